@@ -1,0 +1,7 @@
+// corofem: simplified co-rotational FEM on linear tetrahedra. Umbrella header.
+#pragma once
+
+#include <corofem/mesh.hpp>
+#include <corofem/scene.hpp>
+#include <corofem/simulation.hpp>
+#include <corofem/status.hpp>

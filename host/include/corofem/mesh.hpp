@@ -1,0 +1,113 @@
+// Meshes: a tetrahedral volume mesh and a triangle surface mesh; reading, writing and generating.
+#pragma once
+
+#include <corofem/status.hpp>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace corofem {
+
+/// Linear tetrahedral mesh. Elements are positively oriented after loading:
+/// (b-a) . ((c-a) x (d-a)) > 0 for element nodes (a, b, c, d).
+struct TetMesh {
+  std::vector<double> nodes;          ///< 3 per node: x, y, z (scene units, SI metres by convention)
+  std::vector<std::uint32_t> tets;    ///< 4 per element: 0-based node indices
+  std::vector<std::int32_t> regions;  ///< one region id per element, or empty when the file has none
+
+  std::size_t nodeCount() const { return nodes.size() / 3; }
+  std::size_t tetCount() const { return tets.size() / 4; }
+};
+
+/// Triangle surface mesh (render surface, coupled-mesh target). Quads and polygons are fan-split.
+struct SurfaceMesh {
+  std::vector<double> vertices;          ///< 3 per vertex
+  std::vector<std::uint32_t> triangles;  ///< 3 per triangle, 0-based vertex indices
+  std::vector<float> texcoords;          ///< 2 per vertex when the file has per-vertex UVs, else empty
+
+  std::size_t vertexCount() const { return vertices.size() / 3; }
+  std::size_t triangleCount() const { return triangles.size() / 3; }
+};
+
+/// What a reader did beyond returning the mesh.
+struct MeshReadReport {
+  std::string format;                              ///< e.g. "gmsh 4.1", "medit", "vtk legacy 5.1"
+  std::size_t reorientedElements = 0;              ///< negatively oriented elements whose nodes were swapped
+  std::size_t skippedElements = 0;                 ///< non-tetrahedral elements skipped (Gmsh, VTK)
+  std::map<std::string, std::size_t> skippedByType;///< e.g. {"triangle (gmsh type 2)": 120}
+  std::size_t splitPolygons = 0;                   ///< OBJ quads/polygons fan-split into triangles
+};
+
+/// Options of mesh validation on load.
+struct MeshValidation {
+  /// An element whose volume is below this fraction of the mean element volume is an error
+  /// ("near-zero volume"). 0 disables the relative test; exactly zero volume is always an error.
+  double minRelativeVolume = 1e-12;
+  bool reorient = true;  ///< swap two nodes of negatively oriented elements (counted in the report)
+};
+
+/// Reads a tetrahedral mesh; the format is chosen from the extension (.msh Gmsh 1/2.2/4.1,
+/// .node/.ele TetGen given either file, .mesh Medit, .vtk legacy, .veg Vega). Errors name the file,
+/// line and element.
+Result<TetMesh> readTetMesh(const std::string& path, MeshReadReport* report = nullptr,
+                            const MeshValidation& validation = {});
+
+/// Reads a triangle surface mesh (.obj; also the boundary of any tet mesh format is NOT extracted).
+Result<SurfaceMesh> readSurfaceMesh(const std::string& path, MeshReadReport* report = nullptr);
+
+/// Per-node or per-element data written alongside a mesh (VTK formats).
+struct MeshField {
+  std::string name;          ///< field name shown in ParaView
+  int components = 1;        ///< 1 (scalar) or 3 (vector)
+  bool perElement = false;   ///< cell data when true, point data otherwise
+  std::vector<double> values;///< components x (node or element count)
+};
+
+/// Writes a tet mesh; format from the extension: .vtu (VTK XML), .vtk (legacy 2.0 ASCII),
+/// .msh (Gmsh 2.2 ASCII), .mesh (Medit), .node (TetGen, with .ele beside it), .veg (Vega).
+Status writeTetMesh(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields = {});
+
+/// Writes a surface mesh (.obj, or .vtk/.vtu as a polygonal dataset).
+Status writeSurfaceMesh(const std::string& path, const SurfaceMesh& mesh);
+
+/// A ParaView `.pvd` time-series collection: add (time, file) entries, then write.
+class PvdSeries {
+ public:
+  explicit PvdSeries(std::string pvdPath) : path_(std::move(pvdPath)) {}
+  void add(double time, const std::string& fileRelativeToPvd) { entries_.push_back({time, fileRelativeToPvd}); }
+  Status write() const;  ///< rewrites the whole .pvd (call after each add: a killed run stays readable)
+  const std::string& path() const { return path_; }
+
+ private:
+  struct Entry { double time; std::string file; };
+  std::string path_;
+  std::vector<Entry> entries_;
+};
+
+/// Axis-aligned box split into cells, each cell into 5 or 6 tetrahedra.
+struct BoxSpec {
+  std::array<double, 3> min{0.0, 0.0, 0.0};  ///< lower corner
+  std::array<double, 3> max{1.0, 1.0, 1.0};  ///< upper corner, > min on every axis
+  std::array<int, 3> cells{1, 1, 1};         ///< cells per axis, >= 1
+  int tetsPerCell = 5;                        ///< 5 (alternating, conforming) or 6 (Kuhn split)
+};
+Result<TetMesh> generateBox(const BoxSpec& spec);
+
+/// Geometry and quality summary (the `corofem info` command).
+struct MeshInfo {
+  std::size_t nodes = 0, tets = 0, boundaryFaces = 0, negativeElements = 0;
+  std::array<double, 3> bboxMin{}, bboxMax{};
+  double volume = 0, minVolume = 0, maxVolume = 0;
+  double minAspect = 0, maxAspect = 0;  ///< aspect ratio: longest edge / (2 sqrt(6) inradius), 1 for regular
+  std::size_t unusedNodes = 0;
+};
+MeshInfo computeMeshInfo(const TetMesh& mesh);
+
+/// Signed volume of element e: (b-a).((c-a)x(d-a)) / 6.
+double signedVolume(const TetMesh& mesh, std::size_t element);
+
+}  // namespace corofem

@@ -1,0 +1,172 @@
+// Scene description: what to simulate. Filled from a JSON scene file (docs/scene-format.md) or
+// directly by an embedding application. Units are SI unless a field says otherwise.
+#pragma once
+
+#include <corofem/mesh.hpp>
+#include <corofem/status.hpp>
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace corofem {
+
+using Vec3 = std::array<double, 3>;
+
+/// A set of mesh nodes, chosen geometrically or listed.
+struct NodeSetDesc {
+  enum class Kind { Box, Plane, List, BouFile };
+  Kind kind = Kind::Box;
+  Vec3 boxMin{0, 0, 0}, boxMax{0, 0, 0};  ///< Box: nodes with min <= x <= max on every axis (m)
+  Vec3 planePoint{0, 0, 0};               ///< Plane: a point on the plane (m)
+  Vec3 planeNormal{1, 0, 0};              ///< Plane: normal (need not be unit, must be non-zero)
+  double planeTolerance = 1e-9;           ///< Plane: nodes with |distance| <= tolerance (m), >= 0
+  std::vector<std::uint32_t> indices;     ///< List: 0-based node indices
+  std::string bouFile;                    ///< BouFile: Vega .bou file (1-based ids), path as given
+};
+
+/// Material of a body (isotropic, linear elastic in the co-rotated frame).
+struct MaterialDesc {
+  double youngsModulus = 1e5;   ///< E in Pa, > 0
+  double poissonRatio = 0.3;    ///< nu, -1 < nu < 0.5
+  double density = 1000.0;      ///< rho in kg/m^3, > 0
+  double rayleighMass = 0.0;    ///< alpha in C = alpha M + beta K, 1/s, >= 0
+  double rayleighStiffness = 0.0;///< beta in C = alpha M + beta K, s, >= 0
+};
+
+enum class Formulation {
+  Linear,             ///< small-displacement linear elasticity (R = I)
+  Corotational,       ///< the paper's simplified co-rotational formulation (default)
+  StVenantKirchhoff,  ///< total-Lagrangian St. Venant-Kirchhoff (reference backend only)
+  NeoHookean,         ///< compressible Neo-Hookean (reference backend only)
+};
+
+/// Where a body's mesh comes from: a file or the box generator (exactly one).
+struct MeshSourceDesc {
+  std::string file;            ///< mesh file, resolved relative to the scene file's folder
+  std::optional<BoxSpec> box;  ///< generated box when set
+  double scale = 1.0;          ///< multiplies node coordinates after loading, > 0
+  Vec3 translate{0, 0, 0};     ///< added to node coordinates after scaling (m)
+};
+
+/// A load on a body.
+struct LoadDesc {
+  enum class Kind {
+    Gravity,       ///< body force rho * vector on every element (m/s^2)
+    Force,         ///< total force `vector` (N) spread equally over the nodes of `nodes`
+    Displacement,  ///< prescribed displacement `vector` (m) of the nodes of `nodes` (a dragged handle)
+  };
+  Kind kind = Kind::Gravity;
+  Vec3 vector{0, -9.81, 0};
+  NodeSetDesc nodes;      ///< Force, Displacement: where
+  double rampTime = 0.0;  ///< dynamics: the load grows linearly from 0 over this time (s), >= 0
+};
+
+/// One deformable body.
+struct BodyDesc {
+  std::string name = "body";
+  MeshSourceDesc mesh;
+  MaterialDesc material;
+  Formulation formulation = Formulation::Corotational;
+  std::vector<NodeSetDesc> fixed;  ///< nodes held at their rest position
+  std::vector<LoadDesc> loads;
+  Vec3 initialVelocity{0, 0, 0};          ///< m/s, dynamics only
+  Vec3 initialAngularVelocity{0, 0, 0};   ///< rad/s about the body's rest centroid, dynamics only
+  std::string surface;                    ///< optional render surface (.obj) driven by the body
+};
+
+struct StaticDesc {
+  int increments = 1;             ///< load increments (full load in one step by default), >= 1
+  int maxNewtonIterations = 30;   ///< per increment, >= 1
+  double residualTolerance = 1e-6;   ///< |f_ext - f_int| <= tol * max(|f_ext|, |f_int|, tiny)
+  double displacementTolerance = 1e-8; ///< |du| <= tol * max(|u|, characteristic length)
+};
+
+enum class Integrator { Newmark, BackwardEuler };
+
+struct DynamicDesc {
+  Integrator integrator = Integrator::Newmark;
+  double timeStep = 1.0 / 60.0;  ///< s, > 0
+  int steps = 100;               ///< >= 1
+  double newmarkBeta = 0.25;     ///< 0 < beta <= 0.5
+  double newmarkGamma = 0.5;     ///< 0.5 <= gamma <= 1
+  int newtonIterations = 1;      ///< Newton iterations per step (1 = linearised, as in the paper), >= 1
+  double newtonTolerance = 1e-6; ///< relative residual that ends the Newton loop early
+};
+
+struct AnalysisDesc {
+  enum class Kind { Static, Dynamic };
+  Kind kind = Kind::Dynamic;
+  StaticDesc statics;
+  DynamicDesc dynamics;
+};
+
+enum class LinearSolverKind { Pcg, Cholesky };  ///< Cholesky only on the reference backend
+enum class PreconditionerKind { None, Diagonal, BlockDiagonal };
+enum class Precision { Double, Float };
+enum class RotationMethod { Polar, Svd, Quaternion, Qr };
+
+struct SolverDesc {
+  LinearSolverKind linearSolver = LinearSolverKind::Pcg;
+  double tolerance = 1e-6;        ///< PCG relative residual |r| / |b|, > 0
+  int maxIterations = 1000;       ///< PCG iteration cap, >= 1
+  int checkEvery = 4;             ///< PCG convergence check every k iterations (device backends), >= 1
+  PreconditionerKind preconditioner = PreconditionerKind::Diagonal;
+  Precision precision = Precision::Double;
+  RotationMethod rotation = RotationMethod::Polar;
+};
+
+enum class BackendKind { Auto, Reference, OpenCL };
+
+struct BackendDesc {
+  BackendKind kind = BackendKind::Auto;
+  std::string device;  ///< device name substring or index ("" = the scheduler's choice)
+};
+
+/// A probe: the mean displacement of a node set, written to probes.csv each step/increment.
+struct ProbeDesc {
+  std::string name;
+  std::string body;     ///< body name ("" = the first body)
+  NodeSetDesc nodes;
+};
+
+struct OutputDesc {
+  std::vector<ProbeDesc> probes;
+  int vtkEvery = 0;        ///< write a .vtu of every body every N steps (0 = only first and last)
+  bool vtk = true;         ///< write the VTK series at all
+  bool surfaceObj = false; ///< write deformed surfaces as OBJ (bodies with a surface)
+};
+
+struct Scene {
+  std::string name = "scene";
+  std::string baseDir;  ///< folder against which relative paths are resolved (the scene file's)
+  std::vector<BodyDesc> bodies;
+  AnalysisDesc analysis;
+  SolverDesc solver;
+  BackendDesc backend;
+  OutputDesc output;
+};
+
+/// Parses a JSON scene. `overrides` are "key.path=value" strings (the --set option) applied to the
+/// JSON before validation; arrays are indexed by number ("bodies.0.material.youngs_modulus=1e6").
+/// Errors give the key's path, and for a misspelt key the nearest valid one.
+Result<Scene> parseScene(const std::string& jsonText, const std::string& baseDir,
+                         const std::vector<std::string>& overrides = {});
+Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides = {});
+
+/// The 0-based node indices a node set selects on a mesh (sorted, unique). An empty selection is
+/// an error naming the set, since it is almost always a typo in a coordinate.
+Result<std::vector<std::uint32_t>> resolveNodeSet(const NodeSetDesc& set, const TetMesh& mesh,
+                                                  const std::string& baseDir = "");
+
+/// Loads (or generates) a body's mesh, applying scale and translation.
+Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir,
+                             MeshReadReport* report = nullptr);
+
+const char* toString(Formulation f);
+const char* toString(RotationMethod m);
+const char* toString(BackendKind b);
+
+}  // namespace corofem

@@ -1,0 +1,71 @@
+// Simulation: a scene compiled for a backend, advanced step by step.
+//
+//   auto sim = corofem::Simulation::create(scene);      // Result<Simulation>
+//   while (!sim->finished()) { corofem::StepReport r; if (!sim->step(&r)) ...; }
+//   sim->readPositions(0, positions);                    // explicit read-back
+#pragma once
+
+#include <corofem/mesh.hpp>
+#include <corofem/scene.hpp>
+#include <corofem/status.hpp>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem {
+
+/// What one step (dynamics) or one load increment (statics) did, summed over bodies.
+struct StepReport {
+  int step = 0;                  ///< 1-based index of the step or increment just taken
+  double time = 0.0;             ///< simulated time after the step (s); statics: the load factor
+  int newtonIterations = 0;      ///< Newton iterations, summed over bodies
+  int linearIterations = 0;      ///< PCG iterations, summed over bodies and Newton iterations
+  double residual = 0.0;         ///< largest final relative Newton residual over bodies
+  double linearResidual = 0.0;   ///< largest final relative PCG residual over bodies
+  bool converged = true;         ///< every body's Newton (statics) / linear solves converged
+  double wallSeconds = 0.0;      ///< wall time of the step
+};
+
+/// Energies of one body at the current state (J).
+struct EnergyReport {
+  double elastic = 0.0;  ///< strain energy of the formulation
+  double kinetic = 0.0;  ///< 1/2 v^T M v with the lumped mass
+  double externalWork = 0.0;  ///< work of the external loads since the start
+};
+
+class Simulation {
+ public:
+  /// Loads meshes, builds the problem of every body and the backend. Errors: bad input (mesh,
+  /// node set, material), not compiled in (backend), device error.
+  static Result<Simulation> create(const Scene& scene);
+
+  Simulation(Simulation&&) noexcept;
+  Simulation& operator=(Simulation&&) noexcept;
+  ~Simulation();
+
+  /// Advances one time step (dynamics) or one load increment (statics). When a solve fails the
+  /// bodies keep their last good state and the status says why (ErrorCode::SolveFailed).
+  Status step(StepReport* report = nullptr);
+  bool finished() const;       ///< all steps / increments done
+  int stepsTaken() const;
+  int stepCount() const;       ///< steps (dynamics) or increments (statics) the analysis asks for
+  double time() const;         ///< simulated time (dynamics) or load factor (statics)
+
+  const Scene& scene() const;
+  int bodyCount() const;
+  const TetMesh& restMesh(int body) const;     ///< the body's mesh as loaded (rest positions)
+  const MeshReadReport& meshReport(int body) const;
+  Status readPositions(int body, std::vector<double>& out) const;   ///< 3 per node, current
+  Status readVelocities(int body, std::vector<double>& out) const;  ///< 3 per node
+  EnergyReport energies(int body) const;
+  std::string backendName() const;  ///< "reference", "opencl"
+  std::string deviceName() const;   ///< e.g. "host (Eigen, double)" or the OpenCL device name
+
+ private:
+  struct Impl;
+  explicit Simulation(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace corofem

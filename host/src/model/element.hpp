@@ -1,0 +1,47 @@
+// Linear tetrahedron: rest-state set-up (paper Eqs. 4-8), deformation gradient, rotation, forces.
+// Double precision, Eigen. This is the mathematics every backend reproduces.
+#pragma once
+
+#include <corofem/scene.hpp>
+
+#include <Eigen/Core>
+
+#include <array>
+
+namespace corofem::detail {
+
+using Mat3 = Eigen::Matrix3d;
+using Vec3d = Eigen::Vector3d;
+using Mat12 = Eigen::Matrix<double, 12, 12>;
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+using Grad43 = Eigen::Matrix<double, 4, 3>;  ///< row i = gradient of shape function N_i (1/m)
+
+/// Rest state of one element, computed once.
+struct ElementRest {
+  Mat3 DmInv;       ///< inverse of the rest edge matrix [X1-X0, X2-X0, X3-X0] (columns)
+  Grad43 grad;      ///< shape-function gradients; sum of rows is zero
+  double volume = 0;///< rest volume (m^3), > 0 for a positively oriented element
+};
+
+/// Lame parameters from E and nu. Throws Error(BadInput) unless E > 0 and -1 < nu < 0.5.
+struct Lame { double lambda = 0, mu = 0; };
+Lame lameFromYoungPoisson(double youngsModulus, double poissonRatio);
+
+/// Rest set-up from the 4 rest node positions. Throws Error(BadInput) when the volume is not > 0.
+ElementRest computeElementRest(const std::array<Vec3d, 4>& X);
+
+/// K_e = V B^T H B (12x12, node-major dofs: node i, component c at 3i+c).
+Mat12 linearStiffness(const ElementRest& rest, const Lame& lame);
+
+/// F = D_s D_m^-1 from current positions.
+Mat3 deformationGradient(const ElementRest& rest, const std::array<Vec3d, 4>& x);
+
+/// Rotational part of F by polar decomposition F = R S, det R = +1 (the reference: SVD-based,
+/// with the smallest singular direction flipped for inverted elements).
+Mat3 polarRotation(const Mat3& F);
+
+/// Co-rotational element force f = R K (R^T x - X) (Eq. 9), 12 entries.
+Vec12 corotationalForce(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4>& x,
+                        const std::array<Vec3d, 4>& X);
+
+}  // namespace corofem::detail

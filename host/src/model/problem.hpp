@@ -1,0 +1,60 @@
+// Problem: one body discretised for simulation, independent of any backend. Built once from a
+// scene body and its mesh; the backends upload from it and the solve/ drivers read it.
+#pragma once
+
+#include "model/element.hpp"
+
+#include <corofem/mesh.hpp>
+#include <corofem/scene.hpp>
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace corofem::detail {
+
+/// A prescribed displacement: dofs and their full values (scaled by the load factor / ramp).
+struct PrescribedDisplacement {
+  std::vector<std::uint32_t> dofs;   ///< 3 * node + component
+  std::vector<double> values;        ///< full displacement of each dof (m)
+  double rampTime = 0.0;             ///< dynamics: linear ramp from 0 over this time (s)
+};
+
+/// A constant external force (gravity, spread nodal forces) with its ramp.
+struct ExternalForce {
+  Eigen::VectorXd f;                 ///< 3N nodal forces at full load (N)
+  double rampTime = 0.0;
+};
+
+struct Problem {
+  std::string name;
+  TetMesh mesh;                      ///< rest mesh (positively oriented)
+  Eigen::VectorXd restPositions;     ///< 3N, node-major (x0 y0 z0 x1 ...)
+  std::vector<ElementRest> elements; ///< one per tet
+  Lame lame;                         ///< same material in every element of a body
+  double density = 0;
+  double rayleighMass = 0, rayleighStiffness = 0;
+  Formulation formulation = Formulation::Corotational;
+  RotationMethod rotation = RotationMethod::Polar;
+  Eigen::VectorXd lumpedMass;        ///< 3N: rho V / 4 to each node of each element, per component
+  std::vector<std::uint8_t> constrained;  ///< 3N: 1 where the dof is fixed or prescribed
+  std::vector<PrescribedDisplacement> prescribed;
+  std::vector<ExternalForce> forces;
+  Eigen::VectorXd initialVelocity;   ///< 3N
+
+  std::size_t dofCount() const { return static_cast<std::size_t>(restPositions.size()); }
+
+  /// f_ext at load factor (statics) or time (dynamics: each force scaled by min(1, t / ramp)).
+  Eigen::VectorXd externalForce(double loadFactorOrTime, bool dynamic) const;
+  /// Writes the prescribed displacements (scaled likewise) into the positions x (3N).
+  void applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const;
+};
+
+/// Builds a body's problem (node sets resolved, loads assembled, elements set up). Throws
+/// Error(BadInput) with the body name and the element for a zero-volume element, bad material...
+Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc& solver,
+                     const std::string& baseDir);
+
+}  // namespace corofem::detail

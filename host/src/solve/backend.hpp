@@ -1,0 +1,68 @@
+// The small interface every backend implements (reference Eigen, OpenCL, later Vulkan). Newton,
+// the time integrators and the Simulation are written once in solve/ against it.
+//
+// System matrices: A = mass * M + damping * C + stiffness * K_t, with M the lumped mass,
+// C = alpha M + beta K_t (Rayleigh, alpha/beta from the problem) and K_t the tangent stiffness
+// at the current positions (R K R^T summed over elements for the co-rotational formulation,
+// K for the linear one, the consistent tangent for the hyperelastic ones).
+#pragma once
+
+#include "model/problem.hpp"
+
+#include <corofem/scene.hpp>
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::detail {
+
+struct SystemCoeffs {
+  double mass = 0.0;
+  double damping = 0.0;
+  double stiffness = 1.0;
+};
+
+struct LinearSolveStats {
+  int iterations = 0;             ///< PCG iterations (0 for a direct solve)
+  double relativeResidual = 0.0;  ///< |b - A x| / |b| on the free dofs (0 when b = 0)
+  bool converged = false;
+};
+
+class Backend {
+ public:
+  virtual ~Backend() = default;
+  virtual std::string name() const = 0;        ///< "reference", "opencl"
+  virtual std::string deviceName() const = 0;  ///< human-readable device
+
+  /// Sets the current positions (3N, node-major) and refreshes the per-element state that depends
+  /// on them (rotations for the co-rotational formulation, F for the hyperelastic ones).
+  virtual void setPositions(const Eigen::VectorXd& x) = 0;
+
+  /// Internal forces at the current positions (3N). Constrained dofs are not zeroed.
+  virtual void internalForces(Eigen::VectorXd& f) = 0;
+
+  /// y = A p on all dofs (no projection of constraints).
+  virtual void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) = 0;
+
+  /// Solves A x = b on the free dofs; constrained dofs of x are set to 0 and their rows of b
+  /// ignored. On entry x holds the starting vector (warm start). Never throws for
+  /// non-convergence: the stats say so. Throws Error(SolveFailed) when the result is not finite.
+  virtual LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) = 0;
+
+  /// Strain energy at the current positions (J).
+  virtual double elasticEnergy() = 0;
+};
+
+/// The reference backend: assembled sparse matrices, Eigen's CG (diagonal preconditioner) or
+/// sparse Cholesky, double precision. Supports every formulation.
+std::unique_ptr<Backend> createReferenceBackend(const Problem& problem, const SolverDesc& solver);
+
+/// The OpenCL backend (co-rotational and linear formulations). Throws Error(NotCompiledIn) when
+/// the library was built without COROFEM_WITH_OPENCL, Error(DeviceError) when no device fits.
+std::unique_ptr<Backend> createOpenCLBackend(const Problem& problem, const SolverDesc& solver,
+                                             const std::string& deviceSelector);
+
+}  // namespace corofem::detail
