@@ -1,3 +1,232 @@
-// The `corofem` command (placeholder until the CLI lands).
+// The `corofem` command: run a scene headless, inspect a mesh, convert between mesh formats.
+//
+//   corofem run SCENE [--out DIR] [--set key.path=value ...] [--quiet]
+//   corofem info MESH [--json]
+//   corofem convert IN OUT
+//
+// Exit status: 0 success, 2 bad input (message on stderr), 3 a solve failed (outputs written so
+// far stay readable), 1 anything else (device error, i/o error, internal error).
+#include "output/run_outputs.hpp"
+#include "util/error.hpp"
+
+#include <corofem/corofem.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
 #include <cstdio>
-int main() { std::puts("corofem: CLI not written yet"); return 1; }
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace corofem;
+
+constexpr int kExitOk = 0;
+constexpr int kExitOther = 1;
+constexpr int kExitBadInput = 2;
+constexpr int kExitSolveFailed = 3;
+
+int exitCodeFor(const Status& s) {
+  switch (s.code()) {
+    case ErrorCode::Ok: return kExitOk;
+    case ErrorCode::BadInput:
+    case ErrorCode::NotCompiledIn: return kExitBadInput;
+    case ErrorCode::SolveFailed: return kExitSolveFailed;
+    default: return kExitOther;
+  }
+}
+
+int report(const Status& s) {
+  std::cerr << "corofem: error (" << toString(s.code()) << "): " << s.message() << '\n';
+  return exitCodeFor(s);
+}
+
+void usage(std::ostream& os) {
+  os << "usage:\n"
+        "  corofem run SCENE.json [--out DIR] [--set key.path=value ...] [--quiet]\n"
+        "      Runs a scene headless. Writes DIR/probes.csv (one row per step or load increment),\n"
+        "      DIR/<body>.pvd + DIR/vtk/*.vtu (ParaView) and DIR/summary.json.\n"
+        "      DIR defaults to out/<scene name>. --set overrides any scene value, e.g.\n"
+        "      --set bodies.0.material.youngs_modulus=2e5 --set analysis.integrator=backward_euler\n"
+        "  corofem info MESH [--json]\n"
+        "      Counts, bounding box, volume, element quality and orientation of a tet mesh\n"
+        "      (.msh .node/.ele .mesh .vtk .veg) or a surface mesh (.obj).\n"
+        "  corofem convert IN OUT\n"
+        "      Converts a tet mesh (to .vtu .vtk .msh .mesh .node .veg) or a surface (.obj .vtk).\n"
+        "exit status: 0 ok, 2 bad input, 3 solve failed, 1 other errors\n";
+}
+
+bool isSurfacePath(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".obj";
+}
+
+// ------------------------------------------------------------------------------------ run
+int cmdRun(const std::vector<std::string>& args) {
+  std::string scenePath, outDir;
+  std::vector<std::string> overrides;
+  bool quiet = false;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    if (a == "--out" || a == "--set") {
+      if (i + 1 >= args.size()) return report(Status(ErrorCode::BadInput, a + " needs a value"));
+      (a == "--out" ? outDir : overrides.emplace_back()) = args[++i];
+    } else if (a.rfind("--out=", 0) == 0) {
+      outDir = a.substr(6);
+    } else if (a.rfind("--set=", 0) == 0) {
+      overrides.push_back(a.substr(6));
+    } else if (a == "--quiet" || a == "-q") {
+      quiet = true;
+    } else if (!a.empty() && a[0] == '-') {
+      return report(Status(ErrorCode::BadInput, "run: unknown option " + a + " (options: --out DIR, --set key=value, --quiet)"));
+    } else if (scenePath.empty()) {
+      scenePath = a;
+    } else {
+      return report(Status(ErrorCode::BadInput, "run: more than one scene given (" + scenePath + ", " + a + ")"));
+    }
+  }
+  if (scenePath.empty()) return report(Status(ErrorCode::BadInput, "run: no scene file given; usage: corofem run SCENE.json"));
+
+  auto scene = loadScene(scenePath, overrides);
+  if (!scene) return report(scene.status());
+  if (outDir.empty()) outDir = (std::filesystem::path("out") / scene->name).string();
+
+  auto sim = Simulation::create(scene.value());
+  if (!sim) return report(sim.status());
+
+  const auto t0 = std::chrono::steady_clock::now();
+  Status status;
+  std::unique_ptr<detail::RunOutputs> outputs;
+  status = detail::guard([&] { outputs = std::make_unique<detail::RunOutputs>(sim.value(), outDir); });
+  if (!status) return report(status);
+  if (!quiet)
+    std::cout << "corofem: scene '" << scene->name << "': " << sim->bodyCount() << " body(ies), backend "
+              << sim->backendName() << " on " << sim->deviceName() << ", " << sim->stepCount()
+              << (scene->analysis.kind == AnalysisDesc::Kind::Static ? " load increment(s)" : " step(s)")
+              << ", outputs in " << outDir << std::endl;
+
+  status = detail::guard([&] { outputs->record(sim.value(), StepReport{}); });
+  const int every = std::max(1, sim->stepCount() / 10);
+  while (status && !sim->finished()) {
+    StepReport r;
+    status = sim->step(&r);
+    Status recorded = detail::guard([&] { outputs->record(sim.value(), r); });
+    if (status && !recorded) status = recorded;
+    if (!quiet && status && (r.step % every == 0 || sim->finished()))
+      std::cout << "  step " << r.step << "/" << sim->stepCount() << "  t=" << r.time
+                << "  newton=" << r.newtonIterations << "  pcg=" << r.linearIterations
+                << "  residual=" << r.residual << "  " << r.wallSeconds * 1e3 << " ms" << std::endl;
+  }
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  Status finished = detail::guard([&] { outputs->finish(sim.value(), status, wall); });
+  if (!status) return report(status);
+  if (!finished) return report(finished);
+  if (!quiet) std::cout << "corofem: done in " << wall << " s; summary in " << outDir << "/summary.json" << std::endl;
+  return kExitOk;
+}
+
+// ------------------------------------------------------------------------------------ info
+int cmdInfo(const std::vector<std::string>& args) {
+  std::string path;
+  bool asJson = false;
+  for (const std::string& a : args) {
+    if (a == "--json") asJson = true;
+    else if (!a.empty() && a[0] == '-') return report(Status(ErrorCode::BadInput, "info: unknown option " + a));
+    else if (path.empty()) path = a;
+    else return report(Status(ErrorCode::BadInput, "info: more than one mesh given"));
+  }
+  if (path.empty()) return report(Status(ErrorCode::BadInput, "info: no mesh given; usage: corofem info MESH"));
+
+  nlohmann::json j;
+  MeshReadReport rep;
+  if (isSurfacePath(path)) {
+    auto surf = readSurfaceMesh(path, &rep);
+    if (!surf) return report(surf.status());
+    std::array<double, 3> lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+    for (std::size_t i = 0; i < surf->vertexCount(); ++i)
+      for (int c = 0; c < 3; ++c) {
+        lo[c] = std::min(lo[c], surf->vertices[3 * i + c]);
+        hi[c] = std::max(hi[c], surf->vertices[3 * i + c]);
+      }
+    j = {{"file", path}, {"format", rep.format}, {"vertices", surf->vertexCount()},
+         {"triangles", surf->triangleCount()}, {"split_polygons", rep.splitPolygons},
+         {"bbox_min", lo}, {"bbox_max", hi}};
+  } else {
+    auto mesh = readTetMesh(path, &rep);
+    if (!mesh) return report(mesh.status());
+    const MeshInfo info = computeMeshInfo(mesh.value());
+    j = {{"file", path}, {"format", rep.format}, {"nodes", info.nodes}, {"tets", info.tets},
+         {"boundary_faces", info.boundaryFaces}, {"unused_nodes", info.unusedNodes},
+         {"bbox_min", info.bboxMin}, {"bbox_max", info.bboxMax}, {"volume", info.volume},
+         {"min_element_volume", info.minVolume}, {"max_element_volume", info.maxVolume},
+         {"min_aspect_ratio", info.minAspect}, {"max_aspect_ratio", info.maxAspect},
+         {"negatively_oriented_in_file", rep.reorientedElements},
+         {"skipped_elements", rep.skippedElements}, {"skipped_by_type", rep.skippedByType},
+         {"has_regions", !mesh->regions.empty()}};
+  }
+  if (asJson) {
+    std::cout << j.dump(2) << '\n';
+    return kExitOk;
+  }
+  for (auto it = j.begin(); it != j.end(); ++it) std::cout << it.key() << ": " << it.value().dump() << '\n';
+  return kExitOk;
+}
+
+// ------------------------------------------------------------------------------------ convert
+int cmdConvert(const std::vector<std::string>& args) {
+  if (args.size() != 2) return report(Status(ErrorCode::BadInput, "convert: usage: corofem convert IN OUT"));
+  const std::string& in = args[0];
+  const std::string& out = args[1];
+  if (isSurfacePath(in)) {
+    auto surf = readSurfaceMesh(in);
+    if (!surf) return report(surf.status());
+    Status st = writeSurfaceMesh(out, surf.value());
+    if (!st) return report(st);
+    std::cout << "corofem: wrote " << out << " (" << surf->vertexCount() << " vertices, " << surf->triangleCount()
+              << " triangles)\n";
+    return kExitOk;
+  }
+  MeshReadReport rep;
+  auto mesh = readTetMesh(in, &rep);
+  if (!mesh) return report(mesh.status());
+  if (isSurfacePath(out))
+    return report(Status(ErrorCode::BadInput, "convert: " + out + ": a tet mesh cannot be written as OBJ; use .vtu, .vtk, .msh, .mesh, .node or .veg"));
+  Status st = writeTetMesh(out, mesh.value());
+  if (!st) return report(st);
+  std::cout << "corofem: wrote " << out << " (" << mesh->nodeCount() << " nodes, " << mesh->tetCount() << " tets";
+  if (rep.reorientedElements) std::cout << ", " << rep.reorientedElements << " reoriented";
+  std::cout << ")\n";
+  return kExitOk;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> args(argv + 1, argv + argc);
+  if (args.empty() || args[0] == "--help" || args[0] == "-h" || args[0] == "help") {
+    usage(args.empty() ? std::cerr : std::cout);
+    return args.empty() ? kExitBadInput : kExitOk;
+  }
+  if (args[0] == "--version") {
+    std::cout << "corofem 0.1.0\n";
+    return kExitOk;
+  }
+  const std::string cmd = args[0];
+  args.erase(args.begin());
+  try {
+    if (cmd == "run") return cmdRun(args);
+    if (cmd == "info") return cmdInfo(args);
+    if (cmd == "convert") return cmdConvert(args);
+  } catch (const std::exception& e) {
+    std::cerr << "corofem: internal error: " << e.what() << '\n';
+    return kExitOther;
+  }
+  std::cerr << "corofem: unknown command '" << cmd << "' (commands: run, info, convert)\n";
+  usage(std::cerr);
+  return kExitBadInput;
+}

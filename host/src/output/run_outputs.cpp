@@ -1,0 +1,214 @@
+#include "output/run_outputs.hpp"
+
+#include "util/error.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iomanip>
+#include <numeric>
+
+namespace corofem::detail {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+int findBody(const Simulation& sim, const std::string& name) {
+  if (name.empty()) return 0;
+  for (int b = 0; b < sim.bodyCount(); ++b)
+    if (sim.scene().bodies[static_cast<std::size_t>(b)].name == name) return b;
+  std::string names;
+  for (const auto& body : sim.scene().bodies) names += (names.empty() ? "\"" : ", \"") + body.name + "\"";
+  fail(ErrorCode::BadInput, "output.probes: body \"", name, "\" does not exist; the scene's bodies are ", names);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+std::string vtkName(const std::string& body, int step) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "_%06d.vtu", step);
+  return body + buf;
+}
+
+}  // namespace
+
+RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir) {
+  std::error_code ec;
+  fs::create_directories(dir_, ec);
+  if (ec) fail(ErrorCode::IoError, "cannot create the output folder ", dir_, ": ", ec.message());
+
+  const Scene& scene = sim.scene();
+  for (std::size_t i = 0; i < scene.output.probes.size(); ++i) {
+    const ProbeDesc& desc = scene.output.probes[i];
+    Probe probe;
+    probe.name = desc.name.empty() ? "probe" + std::to_string(i) : desc.name;
+    probe.body = findBody(sim, desc.body);
+    auto nodes = resolveNodeSet(desc.nodes, sim.restMesh(probe.body), scene.baseDir);
+    if (!nodes) fail(nodes.status().code(), "output.probes[", i, "] (\"", probe.name, "\"): ", nodes.message());
+    probe.nodes = std::move(nodes.value());
+    probes_.push_back(std::move(probe));
+  }
+
+  const std::string csvPath = (fs::path(dir_) / "probes.csv").string();
+  csv_.open(csvPath);
+  if (!csv_) fail(ErrorCode::IoError, "cannot write ", csvPath);
+  csv_ << "step,time,newton_iterations,linear_iterations,residual,linear_residual,converged,"
+          "elastic_energy,kinetic_energy";
+  for (const Probe& p : probes_) csv_ << ',' << p.name << "_ux," << p.name << "_uy," << p.name << "_uz";
+  csv_ << '\n';
+  csv_ << std::setprecision(10);
+
+  if (scene.output.vtk) {
+    fs::create_directories(fs::path(dir_) / "vtk", ec);
+    if (ec) fail(ErrorCode::IoError, "cannot create ", (fs::path(dir_) / "vtk").string(), ": ", ec.message());
+    for (const BodyDesc& body : scene.bodies)
+      series_.push_back(std::make_unique<PvdSeries>((fs::path(dir_) / (body.name + ".pvd")).string()));
+  }
+}
+
+RunOutputs::~RunOutputs() = default;
+
+void RunOutputs::record(const Simulation& sim, const StepReport& report) {
+  if (report.step > 0) {
+    stepWallSeconds_.push_back(report.wallSeconds);
+    reports_.push_back(report);
+  }
+  double elastic = 0, kinetic = 0;
+  for (int b = 0; b < sim.bodyCount(); ++b) {
+    const EnergyReport e = sim.energies(b);
+    elastic += e.elastic;
+    kinetic += e.kinetic;
+  }
+  csv_ << report.step << ',' << report.time << ',' << report.newtonIterations << ','
+       << report.linearIterations << ',' << report.residual << ',' << report.linearResidual << ','
+       << (report.converged ? 1 : 0) << ',' << elastic << ',' << kinetic;
+
+  lastProbe_.clear();
+  std::vector<double> x;
+  for (const Probe& p : probes_) {
+    Status st = sim.readPositions(p.body, x);
+    if (!st) fail(st.code(), st.message());
+    const std::vector<double>& x0 = sim.restMesh(p.body).nodes;
+    double u[3] = {0, 0, 0};
+    for (std::uint32_t n : p.nodes)
+      for (int c = 0; c < 3; ++c) u[c] += x[3 * n + c] - x0[3 * n + c];
+    for (double& c : u) c /= static_cast<double>(p.nodes.size());
+    csv_ << ',' << u[0] << ',' << u[1] << ',' << u[2];
+    lastProbe_.insert(lastProbe_.end(), u, u + 3);
+  }
+  csv_ << '\n';
+  csv_.flush();
+
+  const Scene& scene = sim.scene();
+  if (scene.output.vtk) {
+    const int every = scene.output.vtkEvery;
+    const bool last = sim.finished();
+    if (report.step == 0 || last || (every > 0 && report.step % every == 0)) writeVtk(sim, report.step, report.time);
+  }
+}
+
+void RunOutputs::writeVtk(const Simulation& sim, int step, double time) {
+  if (step == lastVtkStep_) return;
+  lastVtkStep_ = step;
+  std::vector<double> x, v;
+  for (int b = 0; b < sim.bodyCount(); ++b) {
+    const BodyDesc& body = sim.scene().bodies[static_cast<std::size_t>(b)];
+    TetMesh mesh = sim.restMesh(b);
+    Status st = sim.readPositions(b, x);
+    if (!st) fail(st.code(), st.message());
+    MeshField disp{"displacement", 3, false, {}};
+    disp.values.resize(x.size());
+    for (std::size_t i = 0; i < x.size(); ++i) disp.values[i] = x[i] - mesh.nodes[i];
+    std::vector<MeshField> fields{disp};
+    if (sim.scene().analysis.kind == AnalysisDesc::Kind::Dynamic && sim.readVelocities(b, v))
+      fields.push_back(MeshField{"velocity", 3, false, v});
+    mesh.nodes = x;
+    const std::string name = vtkName(body.name, step);
+    st = writeTetMesh((fs::path(dir_) / "vtk" / name).string(), mesh, fields);
+    if (!st) fail(st.code(), st.message());
+    series_[static_cast<std::size_t>(b)]->add(time, "vtk/" + name);
+    st = series_[static_cast<std::size_t>(b)]->write();
+    if (!st) fail(st.code(), st.message());
+  }
+}
+
+void RunOutputs::finish(const Simulation& sim, const Status& status, double totalWallSeconds) {
+  using nlohmann::json;
+  const Scene& scene = sim.scene();
+  json j;
+  j["scene"] = scene.name;
+  j["status"] = status.isOk() ? "ok" : "failed";
+  if (!status.isOk()) {
+    j["error"] = status.message();
+    j["error_kind"] = toString(status.code());
+  }
+  j["backend"] = sim.backendName();
+  j["device"] = sim.deviceName();
+  j["analysis"] = scene.analysis.kind == AnalysisDesc::Kind::Static ? "static" : "dynamic";
+  j["steps_requested"] = sim.stepCount();
+  j["steps_taken"] = sim.stepsTaken();
+  j["time"] = sim.time();
+  j["total_wall_time_s"] = totalWallSeconds;
+
+  std::vector<double> linIters, newtonIters;
+  long long linTotal = 0, newtonTotal = 0;
+  for (const StepReport& r : reports_) {
+    linIters.push_back(r.linearIterations);
+    newtonIters.push_back(r.newtonIterations);
+    linTotal += r.linearIterations;
+    newtonTotal += r.newtonIterations;
+  }
+  json wall;
+  wall["median"] = median(stepWallSeconds_);
+  wall["min"] = stepWallSeconds_.empty() ? 0.0 : *std::min_element(stepWallSeconds_.begin(), stepWallSeconds_.end());
+  wall["max"] = stepWallSeconds_.empty() ? 0.0 : *std::max_element(stepWallSeconds_.begin(), stepWallSeconds_.end());
+  wall["mean"] = stepWallSeconds_.empty() ? 0.0
+      : std::accumulate(stepWallSeconds_.begin(), stepWallSeconds_.end(), 0.0) / static_cast<double>(stepWallSeconds_.size());
+  j["wall_time_per_step_s"] = wall;
+  j["linear_iterations"] = {{"total", linTotal}, {"median_per_step", median(linIters)}};
+  j["newton_iterations"] = {{"total", newtonTotal}, {"median_per_step", median(newtonIters)}};
+
+  json bodies = json::array();
+  for (int b = 0; b < sim.bodyCount(); ++b) {
+    const TetMesh& mesh = sim.restMesh(b);
+    const MeshReadReport& rep = sim.meshReport(b);
+    const EnergyReport e = sim.energies(b);
+    bodies.push_back({{"name", scene.bodies[static_cast<std::size_t>(b)].name},
+                      {"formulation", toString(scene.bodies[static_cast<std::size_t>(b)].formulation)},
+                      {"nodes", mesh.nodeCount()},
+                      {"tets", mesh.tetCount()},
+                      {"mesh_format", rep.format},
+                      {"reoriented_elements", rep.reorientedElements},
+                      {"skipped_elements", rep.skippedElements},
+                      {"elastic_energy", e.elastic},
+                      {"kinetic_energy", e.kinetic}});
+  }
+  j["bodies"] = bodies;
+  json probes = json::object();
+  for (std::size_t i = 0; i < probes_.size(); ++i) {
+    if (lastProbe_.size() >= 3 * (i + 1))
+      probes[probes_[i].name] = {lastProbe_[3 * i], lastProbe_[3 * i + 1], lastProbe_[3 * i + 2]};
+  }
+  j["final_probe_displacement"] = probes;
+  if (!series_.empty()) {
+    json vtk = json::array();
+    for (const auto& s : series_) vtk.push_back(fs::path(s->path()).filename().string());
+    j["vtk_series"] = vtk;
+  }
+
+  const std::string path = (fs::path(dir_) / "summary.json").string();
+  std::ofstream out(path);
+  if (!out) fail(ErrorCode::IoError, "cannot write ", path);
+  out << j.dump(2) << '\n';
+}
+
+}  // namespace corofem::detail
