@@ -1,0 +1,30 @@
+// Runs the built `corofem` command and captures its exit status and output.
+#pragma once
+
+#include <array>
+#include <cstdio>
+#include <string>
+#include <sys/wait.h>
+
+namespace corofem::test {
+
+struct CommandResult {
+  int exitCode = -1;
+  std::string output;  ///< stdout and stderr together
+};
+
+/// Runs `corofem ARGS` (the shell parses ARGS) from the project root.
+inline CommandResult runCli(const std::string& args) {
+  const std::string cmd = std::string("cd '") + COROFEM_SOURCE_DIR + "' && '" + COROFEM_CLI_PATH + "' " + args + " 2>&1";
+  CommandResult r;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf{};
+  std::size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
+  const int status = pclose(pipe);
+  r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+}  // namespace corofem::test
