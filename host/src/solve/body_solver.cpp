@@ -1,0 +1,62 @@
+// Shared part of the per-body drivers: free-dof norms, scales, energies, the driver factory.
+#include "solve/body_solver.hpp"
+
+#include <cmath>
+
+namespace corofem::detail {
+
+BodySolver::BodySolver(const Problem& problem, Backend& backend) : problem_(problem), backend_(backend) {
+  const Eigen::Index n = problem.restPositions.size();
+  freeMask_ = Eigen::ArrayXd::Ones(n);
+  for (Eigen::Index d = 0; d < n; ++d)
+    if (static_cast<std::size_t>(d) < problem.constrained.size() && problem.constrained[static_cast<std::size_t>(d)])
+      freeMask_[d] = 0.0;
+
+  // Bounding-box diagonal of the rest positions: the body's length scale.
+  if (n >= 3) {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = Eigen::Vector3d::Constant(-INFINITY);
+    for (Eigen::Index i = 0; i + 2 < n; i += 3) {
+      const Eigen::Vector3d p = problem.restPositions.segment<3>(i);
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    diagonal_ = (hi - lo).norm();
+  }
+  if (!(diagonal_ > 0.0) || !std::isfinite(diagonal_)) diagonal_ = 1.0;
+  const double modulus = problem.lame.lambda + 2.0 * problem.lame.mu;  // P-wave modulus, > 0
+  forceFloor_ = 1e-8 * (modulus > 0.0 ? modulus : 1.0) * diagonal_ * diagonal_;
+
+  x_ = problem.restPositions;
+  v_ = Eigen::VectorXd::Zero(n);
+  a_ = Eigen::VectorXd::Zero(n);
+  xPrev_ = x_;
+  vPrev_ = v_;
+  aPrev_ = a_;
+}
+
+double BodySolver::kineticEnergy() const {
+  if (problem_.lumpedMass.size() != v_.size()) return 0.0;
+  return 0.5 * (problem_.lumpedMass.array() * v_.array().square()).sum();
+}
+
+double BodySolver::elasticEnergy() {
+  if (!backendAtCommitted_) setBackendPositions(x_, true);
+  return backend_.elasticEnergy();
+}
+
+double BodySolver::freeNorm(const Eigen::VectorXd& v) const { return (v.array() * freeMask_).matrix().norm(); }
+
+bool BodySolver::allFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
+
+void BodySolver::setBackendPositions(const Eigen::VectorXd& x, bool committed) {
+  backend_.setPositions(x);
+  backendAtCommitted_ = committed;
+}
+
+std::unique_ptr<BodySolver> createBodySolver(const Problem& problem, Backend& backend, const AnalysisDesc& analysis) {
+  if (analysis.kind == AnalysisDesc::Kind::Static)
+    return std::make_unique<StaticSolver>(problem, backend, analysis.statics);
+  return std::make_unique<DynamicSolver>(problem, backend, analysis.dynamics);
+}
+
+}  // namespace corofem::detail

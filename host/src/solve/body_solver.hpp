@@ -1,0 +1,148 @@
+// Backend-independent drivers of one body: Newton-Raphson statics (paper Eqs. 12-13) and implicit
+// time integration solved for velocities (paper Eq. 14). They own the body's state (positions,
+// velocities, accelerations, external work) and drive a Backend through its small interface; they
+// never see how the backend stores or solves anything.
+//
+// Failure contract: a step that fails throws Error(SolveFailed) naming the body, the step and a fix,
+// and leaves the driver (and the backend's positions) at the state before the step. The previous
+// committed state of a step that succeeded can be restored with rollback(), so that a scene with
+// several bodies keeps all of them at the last step every body completed.
+#pragma once
+
+#include "model/problem.hpp"
+#include "solve/backend.hpp"
+
+#include <corofem/scene.hpp>
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+
+namespace corofem::detail {
+
+/// What one body did in one step or increment.
+struct BodyStepStats {
+  int newtonIterations = 0;     ///< linear solves done (statics and dynamics)
+  int linearIterations = 0;     ///< PCG iterations summed over the Newton iterations
+  double residual = 0.0;        ///< final relative Newton residual (see each driver for the scale)
+  double linearResidual = 0.0;  ///< largest relative residual of the linear solves
+  bool converged = true;        ///< statics: Newton converged; dynamics: every linear solve converged
+};
+
+/// Common interface of the per-body drivers.
+class BodySolver {
+ public:
+  virtual ~BodySolver() = default;
+
+  /// Advances to step / increment `index` (1-based) of `count`. Throws Error(SolveFailed) with the
+  /// state unchanged when the step fails.
+  virtual BodyStepStats step(int index, int count) = 0;
+  /// Restores the state before the last successful step() (one level).
+  virtual void rollback() = 0;
+
+  const Eigen::VectorXd& positions() const { return x_; }
+  const Eigen::VectorXd& velocities() const { return v_; }
+  double externalWork() const { return work_; }
+  /// 1/2 v^T M v with the lumped mass (every dof, constrained ones included).
+  double kineticEnergy() const;
+  /// Strain energy at the current positions (refreshes the backend's positions when needed).
+  double elasticEnergy();
+
+ protected:
+  BodySolver(const Problem& problem, Backend& backend);
+
+  /// Euclidean norm over the free dofs.
+  double freeNorm(const Eigen::VectorXd& v) const;
+  /// True when every entry is finite.
+  static bool allFinite(const Eigen::VectorXd& v);
+  /// Sets the backend's positions to x and remembers whether they are the committed ones.
+  void setBackendPositions(const Eigen::VectorXd& x, bool committed);
+
+  const Problem& problem_;
+  Backend& backend_;
+  Eigen::ArrayXd freeMask_;   ///< 1 on free dofs, 0 on constrained ones
+  double diagonal_ = 1.0;     ///< rest bounding-box diagonal (m), the body's length scale
+  /// Force below which a residual counts as zero: the force that strains the whole body by 1e-8,
+  /// (lambda + 2 mu) * diagonal^2 * 1e-8 (N). It keeps an unloaded body, whose internal forces
+  /// are pure rounding, from failing a purely relative test.
+  double forceFloor_ = 0.0;
+
+  Eigen::VectorXd x_, v_, a_;           ///< committed state
+  Eigen::VectorXd xPrev_, vPrev_, aPrev_;
+  double work_ = 0.0, workPrev_ = 0.0;  ///< external work since the start (trapezoidal rule)
+  bool backendAtCommitted_ = false;     ///< the backend's positions equal x_
+};
+
+/// Newton-Raphson statics, Eqs. 12-13: r(x) = f_int(x) - lambda f_ext = 0 with K_t dx = -r on the
+/// free dofs. Increment k of n uses lambda = k / n; prescribed displacements (scaled by lambda) are
+/// written into x before the increment's iterations. Convergence at iterate x_i (after i linear
+/// solves, i >= 0), with norms over the free dofs:
+///   residual      |r_i| <= residualTolerance * max(|lambda f_ext|, |f_int(x_i)|, forceFloor)
+///   displacement  |dx_{i-1}| <= displacementTolerance * max(|x_i - X|, 1e-12 * diag * sqrt(free dofs))
+/// Both must hold, except that a residual below min(1e-8, 1e-2 * residualTolerance) times the same
+/// scale accepts the increment alone (Abaqus' "linear increment" rule): the last correction was then
+/// exact to rounding, so a linear problem solved directly converges in one iteration instead of
+/// paying a second solve only to measure a zero correction.
+class StaticSolver final : public BodySolver {
+ public:
+  StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc);
+  BodyStepStats step(int increment, int incrementCount) override;
+  void rollback() override;
+
+ private:
+  StaticDesc desc_;
+  Eigen::VectorXd fextPrev_;  ///< lambda f_ext of the last converged increment (for the work)
+  Eigen::VectorXd fextPrevSaved_;
+};
+
+/// Implicit time integration of Eq. 14, M a + C v + f_int(x) = f_ext(t), solved for the velocities
+/// v_{n+1} by Newton. Both schemes write x and a as affine functions of v:
+///   a(v) = ka (v - vb),  x(v) = xb + kx v
+///   Newmark:        ka = 1/(h gamma), vb = v_n + h (1 - gamma) a_n, kx = h beta / gamma,
+///                   xb = x_n + h v_n + h^2 (1/2 - beta) a_n - kx vb
+///   backward Euler: ka = 1/h, vb = v_n, kx = h, xb = x_n
+/// The residual r(v) = M a(v) + C v + f_int(x(v)) - f_ext(t_{n+1}) has the Jacobian
+/// ka M + C + kx K_t; times 1/ka this is A = M + (1/ka) C + (kx/ka) K_t, i.e. Newmark
+/// M + h gamma C + h^2 beta K_t and backward Euler M + h C + h^2 K_t, so each iteration solves
+/// A dv = -r / ka (SystemCoeffs{1, 1/ka, kx/ka}). C = alpha M + beta K_t at the current positions.
+///
+/// Constrained dofs: v is chosen so that x(v) lands on the target at t_{n+1} (rest position for
+/// fixed dofs, X + ramp * value for prescribed ones): v = (x_target - xb) / kx. The linear solves
+/// leave them alone (dv = 0 there).
+///
+/// Warm start, as the paper's Sec. 3: Newton starts at v = v_n and the first linear solve starts at
+/// dv = 0, which is exactly the paper's "previous velocities as the PCG starting vector" for the
+/// system written in v. Later Newton iterations start at dv = 0 too (corrections are small).
+///
+/// Relative residual: |r| / max(|M a|, |C v|, |f_int|, |f_ext|, forceFloor) on the free dofs. With
+/// newtonIterations == 1 (the paper's linearised step) and a converged linear solve, the residual
+/// after the step is not evaluated (it would cost a force evaluation every step): the report gives
+/// the linearised prediction, relative residual before the solve times the linear solve's relative
+/// residual.
+///
+/// Blow-up detection: any non-finite force, velocity or position; or a linear solve that did not
+/// converge together with a final residual whose norm grew above the step's initial one and whose
+/// relative value is above 1e-3. The step then throws SolveFailed and the state stays at t_n.
+class DynamicSolver final : public BodySolver {
+ public:
+  DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc);
+  BodyStepStats step(int index, int count) override;
+  void rollback() override;
+  double time() const { return t_; }
+
+ private:
+  /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs (0 on constrained ones).
+  void initialAcceleration();
+
+  DynamicDesc desc_;
+  double t_ = 0.0, tPrev_ = 0.0;
+  bool started_ = false;
+  Eigen::VectorXd fextPrev_, fextPrevSaved_;  ///< f_ext(t_n) for the trapezoidal external work
+};
+
+/// Creates the driver the analysis asks for.
+std::unique_ptr<BodySolver> createBodySolver(const Problem& problem, Backend& backend,
+                                             const AnalysisDesc& analysis);
+
+}  // namespace corofem::detail

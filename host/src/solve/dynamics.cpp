@@ -1,0 +1,198 @@
+// Implicit Newmark and backward Euler (paper Eq. 14) solved for the velocities by Newton. The
+// scheme, the constraint handling, the warm start and the blow-up rule are documented on
+// DynamicSolver in body_solver.hpp.
+#include "solve/body_solver.hpp"
+#include "util/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+namespace corofem::detail {
+
+namespace {
+
+std::string sci(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.1e", value);
+  return buffer;
+}
+
+/// Relative residual above which a step whose linear solves did not converge, and whose residual
+/// grew during the step, counts as blown up. Below it the step is merely inexact (the user traded
+/// accuracy for speed with a low solver.max_iterations).
+constexpr double kBlowUpResidual = 1e-3;
+
+}  // namespace
+
+DynamicSolver::DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc)
+    : BodySolver(problem, backend), desc_(desc) {
+  if (problem.initialVelocity.size() == v_.size()) v_ = problem.initialVelocity;
+  v_ = (v_.array() * freeMask_).matrix();  // constrained dofs start at rest
+  vPrev_ = v_;
+  fextPrev_ = Eigen::VectorXd::Zero(x_.size());
+  fextPrevSaved_ = fextPrev_;
+}
+
+void DynamicSolver::initialAcceleration() {
+  const Eigen::Index n = x_.size();
+  Eigen::VectorXd fint(n), cv = Eigen::VectorXd::Zero(n);
+  setBackendPositions(x_, true);
+  backend_.internalForces(fint);
+  if (problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0)
+    backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v_, cv);
+  fextPrev_ = problem_.externalForce(0.0, /*dynamic=*/true);
+  a_ = Eigen::VectorXd::Zero(n);
+  for (Eigen::Index d = 0; d < n; ++d) {
+    const double m = problem_.lumpedMass.size() == n ? problem_.lumpedMass[d] : 0.0;
+    if (freeMask_[d] != 0.0 && m > 0.0) a_[d] = (fextPrev_[d] - cv[d] - fint[d]) / m;
+  }
+  if (!allFinite(a_))
+    fail(ErrorCode::SolveFailed, "body '", problem_.name,
+         "': the initial acceleration is not finite; check the material, the loads and the initial velocity");
+}
+
+BodyStepStats DynamicSolver::step(int index, int count) {
+  if (!started_) {
+    initialAcceleration();
+    started_ = true;
+  }
+  const Eigen::Index n = x_.size();
+  const double h = desc_.timeStep;
+  const double t1 = t_ + h;
+
+  // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme.
+  double ka = 0.0, kx = 0.0;
+  Eigen::VectorXd vb, xb;
+  if (desc_.integrator == Integrator::Newmark) {
+    const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
+    ka = 1.0 / (h * gamma);
+    kx = h * beta / gamma;
+    vb = v_ + h * (1.0 - gamma) * a_;
+    xb = x_ + h * v_ + h * h * (0.5 - beta) * a_ - kx * vb;
+  } else {
+    ka = 1.0 / h;
+    kx = h;
+    vb = v_;
+    xb = x_;
+  }
+  const bool damped = problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0;
+  const SystemCoeffs system{1.0, 1.0 / ka, kx / ka};
+
+  auto failHere = [&](const std::string& what, const std::string& fix) {
+    setBackendPositions(x_, true);
+    fail(ErrorCode::SolveFailed, "body '", problem_.name, "': time step ", index, "/", count, " (t = ", t1,
+         " s) ", what, "; ", fix, ". The body keeps its state at t = ", t_, " s");
+  };
+  const std::string stepFix =
+      "try a smaller analysis.time_step, more analysis.newton_iterations or a tighter solver.tolerance "
+      "(or more solver.max_iterations)";
+
+  // Targets of the constrained dofs at t_{n+1}: rest position (fixed) or X + ramp * value (prescribed).
+  Eigen::VectorXd target = problem_.restPositions;
+  problem_.applyPrescribed(target, t1, /*dynamic=*/true);
+  const Eigen::VectorXd fext = problem_.externalForce(t1, /*dynamic=*/true);
+  const double fextNorm = freeNorm(fext);
+
+  // Newton's starting point: v = v_n on the free dofs; constrained dofs hit their targets.
+  Eigen::VectorXd v = v_;
+  for (Eigen::Index d = 0; d < n; ++d)
+    if (freeMask_[d] == 0.0) v[d] = (target[d] - xb[d]) / kx;
+
+  const Eigen::VectorXd& mass = problem_.lumpedMass;
+  Eigen::VectorXd x(n), a(n), fint(n), cv = Eigen::VectorXd::Zero(n), r(n), dv(n);
+  BodyStepStats stats;
+  double initialRelative = 0.0, initialNorm = 0.0, residualNorm = 0.0;
+  bool allLinearConverged = true;
+  bool evaluated = false;  // stats.residual was measured at the final v
+  const int maxIterations = std::max(1, desc_.newtonIterations);
+  for (int iteration = 0;; ++iteration) {
+    x = xb + kx * v;
+    a = ka * (v - vb);
+    try {
+      setBackendPositions(x, false);
+      backend_.internalForces(fint);
+      if (damped) backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v, cv);
+    } catch (const Error& e) {
+      failHere(std::string("failed: ") + e.what(), stepFix);
+    }
+    const Eigen::VectorXd ma = mass.cwiseProduct(a);
+    r = ma + cv + fint - fext;
+    const double scale = std::max({freeNorm(ma), freeNorm(cv), freeNorm(fint), fextNorm, forceFloor_});
+    residualNorm = freeNorm(r);
+    const double relative = residualNorm / scale;
+    if (!std::isfinite(relative) || !allFinite(x) || !allFinite(v))
+      failHere("produced non-finite forces, velocities or positions", stepFix);
+    if (iteration == 0) {
+      initialRelative = relative;
+      initialNorm = residualNorm;
+    }
+    stats.residual = relative;
+    evaluated = true;
+    if (relative <= desc_.newtonTolerance || iteration == maxIterations) break;
+
+    // Newton update: A dv = -r / ka with A = M + (1/ka) C + (kx/ka) K_t. Starting vector dv = 0,
+    // i.e. the previous velocities (first iteration) or the current iterate.
+    dv.setZero();
+    LinearSolveStats ls;
+    try {
+      ls = backend_.solve(system, -r / ka, dv);
+    } catch (const Error& e) {
+      failHere(std::string("failed in the linear solve: ") + e.what(), stepFix);
+    }
+    stats.newtonIterations += 1;
+    stats.linearIterations += ls.iterations;
+    stats.linearResidual = std::max(stats.linearResidual, ls.relativeResidual);
+    allLinearConverged = allLinearConverged && ls.converged;
+    if (!allFinite(dv)) failHere("produced non-finite velocities", stepFix);
+    v += dv;
+    evaluated = false;
+    // The paper's linearised step: one solve, and no force evaluation after it when the solve
+    // converged (the report then carries the linearised prediction of the residual).
+    if (maxIterations == 1 && ls.converged) {
+      stats.residual = relative * ls.relativeResidual;
+      break;
+    }
+  }
+  x = xb + kx * v;
+  a = ka * (v - vb);
+  if (!allFinite(x) || !allFinite(v) || !allFinite(a))
+    failHere("produced non-finite velocities or positions", stepFix);
+  // Growth is judged on the absolute residual: the relative one is bounded by the number of terms
+  // when f_int dominates, exactly as it does in a blow-up.
+  if (!allLinearConverged && evaluated && residualNorm > initialNorm && stats.residual > kBlowUpResidual)
+    failHere("blew up: the linear solve did not converge and the Newton residual grew from " +
+                 sci(initialNorm) + " N to " + sci(residualNorm) + " N (relative " + sci(initialRelative) +
+                 " to " + sci(stats.residual) + ")",
+             stepFix);
+  stats.converged = allLinearConverged;
+
+  // Commit.
+  xPrev_ = x_;
+  vPrev_ = v_;
+  aPrev_ = a_;
+  workPrev_ = work_;
+  tPrev_ = t_;
+  fextPrevSaved_ = fextPrev_;
+  work_ += 0.5 * (fextPrev_ + fext).dot(x - x_);  // trapezoidal rule in time
+  fextPrev_ = fext;
+  x_ = x;
+  v_ = v;
+  a_ = a;
+  t_ = t1;
+  backendAtCommitted_ = evaluated;  // the backend's positions are x only when evaluated at the final v
+  return stats;
+}
+
+void DynamicSolver::rollback() {
+  x_ = xPrev_;
+  v_ = vPrev_;
+  a_ = aPrev_;
+  work_ = workPrev_;
+  t_ = tPrev_;
+  fextPrev_ = fextPrevSaved_;
+  backendAtCommitted_ = false;
+}
+
+}  // namespace corofem::detail

@@ -1,0 +1,178 @@
+// Simulation: the public object that owns every body's mesh, problem, backend and driver, and
+// advances them together. Every public member converts exceptions to Status (util/error.hpp).
+#include <corofem/simulation.hpp>
+
+#include "model/problem.hpp"
+#include "solve/backend.hpp"
+#include "solve/body_solver.hpp"
+#include "util/error.hpp"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <cmath>
+#include <utility>
+
+namespace corofem {
+
+namespace {
+
+bool isHyperelastic(Formulation f) {
+  return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean;
+}
+
+}  // namespace
+
+struct Simulation::Impl {
+  struct Body {
+    TetMesh mesh;
+    MeshReadReport report;
+    // The problem is heap-held so that the backend and the driver, which keep references to it,
+    // survive moves of the Body.
+    std::unique_ptr<detail::Problem> problem;
+    std::unique_ptr<detail::Backend> backend;
+    std::unique_ptr<detail::BodySolver> solver;
+  };
+
+  Scene scene;
+  std::vector<Body> bodies;
+  int stepsTaken = 0;
+  std::string backendName, deviceName;
+
+  bool isStatic() const { return scene.analysis.kind == AnalysisDesc::Kind::Static; }
+  int stepCount() const {
+    return isStatic() ? std::max(1, scene.analysis.statics.increments) : std::max(1, scene.analysis.dynamics.steps);
+  }
+  const Body& body(int index) const {
+    if (index < 0 || index >= static_cast<int>(bodies.size()))
+      detail::fail(ErrorCode::BadInput, "body index ", index, " is out of range: the scene has ", bodies.size(),
+                   " body(ies), numbered from 0");
+    return bodies[static_cast<std::size_t>(index)];
+  }
+};
+
+Result<Simulation> Simulation::create(const Scene& scene) {
+  return detail::guardResult<Simulation>([&]() {
+    auto impl = std::make_unique<Impl>();
+    impl->scene = scene;
+    if (scene.bodies.empty())
+      detail::fail(ErrorCode::BadInput, "scene '", scene.name, "' has no bodies; add at least one to \"bodies\"");
+    for (const BodyDesc& desc : scene.bodies) {
+      Impl::Body body;
+      Result<TetMesh> mesh = loadBodyMesh(desc, scene.baseDir, &body.report);
+      if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
+      body.mesh = std::move(mesh.value());
+      body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
+
+      switch (scene.backend.kind) {
+        case BackendKind::OpenCL:
+          if (isHyperelastic(desc.formulation))
+            detail::fail(ErrorCode::BadInput, "body '", desc.name, "': the ", toString(desc.formulation),
+                         " formulation runs only on the reference backend; set \"backend\": \"reference\" "
+                         "or use the \"corotational\" or \"linear\" formulation");
+          body.backend = detail::createOpenCLBackend(*body.problem, scene.solver, scene.backend.device);
+          break;
+        case BackendKind::Auto:
+          // TODO(scheduler): Auto should pick a device (GPU for large work, PoCL otherwise, with a
+          // calibration run); until the scheduler exists it is the reference backend.
+        case BackendKind::Reference:
+          body.backend = detail::createReferenceBackend(*body.problem, scene.solver);
+          break;
+      }
+      body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis);
+      impl->bodies.push_back(std::move(body));
+    }
+    impl->backendName = impl->bodies.front().backend->name();
+    impl->deviceName = impl->bodies.front().backend->deviceName();
+    return Simulation(std::move(impl));
+  });
+}
+
+Simulation::Simulation(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Simulation::Simulation(Simulation&&) noexcept = default;
+Simulation& Simulation::operator=(Simulation&&) noexcept = default;
+Simulation::~Simulation() = default;
+
+Status Simulation::step(StepReport* report) {
+  const auto start = std::chrono::steady_clock::now();
+  StepReport r;
+  Status status = detail::guard([&] {
+    Impl& s = *impl_;
+    const int count = s.stepCount();
+    if (s.stepsTaken >= count)
+      detail::fail(ErrorCode::BadInput, "the analysis is finished (", count,
+                   " steps taken); check finished() before step()");
+    const int index = s.stepsTaken + 1;
+    std::size_t done = 0;
+    try {
+      for (; done < s.bodies.size(); ++done) {
+        const detail::BodyStepStats b = s.bodies[done].solver->step(index, count);
+        r.newtonIterations += b.newtonIterations;
+        r.linearIterations += b.linearIterations;
+        r.residual = std::max(r.residual, b.residual);
+        r.linearResidual = std::max(r.linearResidual, b.linearResidual);
+        r.converged = r.converged && b.converged;
+      }
+    } catch (...) {
+      // The failing body restored itself; the bodies stepped before it go back one step so that
+      // the whole scene stays at the last step every body completed.
+      for (std::size_t b = 0; b < done; ++b) s.bodies[b].solver->rollback();
+      throw;
+    }
+    s.stepsTaken = index;
+    r.step = index;
+  });
+  r.time = time();
+  if (!status) r.converged = false;
+  r.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (report) *report = r;
+  return status;
+}
+
+bool Simulation::finished() const { return impl_->stepsTaken >= impl_->stepCount(); }
+int Simulation::stepsTaken() const { return impl_->stepsTaken; }
+int Simulation::stepCount() const { return impl_->stepCount(); }
+
+double Simulation::time() const {
+  if (impl_->isStatic()) return static_cast<double>(impl_->stepsTaken) / impl_->stepCount();
+  return impl_->stepsTaken * impl_->scene.analysis.dynamics.timeStep;
+}
+
+const Scene& Simulation::scene() const { return impl_->scene; }
+int Simulation::bodyCount() const { return static_cast<int>(impl_->bodies.size()); }
+const TetMesh& Simulation::restMesh(int body) const { assert(body >= 0 && body < bodyCount());  // a reference cannot carry a status
+  return impl_->bodies[static_cast<std::size_t>(body)].mesh; }
+const MeshReadReport& Simulation::meshReport(int body) const {
+  assert(body >= 0 && body < bodyCount());
+  return impl_->bodies[static_cast<std::size_t>(body)].report;
+}
+
+Status Simulation::readPositions(int body, std::vector<double>& out) const {
+  return detail::guard([&] {
+    const Eigen::VectorXd& x = impl_->body(body).solver->positions();
+    out.assign(x.data(), x.data() + x.size());
+  });
+}
+
+Status Simulation::readVelocities(int body, std::vector<double>& out) const {
+  return detail::guard([&] {
+    const Eigen::VectorXd& v = impl_->body(body).solver->velocities();
+    out.assign(v.data(), v.data() + v.size());
+  });
+}
+
+EnergyReport Simulation::energies(int body) const {
+  EnergyReport e;
+  if (body < 0 || body >= bodyCount()) return e;
+  detail::BodySolver& solver = *impl_->bodies[static_cast<std::size_t>(body)].solver;
+  e.kinetic = solver.kineticEnergy();
+  e.externalWork = solver.externalWork();
+  Status st = detail::guard([&] { e.elastic = solver.elasticEnergy(); });
+  if (!st) e.elastic = std::nan("");  // a backend failure here has no other channel; NaN marks it
+  return e;
+}
+
+std::string Simulation::backendName() const { return impl_->backendName; }
+std::string Simulation::deviceName() const { return impl_->deviceName; }
+
+}  // namespace corofem
