@@ -1,0 +1,91 @@
+// Saving, escaping and the pre-write checks shared by the mesh writers.
+#include "mesh/text_writer.hpp"
+
+#include "util/error.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+
+namespace corofem::mesh {
+
+void TextWriter::save(const std::string& path) const {
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f)
+    detail::fail(ErrorCode::IoError, "cannot write ", path, ": ", std::strerror(errno),
+                 "; check that the folder exists and is writable");
+  const bool wrote = std::fwrite(buf_.data(), 1, buf_.size(), f) == buf_.size();
+  const int err = errno;
+  const bool closed = std::fclose(f) == 0;
+  if (!wrote || !closed) {
+    std::remove(tmp.c_str());
+    detail::fail(ErrorCode::IoError, "cannot write ", path, ": ", std::strerror(err), " (disk full?)");
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int renameErr = errno;
+    std::remove(tmp.c_str());
+    detail::fail(ErrorCode::IoError, "cannot write ", path, ": renaming the temporary file failed: ",
+                 std::strerror(renameErr));
+  }
+}
+
+std::string xmlEscape(std::string_view s) {
+  std::string r;
+  r.reserve(s.size());
+  for (char c : s) {
+    switch (c) {
+      case '&': r += "&amp;"; break;
+      case '<': r += "&lt;"; break;
+      case '>': r += "&gt;"; break;
+      case '"': r += "&quot;"; break;
+      default: r += c;
+    }
+  }
+  return r;
+}
+
+void checkWritable(const TetMesh& mesh, const std::string& path) {
+  if (mesh.nodes.size() % 3 != 0 || mesh.tets.size() % 4 != 0)
+    detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the mesh arrays are not whole (", mesh.nodes.size(),
+                 " node values, ", mesh.tets.size(), " element indices); they must be multiples of 3 and 4");
+  const std::size_t n = mesh.nodeCount();
+  for (std::size_t i = 0; i < mesh.tets.size(); ++i)
+    if (mesh.tets[i] >= n)
+      detail::fail(ErrorCode::BadInput, "cannot write ", path, ": element ", i / 4, " refers to node ", mesh.tets[i],
+                   " but the mesh has ", n, " nodes (0-based indices)");
+  if (!mesh.regions.empty() && mesh.regions.size() != mesh.tetCount())
+    detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the mesh has ", mesh.regions.size(), " regions for ",
+                 mesh.tetCount(), " elements; give one per element or none");
+}
+
+void checkWritable(const SurfaceMesh& mesh, const std::string& path) {
+  if (mesh.vertices.size() % 3 != 0 || mesh.triangles.size() % 3 != 0)
+    detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the surface arrays are not whole (",
+                 mesh.vertices.size(), " vertex values, ", mesh.triangles.size(), " triangle indices)");
+  const std::size_t n = mesh.vertexCount();
+  for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
+    if (mesh.triangles[i] >= n)
+      detail::fail(ErrorCode::BadInput, "cannot write ", path, ": triangle ", i / 3, " refers to vertex ",
+                   mesh.triangles[i], " but the surface has ", n, " vertices (0-based indices)");
+  if (!mesh.texcoords.empty() && mesh.texcoords.size() != 2 * n)
+    detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", mesh.texcoords.size(),
+                 " texcoord values for ", n, " vertices; give 2 per vertex or none");
+}
+
+void checkFields(const std::vector<MeshField>& fields, std::size_t nodes, std::size_t elements,
+                 const std::string& path) {
+  for (const MeshField& f : fields) {
+    if (f.name.empty()) detail::fail(ErrorCode::BadInput, "cannot write ", path, ": a field has no name");
+    if (f.components < 1 || f.components > 9)
+      detail::fail(ErrorCode::BadInput, "cannot write ", path, ": field '", f.name, "' has ", f.components,
+                   " components; use 1 (scalar) or 3 (vector)");
+    const std::size_t count = f.perElement ? elements : nodes;
+    if (f.values.size() != count * std::size_t(f.components))
+      detail::fail(ErrorCode::BadInput, "cannot write ", path, ": field '", f.name, "' has ", f.values.size(),
+                   " values, expected ", f.components, " x ", count, (f.perElement ? " elements" : " nodes"), " = ",
+                   count * std::size_t(f.components));
+  }
+}
+
+}  // namespace corofem::mesh
