@@ -44,4 +44,30 @@ Mat3 polarRotation(const Mat3& F);
 Vec12 corotationalForce(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4>& x,
                         const std::array<Vec3d, 4>& X);
 
+// ---- additions (model helper): volume, mass, energy, rotated stiffness, small-strain stress ----
+
+/// Signed volume (X1-X0).((X2-X0)x(X3-X0)) / 6 (m^3); > 0 for a positively oriented element.
+double signedVolume(const std::array<Vec3d, 4>& X);
+
+/// Lumped mass of each of the element's 4 nodes: rho V / 4 (kg), per component.
+double lumpedNodeMass(const ElementRest& rest, double density);
+
+/// Consistent mass of the linear tetrahedron: M_(3i+c)(3j+c) = rho V / 20 (1 + delta_ij), zero
+/// between different components (12x12, node-major). Its row sums equal the lumped masses.
+Mat12 consistentMass(const ElementRest& rest, double density);
+
+/// R K R^T applied block-wise (paper Eq. 11): the co-rotational element tangent.
+Mat12 rotateStiffness(const Mat12& K, const Mat3& R);
+
+/// Strain energy 1/2 u^T K u with u = R^T x - X (co-rotational; R = I gives the linear energy) (J).
+double corotationalEnergy(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4>& x,
+                          const std::array<Vec3d, 4>& X);
+
+/// Small strain eps = (F + F^T)/2 - I of a deformation gradient (for the linear formulation; for the
+/// co-rotational one pass R^T F).
+Mat3 smallStrain(const Mat3& F);
+
+/// Hooke's law sigma = lambda tr(eps) I + 2 mu eps (Pa). Equals H B u in tensor form (Eq. 8).
+Mat3 hookeStress(const Mat3& strain, const Lame& lame);
+
 }  // namespace corofem::detail

@@ -1,0 +1,41 @@
+// Problem: load and prescribed-displacement scaling (statics: load factor; dynamics: ramp in time).
+// buildProblem lives in build_problem.cpp (it needs the scene's node-set resolution).
+#include "model/problem.hpp"
+
+#include <algorithm>
+
+namespace corofem::detail {
+
+namespace {
+
+/// Scale of a load: statics -> the load factor itself; dynamics -> min(1, t / rampTime), or 1 when
+/// the load has no ramp (rampTime == 0). Negative times give 0 (nothing applied before t = 0).
+double loadScale(double loadFactorOrTime, bool dynamic, double rampTime) {
+  if (!dynamic) return loadFactorOrTime;
+  if (rampTime <= 0.0) return 1.0;
+  return std::clamp(loadFactorOrTime / rampTime, 0.0, 1.0);
+}
+
+}  // namespace
+
+Eigen::VectorXd Problem::externalForce(double loadFactorOrTime, bool dynamic) const {
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(restPositions.size());
+  for (const ExternalForce& load : forces) f += loadScale(loadFactorOrTime, dynamic, load.rampTime) * load.f;
+  return f;
+}
+
+void Problem::applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const {
+  // Fixed dofs (constrained, value 0) are held at their rest position; prescribed dofs move to
+  // X + scale * value. Prescribed entries are written after, so they win on a shared dof.
+  for (std::size_t d = 0; d < constrained.size(); ++d)
+    if (constrained[d]) x[static_cast<Eigen::Index>(d)] = restPositions[static_cast<Eigen::Index>(d)];
+  for (const PrescribedDisplacement& p : prescribed) {
+    const double s = loadScale(loadFactorOrTime, dynamic, p.rampTime);
+    for (std::size_t k = 0; k < p.dofs.size(); ++k) {
+      const auto d = static_cast<Eigen::Index>(p.dofs[k]);
+      x[d] = restPositions[d] + s * p.values[k];
+    }
+  }
+}
+
+}  // namespace corofem::detail
