@@ -1,0 +1,105 @@
+// Coupled mesh (paper Section 5): a fine triangle surface bound to a coarse tetrahedral mesh.
+//
+// Once, before the simulation: every surface vertex is bound to one tetrahedron by its barycentric
+// coordinates (the element that contains it; for a vertex outside the tet mesh, the nearest element,
+// with extrapolated coordinates). Every frame: the vertices are recomputed from the deformed nodes,
+//   x_v = sum_k w_vk x_{n_vk}      (k = 0..3, the nodes of the vertex's element),
+// and smooth vertex normals are rebuilt from the deformed triangles, into a buffer a renderer draws.
+//
+//   auto binding = corofem::bindSurface(tetMesh, surface);           // Result<SurfaceBinding>
+//   std::vector<float> vbo(6 * surface.vertexCount());                // px py pz nx ny nz per vertex
+//   corofem::SurfaceOutput out;  out.interleaved = vbo.data();
+//   corofem::deformSurface(*binding, positions.data(), tetMesh.nodeCount(), out);   // every frame
+#pragma once
+
+#include <corofem/mesh.hpp>
+#include <corofem/status.hpp>
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace corofem {
+
+/// How bindSurface binds vertices.
+struct BindingOptions {
+  /// Largest distance (scene units, m by convention) from a vertex outside the tet mesh to its
+  /// nearest element. Farther vertices make binding fail with ErrorCode::BadInput. Negative (the
+  /// default): 5% of the diagonal of the tet mesh's bounding box. 0: every vertex must be inside
+  /// (within insideTolerance). +infinity: no limit.
+  double maxDistance = -1.0;
+  /// A vertex is inside an element when all four barycentric coordinates are >= -insideTolerance
+  /// (dimensionless, >= 0, typically 1e-12..1e-6). It absorbs rounding for vertices on element
+  /// faces and on the tet mesh's boundary; such vertices count as inside with distance 0.
+  double insideTolerance = 1e-10;
+  /// Worker threads for the search (std::thread). 0: automatic (hardware concurrency, but one
+  /// thread below 20000 vertices). The result does not depend on the thread count.
+  int threads = 0;
+};
+
+/// Summary of a binding.
+struct BindingStatistics {
+  std::size_t insideCount = 0;    ///< vertices contained in an element (within insideTolerance)
+  std::size_t outsideCount = 0;   ///< vertices bound to their nearest element by extrapolation
+  double largestDistance = 0.0;   ///< largest vertex-to-tet-mesh distance (m), 0 when all are inside
+  double maxDistanceUsed = 0.0;   ///< the effective BindingOptions::maxDistance (m)
+  double boundingBoxDiagonal = 0.0;  ///< diagonal of the tet mesh's bounding box (m)
+  std::vector<std::uint32_t> outsideVertices;  ///< indices of the outside vertices, ascending
+  std::vector<double> outsideDistances;        ///< per outside vertex: its distance to its element (m)
+};
+
+/// A surface mesh bound to a tet mesh. Self-contained: deformSurface needs only this and the node
+/// positions (the element's node indices and the surface triangles are copied in).
+struct SurfaceBinding {
+  std::size_t tetNodeCount = 0;          ///< node count of the tet mesh bound to (checked each frame)
+  std::vector<std::uint32_t> element;    ///< per vertex: its element (0-based index into TetMesh::tets)
+  std::vector<std::uint32_t> nodes;      ///< 4 per vertex: the element's node indices, in element order
+  /// 4 per vertex: barycentric coordinates w_k of the vertex in its element's rest shape, in the order
+  /// of `nodes`; they sum to 1. All in [-insideTolerance, 1] for inside vertices; some are negative
+  /// (extrapolation) for outside vertices.
+  std::vector<double> weights;
+  std::vector<std::uint32_t> triangles;  ///< 3 per triangle: the surface triangles (for normals)
+  /// Vertex -> incident triangles (CSR): the triangles of vertex v are
+  /// vertexTriangles[vertexTriangleOffsets[v] .. vertexTriangleOffsets[v+1]), ascending. Normals are
+  /// gathered per vertex in this fixed order, so they do not depend on the thread count.
+  std::vector<std::uint32_t> vertexTriangleOffsets;
+  std::vector<std::uint32_t> vertexTriangles;
+  BindingStatistics statistics;          ///< what the binding found
+
+  std::size_t vertexCount() const { return element.size(); }
+};
+
+/// Binds every vertex of `surface` to an element of `tets` (spatial grid search; seconds for a
+/// million vertices and 100k elements). A vertex contained in several elements (on a shared face,
+/// edge or node) takes the lowest element index; a vertex outside takes the element at the smallest
+/// true point-to-tetrahedron distance (ties: lowest index). Errors (ErrorCode::BadInput): empty
+/// meshes, non-finite coordinates, indices out of range, flat elements, vertices farther than
+/// maxDistance (the message counts and locates them).
+Result<SurfaceBinding> bindSurface(const TetMesh& tets, const SurfaceMesh& surface,
+                                   const BindingOptions& options = {});
+
+/// Where deformSurface writes. Any pointer may be null (that stream is skipped); at least one must be
+/// set. Buffers hold vertexCount() entries of the stated width.
+struct SurfaceOutput {
+  /// 6 floats per vertex: position x y z (m), then unit normal x y z; stride 24 bytes. The layout of an
+  /// interleaved vertex buffer (position at offset 0, normal at offset 12).
+  float* interleaved = nullptr;
+  float* positions = nullptr;         ///< 3 floats per vertex (m)
+  float* normals = nullptr;           ///< 3 floats per vertex, unit length (0 0 0 for a vertex with no
+                                      ///< triangle or only degenerate ones)
+  double* positionsDouble = nullptr;  ///< 3 doubles per vertex (m): full precision positions
+  /// Worker threads. 0: automatic (hardware concurrency, one thread per 100k vertices at most). The
+  /// output is bitwise identical for every thread count.
+  int threads = 0;
+};
+
+/// Per-frame update of the coupled mesh. Positions x_v = sum_k w_vk x_{n_vk} (double arithmetic);
+/// normals: n_v = normalise(sum over triangles t at v of (b-a) x (c-a)), the area-weighted mean of
+/// the incident face normals, from the double positions. `tetNodePositions` holds 3 doubles per node
+/// of the tet mesh (current positions), `tetNodeCount` nodes. Errors (ErrorCode::BadInput): node count
+/// differs from the bound mesh's, no output set. Non-finite node positions propagate (no check per
+/// frame). Uses a thread-local scratch buffer when positionsDouble is null and normals are asked for.
+Status deformSurface(const SurfaceBinding& binding, const double* tetNodePositions,
+                     std::size_t tetNodeCount, const SurfaceOutput& output);
+
+}  // namespace corofem
