@@ -8,24 +8,11 @@
 
 #include <cmath>
 #include <sstream>
+#include <string>
 
 namespace corofem::detail {
 
 namespace {
-
-std::string describeSet(const NodeSetDesc& set) {
-  std::ostringstream os;
-  switch (set.kind) {
-    case NodeSetDesc::Kind::Box:
-      os << "box [" << set.boxMin[0] << ", " << set.boxMin[1] << ", " << set.boxMin[2] << "] - ["
-         << set.boxMax[0] << ", " << set.boxMax[1] << ", " << set.boxMax[2] << "]";
-      break;
-    case NodeSetDesc::Kind::Plane: os << "plane"; break;
-    case NodeSetDesc::Kind::List: os << "node list (" << set.indices.size() << " nodes)"; break;
-    case NodeSetDesc::Kind::BouFile: os << "bou file '" << set.bouFile << "'"; break;
-  }
-  return os.str();
-}
 
 std::vector<std::uint32_t> resolveOrThrow(const BodyDesc& body, const std::string& what,
                                           const NodeSetDesc& set, const TetMesh& mesh,
@@ -33,7 +20,7 @@ std::vector<std::uint32_t> resolveOrThrow(const BodyDesc& body, const std::strin
   Result<std::vector<std::uint32_t>> nodes = resolveNodeSet(set, mesh, baseDir);
   if (!nodes) {
     fail(nodes.status().code() == ErrorCode::Ok ? ErrorCode::BadInput : nodes.status().code(), "body '",
-         body.name, "': ", what, " (", describeSet(set), "): ", nodes.message());
+         body.name, "': ", what, ": ", nodes.message());
   }
   for (std::uint32_t n : *nodes)
     if (n >= mesh.nodeCount())
