@@ -6,7 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 namespace corofem {
 namespace {
@@ -60,6 +64,36 @@ TEST(SceneExamples, EveryNodeSetSelectsNodesWhereTheMeshIsAvailable) {
     }
   }
   EXPECT_GE(checkedBodies, 3);  // the generated-box examples need no shared data
+}
+
+TEST(SceneExamples, DocumentationShowsTheFilesAsTheyAre) {
+  // docs/scene-format.md quotes each example after a link "(examples/<file>.json)"; the quoted JSON
+  // must equal the file, so the documentation cannot drift from what the tests check.
+  std::ifstream in(fs::path(COROFEM_SOURCE_DIR) / "docs" / "scene-format.md");
+  ASSERT_TRUE(in) << "docs/scene-format.md is missing";
+  std::stringstream text;
+  text << in.rdbuf();
+  const std::string doc = text.str();
+  int quoted = 0;
+  for (const fs::path& file : examples()) {
+    const std::string link = "(examples/" + file.filename().string() + ")";
+    const std::size_t at = doc.find(link);
+    if (at == std::string::npos) {
+      ADD_FAILURE() << file.filename() << " is not linked from docs/scene-format.md";
+      continue;
+    }
+    const std::size_t open = doc.find("```json\n", at);
+    const std::size_t close = doc.find("```", open + 8);
+    ASSERT_NE(open, std::string::npos);
+    ASSERT_NE(close, std::string::npos);
+    std::ifstream f(file);
+    std::stringstream content;
+    content << f.rdbuf();
+    EXPECT_EQ(nlohmann::json::parse(doc.substr(open + 8, close - open - 8)), nlohmann::json::parse(content.str()))
+        << "the block quoted after " << link << " differs from the file";
+    ++quoted;
+  }
+  EXPECT_GE(quoted, 4);
 }
 
 }  // namespace
