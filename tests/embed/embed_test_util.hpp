@@ -142,4 +142,31 @@ inline SurfaceMesh pointCloud(const std::vector<double>& xyz) {
   return s;
 }
 
+/// Latitude-longitude sphere: `stacks` rings of `slices` vertices plus the two poles, triangles
+/// counter-clockwise seen from outside (so (b-a) x (c-a) points outwards).
+/// (stacks - 1) * slices + 2 vertices, 2 * slices * (stacks - 1) triangles.
+inline SurfaceMesh uvSphere(const std::array<double, 3>& center, double radius, int stacks, int slices) {
+  SurfaceMesh s;
+  auto add = [&](double theta, double phi) {
+    s.vertices.push_back(center[0] + radius * std::sin(theta) * std::cos(phi));
+    s.vertices.push_back(center[1] + radius * std::sin(theta) * std::sin(phi));
+    s.vertices.push_back(center[2] + radius * std::cos(theta));
+  };
+  add(0.0, 0.0);  // north pole, vertex 0
+  for (int i = 1; i < stacks; ++i)
+    for (int j = 0; j < slices; ++j) add(M_PI * i / stacks, 2.0 * M_PI * j / slices);
+  add(M_PI, 0.0);  // south pole
+  const std::uint32_t south = static_cast<std::uint32_t>(s.vertexCount() - 1);
+  auto ring = [&](int i, int j) { return static_cast<std::uint32_t>(1 + (i - 1) * slices + (j % slices)); };
+  for (int j = 0; j < slices; ++j) s.triangles.insert(s.triangles.end(), {0u, ring(1, j), ring(1, j + 1)});
+  for (int i = 1; i + 1 < stacks; ++i)
+    for (int j = 0; j < slices; ++j) {
+      s.triangles.insert(s.triangles.end(), {ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)});
+      s.triangles.insert(s.triangles.end(), {ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)});
+    }
+  for (int j = 0; j < slices; ++j)
+    s.triangles.insert(s.triangles.end(), {south, ring(stacks - 1, j + 1), ring(stacks - 1, j)});
+  return s;
+}
+
 }  // namespace corofem::test

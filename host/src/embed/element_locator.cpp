@@ -71,10 +71,10 @@ ElementLocator::ElementLocator(const TetMesh& mesh, double insideTolerance)
   bboxLo_.resize(elementCount);
   bboxHi_.resize(elementCount);
 
-  Point3 meshLo{}, meshHi{};
+  Point3 meshLo{}, meshHi{}, nodeLo{}, nodeHi{};  // padded element boxes; the nodes alone
   for (int a = 0; a < 3; ++a) {
-    meshLo[a] = std::numeric_limits<double>::infinity();
-    meshHi[a] = -std::numeric_limits<double>::infinity();
+    meshLo[a] = nodeLo[a] = std::numeric_limits<double>::infinity();
+    meshHi[a] = nodeHi[a] = -std::numeric_limits<double>::infinity();
   }
   for (std::size_t e = 0; e < elementCount; ++e) {
     const std::uint32_t* t = tets_ + 4 * e;
@@ -105,7 +105,11 @@ ElementLocator::ElementLocator(const TetMesh& mesh, double insideTolerance)
         hi[a] = std::max(hi[a], x[a]);
       }
     }
-    for (int a = 0; a < 3; ++a) extent = std::max(extent, hi[a] - lo[a]);
+    for (int a = 0; a < 3; ++a) {
+      extent = std::max(extent, hi[a] - lo[a]);
+      nodeLo[a] = std::min(nodeLo[a], lo[a]);
+      nodeHi[a] = std::max(nodeHi[a], hi[a]);
+    }
     // A point with all w_k >= -tol lies within about 3 tol * extent of the element (each negative w_k
     // moves it at most |w_k| times an edge length outside): pad the box by 4 tol * extent.
     const double pad = 4.0 * tolerance_ * extent;
@@ -119,7 +123,7 @@ ElementLocator::ElementLocator(const TetMesh& mesh, double insideTolerance)
     bboxHi_[e] = hi;
   }
   if (elementCount == 0) return;
-  diagonal_ = std::sqrt(dot(sub(meshHi, meshLo), sub(meshHi, meshLo)));
+  diagonal_ = std::sqrt(dot(sub(nodeHi, nodeLo), sub(nodeHi, nodeLo)));
 
   // Grid: about one cell per element, cubic cells as far as the box allows.
   const double tiny = 1e-12 * diagonal_;
