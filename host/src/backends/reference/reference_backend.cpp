@@ -105,6 +105,12 @@ class ReferenceBackend final : public Backend {
     assemble(c);
 
     const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs_.size());
+    if (nf == 0) {  // everything constrained: nothing to solve
+      x.setZero();
+      LinearSolveStats none;
+      none.converged = true;
+      return none;
+    }
     Eigen::VectorXd bf(nf), xf(nf);
     for (Eigen::Index i = 0; i < nf; ++i) {
       bf[i] = b[freeDofs_[static_cast<std::size_t>(i)]];
