@@ -1,0 +1,186 @@
+// Device discovery, selection and context ownership (cl_context.hpp).
+#include "backends/opencl/cl_context.hpp"
+
+#include "util/error.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <sstream>
+
+namespace corofem::detail::cl {
+
+namespace {
+
+std::string deviceString(cl_device_id device, cl_device_info what) {
+  std::size_t size = 0;
+  if (clGetDeviceInfo(device, what, 0, nullptr, &size) != CL_SUCCESS || size == 0) return {};
+  std::string s(size, '\0');
+  if (clGetDeviceInfo(device, what, size, s.data(), nullptr) != CL_SUCCESS) return {};
+  while (!s.empty() && (s.back() == '\0' || s.back() == ' ')) s.pop_back();
+  return s;
+}
+
+std::string platformString(cl_platform_id platform, cl_platform_info what) {
+  std::size_t size = 0;
+  if (clGetPlatformInfo(platform, what, 0, nullptr, &size) != CL_SUCCESS || size == 0) return {};
+  std::string s(size, '\0');
+  if (clGetPlatformInfo(platform, what, size, s.data(), nullptr) != CL_SUCCESS) return {};
+  while (!s.empty() && (s.back() == '\0' || s.back() == ' ')) s.pop_back();
+  return s;
+}
+
+std::string lower(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
+  return s;
+}
+
+}  // namespace
+
+std::string DeviceInfo::describe() const {
+  std::ostringstream os;
+  os << name << " (" << (gpu ? "GPU" : "CPU/other") << ", " << platformName << ", "
+     << (fp64 ? "fp64" : "no fp64") << ")";
+  return os.str();
+}
+
+DeviceInfo queryDevice(cl_device_id device) {
+  DeviceInfo info;
+  info.device = device;
+  clGetDeviceInfo(device, CL_DEVICE_PLATFORM, sizeof(info.platform), &info.platform, nullptr);
+  info.name = deviceString(device, CL_DEVICE_NAME);
+  info.driverVersion = deviceString(device, CL_DRIVER_VERSION);
+  info.deviceVersion = deviceString(device, CL_DEVICE_VERSION);
+  if (info.platform) info.platformName = platformString(info.platform, CL_PLATFORM_NAME);
+  cl_device_type type = 0;
+  clGetDeviceInfo(device, CL_DEVICE_TYPE, sizeof(type), &type, nullptr);
+  info.gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
+  const std::string extensions = deviceString(device, CL_DEVICE_EXTENSIONS);
+  info.fp64 = extensions.find("cl_khr_fp64") != std::string::npos;
+  clGetDeviceInfo(device, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof(info.globalMemoryBytes),
+                  &info.globalMemoryBytes, nullptr);
+  clGetDeviceInfo(device, CL_DEVICE_MAX_COMPUTE_UNITS, sizeof(info.computeUnits), &info.computeUnits,
+                  nullptr);
+  clGetDeviceInfo(device, CL_DEVICE_MAX_WORK_GROUP_SIZE, sizeof(info.maxWorkGroupSize),
+                  &info.maxWorkGroupSize, nullptr);
+  return info;
+}
+
+std::vector<DeviceInfo> listDevices() {
+  std::vector<DeviceInfo> out;
+  cl_uint platformCount = 0;
+  if (clGetPlatformIDs(0, nullptr, &platformCount) != CL_SUCCESS || platformCount == 0) return out;
+  std::vector<cl_platform_id> platforms(platformCount);
+  if (clGetPlatformIDs(platformCount, platforms.data(), nullptr) != CL_SUCCESS) return out;
+  for (cl_platform_id platform : platforms) {
+    cl_uint count = 0;
+    if (clGetDeviceIDs(platform, CL_DEVICE_TYPE_ALL, 0, nullptr, &count) != CL_SUCCESS || count == 0)
+      continue;
+    std::vector<cl_device_id> devices(count);
+    if (clGetDeviceIDs(platform, CL_DEVICE_TYPE_ALL, count, devices.data(), nullptr) != CL_SUCCESS)
+      continue;
+    for (cl_device_id d : devices) out.push_back(queryDevice(d));
+  }
+  return out;
+}
+
+std::string describeDevices(const std::vector<DeviceInfo>& devices) {
+  std::ostringstream os;
+  if (devices.empty()) os << "  (none: no OpenCL platform or device was found; install a driver or "
+                             "pocl-opencl-icd for the CPU)\n";
+  for (std::size_t i = 0; i < devices.size(); ++i) os << "  " << i << ": " << devices[i].describe() << "\n";
+  return os.str();
+}
+
+DeviceInfo selectDevice(const std::string& selector) {
+  const std::vector<DeviceInfo> devices = listDevices();
+  if (devices.empty())
+    fail(ErrorCode::DeviceError, "no OpenCL device found (no platform reports a device); install a "
+                                 "GPU driver or pocl-opencl-icd, or use \"backend\": \"reference\"");
+  if (selector.empty()) {
+    for (const DeviceInfo& d : devices)
+      if (d.gpu) return d;
+    return devices.front();
+  }
+  const bool numeric = std::all_of(selector.begin(), selector.end(),
+                                   [](unsigned char c) { return std::isdigit(c) != 0; });
+  if (numeric) {
+    const unsigned long index = std::stoul(selector);
+    if (index < devices.size()) return devices[index];
+  } else {
+    const std::string want = lower(selector);
+    for (const DeviceInfo& d : devices)
+      if (lower(d.name).find(want) != std::string::npos) return d;
+  }
+  fail(ErrorCode::DeviceError, "OpenCL device selector '", selector,
+       "' matches no device; give an index or a part of a name from this list:\n",
+       describeDevices(devices));
+}
+
+std::shared_ptr<Context> Context::createOn(const DeviceInfo& info) {
+  std::shared_ptr<Context> ctx(new Context());
+  ctx->info_ = info;
+  cl_int status = CL_SUCCESS;
+  cl_context_properties props[] = {CL_CONTEXT_PLATFORM,
+                                   reinterpret_cast<cl_context_properties>(info.platform), 0};
+  ctx->context_ = clCreateContext(props, 1, &info.device, nullptr, nullptr, &status);
+  checkCl(status, "clCreateContext", info.name);
+  ctx->queue_ = clCreateCommandQueue(ctx->context_, info.device, 0, &status);
+  checkCl(status, "clCreateCommandQueue", info.name);
+  return ctx;
+}
+
+std::shared_ptr<Context> Context::create(const std::string& selector) {
+  return createOn(selectDevice(selector));
+}
+
+std::shared_ptr<Context> Context::shared(const std::string& selector) {
+  static std::mutex mutex;
+  static std::map<cl_device_id, std::weak_ptr<Context>> contexts;
+  const DeviceInfo info = selectDevice(selector);
+  std::lock_guard<std::mutex> lock(mutex);
+  if (auto existing = contexts[info.device].lock()) return existing;
+  auto made = createOn(info);
+  contexts[info.device] = made;
+  return made;
+}
+
+std::shared_ptr<Context> Context::adopt(cl_context context, cl_command_queue queue, cl_device_id device) {
+  if (!context || !queue || !device)
+    fail(ErrorCode::BadInput, "adopting an OpenCL context: the context, queue and device must all be "
+                              "non-null");
+  std::shared_ptr<Context> ctx(new Context());
+  ctx->info_ = queryDevice(device);
+  checkCl(clRetainContext(context), "clRetainContext", ctx->info_.name);
+  ctx->context_ = context;
+  checkCl(clRetainCommandQueue(queue), "clRetainCommandQueue", ctx->info_.name);
+  ctx->queue_ = queue;
+  return ctx;
+}
+
+Context::~Context() {
+  for (auto& entry : programs_) clReleaseProgram(entry.second);
+  if (queue_) {
+    clFinish(queue_);
+    clReleaseCommandQueue(queue_);
+  }
+  if (context_) clReleaseContext(context_);
+}
+
+cl_program Context::findProgram(const std::string& key) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = programs_.find(key);
+  return it == programs_.end() ? nullptr : it->second;
+}
+
+void Context::storeProgram(const std::string& key, cl_program program) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = programs_.find(key);
+  if (it != programs_.end()) {
+    clReleaseProgram(it->second);
+    it->second = program;
+  } else {
+    programs_[key] = program;
+  }
+}
+
+}  // namespace corofem::detail::cl

@@ -1,0 +1,550 @@
+// The OpenCL backend: per-element rotations, matrix-free co-rotational forces and products,
+// deterministic per-node gathers and a PCG whose scalars stay on the device (kernels/opencl/).
+#ifdef COROFEM_WITH_OPENCL
+
+#include "backends/opencl/opencl_backend.hpp"
+
+#include "util/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <utility>
+
+namespace corofem::detail {
+
+// The device layout constants (kScalarRho, kGeomVolume, ...), shared with the kernels.
+namespace layout {
+#include "../../../../kernels/shared/corofem_layout.h"
+}  // namespace layout
+
+namespace {
+
+using cl::checkCl;
+using namespace layout;
+
+/// A device buffer released on destruction.
+class Buffer {
+ public:
+  Buffer() = default;
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+  ~Buffer() {
+    if (mem_) clReleaseMemObject(mem_);
+  }
+  void create(cl_context ctx, std::size_t bytes, const std::string& device) {
+    cl_int status = CL_SUCCESS;
+    mem_ = clCreateBuffer(ctx, CL_MEM_READ_WRITE, std::max<std::size_t>(bytes, 16), nullptr, &status);
+    checkCl(status, "clCreateBuffer", device);
+    bytes_ = bytes;
+  }
+  cl_mem get() const { return mem_; }
+  std::size_t bytes() const { return bytes_; }
+
+ private:
+  cl_mem mem_ = nullptr;
+  std::size_t bytes_ = 0;
+};
+
+/// A kernel released on destruction.
+class Kernel {
+ public:
+  Kernel() = default;
+  Kernel(const Kernel&) = delete;
+  Kernel& operator=(const Kernel&) = delete;
+  ~Kernel() {
+    if (k_) clReleaseKernel(k_);
+  }
+  void create(cl_program program, const char* name, const std::string& device) {
+    cl_int status = CL_SUCCESS;
+    k_ = clCreateKernel(program, name, &status);
+    if (status != CL_SUCCESS)
+      fail(ErrorCode::DeviceError, "clCreateKernel('", name, "') failed with ",
+           cl::errorString(status), " on OpenCL device '", device, "'");
+    name_ = name;
+  }
+  cl_kernel get() const { return k_; }
+  const char* name() const { return name_; }
+
+ private:
+  cl_kernel k_ = nullptr;
+  const char* name_ = "";
+};
+
+/// A floating-point kernel argument, passed as float or double by the backend's precision.
+struct RealArg {
+  double value;
+};
+
+std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
+
+class OpenCLBackend final : public OpenCLBackendInternal {
+ public:
+  OpenCLBackend(const Problem& problem, const SolverDesc& solver, std::shared_ptr<cl::Context> ctx,
+                const OpenCLOptions& options);
+
+  std::string name() const override { return "opencl"; }
+  std::string deviceName() const override { return ctx_->info().describe(); }
+  void setPositions(const Eigen::VectorXd& x) override;
+  void internalForces(Eigen::VectorXd& f) override;
+  void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override;
+  LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override;
+  double elasticEnergy() override;
+
+  std::vector<double> readRotations() override;
+  const std::string& buildOptions() const override { return options_; }
+  cl::ProgramOrigin programOrigin() const override { return build_.origin; }
+  const cl::ProgramBuild& programBuild() const override { return build_; }
+  cl::Context& context() override { return *ctx_; }
+  void enqueueRotations() override;
+  void enqueueForces() override;
+  void enqueueElementForces() override;
+  void enqueueProduct(const SystemCoeffs& c) override;
+  void enqueueElementProduct(const SystemCoeffs& c) override;
+  void finish() override { checkCl(clFinish(ctx_->queue()), "clFinish", dev_); }
+
+ private:
+  // -- argument setting and launching
+  void setArg(cl_kernel k, cl_uint i, cl_mem m) {
+    checkCl(clSetKernelArg(k, i, sizeof(cl_mem), &m), "clSetKernelArg", dev_);
+  }
+  void setArg(cl_kernel k, cl_uint i, const Buffer& b) { setArg(k, i, b.get()); }
+  void setArg(cl_kernel k, cl_uint i, cl_uint v) {
+    checkCl(clSetKernelArg(k, i, sizeof(cl_uint), &v), "clSetKernelArg", dev_);
+  }
+  void setArg(cl_kernel k, cl_uint i, RealArg v) {
+    if (double_) {
+      checkCl(clSetKernelArg(k, i, sizeof(double), &v.value), "clSetKernelArg", dev_);
+    } else {
+      const float f = static_cast<float>(v.value);
+      checkCl(clSetKernelArg(k, i, sizeof(float), &f), "clSetKernelArg", dev_);
+    }
+  }
+  template <class... Args>
+  void launch(const Kernel& kernel, std::size_t items, const Args&... args) {
+    cl_uint index = 0;
+    (setArg(kernel.get(), index++, args), ...);
+    const std::size_t global = roundUp(std::max<std::size_t>(items, 1), wg_);
+    const cl_int status = clEnqueueNDRangeKernel(ctx_->queue(), kernel.get(), 1, nullptr, &global, &wg_,
+                                                 0, nullptr, nullptr);
+    if (status != CL_SUCCESS)
+      fail(ErrorCode::DeviceError, "clEnqueueNDRangeKernel('", kernel.name(), "', ", global,
+           " work-items) failed with ", cl::errorString(status), " on OpenCL device '", dev_, "'");
+  }
+
+  // -- transfers (blocking, through the staging area, converting to the device precision)
+  void upload(const Buffer& buf, const double* src, std::size_t count);
+  void download(const Buffer& buf, double* dst, std::size_t count);
+  template <class T>
+  void uploadRaw(const Buffer& buf, const std::vector<T>& v) {
+    checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, v.size() * sizeof(T), v.data(), 0,
+                                 nullptr, nullptr),
+            "clEnqueueWriteBuffer", dev_);
+  }
+  void createReal(Buffer& buf, std::size_t count) { buf.create(ctx_->context(), count * realSize_, dev_); }
+
+  void checkVector(const Eigen::VectorXd& v, const char* what) const {
+    if (static_cast<std::size_t>(v.size()) != dofs_)
+      fail(ErrorCode::Internal, "OpenCL backend: ", what, " has ", v.size(), " entries, expected 3N = ",
+           dofs_);
+  }
+  void coefficients(const SystemCoeffs& c, double& massCoef, double& stiffCoef) const {
+    // A = m M + c (alpha M + beta K^R) + k K^R = (m + c alpha) M + (k + c beta) K^R.
+    massCoef = c.mass + c.damping * rayleighMass_;
+    stiffCoef = c.stiffness + c.damping * rayleighStiffness_;
+  }
+  /// y = A v (element product + gather), p . y partial sums per group into partials_.
+  void product(const Buffer& v, const Buffer& y, double massCoef, double stiffCoef, bool project);
+  void refreshBlocks();
+
+  std::shared_ptr<cl::Context> ctx_;
+  std::string dev_;
+  OpenCLOptions opts_;
+  std::string options_;
+  cl::ProgramBuild build_;
+  bool double_ = false;
+  std::size_t realSize_ = sizeof(float);
+  std::size_t wg_ = 64;
+  Formulation formulation_;
+  PreconditionerKind precond_;
+  SolverDesc solver_;
+  double lambda_ = 0, mu_ = 0, rayleighMass_ = 0, rayleighStiffness_ = 0;
+  std::size_t nodes_ = 0, elems_ = 0, dofs_ = 0, stride_ = 0;
+  std::size_t elemGroups_ = 0, nodeGroups_ = 0;
+  std::vector<std::uint8_t> constrained_;
+  std::vector<unsigned char> staging_;
+
+  Kernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_,
+      kBlocks_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
+  Buffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
+  Buffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, partials_, scalars_;
+};
+
+OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
+                             std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options)
+    : ctx_(std::move(ctx)), opts_(options), formulation_(problem.formulation),
+      precond_(solver.preconditioner), solver_(solver) {
+  dev_ = ctx_->deviceName();
+  if (formulation_ != Formulation::Corotational && formulation_ != Formulation::Linear)
+    fail(ErrorCode::BadInput, "body '", problem.name, "': the OpenCL backend implements the co-rotational "
+         "and linear formulations only, not '", toString(formulation_),
+         "'; use the reference backend (\"backend\": \"reference\") for this formulation");
+  if (solver.linearSolver != LinearSolverKind::Pcg)
+    fail(ErrorCode::BadInput, "body '", problem.name, "': the OpenCL backend solves with PCG only; "
+         "\"cholesky\" is available on the reference backend (\"backend\": \"reference\")");
+  double_ = solver.precision == Precision::Double;
+  if (double_ && !ctx_->info().fp64)
+    fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64); "
+         "set the solver precision to \"float\" or choose another device");
+  realSize_ = double_ ? sizeof(double) : sizeof(float);
+  wg_ = options.workGroupSize ? options.workGroupSize : 64;
+  if ((wg_ & (wg_ - 1)) != 0 || wg_ > ctx_->info().maxWorkGroupSize)
+    fail(ErrorCode::BadInput, "OpenCL work-group size ", wg_, " must be a power of two <= ",
+         ctx_->info().maxWorkGroupSize, " on device '", dev_, "'");
+
+  nodes_ = problem.mesh.nodeCount();
+  elems_ = problem.mesh.tetCount();
+  dofs_ = 3 * nodes_;
+  if (problem.elements.size() != elems_ || problem.dofCount() != dofs_)
+    fail(ErrorCode::Internal, "OpenCL backend: problem '", problem.name, "' has ", problem.elements.size(),
+         " element rest states for ", elems_, " tets and ", problem.dofCount(), " dofs for ", nodes_,
+         " nodes");
+  if (elems_ == 0) fail(ErrorCode::BadInput, "body '", problem.name, "' has no elements");
+  if (elems_ * kStoredKComponents >= (std::size_t(1) << 32) / 2)
+    fail(ErrorCode::BadInput, "body '", problem.name, "': ", elems_, " elements exceed the OpenCL "
+         "backend's 32-bit element indexing; split the body");
+  stride_ = roundUp(elems_, kStrideAlign);
+  elemGroups_ = roundUp(elems_, wg_) / wg_;
+  nodeGroups_ = roundUp(std::max<std::size_t>(nodes_, 1), wg_) / wg_;
+  lambda_ = problem.lame.lambda;
+  mu_ = problem.lame.mu;
+  rayleighMass_ = problem.rayleighMass;
+  rayleighStiffness_ = problem.rayleighStiffness;
+
+  // -- program: only the features this problem uses
+  options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_);
+  if (double_) options_ += " -DCOROFEM_DOUBLE";
+  switch (solver.rotation) {
+    case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;
+    case RotationMethod::Svd: options_ += " -DCOROFEM_ROT_SVD"; break;
+    case RotationMethod::Quaternion: options_ += " -DCOROFEM_ROT_QUAT"; break;
+    case RotationMethod::Qr: options_ += " -DCOROFEM_ROT_QR"; break;
+  }
+  if (options.quaternionIterations > 0)
+    options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(options.quaternionIterations);
+  if (precond_ == PreconditionerKind::BlockDiagonal) options_ += " -DCOROFEM_PRECOND_BLOCK";
+  else if (precond_ == PreconditionerKind::Diagonal) options_ += " -DCOROFEM_PRECOND_DIAG";
+  static const std::string source = cl::corofemProgramSource();
+  build_ = cl::buildProgram(*ctx_, "corofem", source, options_);
+  kRotations_.create(build_.program, "compute_rotations", dev_);
+  kForces_.create(build_.program, "element_forces", dev_);
+  kEnergy_.create(build_.program, "element_energy", dev_);
+  kProduct_.create(build_.program, "element_product", dev_);
+  kProductStored_.create(build_.program, "element_product_stored", dev_);
+  kGatherSum_.create(build_.program, "gather_sum", dev_);
+  kGatherProduct_.create(build_.program, "gather_product", dev_);
+  kBlocks_.create(build_.program, "node_stiffness_blocks", dev_);
+  kPrecondInvert_.create(build_.program, "precond_invert", dev_);
+  kPcgInit_.create(build_.program, "pcg_init", dev_);
+  kPcgUpdate_.create(build_.program, "pcg_update", dev_);
+  kPcgDirection_.create(build_.program, "pcg_direction", dev_);
+  kReduceFinish_.create(build_.program, "reduce_finish", dev_);
+
+  // -- element data, structure of arrays (kernels/shared/corofem_layout.h)
+  const std::size_t S = stride_;
+  cl_context c = ctx_->context();
+  {
+    std::vector<cl_uint> nodes(kElemNodeComponents * S, 0);
+    for (std::size_t e = 0; e < elems_; ++e)
+      for (std::size_t k = 0; k < 4; ++k) nodes[k * S + e] = problem.mesh.tets[4 * e + k];
+    elemNodes_.create(c, nodes.size() * sizeof(cl_uint), dev_);
+    uploadRaw(elemNodes_, nodes);
+  }
+  {
+    std::vector<double> geom(kGeomComponents * S, 0.0), rot(kRotComponents * S, 0.0),
+        quat(kQuatComponents * S, 0.0);
+    for (std::size_t e = 0; e < elems_; ++e) {
+      const ElementRest& rest = problem.elements[e];
+      for (int i = 1; i < 4; ++i)
+        for (int k = 0; k < 3; ++k) geom[(3 * (i - 1) + k) * S + e] = rest.grad(i, k);
+      geom[kGeomVolume * S + e] = rest.volume;
+      rot[0 * S + e] = rot[4 * S + e] = rot[8 * S + e] = 1.0;
+      quat[3 * S + e] = 1.0;
+    }
+    createReal(geom_, geom.size());
+    upload(geom_, geom.data(), geom.size());
+    createReal(rot_, rot.size());
+    upload(rot_, rot.data(), rot.size());
+    // At rest (and always for the linear formulation) R = I, so a_i = grad N_i.
+    createReal(rotGrad_, kRotGradComponents * S);
+    upload(rotGrad_, geom.data(), kRotGradComponents * S);
+    createReal(quat_, quat.size());
+    upload(quat_, quat.data(), quat.size());
+  }
+  if (opts_.storedStiffness) {
+    std::vector<double> K(kStoredKComponents * S, 0.0);
+    for (std::size_t e = 0; e < elems_; ++e) {
+      const Mat12 Ke = linearStiffness(problem.elements[e], problem.lame);
+      std::size_t idx = 0;
+      for (int r = 0; r < 12; ++r)
+        for (int col = r; col < 12; ++col, ++idx) K[idx * S + e] = Ke(r, col);
+    }
+    createReal(stiffness_, K.size());
+    upload(stiffness_, K.data(), K.size());
+  }
+  createReal(elemOut_, kElemOutComponents * S);
+
+  // -- node gather lists (CSR, fixed order: by element, then corner)
+  {
+    std::vector<cl_uint> start(nodes_ + 1, 0), entries(4 * elems_);
+    for (std::size_t e = 0; e < elems_; ++e)
+      for (int k = 0; k < 4; ++k) ++start[problem.mesh.tets[4 * e + k] + 1];
+    for (std::size_t n = 0; n < nodes_; ++n) start[n + 1] += start[n];
+    std::vector<cl_uint> fill(start.begin(), start.end() - 1);
+    for (std::size_t e = 0; e < elems_; ++e)
+      for (int k = 0; k < 4; ++k)
+        entries[fill[problem.mesh.tets[4 * e + k]]++] = static_cast<cl_uint>(3 * k * S + e);
+    nodeStart_.create(c, start.size() * sizeof(cl_uint), dev_);
+    uploadRaw(nodeStart_, start);
+    nodeEntries_.create(c, entries.size() * sizeof(cl_uint), dev_);
+    uploadRaw(nodeEntries_, entries);
+  }
+
+  // -- node data
+  createReal(pos_, dofs_);
+  upload(pos_, problem.restPositions.data(), dofs_);
+  {
+    std::vector<double> mass(dofs_, 0.0), freeMask(dofs_, 1.0);
+    if (static_cast<std::size_t>(problem.lumpedMass.size()) == dofs_)
+      for (std::size_t d = 0; d < dofs_; ++d) mass[d] = problem.lumpedMass[d];
+    constrained_.assign(dofs_, 0);
+    if (problem.constrained.size() == dofs_) constrained_ = problem.constrained;
+    for (std::size_t d = 0; d < dofs_; ++d)
+      if (constrained_[d]) freeMask[d] = 0.0;
+    createReal(mass_, dofs_);
+    upload(mass_, mass.data(), dofs_);
+    createReal(free_, dofs_);
+    upload(free_, freeMask.data(), dofs_);
+  }
+  createReal(blocks_, kNodeBlockComponents * nodes_);
+  createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodes_);
+  for (Buffer* v : {&x_, &b_, &r_, &z_, &p_, &q_}) createReal(*v, dofs_);
+  createReal(partials_, kPartialComponents * std::max(elemGroups_, nodeGroups_));
+  createReal(scalars_, kScalarCount);
+  refreshBlocks();
+  finish();
+}
+
+void OpenCLBackend::upload(const Buffer& buf, const double* src, std::size_t count) {
+  staging_.resize(count * realSize_);
+  if (double_) {
+    std::memcpy(staging_.data(), src, count * sizeof(double));
+  } else {
+    float* out = reinterpret_cast<float*>(staging_.data());
+    for (std::size_t i = 0; i < count; ++i) out[i] = static_cast<float>(src[i]);
+  }
+  checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, count * realSize_, staging_.data(), 0,
+                               nullptr, nullptr),
+          "clEnqueueWriteBuffer", dev_);
+}
+
+void OpenCLBackend::download(const Buffer& buf, double* dst, std::size_t count) {
+  staging_.resize(count * realSize_);
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, count * realSize_, staging_.data(), 0,
+                              nullptr, nullptr),
+          "clEnqueueReadBuffer", dev_);
+  if (double_) {
+    std::memcpy(dst, staging_.data(), count * sizeof(double));
+  } else {
+    const float* in = reinterpret_cast<const float*>(staging_.data());
+    for (std::size_t i = 0; i < count; ++i) dst[i] = in[i];
+  }
+}
+
+void OpenCLBackend::refreshBlocks() {
+  if (precond_ == PreconditionerKind::None) return;
+  launch(kBlocks_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, geom_, rotGrad_,
+         RealArg{lambda_}, RealArg{mu_}, blocks_);
+}
+
+void OpenCLBackend::enqueueRotations() {
+  if (formulation_ != Formulation::Corotational) return;
+  launch(kRotations_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, pos_, rot_, rotGrad_,
+         quat_);
+}
+
+void OpenCLBackend::setPositions(const Eigen::VectorXd& x) {
+  checkVector(x, "the positions");
+  upload(pos_, x.data(), dofs_);
+  enqueueRotations();
+  if (formulation_ == Formulation::Corotational) refreshBlocks();  // the blocks rotate with R
+}
+
+void OpenCLBackend::enqueueElementForces() {
+  launch(kForces_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, pos_,
+         RealArg{lambda_}, RealArg{mu_}, elemOut_);
+}
+
+void OpenCLBackend::enqueueForces() {
+  enqueueElementForces();
+  launch(kGatherSum_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, elemOut_, q_);
+}
+
+void OpenCLBackend::internalForces(Eigen::VectorXd& f) {
+  enqueueForces();
+  f.resize(static_cast<Eigen::Index>(dofs_));
+  download(q_, f.data(), dofs_);
+}
+
+void OpenCLBackend::enqueueElementProduct(const SystemCoeffs& c) {
+  double massCoef = 0, stiffCoef = 0;
+  coefficients(c, massCoef, stiffCoef);
+  if (opts_.storedStiffness)
+    launch(kProductStored_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, stiffness_, rot_, p_,
+           RealArg{stiffCoef}, elemOut_);
+  else
+    launch(kProduct_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, p_,
+           RealArg{stiffCoef * lambda_}, RealArg{stiffCoef * mu_}, elemOut_);
+}
+
+void OpenCLBackend::product(const Buffer& v, const Buffer& y, double massCoef, double stiffCoef,
+                            bool project) {
+  if (opts_.storedStiffness)
+    launch(kProductStored_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, stiffness_, rot_, v,
+           RealArg{stiffCoef}, elemOut_);
+  else
+    launch(kProduct_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, v,
+           RealArg{stiffCoef * lambda_}, RealArg{stiffCoef * mu_}, elemOut_);
+  launch(kGatherProduct_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, elemOut_,
+         mass_, RealArg{massCoef}, free_, cl_uint(project ? 1 : 0), v, y, partials_);
+}
+
+void OpenCLBackend::enqueueProduct(const SystemCoeffs& c) {
+  double massCoef = 0, stiffCoef = 0;
+  coefficients(c, massCoef, stiffCoef);
+  product(p_, q_, massCoef, stiffCoef, false);
+}
+
+void OpenCLBackend::apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) {
+  checkVector(p, "the vector p of apply");
+  upload(p_, p.data(), dofs_);
+  enqueueProduct(c);
+  y.resize(static_cast<Eigen::Index>(dofs_));
+  download(q_, y.data(), dofs_);
+}
+
+LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+  checkVector(b, "the right-hand side b");
+  if (static_cast<std::size_t>(x.size()) != dofs_) x = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(dofs_));
+  LinearSolveStats stats;
+  double bb = 0.0;
+  for (std::size_t d = 0; d < dofs_; ++d)
+    if (!constrained_[d]) bb += b[d] * b[d];
+  if (!std::isfinite(bb))
+    fail(ErrorCode::SolveFailed, "OpenCL PCG: the right-hand side is not finite (NaN or Inf in b); the "
+         "state diverged before the linear solve");
+  if (bb == 0.0) {
+    x.setZero();
+    stats.converged = true;
+    return stats;
+  }
+  double massCoef = 0, stiffCoef = 0;
+  coefficients(c, massCoef, stiffCoef);
+
+  Eigen::VectorXd x0 = x;
+  for (std::size_t d = 0; d < dofs_; ++d)
+    if (constrained_[d] || !std::isfinite(x0[d])) x0[d] = 0.0;
+  upload(b_, b.data(), dofs_);
+  upload(x_, x0.data(), dofs_);
+  if (precond_ != PreconditionerKind::None)
+    launch(kPrecondInvert_, nodes_, cl_uint(nodes_), blocks_, mass_, RealArg{massCoef}, RealArg{stiffCoef},
+           free_, minv_);
+  // r = b - A x (projected), z = M^-1 r, p = z, rho = r.z, rr = r.r, bb = b.b
+  product(x_, q_, massCoef, stiffCoef, true);
+  launch(kPcgInit_, nodes_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
+  const cl_uint groups = cl_uint(nodeGroups_);
+  launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceInit));
+
+  const double tol = solver_.tolerance;
+  const int checkEvery = std::max(1, solver_.checkEvery);
+  std::vector<double> scalars(kScalarCount);
+  auto readScalars = [&]() { download(scalars_, scalars.data(), kScalarCount); };
+  auto relative = [&]() { return std::sqrt(std::max(0.0, scalars[kScalarRr]) / scalars[kScalarBb]); };
+
+  readScalars();
+  stats.relativeResidual = relative();
+  bool finite = std::isfinite(stats.relativeResidual);
+  stats.converged = finite && stats.relativeResidual <= tol;
+  int it = 0;
+  while (finite && !stats.converged && it < solver_.maxIterations) {
+    product(p_, q_, massCoef, stiffCoef, true);  // q = A p, partial p.q
+    launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceAlpha));
+    launch(kPcgUpdate_, nodes_, cl_uint(nodes_), scalars_, p_, q_, minv_, x_, r_, z_, partials_);
+    launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceBeta));
+    launch(kPcgDirection_, dofs_, cl_uint(dofs_), scalars_, z_, p_);
+    ++it;
+    if (it % checkEvery == 0 || it == solver_.maxIterations) {
+      readScalars();
+      stats.relativeResidual = relative();
+      finite = std::isfinite(stats.relativeResidual);
+      stats.converged = finite && stats.relativeResidual <= tol;
+      if (scalars[kScalarBreakdown] != 0.0) break;  // p.Ap <= 0: no further progress possible
+    }
+  }
+  stats.iterations = it;
+  if (!finite)
+    fail(ErrorCode::SolveFailed, "OpenCL PCG produced a non-finite residual after ", it, " iterations on "
+         "device '", dev_, "' (the system matrix or the right-hand side holds NaN/Inf, or ",
+         double_ ? "double" : "float", " precision overflowed); check the material, time step and loads");
+  Eigen::VectorXd out(static_cast<Eigen::Index>(dofs_));
+  download(x_, out.data(), dofs_);
+  if (!out.allFinite())
+    fail(ErrorCode::SolveFailed, "OpenCL PCG produced a non-finite solution on device '", dev_, "'");
+  x = std::move(out);
+  return stats;
+}
+
+double OpenCLBackend::elasticEnergy() {
+  launch(kEnergy_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, pos_,
+         RealArg{lambda_}, RealArg{mu_}, elemOut_, partials_);
+  std::vector<double> partial(elemGroups_);
+  download(partials_, partial.data(), elemGroups_);
+  double sum = 0.0;
+  for (double v : partial) sum += v;  // fixed order: deterministic
+  return sum;
+}
+
+std::vector<double> OpenCLBackend::readRotations() {
+  std::vector<double> soa(kRotComponents * stride_);
+  download(rot_, soa.data(), soa.size());
+  std::vector<double> out(9 * elems_);
+  for (std::size_t e = 0; e < elems_; ++e)
+    for (std::size_t k = 0; k < 9; ++k) out[9 * e + k] = soa[k * stride_ + e];
+  return out;
+}
+
+}  // namespace
+
+std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& problem, const SolverDesc& solver,
+                                                             std::shared_ptr<cl::Context> context,
+                                                             const OpenCLOptions& options) {
+  return std::make_unique<OpenCLBackend>(problem, solver, std::move(context), options);
+}
+
+std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem& problem,
+                                                                   const SolverDesc& solver,
+                                                                   cl_context context,
+                                                                   cl_command_queue queue,
+                                                                   cl_device_id device,
+                                                                   const OpenCLOptions& options) {
+  return createOpenCLBackendOn(problem, solver, cl::Context::adopt(context, queue, device), options);
+}
+
+std::unique_ptr<Backend> createOpenCLBackend(const Problem& problem, const SolverDesc& solver,
+                                             const std::string& deviceSelector) {
+  return createOpenCLBackendOn(problem, solver, cl::Context::shared(deviceSelector));
+}
+
+}  // namespace corofem::detail
+
+#endif  // COROFEM_WITH_OPENCL

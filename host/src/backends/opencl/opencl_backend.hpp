@@ -1,0 +1,59 @@
+// The OpenCL backend (co-rotational and linear formulations): internal interface for tests and
+// benchmarks, beyond the Backend interface of solve/backend.hpp.
+#pragma once
+
+#include "backends/opencl/cl_context.hpp"
+#include "backends/opencl/program_cache.hpp"
+#include "solve/backend.hpp"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::detail {
+
+/// Options of the OpenCL backend that the scene does not expose (tuning, benchmarking).
+struct OpenCLOptions {
+  bool storedStiffness = false;  ///< product with a stored 12x12 K_e per element instead of the gradients
+  std::size_t workGroupSize = 0; ///< power of two, 0 = the default (64)
+  int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
+};
+
+/// Backend plus what the conformance tests and the benchmark need to see.
+class OpenCLBackendInternal : public Backend {
+ public:
+  /// The element rotations, 9 per element (row-major R), as last computed by setPositions.
+  virtual std::vector<double> readRotations() = 0;
+  /// The -D options the program was built with.
+  virtual const std::string& buildOptions() const = 0;
+  /// Where the program came from (memory, disk cache, compiler).
+  virtual cl::ProgramOrigin programOrigin() const = 0;
+  virtual const cl::ProgramBuild& programBuild() const = 0;
+  virtual cl::Context& context() = 0;
+
+  // Device-only work for the benchmark (no transfers); finish() waits for it.
+  virtual void enqueueRotations() = 0;         ///< rotations from the positions on the device
+  virtual void enqueueForces() = 0;            ///< element forces + gather
+  virtual void enqueueElementForces() = 0;     ///< element forces only (no gather)
+  virtual void enqueueProduct(const SystemCoeffs& c) = 0;  ///< q = A p (element product + gather)
+  virtual void enqueueElementProduct(const SystemCoeffs& c) = 0;  ///< element product only
+  virtual void finish() = 0;
+};
+
+/// The backend on a given context (shared, private or adopted). Throws Error(BadInput) for a
+/// formulation other than co-rotational or linear, Error(DeviceError) for a device problem.
+std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& problem,
+                                                             const SolverDesc& solver,
+                                                             std::shared_ptr<cl::Context> context,
+                                                             const OpenCLOptions& options = {});
+
+/// The backend on an application's own context, queue and device (retained, never released
+/// beyond the backend's own references).
+std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem& problem,
+                                                                   const SolverDesc& solver,
+                                                                   cl_context context,
+                                                                   cl_command_queue queue,
+                                                                   cl_device_id device,
+                                                                   const OpenCLOptions& options = {});
+
+}  // namespace corofem::detail

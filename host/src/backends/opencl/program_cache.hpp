@@ -1,0 +1,43 @@
+// OpenCL programs built from the embedded kernel sources (kernels/opencl/*.cl after
+// kernels/shared/*.h) with -D switches, cached in memory per context and on disk as device binaries.
+// Disk cache: $COROFEM_KERNEL_CACHE (the value "off" disables it) or ~/.cache/corofem/kernels (or
+// $XDG_CACHE_HOME/corofem/kernels); one file per (device name, driver version, options, source
+// hash). A cache file that does not load is rebuilt from source and overwritten, never fatal.
+#pragma once
+
+#include "backends/opencl/cl_context.hpp"
+
+#include <cstdint>
+#include <string>
+
+namespace corofem::detail::cl {
+
+enum class ProgramOrigin {
+  Memory,    ///< already built on this context
+  Disk,      ///< loaded from a cached device binary
+  Compiled,  ///< compiled from source (and written to the disk cache when possible)
+};
+
+struct ProgramBuild {
+  cl_program program = nullptr;  ///< owned by the context's cache: do not release
+  ProgramOrigin origin = ProgramOrigin::Compiled;
+  std::string cacheFile;         ///< the disk cache file for this program ("" when disabled)
+};
+
+/// The on-disk cache directory, "" when disabled or no home directory is known.
+std::string kernelCacheDirectory();
+
+/// The corofem kernel program: the embedded shared headers, then the .cl files in dependency
+/// order, each preceded by a #line directive naming it (so build logs name the real file).
+std::string corofemProgramSource();
+
+/// 64-bit FNV-1a hash (cache keys).
+std::uint64_t fnv1a64(const std::string& text, std::uint64_t seed = 1469598103934665603ull);
+
+/// Returns the program built from `source` with `options` on ctx: from the context's memory cache,
+/// else from the disk cache, else compiled. Throws Error(DeviceError) with the compiler's build log
+/// naming `label` when compilation fails.
+ProgramBuild buildProgram(Context& ctx, const std::string& label, const std::string& source,
+                          const std::string& options);
+
+}  // namespace corofem::detail::cl

@@ -1,0 +1,86 @@
+/* Preconditioners of the system matrix A = massCoef M + k K^R: its diagonal or its 3x3 node
+ * blocks, inverted per node. The diagonal blocks of the rotated element stiffness have a closed
+ * form: for corner i with gradient g_i and rotated gradient a_i = R g_i,
+ *   R K_e,ii R^T = V ((lambda + mu) a_i a_i^T + mu |a_i|^2 I)
+ * (from sigma = lambda tr(eps) I + 2 mu eps with eps = sym(u g_i^T)), so no 12x12 is needed.
+ * node_stiffness_blocks runs after every rotation update (the blocks rotate with the elements);
+ * precond_invert mixes in the coefficients of the solve and inverts.
+ */
+#ifndef COROFEM_EMBEDDED
+#include "../shared/corofem_layout.h"
+#endif
+
+/* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T. */
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void node_stiffness_blocks(const uint nodeCount, const uint S, __global const uint* restrict start,
+                           __global const uint* restrict entries, __global const real* restrict geom,
+                           __global const real* restrict rotGrad, const real lambda, const real mu,
+                           __global real* restrict blocks) {
+  const uint n = get_global_id(0);
+  if (n >= nodeCount) return;
+  real b[6] = {0, 0, 0, 0, 0, 0};
+  const uint end = start[n + 1];
+  for (uint j = start[n]; j < end; ++j) {
+    const uint at = entries[j];
+    const uint c = at / (3 * S), e = at - c * 3 * S;
+    real a[3];
+    if (c == 0) {
+      for (int k = 0; k < 3; ++k)
+        a[k] = -(rotGrad[k * S + e] + rotGrad[(3 + k) * S + e] + rotGrad[(6 + k) * S + e]);
+    } else {
+      for (int k = 0; k < 3; ++k) a[k] = rotGrad[(3 * (c - 1) + k) * S + e];
+    }
+    const real V = geom[kGeomVolume * S + e];
+    const real lm = V * (lambda + mu), iso = V * mu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+    b[0] += lm * a[0] * a[0] + iso;
+    b[1] += lm * a[1] * a[1] + iso;
+    b[2] += lm * a[2] * a[2] + iso;
+    b[3] += lm * a[0] * a[1];
+    b[4] += lm * a[0] * a[2];
+    b[5] += lm * a[1] * a[2];
+  }
+  for (int k = 0; k < 6; ++k) blocks[6 * n + k] = b[k];
+}
+
+/* B = k blocks + massCoef diag(m), rows/columns of constrained dofs replaced by the identity,
+ * inverted: minv[9 n + 3 i + j] (COROFEM_PRECOND_BLOCK) or minv[3 n + i] (COROFEM_PRECOND_DIAG).
+ * Constrained dofs get 0 in the inverse so that z = M^-1 r stays 0 there. A non-positive pivot
+ * (a node touched by no element and massless) falls back to 1. */
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void precond_invert(const uint nodeCount, __global const real* restrict blocks,
+                    __global const real* restrict mass, const real massCoef, const real stiffCoef,
+                    __global const real* restrict free, __global real* restrict minv) {
+  const uint n = get_global_id(0);
+  if (n >= nodeCount) return;
+  const real f0 = free[3 * n], f1 = free[3 * n + 1], f2 = free[3 * n + 2];
+  real d0 = stiffCoef * blocks[6 * n] + massCoef * mass[3 * n];
+  real d1 = stiffCoef * blocks[6 * n + 1] + massCoef * mass[3 * n + 1];
+  real d2 = stiffCoef * blocks[6 * n + 2] + massCoef * mass[3 * n + 2];
+#ifdef COROFEM_PRECOND_BLOCK
+  real b01 = stiffCoef * blocks[6 * n + 3] * f0 * f1;
+  real b02 = stiffCoef * blocks[6 * n + 4] * f0 * f2;
+  real b12 = stiffCoef * blocks[6 * n + 5] * f1 * f2;
+  if (f0 == (real)0) d0 = 1;
+  if (f1 == (real)0) d1 = 1;
+  if (f2 == (real)0) d2 = 1;
+  /* symmetric inverse by cofactors */
+  const real c00 = d1 * d2 - b12 * b12, c01 = b02 * b12 - b01 * d2, c02 = b01 * b12 - b02 * d1;
+  const real c11 = d0 * d2 - b02 * b02, c12 = b01 * b02 - d0 * b12, c22 = d0 * d1 - b01 * b01;
+  const real det = d0 * c00 + b01 * c01 + b02 * c02;
+  __global real* m = minv + 9 * n;
+  if (det > (real)0 && d0 > (real)0 && d1 > (real)0 && d2 > (real)0) {
+    const real inv = (real)1 / det;
+    m[0] = c00 * inv * f0;      m[1] = c01 * inv * f0 * f1; m[2] = c02 * inv * f0 * f2;
+    m[3] = c01 * inv * f0 * f1; m[4] = c11 * inv * f1;      m[5] = c12 * inv * f1 * f2;
+    m[6] = c02 * inv * f0 * f2; m[7] = c12 * inv * f1 * f2; m[8] = c22 * inv * f2;
+  } else {
+    m[0] = f0 * (d0 > (real)0 ? (real)1 / d0 : (real)1); m[1] = m[2] = m[3] = (real)0;
+    m[4] = f1 * (d1 > (real)0 ? (real)1 / d1 : (real)1); m[5] = m[6] = m[7] = (real)0;
+    m[8] = f2 * (d2 > (real)0 ? (real)1 / d2 : (real)1);
+  }
+#else
+  minv[3 * n] = f0 * (d0 > (real)0 ? (real)1 / d0 : (real)1);
+  minv[3 * n + 1] = f1 * (d1 > (real)0 ? (real)1 / d1 : (real)1);
+  minv[3 * n + 2] = f2 * (d2 > (real)0 ? (real)1 / d2 : (real)1);
+#endif
+}

@@ -1,0 +1,302 @@
+/* Per-element rotation R_e: the rotational part of the deformation gradient F = D_s D_m^-1, which
+ * the simplified co-rotational formulation uses in Eq. 9 (forces) and Eq. 11 (K^R = R K R^T).
+ * One work-item per element. The method is chosen at build time:
+ *   COROFEM_ROT_POLAR  Higham's scaled Newton iteration for the polar factor, with a fallback to
+ *                      the SVD path for inverted, degenerate or non-converging elements;
+ *   COROFEM_ROT_SVD    Jacobi eigen-decomposition of F^T F, R = U V^T, smallest singular direction
+ *                      flipped when det F < 0 (the reference's convention: always a proper rotation);
+ *   COROFEM_ROT_QUAT   Mueller et al. 2016, "A robust method to extract the rotational part of
+ *                      deformations", warm-started from the previous rotation kept as a quaternion;
+ *   COROFEM_ROT_QR     Gram-Schmidt of F's columns (cheap edge frame; equals the polar factor only
+ *                      for pure rotations: the error grows with the shear).
+ * Besides R, the kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force,
+ * product and preconditioner kernels use instead of R (see element_force.cl).
+ */
+#ifndef COROFEM_EMBEDDED
+#include "../shared/corofem_layout.h"
+#include "mat3.cl"
+#endif
+
+#ifndef COROFEM_POLAR_ITERS
+#define COROFEM_POLAR_ITERS 12
+#endif
+#ifndef COROFEM_JACOBI_SWEEPS
+#define COROFEM_JACOBI_SWEEPS 8
+#endif
+#ifndef COROFEM_QUAT_ITERS
+#define COROFEM_QUAT_ITERS 6
+#endif
+
+/* F = sum_i x_i grad N_i^T = sum_{i=1..3} (x_i - x_0) grad N_i^T, since sum_i grad N_i = 0. The
+ * differences keep float accurate for bodies far from the origin. */
+inline Mat3 element_deformation_gradient(uint e, uint S, __global const uint* nodes,
+                                         __global const real* geom, __global const real* pos) {
+  const uint n0 = nodes[e];
+  const real x0 = pos[3 * n0], y0 = pos[3 * n0 + 1], z0 = pos[3 * n0 + 2];
+  Mat3 F;
+  for (int k = 0; k < 9; ++k) F.m[k] = (real)0;
+  for (int i = 1; i < 4; ++i) {
+    const uint n = nodes[i * S + e];
+    const real d[3] = {pos[3 * n] - x0, pos[3 * n + 1] - y0, pos[3 * n + 2] - z0};
+    const real g[3] = {geom[(3 * (i - 1)) * S + e], geom[(3 * (i - 1) + 1) * S + e],
+                       geom[(3 * (i - 1) + 2) * S + e]};
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) F.m[3 * j + k] += d[j] * g[k];
+  }
+  return F;
+}
+
+/* ------------------------------------------------------------------ SVD via Jacobi on F^T F */
+
+/* One Jacobi rotation J in the (p, q) plane zeroing a_pq of the symmetric A: A <- J^T A J,
+ * V <- V J, with J_pp = J_qq = c, J_pq = s, J_qp = -s and t = s / c the smaller root of
+ * t^2 + 2 theta t - 1 = 0, theta = (a_qq - a_pp) / (2 a_pq). */
+inline void jacobi_rotate(real* a, real* v, int p, int q) {
+  const real apq = a[3 * p + q];
+  if (apq == (real)0) return;
+  const real theta = (a[3 * q + q] - a[3 * p + p]) / (2 * apq);
+  real t;
+  if (fabs(theta) > (real)1e15)
+    t = (real)0.5 / theta;
+  else
+    t = (theta >= (real)0 ? (real)1 : (real)-1) / (fabs(theta) + sqrt(theta * theta + (real)1));
+  const real c = (real)1 / sqrt(t * t + (real)1), s = t * c;
+  for (int k = 0; k < 3; ++k) {
+    const real akp = a[3 * k + p], akq = a[3 * k + q];
+    a[3 * k + p] = c * akp - s * akq;
+    a[3 * k + q] = s * akp + c * akq;
+  }
+  for (int k = 0; k < 3; ++k) {
+    const real apk = a[3 * p + k], aqk = a[3 * q + k];
+    a[3 * p + k] = c * apk - s * aqk;
+    a[3 * q + k] = s * apk + c * aqk;
+  }
+  for (int k = 0; k < 3; ++k) {
+    const real vkp = v[3 * k + p], vkq = v[3 * k + q];
+    v[3 * k + p] = c * vkp - s * vkq;
+    v[3 * k + q] = s * vkp + c * vkq;
+  }
+}
+
+inline void swap_columns(real* a, real* v, int p, int q) {
+  real t = a[3 * p + p];
+  a[3 * p + p] = a[3 * q + q];
+  a[3 * q + q] = t;
+  for (int k = 0; k < 3; ++k) {
+    t = v[3 * k + p];
+    v[3 * k + p] = v[3 * k + q];
+    v[3 * k + q] = t;
+  }
+}
+
+/* F = U S V^T from the eigen-decomposition F^T F = V S^2 V^T (cyclic Jacobi, quadratically
+ * convergent), u_1 = F v_1 / |F v_1|, u_2 = F v_2 orthogonalised against u_1, u_3 = u_1 x u_2 and
+ * V made proper (det V = +1). Then R = U V^T is the polar factor when det F > 0; when det F < 0
+ * the true u_3 is -(u_1 x u_2), so using +(u_1 x u_2) flips the smallest singular direction:
+ * R = U diag(1, 1, -1) V^T, exactly the reference's choice (detail::polarRotation). Flat or
+ * collapsed elements (s_3 or s_2 ~ 0) still get an orthonormal U, so R stays a proper rotation. */
+inline Mat3 rotation_svd(const Mat3* F) {
+  real a[9];
+  Mat3 FtF = mat3_tmul(F, F);
+  for (int k = 0; k < 9; ++k) a[k] = FtF.m[k];
+  real v[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  const real scale2 = a[0] * a[0] + a[4] * a[4] + a[8] * a[8];
+  for (int sweep = 0; sweep < COROFEM_JACOBI_SWEEPS; ++sweep) {
+    const real off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5];
+    if (!(off > REAL_EPS * REAL_EPS * scale2)) break;
+    jacobi_rotate(a, v, 0, 1);
+    jacobi_rotate(a, v, 0, 2);
+    jacobi_rotate(a, v, 1, 2);
+  }
+  /* Sort eigenvalues (squared singular values) descending, columns of V with them. */
+  if (a[0] < a[4]) swap_columns(a, v, 0, 1);
+  if (a[0] < a[8]) swap_columns(a, v, 0, 2);
+  if (a[4] < a[8]) swap_columns(a, v, 1, 2);
+  /* Proper V. */
+  const real detV = v[0] * (v[4] * v[8] - v[5] * v[7]) - v[1] * (v[3] * v[8] - v[5] * v[6]) +
+                    v[2] * (v[3] * v[7] - v[4] * v[6]);
+  if (detV < (real)0) {
+    v[2] = -v[2];
+    v[5] = -v[5];
+    v[8] = -v[8];
+  }
+  real u1[3], u2[3], u3[3];
+  for (int j = 0; j < 3; ++j) {
+    u1[j] = F->m[3 * j] * v[0] + F->m[3 * j + 1] * v[3] + F->m[3 * j + 2] * v[6];
+    u2[j] = F->m[3 * j] * v[1] + F->m[3 * j + 1] * v[4] + F->m[3 * j + 2] * v[7];
+  }
+  const real fscale = sqrt(a[0] + a[4] + a[8]);
+  real n1 = sqrt(u1[0] * u1[0] + u1[1] * u1[1] + u1[2] * u1[2]);
+  if (!(n1 > REAL_TINY + REAL_EPS * fscale)) {
+    /* F ~ 0: the element collapsed to a point; no rotation can be read off. */
+    return mat3_identity();
+  }
+  for (int j = 0; j < 3; ++j) u1[j] /= n1;
+  real d = u1[0] * u2[0] + u1[1] * u2[1] + u1[2] * u2[2];
+  for (int j = 0; j < 3; ++j) u2[j] -= d * u1[j];
+  real n2 = sqrt(u2[0] * u2[0] + u2[1] * u2[1] + u2[2] * u2[2]);
+  if (!(n2 > (real)16 * REAL_EPS * n1)) {
+    /* Collapsed to a line: any unit vector normal to u_1 (the axis least aligned with u_1). */
+    int k = 0;
+    if (fabs(u1[1]) < fabs(u1[k])) k = 1;
+    if (fabs(u1[2]) < fabs(u1[k])) k = 2;
+    for (int j = 0; j < 3; ++j) u2[j] = (j == k ? (real)1 : (real)0) - u1[k] * u1[j];
+    n2 = sqrt(u2[0] * u2[0] + u2[1] * u2[1] + u2[2] * u2[2]);
+  }
+  for (int j = 0; j < 3; ++j) u2[j] /= n2;
+  u3[0] = u1[1] * u2[2] - u1[2] * u2[1];
+  u3[1] = u1[2] * u2[0] - u1[0] * u2[2];
+  u3[2] = u1[0] * u2[1] - u1[1] * u2[0];
+  Mat3 R;
+  for (int j = 0; j < 3; ++j)
+    for (int k = 0; k < 3; ++k)
+      R.m[3 * j + k] = u1[j] * v[3 * k] + u2[j] * v[3 * k + 1] + u3[j] * v[3 * k + 2];
+  return R;
+}
+
+/* ------------------------------------------------------------------ polar: scaled Newton */
+
+/* Higham's iteration R <- (g R + R^-T / g) / 2 from R = F, with the Frobenius-norm scaling
+ * g = (|R^-1|_F / |R|_F)^(1/2) that makes the first steps fast for any stretch. It converges
+ * quadratically to the orthogonal polar factor when det F > 0. Inverted (det F <= 0, where Newton
+ * would converge to an improper factor), nearly singular or non-converged elements take the SVD
+ * path, whose convention matches the reference. The stop test |R_k+1 - R_k|_F < sqrt(eps) leaves
+ * an error ~ eps after the quadratic step already taken. */
+inline Mat3 rotation_polar(const Mat3* F) {
+  const real fn2 = mat3_norm2(F);
+  const real detF = mat3_det(F);
+  if (!(detF > (real)1e-3 * fn2 * sqrt(fn2) * (real)1e-3)) return rotation_svd(F);
+  Mat3 R = *F;
+  for (int it = 0; it < COROFEM_POLAR_ITERS; ++it) {
+    const real det = mat3_det(&R);
+    Mat3 C = mat3_cofactor(&R); /* R^-T = C / det */
+    const real r2 = mat3_norm2(&R), c2 = mat3_norm2(&C);
+    const real g = sqrt(sqrt(c2 / (det * det * r2)));
+    const real hr = (real)0.5 * g, hc = (real)0.5 / (g * det);
+    real diff2 = (real)0;
+    for (int k = 0; k < 9; ++k) {
+      const real nk = hr * R.m[k] + hc * C.m[k];
+      diff2 += (nk - R.m[k]) * (nk - R.m[k]);
+      R.m[k] = nk;
+    }
+    if (diff2 < (real)3 * REAL_EPS) return R; /* |dR|_F < sqrt(3 eps), |R|_F = sqrt 3 */
+  }
+  return rotation_svd(F);
+}
+
+/* ------------------------------------------------------------------ quaternion (Mueller 2016) */
+
+inline Mat3 quat_to_matrix(real4 q) {
+  const real x = q.x, y = q.y, z = q.z, w = q.w;
+  Mat3 R;
+  R.m[0] = 1 - 2 * (y * y + z * z);
+  R.m[1] = 2 * (x * y - z * w);
+  R.m[2] = 2 * (x * z + y * w);
+  R.m[3] = 2 * (x * y + z * w);
+  R.m[4] = 1 - 2 * (x * x + z * z);
+  R.m[5] = 2 * (y * z - x * w);
+  R.m[6] = 2 * (x * z - y * w);
+  R.m[7] = 2 * (y * z + x * w);
+  R.m[8] = 1 - 2 * (x * x + y * y);
+  return R;
+}
+
+/* omega = sum_i r_i x f_i / (|sum_i r_i . f_i| + tiny) (r_i, f_i the columns of R and F) is a
+ * Newton-like step towards the rotation with R^T F symmetric; q <- exp(omega) q. Each step keeps q
+ * a unit quaternion, so R is a proper rotation whatever F is (also inverted). Warm start: q is the
+ * previous step's rotation, so a few iterations per step suffice. */
+inline Mat3 rotation_quaternion(const Mat3* F, real4* qInOut) {
+  real4 q = *qInOut;
+  for (int it = 0; it < COROFEM_QUAT_ITERS; ++it) {
+    const Mat3 R = quat_to_matrix(q);
+    real ox = 0, oy = 0, oz = 0, dot = 0;
+    for (int c = 0; c < 3; ++c) {
+      const real rx = R.m[c], ry = R.m[3 + c], rz = R.m[6 + c];
+      const real fx = F->m[c], fy = F->m[3 + c], fz = F->m[6 + c];
+      ox += ry * fz - rz * fy;
+      oy += rz * fx - rx * fz;
+      oz += rx * fy - ry * fx;
+      dot += rx * fx + ry * fy + rz * fz;
+    }
+    const real inv = (real)1 / (fabs(dot) + (real)1e-9);
+    ox *= inv;
+    oy *= inv;
+    oz *= inv;
+    const real w = sqrt(ox * ox + oy * oy + oz * oz);
+    if (!(w > (real)10 * REAL_EPS)) break;
+    const real s = sin((real)0.5 * w) / w, c = cos((real)0.5 * w);
+    const real4 dq = (real4)(s * ox, s * oy, s * oz, c);
+    /* Hamilton product dq * q */
+    real4 nq;
+    nq.x = dq.w * q.x + dq.x * q.w + dq.y * q.z - dq.z * q.y;
+    nq.y = dq.w * q.y - dq.x * q.z + dq.y * q.w + dq.z * q.x;
+    nq.z = dq.w * q.z + dq.x * q.y - dq.y * q.x + dq.z * q.w;
+    nq.w = dq.w * q.w - dq.x * q.x - dq.y * q.y - dq.z * q.z;
+    q = nq / sqrt(nq.x * nq.x + nq.y * nq.y + nq.z * nq.z + nq.w * nq.w);
+  }
+  *qInOut = q;
+  return quat_to_matrix(q);
+}
+
+/* ------------------------------------------------------------------ QR: edge frame */
+
+/* Gram-Schmidt of F's columns f_1, f_2 (r_1 = f_1 / |f_1|, r_2 = normalised f_2 - (r_1 . f_2) r_1,
+ * r_3 = r_1 x r_2): F = R T with T upper triangular. Proper by construction; equal to the polar
+ * factor only when F is a rotation. Degenerate columns take the SVD path. */
+inline Mat3 rotation_qr(const Mat3* F) {
+  real r1[3] = {F->m[0], F->m[3], F->m[6]};
+  real r2[3] = {F->m[1], F->m[4], F->m[7]};
+  const real fn = sqrt(mat3_norm2(F));
+  const real n1 = sqrt(r1[0] * r1[0] + r1[1] * r1[1] + r1[2] * r1[2]);
+  if (!(n1 > (real)1e-3 * fn)) return rotation_svd(F);
+  for (int j = 0; j < 3; ++j) r1[j] /= n1;
+  const real d = r1[0] * r2[0] + r1[1] * r2[1] + r1[2] * r2[2];
+  for (int j = 0; j < 3; ++j) r2[j] -= d * r1[j];
+  const real n2 = sqrt(r2[0] * r2[0] + r2[1] * r2[1] + r2[2] * r2[2]);
+  if (!(n2 > (real)1e-3 * fn)) return rotation_svd(F);
+  for (int j = 0; j < 3; ++j) r2[j] /= n2;
+  Mat3 R;
+  R.m[0] = r1[0];
+  R.m[3] = r1[1];
+  R.m[6] = r1[2];
+  R.m[1] = r2[0];
+  R.m[4] = r2[1];
+  R.m[7] = r2[2];
+  R.m[2] = r1[1] * r2[2] - r1[2] * r2[1];
+  R.m[5] = r1[2] * r2[0] - r1[0] * r2[2];
+  R.m[8] = r1[0] * r2[1] - r1[1] * r2[0];
+  return R;
+}
+
+/* ------------------------------------------------------------------ the kernel */
+
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void compute_rotations(const uint count, const uint S, __global const uint* restrict nodes,
+                       __global const real* restrict geom, __global const real* restrict pos,
+                       __global real* restrict rot, __global real* restrict rotGrad,
+                       __global real* restrict quat) {
+  const uint e = get_global_id(0);
+  if (e >= count) return;
+  const Mat3 F = element_deformation_gradient(e, S, nodes, geom, pos);
+#if defined(COROFEM_ROT_SVD)
+  const Mat3 R = rotation_svd(&F);
+#elif defined(COROFEM_ROT_QUAT)
+  real4 q = (real4)(quat[e], quat[S + e], quat[2 * S + e], quat[3 * S + e]);
+  const Mat3 R = rotation_quaternion(&F, &q);
+  quat[e] = q.x;
+  quat[S + e] = q.y;
+  quat[2 * S + e] = q.z;
+  quat[3 * S + e] = q.w;
+#elif defined(COROFEM_ROT_QR)
+  const Mat3 R = rotation_qr(&F);
+#else
+  const Mat3 R = rotation_polar(&F);
+#endif
+  for (int k = 0; k < 9; ++k) rot[k * S + e] = R.m[k];
+  /* a_i = R grad N_i, i = 1..3 */
+  for (int i = 0; i < 3; ++i) {
+    const real g0 = geom[(3 * i) * S + e], g1 = geom[(3 * i + 1) * S + e], g2 = geom[(3 * i + 2) * S + e];
+    for (int j = 0; j < 3; ++j)
+      rotGrad[(3 * i + j) * S + e] = R.m[3 * j] * g0 + R.m[3 * j + 1] * g1 + R.m[3 * j + 2] * g2;
+  }
+}
