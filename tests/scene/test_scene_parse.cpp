@@ -220,6 +220,8 @@ TEST(SceneParse, EnumerationsAndShorthands) {
   EXPECT_EQ(qr.solver.precision, Precision::Float);
   // Integers may be written as integral floats (1e3).
   EXPECT_EQ(parseOk(test::kMinimalScene, {"solver.max_iterations=1e3"}).solver.maxIterations, 1000);
+  EXPECT_EQ(parseOk(test::kMinimalScene, {"bodies.0.fixed=[{\"list\": [2.0, 1e1]}]"}).bodies[0].fixed[0].indices,
+            (std::vector<std::uint32_t>{2, 10}));
 }
 
 TEST(SceneParse, CommentsAreAllowed) {

@@ -316,14 +316,16 @@ NodeSetDesc parseNodeSet(const Reader& r, const json& j, const std::string& path
     if (body.empty()) r.fail(bodyPath, "must not be empty");
     for (std::size_t i = 0; i < body.size(); ++i) {
       const std::string at = indexPath(bodyPath, i);
-      if (!body[i].is_number_integer() && !body[i].is_number_unsigned())
-        r.fail(at, "expected a 0-based node index (an integer >= 0), got ", describe(body[i]));
-      if (body[i].is_number_integer() && body[i].get<std::int64_t>() < 0)
-        r.fail(at, body[i].dump(), " is out of range: node indices are 0-based, >= 0");
-      const std::uint64_t index = body[i].get<std::uint64_t>();
-      if (index > std::numeric_limits<std::uint32_t>::max())
-        r.fail(at, body[i].dump(), " is out of range: too large for a node index");
-      set.indices.push_back(static_cast<std::uint32_t>(index));
+      const json& item = body[i];
+      // Integral floats (1e3) are accepted like every other integer in the format.
+      const double x = item.is_number() ? item.get<double>() : 0.5;
+      if (!item.is_number() || std::floor(x) != x)
+        r.fail(at, "expected a 0-based node index (an integer >= 0), got ", describe(item));
+      if (x < 0) r.fail(at, item.dump(), " is out of range: node indices are 0-based, >= 0");
+      if (x > std::numeric_limits<std::uint32_t>::max())
+        r.fail(at, item.dump(), " is out of range: too large for a node index");
+      const auto index = static_cast<std::uint32_t>(x);
+      set.indices.push_back(index);
     }
   } else {  // bou
     set.kind = NodeSetDesc::Kind::BouFile;
