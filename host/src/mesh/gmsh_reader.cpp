@@ -74,8 +74,8 @@ class GmshParser {
     if (!sawNodes || !sawElements)
       sc_.fail("the file has no ", sawNodes ? "$Elements" : "$Nodes", " section; is this a Gmsh .msh file?");
     report_.format = version_ == 1 ? "gmsh 1" : version_ >= 4 ? "gmsh 4.1" : "gmsh 2.2";
-    if (version_ < 4 && std::all_of(out_.regions.begin(), out_.regions.end(), [](std::int32_t r) { return r == 0; }))
-      out_.regions.clear();  // physical tag 0 everywhere: no physical groups, so no regions
+    if (std::all_of(out_.regions.begin(), out_.regions.end(), [](std::int32_t r) { return r == 0; }))
+      out_.regions.clear();  // tag 0 everywhere: no physical groups (v1, v2) or entities (v4.1), so no regions
     return std::move(out_);
   }
 

@@ -1,5 +1,5 @@
 // Medit .mesh (ASCII) reader: "Vertices n" (x y z ref), "Tetrahedra m" (a b c d ref, 1-based; the
-// reference becomes the region). Other sections (Triangles, Edges, Corners, ...) are skipped.
+// reference becomes the region; all references 0 means no regions). Other sections (Triangles, Edges, Corners, ...) are skipped.
 #include "mesh/readers.hpp"
 #include "mesh/text_scanner.hpp"
 
@@ -89,6 +89,10 @@ ParsedTetMesh parseMedit(const std::string& text, const std::string& path, MeshR
   }
   if (!sawVersion && !sawVertices) sc.fail("no MeshVersionFormatted or Vertices keyword; is this a Medit .mesh file?");
   if (!sawVertices) sc.fail("the file has no Vertices section");
+  // Reference 0 everywhere is Medit's "no reference": no regions.
+  bool anyRegion = false;
+  for (std::int32_t r : out.regions) anyRegion = anyRegion || r != 0;
+  if (!anyRegion) out.regions.clear();
   report.format = "medit";
   return out;
 }

@@ -25,8 +25,7 @@ TetMesh readTetMeshOrThrow(const std::string& path, MeshReadReport& report, cons
   } else if (ext == ".node" || ext == ".ele") {
     const std::string nodePath = ext == ".node" ? path : withExtension(path, ".node");
     const std::string elePath = ext == ".ele" ? path : withExtension(path, ".ele");
-    const std::string nodeText = mesh::readWholeFile(nodePath);
-    parsed = mesh::parseTetGen(nodeText, nodePath, mesh::readWholeFile(elePath), elePath, report);
+    parsed = mesh::parseTetGen(nodePath, elePath, report);
     messagePath = elePath;  // element errors are reported against the .ele file
   } else if (ext == ".mesh") {
     parsed = mesh::parseMedit(mesh::readWholeFile(path), path, report);

@@ -12,14 +12,13 @@
 namespace corofem::mesh {
 
 /// Gmsh .msh ASCII: version 1 ($NOD/$ELM), 2.x and 4.1. Only tetrahedra (type 4) are kept; other
-/// element types are counted in report.skippedByType. Regions: the physical tag (v1, v2; dropped when
-/// all are 0, Gmsh's "no physical group") or the volume entity tag (v4.1).
+/// element types are counted in report.skippedByType. Regions: the physical tag (v1, v2) or the volume
+/// entity tag (v4.1); none when all are 0 (Gmsh's "no physical group").
 ParsedTetMesh parseGmsh(const std::string& text, const std::string& path, MeshReadReport& report);
 
 /// TetGen .node + .ele (0- or 1-based, detected from the first node id; first element attribute ->
-/// regions).
-ParsedTetMesh parseTetGen(const std::string& nodeText, const std::string& nodePath, const std::string& eleText,
-                          const std::string& elePath, MeshReadReport& report);
+/// regions). Reads the .node file first, so its errors come before a missing .ele.
+ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePath, MeshReadReport& report);
 
 /// Medit .mesh (ASCII): Vertices and Tetrahedra (reference -> regions); other sections skipped.
 ParsedTetMesh parseMedit(const std::string& text, const std::string& path, MeshReadReport& report);

@@ -8,10 +8,10 @@
 
 namespace corofem::mesh {
 
-ParsedTetMesh parseTetGen(const std::string& nodeText, const std::string& nodePath, const std::string& eleText,
-                          const std::string& elePath, MeshReadReport& report) {
+ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePath, MeshReadReport& report) {
   ParsedTetMesh out;
   {
+    const std::string nodeText = readWholeFile(nodePath);
     TextScanner sc(nodeText, nodePath);
     sc.setCommentChar('#');
     sc.setContext("the .node header");
@@ -45,6 +45,7 @@ ParsedTetMesh parseTetGen(const std::string& nodeText, const std::string& nodePa
     }
   }
   {
+    const std::string eleText = readWholeFile(elePath);
     TextScanner sc(eleText, elePath);
     sc.setCommentChar('#');
     sc.setContext("the .ele header");

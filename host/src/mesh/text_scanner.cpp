@@ -73,6 +73,7 @@ void TextScanner::failEof() const {
 }
 
 void TextScanner::failShortLine() const {
+  if (p_ >= end_) failEof();
   fail("the line ends too early while reading ", context(), "; a value is missing");
 }
 

@@ -132,7 +132,7 @@ class TextScanner {
   /// Integer on the current line only: a line with too few values is an error, not a silent read
   /// of the next line.
   std::int64_t readIntOnLine() {
-    if (atLineEnd()) failShortLine();
+    if (atLineEnd()) failShortLine();  // (or failEof at the end of the file)
     return parseInt();
   }
 
@@ -144,7 +144,7 @@ class TextScanner {
 
   /// Double on the current line only.
   double readDoubleOnLine() {
-    if (atLineEnd()) failShortLine();
+    if (atLineEnd()) failShortLine();  // (or failEof at the end of the file)
     return parseDouble();
   }
 
