@@ -83,6 +83,8 @@ TEST(SceneOverrides, UnknownKeyAfterApplicationSuggestsTheNearest) {
 
 TEST(SceneOverrides, IndexOutOfRangeNamesTheOverride) {
   EXPECT_EQ(overrideError({"bodies.3.name=x"}), "--set \"bodies.3.name=x\": index 3 is out of range: bodies has 1 element");
+  EXPECT_EQ(overrideError({"bodies.99999999999.name=x"}),
+            "--set \"bodies.99999999999.name=x\": index 99999999999 is out of range: bodies has 1 element");
   EXPECT_EQ(test::parseError(kTwoBodies, {"bodies.0.loads.2.vector=[0,0,1]"}),
             "--set \"bodies.0.loads.2.vector=[0,0,1]\": index 2 is out of range: bodies[0].loads has 2 elements");
   EXPECT_EQ(overrideError({"bodies.0.fixed.0.list=[1]"}),

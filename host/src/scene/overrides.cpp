@@ -22,7 +22,7 @@ struct Segment {
   std::string text;
   bool bracketed = false;  ///< written as [n]: must index an array
   bool isNumber() const {
-    return !text.empty() && text.size() < 10 &&
+    return !text.empty() &&
            std::all_of(text.begin(), text.end(), [](unsigned char c) { return std::isdigit(c); });
   }
 };
@@ -109,9 +109,10 @@ void applyOne(json& root, const std::string& text, const std::string& prefix) {
       if (!seg.isNumber())
         fail(where, " is an array: the next segment must be a numeric index (e.g. ", where, ".0), not \"",
              seg.text, "\"");
-      const std::size_t index = std::stoul(seg.text);
+      // More than 9 digits is out of range of any scene array (and of std::stoul on some platforms).
+      const std::size_t index = seg.text.size() > 9 ? node->size() + 1 : std::stoul(seg.text);
       if (index >= node->size())
-        fail("index ", index, " is out of range: ", where, " has ", node->size(),
+        fail("index ", seg.text, " is out of range: ", where, " has ", node->size(),
              node->size() == 1 ? " element" : " elements");
       where = indexPath(where, index);
       node = &(*node)[index];
