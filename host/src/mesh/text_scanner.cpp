@@ -90,9 +90,10 @@ void TextScanner::checkCount(std::int64_t count, const char* what, std::size_t m
   if (count < 0) fail("the number of ", what, " is negative (", count, ")");
   if (count > static_cast<std::int64_t>(std::numeric_limits<std::uint32_t>::max() - 1))
     fail("the file announces ", count, " ", what, ", more than corofem can index (32-bit indices)");
-  // An entry takes at least minBytesPerEntry bytes (one character and one separator per value), so
-  // a larger count cannot fit in what remains: fail now instead of allocating for it.
-  const std::size_t fits = bytesRemaining() / (minBytesPerEntry ? minBytesPerEntry : 1);
+  // An entry takes at least minBytesPerEntry bytes (one character and one separator per value; the
+  // last entry may lack its final newline, hence the + 1), so a larger count cannot fit in what
+  // remains: fail now instead of allocating for it.
+  const std::size_t fits = (bytesRemaining() + 1) / (minBytesPerEntry ? minBytesPerEntry : 1);
   if (static_cast<std::uint64_t>(count) > fits)
     fail("the header announces ", count, " ", what, ", but only ", bytesRemaining(),
          " bytes follow, room for at most ", fits,
