@@ -345,4 +345,34 @@ TEST(InlineReaders, MeditSkipsOtherSectionsAndCountsThem) {
   EXPECT_EQ(report.skippedByType.at("Triangles (medit)"), 2u);
 }
 
+TEST(InlineReaders, TetGenMinimalFilesWithoutFinalNewlineAndZeroBasedRegions) {
+  const auto dir = tempDir();
+  // Single-digit entries and no final newline: exactly at the minimal size the count check allows.
+  writeTemp(dir, "min.node", "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1");
+  writeTemp(dir, "min.ele", "1 4 0\n1 1 2 3 4");
+  const auto mesh = corofem::test::loadTet((dir / "min.ele").string());
+  EXPECT_EQ(mesh.tetCount(), 1u);
+  // 0-based, comments, a boundary marker column and a region attribute.
+  writeTemp(dir, "z.node", "# header next\n5 3 0 1\n0 0 0 0 1\n1 1 0 0 1\n2 0 1 0 1\n3 0 0 1 1\n4 1 1 1 0 # last\n");
+  writeTemp(dir, "z.ele", "2 4 1\n0 0 1 2 3 -2\n1 1 2 3 4 7\n");
+  corofem::MeshReadReport report;
+  const auto z = corofem::test::loadTet((dir / "z.node").string(), &report);
+  EXPECT_EQ(report.format, "tetgen");
+  EXPECT_EQ(z.tetCount(), 2u);
+  EXPECT_EQ(z.regions, (std::vector<std::int32_t>{-2, 7}));
+  std::multiset<std::uint32_t> second(z.tets.begin() + 4, z.tets.end());
+  EXPECT_EQ(second, (std::multiset<std::uint32_t>{1, 2, 3, 4}));
+}
+
+TEST(InlineReaders, Gmsh1SkipsNonTetElements) {
+  const std::string text =
+      "$NOD\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$ENDNOD\n$ELM\n2\n1 2 1 1 3 1 2 3\n2 4 3 1 4 1 2 3 4\n$ENDELM\n";
+  corofem::MeshReadReport report;
+  const auto mesh = corofem::test::loadTet(writeTemp(tempDir(), "v1.msh", text), &report);
+  EXPECT_EQ(report.format, "gmsh 1");
+  EXPECT_EQ(mesh.tetCount(), 1u);
+  EXPECT_EQ(report.skippedByType.at("triangle (gmsh type 2)"), 1u);
+  EXPECT_EQ(mesh.regions, std::vector<std::int32_t>{3});
+}
+
 }  // namespace
