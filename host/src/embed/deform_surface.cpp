@@ -13,7 +13,7 @@ namespace {
 
 constexpr std::size_t kVerticesPerThread = 100000;  // below this a thread costs more than it saves
 
-/// Pass 1, vertices [first, last): x_v = sum_k w_vk x_{n_vk}.
+/// Pass 1, vertices [first, last): x_v = sum_k w_vk x_{n_vk}, into `out` (double) and/or `outFloat`.
 void computePositions(const SurfaceBinding& b, const double* x, std::size_t first, std::size_t last, double* out,
                       float* outFloat) {
   const std::uint32_t* nodes = b.nodes.data();
@@ -27,32 +27,44 @@ void computePositions(const SurfaceBinding& b, const double* x, std::size_t firs
     const double* x3 = x + 3 * static_cast<std::size_t>(n[3]);
     for (int a = 0; a < 3; ++a) {
       const double p = w[0] * x0[a] + w[1] * x1[a] + w[2] * x2[a] + w[3] * x3[a];
-      out[3 * v + a] = p;
+      if (out) out[3 * v + a] = p;
       if (outFloat) outFloat[3 * v + a] = static_cast<float>(p);
     }
   }
 }
 
-/// Pass 2, vertices [first, last): n_v = normalise(sum_t (x_b - x_a) x (x_c - x_a)) over the incident
-/// triangles t = (a, b, c); |(x_b - x_a) x (x_c - x_a)| is twice the area, so the sum is the
-/// area-weighted mean of the face normals. Gathered per vertex in a fixed order (no scatter, no races).
-void computeNormals(const SurfaceBinding& b, const double* p, std::size_t first, std::size_t last,
-                    const SurfaceOutput& out) {
+/// Pass 2, triangles [first, last): face vector f_t = (x_b - x_a) x (x_c - x_a) of t = (a, b, c), whose
+/// length is twice the area.
+void computeFaceVectors(const SurfaceBinding& b, const double* p, std::size_t first, std::size_t last,
+                        double* faces) {
   const std::uint32_t* tri = b.triangles.data();
+  for (std::size_t f = first; f < last; ++f) {
+    const std::uint32_t* t = tri + 3 * f;
+    const double* a = p + 3 * static_cast<std::size_t>(t[0]);
+    const double* bb = p + 3 * static_cast<std::size_t>(t[1]);
+    const double* c = p + 3 * static_cast<std::size_t>(t[2]);
+    const double e1[3] = {bb[0] - a[0], bb[1] - a[1], bb[2] - a[2]};
+    const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    faces[3 * f + 0] = e1[1] * e2[2] - e1[2] * e2[1];
+    faces[3 * f + 1] = e1[2] * e2[0] - e1[0] * e2[2];
+    faces[3 * f + 2] = e1[0] * e2[1] - e1[1] * e2[0];
+  }
+}
+
+/// Pass 3, vertices [first, last): n_v = normalise(sum of f_t over the incident triangles t): the
+/// area-weighted mean of the face normals. Gathered per vertex in ascending triangle order (no
+/// scatter, no races, the same bits for every thread count).
+void computeNormals(const SurfaceBinding& b, const double* p, const double* faces, std::size_t first,
+                    std::size_t last, const SurfaceOutput& out) {
   const std::uint32_t* offsets = b.vertexTriangleOffsets.data();
   const std::uint32_t* incident = b.vertexTriangles.data();
   for (std::size_t v = first; v < last; ++v) {
     double n[3] = {0.0, 0.0, 0.0};
     for (std::uint32_t q = offsets[v]; q < offsets[v + 1]; ++q) {
-      const std::uint32_t* t = tri + 3 * static_cast<std::size_t>(incident[q]);
-      const double* a = p + 3 * static_cast<std::size_t>(t[0]);
-      const double* bb = p + 3 * static_cast<std::size_t>(t[1]);
-      const double* c = p + 3 * static_cast<std::size_t>(t[2]);
-      const double e1[3] = {bb[0] - a[0], bb[1] - a[1], bb[2] - a[2]};
-      const double e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-      n[0] += e1[1] * e2[2] - e1[2] * e2[1];
-      n[1] += e1[2] * e2[0] - e1[0] * e2[2];
-      n[2] += e1[0] * e2[1] - e1[1] * e2[0];
+      const double* f = faces + 3 * static_cast<std::size_t>(incident[q]);
+      n[0] += f[0];
+      n[1] += f[1];
+      n[2] += f[2];
     }
     const double length = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     const double scale = length > 0.0 ? 1.0 / length : 0.0;
@@ -111,21 +123,30 @@ Status deformSurface(const SurfaceBinding& binding, const double* tetNodePositio
     threads = std::min(threads, vertexCount);
 
     const bool wantNormals = output.interleaved || output.normals;
+    // Normals need the positions of neighbouring vertices and the face vectors of all incident
+    // triangles: passes over double scratch buffers, kept per calling thread so that frames do not
+    // reallocate.
+    thread_local std::vector<double> positionScratch, faceScratch;
     double* positions = output.positionsDouble;
-    if (!positions) {
-      // Normals and the interleaved buffer need the positions of neighbouring vertices, so they are
-      // computed in a second pass from a double buffer; kept per thread so frames do not reallocate.
-      thread_local std::vector<double> scratch;
-      if (scratch.size() < 3 * vertexCount) scratch.resize(3 * vertexCount);
-      positions = scratch.data();
+    const std::size_t triangleCount = binding.triangles.size() / 3;
+    if (!positions && wantNormals) {
+      if (positionScratch.size() < 3 * vertexCount) positionScratch.resize(3 * vertexCount);
+      positions = positionScratch.data();
     }
     parallelRanges(vertexCount, threads, [&](std::size_t first, std::size_t last) {
       computePositions(binding, tetNodePositions, first, last, positions, output.positions);
     });
-    if (wantNormals)
+    if (wantNormals) {
+      if (faceScratch.size() < 3 * triangleCount) faceScratch.resize(3 * triangleCount);
+      double* faces = faceScratch.data();
+      parallelRanges(triangleCount, std::min(threads, std::max<std::size_t>(triangleCount, 1)),
+                     [&](std::size_t first, std::size_t last) {
+                       computeFaceVectors(binding, positions, first, last, faces);
+                     });
       parallelRanges(vertexCount, threads, [&](std::size_t first, std::size_t last) {
-        computeNormals(binding, positions, first, last, output);
+        computeNormals(binding, positions, faces, first, last, output);
       });
+    }
   });
 }
 

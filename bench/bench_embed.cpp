@@ -1,0 +1,161 @@
+// Coupled mesh (paper Section 5) on the host: binding time (Vega bridge; 1M vertices in a 100k-element
+// box) and the per-frame surface update (positions + normals) for 1M vertices.
+//
+//   build-*/bench/bench_embed --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+//
+// Counters: items_per_second = surface vertices per second; bytes_per_second (per-frame update) =
+// the compulsory memory traffic of one frame (every binding array read once, the double scratch
+// positions written and read once, the output written once, the tet node positions read once) per
+// second, to compare with the machine's bandwidth (DESIGN.md: ~33 GB/s single-thread triad).
+#include <corofem/embed.hpp>
+#include <corofem/mesh.hpp>
+
+#include "embed/embed_test_util.hpp"
+
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <random>
+
+namespace {
+
+using namespace corofem;
+
+/// 20 x 20 x 50 cells of 0.05 m, 5 tets each: 100000 elements, 22491 nodes.
+const TetMesh& box100k() {
+  static const TetMesh mesh = [] {
+    BoxSpec spec;
+    spec.min = {0.0, 0.0, 0.0};
+    spec.max = {1.0, 1.0, 2.5};
+    spec.cells = {20, 20, 50};
+    auto r = generateBox(spec);
+    if (!r) {
+      std::fprintf(stderr, "generateBox: %s\n", r.message().c_str());
+      std::abort();
+    }
+    return std::move(r).value();
+  }();
+  return mesh;
+}
+
+/// UV sphere of radius 0.45 m inside the box: 999 x 1000 + 2 = 999002 vertices, 1998000 triangles.
+const SurfaceMesh& sphere1M() {
+  static const SurfaceMesh surface = test::uvSphere({0.5, 0.5, 1.25}, 0.45, 1000, 1000);
+  return surface;
+}
+
+/// 1M uniformly random points in a box 2% larger than the tet mesh (about 6% of them outside).
+const SurfaceMesh& cloud1M() {
+  static const SurfaceMesh surface = [] {
+    std::mt19937 rng(1);
+    std::uniform_real_distribution<double> u(-0.01, 1.01), w(-0.025, 2.525);
+    SurfaceMesh s;
+    s.vertices.reserve(3000000);
+    for (int i = 0; i < 1000000; ++i) s.vertices.insert(s.vertices.end(), {u(rng), u(rng), w(rng)});
+    return s;
+  }();
+  return surface;
+}
+
+std::string dataFile(const char* relative) {
+  const char* env = std::getenv("COROFEM_DATA_DIR");
+  const std::filesystem::path root =
+      env ? std::filesystem::path(env) : std::filesystem::path(COROFEM_SOURCE_DIR) / ".." / "shared" / "data";
+  return (root / relative).string();
+}
+
+void bindAndCount(benchmark::State& state, const TetMesh& tets, const SurfaceMesh& surface) {
+  BindingOptions options;
+  options.threads = static_cast<int>(state.range(0));
+  std::size_t outside = 0;
+  for (auto _ : state) {
+    auto b = bindSurface(tets, surface, options);
+    if (!b) {
+      state.SkipWithError(b.message().c_str());
+      return;
+    }
+    outside = b->statistics.outsideCount;
+    benchmark::DoNotOptimize(b->weights.data());
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * surface.vertexCount()));
+  state.counters["vertices"] = static_cast<double>(surface.vertexCount());
+  state.counters["elements"] = static_cast<double>(tets.tetCount());
+  state.counters["outside"] = static_cast<double>(outside);
+}
+
+void BM_BindBridge(benchmark::State& state) {
+  static std::unique_ptr<std::pair<TetMesh, SurfaceMesh>> bridge;
+  if (!bridge) {
+    auto t = readTetMesh(dataFile("meshes/vega/simpleBridge/simpleBridge-ic_128_0.15_.1.veg"));
+    auto s = readSurfaceMesh(dataFile("meshes/vega/simpleBridge/simpleBridge.obj"));
+    if (!t || !s) {
+      state.SkipWithError("shared data (../shared/data/meshes/vega/simpleBridge) is absent");
+      return;
+    }
+    bridge = std::make_unique<std::pair<TetMesh, SurfaceMesh>>(std::move(t).value(), std::move(s).value());
+  }
+  bindAndCount(state, bridge->first, bridge->second);
+}
+BENCHMARK(BM_BindBridge)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_BindSphere1M_Box100k(benchmark::State& state) { bindAndCount(state, box100k(), sphere1M()); }
+BENCHMARK(BM_BindSphere1M_Box100k)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+
+void BM_BindCloud1M_Box100k(benchmark::State& state) { bindAndCount(state, box100k(), cloud1M()); }
+BENCHMARK(BM_BindCloud1M_Box100k)->Arg(1)->Arg(2)->ArgName("threads")->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
+
+/// The per-frame update of the 1M-vertex sphere. range(0): threads; range(1): 1 = interleaved
+/// position+normal float buffer, 0 = float positions only (no normals).
+void BM_DeformSphere1M(benchmark::State& state) {
+  static std::unique_ptr<SurfaceBinding> binding;
+  if (!binding) {
+    auto b = bindSurface(box100k(), sphere1M());
+    if (!b) {
+      state.SkipWithError(b.message().c_str());
+      return;
+    }
+    binding = std::make_unique<SurfaceBinding>(std::move(b).value());
+  }
+  std::mt19937 rng(2);
+  const std::vector<double> x = test::SmoothDeformation::random(rng, 2.5, true).apply(box100k().nodes);
+  const bool normals = state.range(1) != 0;
+  const std::size_t n = binding->vertexCount();
+  std::vector<float> out((normals ? 6 : 3) * n);
+  SurfaceOutput o;
+  (normals ? o.interleaved : o.positions) = out.data();
+  o.threads = static_cast<int>(state.range(0));
+  for (auto _ : state) {
+    const Status s = deformSurface(*binding, x.data(), box100k().nodeCount(), o);
+    if (!s) {
+      state.SkipWithError(s.message().c_str());
+      return;
+    }
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  // Compulsory traffic of one frame (bytes): nodes + weights (16 + 32 per vertex), tet node positions,
+  // the output; with normals also the double position scratch (written, read), the triangle list, the
+  // double face vectors (written, read) and the CSR adjacency. Positions only: the weighted sum goes
+  // straight to the float output.
+  double bytes = 48.0 * n + 24.0 * box100k().nodeCount() + 4.0 * out.size();
+  if (normals)
+    bytes += 48.0 * n + 20.0 * binding->triangles.size() +  // per index: 4 B + 16 B of face vector
+             4.0 * (binding->vertexTriangleOffsets.size() + binding->vertexTriangles.size());
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * n));
+  state.SetBytesProcessed(static_cast<std::int64_t>(state.iterations() * bytes));
+  state.counters["bytes_per_vertex"] = bytes / static_cast<double>(n);
+}
+BENCHMARK(BM_DeformSphere1M)
+    ->Args({1, 1})
+    ->Args({2, 1})
+    ->Args({1, 0})
+    ->Args({2, 0})
+    ->ArgNames({"threads", "normals"})
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace
+
+BENCHMARK_MAIN();
