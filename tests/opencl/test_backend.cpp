@@ -1,0 +1,270 @@
+// The OpenCL backend against the reference backend (createReferenceBackend: assembled Eigen,
+// double) on the same Problem: forces, products, energy and PCG solves on a clamped box mesh,
+// plus determinism, warm start, the convergence-check cadence and the adopted-context path.
+//
+// Tolerances. Double: PCG to a relative residual of 1e-10 versus the reference's direct solve;
+// the error is bounded by cond(A) * 1e-10 and cond(A) of these small, mass-dominated systems is
+// ~1e2..1e3, so 1e-7 relative; forces/products agree to rounding (1e-10 relative). Float: the
+// achievable relative residual is ~ eps_float * cond(A) ~ 1e-5; we ask PCG for 1e-5 and accept a
+// true residual (recomputed in double by the reference) of 1e-3 and forces/products to 1e-4
+// relative (positions rounded to float; see test_kernels.cpp).
+#include "backends/opencl/opencl_backend.hpp"
+#include "opencl/opencl_test_support.hpp"
+#include "util/error.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <random>
+
+namespace corofem {
+namespace {
+
+using test::DeviceCase;
+
+class OpenCLBackendVsReference : public ::testing::TestWithParam<DeviceCase> {
+ protected:
+  bool isDouble() const { return GetParam().precision == Precision::Double; }
+
+  /// A 2 x 0.5 x 0.5 m box beam (8 x 2 x 2 cells, 192 tets) clamped at x = 0, with Rayleigh
+  /// damping, bent and rotated as a whole by 50 degrees about a skew axis.
+  static detail::Problem beam() {
+    detail::Problem p = test::makeProblem(test::boxMesh(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
+    p.rayleighMass = 0.2;
+    p.rayleighStiffness = 0.01;
+    for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
+      if (p.mesh.nodes[3 * n] < 1e-9)
+        for (int k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;
+    return p;
+  }
+  static Eigen::VectorXd bent(const detail::Problem& p) {
+    Eigen::VectorXd x = p.restPositions;
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.9, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+    for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) {
+      Eigen::Vector3d X = p.restPositions.segment<3>(3 * n);
+      Eigen::Vector3d u(0.02 * X.y(), -0.15 * X.x() * X.x(), 0.05 * X.x() * X.z());
+      x.segment<3>(3 * n) = R * (X + u);
+    }
+    return x;
+  }
+  SolverDesc solver(PreconditionerKind pc = PreconditionerKind::BlockDiagonal) const {
+    SolverDesc s;
+    s.precision = GetParam().precision;
+    s.preconditioner = pc;
+    s.tolerance = isDouble() ? 1e-10 : 1e-5;
+    s.maxIterations = 2000;
+    s.checkEvery = 4;
+    return s;
+  }
+  std::unique_ptr<detail::OpenCLBackendInternal> openclBackend(const detail::Problem& p, const SolverDesc& s,
+                                                              const detail::OpenCLOptions& o = {}) {
+    return detail::createOpenCLBackendOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)), o);
+  }
+  static double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+    return (a - b).norm() / std::max(b.norm(), 1e-300);
+  }
+  static Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Eigen::VectorXd v(static_cast<Eigen::Index>(n));
+    for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
+    return v;
+  }
+  static Eigen::VectorXd freeOnly(const detail::Problem& p, Eigen::VectorXd v) {
+    for (std::size_t d = 0; d < p.dofCount(); ++d)
+      if (p.constrained[d]) v[d] = 0;
+    return v;
+  }
+};
+
+TEST_P(OpenCLBackendVsReference, ForcesProductAndEnergyMatch) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const SolverDesc s = solver();
+  auto ref = detail::createReferenceBackend(p, s);
+  for (bool stored : {false, true}) {
+    detail::OpenCLOptions o;
+    o.storedStiffness = stored;
+    auto ocl = openclBackend(p, s, o);
+    const Eigen::VectorXd x = bent(p);
+    ref->setPositions(x);
+    ocl->setPositions(x);
+    Eigen::VectorXd fr, fo;
+    ref->internalForces(fr);
+    ocl->internalForces(fo);
+    const double tol = isDouble() ? 1e-10 : 1e-4;
+    EXPECT_LE((fo - fr).cwiseAbs().maxCoeff(), tol * fr.cwiseAbs().maxCoeff()) << "forces";
+    EXPECT_NEAR(ocl->elasticEnergy(), ref->elasticEnergy(), tol * ref->elasticEnergy());
+    const Eigen::VectorXd v = randomVector(p.dofCount(), 3);
+    for (detail::SystemCoeffs c : {detail::SystemCoeffs{14400.0, 120.0, 1.0}, detail::SystemCoeffs{0.0, 0.0, 1.0},
+                                   detail::SystemCoeffs{1.0, 0.0, 0.0}}) {
+      Eigen::VectorXd yr, yo;
+      ref->apply(c, v, yr);
+      ocl->apply(c, v, yo);
+      EXPECT_LE((yo - yr).cwiseAbs().maxCoeff(), tol * yr.cwiseAbs().maxCoeff())
+          << "apply with m=" << c.mass << " c=" << c.damping << " k=" << c.stiffness
+          << (stored ? " (stored K_e)" : "");
+    }
+  }
+}
+
+TEST_P(OpenCLBackendVsReference, SolveMatchesDirectSolveForEveryPreconditioner) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  SolverDesc direct = solver();
+  direct.linearSolver = LinearSolverKind::Cholesky;
+  auto ref = detail::createReferenceBackend(p, direct);
+  const Eigen::VectorXd x = bent(p);
+  ref->setPositions(x);
+  const Eigen::VectorXd b = randomVector(p.dofCount(), 5);
+  // Dynamic (Newmark, dt = 1/60: m = 4/dt^2) and static (mass-free, clamped) systems.
+  for (detail::SystemCoeffs c : {detail::SystemCoeffs{14400.0, 120.0, 1.0}, detail::SystemCoeffs{0.0, 0.0, 1.0}}) {
+    Eigen::VectorXd xr = Eigen::VectorXd::Zero(b.size());
+    ref->solve(c, b, xr);
+    for (PreconditionerKind pc :
+         {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
+      auto ocl = openclBackend(p, solver(pc));
+      ocl->setPositions(x);
+      Eigen::VectorXd xo = Eigen::VectorXd::Zero(b.size());
+      const detail::LinearSolveStats st = ocl->solve(c, b, xo);
+      const std::string what = "preconditioner " + std::to_string(static_cast<int>(pc)) + ", mass " +
+                               std::to_string(c.mass) + ", " + std::to_string(st.iterations) + " iterations";
+      EXPECT_TRUE(st.converged) << what;
+      EXPECT_GT(st.iterations, 0) << what;
+      // True residual in double through the reference's operator.
+      Eigen::VectorXd Ax;
+      ref->apply(c, xo, Ax);
+      const double trueRes = (freeOnly(p, b - Ax)).norm() / freeOnly(p, b).norm();
+      EXPECT_LE(trueRes, isDouble() ? 1e-9 : 1e-3) << what;
+      EXPECT_NEAR(st.relativeResidual, trueRes, isDouble() ? 1e-9 : 1e-3) << what;
+      EXPECT_LE(relErr(xo, xr), isDouble() ? 1e-7 : 5e-2) << what;
+      for (std::size_t d = 0; d < p.dofCount(); ++d)
+        if (p.constrained[d]) EXPECT_EQ(xo[d], 0.0) << "constrained dof " << d;
+    }
+  }
+}
+
+TEST_P(OpenCLBackendVsReference, BlockPreconditionerNeedsNoMoreIterationsThanDiagonal) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), b = randomVector(p.dofCount(), 9);
+  int iterations[3] = {0, 0, 0};
+  for (PreconditionerKind pc :
+       {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
+    SolverDesc s = solver(pc);
+    s.checkEvery = 1;
+    auto ocl = openclBackend(p, s);
+    ocl->setPositions(x);
+    Eigen::VectorXd xo = Eigen::VectorXd::Zero(b.size());
+    iterations[static_cast<int>(pc)] = ocl->solve({0.0, 0.0, 1.0}, b, xo).iterations;
+  }
+  std::printf("[info] static beam PCG iterations: none %d, diagonal %d, block %d\n", iterations[0],
+              iterations[1], iterations[2]);
+  EXPECT_LE(iterations[2], iterations[1]);
+}
+
+TEST_P(OpenCLBackendVsReference, SameSolveTwiceGivesIdenticalBits) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), b = randomVector(p.dofCount(), 11);
+  Eigen::VectorXd results[3], forces[3];
+  auto first = openclBackend(p, solver());
+  auto fresh = openclBackend(p, solver());
+  for (int run = 0; run < 3; ++run) {
+    // Runs 0 and 1 on one backend, run 2 on another instance.
+    detail::OpenCLBackendInternal& ocl = run < 2 ? *first : *fresh;
+    ocl.setPositions(x);
+    ocl.internalForces(forces[run]);
+    results[run] = Eigen::VectorXd::Constant(b.size(), 0.01);
+    ocl.solve({14400.0, 120.0, 1.0}, b, results[run]);
+  }
+  for (int run = 1; run < 3; ++run) {
+    EXPECT_EQ(0, std::memcmp(results[0].data(), results[run].data(), sizeof(double) * b.size())) << "run " << run;
+    EXPECT_EQ(0, std::memcmp(forces[0].data(), forces[run].data(), sizeof(double) * b.size())) << "run " << run;
+  }
+}
+
+TEST_P(OpenCLBackendVsReference, WarmStartZeroRhsAndIterationCadence) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), b = randomVector(p.dofCount(), 13);
+  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
+  SolverDesc s = solver();
+  s.checkEvery = 5;
+  auto ocl = openclBackend(p, s);
+  ocl->setPositions(x);
+  Eigen::VectorXd sol = Eigen::VectorXd::Zero(b.size());
+  const auto first = ocl->solve(c, b, sol);
+  ASSERT_TRUE(first.converged);
+  EXPECT_EQ(first.iterations % 5, 0) << "convergence is only checked every checkEvery iterations";
+  // Warm start from the solution: converged before the first iteration.
+  Eigen::VectorXd again = sol;
+  const auto warm = ocl->solve(c, b, again);
+  EXPECT_TRUE(warm.converged);
+  EXPECT_EQ(warm.iterations, 0);
+  // b = 0: x = 0 without iterating.
+  Eigen::VectorXd zero = Eigen::VectorXd::Constant(b.size(), 3.0);
+  const auto z = ocl->solve(c, Eigen::VectorXd::Zero(b.size()), zero);
+  EXPECT_TRUE(z.converged);
+  EXPECT_EQ(z.iterations, 0);
+  EXPECT_EQ(zero.cwiseAbs().maxCoeff(), 0.0);
+  // The iteration cap: stops at exactly maxIterations, not converged, still a finite x.
+  s.maxIterations = 7;
+  s.tolerance = 1e-14;
+  auto capped = openclBackend(p, s);
+  capped->setPositions(x);
+  Eigen::VectorXd xc = Eigen::VectorXd::Zero(b.size());
+  const auto st = capped->solve({0.0, 0.0, 1.0}, b, xc);
+  EXPECT_EQ(st.iterations, 7);
+  EXPECT_FALSE(st.converged);
+  EXPECT_TRUE(xc.allFinite());
+  EXPECT_GT(st.relativeResidual, 0.0);
+}
+
+TEST_P(OpenCLBackendVsReference, NonFiniteInputIsASolveFailure) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  auto ocl = openclBackend(p, solver());
+  ocl->setPositions(bent(p));
+  Eigen::VectorXd b = randomVector(p.dofCount(), 17);
+  b[40] = std::nan("");
+  Eigen::VectorXd xs = Eigen::VectorXd::Zero(b.size());
+  try {
+    ocl->solve({1.0, 0.0, 1.0}, b, xs);
+    FAIL() << "expected SolveFailed";
+  } catch (const detail::Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::SolveFailed);
+    EXPECT_NE(std::string(e.what()).find("not finite"), std::string::npos) << e.what();
+  }
+}
+
+TEST_P(OpenCLBackendVsReference, AdoptedContextGivesTheSameForces) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const auto info = detail::cl::listDevices().at(static_cast<std::size_t>(GetParam().device));
+  cl_int status = CL_SUCCESS;
+  cl_context ctx = clCreateContext(nullptr, 1, &info.device, nullptr, nullptr, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  cl_command_queue queue = clCreateCommandQueue(ctx, info.device, 0, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  Eigen::VectorXd fa, fs;
+  {
+    auto adopted = detail::createOpenCLBackendAdopting(p, solver(), ctx, queue, info.device);
+    adopted->setPositions(bent(p));
+    adopted->internalForces(fa);
+  }
+  auto shared = openclBackend(p, solver());
+  shared->setPositions(bent(p));
+  shared->internalForces(fs);
+  EXPECT_EQ(0, std::memcmp(fa.data(), fs.data(), sizeof(double) * fa.size()));
+  // The application's objects are still valid after the backend released its references.
+  EXPECT_EQ(clFinish(queue), CL_SUCCESS);
+  clReleaseCommandQueue(queue);
+  clReleaseContext(ctx);
+}
+
+INSTANTIATE_TEST_SUITE_P(Devices, OpenCLBackendVsReference, ::testing::ValuesIn(test::deviceCases()),
+                         test::caseName);
+
+}  // namespace
+}  // namespace corofem
