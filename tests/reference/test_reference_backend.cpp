@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 using namespace corofem;
 using namespace corofem::detail;
 using corofem::test::boxMesh;
@@ -289,4 +291,28 @@ TEST(ReferenceBackend, PatchTestLinearAndCorotational) {
       if (p.constrained[d]) f[static_cast<Eigen::Index>(d)] = 0.0;
     EXPECT_LT(f.norm(), 1e-8);  // N; element forces are ~ 200 Pa * 0.01 m^2 = 2 N
   }
+}
+
+TEST(ReferenceBackend, InvertedNeoHookeanElementIsASolveFailureNamingIt) {
+  Problem p = makeProblem(boxMesh(1, 1, 1), 1e5, 0.3, 1000.0, Formulation::NeoHookean);
+  auto backend = createReferenceBackend(p, SolverDesc{});
+  Eigen::VectorXd x = p.restPositions;
+  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) x[3 * n + 2] *= -1.0;  // mirror: every element inverted
+  backend->setPositions(x);
+  EXPECT_EQ(backend->elasticEnergy(), std::numeric_limits<double>::infinity());  // usable by a line search
+  Eigen::VectorXd f;
+  try {
+    backend->internalForces(f);
+    ADD_FAILURE() << "no error for inverted Neo-Hookean elements";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::SolveFailed);
+    EXPECT_NE(std::string(e.what()).find("element 0 (nodes"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("inverted"), std::string::npos) << e.what();
+  }
+  // St. Venant-Kirchhoff stays defined for the same state (finite forces, no error).
+  p.formulation = Formulation::StVenantKirchhoff;
+  auto svk = createReferenceBackend(p, SolverDesc{});
+  svk->setPositions(x);
+  svk->internalForces(f);
+  EXPECT_TRUE(f.allFinite());
 }
