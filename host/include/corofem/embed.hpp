@@ -17,7 +17,16 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <string>
 #include <vector>
+
+// OpenCL handle types, declared as OpenCL itself declares them (CL/cl.h: typedef struct _cl_mem*
+// cl_mem, ...), so this header needs no OpenCL headers.
+struct _cl_context;
+struct _cl_command_queue;
+struct _cl_device_id;
+struct _cl_mem;
 
 namespace corofem {
 
@@ -101,5 +110,64 @@ struct SurfaceOutput {
 /// frame). Uses a thread-local scratch buffer when positionsDouble is null and normals are asked for.
 Status deformSurface(const SurfaceBinding& binding, const double* tetNodePositions,
                      std::size_t tetNodeCount, const SurfaceOutput& output);
+
+/// Options of the per-frame update on an OpenCL device (DeviceSurface).
+struct DeviceSurfaceOptions {
+  /// Device selector, as for the OpenCL backend: "" = the first GPU, else the first device; a number
+  /// = index in the list of all devices of all platforms; other text = a case-insensitive substring of
+  /// the device name. Ignored when `context` is set.
+  std::string device;
+  /// Positions, weights and face vectors in double on the device (needs cl_khr_fp64); float when false.
+  /// The output buffer is float either way. Node positions given to updateFromDevice() must be of this
+  /// precision.
+  bool doublePrecision = false;
+  /// The application's own context, queue and device (all three, or none): the buffers and kernels
+  /// live there (e.g. where a cl_mem shared with the renderer was created). Retained, not owned.
+  _cl_context* context = nullptr;
+  _cl_command_queue* queue = nullptr;  ///< in-order queue on `context`
+  _cl_device_id* deviceId = nullptr;   ///< device of `queue`
+};
+
+/// The per-frame coupled-mesh update on an OpenCL device (kernels/opencl/surface_update.cl): the same
+/// mathematics as deformSurface, into a device buffer of 6 floats per vertex (position, unit normal;
+/// the SurfaceOutput::interleaved layout) that a renderer can draw from. Built only with
+/// COROFEM_WITH_OPENCL; otherwise create() returns ErrorCode::NotCompiledIn.
+///
+///   auto gpu = corofem::DeviceSurface::create(binding);              // Result<DeviceSurface>
+///   gpu->update(nodePositions, nodeCount);                            // every frame (enqueues)
+///   gpu->read(vbo);                                                   // or draw from gpu->vertexBuffer()
+class DeviceSurface {
+ public:
+  /// Uploads the binding (node indices, weights, triangles, adjacency) and builds the kernels.
+  /// Errors: NotCompiledIn, DeviceError (no device, build or allocation failure), BadInput (double
+  /// precision on a device without cl_khr_fp64, an inconsistent binding).
+  static Result<DeviceSurface> create(const SurfaceBinding& binding, const DeviceSurfaceOptions& options = {});
+
+  DeviceSurface(DeviceSurface&&) noexcept;
+  DeviceSurface& operator=(DeviceSurface&&) noexcept;
+  ~DeviceSurface();
+
+  /// Copies the tet node positions (3 doubles per node, converted to the device precision) to the
+  /// device and enqueues the update. Errors: BadInput (node count differs from the binding's),
+  /// DeviceError.
+  Status update(const double* tetNodePositions, std::size_t tetNodeCount);
+  /// Enqueues the update from node positions already on the device: a buffer of 3 reals per node
+  /// (float or double as DeviceSurfaceOptions::doublePrecision), e.g. the simulation's own buffer.
+  Status updateFromDevice(_cl_mem* tetNodePositions);
+  /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update).
+  Status read(float* interleaved) const;
+  /// The output buffer (6 * vertexCount() floats), owned by this object; valid for its lifetime.
+  _cl_mem* vertexBuffer() const;
+  /// Blocks until all enqueued work is done.
+  Status finish() const;
+
+  std::size_t vertexCount() const;
+  std::string deviceName() const;  ///< the device the kernels run on
+
+ private:
+  struct Impl;
+  explicit DeviceSurface(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace corofem
