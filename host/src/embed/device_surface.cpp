@@ -10,6 +10,7 @@
 #include "backends/opencl/cl_context.hpp"
 #include "backends/opencl/program_cache.hpp"
 
+#include <algorithm>
 #include <cstring>
 #endif
 
@@ -98,9 +99,13 @@ struct DeviceSurface::Impl {
     checkCl(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg", device());
   }
 
+  /// One work-item per entry, in work-groups of 64 (the kernels skip the padding work-items):
+  /// leaving the size to the runtime lets some (PoCL) pick tiny groups.
   void enqueue(cl_kernel k, std::size_t count, const char* name) {
     if (count == 0) return;
-    checkCl(clEnqueueNDRangeKernel(ctx->queue(), k, 1, nullptr, &count, nullptr, 0, nullptr, nullptr), name,
+    const std::size_t local = std::clamp<std::size_t>(ctx->info().maxWorkGroupSize, 1, 64);
+    const std::size_t global = (count + local - 1) / local * local;
+    checkCl(clEnqueueNDRangeKernel(ctx->queue(), k, 1, nullptr, &global, &local, 0, nullptr, nullptr), name,
             device());
   }
 
