@@ -113,6 +113,23 @@ TEST(StaticNewton, NonConvergenceKeepsLastIncrementAndExplains) {
   EXPECT_EQ(solver.positions(), p.restPositions);
 }
 
+TEST(StaticNewton, CutBackRescuesAnIncrementTooLargeForTheIterationLimit) {
+  detail::Problem p = springChainProblem(4, 1.0);
+  const double force = 500.0, k = 1.0, k3 = 100.0;
+  addTipForce(p, {force, 0.0, 0.0});
+  SpringChainBackend backend(p, k, k3);
+  StaticDesc desc;
+  desc.maxNewtonIterations = 6;  // too few for the full load from rest, enough for part of it
+  StaticSolver solver(p, backend, desc);
+  const BodyStepStats stats = solver.step(1, 1);
+  EXPECT_TRUE(stats.converged);
+  EXPECT_GT(stats.newtonIterations, 6);  // the failed full attempt plus the sub-increments
+  double e = std::cbrt(force / k3);
+  for (int i = 0; i < 100; ++i) e -= (k * e + k3 * e * e * e - force) / (k + 3 * k3 * e * e);
+  // 1e-6: residual tolerance 1e-6 relative to F = 500 N over a tangent of ~1e4 N/m.
+  EXPECT_NEAR(solver.positions()[9] - 3.0, 3 * e, 1e-6);
+}
+
 TEST(StaticNewton, NonFiniteForcesFailAndKeepState) {
   detail::Problem p = springChainProblem(3, 1.0);
   addTipForce(p, {1.0, 0.0, 0.0});

@@ -96,7 +96,14 @@ class BodySolver {
 /// first iteration and for linear problems, this is exactly Eq. 13), and (2) takes a line search on
 /// the potential energy (residual = energy gradient) using directional derivatives only. Each
 /// iteration still costs one K_t solve; the line search adds force evaluations only when it
-/// shortens a step. Set COROFEM_DEBUG_NEWTON=1 to print every iteration's residual.
+/// shortens a step.
+///
+/// Automatic cut-back: when Newton does not converge within maxNewtonIterations (or meets a
+/// non-finite value), the increment is retried from the last converged state in halves, down to
+/// 1/16 of it, and the sub-increment grows back after two successes (Abaqus-style automatic
+/// incrementation inside the user's increment). Every step() still ends at lambda = k / n; the
+/// report sums the Newton iterations of all attempts. Only when even 1/16 fails does the step throw.
+/// Set COROFEM_DEBUG_NEWTON=1 to print every iteration's residual and step length.
 class StaticSolver final : public BodySolver {
  public:
   StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc);
@@ -104,11 +111,29 @@ class StaticSolver final : public BodySolver {
   void rollback() override;
 
  private:
+  /// Outcome of one Newton solve at a fixed load factor.
+  struct NewtonOutcome {
+    bool converged = false;
+    double relative = 0;     ///< final relative residual
+    double correction = 0;   ///< last |dx| over the displacement scale
+    std::string failure;     ///< why it stopped, when not converged
+  };
+  /// Newton at load factor lambda from the starting guess x (prescribed values written), x left at
+  /// the last iterate. Throws only for backend errors other than SolveFailed.
+  NewtonOutcome newton(double lambda, const Eigen::VectorXd& fext, Eigen::VectorXd& x, BodyStepStats& stats);
+
+  /// Converged state beyond the base class's x_ / work_: load factor, f_ext at it, and the converged
+  /// state before it (for the predictor's extrapolation).
+  struct Track {
+    double lambda = 0.0;
+    Eigen::VectorXd fext;
+    Eigen::VectorXd xBack;
+    double lambdaBack = 0.0;
+    bool haveBack = false;
+  };
+
   StaticDesc desc_;
-  Eigen::VectorXd fextPrev_;  ///< lambda f_ext of the last converged increment (for the work)
-  Eigen::VectorXd fextPrevSaved_;
-  double lambda_ = 0.0, lambdaPrev_ = 0.0;  ///< load factors of x_ and xPrev_
-  bool havePrevious_ = false;               ///< xPrev_ is a converged increment (predictor usable)
+  Track track_, trackSaved_;
 };
 
 /// Implicit time integration of Eq. 14, M a + C v + f_int(x) = f_ext(t), solved for the velocities

@@ -1,5 +1,6 @@
 // Newton-Raphson statics (paper Eqs. 12-13), one load increment per call. The criteria, the
-// quasi-Newton correction and the line search are documented on StaticSolver in body_solver.hpp.
+// quasi-Newton correction, the line search and the automatic cut-back are documented on
+// StaticSolver in body_solver.hpp.
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
 
@@ -26,164 +27,223 @@ constexpr int kHistory = 8;
 constexpr double kArmijo = 1e-4;
 /// Step-length reductions tried before the last trial step is taken as it is.
 constexpr int kMaxBacktracks = 6;
+/// Halvings of an increment tried before the step fails: down to 1/16 of it.
+constexpr int kMaxCuts = 4;
 
 struct SecantPair {
   Eigen::VectorXd s, y;  ///< step and change of residual, free dofs only
   double rho = 0;        ///< 1 / (y . s)
 };
 
+/// Thrown inside newton() to end an attempt that met a non-finite value (a cut-back may cure it).
+struct AttemptFailed {
+  std::string why;
+};
+
 }  // namespace
 
 StaticSolver::StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc)
     : BodySolver(problem, backend), desc_(desc) {
-  fextPrev_ = Eigen::VectorXd::Zero(problem.restPositions.size());
-  fextPrevSaved_ = fextPrev_;
+  track_.fext = Eigen::VectorXd::Zero(problem.restPositions.size());
+  trackSaved_ = track_;
 }
 
-BodyStepStats StaticSolver::step(int increment, int incrementCount) {
-  const double lambda = static_cast<double>(increment) / static_cast<double>(std::max(1, incrementCount));
+StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::VectorXd& fext, Eigen::VectorXd& x,
+                                                 BodyStepStats& stats) {
   const int maxIterations = std::max(1, desc_.maxNewtonIterations);
   // Below this relative residual the increment is accepted without the displacement test
   // (see the class comment: a linear problem solved exactly converges in one iteration).
   const double linearAcceptance = std::min(1e-8, 1e-2 * desc_.residualTolerance);
   const double displacementFloor = 1e-12 * diagonal_ * std::sqrt(std::max(1.0, freeMask_.sum()));
   const bool debug = std::getenv("COROFEM_DEBUG_NEWTON") != nullptr;
-
-  auto failHere = [&](const std::string& what, const std::string& fix) {
-    setBackendPositions(x_, true);  // the backend goes back to the last converged state too
-    fail(ErrorCode::SolveFailed, "body '", problem_.name, "': static increment ", increment, "/",
-         incrementCount, " ", what, "; ", fix);
-  };
-  const std::string incrementFix =
-      "try more increments (analysis.increments) or a looser analysis.residual_tolerance";
-
-  // Predictor: the free dofs continue along the last increment's displacement (linear
-  // extrapolation in the load factor), which puts a linear problem on its answer at once and a
-  // nonlinear one much closer than the last converged state. Prescribed values are then written.
-  Eigen::VectorXd x = x_;
-  if (havePrevious_ && lambda > lambda_ && lambda_ > lambdaPrev_) {
-    const double ratio = (lambda - lambda_) / (lambda_ - lambdaPrev_);
-    x += ratio * ((x_ - xPrev_).array() * freeMask_).matrix();
-  }
-  problem_.applyPrescribed(x, lambda, /*dynamic=*/false);
-  const Eigen::VectorXd fext = problem_.externalForce(lambda, /*dynamic=*/false);
   const double fextNorm = freeNorm(fext);
 
   const Eigen::Index n = x.size();
   Eigen::VectorXd fint(n), r(n), trialForce(n), trialResidual(n), q(n), z(n), d(n), trial(n);
   // Residual of Eq. 12 on the free dofs at y (constrained rows are reactions, not unknowns).
+  // Non-finite results and SolveFailed from the backend end the attempt; other errors propagate.
   auto evaluate = [&](const Eigen::VectorXd& y, Eigen::VectorXd& force, Eigen::VectorXd& residual) {
     try {
       setBackendPositions(y, false);
       backend_.internalForces(force);
     } catch (const Error& e) {
-      failHere(std::string("failed: ") + e.what(), incrementFix);
+      if (e.code() != ErrorCode::SolveFailed) throw;
+      throw AttemptFailed{std::string("failed: ") + e.what()};
     }
     residual = ((force - fext).array() * freeMask_).matrix();
   };
 
+  NewtonOutcome out;
+  try {
+    std::deque<SecantPair> history;
+    double dxNorm = INFINITY;
+    evaluate(x, fint, r);
+    for (int iteration = 0;; ++iteration) {
+      const double scale = std::max({fextNorm, freeNorm(fint), forceFloor_});
+      const double relative = r.norm() / scale;
+      const double displacementScale = std::max(freeNorm(x - problem_.restPositions), displacementFloor);
+      out.relative = relative;
+      out.correction = dxNorm / displacementScale;
+      stats.residual = relative;
+      if (debug)
+        std::fprintf(stderr, "static lambda %.6g iteration %d: relative residual %.3e, |dx| %.3e\n", lambda,
+                     iteration, relative, dxNorm);
+      if (!std::isfinite(relative) || !allFinite(x))
+        throw AttemptFailed{"produced non-finite forces or positions after " + std::to_string(iteration) +
+                            " Newton iterations"};
+
+      const bool residualOk = relative <= desc_.residualTolerance;
+      const bool displacementOk = iteration > 0 && dxNorm <= desc_.displacementTolerance * displacementScale;
+      if (residualOk && (displacementOk || relative <= linearAcceptance)) {
+        out.converged = true;
+        return out;
+      }
+      if (iteration == maxIterations) {
+        out.failure = "did not converge in " + std::to_string(maxIterations) +
+                      " Newton iterations (relative residual " + sci(relative) + ", last correction " +
+                      sci(out.correction) + " of the displacement)";
+        return out;
+      }
+
+      // Direction: Eq. 13's K_t dx = -r, with the L-BFGS two-loop correction built from the last
+      // secant pairs (K_t^-1 as the initial inverse Hessian). Without history it is exactly Eq. 13.
+      q = r;
+      std::vector<double> alphas(history.size());
+      for (std::size_t i = history.size(); i-- > 0;) {
+        alphas[i] = history[i].rho * history[i].s.dot(q);
+        q -= alphas[i] * history[i].y;
+      }
+      z.setZero();
+      LinearSolveStats ls;
+      try {
+        ls = backend_.solve(SystemCoeffs{0.0, 0.0, 1.0}, q, z);
+      } catch (const Error& e) {
+        if (e.code() != ErrorCode::SolveFailed) throw;
+        throw AttemptFailed{std::string("failed in the linear solve: ") + e.what()};
+      }
+      for (std::size_t i = 0; i < history.size(); ++i) {
+        const double beta = history[i].rho * history[i].y.dot(z);
+        z += (alphas[i] - beta) * history[i].s;
+      }
+      d = -(z.array() * freeMask_).matrix();
+      stats.newtonIterations += 1;
+      stats.linearIterations += ls.iterations;
+      stats.linearResidual = std::max(stats.linearResidual, ls.relativeResidual);
+      if (!allFinite(d)) throw AttemptFailed{"produced a non-finite Newton correction"};
+
+      // Line search on the potential energy Pi = U(x) - f_ext . x, whose gradient is r (the
+      // co-rotational force with the polar rotation, and the hyperelastic ones, are energy
+      // gradients). Using only g(t) = r(x + t d) . d: for a quadratic,
+      //   Pi(t) - Pi(0) = t (g(0) + g(t)) / 2 <= kArmijo t g(0)  <=>  g(t) <= (1 - 2 kArmijo) |g(0)|,
+      // which needs no energy differences (those cancel to rounding near convergence). A step that
+      // fails it is shortened to the secant root of g, the minimiser of the quadratic model. When d
+      // is not a descent direction (g(0) >= 0: an indefinite hyperelastic tangent) the full step is
+      // taken, as plain Newton would.
+      const double g0 = r.dot(d);
+      double t = 1.0;
+      for (int backtrack = 0;; ++backtrack) {
+        trial = x + t * d;
+        bool finite = true;
+        try {
+          evaluate(trial, trialForce, trialResidual);
+        } catch (const AttemptFailed&) {
+          if (backtrack == kMaxBacktracks) throw;
+          finite = false;
+        }
+        const double gt = finite ? trialResidual.dot(d) : NAN;
+        finite = finite && std::isfinite(gt) && allFinite(trialResidual);
+        if (backtrack == kMaxBacktracks) break;
+        if (finite && (g0 >= 0.0 || gt <= (1.0 - 2.0 * kArmijo) * std::abs(g0))) break;
+        const double secant = finite && gt > g0 ? t * g0 / (g0 - gt) : 0.25 * t;
+        t = std::clamp(secant, 0.1 * t, 0.7 * t);
+      }
+      SecantPair pair;
+      pair.s = t * d;
+      pair.y = trialResidual - r;
+      const double sy = pair.s.dot(pair.y);
+      // Keep the pair only where the energy is locally convex along s (y . s > 0), as L-BFGS must.
+      if (sy > 1e-12 * pair.s.norm() * pair.y.norm() && std::isfinite(sy)) {
+        pair.rho = 1.0 / sy;
+        history.push_back(std::move(pair));
+        if (static_cast<int>(history.size()) > kHistory) history.pop_front();
+      }
+      dxNorm = t * d.norm();
+      if (debug) std::fprintf(stderr, "  step length %.3g, g0 %.3e, history %zu\n", t, g0, history.size());
+      x = trial;
+      fint = trialForce;
+      r = trialResidual;
+    }
+  } catch (const AttemptFailed& e) {
+    out.converged = false;
+    out.failure = e.why;
+    return out;
+  }
+}
+
+BodyStepStats StaticSolver::step(int increment, int incrementCount) {
+  const double target = static_cast<double>(increment) / static_cast<double>(std::max(1, incrementCount));
   BodyStepStats stats;
-  std::deque<SecantPair> history;
-  double dxNorm = INFINITY;
-  evaluate(x, fint, r);
-  for (int iteration = 0;; ++iteration) {
-    const double scale = std::max({fextNorm, freeNorm(fint), forceFloor_});
-    const double relative = r.norm() / scale;
-    stats.residual = relative;
-    if (debug) std::fprintf(stderr, "static %d/%d iteration %d: relative residual %.3e, |dx| %.3e\n", increment,
-                            incrementCount, iteration, relative, dxNorm);
-    if (!std::isfinite(relative) || !allFinite(x))
-      failHere("produced non-finite forces or positions after " + std::to_string(iteration) + " Newton iterations",
-               "the load is probably far beyond what the mesh can carry in one step: " + incrementFix +
-                   ", or check the material (E, nu) and the loads");
 
-    const double displacementScale = std::max(freeNorm(x - problem_.restPositions), displacementFloor);
-    const bool residualOk = relative <= desc_.residualTolerance;
-    const bool displacementOk = iteration > 0 && dxNorm <= desc_.displacementTolerance * displacementScale;
-    if (residualOk && (displacementOk || relative <= linearAcceptance)) break;
+  // Work on copies; commit only when the whole increment converged.
+  Eigen::VectorXd xDone = x_;
+  Track track = track_;
+  double work = work_;
+  double size = target - track.lambda;  // current sub-increment
+  int cuts = 0, successes = 0;
+  NewtonOutcome last;
+  while (track.lambda < target) {
+    const bool reachesTarget = track.lambda + size >= target * (1.0 - 1e-12);
+    const double lambda = reachesTarget ? target : track.lambda + size;
 
-    if (iteration == maxIterations) {
+    // Predictor: the free dofs continue along the last converged (sub-)increment's displacement
+    // (linear extrapolation in the load factor), which puts a linear problem on its answer at once
+    // and a nonlinear one closer than the last converged state. Prescribed values are then written.
+    Eigen::VectorXd x = xDone;
+    if (track.haveBack && track.lambda > track.lambdaBack) {
+      const double ratio = (lambda - track.lambda) / (track.lambda - track.lambdaBack);
+      x += ratio * ((xDone - track.xBack).array() * freeMask_).matrix();
+    }
+    problem_.applyPrescribed(x, lambda, /*dynamic=*/false);
+    const Eigen::VectorXd fext = problem_.externalForce(lambda, /*dynamic=*/false);
+
+    last = newton(lambda, fext, x, stats);
+    if (last.converged) {
+      // External work by the trapezoidal rule over the (sub-)increment (exact for a linear
+      // response to a proportional load; an estimate otherwise).
+      work += 0.5 * (track.fext + fext).dot(x - xDone);
+      track.xBack = xDone;
+      track.lambdaBack = track.lambda;
+      track.haveBack = true;
+      track.lambda = lambda;
+      track.fext = fext;
+      xDone = x;
+      if (cuts > 0 && ++successes >= 2) {  // grow back after two successes in a row
+        size *= 2.0;
+        successes = 0;
+      }
+      continue;
+    }
+    if (cuts == kMaxCuts) {
       stats.converged = false;
-      failHere("did not converge in " + std::to_string(maxIterations) + " Newton iterations (relative residual " +
-                   sci(relative) + ", last correction " + sci(dxNorm / displacementScale) + " of the displacement)",
-               incrementFix + " or analysis.max_newton_iterations");
+      setBackendPositions(x_, true);  // the backend goes back to the last converged state too
+      fail(ErrorCode::SolveFailed, "body '", problem_.name, "': static increment ", increment, "/", incrementCount,
+           " ", last.failure, ", even cut into sub-increments down to 1/", 1 << kMaxCuts,
+           " of it; try more increments (analysis.increments), a looser analysis.residual_tolerance or more "
+           "analysis.max_newton_iterations; check the constraints (is the body held?) and the material");
     }
-
-    // Direction: Eq. 13's K_t dx = -r, with the L-BFGS two-loop correction built from the last
-    // secant pairs (K_t^-1 as the initial inverse Hessian). Without history it is exactly Eq. 13.
-    q = r;
-    std::vector<double> alphas(history.size());
-    for (std::size_t i = history.size(); i-- > 0;) {
-      alphas[i] = history[i].rho * history[i].s.dot(q);
-      q -= alphas[i] * history[i].y;
-    }
-    z.setZero();
-    LinearSolveStats ls;
-    try {
-      ls = backend_.solve(SystemCoeffs{0.0, 0.0, 1.0}, q, z);
-    } catch (const Error& e) {
-      failHere(std::string("failed in the linear solve: ") + e.what(), incrementFix);
-    }
-    for (std::size_t i = 0; i < history.size(); ++i) {
-      const double beta = history[i].rho * history[i].y.dot(z);
-      z += (alphas[i] - beta) * history[i].s;
-    }
-    d = -(z.array() * freeMask_).matrix();
-    stats.newtonIterations += 1;
-    stats.linearIterations += ls.iterations;
-    stats.linearResidual = std::max(stats.linearResidual, ls.relativeResidual);
-    if (!allFinite(d))
-      failHere("produced a non-finite Newton correction",
-               incrementFix + ", or check the constraints (is the body held?)");
-
-    // Line search on the potential energy Pi = U(x) - f_ext . x, whose gradient is r (the
-    // co-rotational force with the polar rotation, and the hyperelastic ones, are energy
-    // gradients). Using only g(t) = r(x + t d) . d: for a quadratic,
-    //   Pi(t) - Pi(0) = t (g(0) + g(t)) / 2 <= kArmijo t g(0)  <=>  g(t) <= (1 - 2 kArmijo) |g(0)|,
-    // which needs no energy differences (those cancel to rounding near convergence). A step that
-    // fails it is shortened to the secant root of g, the minimiser of the quadratic model. When d
-    // is not a descent direction (g(0) >= 0: an indefinite hyperelastic tangent) the full step is
-    // taken, as plain Newton would.
-    const double g0 = r.dot(d);
-    double t = 1.0;
-    for (int backtrack = 0;; ++backtrack) {
-      trial = x + t * d;
-      evaluate(trial, trialForce, trialResidual);
-      const double gt = trialResidual.dot(d);
-      const bool finite = std::isfinite(gt) && allFinite(trialResidual);
-      if (backtrack == kMaxBacktracks) break;
-      if (finite && (g0 >= 0.0 || gt <= (1.0 - 2.0 * kArmijo) * std::abs(g0))) break;
-      const double secant = finite && gt > g0 ? t * g0 / (g0 - gt) : 0.25 * t;
-      t = std::clamp(secant, 0.1 * t, 0.7 * t);
-    }
-    SecantPair pair;
-    pair.s = t * d;
-    pair.y = trialResidual - r;
-    const double sy = pair.s.dot(pair.y);
-    // Keep the pair only where the energy is locally convex along s (y . s > 0), as L-BFGS must.
-    if (sy > 1e-12 * pair.s.norm() * pair.y.norm() && std::isfinite(sy)) {
-      pair.rho = 1.0 / sy;
-      history.push_back(std::move(pair));
-      if (static_cast<int>(history.size()) > kHistory) history.pop_front();
-    }
-    dxNorm = t * d.norm();
-    x = trial;
-    fint = trialForce;
-    r = trialResidual;
+    ++cuts;
+    successes = 0;
+    size *= 0.5;
+    // A cut-back restarts from the last converged state with the predictor of that state.
   }
 
-  // Converged: commit. The backend holds x (the last evaluation).
+  // Converged: commit. The backend holds the last evaluated positions, which are xDone.
   xPrev_ = x_;
   workPrev_ = work_;
-  fextPrevSaved_ = fextPrev_;
-  lambdaPrev_ = lambda_;
-  lambda_ = lambda;
-  havePrevious_ = true;
-  // External work by the trapezoidal rule over the increment (exact for loads linear in lambda
-  // along a straight path; an estimate otherwise).
-  work_ += 0.5 * (fextPrev_ + fext).dot(x - x_);
-  fextPrev_ = fext;
-  x_ = x;
+  trackSaved_ = track_;
+  x_ = xDone;
+  work_ = work;
+  track_ = track;
   backendAtCommitted_ = true;
   stats.converged = true;
   return stats;
@@ -192,9 +252,7 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
 void StaticSolver::rollback() {
   x_ = xPrev_;
   work_ = workPrev_;
-  fextPrev_ = fextPrevSaved_;
-  lambda_ = lambdaPrev_;
-  havePrevious_ = false;  // one level of history only: no predictor after a rollback
+  track_ = trackSaved_;
   backendAtCommitted_ = false;
 }
 
