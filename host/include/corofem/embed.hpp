@@ -41,8 +41,8 @@ struct BindingOptions {
   /// (dimensionless, >= 0, typically 1e-12..1e-6). It absorbs rounding for vertices on element
   /// faces and on the tet mesh's boundary; such vertices count as inside with distance 0.
   double insideTolerance = 1e-10;
-  /// Worker threads for the search (std::thread). 0: automatic (hardware concurrency, but one
-  /// thread below 20000 vertices). The result does not depend on the thread count.
+  /// Worker threads for the search (std::thread). 0: automatic (one per 20000 vertices, at most the
+  /// hardware concurrency). The result does not depend on the thread count.
   int threads = 0;
 };
 
@@ -64,7 +64,7 @@ struct SurfaceBinding {
   std::vector<std::uint32_t> element;    ///< per vertex: its element (0-based index into TetMesh::tets)
   std::vector<std::uint32_t> nodes;      ///< 4 per vertex: the element's node indices, in element order
   /// 4 per vertex: barycentric coordinates w_k of the vertex in its element's rest shape, in the order
-  /// of `nodes`; they sum to 1. All in [-insideTolerance, 1] for inside vertices; some are negative
+  /// of `nodes`; they sum to 1. Each >= -insideTolerance for inside vertices; some are negative
   /// (extrapolation) for outside vertices.
   std::vector<double> weights;
   std::vector<std::uint32_t> triangles;  ///< 3 per triangle: the surface triangles (for normals)
@@ -107,7 +107,9 @@ struct SurfaceOutput {
 /// the incident face normals, from the double positions. `tetNodePositions` holds 3 doubles per node
 /// of the tet mesh (current positions), `tetNodeCount` nodes. Errors (ErrorCode::BadInput): node count
 /// differs from the bound mesh's, no output set. Non-finite node positions propagate (no check per
-/// frame). Uses a thread-local scratch buffer when positionsDouble is null and normals are asked for.
+/// frame). With normals, double scratch buffers (positions unless positionsDouble is given, face
+/// vectors) are kept per calling thread, so frames do not reallocate. Deterministic: the same bits for
+/// every thread count.
 Status deformSurface(const SurfaceBinding& binding, const double* tetNodePositions,
                      std::size_t tetNodeCount, const SurfaceOutput& output);
 
