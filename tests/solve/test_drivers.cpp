@@ -158,8 +158,10 @@ struct Oscillator {
 struct History {
   std::vector<double> time, u, total, kinetic, elastic;
 };
-History runOscillator(Oscillator& osc, const DynamicDesc& desc, int steps, double force, double rayleighMass = 0.0) {
+History runOscillator(Oscillator& osc, const DynamicDesc& desc, int steps, double force, double rayleighMass = 0.0,
+                      double rayleighStiffness = 0.0) {
   osc.problem.rayleighMass = rayleighMass;
+  osc.problem.rayleighStiffness = rayleighStiffness;
   addTipForce(osc.problem, {force, 0.0, 0.0});
   SpringChainBackend backend(osc.problem, osc.k);
   DynamicSolver solver(osc.problem, backend, desc);
@@ -273,6 +275,24 @@ TEST(Newmark, RayleighMassDampingDecaysAtTheRightRate) {
   // 2e-3: the sampled peaks sit within h of the true ones (relative error ~ (omega h)^2 / 2 = 2e-4)
   // plus the trapezoidal rule's O((omega h)^2) damping error.
   EXPECT_NEAR(peaks[2] / peaks[1], expected, 2e-3);
+}
+
+TEST(Newmark, RayleighStiffnessDampingDecaysAtTheRightRate) {
+  // C = beta K: zeta = beta omega / 2. The damping term C v goes through Backend::apply with
+  // SystemCoeffs{0, 1, 0}, and the system matrix through SystemCoeffs{1, h gamma, h^2 beta}.
+  Oscillator osc;
+  DynamicDesc desc;
+  desc.timeStep = 0.01;
+  const double beta = 0.05;  // zeta = 0.05
+  const History run = runOscillator(osc, desc, 4000, 4.0, 0.0, beta);
+  std::vector<double> peaks;
+  for (std::size_t i = 1; i + 1 < run.u.size(); ++i)
+    if (run.u[i] > run.u[i - 1] && run.u[i] >= run.u[i + 1]) peaks.push_back(run.u[i] - 4.0 / osc.k);
+  ASSERT_GE(peaks.size(), 4u);
+  const double zeta = beta * osc.omega() / 2;
+  const double td = 2 * kPi / (osc.omega() * std::sqrt(1 - zeta * zeta));
+  // 2e-3: as for the mass-proportional case (sampled peaks, O((omega h)^2) scheme error).
+  EXPECT_NEAR(peaks[2] / peaks[1], std::exp(-zeta * osc.omega() * td), 2e-3);
 }
 
 TEST(Dynamics, PrescribedDisplacementFollowsItsRamp) {
