@@ -1,6 +1,7 @@
-/* Matrix-free co-rotational element operators, one work-item per element, each writing the
- * element's 12-vector (corner c, component k at (3 c + k) * S + e) for the deterministic per-node
- * gather (gather.cl).
+/* Matrix-free co-rotational element operators, one work-item per COROFEM_VEC elements, each
+ * writing the element's 12-vector as four real4 (corner c of element e at real4 index 4 e + c,
+ * w = 0) for the deterministic per-node gather (gather.cl), which then reads one aligned real4 per
+ * incident corner.
  *
  * Internal force (paper Eq. 9): f = R K (R^T x - X). With K = V B^T H B (Eq. 7) applied from the
  * gradients instead of a stored 12x12:
@@ -16,99 +17,114 @@
  * coefficient of the system matrix is folded into lambda and mu by the host.
  *
  * Linear formulation: R = I, a_i = grad_i (uploaded once, compute_rotations never runs).
+ *
+ * Each work-item handles COROFEM_VEC consecutive elements with vector arithmetic (corofem_vector.h).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
-#include "mat3.cl"
+#include "../shared/corofem_vector.h"
 #endif
 
-/* Reads the rotated gradients a_1..a_3 (a[3 (i-1) + k]) and the volume of element e. */
-inline real load_rotated_gradients(uint e, uint S, __global const real* rotGrad,
-                                   __global const real* geom, real* a) {
-  for (int k = 0; k < 9; ++k) a[k] = rotGrad[k * S + e];
-  return geom[kGeomVolume * S + e];
+/* The VEC elements e0 .. e0 + VEC - 1: corner node indices, rotated gradients a_1..a_3
+ * (a[3 (i-1) + k]) and volumes. */
+typedef struct {
+  uint node[4][COROFEM_VEC];
+  realv a[9];
+  realv volume;
+} ElemBlock;
+
+inline void load_element_block(uint e0, uint S, __global const uint* nodes, __global const real* geom,
+                               __global const real* rotGrad, ElemBlock* b) {
+  for (int c = 0; c < 4; ++c)
+    for (int l = 0; l < COROFEM_VEC; ++l) b->node[c][l] = nodes[c * S + e0 + l];
+  for (int k = 0; k < 9; ++k) b->a[k] = VLOAD(rotGrad + k * S + e0);
+  b->volume = VLOAD(geom + kGeomVolume * S + e0);
 }
 
-/* sum_{i=1..3} (v_i - v_0) a_i^T for a node vector v (3N) at the element's corners. */
-inline Mat3 corner_outer_sum(uint e, uint S, __global const uint* nodes, __global const real* v,
-                             const real* a) {
-  const uint n0 = nodes[e];
-  const real v0x = v[3 * n0], v0y = v[3 * n0 + 1], v0z = v[3 * n0 + 2];
-  Mat3 P;
-  for (int k = 0; k < 9; ++k) P.m[k] = (real)0;
+/* sum_{i=1..3} (v_i - v_0) a_i^T for a node vector v (3N) at the elements' corners (9 entries,
+ * row-major). */
+inline void corner_outer_sum(const ElemBlock* b, __global const real* v, realv* P) {
+  realv v0[3];
+  for (int j = 0; j < 3; ++j) v0[j] = gather_node_component(v, b->node[0], j);
+  for (int k = 0; k < 9; ++k) P[k] = (realv)0;
   for (int i = 1; i < 4; ++i) {
-    const uint n = nodes[i * S + e];
-    const real d[3] = {v[3 * n] - v0x, v[3 * n + 1] - v0y, v[3 * n + 2] - v0z};
-    const real* ai = a + 3 * (i - 1);
-    for (int j = 0; j < 3; ++j)
-      for (int k = 0; k < 3; ++k) P.m[3 * j + k] += d[j] * ai[k];
+    for (int j = 0; j < 3; ++j) {
+      const realv d = gather_node_component(v, b->node[i], j) - v0[j];
+      for (int k = 0; k < 3; ++k) P[3 * j + k] += d * b->a[3 * (i - 1) + k];
+    }
   }
-  return P;
 }
 
-/* Given E (symmetric part taken here, minus `shift` I), writes y_i = V S_w a_i with
- * S_w = lambda tr(E) I + 2 mu E, and y_0 = -(y_1 + y_2 + y_3). Returns S_w : E. */
-inline real write_stress_times_gradients(uint e, uint S, const Mat3* P, real shift, real volume,
-                                         real lambda, real mu, const real* a,
-                                         __global real* out) {
-  const real exx = P->m[0] - shift, eyy = P->m[4] - shift, ezz = P->m[8] - shift;
-  const real exy = (real)0.5 * (P->m[1] + P->m[3]);
-  const real exz = (real)0.5 * (P->m[2] + P->m[6]);
-  const real eyz = (real)0.5 * (P->m[5] + P->m[7]);
-  const real lt = lambda * (exx + eyy + ezz), m2 = 2 * mu;
+/* Writes the corner-c vectors (x, y, z) of the VEC elements e0.. as real4 at 4 e + c. */
+inline void store_corner(__global real* out, uint e0, int c, realv x, realv y, realv z) {
+  real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
+  VSTORE(x, lx);
+  VSTORE(y, ly);
+  VSTORE(z, lz);
+  for (int l = 0; l < COROFEM_VEC; ++l) vstore4((real4)(lx[l], ly[l], lz[l], (real)0), 4 * (e0 + l) + c, out);
+}
+
+/* Given P, E = sym(P) - shift I, S_w = lambda tr(E) I + 2 mu E; writes y_i = V S_w a_i and
+ * y_0 = -(y_1 + y_2 + y_3) to out; returns V S_w : E (twice the energy). */
+inline realv write_stress_times_gradients(uint e0, uint S, const realv* P, real shift, const ElemBlock* b,
+                                          real lambda, real mu, __global real* out) {
+  const realv exx = P[0] - shift, eyy = P[4] - shift, ezz = P[8] - shift;
+  const realv exy = (real)0.5 * (P[1] + P[3]);
+  const realv exz = (real)0.5 * (P[2] + P[6]);
+  const realv eyz = (real)0.5 * (P[5] + P[7]);
+  const realv V = b->volume;
+  const realv lt = lambda * (exx + eyy + ezz);
+  const real m2 = 2 * mu;
   /* V S_w */
-  const real sxx = volume * (lt + m2 * exx), syy = volume * (lt + m2 * eyy),
-             szz = volume * (lt + m2 * ezz);
-  const real sxy = volume * m2 * exy, sxz = volume * m2 * exz, syz = volume * m2 * eyz;
-  real y0x = 0, y0y = 0, y0z = 0;
+  const realv sxx = V * (lt + m2 * exx), syy = V * (lt + m2 * eyy), szz = V * (lt + m2 * ezz);
+  const realv sxy = V * (m2 * exy), sxz = V * (m2 * exz), syz = V * (m2 * eyz);
+  realv y0x = (realv)0, y0y = (realv)0, y0z = (realv)0;
   for (int i = 0; i < 3; ++i) {
-    const real ax = a[3 * i], ay = a[3 * i + 1], az = a[3 * i + 2];
-    const real yx = sxx * ax + sxy * ay + sxz * az;
-    const real yy = sxy * ax + syy * ay + syz * az;
-    const real yz = sxz * ax + syz * ay + szz * az;
-    out[(3 * (i + 1)) * S + e] = yx;
-    out[(3 * (i + 1) + 1) * S + e] = yy;
-    out[(3 * (i + 1) + 2) * S + e] = yz;
+    const realv ax = b->a[3 * i], ay = b->a[3 * i + 1], az = b->a[3 * i + 2];
+    const realv yx = sxx * ax + sxy * ay + sxz * az;
+    const realv yy = sxy * ax + syy * ay + syz * az;
+    const realv yz = sxz * ax + syz * ay + szz * az;
+    store_corner(out, e0, i + 1, yx, yy, yz);
     y0x -= yx;
     y0y -= yy;
     y0z -= yz;
   }
-  out[e] = y0x;
-  out[S + e] = y0y;
-  out[2 * S + e] = y0z;
-  /* V S_w : E (for the energy) */
-  return sxx * exx + syy * eyy + szz * ezz + 2 * (sxy * exy + sxz * exz + syz * eyz);
+  store_corner(out, e0, 0, y0x, y0y, y0z);
+  return sxx * exx + syy * eyy + szz * ezz + (real)2 * (sxy * exy + sxz * exz + syz * eyz);
 }
 
-/* Internal forces, Eq. 9. */
+/* Internal forces, Eq. 9: P = F R^T, E = sym(F R^T) - I. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void element_forces(const uint count, const uint S, __global const uint* restrict nodes,
                     __global const real* restrict geom, __global const real* restrict rotGrad,
                     __global const real* restrict pos, const real lambda, const real mu,
                     __global real* restrict out) {
-  const uint e = get_global_id(0);
-  if (e >= count) return;
-  real a[9];
-  const real volume = load_rotated_gradients(e, S, rotGrad, geom, a);
-  const Mat3 FRt = corner_outer_sum(e, S, nodes, pos, a); /* F R^T */
-  write_stress_times_gradients(e, S, &FRt, (real)1, volume, lambda, mu, a, out);
+  const uint e0 = get_global_id(0) * COROFEM_VEC;
+  if (e0 >= count) return;
+  ElemBlock b;
+  load_element_block(e0, S, nodes, geom, rotGrad, &b);
+  realv P[9];
+  corner_outer_sum(&b, pos, P);
+  write_stress_times_gradients(e0, S, P, (real)1, &b, lambda, mu, out);
 }
 
 /* Strain energy V/2 S_w : E = 1/2 (R^T x - X)^T K (R^T x - X) per element, summed per work-group
- * (fixed tree order) into partials[group]. `out` is scratch (the forces come for free). */
+ * (lanes, then a fixed tree order) into partials[group]. `out` is scratch (the forces). Padding
+ * lanes have V = 0 and contribute nothing. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void element_energy(const uint count, const uint S, __global const uint* restrict nodes,
                     __global const real* restrict geom, __global const real* restrict rotGrad,
                     __global const real* restrict pos, const real lambda, const real mu,
                     __global real* restrict out, __global real* restrict partials) {
   __local real sum[COROFEM_WG];
-  const uint e = get_global_id(0), lid = get_local_id(0);
+  const uint e0 = get_global_id(0) * COROFEM_VEC, lid = get_local_id(0);
   real energy = (real)0;
-  if (e < count) {
-    real a[9];
-    const real volume = load_rotated_gradients(e, S, rotGrad, geom, a);
-    const Mat3 FRt = corner_outer_sum(e, S, nodes, pos, a);
-    energy = (real)0.5 * write_stress_times_gradients(e, S, &FRt, (real)1, volume, lambda, mu, a, out);
+  if (e0 < count) {
+    ElemBlock b;
+    load_element_block(e0, S, nodes, geom, rotGrad, &b);
+    realv P[9];
+    corner_outer_sum(&b, pos, P);
+    energy = (real)0.5 * lane_sum(write_stress_times_gradients(e0, S, P, (real)1, &b, lambda, mu, out));
   }
   sum[lid] = energy;
   barrier(CLK_LOCAL_MEM_FENCE);
@@ -125,12 +141,13 @@ void element_product(const uint count, const uint S, __global const uint* restri
                      __global const real* restrict geom, __global const real* restrict rotGrad,
                      __global const real* restrict p, const real lambda, const real mu,
                      __global real* restrict out) {
-  const uint e = get_global_id(0);
-  if (e >= count) return;
-  real a[9];
-  const real volume = load_rotated_gradients(e, S, rotGrad, geom, a);
-  const Mat3 P = corner_outer_sum(e, S, nodes, p, a);
-  write_stress_times_gradients(e, S, &P, (real)0, volume, lambda, mu, a, out);
+  const uint e0 = get_global_id(0) * COROFEM_VEC;
+  if (e0 >= count) return;
+  ElemBlock b;
+  load_element_block(e0, S, nodes, geom, rotGrad, &b);
+  realv P[9];
+  corner_outer_sum(&b, p, P);
+  write_stress_times_gradients(e0, S, P, (real)0, &b, lambda, mu, out);
 }
 
 /* Stored-K_e variant: y_e = k R (K_e (R^T p_e)) with the upper triangle of K_e (78 reals, row by
@@ -141,29 +158,33 @@ void element_product_stored(const uint count, const uint S, __global const uint*
                             __global const real* restrict stiffness, __global const real* restrict rot,
                             __global const real* restrict p, const real k,
                             __global real* restrict out) {
-  const uint e = get_global_id(0);
-  if (e >= count) return;
-  real R[9];
-  for (int j = 0; j < 9; ++j) R[j] = rot[j * S + e];
-  real q[12], y[12];
+  const uint e0 = get_global_id(0) * COROFEM_VEC;
+  if (e0 >= count) return;
+  realv R[9];
+  for (int j = 0; j < 9; ++j) R[j] = VLOAD(rot + j * S + e0);
+  realv q[12], y[12];
   for (int c = 0; c < 4; ++c) {
-    const uint n = nodes[c * S + e];
-    const real px = p[3 * n], py = p[3 * n + 1], pz = p[3 * n + 2];
+    uint idx[COROFEM_VEC];
+    for (int l = 0; l < COROFEM_VEC; ++l) idx[l] = nodes[c * S + e0 + l];
+    const realv px = gather_node_component(p, idx, 0), py = gather_node_component(p, idx, 1),
+                pz = gather_node_component(p, idx, 2);
     for (int j = 0; j < 3; ++j) q[3 * c + j] = R[j] * px + R[3 + j] * py + R[6 + j] * pz; /* R^T p */
-    y[3 * c] = y[3 * c + 1] = y[3 * c + 2] = (real)0;
+    y[3 * c] = y[3 * c + 1] = y[3 * c + 2] = (realv)0;
   }
   uint idx = 0;
   for (int r = 0; r < 12; ++r) {
-    y[r] += stiffness[idx * S + e] * q[r];
+    y[r] += VLOAD(stiffness + idx * S + e0) * q[r];
     ++idx;
     for (int c = r + 1; c < 12; ++c, ++idx) {
-      const real kv = stiffness[idx * S + e];
+      const realv kv = VLOAD(stiffness + idx * S + e0);
       y[r] += kv * q[c];
       y[c] += kv * q[r];
     }
   }
-  for (int c = 0; c < 4; ++c)
+  for (int c = 0; c < 4; ++c) {
+    realv w[3];
     for (int j = 0; j < 3; ++j)
-      out[(3 * c + j) * S + e] =
-          k * (R[3 * j] * y[3 * c] + R[3 * j + 1] * y[3 * c + 1] + R[3 * j + 2] * y[3 * c + 2]);
+      w[j] = k * (R[3 * j] * y[3 * c] + R[3 * j + 1] * y[3 * c + 1] + R[3 * j + 2] * y[3 * c + 2]);
+    store_corner(out, e0, c, w[0], w[1], w[2]);
+  }
 }

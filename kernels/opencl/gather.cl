@@ -1,33 +1,31 @@
 /* Deterministic scatter of the per-element 12-vectors to the nodes, written as a gather: one
  * work-item per node sums its incident (element, corner) contributions in the fixed CSR order
  * built once on the host, so two runs give the same bits (no atomics, no colouring).
- * entries[j] = 3 c S + e addresses component 0 of corner c of element e in `elemOut`.
+ * entries[j] = 4 e + c is the real4 of corner c of element e in `elemOut` (element_force.cl).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
 #endif
 
-inline void gather_node(uint n, uint S, __global const uint* start, __global const uint* entries,
+inline void gather_node(uint n, __global const uint* start, __global const uint* entries,
                         __global const real* elemOut, real* acc) {
-  acc[0] = acc[1] = acc[2] = (real)0;
+  real4 sum = (real4)(0);
   const uint end = start[n + 1];
-  for (uint j = start[n]; j < end; ++j) {
-    const uint at = entries[j];
-    acc[0] += elemOut[at];
-    acc[1] += elemOut[at + S];
-    acc[2] += elemOut[at + 2 * S];
-  }
+  for (uint j = start[n]; j < end; ++j) sum += vload4(entries[j], elemOut);
+  acc[0] = sum.x;
+  acc[1] = sum.y;
+  acc[2] = sum.z;
 }
 
 /* f_n = sum over incident elements (internal forces, Eq. 9 assembled). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void gather_sum(const uint nodeCount, const uint S, __global const uint* restrict start,
+void gather_sum(const uint nodeCount, __global const uint* restrict start,
                 __global const uint* restrict entries, __global const real* restrict elemOut,
                 __global real* restrict out) {
   const uint n = get_global_id(0);
   if (n >= nodeCount) return;
   real acc[3];
-  gather_node(n, S, start, entries, elemOut, acc);
+  gather_node(n, start, entries, elemOut, acc);
   out[3 * n] = acc[0];
   out[3 * n + 1] = acc[1];
   out[3 * n + 2] = acc[2];
@@ -40,7 +38,7 @@ void gather_sum(const uint nodeCount, const uint S, __global const uint* restric
  * the identity row/column of the projected system. The work-group's partial sum of p . y (fixed
  * tree order) goes to partials[kPartialComponents * group] for the alpha of PCG. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void gather_product(const uint nodeCount, const uint S, __global const uint* restrict start,
+void gather_product(const uint nodeCount, __global const uint* restrict start,
                     __global const uint* restrict entries, __global const real* restrict elemOut,
                     __global const real* restrict mass, const real massCoef,
                     __global const real* restrict free, const uint project,
@@ -51,7 +49,7 @@ void gather_product(const uint nodeCount, const uint S, __global const uint* res
   real dot = (real)0;
   if (n < nodeCount) {
     real acc[3];
-    gather_node(n, S, start, entries, elemOut, acc);
+    gather_node(n, start, entries, elemOut, acc);
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       const real pd = p[d];

@@ -22,7 +22,7 @@ void node_stiffness_blocks(const uint nodeCount, const uint S, __global const ui
   const uint end = start[n + 1];
   for (uint j = start[n]; j < end; ++j) {
     const uint at = entries[j];
-    const uint c = at / (3 * S), e = at - c * 3 * S;
+    const uint c = at & 3u, e = at >> 2;
     real a[3];
     if (c == 0) {
       for (int k = 0; k < 3; ++k)

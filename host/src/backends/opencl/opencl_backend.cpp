@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <utility>
 
@@ -75,6 +76,8 @@ class Kernel {
 struct RealArg {
   double value;
 };
+
+constexpr std::size_t kDefaultWorkGroup = 64;
 
 std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
 
@@ -165,6 +168,8 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   bool double_ = false;
   std::size_t realSize_ = sizeof(float);
   std::size_t wg_ = 64;
+  std::size_t vec_ = 1;         ///< elements per work-item in the element kernels
+  std::size_t elemItems_ = 0;   ///< work-items of the element kernels
   Formulation formulation_;
   PreconditionerKind precond_;
   SolverDesc solver_;
@@ -197,7 +202,14 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64); "
          "set the solver precision to \"float\" or choose another device");
   realSize_ = double_ ? sizeof(double) : sizeof(float);
-  wg_ = options.workGroupSize ? options.workGroupSize : 64;
+  wg_ = options.workGroupSize ? options.workGroupSize : kDefaultWorkGroup;
+  vec_ = options.vectorWidth ? options.vectorWidth : (ctx_->info().gpu ? 1 : 8);
+  if (const char* env = std::getenv("COROFEM_OPENCL_VEC"); env && *env && !options.vectorWidth)
+    vec_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
+  if (vec_ != 1 && vec_ != 4 && vec_ != 8 && vec_ != 16)
+    fail(ErrorCode::BadInput, "OpenCL element vector width ", vec_, " must be 1, 4, 8 or 16");
+  if (const char* env = std::getenv("COROFEM_OPENCL_WG"); env && *env && !options.workGroupSize)
+    wg_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
   if ((wg_ & (wg_ - 1)) != 0 || wg_ > ctx_->info().maxWorkGroupSize)
     fail(ErrorCode::BadInput, "OpenCL work-group size ", wg_, " must be a power of two <= ",
          ctx_->info().maxWorkGroupSize, " on device '", dev_, "'");
@@ -214,7 +226,8 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     fail(ErrorCode::BadInput, "body '", problem.name, "': ", elems_, " elements exceed the OpenCL "
          "backend's 32-bit element indexing; split the body");
   stride_ = roundUp(elems_, kStrideAlign);
-  elemGroups_ = roundUp(elems_, wg_) / wg_;
+  elemItems_ = (elems_ + vec_ - 1) / vec_;
+  elemGroups_ = roundUp(elemItems_, wg_) / wg_;
   nodeGroups_ = roundUp(std::max<std::size_t>(nodes_, 1), wg_) / wg_;
   lambda_ = problem.lame.lambda;
   mu_ = problem.lame.mu;
@@ -222,7 +235,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   rayleighStiffness_ = problem.rayleighStiffness;
 
   // -- program: only the features this problem uses
-  options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_);
+  options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_);
   if (double_) options_ += " -DCOROFEM_DOUBLE";
   switch (solver.rotation) {
     case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;
@@ -234,6 +247,8 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(options.quaternionIterations);
   if (precond_ == PreconditionerKind::BlockDiagonal) options_ += " -DCOROFEM_PRECOND_BLOCK";
   else if (precond_ == PreconditionerKind::Diagonal) options_ += " -DCOROFEM_PRECOND_DIAG";
+  if (const char* extra = std::getenv("COROFEM_OPENCL_OPTIONS"); extra && *extra)
+    options_ += std::string(" ") + extra;  // tuning experiments: extra compiler options
   static const std::string source = cl::corofemProgramSource();
   build_ = cl::buildProgram(*ctx_, "corofem", source, options_);
   kRotations_.create(build_.program, "compute_rotations", dev_);
@@ -303,7 +318,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     std::vector<cl_uint> fill(start.begin(), start.end() - 1);
     for (std::size_t e = 0; e < elems_; ++e)
       for (int k = 0; k < 4; ++k)
-        entries[fill[problem.mesh.tets[4 * e + k]]++] = static_cast<cl_uint>(3 * k * S + e);
+        entries[fill[problem.mesh.tets[4 * e + k]]++] = static_cast<cl_uint>(4 * e + k);
     nodeStart_.create(c, start.size() * sizeof(cl_uint), dev_);
     uploadRaw(nodeStart_, start);
     nodeEntries_.create(c, entries.size() * sizeof(cl_uint), dev_);
@@ -381,13 +396,13 @@ void OpenCLBackend::setPositions(const Eigen::VectorXd& x) {
 }
 
 void OpenCLBackend::enqueueElementForces() {
-  launch(kForces_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, pos_,
+  launch(kForces_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, pos_,
          RealArg{lambda_}, RealArg{mu_}, elemOut_);
 }
 
 void OpenCLBackend::enqueueForces() {
   enqueueElementForces();
-  launch(kGatherSum_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, elemOut_, q_);
+  launch(kGatherSum_, nodes_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_, q_);
 }
 
 void OpenCLBackend::internalForces(Eigen::VectorXd& f) {
@@ -400,22 +415,22 @@ void OpenCLBackend::enqueueElementProduct(const SystemCoeffs& c) {
   double massCoef = 0, stiffCoef = 0;
   coefficients(c, massCoef, stiffCoef);
   if (opts_.storedStiffness)
-    launch(kProductStored_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, stiffness_, rot_, p_,
+    launch(kProductStored_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, stiffness_, rot_, p_,
            RealArg{stiffCoef}, elemOut_);
   else
-    launch(kProduct_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, p_,
+    launch(kProduct_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, p_,
            RealArg{stiffCoef * lambda_}, RealArg{stiffCoef * mu_}, elemOut_);
 }
 
 void OpenCLBackend::product(const Buffer& v, const Buffer& y, double massCoef, double stiffCoef,
                             bool project) {
   if (opts_.storedStiffness)
-    launch(kProductStored_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, stiffness_, rot_, v,
+    launch(kProductStored_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, stiffness_, rot_, v,
            RealArg{stiffCoef}, elemOut_);
   else
-    launch(kProduct_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, v,
+    launch(kProduct_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, v,
            RealArg{stiffCoef * lambda_}, RealArg{stiffCoef * mu_}, elemOut_);
-  launch(kGatherProduct_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, elemOut_,
+  launch(kGatherProduct_, nodes_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_,
          mass_, RealArg{massCoef}, free_, cl_uint(project ? 1 : 0), v, y, partials_);
 }
 
@@ -516,7 +531,7 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
 }
 
 double OpenCLBackend::elasticEnergy() {
-  launch(kEnergy_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, pos_,
+  launch(kEnergy_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, pos_,
          RealArg{lambda_}, RealArg{mu_}, elemOut_, partials_);
   std::vector<double> partial(elemGroups_);
   download(partials_, partial.data(), elemGroups_);

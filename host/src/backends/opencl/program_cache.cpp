@@ -3,6 +3,7 @@
 
 #include "util/error.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -59,6 +60,10 @@ std::string corofemProgramSource() {
     if (name.size() > 2 && name.substr(name.size() - 2) == ".h") headers.push_back(&s);
     else others.push_back(&s);
   }
+  // The layout header defines `real`: first.
+  std::stable_sort(headers.begin(), headers.end(), [](const EmbeddedSource* a, const EmbeddedSource* b) {
+    return std::string(a->name) == "corofem_layout.h" && std::string(b->name) != "corofem_layout.h";
+  });
   for (const char* want : kOrder)
     for (auto it = others.begin(); it != others.end(); ++it)
       if (std::string((*it)->name) == want) {

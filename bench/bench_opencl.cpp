@@ -1,0 +1,275 @@
+// OpenCL backend benchmarks: per kernel (rotation methods, internal force, product with gradients
+// vs stored K_e, PCG iteration) on generated boxes of ~1k, 10k, 100k and 1M elements, on every
+// OpenCL device, plus a full dynamic step of a 10k-element beam (20 PCG iterations, transfers
+// included). Reports elements/s and the fraction of the device bandwidth measured here by a copy
+// kernel. Run:  bench_opencl --benchmark_format=json [--benchmark_filter=-1M]  (skip the 1M mesh)
+// Precision is float unless the name says double. Device work only (no transfers) except
+// dynamic_step, which is what an application sees per frame.
+#include <benchmark/benchmark.h>
+
+#ifdef COROFEM_WITH_OPENCL
+
+#define COROFEM_BENCHMARK
+#include "backends/opencl/opencl_backend.hpp"
+#include "opencl/opencl_test_support.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <random>
+
+namespace corofem {
+namespace {
+
+struct MeshSize {
+  const char* label;
+  int nx, ny, nz;  ///< cells; 6 tets per cell
+};
+constexpr MeshSize kSizes[] = {{"1k", 10, 4, 4}, {"10k", 20, 9, 9}, {"100k", 40, 20, 21}, {"1M", 80, 45, 46}};
+
+/// A box problem with the x = 0 face clamped, cached per size (the largest is slow to set up).
+const detail::Problem& boxProblem(const MeshSize& size) {
+  static std::map<std::string, std::unique_ptr<detail::Problem>> cache;
+  auto& slot = cache[size.label];
+  if (!slot) {
+    if (!cache.empty())
+      for (auto& entry : cache)
+        if (entry.first != size.label) entry.second.reset();  // one size in memory at a time
+    slot = std::make_unique<detail::Problem>(
+        test::makeProblem(test::boxMesh(size.nx, size.ny, size.nz, 0.1, 0.1, 0.1), 1e5, 0.4, 1000.0));
+    for (std::size_t n = 0; n < slot->mesh.nodeCount(); ++n)
+      if (slot->mesh.nodes[3 * n] < 1e-9)
+        for (int k = 0; k < 3; ++k) slot->constrained[3 * n + k] = 1;
+  }
+  return *slot;
+}
+
+/// Positions: the box bent and rotated (every element gets a non-trivial rotation).
+Eigen::VectorXd deformed(const detail::Problem& p) {
+  Eigen::VectorXd x = p.restPositions;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) {
+    const Eigen::Vector3d X = p.restPositions.segment<3>(3 * n);
+    x.segment<3>(3 * n) = R * (X + Eigen::Vector3d(0.0, -0.1 * X.x() * X.x(), 0.02 * X.z()));
+  }
+  return x;
+}
+
+/// Device bandwidth (bytes/s) measured with the copy kernel of bandwidth.cl on 64 MiB buffers
+/// (read + write counted), median of 9 runs; cached per device.
+double measuredBandwidth(int device) {
+  static std::map<int, double> cache;
+  if (auto it = cache.find(device); it != cache.end()) return it->second;
+  auto ctx = detail::cl::Context::shared(std::to_string(device));
+  const auto build = detail::cl::buildProgram(*ctx, "corofem", detail::cl::corofemProgramSource(),
+                                              "-cl-std=CL1.2 -DCOROFEM_WG=64");
+  cl_int status = CL_SUCCESS;
+  cl_kernel k = clCreateKernel(build.program, "bandwidth_copy", &status);
+  const std::size_t bytes = 64u << 20, count = bytes / 16;
+  cl_mem a = clCreateBuffer(ctx->context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
+  cl_mem b = clCreateBuffer(ctx->context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
+  const float zero = 1.0f;
+  clEnqueueFillBuffer(ctx->queue(), a, &zero, sizeof(zero), 0, bytes, 0, nullptr, nullptr);
+  cl_uint n = static_cast<cl_uint>(count);
+  clSetKernelArg(k, 0, sizeof(n), &n);
+  clSetKernelArg(k, 1, sizeof(cl_mem), &a);
+  clSetKernelArg(k, 2, sizeof(cl_mem), &b);
+  std::vector<double> times;
+  for (int rep = 0; rep < 10; ++rep) {
+    const std::size_t global = count, local = 256;
+    const auto t0 = std::chrono::steady_clock::now();
+    clEnqueueNDRangeKernel(ctx->queue(), k, 1, nullptr, &global, &local, 0, nullptr, nullptr);
+    clFinish(ctx->queue());
+    const auto t1 = std::chrono::steady_clock::now();
+    if (rep > 0) times.push_back(std::chrono::duration<double>(t1 - t0).count());  // first: warm-up
+  }
+  std::sort(times.begin(), times.end());
+  const double bw = 2.0 * bytes / times[times.size() / 2];
+  clReleaseMemObject(a);
+  clReleaseMemObject(b);
+  clReleaseKernel(k);
+  std::fprintf(stderr, "[bench_opencl] device %d (%s): copy bandwidth %.1f GB/s\n", device,
+               ctx->deviceName().c_str(), bw / 1e9);
+  return cache[device] = bw;
+}
+
+enum class Work { Rotation, Force, Product, ProductStored, PcgIteration };
+
+struct Config {
+  int device;
+  MeshSize size;
+  Work work;
+  RotationMethod rotation = RotationMethod::Polar;
+  Precision precision = Precision::Float;
+};
+
+/// Minimum bytes each kernel family must move per element (4-byte indices, r-byte reals, node
+/// data amortised with nodes/elements ~ 1/5 for these boxes): the numerator of the bandwidth
+/// fraction. Element pass: 4 indices, its per-element reals, the 4 corner vectors it gathers, the
+/// 12-vector it writes; gather pass: 4 list entries and the 12-vector read back, plus per node
+/// the vectors it reads and writes.
+double bytesPerElement(const Config& c, const detail::Problem& p) {
+  const double r = c.precision == Precision::Float ? 4.0 : 8.0;
+  const double nodesPerElement = static_cast<double>(p.mesh.nodeCount()) / static_cast<double>(p.mesh.tetCount());
+  switch (c.work) {
+    case Work::Rotation:  // indices, 9 gradients, 12 corner positions -> 9 R + 9 a
+      return 16 + r * (9 + 12 + 18);
+    case Work::Force:  // indices, 10 geometry, 12 positions, write 12; gather 16 + 12 r; node: 3 out
+      return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 3;
+    case Work::Product:  // as forces, node: mass, p, y
+      return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 9;
+    case Work::ProductStored:  // 78 K entries + 9 R instead of 10
+      return 16 + r * (87 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 9;
+    case Work::PcgIteration:  // product + vector updates (x, r, p, q, z, minv: ~12 node vectors)
+      return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * (9 + 3 * 12);
+  }
+  return 0;
+}
+
+void runKernel(benchmark::State& state, Config c) {
+  const detail::Problem& p = boxProblem(c.size);
+  SolverDesc s;
+  s.precision = c.precision;
+  s.rotation = c.rotation;
+  s.preconditioner = PreconditionerKind::Diagonal;
+  s.tolerance = 1e-30;  // PCG: run exactly maxIterations
+  s.maxIterations = 20;
+  s.checkEvery = 1000;
+  detail::OpenCLOptions o;
+  o.storedStiffness = c.work == Work::ProductStored;
+  std::unique_ptr<detail::OpenCLBackendInternal> b;
+  try {
+    b = detail::createOpenCLBackendOn(p, s, detail::cl::Context::shared(std::to_string(c.device)), o);
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+    return;
+  }
+  const Eigen::VectorXd x = deformed(p);
+  b->setPositions(x);
+  const detail::SystemCoeffs coeffs{14400.0, 0.0, 1.0};
+  Eigen::VectorXd v = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(p.dofCount()), 1e-3), y, rhs;
+  b->apply(coeffs, v, y);  // uploads p for the product benchmarks
+  b->internalForces(rhs);
+  Eigen::VectorXd sol = Eigen::VectorXd::Zero(rhs.size());
+  b->finish();
+  for (auto _ : state) {
+    switch (c.work) {
+      case Work::Rotation: b->enqueueRotations(); break;
+      case Work::Force: b->enqueueForces(); break;
+      case Work::Product:
+      case Work::ProductStored: b->enqueueProduct(coeffs); break;
+      case Work::PcgIteration: {
+        sol.setZero();
+        const auto st = b->solve(coeffs, rhs, sol);
+        benchmark::DoNotOptimize(st);
+        break;
+      }
+    }
+    b->finish();
+  }
+  const double elems = static_cast<double>(p.mesh.tetCount());
+  const double perIteration = c.work == Work::PcgIteration ? 20.0 : 1.0;
+  state.counters["elements"] = elems;
+  state.counters["elements_per_s"] =
+      benchmark::Counter(elems * perIteration * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  const double bw = measuredBandwidth(c.device);
+  state.counters["bandwidth_fraction"] = benchmark::Counter(
+      elems * perIteration * bytesPerElement(c, p) * static_cast<double>(state.iterations()) / bw,
+      benchmark::Counter::kIsRate);
+  state.counters["bytes_per_element"] = bytesPerElement(c, p);
+  state.SetLabel(b->deviceName());
+}
+
+/// One frame of a linearised implicit step as an application runs it: upload positions,
+/// rotations + preconditioner blocks, internal forces down, PCG (20 iterations) with b and the
+/// warm start up and the solution down. Float, diagonal preconditioner, checkEvery 4.
+void dynamicStep(benchmark::State& state, int device) {
+  static std::unique_ptr<detail::Problem> beam;
+  if (!beam) {
+    beam = std::make_unique<detail::Problem>(test::makeProblem(test::boxMesh(40, 6, 7, 0.05, 0.05, 0.05), 1e5, 0.4, 1000.0));
+    for (std::size_t n = 0; n < beam->mesh.nodeCount(); ++n)
+      if (beam->mesh.nodes[3 * n] < 1e-9)
+        for (int k = 0; k < 3; ++k) beam->constrained[3 * n + k] = 1;
+  }
+  SolverDesc s;
+  s.precision = Precision::Float;
+  s.preconditioner = PreconditionerKind::Diagonal;
+  s.tolerance = 1e-30;
+  s.maxIterations = 20;
+  s.checkEvery = 4;
+  auto b = detail::createOpenCLBackendOn(*beam, s, detail::cl::Context::shared(std::to_string(device)));
+  const Eigen::VectorXd x = deformed(*beam);
+  Eigen::VectorXd f, v = Eigen::VectorXd::Zero(x.size());
+  const double dt = 1.0 / 60.0;
+  const detail::SystemCoeffs coeffs{1.0, 0.5 * dt, 0.25 * dt * dt};  // Newmark on velocities
+  int iterations = 0;
+  for (auto _ : state) {
+    b->setPositions(x);
+    b->internalForces(f);
+    Eigen::VectorXd rhs = -dt * f;
+    const auto st = b->solve(coeffs, rhs, v);
+    iterations = st.iterations;
+  }
+  state.counters["elements"] = static_cast<double>(beam->mesh.tetCount());
+  state.counters["pcg_iterations"] = iterations;
+  state.SetLabel(b->deviceName());
+}
+
+// Not corofem::toString: registration runs during static initialisation.
+const char* rotationName(RotationMethod m) {
+  switch (m) {
+    case RotationMethod::Polar: return "polar";
+    case RotationMethod::Svd: return "svd";
+    case RotationMethod::Quaternion: return "quaternion";
+    case RotationMethod::Qr: return "qr";
+  }
+  return "?";
+}
+
+const char* workName(Work w) {
+  switch (w) {
+    case Work::Rotation: return "rotation";
+    case Work::Force: return "internal_force";
+    case Work::Product: return "product";
+    case Work::ProductStored: return "product_stored_Ke";
+    case Work::PcgIteration: return "pcg_iteration";
+  }
+  return "?";
+}
+
+int registerAll() {
+  const auto devices = detail::cl::listDevices();
+  for (std::size_t d = 0; d < devices.size(); ++d) {
+    const int dev = static_cast<int>(d);
+    const std::string devName = "dev" + std::to_string(d);
+    benchmark::RegisterBenchmark(("dynamic_step_10k_beam_20pcg/" + devName).c_str(),
+                                 [dev](benchmark::State& st) { dynamicStep(st, dev); })
+        ->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true)->UseRealTime();
+    for (const MeshSize& size : kSizes) {
+      auto add = [&](const std::string& name, Config c) {
+        benchmark::RegisterBenchmark((name + "/" + devName + "/" + size.label).c_str(),
+                                     [c](benchmark::State& st) { runKernel(st, c); })
+            ->Unit(benchmark::kMicrosecond)->Repetitions(3)->ReportAggregatesOnly(true)->MinTime(0.1)->UseRealTime();
+      };
+      for (RotationMethod m : {RotationMethod::Polar, RotationMethod::Svd, RotationMethod::Quaternion,
+                               RotationMethod::Qr})
+        add(std::string("rotation_") + rotationName(m), {dev, size, Work::Rotation, m});
+      add(workName(Work::Force), {dev, size, Work::Force});
+      add(workName(Work::Product), {dev, size, Work::Product});
+      add(workName(Work::ProductStored), {dev, size, Work::ProductStored});
+      if (devices[d].fp64) add("product_double", {dev, size, Work::Product, RotationMethod::Polar, Precision::Double});
+      add(workName(Work::PcgIteration), {dev, size, Work::PcgIteration});
+    }
+  }
+  return 0;
+}
+
+const int registered = registerAll();
+
+}  // namespace
+}  // namespace corofem
+
+#endif  // COROFEM_WITH_OPENCL
+
+BENCHMARK_MAIN();
