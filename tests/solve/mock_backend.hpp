@@ -37,6 +37,12 @@ class SpringChainBackend final : public detail::Backend {
         f[3 * (s + 1) + c] += g;
         f[3 * s + c] -= g;
       }
+    // Circulatory (follower-like) force, absent from the tangent and the energy: it pumps energy
+    // into the x-y motion of every node, as an energy-gaining integration scheme would.
+    for (int i = 1; i < nodes(); ++i) {
+      f[3 * i] += circulation * u[3 * i + 1];
+      f[3 * i + 1] -= circulation * u[3 * i];
+    }
     if (nanAfterForceCalls >= 0 && forceCalls > nanAfterForceCalls) f[f.size() - 1] = std::nan("");
   }
 
@@ -98,6 +104,7 @@ class SpringChainBackend final : public detail::Backend {
     return kt;
   }
 
+  double circulation = 0.0;     ///< N/m, see internalForces
   int forceCalls = 0;
   int solveCalls = 0;
   int nanAfterForceCalls = -1;  ///< >= 0: forces get a NaN after this many calls
