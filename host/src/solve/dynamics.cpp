@@ -192,7 +192,7 @@ BodyStepStats DynamicSolver::step(int index, int count) {
   const double given = initialEnergy_ + std::abs(loadWork) + std::abs(supportWork);
   if (!(kinetic + elastic <= kRunawayEnergyRatio * given + forceFloor_ * diagonal_))
     failHere("ran away: the kinetic + elastic energy " + sci(kinetic + elastic) + " J exceeds " +
-                 sci(kRunawayEnergyRatio) + " times the energy the body was ever given (" + sci(given) +
+                 std::to_string(kRunawayEnergyRatio).substr(0, 4) + " times the energy the body was ever given (" + sci(given) +
                  " J: initial energy plus the work of the loads and supports); the scheme is feeding energy in",
              "use more analysis.newton_iterations (with analysis.newton_tolerance), a smaller analysis.time_step, "
              "a dissipative scheme (analysis.integrator \"backward_euler\", or analysis.newmark_gamma 0.6 with "
