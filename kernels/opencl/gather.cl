@@ -5,6 +5,7 @@
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
+#include "../shared/corofem_reduce.h"
 #endif
 
 inline void gather_node(uint n, __global const uint* start, __global const uint* entries,
@@ -35,8 +36,8 @@ void gather_sum(const uint nodeCount, __global const uint* restrict start,
  * lumped mass M. Rayleigh damping C = alpha M + beta K^R needs no code of its own: the host folds
  * it into massCoef = m + c alpha and the stiffness coefficient k + c beta.
  * project != 0 (inside PCG): y_d = 0 on constrained dofs (free[d] = 0): with p_d = 0 there, this is
- * the identity row/column of the projected system. The work-group's partial sum of p . y (fixed
- * tree order) goes to partials[kPartialComponents * group] for the alpha of PCG. */
+ * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h)
+ * give PCG its alpha. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void gather_product(const uint nodeCount, __global const uint* restrict start,
                     __global const uint* restrict entries, __global const real* restrict elemOut,
@@ -44,10 +45,10 @@ void gather_product(const uint nodeCount, __global const uint* restrict start,
                     __global const real* restrict free, const uint project,
                     __global const real* restrict p, __global real* restrict y,
                     __global real* restrict partials) {
-  __local real sum[COROFEM_WG];
-  const uint n = get_global_id(0), lid = get_local_id(0);
+  COROFEM_PARTIAL_LOCALS
+  COROFEM_NODE_RANGE(nodeCount, first, last);
   real dot = (real)0;
-  if (n < nodeCount) {
+  for (uint n = first; n < last; ++n) {
     real acc[3];
     gather_node(n, start, entries, elemOut, acc);
     for (int k = 0; k < 3; ++k) {
@@ -59,11 +60,5 @@ void gather_product(const uint nodeCount, __global const uint* restrict start,
       dot += pd * yd;
     }
   }
-  sum[lid] = dot;
-  barrier(CLK_LOCAL_MEM_FENCE);
-  for (uint s = COROFEM_WG / 2; s > 0; s >>= 1) {
-    if (lid < s) sum[lid] += sum[lid + s];
-    barrier(CLK_LOCAL_MEM_FENCE);
-  }
-  if (lid == 0) partials[kPartialComponents * get_group_id(0)] = sum[0];
+  COROFEM_PARTIAL_STORE(dot, (real)0, (real)0, partials);
 }

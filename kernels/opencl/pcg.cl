@@ -6,11 +6,12 @@
  *   pcg_update:            x += alpha p, r -= alpha q, z = M^-1 r, partial sums of r . z and r . r
  *   reduce_finish(Beta):   beta = (r . z)_new / rho, rho = (r . z)_new, rr = r . r
  *   pcg_direction:         p = z + beta p
- * Dot products are two-stage and deterministic: a fixed-order tree per work-group into
- * `partials`, then one work-group summing the partials in a fixed order.
+ * Dot products are two-stage and deterministic: fixed-order partial sums (corofem_reduce.h), then
+ * one work-group summing the partials in a fixed order.
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
+#include "../shared/corofem_reduce.h"
 #endif
 
 /* z = M^-1 r for the dofs of node n (M^-1 from precond_invert). */
@@ -31,40 +32,16 @@ inline void apply_preconditioner(uint n, __global const real* minv, const real* 
 #endif
 }
 
-/* Fixed-order tree sum of three values over the work-group into partials[3 group + k]. */
-inline void group_sum3(__local real* s0, __local real* s1, __local real* s2, real a, real b, real c,
-                       __global real* partials) {
-  const uint lid = get_local_id(0);
-  s0[lid] = a;
-  s1[lid] = b;
-  s2[lid] = c;
-  barrier(CLK_LOCAL_MEM_FENCE);
-  for (uint s = COROFEM_WG / 2; s > 0; s >>= 1) {
-    if (lid < s) {
-      s0[lid] += s0[lid + s];
-      s1[lid] += s1[lid + s];
-      s2[lid] += s2[lid + s];
-    }
-    barrier(CLK_LOCAL_MEM_FENCE);
-  }
-  if (lid == 0) {
-    const uint g = get_group_id(0);
-    partials[kPartialComponents * g] = s0[0];
-    partials[kPartialComponents * g + 1] = s1[0];
-    partials[kPartialComponents * g + 2] = s2[0];
-  }
-}
-
 /* r = free (b - A x), z = M^-1 r, p = z; partials (r . z, r . r, |free b|^2). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_init(const uint nodeCount, __global const real* restrict b, __global const real* restrict q,
               __global const real* restrict free, __global const real* restrict minv,
               __global real* restrict r, __global real* restrict z, __global real* restrict p,
               __global real* restrict partials) {
-  __local real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
-  const uint n = get_global_id(0);
+  COROFEM_PARTIAL_LOCALS
+  COROFEM_NODE_RANGE(nodeCount, first, last);
   real rz = 0, rr = 0, bb = 0;
-  if (n < nodeCount) {
+  for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
@@ -82,7 +59,7 @@ void pcg_init(const uint nodeCount, __global const real* restrict b, __global co
       rr += rn[k] * rn[k];
     }
   }
-  group_sum3(s0, s1, s2, rz, rr, bb, partials);
+  COROFEM_PARTIAL_STORE(rz, rr, bb, partials);
 }
 
 /* x += alpha p, r -= alpha q, z = M^-1 r; partials (r . z, r . r, 0). */
@@ -91,11 +68,11 @@ void pcg_update(const uint nodeCount, __global const real* restrict scalars,
                 __global const real* restrict p, __global const real* restrict q,
                 __global const real* restrict minv, __global real* restrict x,
                 __global real* restrict r, __global real* restrict z, __global real* restrict partials) {
-  __local real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
-  const uint n = get_global_id(0);
+  COROFEM_PARTIAL_LOCALS
+  COROFEM_NODE_RANGE(nodeCount, first, last);
   const real alpha = scalars[kScalarAlpha];
   real rz = 0, rr = 0;
-  if (n < nodeCount) {
+  for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
@@ -110,7 +87,7 @@ void pcg_update(const uint nodeCount, __global const real* restrict scalars,
       rr += rn[k] * rn[k];
     }
   }
-  group_sum3(s0, s1, s2, rz, rr, (real)0, partials);
+  COROFEM_PARTIAL_STORE(rz, rr, (real)0, partials);
 }
 
 /* p = z + beta p */
@@ -122,17 +99,17 @@ void pcg_direction(const uint dofCount, __global const real* restrict scalars,
   p[d] = z[d] + scalars[kScalarBeta] * p[d];
 }
 
-/* Second stage of the dot products: one work-group sums the groupCount partial triples in a fixed
+/* Second stage of the dot products: one work-group sums the partialCount partial triples in a fixed
  * order, then updates the PCG scalars according to `mode` (kReduceInit/Alpha/Beta). A
  * non-positive p . A p (A not positive definite on the free dofs, or p = 0) sets alpha = 0 and
  * the breakdown flag instead of dividing. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void reduce_finish(const uint groupCount, __global const real* restrict partials,
+void reduce_finish(const uint partialCount, __global const real* restrict partials,
                    __global real* restrict scalars, const uint mode) {
   __local real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
   const uint lid = get_local_id(0);
   real a = 0, b = 0, c = 0;
-  for (uint g = lid; g < groupCount; g += COROFEM_WG) {
+  for (uint g = lid; g < partialCount; g += COROFEM_WG) {
     a += partials[kPartialComponents * g];
     b += partials[kPartialComponents * g + 1];
     c += partials[kPartialComponents * g + 2];

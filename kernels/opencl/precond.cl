@@ -3,41 +3,62 @@
  * form: for corner i with gradient g_i and rotated gradient a_i = R g_i,
  *   R K_e,ii R^T = V ((lambda + mu) a_i a_i^T + mu |a_i|^2 I)
  * (from sigma = lambda tr(eps) I + 2 mu eps with eps = sym(u g_i^T)), so no 12x12 is needed.
- * node_stiffness_blocks runs after every rotation update (the blocks rotate with the elements);
+ * corner_gradients + node_stiffness_blocks run after every rotation update (the blocks rotate with
+ * the elements);
  * precond_invert mixes in the coefficients of the solve and inverts.
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
+#include "../shared/corofem_vector.h"
 #endif
 
-/* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T. */
+/* Element pass: (a_c, V) as the real4 of corner c (a_0 = -(a_1 + a_2 + a_3)) into the element
+ * output buffer (its layout, element_force.cl), for node_stiffness_blocks to gather. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void node_stiffness_blocks(const uint nodeCount, const uint S, __global const uint* restrict start,
-                           __global const uint* restrict entries, __global const real* restrict geom,
-                           __global const real* restrict rotGrad, const real lambda, const real mu,
-                           __global real* restrict blocks) {
+void corner_gradients(const uint count, const uint S, __global const real* restrict geom,
+                      __global const real* restrict rotGrad, __global real* restrict out) {
+  const uint e0 = get_global_id(0) * COROFEM_VEC;
+  if (e0 >= count) return;
+  realv a[9];
+  for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
+  const realv V = VLOAD(geom + kGeomVolume * S + e0);
+  real lv[COROFEM_VEC];
+  VSTORE(V, lv);
+  for (int c = 0; c < 4; ++c) {
+    real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
+    if (c == 0) {
+      VSTORE(-(a[0] + a[3] + a[6]), lx);
+      VSTORE(-(a[1] + a[4] + a[7]), ly);
+      VSTORE(-(a[2] + a[5] + a[8]), lz);
+    } else {
+      VSTORE(a[3 * (c - 1)], lx);
+      VSTORE(a[3 * (c - 1) + 1], ly);
+      VSTORE(a[3 * (c - 1) + 2], lz);
+    }
+    for (int l = 0; l < COROFEM_VEC; ++l) vstore4((real4)(lx[l], ly[l], lz[l], lv[l]), 4 * (e0 + l) + c, out);
+  }
+}
+
+/* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T, from the
+ * (a_c, V) written by corner_gradients, in the fixed CSR order. */
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void node_stiffness_blocks(const uint nodeCount, __global const uint* restrict start,
+                           __global const uint* restrict entries, __global const real* restrict corners,
+                           const real lambda, const real mu, __global real* restrict blocks) {
   const uint n = get_global_id(0);
   if (n >= nodeCount) return;
   real b[6] = {0, 0, 0, 0, 0, 0};
   const uint end = start[n + 1];
   for (uint j = start[n]; j < end; ++j) {
-    const uint at = entries[j];
-    const uint c = at & 3u, e = at >> 2;
-    real a[3];
-    if (c == 0) {
-      for (int k = 0; k < 3; ++k)
-        a[k] = -(rotGrad[k * S + e] + rotGrad[(3 + k) * S + e] + rotGrad[(6 + k) * S + e]);
-    } else {
-      for (int k = 0; k < 3; ++k) a[k] = rotGrad[(3 * (c - 1) + k) * S + e];
-    }
-    const real V = geom[kGeomVolume * S + e];
-    const real lm = V * (lambda + mu), iso = V * mu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-    b[0] += lm * a[0] * a[0] + iso;
-    b[1] += lm * a[1] * a[1] + iso;
-    b[2] += lm * a[2] * a[2] + iso;
-    b[3] += lm * a[0] * a[1];
-    b[4] += lm * a[0] * a[2];
-    b[5] += lm * a[1] * a[2];
+    const real4 av = vload4(entries[j], corners);
+    const real V = av.w;
+    const real lm = V * (lambda + mu), iso = V * mu * (av.x * av.x + av.y * av.y + av.z * av.z);
+    b[0] += lm * av.x * av.x + iso;
+    b[1] += lm * av.y * av.y + iso;
+    b[2] += lm * av.z * av.z + iso;
+    b[3] += lm * av.x * av.y;
+    b[4] += lm * av.x * av.z;
+    b[5] += lm * av.y * av.z;
   }
   for (int k = 0; k < 6; ++k) blocks[6 * n + k] = b[k];
 }

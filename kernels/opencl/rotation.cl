@@ -14,6 +14,7 @@
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
+#include "../shared/corofem_vector.h"
 #include "mat3.cl"
 #endif
 
@@ -268,35 +269,147 @@ inline Mat3 rotation_qr(const Mat3* F) {
   return R;
 }
 
+/* ------------------------------------------------------------------ vectorised polar */
+
+#if COROFEM_VEC > 1
+/* rotation_polar on COROFEM_VEC elements at once (the same iteration and stop test per lane; a
+ * lane that has converged keeps its value). Returns the lanes that must take the SVD path:
+ * inverted or degenerate (det F <= 1e-6 |F|^3) or not converged. */
+inline maskv rotation_polar_v(const realv* F, realv* R) {
+  realv fn2 = (realv)0;
+  for (int k = 0; k < 9; ++k) fn2 += F[k] * F[k];
+  const realv detF = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
+                     F[2] * (F[3] * F[7] - F[4] * F[6]);
+  const maskv bad = !(detF > (real)1e-6 * fn2 * sqrt(fn2));
+  maskv done = bad;
+  for (int k = 0; k < 9; ++k) R[k] = F[k];
+  for (int it = 0; it < COROFEM_POLAR_ITERS; ++it) {
+    realv C[9];
+    C[0] = R[4] * R[8] - R[5] * R[7];
+    C[1] = R[5] * R[6] - R[3] * R[8];
+    C[2] = R[3] * R[7] - R[4] * R[6];
+    C[3] = R[2] * R[7] - R[1] * R[8];
+    C[4] = R[0] * R[8] - R[2] * R[6];
+    C[5] = R[1] * R[6] - R[0] * R[7];
+    C[6] = R[1] * R[5] - R[2] * R[4];
+    C[7] = R[2] * R[3] - R[0] * R[5];
+    C[8] = R[0] * R[4] - R[1] * R[3];
+    const realv det = R[0] * C[0] + R[1] * C[1] + R[2] * C[2];
+    realv r2 = (realv)0, c2 = (realv)0;
+    for (int k = 0; k < 9; ++k) {
+      r2 += R[k] * R[k];
+      c2 += C[k] * C[k];
+    }
+    const realv g = sqrt(sqrt(c2 / (det * det * r2)));
+    const realv hr = (real)0.5 * g, hc = (real)0.5 / (g * det);
+    realv diff2 = (realv)0;
+    for (int k = 0; k < 9; ++k) {
+      const realv nk = hr * R[k] + hc * C[k];
+      diff2 += (nk - R[k]) * (nk - R[k]);
+      R[k] = select(nk, R[k], done);
+    }
+    done = done | (diff2 < (real)3 * REAL_EPS);
+    if (all(done)) break;
+  }
+  return bad | !done;
+}
+#endif
+
 /* ------------------------------------------------------------------ the kernel */
 
+inline Mat3 rotation_of(const Mat3* F, __global real* quat, uint e, uint S) {
+#if defined(COROFEM_ROT_SVD)
+  return rotation_svd(F);
+#elif defined(COROFEM_ROT_QUAT)
+  real4 q = (real4)(quat[e], quat[S + e], quat[2 * S + e], quat[3 * S + e]);
+  const Mat3 R = rotation_quaternion(F, &q);
+  quat[e] = q.x;
+  quat[S + e] = q.y;
+  quat[2 * S + e] = q.z;
+  quat[3 * S + e] = q.w;
+  return R;
+#elif defined(COROFEM_ROT_QR)
+  return rotation_qr(F);
+#else
+  return rotation_polar(F);
+#endif
+}
+
+/* One work-item per COROFEM_VEC elements: F gathered with vector arithmetic, the rotation by the
+ * chosen method (Polar: vectorised Newton with per-lane SVD fallback; the others lane by lane),
+ * then R and a_i = R grad N_i written as vectors. Padding lanes (zero gradients, F = 0) get R = I
+ * from the SVD path's collapsed-element rule and write only into the padding. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void compute_rotations(const uint count, const uint S, __global const uint* restrict nodes,
                        __global const real* restrict geom, __global const real* restrict pos,
                        __global real* restrict rot, __global real* restrict rotGrad,
                        __global real* restrict quat) {
-  const uint e = get_global_id(0);
-  if (e >= count) return;
-  const Mat3 F = element_deformation_gradient(e, S, nodes, geom, pos);
-#if defined(COROFEM_ROT_SVD)
-  const Mat3 R = rotation_svd(&F);
-#elif defined(COROFEM_ROT_QUAT)
-  real4 q = (real4)(quat[e], quat[S + e], quat[2 * S + e], quat[3 * S + e]);
-  const Mat3 R = rotation_quaternion(&F, &q);
-  quat[e] = q.x;
-  quat[S + e] = q.y;
-  quat[2 * S + e] = q.z;
-  quat[3 * S + e] = q.w;
-#elif defined(COROFEM_ROT_QR)
-  const Mat3 R = rotation_qr(&F);
-#else
-  const Mat3 R = rotation_polar(&F);
-#endif
-  for (int k = 0; k < 9; ++k) rot[k * S + e] = R.m[k];
-  /* a_i = R grad N_i, i = 1..3 */
+  const uint e0 = get_global_id(0) * COROFEM_VEC;
+  if (e0 >= count) return;
+#if COROFEM_VEC == 1
+  const Mat3 F = element_deformation_gradient(e0, S, nodes, geom, pos);
+  const Mat3 R = rotation_of(&F, quat, e0, S);
+  for (int k = 0; k < 9; ++k) rot[k * S + e0] = R.m[k];
   for (int i = 0; i < 3; ++i) {
-    const real g0 = geom[(3 * i) * S + e], g1 = geom[(3 * i + 1) * S + e], g2 = geom[(3 * i + 2) * S + e];
+    const real g0 = geom[(3 * i) * S + e0], g1 = geom[(3 * i + 1) * S + e0], g2 = geom[(3 * i + 2) * S + e0];
     for (int j = 0; j < 3; ++j)
-      rotGrad[(3 * i + j) * S + e] = R.m[3 * j] * g0 + R.m[3 * j + 1] * g1 + R.m[3 * j + 2] * g2;
+      rotGrad[(3 * i + j) * S + e0] = R.m[3 * j] * g0 + R.m[3 * j + 1] * g1 + R.m[3 * j + 2] * g2;
   }
+#else
+  /* F = sum_{i=1..3} (x_i - x_0) grad N_i^T, VEC elements at once */
+  uint idx[4][COROFEM_VEC];
+  for (int c = 0; c < 4; ++c)
+    for (int l = 0; l < COROFEM_VEC; ++l) idx[c][l] = nodes[c * S + e0 + l];
+  realv g[9], F[9], x0[3];
+  for (int k = 0; k < 9; ++k) {
+    g[k] = VLOAD(geom + k * S + e0);
+    F[k] = (realv)0;
+  }
+  for (int j = 0; j < 3; ++j) x0[j] = gather_node_component(pos, idx[0], j);
+  for (int i = 1; i < 4; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const realv d = gather_node_component(pos, idx[i], j) - x0[j];
+      for (int k = 0; k < 3; ++k) F[3 * j + k] += d * g[3 * (i - 1) + k];
+    }
+  realv R[9];
+#if defined(COROFEM_ROT_SVD) || defined(COROFEM_ROT_QUAT) || defined(COROFEM_ROT_QR)
+  const maskv scalarLanes = (maskv)(-1);
+#else
+  const maskv scalarLanes = rotation_polar_v(F, R);
+#endif
+  if (any(scalarLanes)) {
+    real lanesF[9][COROFEM_VEC], lanesR[9][COROFEM_VEC];
+    int lanesScalar[COROFEM_VEC];
+    for (int k = 0; k < 9; ++k) {
+      VSTORE(F[k], lanesF[k]);
+#if defined(COROFEM_ROT_SVD) || defined(COROFEM_ROT_QUAT) || defined(COROFEM_ROT_QR)
+      R[k] = (realv)0;
+#endif
+      VSTORE(R[k], lanesR[k]);
+    }
+    {
+      maskv m = scalarLanes;
+      real tmp[COROFEM_VEC];
+      VSTORE(select((realv)0, (realv)1, m), tmp);
+      for (int l = 0; l < COROFEM_VEC; ++l) lanesScalar[l] = tmp[l] != (real)0;
+    }
+    for (int l = 0; l < COROFEM_VEC; ++l) {
+      if (!lanesScalar[l]) continue;
+      Mat3 Fl;
+      for (int k = 0; k < 9; ++k) Fl.m[k] = lanesF[k][l];
+#if defined(COROFEM_ROT_SVD) || defined(COROFEM_ROT_QUAT) || defined(COROFEM_ROT_QR)
+      const Mat3 Rl = rotation_of(&Fl, quat, e0 + l, S);
+#else
+      const Mat3 Rl = rotation_svd(&Fl);
+#endif
+      for (int k = 0; k < 9; ++k) lanesR[k][l] = Rl.m[k];
+    }
+    for (int k = 0; k < 9; ++k) R[k] = VLOAD(lanesR[k]);
+  }
+  for (int k = 0; k < 9; ++k) VSTORE(R[k], rot + k * S + e0);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      VSTORE(R[3 * j] * g[3 * i] + R[3 * j + 1] * g[3 * i + 1] + R[3 * j + 2] * g[3 * i + 2],
+             rotGrad + (3 * i + j) * S + e0);
+#endif
 }

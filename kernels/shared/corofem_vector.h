@@ -14,6 +14,7 @@
 #define COROFEM_VEC 1
 #endif
 
+/* maskv: the result type of a vector comparison of realv (-1 = true per lane). */
 #if COROFEM_VEC == 1
 typedef real realv;
 typedef uint uintv;
@@ -22,8 +23,10 @@ typedef uint uintv;
 #elif COROFEM_VEC == 4
 #ifdef COROFEM_DOUBLE
 typedef double4 realv;
+typedef long4 maskv;
 #else
 typedef float4 realv;
+typedef int4 maskv;
 #endif
 typedef uint4 uintv;
 #define VLOAD(ptr) vload4(0, (ptr))
@@ -31,8 +34,10 @@ typedef uint4 uintv;
 #elif COROFEM_VEC == 8
 #ifdef COROFEM_DOUBLE
 typedef double8 realv;
+typedef long8 maskv;
 #else
 typedef float8 realv;
+typedef int8 maskv;
 #endif
 typedef uint8 uintv;
 #define VLOAD(ptr) vload8(0, (ptr))
@@ -40,8 +45,10 @@ typedef uint8 uintv;
 #elif COROFEM_VEC == 16
 #ifdef COROFEM_DOUBLE
 typedef double16 realv;
+typedef long16 maskv;
 #else
 typedef float16 realv;
+typedef int16 maskv;
 #endif
 typedef uint16 uintv;
 #define VLOAD(ptr) vload16(0, (ptr))

@@ -144,6 +144,28 @@ TEST_P(OpenCLBackendVsReference, SolveMatchesDirectSolveForEveryPreconditioner) 
   }
 }
 
+TEST_P(OpenCLBackendVsReference, GpuAndCpuKernelConfigurationsAgree) {
+  // GPUs run one element per work-item (vector width 1) and local-memory tree reductions (chunk
+  // 1); CPUs 8-wide elements and 16-node chunks. Both configurations run here on whatever device
+  // is present and must solve the same system to the tolerance.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), b = randomVector(p.dofCount(), 7);
+  Eigen::VectorXd sols[2];
+  int config = 0;
+  for (std::size_t width : {1, 8}) {
+    detail::OpenCLOptions o;
+    o.vectorWidth = width;
+    o.nodeChunk = width == 1 ? 1 : 16;
+    auto ocl = openclBackend(p, solver(), o);
+    ocl->setPositions(x);
+    sols[config] = Eigen::VectorXd::Zero(b.size());
+    EXPECT_TRUE(ocl->solve({14400.0, 120.0, 1.0}, b, sols[config]).converged) << "width " << width;
+    ++config;
+  }
+  EXPECT_LE(relErr(sols[1], sols[0]), isDouble() ? 1e-8 : 1e-3);
+}
+
 TEST_P(OpenCLBackendVsReference, BlockPreconditionerNeedsNoMoreIterationsThanDiagonal) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const detail::Problem p = beam();

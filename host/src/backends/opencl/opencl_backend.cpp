@@ -9,7 +9,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstdio>
 #include <cstring>
+#include <map>
 #include <utility>
 
 namespace corofem::detail {
@@ -86,6 +88,11 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   OpenCLBackend(const Problem& problem, const SolverDesc& solver, std::shared_ptr<cl::Context> ctx,
                 const OpenCLOptions& options);
 
+  ~OpenCLBackend() override {
+    for (const auto& [kernel, entry] : profileTimes_)
+      std::fprintf(stderr, "[corofem opencl profile] %-24s %8ld launches %10.1f us each\n", kernel.c_str(),
+                   entry.first, 1e6 * entry.second / static_cast<double>(entry.first));
+  }
   std::string name() const override { return "opencl"; }
   std::string deviceName() const override { return ctx_->info().describe(); }
   void setPositions(const Eigen::VectorXd& x) override;
@@ -128,8 +135,19 @@ class OpenCLBackend final : public OpenCLBackendInternal {
     cl_uint index = 0;
     (setArg(kernel.get(), index++, args), ...);
     const std::size_t global = roundUp(std::max<std::size_t>(items, 1), wg_);
+    cl_event event = nullptr;
     const cl_int status = clEnqueueNDRangeKernel(ctx_->queue(), kernel.get(), 1, nullptr, &global, &wg_,
-                                                 0, nullptr, nullptr);
+                                                 0, nullptr, profile_ ? &event : nullptr);
+    if (event) {
+      clWaitForEvents(1, &event);
+      cl_ulong t0 = 0, t1 = 0;
+      clGetEventProfilingInfo(event, CL_PROFILING_COMMAND_START, sizeof(t0), &t0, nullptr);
+      clGetEventProfilingInfo(event, CL_PROFILING_COMMAND_END, sizeof(t1), &t1, nullptr);
+      auto& entry = profileTimes_[kernel.name()];
+      entry.first += 1;
+      entry.second += static_cast<double>(t1 - t0) * 1e-9;
+      clReleaseEvent(event);
+    }
     if (status != CL_SUCCESS)
       fail(ErrorCode::DeviceError, "clEnqueueNDRangeKernel('", kernel.name(), "', ", global,
            " work-items) failed with ", cl::errorString(status), " on OpenCL device '", dev_, "'");
@@ -162,6 +180,8 @@ class OpenCLBackend final : public OpenCLBackendInternal {
 
   std::shared_ptr<cl::Context> ctx_;
   std::string dev_;
+  bool profile_ = false;  ///< COROFEM_OPENCL_PROFILE: per-kernel device times, printed on destruction
+  std::map<std::string, std::pair<long, double>> profileTimes_;
   OpenCLOptions opts_;
   std::string options_;
   cl::ProgramBuild build_;
@@ -170,6 +190,9 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::size_t wg_ = 64;
   std::size_t vec_ = 1;         ///< elements per work-item in the element kernels
   std::size_t elemItems_ = 0;   ///< work-items of the element kernels
+  std::size_t chunk_ = 1;       ///< nodes per work-item in the PCG node kernels (corofem_reduce.h)
+  std::size_t nodeItems_ = 0;   ///< work-items of the PCG node kernels
+  std::size_t partialCount_ = 0;///< partial sums they write
   Formulation formulation_;
   PreconditionerKind precond_;
   SolverDesc solver_;
@@ -180,7 +203,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::vector<unsigned char> staging_;
 
   Kernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_,
-      kBlocks_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
+      kBlocks_, kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
   Buffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
   Buffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, partials_, scalars_;
 };
@@ -190,6 +213,9 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     : ctx_(std::move(ctx)), opts_(options), formulation_(problem.formulation),
       precond_(solver.preconditioner), solver_(solver) {
   dev_ = ctx_->deviceName();
+  cl_command_queue_properties queueProps = 0;
+  clGetCommandQueueInfo(ctx_->queue(), CL_QUEUE_PROPERTIES, sizeof(queueProps), &queueProps, nullptr);
+  profile_ = (queueProps & CL_QUEUE_PROFILING_ENABLE) != 0;
   if (formulation_ != Formulation::Corotational && formulation_ != Formulation::Linear)
     fail(ErrorCode::BadInput, "body '", problem.name, "': the OpenCL backend implements the co-rotational "
          "and linear formulations only, not '", toString(formulation_),
@@ -206,6 +232,9 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   vec_ = options.vectorWidth ? options.vectorWidth : (ctx_->info().gpu ? 1 : 8);
   if (const char* env = std::getenv("COROFEM_OPENCL_VEC"); env && *env && !options.vectorWidth)
     vec_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
+  chunk_ = options.nodeChunk ? options.nodeChunk : (ctx_->info().gpu ? 1 : 16);
+  if (const char* env = std::getenv("COROFEM_OPENCL_CHUNK"); env && *env && !options.nodeChunk)
+    chunk_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
   if (vec_ != 1 && vec_ != 4 && vec_ != 8 && vec_ != 16)
     fail(ErrorCode::BadInput, "OpenCL element vector width ", vec_, " must be 1, 4, 8 or 16");
   if (const char* env = std::getenv("COROFEM_OPENCL_WG"); env && *env && !options.workGroupSize)
@@ -229,13 +258,16 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   elemItems_ = (elems_ + vec_ - 1) / vec_;
   elemGroups_ = roundUp(elemItems_, wg_) / wg_;
   nodeGroups_ = roundUp(std::max<std::size_t>(nodes_, 1), wg_) / wg_;
+  nodeItems_ = (nodes_ + chunk_ - 1) / chunk_;
+  partialCount_ = chunk_ == 1 ? nodeGroups_ : roundUp(std::max<std::size_t>(nodeItems_, 1), wg_);
   lambda_ = problem.lame.lambda;
   mu_ = problem.lame.mu;
   rayleighMass_ = problem.rayleighMass;
   rayleighStiffness_ = problem.rayleighStiffness;
 
   // -- program: only the features this problem uses
-  options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_);
+  options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_) +
+             " -DCOROFEM_CHUNK=" + std::to_string(chunk_);
   if (double_) options_ += " -DCOROFEM_DOUBLE";
   switch (solver.rotation) {
     case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;
@@ -259,6 +291,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   kGatherSum_.create(build_.program, "gather_sum", dev_);
   kGatherProduct_.create(build_.program, "gather_product", dev_);
   kBlocks_.create(build_.program, "node_stiffness_blocks", dev_);
+  kCornerGradients_.create(build_.program, "corner_gradients", dev_);
   kPrecondInvert_.create(build_.program, "precond_invert", dev_);
   kPcgInit_.create(build_.program, "pcg_init", dev_);
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
@@ -344,7 +377,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   createReal(blocks_, kNodeBlockComponents * nodes_);
   createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodes_);
   for (Buffer* v : {&x_, &b_, &r_, &z_, &p_, &q_}) createReal(*v, dofs_);
-  createReal(partials_, kPartialComponents * std::max(elemGroups_, nodeGroups_));
+  createReal(partials_, kPartialComponents * std::max(elemGroups_, partialCount_));
   createReal(scalars_, kScalarCount);
   refreshBlocks();
   finish();
@@ -378,13 +411,14 @@ void OpenCLBackend::download(const Buffer& buf, double* dst, std::size_t count) 
 
 void OpenCLBackend::refreshBlocks() {
   if (precond_ == PreconditionerKind::None) return;
-  launch(kBlocks_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, geom_, rotGrad_,
-         RealArg{lambda_}, RealArg{mu_}, blocks_);
+  launch(kCornerGradients_, elemItems_, cl_uint(elems_), cl_uint(stride_), geom_, rotGrad_, elemOut_);
+  launch(kBlocks_, nodes_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_, RealArg{lambda_},
+         RealArg{mu_}, blocks_);
 }
 
 void OpenCLBackend::enqueueRotations() {
   if (formulation_ != Formulation::Corotational) return;
-  launch(kRotations_, elems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, pos_, rot_, rotGrad_,
+  launch(kRotations_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, pos_, rot_, rotGrad_,
          quat_);
 }
 
@@ -430,7 +464,7 @@ void OpenCLBackend::product(const Buffer& v, const Buffer& y, double massCoef, d
   else
     launch(kProduct_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, rotGrad_, v,
            RealArg{stiffCoef * lambda_}, RealArg{stiffCoef * mu_}, elemOut_);
-  launch(kGatherProduct_, nodes_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_,
+  launch(kGatherProduct_, nodeItems_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_,
          mass_, RealArg{massCoef}, free_, cl_uint(project ? 1 : 0), v, y, partials_);
 }
 
@@ -476,8 +510,8 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
            free_, minv_);
   // r = b - A x (projected), z = M^-1 r, p = z, rho = r.z, rr = r.r, bb = b.b
   product(x_, q_, massCoef, stiffCoef, true);
-  launch(kPcgInit_, nodes_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
-  const cl_uint groups = cl_uint(nodeGroups_);
+  launch(kPcgInit_, nodeItems_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
+  const cl_uint groups = cl_uint(partialCount_);
   launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceInit));
 
   const double tol = solver_.tolerance;
@@ -494,7 +528,7 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
   while (finite && !stats.converged && it < solver_.maxIterations) {
     product(p_, q_, massCoef, stiffCoef, true);  // q = A p, partial p.q
     launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceAlpha));
-    launch(kPcgUpdate_, nodes_, cl_uint(nodes_), scalars_, p_, q_, minv_, x_, r_, z_, partials_);
+    launch(kPcgUpdate_, nodeItems_, cl_uint(nodes_), scalars_, p_, q_, minv_, x_, r_, z_, partials_);
     launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceBeta));
     launch(kPcgDirection_, dofs_, cl_uint(dofs_), scalars_, z_, p_);
     ++it;
@@ -512,7 +546,7 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
     // defines it), not the recurrence's estimate, which drifts from it in float: one more product.
     // The convergence decision above stays the recurrence's (the standard PCG stop test).
     product(x_, q_, massCoef, stiffCoef, true);
-    launch(kPcgInit_, nodes_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
+    launch(kPcgInit_, nodeItems_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
     launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceInit));
     readScalars();
     stats.relativeResidual = relative();
