@@ -125,3 +125,39 @@ TEST(CliConvert, RoundTripKeepsCounts) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(CliRun, CoupledSurfaceIsWrittenAndReported) {
+  COROFEM_REQUIRE_DATA("meshes/sofa/liver-smooth.obj");
+  const fs::path out = corofem::test::tempDir();
+  const auto r = runCli("run samples/coupled_liver/liver.json -q --out '" + out.string() +
+                        "' --set analysis.steps=10 --set output.vtk_every=5");
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  const auto summary = nlohmann::json::parse(readFile(out / "summary.json"));
+  const auto& surface = summary.at("bodies").at(0).at("surface");
+  EXPECT_EQ(surface.at("vertices").get<int>(), 2194);  // SOURCES.md: liver-smooth.obj
+  EXPECT_EQ(surface.at("inside").get<int>() + surface.at("outside").get<int>(), 2194);
+  EXPECT_GT(surface.at("largest_distance").get<double>(), 0.0);  // the smooth surface bulges out of the coarse mesh
+  EXPECT_TRUE(fs::exists(out / "liver_surface.pvd"));
+  EXPECT_TRUE(fs::exists(out / "surface" / "liver_surface_000010.obj"));
+  // The deformed OBJ differs from the rest one (the handle moved) but has the same size.
+  const std::string rest = readFile(out / "surface" / "liver_surface_000000.obj");
+  const std::string last = readFile(out / "surface" / "liver_surface_000010.obj");
+  EXPECT_NE(rest, last);
+  EXPECT_EQ(lineCount(rest), lineCount(last));
+}
+
+TEST(CliRun, SurfaceTooFarFromTheMeshIsBadInput) {
+  COROFEM_REQUIRE_DATA("meshes/sofa/liver.msh");
+  // A surface with one triangle 100 units away from the liver (whose diagonal is about 9.3).
+  const fs::path dir = corofem::test::tempDir();
+  std::ofstream(dir / "far.obj") << "v 100 0 0\nv 101 0 0\nv 100 1 0\nf 1 2 3\n";
+  const auto r = runCli("run samples/coupled_liver/liver.json --out '" + (dir / "out").string() +
+                        "' --set 'bodies.0.surface=\"" + (dir / "far.obj").string() + "\"'");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_NE(r.output.find("maxDistance"), std::string::npos) << r.output;  // names the option to raise
+  EXPECT_NE(r.output.find("3 "), std::string::npos) << r.output;           // counts the vertices
+}
+
+}  // namespace

@@ -5,6 +5,7 @@
 //   sim->readPositions(0, positions);                    // explicit read-back
 #pragma once
 
+#include <corofem/embed.hpp>
 #include <corofem/mesh.hpp>
 #include <corofem/scene.hpp>
 #include <corofem/status.hpp>
@@ -59,6 +60,15 @@ class Simulation {
   Status readPositions(int body, std::vector<double>& out) const;   ///< 3 per node, current
   Status readVelocities(int body, std::vector<double>& out) const;  ///< 3 per node
   EnergyReport energies(int body) const;
+
+  /// The body's render surface (BodyDesc::surface, moved by the mesh's scale and translate), bound
+  /// once at create() to the body's tet mesh (paper Sec. 5); nullptr when the body has none.
+  const SurfaceMesh* restSurface(int body) const;
+  /// What the binding found (inside/outside vertices, largest distance); nullptr without a surface.
+  const BindingStatistics* surfaceBinding(int body) const;
+  /// The deformed surface at the current state: 3 doubles per vertex and, when `normals` is given,
+  /// smooth unit normals (3 floats per vertex). BadInput for a body without a surface.
+  Status readSurface(int body, std::vector<double>& positions, std::vector<float>* normals = nullptr) const;
   std::string backendName() const;  ///< "reference", "opencl"
   std::string deviceName() const;   ///< e.g. "host (Eigen, double)" or the OpenCL device name
 

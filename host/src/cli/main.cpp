@@ -109,6 +109,12 @@ int cmdRun(const std::vector<std::string>& args) {
               << sim->backendName() << " on " << sim->deviceName() << ", " << sim->stepCount()
               << (scene->analysis.kind == AnalysisDesc::Kind::Static ? " load increment(s)" : " step(s)")
               << ", outputs in " << outDir << std::endl;
+  for (int b = 0; !quiet && b < sim->bodyCount(); ++b)
+    if (const BindingStatistics* st = sim->surfaceBinding(b))
+      std::cout << "corofem: body '" << scene->bodies[static_cast<std::size_t>(b)].name << "': surface "
+                << scene->bodies[static_cast<std::size_t>(b)].surface << " bound: " << st->insideCount
+                << " vertices inside, " << st->outsideCount << " outside (largest distance "
+                << st->largestDistance << " m, allowed " << st->maxDistanceUsed << " m)" << std::endl;
 
   status = detail::guard([&] { outputs->record(sim.value(), StepReport{}); });
   const int every = std::max(1, sim->stepCount() / 10);

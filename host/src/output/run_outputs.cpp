@@ -73,6 +73,16 @@ RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir
     for (const BodyDesc& body : scene.bodies)
       series_.push_back(std::make_unique<PvdSeries>((fs::path(dir_) / (body.name + ".pvd")).string()));
   }
+  for (int b = 0; b < sim.bodyCount(); ++b) {
+    const bool hasSurface = sim.restSurface(b) != nullptr;
+    surfaceSeries_.push_back(hasSurface && scene.output.vtk
+        ? std::make_unique<PvdSeries>((fs::path(dir_) / (scene.bodies[static_cast<std::size_t>(b)].name + "_surface.pvd")).string())
+        : nullptr);
+    if (hasSurface && scene.output.surfaceObj) {
+      fs::create_directories(fs::path(dir_) / "surface", ec);
+      if (ec) fail(ErrorCode::IoError, "cannot create ", (fs::path(dir_) / "surface").string(), ": ", ec.message());
+    }
+  }
 }
 
 RunOutputs::~RunOutputs() = default;
@@ -109,11 +119,9 @@ void RunOutputs::record(const Simulation& sim, const StepReport& report) {
   csv_.flush();
 
   const Scene& scene = sim.scene();
-  if (scene.output.vtk) {
-    const int every = scene.output.vtkEvery;
-    const bool last = sim.finished();
-    if (report.step == 0 || last || (every > 0 && report.step % every == 0)) writeVtk(sim, report.step, report.time);
-  }
+  const int every = scene.output.vtkEvery;
+  const bool due = report.step == 0 || sim.finished() || (every > 0 && report.step % every == 0);
+  if (due && (scene.output.vtk || scene.output.surfaceObj)) writeVtk(sim, report.step, report.time);
 }
 
 void RunOutputs::writeVtk(const Simulation& sim, int step, double time) {
@@ -122,6 +130,27 @@ void RunOutputs::writeVtk(const Simulation& sim, int step, double time) {
   std::vector<double> x, v;
   for (int b = 0; b < sim.bodyCount(); ++b) {
     const BodyDesc& body = sim.scene().bodies[static_cast<std::size_t>(b)];
+    if (const SurfaceMesh* rest = sim.restSurface(b)) {
+      // The coupled render surface, recomputed from the deformed tetrahedra (paper Sec. 5).
+      SurfaceMesh surface = *rest;
+      Status st = sim.readSurface(b, surface.vertices);
+      if (!st) fail(st.code(), st.message());
+      char suffix[32];
+      std::snprintf(suffix, sizeof suffix, "_surface_%06d", step);
+      if (sim.scene().output.surfaceObj) {
+        st = writeSurfaceMesh((fs::path(dir_) / "surface" / (body.name + suffix + ".obj")).string(), surface);
+        if (!st) fail(st.code(), st.message());
+      }
+      if (auto& series = surfaceSeries_[static_cast<std::size_t>(b)]) {
+        const std::string name = body.name + suffix + ".vtu";
+        st = writeSurfaceMesh((fs::path(dir_) / "vtk" / name).string(), surface);
+        if (!st) fail(st.code(), st.message());
+        series->add(time, "vtk/" + name);
+        st = series->write();
+        if (!st) fail(st.code(), st.message());
+      }
+    }
+    if (!sim.scene().output.vtk) continue;
     TetMesh mesh = sim.restMesh(b);
     Status st = sim.readPositions(b, x);
     if (!st) fail(st.code(), st.message());
@@ -191,6 +220,16 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
                       {"skipped_elements", rep.skippedElements},
                       {"elastic_energy", e.elastic},
                       {"kinetic_energy", e.kinetic}});
+    if (const BindingStatistics* stats = sim.surfaceBinding(b)) {
+      const SurfaceMesh* surface = sim.restSurface(b);
+      bodies.back()["surface"] = {{"file", scene.bodies[static_cast<std::size_t>(b)].surface},
+                                  {"vertices", surface->vertexCount()},
+                                  {"triangles", surface->triangleCount()},
+                                  {"inside", stats->insideCount},
+                                  {"outside", stats->outsideCount},
+                                  {"largest_distance", stats->largestDistance},
+                                  {"max_distance_allowed", stats->maxDistanceUsed}};
+    }
   }
   j["bodies"] = bodies;
   json probes = json::object();
@@ -202,6 +241,8 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
   if (!series_.empty()) {
     json vtk = json::array();
     for (const auto& s : series_) vtk.push_back(fs::path(s->path()).filename().string());
+    for (const auto& s : surfaceSeries_)
+      if (s) vtk.push_back(fs::path(s->path()).filename().string());
     j["vtk_series"] = vtk;
   }
 

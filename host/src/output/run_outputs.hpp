@@ -39,6 +39,7 @@ class RunOutputs {
   std::vector<Probe> probes_;
   std::ofstream csv_;
   std::vector<std::unique_ptr<PvdSeries>> series_;
+  std::vector<std::unique_ptr<PvdSeries>> surfaceSeries_;  ///< per body; null without a surface
   std::vector<double> stepWallSeconds_;
   std::vector<StepReport> reports_;
   std::vector<double> lastProbe_;

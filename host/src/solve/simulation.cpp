@@ -3,6 +3,7 @@
 #include <corofem/simulation.hpp>
 
 #include "model/problem.hpp"
+#include "scene/scene_paths.hpp"
 #include "solve/backend.hpp"
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
@@ -21,6 +22,23 @@ bool isHyperelastic(Formulation f) {
   return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean;
 }
 
+/// Reads the body's surface, moves it like the mesh (scale, then translate) and binds it.
+void attachSurface(const BodyDesc& desc, const std::string& baseDir, const TetMesh& mesh,
+                   std::unique_ptr<SurfaceMesh>& surface, std::unique_ptr<SurfaceBinding>& binding) {
+  const std::string path = scene::resolveScenePath(baseDir, desc.surface);
+  Result<SurfaceMesh> read = readSurfaceMesh(path);
+  if (!read) detail::fail(read.status().code(), "body '", desc.name, "': surface: ", read.message());
+  SurfaceMesh s = std::move(read.value());
+  for (std::size_t i = 0; i < s.vertices.size(); ++i)
+    s.vertices[i] = s.vertices[i] * desc.mesh.scale + desc.mesh.translate[i % 3];
+  Result<SurfaceBinding> bound = bindSurface(mesh, s);
+  if (!bound)
+    detail::fail(bound.status().code(), "body '", desc.name, "': binding the surface ", path,
+                 " to the body's tet mesh: ", bound.message());
+  surface = std::make_unique<SurfaceMesh>(std::move(s));
+  binding = std::make_unique<SurfaceBinding>(std::move(bound.value()));
+}
+
 }  // namespace
 
 struct Simulation::Impl {
@@ -32,6 +50,9 @@ struct Simulation::Impl {
     std::unique_ptr<detail::Problem> problem;
     std::unique_ptr<detail::Backend> backend;
     std::unique_ptr<detail::BodySolver> solver;
+    // Render surface bound to the tet mesh (paper Sec. 5), when the body names one.
+    std::unique_ptr<SurfaceMesh> surface;
+    std::unique_ptr<SurfaceBinding> binding;
   };
 
   Scene scene;
@@ -62,6 +83,7 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       Result<TetMesh> mesh = loadBodyMesh(desc, scene.baseDir, &body.report);
       if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
       body.mesh = std::move(mesh.value());
+      if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
       body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
 
       switch (scene.backend.kind) {
@@ -170,6 +192,36 @@ EnergyReport Simulation::energies(int body) const {
   Status st = detail::guard([&] { e.elastic = solver.elasticEnergy(); });
   if (!st) e.elastic = std::nan("");  // a backend failure here has no other channel; NaN marks it
   return e;
+}
+
+const SurfaceMesh* Simulation::restSurface(int body) const {
+  if (body < 0 || body >= bodyCount()) return nullptr;
+  return impl_->bodies[static_cast<std::size_t>(body)].surface.get();
+}
+
+const BindingStatistics* Simulation::surfaceBinding(int body) const {
+  if (body < 0 || body >= bodyCount()) return nullptr;
+  const auto& b = impl_->bodies[static_cast<std::size_t>(body)];
+  return b.binding ? &b.binding->statistics : nullptr;
+}
+
+Status Simulation::readSurface(int body, std::vector<double>& positions, std::vector<float>* normals) const {
+  return detail::guard([&] {
+    const Impl::Body& b = impl_->body(body);
+    if (!b.binding)
+      detail::fail(ErrorCode::BadInput, "body '", impl_->scene.bodies[static_cast<std::size_t>(body)].name,
+                   "' has no surface; give it one with \"surface\": \"file.obj\" in the scene");
+    const Eigen::VectorXd& x = b.solver->positions();
+    SurfaceOutput out;
+    positions.resize(3 * b.binding->vertexCount());
+    out.positionsDouble = positions.data();
+    if (normals) {
+      normals->resize(3 * b.binding->vertexCount());
+      out.normals = normals->data();
+    }
+    Status st = deformSurface(*b.binding, x.data(), b.mesh.nodeCount(), out);
+    if (!st) throw detail::Error(st.code(), st.message());
+  });
 }
 
 std::string Simulation::backendName() const { return impl_->backendName; }
