@@ -98,7 +98,7 @@ const std::vector<std::string> kStaticKeys{"type", "increments", "max_newton_ite
                                            "displacement_tolerance"};
 const std::vector<std::string> kDynamicKeys{"type",          "integrator",    "time_step",
                                             "steps",         "newmark_beta",  "newmark_gamma",
-                                            "newton_iterations", "newton_tolerance"};
+                                            "newton_iterations", "newton_tolerance", "max_substeps"};
 const std::vector<std::string> kSolverKeys{"linear_solver", "tolerance",  "max_iterations", "check_every",
                                            "preconditioner", "precision", "rotation"};
 const std::vector<std::string> kBackendKeys{"kind", "device"};
@@ -470,6 +470,7 @@ AnalysisDesc parseAnalysis(const Reader& r, const json& j, const std::string& pa
   o.read("newmark_gamma", d.newmarkGamma, {[](double x) { return x >= 0.5 && x <= 1; }, "0.5 <= gamma <= 1"});
   o.read("newton_iterations", d.newtonIterations, {atLeastOne, "newton_iterations >= 1"});
   o.read("newton_tolerance", d.newtonTolerance, {positive, "newton_tolerance > 0"});
+  o.read("max_substeps", d.maxSubsteps, {atLeastOne, "max_substeps >= 1"});
   return a;
 }
 

@@ -28,6 +28,7 @@ struct BodyStepStats {
   double residual = 0.0;        ///< final relative Newton residual (see each driver for the scale)
   double linearResidual = 0.0;  ///< largest relative residual of the linear solves
   bool converged = true;        ///< statics: Newton converged; dynamics: every linear solve converged
+  int substeps = 1;             ///< dynamics: substeps the step finally took (> 1 after a retry)
 };
 
 /// Common interface of the per-body drivers.
@@ -177,6 +178,16 @@ class StaticSolver final : public BodySolver {
 ///     Costs one elastic-energy evaluation per step. A large residual alone is not a failure:
 ///     backward Euler with one Newton iteration runs stably with relative residuals near 1 when
 ///     a handle is dragged fast.
+///
+/// Substep retry (DynamicDesc::maxSubsteps, default 1 = off): a step that fails in any of the ways
+/// above is retried from t_n as k = 2, 4, 8, ... substeps of h / k (each a full step of the same
+/// scheme, with loads and prescribed targets at the substep's end time) while k <= maxSubsteps.
+/// Why it helps: the failures above are truncation-error failures of a too-large step (the
+/// linearised step's chord error grows like (omega h)^2 for a rotation omega h per step, the
+/// energy drift of the linearised trapezoidal rule likewise), so a smaller step removes them; a
+/// genuinely non-finite problem (NaN material) fails at every k and still throws, after
+/// log2(maxSubsteps) + 1 attempts. The reported stats sum the Newton and PCG iterations of every
+/// attempt (the cost really paid) and give the substeps of the attempt that succeeded.
 class DynamicSolver final : public BodySolver {
  public:
   DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc);
@@ -185,8 +196,20 @@ class DynamicSolver final : public BodySolver {
   double time() const { return t_; }
 
  private:
+  /// Everything a step changes (the committed state of the base class plus the integrator's).
+  struct State {
+    Eigen::VectorXd x, v, a, fextPrev, reactionPrev;
+    double work = 0.0, t = 0.0, supportWork = 0.0;
+  };
+  State capture() const;
+  void restore(const State& s);
+
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs (0 on constrained ones).
   void initialAcceleration();
+  /// One step of the scheme from the committed state to t1 = t_ + h, committed in place (no
+  /// rollback copy). `where` names the step in messages ("time step 3/10", "..., substep 2/4").
+  /// Throws Error(SolveFailed) with the committed state unchanged when it fails.
+  BodyStepStats advance(double h, const std::string& where);
 
   DynamicDesc desc_;
   double t_ = 0.0, tPrev_ = 0.0;

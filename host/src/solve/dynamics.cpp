@@ -63,13 +63,95 @@ void DynamicSolver::initialAcceleration() {
          "': the initial acceleration is not finite; check the material, the loads and the initial velocity");
 }
 
+DynamicSolver::State DynamicSolver::capture() const {
+  State s;
+  s.x = x_;
+  s.v = v_;
+  s.a = a_;
+  s.fextPrev = fextPrev_;
+  s.reactionPrev = reactionPrev_;
+  s.work = work_;
+  s.t = t_;
+  s.supportWork = supportWork_;
+  return s;
+}
+
+void DynamicSolver::restore(const State& s) {
+  x_ = s.x;
+  v_ = s.v;
+  a_ = s.a;
+  fextPrev_ = s.fextPrev;
+  reactionPrev_ = s.reactionPrev;
+  work_ = s.work;
+  t_ = s.t;
+  supportWork_ = s.supportWork;
+  backendAtCommitted_ = false;
+}
+
 BodyStepStats DynamicSolver::step(int index, int count) {
   if (!started_) {
     initialAcceleration();
     started_ = true;
   }
-  const Eigen::Index n = x_.size();
+  const State start = capture();
   const double h = desc_.timeStep;
+  const int maxSubsteps = std::max(1, desc_.maxSubsteps);
+  const std::string where = "time step " + std::to_string(index) + "/" + std::to_string(count);
+  BodyStepStats total;  // iterations of every attempt: the cost really paid
+  std::string tried;    // "1, 2, 4"
+  for (int substeps = 1;; substeps *= 2) {
+    tried += (tried.empty() ? "" : ", ") + std::to_string(substeps);
+    try {
+      BodyStepStats attempt;
+      attempt.converged = true;
+      for (int k = 1; k <= substeps; ++k) {
+        // End time of substep k as start + k h / K, so that the step ends exactly at t_n + h.
+        const double t1 = start.t + h * k / substeps;
+        const BodyStepStats s = advance(t1 - t_, substeps == 1 ? where
+                                                 : where + ", substep " + std::to_string(k) + "/" +
+                                                       std::to_string(substeps));
+        attempt.newtonIterations += s.newtonIterations;
+        attempt.linearIterations += s.linearIterations;
+        attempt.residual = std::max(attempt.residual, s.residual);
+        attempt.linearResidual = std::max(attempt.linearResidual, s.linearResidual);
+        attempt.converged = attempt.converged && s.converged;
+      }
+      total.newtonIterations += attempt.newtonIterations;
+      total.linearIterations += attempt.linearIterations;
+      total.residual = attempt.residual;
+      total.linearResidual = attempt.linearResidual;
+      total.converged = attempt.converged;
+      total.substeps = substeps;
+      break;
+    } catch (const Error& e) {
+      restore(start);
+      setBackendPositions(x_, true);
+      if (e.code() != ErrorCode::SolveFailed) throw;
+      if (substeps * 2 > maxSubsteps) {
+        if (substeps == 1) fail(ErrorCode::SolveFailed, e.what(), " The body keeps its state at t = ", start.t, " s");
+        fail(ErrorCode::SolveFailed, "body '", problem_.name, "': ", where, " failed with ", tried,
+             " substeps (analysis.max_substeps = ", maxSubsteps, "); the last attempt: ", e.what(),
+             " The body keeps its state at t = ", start.t, " s");
+      }
+    }
+  }
+  if (std::getenv("COROFEM_DEBUG_NEWTON") && total.substeps > 1)
+    std::fprintf(stderr, "dynamic step %d/%d: retried, succeeded with %d substeps\n", index, count, total.substeps);
+
+  // The rollback copy is the state before the whole step, whatever the substeps.
+  xPrev_ = start.x;
+  vPrev_ = start.v;
+  aPrev_ = start.a;
+  workPrev_ = start.work;
+  tPrev_ = start.t;
+  fextPrevSaved_ = start.fextPrev;
+  supportWorkSaved_ = start.supportWork;
+  reactionPrevSaved_ = start.reactionPrev;
+  return total;
+}
+
+BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
+  const Eigen::Index n = x_.size();
   const double t1 = t_ + h;
 
   // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme.
@@ -90,14 +172,17 @@ BodyStepStats DynamicSolver::step(int index, int count) {
   const bool damped = problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0;
   const SystemCoeffs system{1.0, 1.0 / ka, kx / ka};
 
+  // The caller (step) restores the state of t_n and says so in the message.
   auto failHere = [&](const std::string& what, const std::string& fix) {
     setBackendPositions(x_, true);
-    fail(ErrorCode::SolveFailed, "body '", problem_.name, "': time step ", index, "/", count, " (t = ", t1,
-         " s) ", what, "; ", fix, ". The body keeps its state at t = ", t_, " s");
+    fail(ErrorCode::SolveFailed, "body '", problem_.name, "': ", where, " (t = ", t1, " s) ", what, "; ", fix,
+         ".");
   };
+  const std::string retryFix =
+      desc_.maxSubsteps <= 1 ? ", or let failed steps be retried in substeps with analysis.max_substeps (e.g. 8)" : "";
   const std::string stepFix =
       "try a smaller analysis.time_step, more analysis.newton_iterations or a tighter solver.tolerance "
-      "(or more solver.max_iterations)";
+      "(or more solver.max_iterations)" + retryFix;
 
   // Targets of the constrained dofs at t_{n+1}: rest position (fixed) or X + ramp * value (prescribed).
   Eigen::VectorXd target = problem_.restPositions;
@@ -160,7 +245,7 @@ BodyStepStats DynamicSolver::step(int index, int count) {
     evaluated = false;  // the loop evaluates the new v before it ends
   }
   if (std::getenv("COROFEM_DEBUG_NEWTON"))
-    std::fprintf(stderr, "dynamic step %d/%d: %d Newton iterations, relative residual %.3e -> %.3e\n", index, count,
+    std::fprintf(stderr, "dynamic %s: %d Newton iterations, relative residual %.3e -> %.3e\n", where.c_str(),
                  stats.newtonIterations, initialRelative, stats.residual);
   x = xb + kx * v;
   a = ka * (v - vb);
@@ -196,17 +281,9 @@ BodyStepStats DynamicSolver::step(int index, int count) {
                  " J: initial energy plus the work of the loads and supports); the scheme is feeding energy in",
              "use more analysis.newton_iterations (with analysis.newton_tolerance), a smaller analysis.time_step, "
              "a dissipative scheme (analysis.integrator \"backward_euler\", or analysis.newmark_gamma 0.6 with "
-             "newmark_beta 0.3025), or a tighter solver.tolerance / more solver.max_iterations");
+             "newmark_beta 0.3025), or a tighter solver.tolerance / more solver.max_iterations" + retryFix);
 
-  // Commit.
-  xPrev_ = x_;
-  vPrev_ = v_;
-  aPrev_ = a_;
-  workPrev_ = work_;
-  tPrev_ = t_;
-  fextPrevSaved_ = fextPrev_;
-  supportWorkSaved_ = supportWork_;
-  reactionPrevSaved_ = reactionPrev_;
+  // Commit (step() keeps the rollback copy).
   work_ = loadWork;  // trapezoidal rule in time
   fextPrev_ = fext;
   supportWork_ = supportWork;
