@@ -121,7 +121,8 @@ double bytesPerElement(const Config& c, const detail::Problem& p) {
       return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 9;
     case Work::ProductStored:  // 78 K entries + 9 R instead of 10
       return 16 + r * (87 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 9;
-    case Work::PcgIteration:  // product + vector updates (x, r, p, q, z, minv: ~12 node vectors)
+    case Work::PcgIteration:  // product + vector updates (x, r, p, q, z, minv: ~12 node vectors);
+                              // timed: set-up (1 product) + 20 iterations, counted as 20
       return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * (9 + 3 * 12);
   }
   return 0;
@@ -152,6 +153,7 @@ void runKernel(benchmark::State& state, Config c) {
   b->apply(coeffs, v, y);  // uploads p for the product benchmarks
   b->internalForces(rhs);
   Eigen::VectorXd sol = Eigen::VectorXd::Zero(rhs.size());
+  if (c.work == Work::PcgIteration) b->solve(coeffs, rhs, sol);  // puts b and x on the device
   b->finish();
   for (auto _ : state) {
     switch (c.work) {
@@ -159,12 +161,7 @@ void runKernel(benchmark::State& state, Config c) {
       case Work::Force: b->enqueueForces(); break;
       case Work::Product:
       case Work::ProductStored: b->enqueueProduct(coeffs); break;
-      case Work::PcgIteration: {
-        sol.setZero();
-        const auto st = b->solve(coeffs, rhs, sol);
-        benchmark::DoNotOptimize(st);
-        break;
-      }
+      case Work::PcgIteration: b->enqueuePcgIterations(coeffs, 20); break;
     }
     b->finish();
   }

@@ -111,6 +111,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   void enqueueElementForces() override;
   void enqueueProduct(const SystemCoeffs& c) override;
   void enqueueElementProduct(const SystemCoeffs& c) override;
+  void enqueuePcgIterations(const SystemCoeffs& c, int iterations) override;
   void finish() override { checkCl(clFinish(ctx_->queue()), "clFinish", dev_); }
 
  private:
@@ -177,6 +178,8 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   /// y = A v (element product + gather), p . y partial sums per group into partials_.
   void product(const Buffer& v, const Buffer& y, double massCoef, double stiffCoef, bool project);
   void refreshBlocks();
+  void pcgSetup(double massCoef, double stiffCoef);     ///< preconditioner, r, z, p, rho from b_, x_
+  void pcgIteration(double massCoef, double stiffCoef); ///< one PCG iteration, no host read
 
   std::shared_ptr<cl::Context> ctx_;
   std::string dev_;
@@ -482,6 +485,32 @@ void OpenCLBackend::apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen
   download(q_, y.data(), dofs_);
 }
 
+void OpenCLBackend::pcgSetup(double massCoef, double stiffCoef) {
+  if (precond_ != PreconditionerKind::None)
+    launch(kPrecondInvert_, nodes_, cl_uint(nodes_), blocks_, mass_, RealArg{massCoef}, RealArg{stiffCoef},
+           free_, minv_);
+  // r = b - A x (projected), z = M^-1 r, p = z, rho = r.z, rr = r.r, bb = b.b
+  product(x_, q_, massCoef, stiffCoef, true);
+  launch(kPcgInit_, nodeItems_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
+  launch(kReduceFinish_, 1, cl_uint(partialCount_), partials_, scalars_, cl_uint(kReduceInit));
+}
+
+void OpenCLBackend::pcgIteration(double massCoef, double stiffCoef) {
+  const cl_uint groups = cl_uint(partialCount_);
+  product(p_, q_, massCoef, stiffCoef, true);  // q = A p, partial p.q
+  launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceAlpha));
+  launch(kPcgUpdate_, nodeItems_, cl_uint(nodes_), scalars_, p_, q_, minv_, x_, r_, z_, partials_);
+  launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceBeta));
+  launch(kPcgDirection_, dofs_, cl_uint(dofs_), scalars_, z_, p_);
+}
+
+void OpenCLBackend::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
+  double massCoef = 0, stiffCoef = 0;
+  coefficients(c, massCoef, stiffCoef);
+  pcgSetup(massCoef, stiffCoef);
+  for (int i = 0; i < iterations; ++i) pcgIteration(massCoef, stiffCoef);
+}
+
 LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
   checkVector(b, "the right-hand side b");
   if (static_cast<std::size_t>(x.size()) != dofs_) x = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(dofs_));
@@ -505,14 +534,8 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
     if (constrained_[d] || !std::isfinite(x0[d])) x0[d] = 0.0;
   upload(b_, b.data(), dofs_);
   upload(x_, x0.data(), dofs_);
-  if (precond_ != PreconditionerKind::None)
-    launch(kPrecondInvert_, nodes_, cl_uint(nodes_), blocks_, mass_, RealArg{massCoef}, RealArg{stiffCoef},
-           free_, minv_);
-  // r = b - A x (projected), z = M^-1 r, p = z, rho = r.z, rr = r.r, bb = b.b
-  product(x_, q_, massCoef, stiffCoef, true);
-  launch(kPcgInit_, nodeItems_, cl_uint(nodes_), b_, q_, free_, minv_, r_, z_, p_, partials_);
+  pcgSetup(massCoef, stiffCoef);
   const cl_uint groups = cl_uint(partialCount_);
-  launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceInit));
 
   const double tol = solver_.tolerance;
   const int checkEvery = std::max(1, solver_.checkEvery);
@@ -526,11 +549,7 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
   stats.converged = finite && stats.relativeResidual <= tol;
   int it = 0;
   while (finite && !stats.converged && it < solver_.maxIterations) {
-    product(p_, q_, massCoef, stiffCoef, true);  // q = A p, partial p.q
-    launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceAlpha));
-    launch(kPcgUpdate_, nodeItems_, cl_uint(nodes_), scalars_, p_, q_, minv_, x_, r_, z_, partials_);
-    launch(kReduceFinish_, 1, groups, partials_, scalars_, cl_uint(kReduceBeta));
-    launch(kPcgDirection_, dofs_, cl_uint(dofs_), scalars_, z_, p_);
+    pcgIteration(massCoef, stiffCoef);
     ++it;
     if (it % checkEvery == 0 || it == solver_.maxIterations) {
       readScalars();

@@ -39,6 +39,8 @@ class OpenCLBackendInternal : public Backend {
   virtual void enqueueElementForces() = 0;     ///< element forces only (no gather)
   virtual void enqueueProduct(const SystemCoeffs& c) = 0;  ///< q = A p (element product + gather)
   virtual void enqueueElementProduct(const SystemCoeffs& c) = 0;  ///< element product only
+  /// PCG set-up from the b and x last given to solve(), then `iterations` iterations, no reads.
+  virtual void enqueuePcgIterations(const SystemCoeffs& c, int iterations) = 0;
   virtual void finish() = 0;
 };
 
