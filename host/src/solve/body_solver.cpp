@@ -1,5 +1,6 @@
 // Shared part of the per-body drivers: free-dof norms, scales, energies, the driver factory.
 #include "solve/body_solver.hpp"
+#include "util/error.hpp"
 
 #include <cmath>
 
@@ -32,6 +33,19 @@ BodySolver::BodySolver(const Problem& problem, Backend& backend) : problem_(prob
   xPrev_ = x_;
   vPrev_ = v_;
   aPrev_ = a_;
+}
+
+void BodySolver::setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+  if (x.size() != x_.size() || v.size() != x_.size())
+    fail(ErrorCode::BadInput, "body '", problem_.name, "': an initial state needs ", x_.size(),
+         " positions and velocities (3 per node), got ", x.size(), " and ", v.size());
+  if (!x.allFinite() || !v.allFinite())
+    fail(ErrorCode::BadInput, "body '", problem_.name, "': the initial positions or velocities are not finite");
+  x_ = x;
+  v_ = (v.array() * freeMask_).matrix();
+  xPrev_ = x_;
+  vPrev_ = v_;
+  backendAtCommitted_ = false;
 }
 
 double BodySolver::kineticEnergy() const {

@@ -41,6 +41,12 @@ class BodySolver {
   virtual BodyStepStats step(int index, int count) = 0;
   /// Restores the state before the last successful step() (one level).
   virtual void rollback() = 0;
+  /// Replaces the starting state before the first step (tests and embedders: a body released from
+  /// a squashed or inverted shape). x and v are 3N; constrained dofs of x should sit at their
+  /// targets at t = 0 and their velocities are zeroed. Dynamics measure the body's initial energy
+  /// (the runaway guard's budget) from this state. Throws Error(BadInput) for a wrong size or a
+  /// non-finite entry.
+  void setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v);
 
   const Eigen::VectorXd& positions() const { return x_; }
   const Eigen::VectorXd& velocities() const { return v_; }

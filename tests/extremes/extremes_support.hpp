@@ -1,0 +1,248 @@
+// Helpers of the numerical-extremes suite: the backends every test runs on (reference double;
+// OpenCL double and float on every device found), scenes on small generated boxes, and a "direct"
+// body (Problem + Backend + BodySolver without a Simulation) for the cases the Scene API cannot
+// express (a body released from an inverted or squashed shape).
+#pragma once
+
+#include <corofem/mesh.hpp>
+#include <corofem/scene.hpp>
+#include <corofem/simulation.hpp>
+
+#include "model/problem.hpp"
+#include "solve/backend.hpp"
+#include "solve/body_solver.hpp"
+#include "util/error.hpp"
+
+#ifdef COROFEM_WITH_OPENCL
+#include "backends/opencl/cl_context.hpp"
+#endif
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::test {
+
+/// One backend / device / precision the suite runs on.
+struct BackendCase {
+  std::string name;  ///< test-name suffix
+  BackendKind kind = BackendKind::Reference;
+  Precision precision = Precision::Double;
+  std::string device;  ///< OpenCL device selector (its index in cl::listDevices())
+  std::string absent;  ///< non-empty: why this case cannot run here (the test skips with it)
+
+  bool isFloat() const { return kind == BackendKind::OpenCL && precision == Precision::Float; }
+  bool isOpenCL() const { return kind == BackendKind::OpenCL; }
+  std::string describe() const {
+    return kind == BackendKind::Reference ? "reference (double)"
+                                          : "opencl device " + device + (isFloat() ? " (float)" : " (double)");
+  }
+};
+
+/// Reference, then OpenCL double and float on every device. A case that cannot run (library built
+/// without OpenCL, no device, no fp64) stays in the list with the reason, so that the skip shows.
+inline std::vector<BackendCase> backendCases() {
+  std::vector<BackendCase> out;
+  out.push_back({"reference", BackendKind::Reference, Precision::Double, "", ""});
+#ifdef COROFEM_WITH_OPENCL
+  const auto devices = detail::cl::listDevices();
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    std::string clean;
+    for (char c : devices[i].name) clean += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+    const std::string base = "opencl_dev" + std::to_string(i) + "_" + clean.substr(0, 20);
+    out.push_back({base + "_double", BackendKind::OpenCL, Precision::Double, std::to_string(i),
+                   devices[i].fp64 ? "" : "device '" + devices[i].name + "' has no fp64 (cl_khr_fp64)"});
+    out.push_back({base + "_float", BackendKind::OpenCL, Precision::Float, std::to_string(i), ""});
+  }
+  if (devices.empty())
+    out.push_back({"opencl_no_device", BackendKind::OpenCL, Precision::Double, "",
+                   "no OpenCL device found on any platform (install a GPU driver or pocl-opencl-icd)"});
+#else
+  out.push_back({"opencl_not_built", BackendKind::OpenCL, Precision::Double, "",
+                 "the library was built without the OpenCL backend (configure with -DCOROFEM_WITH_OPENCL=ON)"});
+#endif
+  return out;
+}
+
+/// Only the cases that actually run a device-independent double computation are needed by some
+/// tests; this keeps the reference case plus the OpenCL ones, exactly as backendCases().
+inline std::string caseName(const testing::TestParamInfo<BackendCase>& info) { return info.param.name; }
+
+#define COROFEM_SKIP_ABSENT(c)                                         \
+  do {                                                                 \
+    if (!(c).absent.empty()) GTEST_SKIP() << (c).absent;               \
+  } while (0)
+
+/// A box mesh source (m).
+inline MeshSourceDesc box(const Vec3& lo, const Vec3& hi, const std::array<int, 3>& cells, int tetsPerCell = 5) {
+  MeshSourceDesc m;
+  BoxSpec b;
+  b.min = lo;
+  b.max = hi;
+  b.cells = cells;
+  b.tetsPerCell = tetsPerCell;
+  m.box = b;
+  return m;
+}
+
+inline NodeSetDesc planeSet(int axis, double value, double tolerance = 1e-9) {
+  NodeSetDesc set;
+  set.kind = NodeSetDesc::Kind::Plane;
+  set.planePoint = {0, 0, 0};
+  set.planePoint[static_cast<std::size_t>(axis)] = value;
+  set.planeNormal = {0, 0, 0};
+  set.planeNormal[static_cast<std::size_t>(axis)] = 1;
+  set.planeTolerance = tolerance;
+  return set;
+}
+
+/// A body with the given mesh and material (co-rotational).
+inline BodyDesc makeBody(const MeshSourceDesc& mesh, double E, double nu, double density = 1000.0) {
+  BodyDesc body;
+  body.name = "body";
+  body.mesh = mesh;
+  body.material.youngsModulus = E;
+  body.material.poissonRatio = nu;
+  body.material.density = density;
+  return body;
+}
+
+/// A dynamic scene of one body on the given backend case.
+inline Scene dynamicScene(const BackendCase& c, const BodyDesc& body, double h, int steps) {
+  Scene scene;
+  scene.name = "extremes";
+  scene.bodies.push_back(body);
+  scene.analysis.kind = AnalysisDesc::Kind::Dynamic;
+  scene.analysis.dynamics.timeStep = h;
+  scene.analysis.dynamics.steps = steps;
+  scene.backend.kind = c.kind;
+  scene.backend.device = c.device;
+  scene.solver.precision = c.precision;
+  // Float PCG cannot reach 1e-6 relative on every system; 1e-5 is about 100 float ulps.
+  scene.solver.tolerance = c.isFloat() ? 1e-5 : 1e-8;
+  scene.solver.maxIterations = 2000;
+  return scene;
+}
+
+inline Scene staticScene(const BackendCase& c, const BodyDesc& body, int increments) {
+  Scene scene = dynamicScene(c, body, 1.0, 1);
+  scene.analysis.kind = AnalysisDesc::Kind::Static;
+  scene.analysis.statics.increments = increments;
+  // Float: the Newton residual cannot fall far below the float rounding of f_int (~1e-7 relative
+  // per element, summed): 1e-4 is reachable; double keeps the default 1e-6.
+  if (c.isFloat()) scene.analysis.statics.residualTolerance = 1e-4;
+  return scene;
+}
+
+/// Creates the simulation; on a missing backend/device records a skip reason in *skip.
+inline std::unique_ptr<Simulation> createSim(const Scene& scene, std::string* skip) {
+  Result<Simulation> sim = Simulation::create(scene);
+  if (!sim) {
+    if (sim.status().code() == ErrorCode::NotCompiledIn || sim.status().code() == ErrorCode::DeviceError) {
+      *skip = sim.message();
+      return nullptr;
+    }
+    ADD_FAILURE() << "Simulation::create failed: " << sim.message();
+    return nullptr;
+  }
+  static std::string lastPrinted;  // one line per backend/device change, not per simulation
+  const std::string where = sim->backendName() + " on " + sim->deviceName();
+  if (where != lastPrinted) std::cout << "  [" << where << "]\n";
+  lastPrinted = where;
+  return std::make_unique<Simulation>(std::move(sim.value()));
+}
+
+#define COROFEM_CREATE_SIM(var, scene)                      \
+  std::string var##Skip;                                    \
+  auto var = createSim((scene), &var##Skip);                \
+  if (!var) {                                               \
+    if (!var##Skip.empty()) GTEST_SKIP() << var##Skip;      \
+    return;                                                 \
+  }
+
+/// Problem + backend + driver of body 0 of a scene, built as Simulation::create does, for tests
+/// that need BodySolver::setInitialState.
+struct DirectBody {
+  TetMesh mesh;
+  std::unique_ptr<detail::Problem> problem;
+  std::unique_ptr<detail::Backend> backend;
+  std::unique_ptr<detail::BodySolver> solver;
+};
+
+/// Builds it; returns false with *skip set when the backend/device is missing.
+inline bool makeDirectBody(const Scene& scene, DirectBody& out, std::string* skip) {
+  try {
+    Result<TetMesh> mesh = loadBodyMesh(scene.bodies[0], scene.baseDir);
+    if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
+    out.mesh = mesh.value();
+    out.problem = std::make_unique<detail::Problem>(
+        detail::buildProblem(scene.bodies[0], out.mesh, scene.solver, scene.baseDir));
+    if (scene.backend.kind == BackendKind::OpenCL)
+      out.backend = detail::createOpenCLBackend(*out.problem, scene.solver, scene.backend.device);
+    else
+      out.backend = detail::createReferenceBackend(*out.problem, scene.solver);
+    out.solver = detail::createBodySolver(*out.problem, *out.backend, scene.analysis);
+    return true;
+  } catch (const detail::Error& e) {
+    if (e.code() == ErrorCode::NotCompiledIn || e.code() == ErrorCode::DeviceError) {
+      *skip = e.what();
+      return false;
+    }
+    ADD_FAILURE() << "building the body failed: " << e.what();
+    return false;
+  }
+}
+
+#define COROFEM_DIRECT_BODY(var, scene)                      \
+  DirectBody var;                                            \
+  {                                                          \
+    std::string skip_;                                       \
+    if (!makeDirectBody((scene), var, &skip_)) {             \
+      if (!skip_.empty()) GTEST_SKIP() << skip_;             \
+      return;                                                \
+    }                                                        \
+  }
+
+/// Largest |entry| (inf when any is not finite).
+inline double maxAbs(const std::vector<double>& v) {
+  double m = 0;
+  for (double x : v) {
+    if (!std::isfinite(x)) return INFINITY;
+    m = std::max(m, std::abs(x));
+  }
+  return m;
+}
+
+inline bool allFinite(const std::vector<double>& v) {
+  for (double x : v)
+    if (!std::isfinite(x)) return false;
+  return true;
+}
+
+/// Displacements x - X of body 0 (3N).
+inline std::vector<double> displacements(const Simulation& sim) {
+  std::vector<double> x;
+  EXPECT_TRUE(sim.readPositions(0, x));
+  const std::vector<double>& X = sim.restMesh(0).nodes;
+  for (std::size_t i = 0; i < x.size() && i < X.size(); ++i) x[i] -= X[i];
+  return x;
+}
+
+/// Smallest signed element volume over rest volume for the positions x (3N) of mesh.
+inline double minVolumeRatio(const TetMesh& rest, const Eigen::VectorXd& x) {
+  TetMesh deformed = rest;
+  deformed.nodes.assign(x.data(), x.data() + x.size());
+  double worst = INFINITY;
+  for (std::size_t e = 0; e < rest.tetCount(); ++e)
+    worst = std::min(worst, signedVolume(deformed, e) / signedVolume(rest, e));
+  return worst;
+}
+
+}  // namespace corofem::test
