@@ -135,9 +135,15 @@ inline Scene staticScene(const BackendCase& c, const BodyDesc& body, int increme
   Scene scene = dynamicScene(c, body, 1.0, 1);
   scene.analysis.kind = AnalysisDesc::Kind::Static;
   scene.analysis.statics.increments = increments;
-  // Float: the Newton residual cannot fall far below the float rounding of f_int (~1e-7 relative
-  // per element, summed): 1e-4 is reachable; double keeps the default 1e-6.
-  if (c.isFloat()) scene.analysis.statics.residualTolerance = 1e-4;
+  // Float: the OpenCL backend stores absolute positions in float, so x is quantised to
+  // ulp(|x|) (3e-8 m at 0.4 m) and f_int carries a noise of E ulp(|x|) / element size per element
+  // corner, which does not shrink as Newton converges. Measured on the 0.4 m cantilever under
+  // gravity (E = 1e6 Pa): the relative residual stalls at ~1e-3 and the corrections at ~1e-7 m
+  // (|dx| / |u| ~ 1e-5). The defaults (1e-6, 1e-8) are unreachable there; these are not.
+  if (c.isFloat()) {
+    scene.analysis.statics.residualTolerance = 1e-2;
+    scene.analysis.statics.displacementTolerance = 1e-4;
+  }
   return scene;
 }
 
