@@ -1,11 +1,11 @@
 /* First stage of the deterministic two-stage dot products (OpenCL C only). The second stage is
  * reduce_finish in pcg.cl. Node kernels that produce partial sums walk COROFEM_CHUNK consecutive
- * nodes per work-item:
- *   COROFEM_CHUNK == 1 (GPUs): one node per work-item, a fixed-order tree over the work-group in
- *     local memory, one partial per work-group;
- *   COROFEM_CHUNK  > 1 (CPUs): each work-item sums its nodes in order and writes its own partial,
- *     with no barrier at all (PoCL splits a kernel at every barrier into separate work-item loops,
- *     which made the fused PCG kernels several times slower than their arithmetic).
+ * nodes per work-item, and then either
+ *   COROFEM_TREE_REDUCE defined (GPUs): a fixed-order tree over the work-group in local memory,
+ *     one partial per work-group; or
+ *   not defined (CPUs): each work-item writes its own partial, with no barrier at all (PoCL splits
+ *     a kernel at every barrier into separate work-item loops, which made the fused PCG kernels
+ *     several times slower than their arithmetic).
  * Either way the summation order is fixed by the sizes alone, so results are reproducible bit for
  * bit. A kernel declares COROFEM_PARTIAL_LOCALS at its top and ends with
  * COROFEM_PARTIAL_STORE(a, b, c, partials) reached by every work-item. */
@@ -17,7 +17,7 @@
 #define COROFEM_CHUNK 1
 #endif
 
-#if COROFEM_CHUNK == 1
+#ifdef COROFEM_TREE_REDUCE
 /* Fixed-order tree sum of three values over the work-group into partials[3 group + k]. */
 inline void group_sum3(__local real* s0, __local real* s1, __local real* s2, real a, real b, real c,
                        __global real* partials) {

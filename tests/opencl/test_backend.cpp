@@ -157,6 +157,7 @@ TEST_P(OpenCLBackendVsReference, GpuAndCpuKernelConfigurationsAgree) {
     detail::OpenCLOptions o;
     o.vectorWidth = width;
     o.nodeChunk = width == 1 ? 1 : 16;
+    o.treeReduce = width == 1 ? 1 : 0;
     auto ocl = openclBackend(p, solver(), o);
     ocl->setPositions(x);
     sols[config] = Eigen::VectorXd::Zero(b.size());

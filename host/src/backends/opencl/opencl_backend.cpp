@@ -1,5 +1,22 @@
 // The OpenCL backend: per-element rotations, matrix-free co-rotational forces and products,
 // deterministic per-node gathers and a PCG whose scalars stay on the device (kernels/opencl/).
+//
+// Per call:
+//   setPositions   upload x; compute_rotations (R, a_i = R grad N_i); corner_gradients +
+//                  node_stiffness_blocks (preconditioner blocks, rotated with the elements)
+//   internalForces element_forces + gather_sum; download f
+//   apply          upload p; element_product + gather_product; download y
+//   solve          upload b, x; precond_invert; r = b - A x; PCG iterations (5 launches each, no
+//                  host read); read the scalars every checkEvery iterations; true residual; download x
+// Build switches (-D), chosen per problem: precision (COROFEM_DOUBLE), rotation method
+// (COROFEM_ROT_*), preconditioner (COROFEM_PRECOND_*), work-group size (COROFEM_WG), elements per
+// work-item (COROFEM_VEC: 8 on CPUs, 1 on GPUs), nodes per work-item in the reducing node kernels
+// (COROFEM_CHUNK: 16 on CPUs, 1 = local-memory trees on GPUs). Rayleigh damping needs no switch:
+// C = alpha M + beta K^R folds into the two coefficients of M and K^R, so a problem without damping
+// runs exactly the same kernels with the same cost.
+// Tuning overrides for experiments (not for production): COROFEM_OPENCL_WG, COROFEM_OPENCL_VEC,
+// COROFEM_OPENCL_CHUNK, COROFEM_OPENCL_OPTIONS (extra compiler options), COROFEM_OPENCL_PROFILE=1
+// (per-kernel device times printed when the backend is destroyed).
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/opencl_backend.hpp"
@@ -196,6 +213,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::size_t chunk_ = 1;       ///< nodes per work-item in the PCG node kernels (corofem_reduce.h)
   std::size_t nodeItems_ = 0;   ///< work-items of the PCG node kernels
   std::size_t partialCount_ = 0;///< partial sums they write
+  bool treeReduce_ = false;     ///< work-group trees in local memory (GPUs) or per-item partials
   Formulation formulation_;
   PreconditionerKind precond_;
   SolverDesc solver_;
@@ -262,7 +280,11 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   elemGroups_ = roundUp(elemItems_, wg_) / wg_;
   nodeGroups_ = roundUp(std::max<std::size_t>(nodes_, 1), wg_) / wg_;
   nodeItems_ = (nodes_ + chunk_ - 1) / chunk_;
-  partialCount_ = chunk_ == 1 ? nodeGroups_ : roundUp(std::max<std::size_t>(nodeItems_, 1), wg_);
+  treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
+  if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
+    treeReduce_ = std::string(env) != "0";  // tuning experiments
+  partialCount_ = roundUp(std::max<std::size_t>(nodeItems_, 1), wg_);
+  if (treeReduce_) partialCount_ /= wg_;
   lambda_ = problem.lame.lambda;
   mu_ = problem.lame.mu;
   rayleighMass_ = problem.rayleighMass;
@@ -270,7 +292,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
 
   // -- program: only the features this problem uses
   options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_) +
-             " -DCOROFEM_CHUNK=" + std::to_string(chunk_);
+             " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "");
   if (double_) options_ += " -DCOROFEM_DOUBLE";
   switch (solver.rotation) {
     case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;

@@ -17,7 +17,8 @@ struct OpenCLOptions {
   bool storedStiffness = false;  ///< product with a stored 12x12 K_e per element instead of the gradients
   std::size_t workGroupSize = 0; ///< power of two, 0 = the default (64)
   std::size_t vectorWidth = 0;   ///< elements per work-item in the element kernels (1, 4, 8, 16), 0 = 8 on CPUs, 1 on GPUs
-  std::size_t nodeChunk = 0;     ///< nodes per work-item in the PCG node kernels; 1 = local-memory tree reductions (GPU style), 0 = 16 on CPUs, 1 on GPUs
+  std::size_t nodeChunk = 0;     ///< nodes per work-item in the PCG node kernels, 0 = default (1 on GPUs, CPUs: see the backend)
+  int treeReduce = -1;           ///< 1: partial sums by local-memory trees (GPU style), 0: one per work-item, -1: by device type
   int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
 };
 
