@@ -33,7 +33,7 @@ typedef struct {
   realv volume;
 } ElemBlock;
 
-inline void load_element_block(uint e0, uint S, __global const uint* nodes, __global const real* geom,
+COROFEM_FN void load_element_block(uint e0, uint S, __global const uint* nodes, __global const real* geom,
                                __global const real* rotGrad, ElemBlock* b) {
   for (int c = 0; c < 4; ++c)
     for (int l = 0; l < COROFEM_VEC; ++l) b->node[c][l] = nodes[c * S + e0 + l];
@@ -43,7 +43,7 @@ inline void load_element_block(uint e0, uint S, __global const uint* nodes, __gl
 
 /* sum_{i=1..3} (v_i - v_0) a_i^T for a node vector v (3N) at the elements' corners (9 entries,
  * row-major). */
-inline void corner_outer_sum(const ElemBlock* b, __global const real* v, realv* P) {
+COROFEM_FN void corner_outer_sum(const ElemBlock* b, __global const real* v, realv* P) {
   realv v0[3];
   for (int j = 0; j < 3; ++j) v0[j] = gather_node_component(v, b->node[0], j);
   for (int k = 0; k < 9; ++k) P[k] = (realv)0;
@@ -56,7 +56,7 @@ inline void corner_outer_sum(const ElemBlock* b, __global const real* v, realv* 
 }
 
 /* Writes the corner-c vectors (x, y, z) of the VEC elements e0.. as real4 at 4 e + c. */
-inline void store_corner(__global real* out, uint e0, int c, realv x, realv y, realv z) {
+COROFEM_FN void store_corner(__global real* out, uint e0, int c, realv x, realv y, realv z) {
   real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
   VSTORE(x, lx);
   VSTORE(y, ly);
@@ -66,7 +66,7 @@ inline void store_corner(__global real* out, uint e0, int c, realv x, realv y, r
 
 /* Given P, E = sym(P) - shift I, S_w = lambda tr(E) I + 2 mu E; writes y_i = V S_w a_i and
  * y_0 = -(y_1 + y_2 + y_3) to out; returns V S_w : E (twice the energy). */
-inline realv write_stress_times_gradients(uint e0, uint S, const realv* P, real shift, const ElemBlock* b,
+COROFEM_FN realv write_stress_times_gradients(uint e0, uint S, const realv* P, real shift, const ElemBlock* b,
                                           real lambda, real mu, __global real* out) {
   const realv exx = P[0] - shift, eyy = P[4] - shift, ezz = P[8] - shift;
   const realv exy = (real)0.5 * (P[1] + P[3]);

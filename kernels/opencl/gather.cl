@@ -8,7 +8,7 @@
 #include "../shared/corofem_reduce.h"
 #endif
 
-inline void gather_node(uint n, __global const uint* start, __global const uint* entries,
+COROFEM_FN void gather_node(uint n, __global const uint* start, __global const uint* entries,
                         __global const real* elemOut, real* acc) {
   real4 sum = (real4)(0);
   const uint end = start[n + 1];

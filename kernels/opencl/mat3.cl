@@ -7,21 +7,21 @@
 
 typedef struct { real m[9]; } Mat3;
 
-inline Mat3 mat3_identity(void) {
+COROFEM_FN Mat3 mat3_identity(void) {
   Mat3 r;
   for (int i = 0; i < 9; ++i) r.m[i] = (real)0;
   r.m[0] = r.m[4] = r.m[8] = (real)1;
   return r;
 }
 
-inline real mat3_det(const Mat3* a) {
+COROFEM_FN real mat3_det(const Mat3* a) {
   return a->m[0] * (a->m[4] * a->m[8] - a->m[5] * a->m[7]) -
          a->m[1] * (a->m[3] * a->m[8] - a->m[5] * a->m[6]) +
          a->m[2] * (a->m[3] * a->m[7] - a->m[4] * a->m[6]);
 }
 
 /* Cofactor matrix: cof(A) = det(A) A^-T, so A^-T = cof(A) / det(A) without a transpose. */
-inline Mat3 mat3_cofactor(const Mat3* a) {
+COROFEM_FN Mat3 mat3_cofactor(const Mat3* a) {
   Mat3 c;
   c.m[0] = a->m[4] * a->m[8] - a->m[5] * a->m[7];
   c.m[1] = a->m[5] * a->m[6] - a->m[3] * a->m[8];
@@ -35,14 +35,14 @@ inline Mat3 mat3_cofactor(const Mat3* a) {
   return c;
 }
 
-inline real mat3_norm2(const Mat3* a) {
+COROFEM_FN real mat3_norm2(const Mat3* a) {
   real s = (real)0;
   for (int i = 0; i < 9; ++i) s += a->m[i] * a->m[i];
   return s;
 }
 
 /* C = A^T B */
-inline Mat3 mat3_tmul(const Mat3* a, const Mat3* b) {
+COROFEM_FN Mat3 mat3_tmul(const Mat3* a, const Mat3* b) {
   Mat3 c;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j)

@@ -15,7 +15,7 @@
 #endif
 
 /* z = M^-1 r for the dofs of node n (M^-1 from precond_invert). */
-inline void apply_preconditioner(uint n, __global const real* minv, const real* r, real* z) {
+COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const real* r, real* z) {
 #if defined(COROFEM_PRECOND_BLOCK)
   __global const real* m = minv + 9 * n;
   z[0] = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];

@@ -30,7 +30,7 @@
 
 /* F = sum_i x_i grad N_i^T = sum_{i=1..3} (x_i - x_0) grad N_i^T, since sum_i grad N_i = 0. The
  * differences keep float accurate for bodies far from the origin. */
-inline Mat3 element_deformation_gradient(uint e, uint S, __global const uint* nodes,
+COROFEM_FN Mat3 element_deformation_gradient(uint e, uint S, __global const uint* nodes,
                                          __global const real* geom, __global const real* pos) {
   const uint n0 = nodes[e];
   const real x0 = pos[3 * n0], y0 = pos[3 * n0 + 1], z0 = pos[3 * n0 + 2];
@@ -52,7 +52,7 @@ inline Mat3 element_deformation_gradient(uint e, uint S, __global const uint* no
 /* One Jacobi rotation J in the (p, q) plane zeroing a_pq of the symmetric A: A <- J^T A J,
  * V <- V J, with J_pp = J_qq = c, J_pq = s, J_qp = -s and t = s / c the smaller root of
  * t^2 + 2 theta t - 1 = 0, theta = (a_qq - a_pp) / (2 a_pq). */
-inline void jacobi_rotate(real* a, real* v, int p, int q) {
+COROFEM_FN void jacobi_rotate(real* a, real* v, int p, int q) {
   const real apq = a[3 * p + q];
   if (apq == (real)0) return;
   const real theta = (a[3 * q + q] - a[3 * p + p]) / (2 * apq);
@@ -79,7 +79,7 @@ inline void jacobi_rotate(real* a, real* v, int p, int q) {
   }
 }
 
-inline void swap_columns(real* a, real* v, int p, int q) {
+COROFEM_FN void swap_columns(real* a, real* v, int p, int q) {
   real t = a[3 * p + p];
   a[3 * p + p] = a[3 * q + q];
   a[3 * q + q] = t;
@@ -96,7 +96,7 @@ inline void swap_columns(real* a, real* v, int p, int q) {
  * the true u_3 is -(u_1 x u_2), so using +(u_1 x u_2) flips the smallest singular direction:
  * R = U diag(1, 1, -1) V^T, exactly the reference's choice (detail::polarRotation). Flat or
  * collapsed elements (s_3 or s_2 ~ 0) still get an orthonormal U, so R stays a proper rotation. */
-inline Mat3 rotation_svd(const Mat3* F) {
+COROFEM_FN Mat3 rotation_svd(const Mat3* F) {
   real a[9];
   Mat3 FtF = mat3_tmul(F, F);
   for (int k = 0; k < 9; ++k) a[k] = FtF.m[k];
@@ -163,7 +163,7 @@ inline Mat3 rotation_svd(const Mat3* F) {
  * would converge to an improper factor), nearly singular or non-converged elements take the SVD
  * path, whose convention matches the reference. The stop test |R_k+1 - R_k|_F < sqrt(eps) leaves
  * an error ~ eps after the quadratic step already taken. */
-inline Mat3 rotation_polar(const Mat3* F) {
+COROFEM_FN Mat3 rotation_polar(const Mat3* F) {
   const real fn2 = mat3_norm2(F);
   const real detF = mat3_det(F);
   if (!(detF > (real)1e-3 * fn2 * sqrt(fn2) * (real)1e-3)) return rotation_svd(F);
@@ -187,7 +187,7 @@ inline Mat3 rotation_polar(const Mat3* F) {
 
 /* ------------------------------------------------------------------ quaternion (Mueller 2016) */
 
-inline Mat3 quat_to_matrix(real4 q) {
+COROFEM_FN Mat3 quat_to_matrix(real4 q) {
   const real x = q.x, y = q.y, z = q.z, w = q.w;
   Mat3 R;
   R.m[0] = 1 - 2 * (y * y + z * z);
@@ -206,7 +206,7 @@ inline Mat3 quat_to_matrix(real4 q) {
  * Newton-like step towards the rotation with R^T F symmetric; q <- exp(omega) q. Each step keeps q
  * a unit quaternion, so R is a proper rotation whatever F is (also inverted). Warm start: q is the
  * previous step's rotation, so a few iterations per step suffice. */
-inline Mat3 rotation_quaternion(const Mat3* F, real4* qInOut) {
+COROFEM_FN Mat3 rotation_quaternion(const Mat3* F, real4* qInOut) {
   real4 q = *qInOut;
   for (int it = 0; it < COROFEM_QUAT_ITERS; ++it) {
     const Mat3 R = quat_to_matrix(q);
@@ -244,7 +244,7 @@ inline Mat3 rotation_quaternion(const Mat3* F, real4* qInOut) {
 /* Gram-Schmidt of F's columns f_1, f_2 (r_1 = f_1 / |f_1|, r_2 = normalised f_2 - (r_1 . f_2) r_1,
  * r_3 = r_1 x r_2): F = R T with T upper triangular. Proper by construction; equal to the polar
  * factor only when F is a rotation. Degenerate columns take the SVD path. */
-inline Mat3 rotation_qr(const Mat3* F) {
+COROFEM_FN Mat3 rotation_qr(const Mat3* F) {
   real r1[3] = {F->m[0], F->m[3], F->m[6]};
   real r2[3] = {F->m[1], F->m[4], F->m[7]};
   const real fn = sqrt(mat3_norm2(F));
@@ -275,7 +275,7 @@ inline Mat3 rotation_qr(const Mat3* F) {
 /* rotation_polar on COROFEM_VEC elements at once (the same iteration and stop test per lane; a
  * lane that has converged keeps its value). Returns the lanes that must take the SVD path:
  * inverted or degenerate (det F <= 1e-6 |F|^3) or not converged. */
-inline maskv rotation_polar_v(const realv* F, realv* R) {
+COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
   realv fn2 = (realv)0;
   for (int k = 0; k < 9; ++k) fn2 += F[k] * F[k];
   const realv detF = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
@@ -317,7 +317,7 @@ inline maskv rotation_polar_v(const realv* F, realv* R) {
 
 /* ------------------------------------------------------------------ the kernel */
 
-inline Mat3 rotation_of(const Mat3* F, __global real* quat, uint e, uint S) {
+COROFEM_FN Mat3 rotation_of(const Mat3* F, __global real* quat, uint e, uint S) {
 #if defined(COROFEM_ROT_SVD)
   return rotation_svd(F);
 #elif defined(COROFEM_ROT_QUAT)

@@ -27,6 +27,9 @@ typedef float4 real4;
 #define REAL_TINY 1e-30f
 #endif
 #define COROFEM_CONSTANT(type, name, value) enum { name = value }
+/* Helper functions: `static inline`, so that no external definition is ever needed (C99 inline
+ * semantics would leave an undefined symbol wherever a compiler declines to inline). */
+#define COROFEM_FN static inline
 #else
 #define COROFEM_CONSTANT(type, name, value) static const type name = value
 #endif

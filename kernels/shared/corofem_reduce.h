@@ -19,7 +19,7 @@
 
 #ifdef COROFEM_TREE_REDUCE
 /* Fixed-order tree sum of three values over the work-group into partials[3 group + k]. */
-inline void group_sum3(__local real* s0, __local real* s1, __local real* s2, real a, real b, real c,
+COROFEM_FN void group_sum3(__local real* s0, __local real* s1, __local real* s2, real a, real b, real c,
                        __global real* partials) {
   const uint lid = get_local_id(0);
   s0[lid] = a;
@@ -44,7 +44,7 @@ inline void group_sum3(__local real* s0, __local real* s1, __local real* s2, rea
 #define COROFEM_PARTIAL_LOCALS __local real s0_[COROFEM_WG], s1_[COROFEM_WG], s2_[COROFEM_WG];
 #define COROFEM_PARTIAL_STORE(a, b, c, partials) group_sum3(s0_, s1_, s2_, (a), (b), (c), (partials))
 #else
-inline void item_store3(real a, real b, real c, __global real* partials) {
+COROFEM_FN void item_store3(real a, real b, real c, __global real* partials) {
   const uint i = get_global_id(0);
   partials[kPartialComponents * i] = a;
   partials[kPartialComponents * i + 1] = b;

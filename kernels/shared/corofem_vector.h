@@ -58,14 +58,14 @@ typedef uint16 uintv;
 #endif
 
 /* Component `comp` of the node vector v (3N) at the VEC nodes idx[0..VEC-1]: a gather. */
-inline realv gather_node_component(__global const real* v, const uint* idx, uint comp) {
+COROFEM_FN realv gather_node_component(__global const real* v, const uint* idx, uint comp) {
   real lanes[COROFEM_VEC];
   for (int l = 0; l < COROFEM_VEC; ++l) lanes[l] = v[3 * idx[l] + comp];
   return VLOAD(lanes);
 }
 
 /* Sum of the lanes in a fixed order (deterministic). */
-inline real lane_sum(realv v) {
+COROFEM_FN real lane_sum(realv v) {
   real lanes[COROFEM_VEC];
   VSTORE(v, lanes);
   real s = (real)0;
