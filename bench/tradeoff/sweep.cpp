@@ -22,8 +22,9 @@
 //              tet mesh solved by the reference.
 //
 // The reference of each (scene, mesh): reference backend, double, LDL^T (Cholesky), co-rotational,
-// statics to a relative residual of 1e-10. Linear-formulation rows are measured against the same
-// co-rotational reference, so their error is the formulation's error.
+// statics to a relative residual of 1e-8 (the knob rows keep the default 1e-6; 1e-10 stalls at
+// 3e-9 on the 9k-dof mesh). Linear-formulation rows are measured against the same co-rotational
+// reference, so their error is the formulation's error.
 //
 // Time per step: StepReport::wallSeconds, the median over the steps of one run (dynamics), or the
 // median over 3 repetitions (1 with --quick) of a whole static solve divided by its increments.
@@ -421,11 +422,17 @@ std::vector<Knobs> resolutionKnobs(bool withOpenCL) {
   pcg.preconditioner = PreconditionerKind::BlockDiagonal;
   pcg.tolerance = 1e-4;
   out.push_back(pcg);
+  Knobs loose = pcg;
+  loose.tolerance = 1e-2;
+  out.push_back(loose);
   if (withOpenCL) {
     Knobs f = pcg;
     f.backend = BackendKind::OpenCL;
     f.precision = Precision::Float;
     out.push_back(f);
+    Knobs fl = f;
+    fl.tolerance = 1e-2;
+    out.push_back(fl);
     Knobs d = f;
     d.precision = Precision::Double;
     d.tolerance = 1e-6;
@@ -450,6 +457,11 @@ struct CsvWriter {
     file.flush();
   }
 };
+
+std::size_t tetCount(SceneKind kind, int level) {
+  const auto c = cellsOf(kind, level);
+  return std::size_t(5) * c[0] * c[1] * c[2];
+}
 
 std::string meshLabel(SceneKind kind, int level) {
   const auto c = cellsOf(kind, level);
@@ -505,7 +517,7 @@ int runSweep(const Options& options) {
                   k.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg",
                   k.linearSolver == LinearSolverKind::Cholesky ? 0.0 : k.tolerance,
                   k.linearSolver == LinearSolverKind::Cholesky ? 0 : k.maxIterations,
-                  r.mesh.tetCount() ? r.mesh.tetCount() : std::size_t(0), meshLabel(c.kind, c.level).c_str(),
+                  tetCount(c.kind, c.level), meshLabel(c.kind, c.level).c_str(),
                   name(k.formulation), r.msPerStep, r.msMin, r.steps, disp, energy, r.pcgPerStep,
                   r.newtonPerStep, r.convergedFraction, r.status.c_str());
     csv.file << line;
@@ -537,7 +549,7 @@ int runSweep(const Options& options) {
     const SceneCase c{"cantilever", SceneKind::Cantilever, 2, 0};
     Knobs tight = cholesky();
     Scene refScene = buildScene(c, tight);
-    refScene.analysis.statics.residualTolerance = 1e-10;
+    refScene.analysis.statics.residualTolerance = 1e-8;
     refScene.analysis.statics.displacementTolerance = 1e-12;
     Reference ref;
     ref.run = runOnce(refScene);
@@ -552,7 +564,7 @@ int runSweep(const Options& options) {
     const std::vector<int> levels = quick ? std::vector<int>{1, 2, 4} : std::vector<int>{1, 2, 3, 6};
     const SceneCase cf{"cantilever_res", SceneKind::Cantilever, finest, 0};
     Scene fineScene = buildScene(cf, tight);
-    fineScene.analysis.statics.residualTolerance = 1e-10;
+    fineScene.analysis.statics.residualTolerance = 1e-8;
     fineScene.analysis.statics.displacementTolerance = 1e-12;
     Reference fine;
     fine.run = runOnce(fineScene);
