@@ -12,8 +12,9 @@
 #include "../shared/corofem_vector.h"
 #endif
 
-/* Element pass: (a_c, V) as the real4 of corner c (a_0 = -(a_1 + a_2 + a_3)) into the element
- * output buffer (its layout, element_force.cl), for node_stiffness_blocks to gather. */
+/* Element pass: (a_c, V) as the real4 of corner c into the element output buffer, for
+ * node_stiffness_blocks to gather; used where compute_rotations does not run (linear formulation,
+ * rest state). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void corner_gradients(const uint count, const uint S, __global const real* restrict geom,
                       __global const real* restrict rotGrad, __global real* restrict out) {
@@ -21,22 +22,7 @@ void corner_gradients(const uint count, const uint S, __global const real* restr
   if (e0 >= count) return;
   realv a[9];
   for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
-  const realv V = VLOAD(geom + kGeomVolume * S + e0);
-  real lv[COROFEM_VEC];
-  VSTORE(V, lv);
-  for (int c = 0; c < 4; ++c) {
-    real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
-    if (c == 0) {
-      VSTORE(-(a[0] + a[3] + a[6]), lx);
-      VSTORE(-(a[1] + a[4] + a[7]), ly);
-      VSTORE(-(a[2] + a[5] + a[8]), lz);
-    } else {
-      VSTORE(a[3 * (c - 1)], lx);
-      VSTORE(a[3 * (c - 1) + 1], ly);
-      VSTORE(a[3 * (c - 1) + 2], lz);
-    }
-    for (int l = 0; l < COROFEM_VEC; ++l) vstore4((real4)(lx[l], ly[l], lz[l], lv[l]), 4 * (e0 + l) + c, out);
-  }
+  store_corner_gradients(out, e0, a, VLOAD(geom + kGeomVolume * S + e0));
 }
 
 /* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T, from the

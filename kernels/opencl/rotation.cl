@@ -10,7 +10,9 @@
  *   COROFEM_ROT_QR     Gram-Schmidt of F's columns (cheap edge frame; equals the polar factor only
  *                      for pure rotations: the error grows with the shear).
  * Besides R, the kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force,
- * product and preconditioner kernels use instead of R (see element_force.cl).
+ * product and preconditioner kernels use instead of R (see element_force.cl), and, when a
+ * preconditioner is used, the per-corner (a_c, V) that node_stiffness_blocks gathers (saving the
+ * separate corner_gradients pass).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -315,6 +317,28 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
 }
 #endif
 
+/* ------------------------------------------------------------------ corner data for the preconditioner */
+
+/* (a_c, V) as the real4 of corner c of each of the VEC elements e0.. (a_0 = -(a_1 + a_2 + a_3)), in
+ * the element output buffer's layout (element_force.cl), for node_stiffness_blocks (precond.cl). */
+COROFEM_FN void store_corner_gradients(__global real* out, uint e0, const realv* a, realv V) {
+  real lv[COROFEM_VEC];
+  VSTORE(V, lv);
+  for (int c = 0; c < 4; ++c) {
+    real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
+    if (c == 0) {
+      VSTORE(-(a[0] + a[3] + a[6]), lx);
+      VSTORE(-(a[1] + a[4] + a[7]), ly);
+      VSTORE(-(a[2] + a[5] + a[8]), lz);
+    } else {
+      VSTORE(a[3 * (c - 1)], lx);
+      VSTORE(a[3 * (c - 1) + 1], ly);
+      VSTORE(a[3 * (c - 1) + 2], lz);
+    }
+    for (int l = 0; l < COROFEM_VEC; ++l) vstore4((real4)(lx[l], ly[l], lz[l], lv[l]), 4 * (e0 + l) + c, out);
+  }
+}
+
 /* ------------------------------------------------------------------ the kernel */
 
 COROFEM_FN Mat3 rotation_of(const Mat3* F, __global real* quat, uint e, uint S) {
@@ -343,18 +367,23 @@ __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void compute_rotations(const uint count, const uint S, __global const uint* restrict nodes,
                        __global const real* restrict geom, __global const real* restrict pos,
                        __global real* restrict rot, __global real* restrict rotGrad,
-                       __global real* restrict quat) {
+                       __global real* restrict quat, __global real* restrict corners,
+                       const uint writeCorners) {
   const uint e0 = get_global_id(0) * COROFEM_VEC;
   if (e0 >= count) return;
 #if COROFEM_VEC == 1
   const Mat3 F = element_deformation_gradient(e0, S, nodes, geom, pos);
   const Mat3 R = rotation_of(&F, quat, e0, S);
   for (int k = 0; k < 9; ++k) rot[k * S + e0] = R.m[k];
+  real a[9];
   for (int i = 0; i < 3; ++i) {
     const real g0 = geom[(3 * i) * S + e0], g1 = geom[(3 * i + 1) * S + e0], g2 = geom[(3 * i + 2) * S + e0];
-    for (int j = 0; j < 3; ++j)
-      rotGrad[(3 * i + j) * S + e0] = R.m[3 * j] * g0 + R.m[3 * j + 1] * g1 + R.m[3 * j + 2] * g2;
+    for (int j = 0; j < 3; ++j) {
+      a[3 * i + j] = R.m[3 * j] * g0 + R.m[3 * j + 1] * g1 + R.m[3 * j + 2] * g2;
+      rotGrad[(3 * i + j) * S + e0] = a[3 * i + j];
+    }
   }
+  if (writeCorners) store_corner_gradients(corners, e0, a, geom[kGeomVolume * S + e0]);
 #else
   /* F = sum_{i=1..3} (x_i - x_0) grad N_i^T, VEC elements at once */
   uint idx[4][COROFEM_VEC];
@@ -407,9 +436,12 @@ void compute_rotations(const uint count, const uint S, __global const uint* rest
     for (int k = 0; k < 9; ++k) R[k] = VLOAD(lanesR[k]);
   }
   for (int k = 0; k < 9; ++k) VSTORE(R[k], rot + k * S + e0);
+  realv a[9];
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      VSTORE(R[3 * j] * g[3 * i] + R[3 * j + 1] * g[3 * i + 1] + R[3 * j + 2] * g[3 * i + 2],
-             rotGrad + (3 * i + j) * S + e0);
+    for (int j = 0; j < 3; ++j) {
+      a[3 * i + j] = R[3 * j] * g[3 * i] + R[3 * j + 1] * g[3 * i + 1] + R[3 * j + 2] * g[3 * i + 2];
+      VSTORE(a[3 * i + j], rotGrad + (3 * i + j) * S + e0);
+    }
+  if (writeCorners) store_corner_gradients(corners, e0, a, VLOAD(geom + kGeomVolume * S + e0));
 #endif
 }

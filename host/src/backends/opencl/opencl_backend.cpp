@@ -194,7 +194,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   }
   /// y = A v (element product + gather), p . y partial sums per group into partials_.
   void product(const Buffer& v, const Buffer& y, double massCoef, double stiffCoef, bool project);
-  void refreshBlocks();
+  void refreshBlocks(bool cornersWritten = false);  ///< cornersWritten: by compute_rotations
   void pcgSetup(double massCoef, double stiffCoef);     ///< preconditioner, r, z, p, rho from b_, x_
   void pcgIteration(double massCoef, double stiffCoef); ///< one PCG iteration, no host read
 
@@ -434,9 +434,10 @@ void OpenCLBackend::download(const Buffer& buf, double* dst, std::size_t count) 
   }
 }
 
-void OpenCLBackend::refreshBlocks() {
+void OpenCLBackend::refreshBlocks(bool cornersWritten) {
   if (precond_ == PreconditionerKind::None) return;
-  launch(kCornerGradients_, elemItems_, cl_uint(elems_), cl_uint(stride_), geom_, rotGrad_, elemOut_);
+  if (!cornersWritten)
+    launch(kCornerGradients_, elemItems_, cl_uint(elems_), cl_uint(stride_), geom_, rotGrad_, elemOut_);
   launch(kBlocks_, nodes_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_, RealArg{lambda_},
          RealArg{mu_}, blocks_);
 }
@@ -444,14 +445,14 @@ void OpenCLBackend::refreshBlocks() {
 void OpenCLBackend::enqueueRotations() {
   if (formulation_ != Formulation::Corotational) return;
   launch(kRotations_, elemItems_, cl_uint(elems_), cl_uint(stride_), elemNodes_, geom_, pos_, rot_, rotGrad_,
-         quat_);
+         quat_, elemOut_, cl_uint(precond_ != PreconditionerKind::None ? 1 : 0));
 }
 
 void OpenCLBackend::setPositions(const Eigen::VectorXd& x) {
   checkVector(x, "the positions");
   upload(pos_, x.data(), dofs_);
   enqueueRotations();
-  if (formulation_ == Formulation::Corotational) refreshBlocks();  // the blocks rotate with R
+  if (formulation_ == Formulation::Corotational) refreshBlocks(true);  // the blocks rotate with R
 }
 
 void OpenCLBackend::enqueueElementForces() {
