@@ -222,6 +222,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::size_t elemGroups_ = 0, nodeGroups_ = 0;
   std::vector<std::uint8_t> constrained_;
   std::vector<unsigned char> staging_;
+  Eigen::VectorXd relative_;  ///< positions relative to their centroid (setPositions)
 
   Kernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_,
       kBlocks_, kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
@@ -450,7 +451,16 @@ void OpenCLBackend::enqueueRotations() {
 
 void OpenCLBackend::setPositions(const Eigen::VectorXd& x) {
   checkVector(x, "the positions");
-  upload(pos_, x.data(), dofs_);
+  // Every kernel uses positions only through differences (F = sum (x_i - x_0) grad N_i^T, forces
+  // and energy from F), so the device gets them relative to their centroid, subtracted in double:
+  // a float body 1e4 m from the origin keeps the resolution of one near it.
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (std::size_t n = 0; n < nodes_; ++n) centroid += x.segment<3>(static_cast<Eigen::Index>(3 * n));
+  centroid /= static_cast<double>(std::max<std::size_t>(nodes_, 1));
+  relative_.resize(static_cast<Eigen::Index>(dofs_));
+  for (std::size_t n = 0; n < nodes_; ++n)
+    relative_.segment<3>(static_cast<Eigen::Index>(3 * n)) = x.segment<3>(static_cast<Eigen::Index>(3 * n)) - centroid;
+  upload(pos_, relative_.data(), dofs_);
   enqueueRotations();
   if (formulation_ == Formulation::Corotational) refreshBlocks(true);  // the blocks rotate with R
 }
