@@ -1,7 +1,6 @@
 /* Matrix-free co-rotational element operators, one work-item per COROFEM_VEC elements, each
- * writing the element's 12-vector as four real4 (corner c of element e at real4 index 4 e + c,
- * w = 0) for the deterministic per-node gather (gather.cl), which then reads one aligned real4 per
- * incident corner.
+ * writing the elements' 12-vectors in blocks of VEC elements (store_corner, corofem_vector.h) for
+ * the deterministic per-node gather (gather.cl).
  *
  * Internal force (paper Eq. 9): f = R K (R^T x - X). With K = V B^T H B (Eq. 7) applied from the
  * gradients instead of a stored 12x12:
@@ -53,15 +52,6 @@ COROFEM_FN void corner_outer_sum(const ElemBlock* b, __global const real* v, rea
       for (int k = 0; k < 3; ++k) P[3 * j + k] += d * b->a[3 * (i - 1) + k];
     }
   }
-}
-
-/* Writes the corner-c vectors (x, y, z) of the VEC elements e0.. as real4 at 4 e + c. */
-COROFEM_FN void store_corner(__global real* out, uint e0, int c, realv x, realv y, realv z) {
-  real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
-  VSTORE(x, lx);
-  VSTORE(y, ly);
-  VSTORE(z, lz);
-  for (int l = 0; l < COROFEM_VEC; ++l) vstore4((real4)(lx[l], ly[l], lz[l], (real)0), 4 * (e0 + l) + c, out);
 }
 
 /* Given P, E = sym(P) - shift I, S_w = lambda tr(E) I + 2 mu E; writes y_i = V S_w a_i and

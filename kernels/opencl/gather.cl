@@ -1,21 +1,28 @@
 /* Deterministic scatter of the per-element 12-vectors to the nodes, written as a gather: one
  * work-item per node sums its incident (element, corner) contributions in the fixed CSR order
  * built once on the host, so two runs give the same bits (no atomics, no colouring).
- * entries[j] = 4 e + c is the real4 of corner c of element e in `elemOut` (element_force.cl).
+ * entries[j] = ((e / VEC) * 12 + 3 c) * VEC + e % VEC addresses component x of corner c of element
+ * e in `elemOut`; y and z follow VEC and 2 VEC reals later (store_corner, corofem_vector.h).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
 #include "../shared/corofem_reduce.h"
+#include "../shared/corofem_vector.h"
 #endif
 
 COROFEM_FN void gather_node(uint n, __global const uint* start, __global const uint* entries,
                         __global const real* elemOut, real* acc) {
-  real4 sum = (real4)(0);
+  real sx = 0, sy = 0, sz = 0;
   const uint end = start[n + 1];
-  for (uint j = start[n]; j < end; ++j) sum += vload4(entries[j], elemOut);
-  acc[0] = sum.x;
-  acc[1] = sum.y;
-  acc[2] = sum.z;
+  for (uint j = start[n]; j < end; ++j) {
+    const uint at = entries[j];
+    sx += elemOut[at];
+    sy += elemOut[at + COROFEM_VEC];
+    sz += elemOut[at + 2 * COROFEM_VEC];
+  }
+  acc[0] = sx;
+  acc[1] = sy;
+  acc[2] = sz;
 }
 
 /* f_n = sum over incident elements (internal forces, Eq. 9 assembled). */

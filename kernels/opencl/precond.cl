@@ -12,7 +12,7 @@
 #include "../shared/corofem_vector.h"
 #endif
 
-/* Element pass: (a_c, V) as the real4 of corner c into the element output buffer, for
+/* Element pass: a_c of every corner into the element output buffer (store_corner), for
  * node_stiffness_blocks to gather; used where compute_rotations does not run (linear formulation,
  * rest state). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
@@ -22,29 +22,33 @@ void corner_gradients(const uint count, const uint S, __global const real* restr
   if (e0 >= count) return;
   realv a[9];
   for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
-  store_corner_gradients(out, e0, a, VLOAD(geom + kGeomVolume * S + e0));
+  store_corner_gradients(out, e0, a);
 }
 
 /* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T, from the
- * (a_c, V) written by corner_gradients, in the fixed CSR order. */
+ * a_c written by compute_rotations or corner_gradients and the rest volumes, in the fixed CSR
+ * order. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void node_stiffness_blocks(const uint nodeCount, __global const uint* restrict start,
+void node_stiffness_blocks(const uint nodeCount, const uint S, __global const uint* restrict start,
                            __global const uint* restrict entries, __global const real* restrict corners,
-                           const real lambda, const real mu, __global real* restrict blocks) {
+                           __global const real* restrict geom, const real lambda, const real mu,
+                           __global real* restrict blocks) {
   const uint n = get_global_id(0);
   if (n >= nodeCount) return;
   real b[6] = {0, 0, 0, 0, 0, 0};
   const uint end = start[n + 1];
   for (uint j = start[n]; j < end; ++j) {
-    const real4 av = vload4(entries[j], corners);
-    const real V = av.w;
-    const real lm = V * (lambda + mu), iso = V * mu * (av.x * av.x + av.y * av.y + av.z * av.z);
-    b[0] += lm * av.x * av.x + iso;
-    b[1] += lm * av.y * av.y + iso;
-    b[2] += lm * av.z * av.z + iso;
-    b[3] += lm * av.x * av.y;
-    b[4] += lm * av.x * av.z;
-    b[5] += lm * av.y * av.z;
+    const uint at = entries[j];
+    const uint e = (at / (12 * COROFEM_VEC)) * COROFEM_VEC + at % COROFEM_VEC;
+    const real ax = corners[at], ay = corners[at + COROFEM_VEC], az = corners[at + 2 * COROFEM_VEC];
+    const real V = geom[kGeomVolume * S + e];
+    const real lm = V * (lambda + mu), iso = V * mu * (ax * ax + ay * ay + az * az);
+    b[0] += lm * ax * ax + iso;
+    b[1] += lm * ay * ay + iso;
+    b[2] += lm * az * az + iso;
+    b[3] += lm * ax * ay;
+    b[4] += lm * ax * az;
+    b[5] += lm * ay * az;
   }
   for (int k = 0; k < 6; ++k) blocks[6 * n + k] = b[k];
 }

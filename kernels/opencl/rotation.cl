@@ -11,7 +11,7 @@
  *                      for pure rotations: the error grows with the shear).
  * Besides R, the kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force,
  * product and preconditioner kernels use instead of R (see element_force.cl), and, when a
- * preconditioner is used, the per-corner (a_c, V) that node_stiffness_blocks gathers (saving the
+ * preconditioner is used, the per-corner a_c that node_stiffness_blocks gathers (saving the
  * separate corner_gradients pass).
  */
 #ifndef COROFEM_EMBEDDED
@@ -319,24 +319,11 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
 
 /* ------------------------------------------------------------------ corner data for the preconditioner */
 
-/* (a_c, V) as the real4 of corner c of each of the VEC elements e0.. (a_0 = -(a_1 + a_2 + a_3)), in
- * the element output buffer's layout (element_force.cl), for node_stiffness_blocks (precond.cl). */
-COROFEM_FN void store_corner_gradients(__global real* out, uint e0, const realv* a, realv V) {
-  real lv[COROFEM_VEC];
-  VSTORE(V, lv);
-  for (int c = 0; c < 4; ++c) {
-    real lx[COROFEM_VEC], ly[COROFEM_VEC], lz[COROFEM_VEC];
-    if (c == 0) {
-      VSTORE(-(a[0] + a[3] + a[6]), lx);
-      VSTORE(-(a[1] + a[4] + a[7]), ly);
-      VSTORE(-(a[2] + a[5] + a[8]), lz);
-    } else {
-      VSTORE(a[3 * (c - 1)], lx);
-      VSTORE(a[3 * (c - 1) + 1], ly);
-      VSTORE(a[3 * (c - 1) + 2], lz);
-    }
-    for (int l = 0; l < COROFEM_VEC; ++l) vstore4((real4)(lx[l], ly[l], lz[l], lv[l]), 4 * (e0 + l) + c, out);
-  }
+/* a_c (a_0 = -(a_1 + a_2 + a_3)) of the VEC elements e0.. in the element output layout
+ * (store_corner), for node_stiffness_blocks (precond.cl). */
+COROFEM_FN void store_corner_gradients(__global real* out, uint e0, const realv* a) {
+  store_corner(out, e0, 0, -(a[0] + a[3] + a[6]), -(a[1] + a[4] + a[7]), -(a[2] + a[5] + a[8]));
+  for (int c = 1; c < 4; ++c) store_corner(out, e0, c, a[3 * (c - 1)], a[3 * (c - 1) + 1], a[3 * (c - 1) + 2]);
 }
 
 /* ------------------------------------------------------------------ the kernel */
@@ -383,7 +370,7 @@ void compute_rotations(const uint count, const uint S, __global const uint* rest
       rotGrad[(3 * i + j) * S + e0] = a[3 * i + j];
     }
   }
-  if (writeCorners) store_corner_gradients(corners, e0, a, geom[kGeomVolume * S + e0]);
+  if (writeCorners) store_corner_gradients(corners, e0, a);
 #else
   /* F = sum_{i=1..3} (x_i - x_0) grad N_i^T, VEC elements at once */
   uint idx[4][COROFEM_VEC];
@@ -442,6 +429,6 @@ void compute_rotations(const uint count, const uint S, __global const uint* rest
       a[3 * i + j] = R[3 * j] * g[3 * i] + R[3 * j + 1] * g[3 * i + 1] + R[3 * j + 2] * g[3 * i + 2];
       VSTORE(a[3 * i + j], rotGrad + (3 * i + j) * S + e0);
     }
-  if (writeCorners) store_corner_gradients(corners, e0, a, VLOAD(geom + kGeomVolume * S + e0));
+  if (writeCorners) store_corner_gradients(corners, e0, a);
 #endif
 }

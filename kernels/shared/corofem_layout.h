@@ -52,11 +52,13 @@ COROFEM_CONSTANT(unsigned, kQuatComponents, 4);
 /* Stored element stiffness (stored-K_e variant): the upper triangle of the symmetric 12x12 K_e,
  * row by row (entry (r, c), c >= r, at index r * 12 - r (r - 1) / 2 + (c - r)), 78 components.   */
 COROFEM_CONSTANT(unsigned, kStoredKComponents, 78);
-/* Per-element output 12-vector (forces or product), array of structures for the gather: corner c
- * of element e is the real4 at index 4 e + c (x, y, z, 0), 16 reals per element.                 */
-COROFEM_CONSTANT(unsigned, kElemOutComponents, 16);
+/* Per-element output 12-vector (forces, products, preconditioner corner data), in blocks of
+ * B = COROFEM_VEC elements so that a work-item writes whole vectors: component k of corner c of
+ * element e at ((e / B) * 12 + 3 c + k) * B + e % B (B = 1 on GPUs: 12 contiguous per element).   */
+COROFEM_CONSTANT(unsigned, kElemOutComponents, 12);
 
-/* Node gather list (CSR over nodes, fixed order): entry = 4 e + c for corner c of element e.      */
+/* Node gather list (CSR over nodes, fixed order): entry = ((e / B) * 12 + 3 c) * B + e % B, the
+ * x component of corner c of element e; y and z follow B and 2 B later.                          */
 
 /* Per-node preconditioner input: symmetric 3x3 block sum of the rotated element stiffness blocks
  * sum_e R K_e,ii R^T (xx, yy, zz, xy, xz, yz) at 6 n + k.                                        */

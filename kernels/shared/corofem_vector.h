@@ -64,6 +64,17 @@ COROFEM_FN realv gather_node_component(__global const real* v, const uint* idx, 
   return VLOAD(lanes);
 }
 
+/* Element output 12-vectors in blocks of COROFEM_VEC elements (corofem_layout.h): component k of
+ * corner c of element e at ((e / VEC) * 12 + 3 c + k) * VEC + e % VEC. A work-item stores each
+ * component of its VEC elements with one contiguous vector store; the gather finds the three
+ * components of a corner VEC reals apart (one or two cache lines). */
+COROFEM_FN void store_corner(__global real* out, uint e0, int c, realv x, realv y, realv z) {
+  __global real* base = out + ((e0 / COROFEM_VEC) * 12 + 3 * c) * COROFEM_VEC;
+  VSTORE(x, base);
+  VSTORE(y, base + COROFEM_VEC);
+  VSTORE(z, base + 2 * COROFEM_VEC);
+}
+
 /* Sum of the lanes in a fixed order (deterministic). */
 COROFEM_FN real lane_sum(realv v) {
   real lanes[COROFEM_VEC];

@@ -377,7 +377,8 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     std::vector<cl_uint> fill(start.begin(), start.end() - 1);
     for (std::size_t e = 0; e < elems_; ++e)
       for (int k = 0; k < 4; ++k)
-        entries[fill[problem.mesh.tets[4 * e + k]]++] = static_cast<cl_uint>(4 * e + k);
+        entries[fill[problem.mesh.tets[4 * e + k]]++] =
+            static_cast<cl_uint>(((e / vec_) * 12 + 3 * k) * vec_ + e % vec_);
     nodeStart_.create(c, start.size() * sizeof(cl_uint), dev_);
     uploadRaw(nodeStart_, start);
     nodeEntries_.create(c, entries.size() * sizeof(cl_uint), dev_);
@@ -439,8 +440,8 @@ void OpenCLBackend::refreshBlocks(bool cornersWritten) {
   if (precond_ == PreconditionerKind::None) return;
   if (!cornersWritten)
     launch(kCornerGradients_, elemItems_, cl_uint(elems_), cl_uint(stride_), geom_, rotGrad_, elemOut_);
-  launch(kBlocks_, nodes_, cl_uint(nodes_), nodeStart_, nodeEntries_, elemOut_, RealArg{lambda_},
-         RealArg{mu_}, blocks_);
+  launch(kBlocks_, nodes_, cl_uint(nodes_), cl_uint(stride_), nodeStart_, nodeEntries_, elemOut_, geom_,
+         RealArg{lambda_}, RealArg{mu_}, blocks_);
 }
 
 void OpenCLBackend::enqueueRotations() {
