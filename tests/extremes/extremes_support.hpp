@@ -135,9 +135,10 @@ inline Scene staticScene(const BackendCase& c, const BodyDesc& body, int increme
   Scene scene = dynamicScene(c, body, 1.0, 1);
   scene.analysis.kind = AnalysisDesc::Kind::Static;
   scene.analysis.statics.increments = increments;
-  // Float: the OpenCL backend stores absolute positions in float, so x is quantised to
-  // ulp(|x|) (3e-8 m at 0.4 m) and f_int carries a noise of E ulp(|x|) / element size per element
-  // corner, which does not shrink as Newton converges. Measured on the 0.4 m cantilever under
+  // Float: the OpenCL backend stores positions in float (relative to the body's centroid since
+  // commit 1ee3d8c), so x is quantised to the ulp of the body's size (~1.5e-8 m at 0.2 m) and
+  // f_int carries a noise of E ulp / element size per element corner, which does not shrink as
+  // Newton converges. Measured on the 0.4 m cantilever under
   // gravity (E = 1e6 Pa): the relative residual stalls at ~1e-3 and the corrections at ~1e-7 m
   // (|dx| / |u| ~ 1e-5). The defaults (1e-6, 1e-8) are unreachable there; these are not.
   if (c.isFloat()) {

@@ -229,8 +229,8 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
       setBackendPositions(x_, true);  // the backend goes back to the last converged state too
       // A stall at the rounding floor: the corrections have shrunk to nothing while the residual
       // stays well above the tolerance. More iterations or increments cannot help; it is what the
-      // float backends show (absolute positions rounded to ulp(|x|) give f_int a noise of
-      // E ulp(|x|) / element size; measured ~1e-3 relative on a 0.4 m cantilever, E = 1e6 Pa,
+      // float backends show (positions rounded to ulp of the body's size give f_int a noise of
+      // E ulp / element size; measured ~1e-3 relative on a 0.4 m cantilever, E = 1e6 Pa,
       // tests/extremes/test_incompressible.cpp).
       const bool stalled = std::isfinite(last.relative) && last.relative > 10.0 * desc_.residualTolerance &&
                            last.correction < 1e-3;
@@ -240,7 +240,7 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
            "analysis.max_newton_iterations; check the constraints (is the body held?) and the material",
            stalled ? ". The corrections have stalled while the residual has not: the residual is at the rounding "
                      "floor of the force evaluation (typical of solver.precision \"float\", whose floor grows with "
-                     "the stiffness and the distance from the origin); use \"double\" or a residual_tolerance "
+                     "the stiffness and the body's size); use \"double\" or a residual_tolerance "
                      "above the stalled residual"
                    : "");
     }
