@@ -94,9 +94,7 @@ struct DynamicDesc {
   double newmarkGamma = 0.5;     ///< 0.5 <= gamma <= 1
   int newtonIterations = 1;      ///< Newton iterations per step (1 = linearised, as in the paper), >= 1
   double newtonTolerance = 1e-6; ///< relative residual that ends the Newton loop early
-  /// Failure policy: a step that fails (non-finite state, blow-up, runaway energy) is retried from
-  /// its start as 2, 4, 8, ... substeps of timeStep / k while k <= maxSubsteps; 1 = no retry. >= 1
-  int maxSubsteps = 1;
+  int maxSubsteps = 1;           ///< a failed step is retried as 2, 4, ... substeps of timeStep/k, k <= this (1 = no retry), >= 1
 };
 
 struct AnalysisDesc {
