@@ -156,8 +156,8 @@ TEST_P(OpenCLBackendVsReference, GpuAndCpuKernelConfigurationsAgree) {
   for (std::size_t width : {1, 8}) {
     detail::OpenCLOptions o;
     o.vectorWidth = width;
-    o.nodeChunk = width == 1 ? 1 : 16;
-    o.treeReduce = width == 1 ? 1 : 0;
+    o.nodeChunk = width == 1 ? 1 : 0;
+    o.treeReduce = width == 1 ? 1 : -1;
     auto ocl = openclBackend(p, solver(), o);
     ocl->setPositions(x);
     sols[config] = Eigen::VectorXd::Zero(b.size());
