@@ -72,6 +72,15 @@ class Simulation {
   std::string backendName() const;  ///< "reference", "opencl"
   std::string deviceName() const;   ///< e.g. "host (Eigen, double)" or the OpenCL device name
 
+  /// Where the bodies run and why, as JSON text: {"choice", "reason", "candidates": [{"backend",
+  /// "device", "ms_per_step", "from_cache", "error"}], "from_cache"} for the first body, the same
+  /// per body under "bodies", and "fallbacks": [{"body", "when", "call", "from", "to", "error"}]
+  /// for every device failure survived by moving a body to the next backend.
+  std::string schedulerReport() const;
+  /// The plan of the scene as JSON text (per body: backend, terms, kernels, buffers with their
+  /// sizes, estimated bytes moved per step); see docs/scene-format.md, "Scheduling and plans".
+  std::string planReport() const;
+
  private:
   struct Impl;
   explicit Simulation(std::unique_ptr<Impl> impl);

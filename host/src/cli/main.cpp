@@ -1,6 +1,7 @@
 // The `corofem` command: run a scene headless, inspect a mesh, convert between mesh formats.
 //
 //   corofem run SCENE [--out DIR] [--set key.path=value ...] [--quiet]
+//   corofem run SCENE --plan [--json] [--set ...]
 //   corofem info MESH [--json]
 //   corofem convert IN OUT
 //
@@ -52,6 +53,11 @@ void usage(std::ostream& os) {
         "      DIR/<body>.pvd + DIR/vtk/*.vtu (ParaView) and DIR/summary.json.\n"
         "      DIR defaults to out/<scene name>. --set overrides any scene value, e.g.\n"
         "      --set bodies.0.material.youngs_modulus=2e5 --set analysis.integrator=backward_euler\n"
+        "  corofem run SCENE.json --plan [--json]\n"
+        "      Prints the plan without running the scene: per body the backend/device chosen (and\n"
+        "      why), the terms and kernels in use, buffers with their sizes and the estimated bytes\n"
+        "      moved per step. COROFEM_DEVICE=reference|opencl|opencl:INDEX|opencl:NAME overrides\n"
+        "      \"backend\": \"auto\".\n"
         "  corofem info MESH [--json]\n"
         "      Counts, bounding box, volume, element quality and orientation of a tet mesh\n"
         "      (.msh .node/.ele .mesh .vtk .veg) or a surface mesh (.obj).\n"
@@ -67,13 +73,64 @@ bool isSurfacePath(const std::string& path) {
 }
 
 // ------------------------------------------------------------------------------------ run
+std::string humanBytes(double b) {
+  const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+  int u = 0;
+  while (b >= 1024 && u < 4) {
+    b /= 1024;
+    ++u;
+  }
+  char buf[64];
+  std::snprintf(buf, sizeof buf, u ? "%.1f %s" : "%.0f %s", b, units[u]);
+  return buf;
+}
+
+/// `corofem run --plan`: the scene's plan (Simulation::planReport), as JSON or as text.
+int printPlan(const Simulation& sim, bool asJson) {
+  const nlohmann::json plan = nlohmann::json::parse(sim.planReport());
+  if (asJson) {
+    std::cout << plan.dump(2) << '\n';
+    return kExitOk;
+  }
+  std::cout << "plan of scene '" << plan["scene"].get<std::string>() << "': " << plan["analysis"].get<std::string>()
+            << ", " << plan["steps"] << (plan["analysis"] == "static" ? " increment(s)" : " step(s)") << '\n';
+  for (const auto& b : plan["bodies"]) {
+    std::cout << "body '" << b["body"].get<std::string>() << "' (" << b["elements"] << " elements, " << b["nodes"]
+              << " nodes) on " << b["choice"].get<std::string>() << "\n  why: " << b["reason"].get<std::string>()
+              << "\n  features:";
+    for (auto it = b["features"].begin(); it != b["features"].end(); ++it) {
+      const std::string v = it.value().is_string() ? it.value().get<std::string>() : it.value().dump();
+      std::cout << ' ' << it.key() << '=' << v;
+    }
+    std::cout << "\n  terms:";
+    for (const auto& t : b["terms"]) std::cout << " [" << t.get<std::string>() << ']';
+    std::cout << "\n  kernels:\n";
+    for (const auto& k : b["kernels"]) std::cout << "    " << k.get<std::string>() << '\n';
+    std::cout << "  buffers (" << humanBytes(b["buffer_bytes_total"].get<double>()) << " in all):\n";
+    for (const auto& buf : b["buffers"])
+      std::cout << "    " << buf["name"].get<std::string>() << " [" << buf["where"].get<std::string>() << "] "
+                << humanBytes(buf["bytes"].get<double>()) << '\n';
+    const auto& m = b["bytes_moved"];
+    std::cout << "  bytes moved (estimate): " << humanBytes(m["per_pcg_iteration"].get<double>()) << " per PCG iteration, "
+              << humanBytes(m["per_newton_iteration_without_pcg"].get<double>()) << " per Newton iteration besides PCG, "
+              << "at most " << humanBytes(m["per_step_upper_bound"].get<double>()) << " per step ("
+              << m["newton_iterations"] << " Newton iteration(s), " << m["newton_iterations_is"].get<std::string>()
+              << ", PCG cap " << m["pcg_iteration_cap"] << ")\n";
+  }
+  return kExitOk;
+}
+
 int cmdRun(const std::vector<std::string>& args) {
   std::string scenePath, outDir;
   std::vector<std::string> overrides;
-  bool quiet = false;
+  bool quiet = false, plan = false, asJson = false;
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
-    if (a == "--out" || a == "--set") {
+    if (a == "--plan") {
+      plan = true;
+    } else if (a == "--json") {
+      asJson = true;
+    } else if (a == "--out" || a == "--set") {
       if (i + 1 >= args.size()) return report(Status(ErrorCode::BadInput, a + " needs a value"));
       (a == "--out" ? outDir : overrides.emplace_back()) = args[++i];
     } else if (a.rfind("--out=", 0) == 0) {
@@ -83,7 +140,7 @@ int cmdRun(const std::vector<std::string>& args) {
     } else if (a == "--quiet" || a == "-q") {
       quiet = true;
     } else if (!a.empty() && a[0] == '-') {
-      return report(Status(ErrorCode::BadInput, "run: unknown option " + a + " (options: --out DIR, --set key=value, --quiet)"));
+      return report(Status(ErrorCode::BadInput, "run: unknown option " + a + " (options: --out DIR, --set key=value, --quiet, --plan, --json)"));
     } else if (scenePath.empty()) {
       scenePath = a;
     } else {
@@ -98,6 +155,7 @@ int cmdRun(const std::vector<std::string>& args) {
 
   auto sim = Simulation::create(scene.value());
   if (!sim) return report(sim.status());
+  if (plan) return printPlan(sim.value(), asJson);
 
   const auto t0 = std::chrono::steady_clock::now();
   Status status;
@@ -109,6 +167,13 @@ int cmdRun(const std::vector<std::string>& args) {
               << sim->backendName() << " on " << sim->deviceName() << ", " << sim->stepCount()
               << (scene->analysis.kind == AnalysisDesc::Kind::Static ? " load increment(s)" : " step(s)")
               << ", outputs in " << outDir << std::endl;
+  if (!quiet) {
+    const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
+    for (const auto& b : sched["bodies"])
+      std::cout << "corofem: scheduler: body '" << b["body"].get<std::string>() << "' on "
+                << b["current"].get<std::string>() << ": " << b["reason"].get<std::string>()
+                << (b["from_cache"].get<bool>() ? " [from cache]" : "") << std::endl;
+  }
   for (int b = 0; !quiet && b < sim->bodyCount(); ++b)
     if (const BindingStatistics* st = sim->surfaceBinding(b))
       std::cout << "corofem: body '" << scene->bodies[static_cast<std::size_t>(b)].name << "': surface "

@@ -182,6 +182,13 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
   }
   j["backend"] = sim.backendName();
   j["device"] = sim.deviceName();
+  {
+    // Where the bodies ran and why (schedule/scheduler.hpp), and the device failures survived.
+    json sched = json::parse(sim.schedulerReport());
+    j["fallbacks"] = sched["fallbacks"];
+    sched.erase("fallbacks");
+    j["scheduler"] = sched;
+  }
   j["analysis"] = scene.analysis.kind == AnalysisDesc::Kind::Static ? "static" : "dynamic";
   j["steps_requested"] = sim.stepCount();
   j["steps_taken"] = sim.stepsTaken();

@@ -3,10 +3,13 @@
 #include <corofem/simulation.hpp>
 
 #include "model/problem.hpp"
+#include "schedule/scheduler.hpp"
 #include "scene/scene_paths.hpp"
 #include "solve/backend.hpp"
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
+
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cassert>
@@ -17,10 +20,6 @@
 namespace corofem {
 
 namespace {
-
-bool isHyperelastic(Formulation f) {
-  return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean;
-}
 
 /// Reads the body's surface, moves it like the mesh (scale, then translate) and binds it.
 void attachSurface(const BodyDesc& desc, const std::string& baseDir, const TetMesh& mesh,
@@ -48,7 +47,11 @@ struct Simulation::Impl {
     // The problem is heap-held so that the backend and the driver, which keep references to it,
     // survive moves of the Body.
     std::unique_ptr<detail::Problem> problem;
+    // The backend is a FailoverBackend over the scheduler's candidates (schedule/scheduler.hpp):
+    // a device failure moves the body to the next candidate without the driver noticing.
     std::unique_ptr<detail::Backend> backend;
+    detail::FailoverBackend* failover = nullptr;  ///< = backend.get()
+    detail::BodySchedule schedule;
     std::unique_ptr<detail::BodySolver> solver;
     // Render surface bound to the tet mesh (paper Sec. 5), when the body names one.
     std::unique_ptr<SurfaceMesh> surface;
@@ -58,7 +61,6 @@ struct Simulation::Impl {
   Scene scene;
   std::vector<Body> bodies;
   int stepsTaken = 0;
-  std::string backendName, deviceName;
 
   bool isStatic() const { return scene.analysis.kind == AnalysisDesc::Kind::Static; }
   int stepCount() const {
@@ -86,26 +88,16 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
       body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
 
-      switch (scene.backend.kind) {
-        case BackendKind::OpenCL:
-          if (isHyperelastic(desc.formulation))
-            detail::fail(ErrorCode::BadInput, "body '", desc.name, "': the ", toString(desc.formulation),
-                         " formulation runs only on the reference backend; set \"backend\": \"reference\" "
-                         "or use the \"corotational\" or \"linear\" formulation");
-          body.backend = detail::createOpenCLBackend(*body.problem, scene.solver, scene.backend.device);
-          break;
-        case BackendKind::Auto:
-          // TODO(scheduler): Auto should pick a device (GPU for large work, PoCL otherwise, with a
-          // calibration run); until the scheduler exists it is the reference backend.
-        case BackendKind::Reference:
-          body.backend = detail::createReferenceBackend(*body.problem, scene.solver);
-          break;
-      }
+      // Where the body runs: the explicit choice (scene / API, else COROFEM_DEVICE), or for "auto"
+      // the scheduler's calibrated (or cached) choice; hyperelastic bodies always on the reference.
+      body.schedule = detail::scheduleBody(desc, *body.problem, scene);
+      auto failover = std::make_unique<detail::FailoverBackend>(*body.problem, scene.solver, body.schedule.order,
+                                                                !body.schedule.explicitChoice);
+      body.failover = failover.get();
+      body.backend = std::move(failover);
       body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis);
       impl->bodies.push_back(std::move(body));
     }
-    impl->backendName = impl->bodies.front().backend->name();
-    impl->deviceName = impl->bodies.front().backend->deviceName();
     return Simulation(std::move(impl));
   });
 }
@@ -128,6 +120,7 @@ Status Simulation::step(StepReport* report) {
     std::size_t done = 0;
     try {
       for (; done < s.bodies.size(); ++done) {
+        s.bodies[done].failover->setWhen("step " + std::to_string(index));
         const detail::BodyStepStats b = s.bodies[done].solver->step(index, count);
         r.newtonIterations += b.newtonIterations;
         r.linearIterations += b.linearIterations;
@@ -224,7 +217,46 @@ Status Simulation::readSurface(int body, std::vector<double>& positions, std::ve
   });
 }
 
-std::string Simulation::backendName() const { return impl_->backendName; }
-std::string Simulation::deviceName() const { return impl_->deviceName; }
+// The first body's backend as it is now (a failover changes it).
+std::string Simulation::backendName() const { return impl_->bodies.front().backend->name(); }
+std::string Simulation::deviceName() const { return impl_->bodies.front().backend->deviceName(); }
+
+std::string Simulation::schedulerReport() const {
+  using nlohmann::json;
+  json j;
+  json bodies = json::array(), fallbacks = json::array();
+  for (const Impl::Body& b : impl_->bodies) {
+    json s = json::parse(detail::scheduleJson(b.schedule));
+    s["current"] = b.failover->current().label();
+    bodies.push_back(s);
+    for (const detail::FallbackEvent& e : b.failover->events()) fallbacks.push_back(json::parse(detail::fallbackJson(e)));
+  }
+  // The top level repeats the first body's decision (the whole scene for a one-body scene).
+  const json& first = bodies.front();
+  j["choice"] = first["choice"];
+  j["reason"] = first["reason"];
+  j["candidates"] = first["candidates"];
+  j["from_cache"] = first["from_cache"];
+  j["bodies"] = bodies;
+  j["fallbacks"] = fallbacks;
+  return j.dump();
+}
+
+std::string Simulation::planReport() const {
+  using nlohmann::json;
+  json j;
+  j["scene"] = impl_->scene.name;
+  j["analysis"] = impl_->isStatic() ? "static" : "dynamic";
+  j["steps"] = impl_->stepCount();
+  json bodies = json::array();
+  for (std::size_t i = 0; i < impl_->bodies.size(); ++i) {
+    const Impl::Body& b = impl_->bodies[i];
+    detail::BodySchedule now = b.schedule;  // after a fallback at create, the backend in use
+    now.order.insert(now.order.begin(), b.failover->current());
+    bodies.push_back(json::parse(detail::planJson(impl_->scene.bodies[i], *b.problem, impl_->scene, now)));
+  }
+  j["bodies"] = bodies;
+  return j.dump();
+}
 
 }  // namespace corofem

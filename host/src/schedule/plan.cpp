@@ -1,0 +1,194 @@
+// The plan of a body: where it runs, which terms and kernels its step needs, the buffers those
+// need and an estimate of the bytes moved per step. Everything is estimated on the host from the
+// Problem and the SolverDesc (the backends expose no introspection); the model is stated in the
+// "bytes_model" field and in docs/scene-format.md.
+//
+// What the step requires (and so what the plan lists):
+//   stiffness K_t            always
+//   rotations R_e            co-rotational formulation only (linear: R = I, hyperelastic: F)
+//   lumped mass M            dynamics only (statics solve K_t dx = -r)
+//   damping C = aM + bK_t    dynamics with Rayleigh alpha or beta > 0
+//   velocities, accelerations  dynamics only (host driver state)
+//   preconditioner blocks    PCG with a preconditioner
+//   surface update           bodies with a render surface
+//
+// Buffer layout of the OpenCL backend (sizes from kernels/shared/corofem_layout.h: 4 node indices,
+// 10 geometry reals (9 gradients + volume), 9 rotation reals, 9 rotated-gradient reals, 4
+// quaternion reals, 12 element-output reals per element; 6 node-block reals per node) and of the
+// reference backend (CSR matrix with 9 entries per node pair that shares an element).
+//
+// Bytes model (r = bytes per real: 8 double, 4 float; D = 3 N dofs; E elements):
+//   OpenCL product q = A p: element pass E (16 + (10 + 12 + 12) r) [node ids, gradients + volume or
+//     rotated gradients, p at the corners, element output], gather pass 16 E + 4 (N + 1) + 12 E r
+//     + D r (p, q, free mask, + mass when the mass term is in use).
+//   PCG iteration: one product + the vector updates (x, r, z, p, q, preconditioner) ~ 12 D r + 3 N
+//     (or 9 N block) r.
+//   Newton iteration without PCG: rotations E (16 + 22 r) (co-rotational only) + internal forces
+//     (one product) + PCG set-up (one product) + host transfers 5 D r (positions, b, x both ways,
+//     forces).
+//   Reference product: the CSR matrix (nnz (8 + 4) + 4 (D + 1)) + 3 D 8; per Newton iteration the
+//     assembly writes the matrix once and reads 144 8 bytes per element.
+//   Upper bound per step = Newton iterations (dynamics: the scene's count; statics: the cap) x
+//   (Newton iteration + PCG iteration cap x PCG iteration). Real steps stop PCG far earlier; the
+//   per-iteration figures are the useful ones.
+#include "schedule/scheduler.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <set>
+#include <utility>
+
+namespace corofem::detail {
+
+namespace {
+
+using nlohmann::json;
+
+const char* precondName(PreconditionerKind p) {
+  switch (p) {
+    case PreconditionerKind::None: return "none";
+    case PreconditionerKind::Diagonal: return "diagonal";
+    case PreconditionerKind::BlockDiagonal: return "block_diagonal";
+  }
+  return "?";
+}
+
+/// Distinct node pairs that share an element (the off-diagonal 3x3 blocks of K).
+std::size_t edgeCount(const TetMesh& mesh) {
+  std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
+  for (std::size_t e = 0; e < mesh.tetCount(); ++e)
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j) {
+        std::uint32_t a = mesh.tets[4 * e + i], b = mesh.tets[4 * e + j];
+        if (a > b) std::swap(a, b);
+        edges.insert({a, b});
+      }
+  return edges.size();
+}
+
+}  // namespace
+
+std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& scene, const BodySchedule& schedule) {
+  const bool dynamic = scene.analysis.kind == AnalysisDesc::Kind::Dynamic;
+  const bool corot = problem.formulation == Formulation::Corotational;
+  const bool hyper = problem.formulation == Formulation::StVenantKirchhoff || problem.formulation == Formulation::NeoHookean;
+  const bool damping = dynamic && (problem.rayleighMass > 0 || problem.rayleighStiffness > 0);
+  const bool pcg = scene.solver.linearSolver == LinearSolverKind::Pcg;
+  const bool precond = pcg && scene.solver.preconditioner != PreconditionerKind::None;
+  const bool block = scene.solver.preconditioner == PreconditionerKind::BlockDiagonal;
+  const Candidate& c = schedule.choice();
+  const bool device = c.kind == BackendKind::OpenCL;
+  const double r = device && scene.solver.precision == Precision::Float ? 4.0 : 8.0;
+  const double E = static_cast<double>(problem.elements.size());
+  const double N = static_cast<double>(problem.mesh.nodeCount());
+  const double D = 3.0 * N;
+
+  json j;
+  j["body"] = desc.name;
+  j["backend"] = device ? "opencl" : "reference";
+  j["device"] = c.device;
+  j["choice"] = c.label();
+  j["reason"] = schedule.reason;
+  j["elements"] = problem.elements.size();
+  j["nodes"] = problem.mesh.nodeCount();
+
+  json f;
+  f["formulation"] = toString(problem.formulation);
+  if (corot)
+    f["rotation_method"] = device ? toString(problem.rotation) : "polar (the reference backend computes every method by SVD)";
+  f["precision"] = device ? (scene.solver.precision == Precision::Float ? "float" : "double") : "double";
+  f["analysis"] = dynamic ? "dynamic" : "static";
+  if (dynamic) f["integrator"] = scene.analysis.dynamics.integrator == Integrator::Newmark ? "newmark" : "backward_euler";
+  f["linear_solver"] = pcg ? "pcg" : "cholesky";
+  if (pcg) f["preconditioner"] = precondName(scene.solver.preconditioner);
+  f["mass_terms"] = dynamic;
+  f["damping"] = damping;
+  f["surface_update"] = !desc.surface.empty();
+  f["prescribed_displacements"] = !problem.prescribed.empty();
+  json terms = json::array({"stiffness K_t"});
+  if (dynamic) terms.push_back("lumped mass M");
+  if (damping) terms.push_back("Rayleigh damping C = alpha M + beta K_t");
+  j["terms"] = terms;
+  j["features"] = f;
+
+  json kernels = json::array();
+  json buffers = json::array();
+  auto buffer = [&](const std::string& name, const std::string& where, double bytes) {
+    buffers.push_back({{"name", name}, {"where", where}, {"bytes", static_cast<long long>(bytes)}});
+  };
+  double product = 0, pcgIter = 0, newtonFixed = 0;
+  if (device) {
+    const std::string dv = "device";
+    buffer("element_nodes", dv, 16 * E);
+    buffer("element_geometry", dv, 10 * E * r);
+    if (corot) {
+      buffer("rotations", dv, 9 * E * r);
+      buffer("rotated_gradients", dv, 9 * E * r);
+      if (problem.rotation == RotationMethod::Quaternion) buffer("quaternions", dv, 4 * E * r);
+    }
+    buffer("element_output", dv, 12 * E * r);
+    buffer("gather_lists", dv, 4 * (N + 1) + 16 * E);
+    buffer("positions", dv, D * r);
+    buffer("free_mask", dv, D * r);
+    if (dynamic) buffer("lumped_mass", dv, D * r);
+    if (precond) {
+      buffer("node_blocks", dv, 6 * N * r);
+      buffer("preconditioner_inverse", dv, (block ? 9 : 3) * N * r);
+    }
+    buffer("pcg_vectors (x b r z p q)", dv, 6 * D * r);
+    if (corot) kernels.push_back(std::string("compute_rotations (") + toString(problem.rotation) + ")");
+    kernels.push_back("element_forces + gather_forces");
+    kernels.push_back(dynamic ? (damping ? "element_product (M, C, K_t) + gather_product"
+                                         : "element_product (M, K_t) + gather_product")
+                              : "element_product (K_t) + gather_product");
+    if (precond) kernels.push_back(block ? "precond_invert (3x3 blocks)" : "precond_invert (diagonal)");
+    kernels.push_back("pcg_init, pcg_update, pcg_direction, reduce_finish");
+    product = E * (16 + 34 * r) + 16 * E + 4 * (N + 1) + 12 * E * r + D * r * (3 + (dynamic ? 1 : 0));
+    pcgIter = product + 12 * D * r + (precond ? (block ? 9 : 3) * N * r : 0);
+    newtonFixed = (corot ? E * (16 + 22 * r) : 0) + 2 * product + 5 * D * r;
+  } else {
+    const double nnz = 9 * (N + 2 * static_cast<double>(edgeCount(problem.mesh)));
+    const std::string h = "host";
+    buffer(dynamic ? "system_matrix (CSR: M, C, K_t combined)" : "stiffness_matrix (CSR)", h, nnz * 12 + 4 * (D + 1));
+    if (corot) buffer("rotations", h, 9 * E * 8);
+    if (hyper) buffer("deformation_gradients", h, 9 * E * 8);
+    if (dynamic) buffer("lumped_mass", h, D * 8);
+    buffer(pcg ? "cg_vectors" : "cholesky_factor (at least the matrix)", h, pcg ? 5 * D * 8 : nnz * 12);
+    if (corot) kernels.push_back("polar decomposition per element (SVD)");
+    kernels.push_back("element forces");
+    kernels.push_back("sparse assembly of " + std::string(dynamic ? "M + C + K_t" : "K_t"));
+    kernels.push_back(pcg ? "Eigen ConjugateGradient" : "Eigen SimplicialLDLT");
+    product = nnz * 12 + 4 * (D + 1) + 3 * D * 8;
+    pcgIter = product + 10 * D * 8;
+    newtonFixed = nnz * 8 + 144 * 8 * E + product;
+  }
+  // Driver state on the host (BodySolver): committed and rollback copies.
+  buffer("state: positions (+ rollback)", "host", 2 * D * 8);
+  if (dynamic) buffer("state: velocities, accelerations (+ rollback)", "host", 4 * D * 8);
+  if (!desc.surface.empty()) kernels.push_back("surface update (barycentric, host)");
+  j["kernels"] = kernels;
+  j["buffers"] = buffers;
+  double total = 0;
+  for (const json& b : buffers) total += b["bytes"].get<double>();
+  j["buffer_bytes_total"] = static_cast<long long>(total);
+
+  const int newton = dynamic ? std::max(1, scene.analysis.dynamics.newtonIterations)
+                             : std::max(1, scene.analysis.statics.maxNewtonIterations);
+  const int cap = pcg ? std::max(1, scene.solver.maxIterations) : 0;
+  json bytes;
+  bytes["per_product"] = static_cast<long long>(product);
+  bytes["per_pcg_iteration"] = static_cast<long long>(pcg ? pcgIter : 0);
+  bytes["per_newton_iteration_without_pcg"] = static_cast<long long>(newtonFixed);
+  bytes["newton_iterations"] = newton;
+  bytes["newton_iterations_is"] = dynamic ? "the scene's count" : "the cap (statics stop earlier)";
+  bytes["pcg_iteration_cap"] = cap;
+  bytes["per_step_upper_bound"] = static_cast<long long>(newton * (newtonFixed + cap * (pcg ? pcgIter : 0.0)));
+  bytes["model"] = "bytes per step <= Newton iterations x (per_newton_iteration_without_pcg + pcg_iteration_cap x "
+                   "per_pcg_iteration); per product: element pass + gather (see schedule/plan.cpp); r = " +
+                   std::to_string(static_cast<int>(r)) + " bytes per real";
+  j["bytes_moved"] = bytes;
+  return j.dump();
+}
+
+}  // namespace corofem::detail
