@@ -45,8 +45,9 @@ void FailoverBackend::advance(const std::string& call, const std::string& error)
     }
     FallbackEvent ev{problem_.name, when_, call, order_[from].label(), order_[index_].label(), error};
     events_.push_back(ev);
-    std::clog << "corofem: body '" << ev.body << "': device failure on " << ev.from << " in " << ev.call << " ("
-              << ev.when << "): " << ev.error << "; continuing on " << ev.to << std::endl;
+    std::clog << "corofem: body '" << ev.body << "': device failure on " << ev.from
+              << (ev.call == ev.when ? " at " + ev.when : " in " + ev.call + " (" + ev.when + ")") << ": " << ev.error
+              << "; continuing on " << ev.to << std::endl;
     return;
   }
   current_.reset();
@@ -56,7 +57,7 @@ void FailoverBackend::advance(const std::string& call, const std::string& error)
 template <class Fn>
 auto FailoverBackend::guarded(const char* call, Fn&& fn) -> decltype(fn(std::declval<Backend&>())) {
   for (;;) {
-    if (!current_) fail(ErrorCode::DeviceError, "body '", problem_.name, "': no backend left:", failures_);
+    if (!current_) fail(ErrorCode::DeviceError, "body '", problem_.name, "': every backend failed:", failures_);
     try {
       return fn(*current_);
     } catch (const Error& e) {

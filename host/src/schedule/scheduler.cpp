@@ -142,7 +142,8 @@ std::string formatMs(double ms) {
 }  // namespace
 
 std::string Candidate::label() const {
-  if (kind == BackendKind::Reference) return "reference";
+  if (kind == BackendKind::Reference)
+    return device.empty() || device == referenceCandidate().device ? "reference" : "reference (" + device + ")";
   return "opencl:" + selector + " (" + device + ")";
 }
 
@@ -340,9 +341,12 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
   for (const CandidateTiming& t : s.timings)
     if (t.error.empty() && !std::isnan(t.msPerStep)) ok.push_back(&t);
   std::stable_sort(ok.begin(), ok.end(), [](auto* a, auto* b) { return a->msPerStep < b->msPerStep; });
-  for (const CandidateTiming* t : ok) s.order.push_back(t->candidate);
-  if (std::none_of(s.order.begin(), s.order.end(), [](const Candidate& c) { return c.kind == BackendKind::Reference; }))
-    s.order.push_back(reference);
+  // Devices in order of speed, then the reference backend (the last resort of every body; when it
+  // is the fastest it is the only entry: nothing falls back from it).
+  const bool referenceFirst = !ok.empty() && ok.front()->candidate.kind == BackendKind::Reference;
+  for (const CandidateTiming* t : ok)
+    if (!referenceFirst && t->candidate.kind != BackendKind::Reference) s.order.push_back(t->candidate);
+  s.order.push_back(reference);
   if (ok.empty()) {
     s.reason = "calibration failed on every candidate (see candidates); the reference backend reports the error";
     return s;

@@ -1,0 +1,191 @@
+// Device failure fallback: a fault-injecting backend (schedule/fault_injection.hpp) fails the way
+// an OpenCL device does (program build, allocation, kernel launch, read-back) and the body carries
+// on, state and all, on the next candidate.
+#include "schedule_support.hpp"
+
+#include "output/run_outputs.hpp"
+#include "solve/body_solver.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <fstream>
+
+namespace corofem::test {
+namespace {
+
+using detail::FaultKind;
+using detail::FaultSpec;
+
+/// Hooks: body runs on "faulty" (a reference backend with the fault injected), then the plain
+/// reference backend. The factory counts the backends it made.
+detail::SchedulerHooks faultyFirst(const FaultSpec& spec, int* created = nullptr) {
+  detail::SchedulerHooks h;
+  h.forcedOrder = {fakeCandidate(BackendKind::Reference, "faulty"), referenceCandidate()};
+  h.factory = [spec, created](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c) {
+    if (created) ++*created;
+    auto inner = detail::createReferenceBackend(p, s);
+    if (c.device == "faulty") return detail::injectFaults(std::move(inner), spec);
+    return inner;
+  };
+  return h;
+}
+
+std::vector<double> undisturbed(const Scene& scene) {
+  HookScope scope;
+  Scene s = scene;
+  s.backend.kind = BackendKind::Reference;
+  auto sim = Simulation::create(s);
+  EXPECT_TRUE(sim) << sim.message();
+  return sim ? runToEnd(sim.value()) : std::vector<double>{};
+}
+
+struct FaultCase {
+  const char* name;
+  FaultSpec spec;
+  const char* call;  ///< the Backend call the failure is reported in
+  const char* when;  ///< "create", "step" (a step), or "" (either)
+};
+
+// Every failure kind, on dynamics and statics. Reference -> reference fallback: the answer must
+// be bit-identical to the undisturbed run (the repeated call sees the same positions and inputs).
+TEST(Failover, EveryFaultKindEndsBitIdenticalOnTheFallback) {
+  const std::vector<FaultCase> cases = {
+      {"build", {FaultKind::Build, 1}, "create", "create"},
+      {"allocation at create", {FaultKind::Allocation, 0}, "create", "create"},
+      {"allocation later", {FaultKind::Allocation, 9}, "", ""},
+      {"launch in solve", {FaultKind::Launch, 5}, "solve", "step"},
+      {"read-back of forces", {FaultKind::ReadBack, 4}, "internalForces", "step"},
+  };
+  for (bool dynamic : {true, false}) {
+    const Scene scene = dynamic ? dynamicScene(boxBeam(), 6) : staticScene(boxBeam(), 3);
+    const std::vector<double> expected = undisturbed(scene);
+    ASSERT_FALSE(expected.empty());
+    for (const FaultCase& fc : cases) {
+      SCOPED_TRACE(std::string(dynamic ? "dynamic, " : "static, ") + fc.name);
+      int created = 0;
+      HookScope scope(faultyFirst(fc.spec, &created));
+      auto sim = Simulation::create(scene);
+      ASSERT_TRUE(sim) << sim.message();
+      const std::vector<double> x = runToEnd(sim.value());
+      ASSERT_EQ(x.size(), expected.size());
+      EXPECT_TRUE(x == expected) << "positions differ from the undisturbed reference run";
+      std::vector<double> v;
+      ASSERT_TRUE(sim->readVelocities(0, v));
+      const auto report = nlohmann::json::parse(sim->schedulerReport());
+      ASSERT_EQ(report["fallbacks"].size(), 1u) << report.dump(1);
+      const auto& ev = report["fallbacks"][0];
+      EXPECT_EQ(ev["from"], "reference (faulty)");
+      EXPECT_EQ(ev["to"], "reference");
+      EXPECT_NE(ev["error"].get<std::string>().find("injected"), std::string::npos) << ev.dump();
+      if (*fc.call) EXPECT_EQ(ev["call"], fc.call);
+      if (std::string(fc.when) == "create") EXPECT_EQ(ev["when"], "create");
+      if (std::string(fc.when) == "step") EXPECT_EQ(ev["when"].get<std::string>().rfind("step ", 0), 0u) << ev.dump();
+      EXPECT_EQ(created, 2);  // the faulty backend and its one replacement
+      EXPECT_EQ(sim->deviceName(), "host (Eigen, double)");  // the replacement, no fault tag
+    }
+  }
+}
+
+// The fallback is recorded in summary.json.
+TEST(Failover, SummaryListsTheFallback) {
+  HookScope scope(faultyFirst({FaultKind::Launch, 2}));
+  auto sim = Simulation::create(dynamicScene(boxBeam(), 3));
+  ASSERT_TRUE(sim) << sim.message();
+  const std::string dir = scope.cacheDir() + "/out";
+  detail::RunOutputs out(sim.value(), dir);
+  ASSERT_FALSE(runToEnd(sim.value()).empty());
+  out.finish(sim.value(), Status::ok(), 0.0);
+  std::ifstream in(dir + "/summary.json");
+  const auto summary = nlohmann::json::parse(in);
+  ASSERT_EQ(summary["fallbacks"].size(), 1u) << summary.dump(1);
+  EXPECT_EQ(summary["fallbacks"][0]["call"], "solve");
+  EXPECT_EQ(summary["fallbacks"][0]["when"], "step 1");
+  EXPECT_TRUE(summary["scheduler"].contains("choice"));
+  EXPECT_TRUE(summary["scheduler"].contains("reason"));
+  EXPECT_TRUE(summary["scheduler"].contains("candidates"));
+  EXPECT_TRUE(summary["scheduler"].contains("from_cache"));
+}
+
+// When every candidate fails the step reports DeviceError naming each failure, and the body keeps
+// its last good state.
+TEST(Failover, EveryCandidateFailingIsADeviceErrorAndKeepsTheState) {
+  detail::SchedulerHooks h;
+  h.forcedOrder = {fakeCandidate(BackendKind::Reference, "faulty-a"), fakeCandidate(BackendKind::Reference, "faulty-b")};
+  h.factory = [](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c) {
+    // a fails at its 3rd solve, b (its replacement) at its first.
+    return detail::injectFaults(detail::createReferenceBackend(p, s),
+                                {FaultKind::Launch, c.device == "faulty-a" ? 3 : 1});
+  };
+  HookScope scope(h);
+  auto sim = Simulation::create(dynamicScene(boxBeam(), 6));
+  ASSERT_TRUE(sim) << sim.message();
+  Status st;
+  std::vector<double> before;
+  while (!sim->finished()) {
+    ASSERT_TRUE(sim->readPositions(0, before));
+    st = sim->step();
+    if (!st) break;
+  }
+  ASSERT_FALSE(st);
+  EXPECT_EQ(st.code(), ErrorCode::DeviceError);
+  EXPECT_NE(st.message().find("every backend failed"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("faulty") , std::string::npos) << st.message();
+  std::vector<double> after;
+  ASSERT_TRUE(sim->readPositions(0, after));
+  EXPECT_EQ(before, after);
+}
+
+// An explicit choice that cannot start is an error, as before the scheduler (no silent move).
+TEST(Failover, ExplicitChoiceThatCannotStartIsAnError) {
+  HookScope scope;
+  Scene scene = dynamicScene(boxBeam(), 2);
+  scene.backend.kind = BackendKind::OpenCL;
+  scene.backend.device = "no-such-device-xyz";
+  auto sim = Simulation::create(scene);
+  ASSERT_FALSE(sim);
+#ifdef COROFEM_WITH_OPENCL
+  EXPECT_EQ(sim.status().code(), ErrorCode::DeviceError) << sim.message();
+#else
+  EXPECT_EQ(sim.status().code(), ErrorCode::NotCompiledIn) << sim.message();
+#endif
+}
+
+#ifdef COROFEM_WITH_OPENCL
+// A real OpenCL device (PoCL here) failing in the middle of the run: the body finishes on the
+// reference backend. The steps before the failure ran on the device, so the answer equals the
+// undisturbed reference run only to the solver tolerance.
+TEST(Failover, OpenClLaunchFailureFinishesOnTheReference) {
+  HookScope scope0;
+  const std::vector<detail::Candidate> cands = detail::listCandidates();
+  if (cands.size() < 2) GTEST_SKIP() << "no OpenCL device";
+  const detail::Candidate device = cands.front();
+  const Scene scene = dynamicScene(boxBeam(), 6);
+  const std::vector<double> expected = undisturbed(scene);
+  detail::SchedulerHooks h;
+  h.forcedOrder = {device, referenceCandidate()};
+  h.factory = [](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c) -> std::unique_ptr<detail::Backend> {
+    if (c.kind == BackendKind::OpenCL)
+      return detail::injectFaults(detail::createOpenCLBackend(p, s, c.selector), {FaultKind::Launch, 6});
+    return detail::createReferenceBackend(p, s);
+  };
+  HookScope scope(h);
+  auto sim = Simulation::create(scene);
+  ASSERT_TRUE(sim) << sim.message();
+  EXPECT_EQ(sim->backendName(), "opencl");
+  const std::vector<double> x = runToEnd(sim.value());
+  ASSERT_EQ(x.size(), expected.size());
+  EXPECT_EQ(sim->backendName(), "reference");
+  // PCG tolerance 1e-10 (relative) on the device steps before the failure: the tip moves ~1 cm, so
+  // 1e-9 m leaves two orders of margin over the measured difference.
+  double worst = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) worst = std::max(worst, std::abs(x[i] - expected[i]));
+  EXPECT_LT(worst, 1e-9);
+  std::cout << "[ measured ] OpenCL -> reference fallback: largest position difference " << worst << " m\n";
+  const auto report = nlohmann::json::parse(sim->schedulerReport());
+  ASSERT_EQ(report["fallbacks"].size(), 1u);
+  EXPECT_EQ(report["fallbacks"][0]["to"], "reference");
+}
+#endif
+
+}  // namespace
+}  // namespace corofem::test

@@ -1,0 +1,168 @@
+// Plans (Simulation::planReport, `corofem run --plan`): a scene's plan lists only what its step
+// needs.
+#include "schedule_support.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+namespace corofem::test {
+namespace {
+
+using nlohmann::json;
+
+bool anyBufferContains(const json& body, const std::string& word) {
+  for (const auto& b : body["buffers"])
+    if (b["name"].get<std::string>().find(word) != std::string::npos) return true;
+  return false;
+}
+
+bool anyContains(const json& list, const std::string& word) {
+  for (const auto& t : list)
+    if (t.get<std::string>().find(word) != std::string::npos) return true;
+  return false;
+}
+
+/// Plans of a scene on the reference backend and on an OpenCL-kind candidate (the plan is a host
+/// estimate; the fake candidate's backend underneath is the reference one).
+std::vector<json> plans(const Scene& scene) {
+  std::vector<json> out;
+  for (bool device : {false, true}) {
+    detail::SchedulerHooks h;
+    if (device) {
+      h.forcedOrder = {fakeCandidate(BackendKind::OpenCL, "fake-gpu", "0"), referenceCandidate()};
+      h.factory = [](const detail::Problem& p, const SolverDesc& s, const detail::Candidate&) {
+        return detail::createReferenceBackend(p, s);
+      };
+    }
+    HookScope scope(h);
+    Scene sc = scene;
+    if (!device) sc.backend.kind = BackendKind::Reference;
+    auto sim = Simulation::create(sc);
+    EXPECT_TRUE(sim) << sim.message();
+    if (!sim) return out;
+    const json plan = json::parse(sim->planReport());
+    EXPECT_EQ(plan["bodies"].size(), 1u);
+    out.push_back(plan["bodies"][0]);
+    EXPECT_EQ(out.back()["backend"], device ? "opencl" : "reference");
+  }
+  return out;
+}
+
+TEST(Plan, StaticSceneHasNoDynamicBuffersOrTerms) {
+  for (const json& body : plans(staticScene(boxBeam(), 2))) {
+    SCOPED_TRACE(body["backend"].get<std::string>());
+    EXPECT_FALSE(anyBufferContains(body, "velocit")) << body["buffers"].dump(1);
+    EXPECT_FALSE(anyBufferContains(body, "mass")) << body["buffers"].dump(1);
+    EXPECT_FALSE(anyContains(body["terms"], "mass")) << body["terms"];
+    EXPECT_FALSE(anyContains(body["kernels"], "M,")) << body["kernels"];
+    EXPECT_EQ(body["features"]["mass_terms"], false);
+    EXPECT_EQ(body["features"]["damping"], false);
+    EXPECT_GT(body["bytes_moved"]["per_pcg_iteration"].get<double>(), 0);
+  }
+}
+
+TEST(Plan, DynamicSceneListsMassAndVelocities) {
+  for (const json& body : plans(dynamicScene(boxBeam(), 2))) {
+    SCOPED_TRACE(body["backend"].get<std::string>());
+    EXPECT_TRUE(anyBufferContains(body, "velocit")) << body["buffers"].dump(1);
+    EXPECT_TRUE(anyContains(body["terms"], "mass")) << body["terms"];
+    EXPECT_EQ(body["features"]["mass_terms"], true);
+    // Damping-free scene: no damping term anywhere.
+    EXPECT_EQ(body["features"]["damping"], false);
+    EXPECT_FALSE(anyContains(body["terms"], "amping")) << body["terms"];
+    EXPECT_FALSE(anyContains(body["kernels"], "C,")) << body["kernels"];
+  }
+}
+
+TEST(Plan, DampedSceneListsTheDampingTerm) {
+  BodyDesc body = boxBeam();
+  body.material.rayleighMass = 0.5;
+  for (const json& b : plans(dynamicScene(body, 2))) {
+    SCOPED_TRACE(b["backend"].get<std::string>());
+    EXPECT_EQ(b["features"]["damping"], true);
+    EXPECT_TRUE(anyContains(b["terms"], "damping")) << b["terms"];
+  }
+}
+
+TEST(Plan, SizesFollowTheModel) {
+  // 400 elements, 21 x 3 x 3 = 189 nodes. On the device in double: element nodes 16 B/element,
+  // positions 3 x 189 x 8 B; in float the reals halve.
+  Scene scene = staticScene(boxBeam(), 1);
+  const std::vector<json> p = plans(scene);
+  ASSERT_EQ(p.size(), 2u);
+  const json& dev = p[1];
+  EXPECT_EQ(dev["elements"], 400);
+  EXPECT_EQ(dev["nodes"], 189);
+  auto bytesOf = [](const json& body, const std::string& name) -> long long {
+    for (const auto& b : body["buffers"])
+      if (b["name"] == name) return b["bytes"].get<long long>();
+    return -1;
+  };
+  EXPECT_EQ(bytesOf(dev, "element_nodes"), 16 * 400);
+  EXPECT_EQ(bytesOf(dev, "positions"), 3 * 189 * 8);
+  EXPECT_EQ(bytesOf(dev, "rotations"), 9 * 400 * 8);
+  scene.solver.precision = Precision::Float;
+  const std::vector<json> pf = plans(scene);
+  ASSERT_EQ(pf.size(), 2u);
+  EXPECT_EQ(bytesOf(pf[1], "positions"), 3 * 189 * 4);
+  EXPECT_EQ(pf[1]["features"]["precision"], "float");
+  EXPECT_EQ(pf[0]["features"]["precision"], "double");  // the reference backend computes in double
+  // Linear formulation: no rotations.
+  scene.bodies[0].formulation = Formulation::Linear;
+  for (const json& b : plans(scene)) EXPECT_FALSE(anyBufferContains(b, "rotation")) << b["buffers"].dump(1);
+}
+
+// `corofem run --plan` prints the plan and runs nothing (no output folder).
+TEST(Plan, CommandPrintsThePlanWithoutRunning) {
+  const std::string cli = COROFEM_CLI_PATH;
+  if (cli.empty()) GTEST_SKIP() << "the corofem command is not built";
+  const auto dir = tempDir();
+  const std::string scene = (dir / "s.json").string();
+  std::ofstream(scene) << R"({"name": "p", "bodies": [{"mesh": {"box": {"cells": [4, 2, 2]}},
+      "fixed": [{"box": {"min": [0, 0, 0], "max": [0, 1, 1]}}]}],
+      "analysis": {"type": "static"}, "backend": "auto"})";
+  const std::string out = (dir / "out").string();
+  const std::string jsonPath = (dir / "plan.json").string();
+  const std::string cmd = "COROFEM_CACHE_DIR=" + dir.string() + " " + cli + " run " + scene + " --plan --json --out " +
+                          out + " > " + jsonPath;
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  std::ifstream in(jsonPath);
+  const json plan = json::parse(in);
+  ASSERT_EQ(plan["bodies"].size(), 1u);
+  EXPECT_EQ(plan["analysis"], "static");
+  EXPECT_FALSE(anyBufferContains(plan["bodies"][0], "velocit"));
+  // The text form names the backend and the buffers.
+  const std::string textPath = (dir / "plan.txt").string();
+  ASSERT_EQ(std::system((cli + " run " + scene + " --plan > " + textPath).c_str()), 0);
+  std::ifstream tin(textPath);
+  const std::string text((std::istreambuf_iterator<char>(tin)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("buffers"), std::string::npos) << text;
+  EXPECT_NE(text.find("on reference"), std::string::npos) << text;  // 80 elements: the reference
+}
+
+// summary.json of a run has the scheduler's decision.
+TEST(Plan, RunSummaryHasTheScheduler) {
+  const std::string cli = COROFEM_CLI_PATH;
+  if (cli.empty()) GTEST_SKIP() << "the corofem command is not built";
+  const auto dir = tempDir();
+  const std::string scene = (dir / "s.json").string();
+  std::ofstream(scene) << R"({"name": "p", "bodies": [{"mesh": {"box": {"cells": [4, 2, 2]}},
+      "fixed": [{"box": {"min": [0, 0, 0], "max": [0, 1, 1]}}]}],
+      "analysis": {"type": "dynamic", "steps": 2}, "output": {"vtk": false}})";
+  const std::string out = (dir / "out").string();
+  const std::string cmd = "COROFEM_CACHE_DIR=" + dir.string() + " " + cli + " run " + scene + " --quiet --out " + out;
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+  std::ifstream in(out + "/summary.json");
+  const json s = json::parse(in);
+  ASSERT_TRUE(s.contains("scheduler")) << s.dump(1);
+  for (const char* k : {"choice", "reason", "candidates", "from_cache"}) EXPECT_TRUE(s["scheduler"].contains(k)) << k;
+  EXPECT_EQ(s["scheduler"]["choice"], "reference");
+  EXPECT_TRUE(s["fallbacks"].empty());
+}
+
+}  // namespace
+}  // namespace corofem::test

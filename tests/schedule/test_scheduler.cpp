@@ -1,0 +1,227 @@
+// "backend": "auto": explicit requests (scene, COROFEM_DEVICE), the rules that need no
+// calibration, calibration on fake candidates, and the cache file.
+#include "schedule_support.hpp"
+
+#include "util/error.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <fstream>
+#include <thread>
+
+namespace corofem::test {
+namespace {
+
+std::string parseError(const std::string& spec) {
+  try {
+    detail::parseDeviceSpec(spec, "COROFEM_DEVICE");
+  } catch (const detail::Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::BadInput);
+    return e.what();
+  }
+  return "";
+}
+
+TEST(DeviceSpec, AcceptedForms) {
+  EXPECT_EQ(detail::parseDeviceSpec("reference", "x").kind, BackendKind::Reference);
+  EXPECT_EQ(detail::parseDeviceSpec("auto", "x").kind, BackendKind::Auto);
+  auto r = detail::parseDeviceSpec("opencl", "x");
+  EXPECT_EQ(r.kind, BackendKind::OpenCL);
+  EXPECT_EQ(r.device, "");
+  r = detail::parseDeviceSpec("opencl:1", "x");
+  EXPECT_EQ(r.device, "1");
+  r = detail::parseDeviceSpec("OpenCL:pthread", "x");  // the name keeps its case, the backend does not matter
+  EXPECT_EQ(r.kind, BackendKind::OpenCL);
+  EXPECT_EQ(r.device, "pthread");
+}
+
+TEST(DeviceSpec, BadValuesListTheChoices) {
+  for (const char* bad : {"cuda", "opencl:", "reference:0", "", "gpu"}) {
+    const std::string m = parseError(bad);
+    EXPECT_NE(m.find("COROFEM_DEVICE=\""), std::string::npos) << bad << ": " << m;
+    EXPECT_NE(m.find("\"reference\""), std::string::npos) << m;
+    EXPECT_NE(m.find("\"opencl:<index>\""), std::string::npos) << m;
+  }
+}
+
+TEST(DeviceSpec, EnvironmentOverridesAutoAndABadValueIsBadInput) {
+  HookScope scope;
+  Scene scene = dynamicScene(boxBeam(), 1);
+  setenv("COROFEM_DEVICE", "reference", 1);
+  auto sim = Simulation::create(scene);
+  ASSERT_TRUE(sim) << sim.message();
+  auto rep = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference");
+  EXPECT_NE(rep["reason"].get<std::string>().find("COROFEM_DEVICE"), std::string::npos) << rep.dump();
+
+  setenv("COROFEM_DEVICE", "vulkan", 1);
+  auto bad = Simulation::create(scene);
+  ASSERT_FALSE(bad);
+  EXPECT_EQ(bad.status().code(), ErrorCode::BadInput);
+  EXPECT_NE(bad.message().find("vulkan"), std::string::npos) << bad.message();
+
+  // The scene's explicit choice wins over the environment.
+  scene.backend.kind = BackendKind::Reference;
+  auto sceneWins = Simulation::create(scene);
+  ASSERT_TRUE(sceneWins) << sceneWins.message();
+  rep = nlohmann::json::parse(sceneWins->schedulerReport());
+  EXPECT_NE(rep["reason"].get<std::string>().find("scene"), std::string::npos) << rep.dump();
+}
+
+/// Candidates: a fake "device" and the reference, both reference backends underneath; the one
+/// named `slow` sleeps in every solve, so calibration must rank it last.
+detail::SchedulerHooks fakeDevices(const std::string& slow, int* created) {
+  detail::SchedulerHooks h;
+  h.candidates = {fakeCandidate(BackendKind::OpenCL, "fake-gpu", "0"), referenceCandidate()};
+  h.factory = [slow, created](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c)
+      -> std::unique_ptr<detail::Backend> {
+    ++*created;
+    auto inner = detail::createReferenceBackend(p, s);
+    if (c.device != slow) return inner;
+    struct Slow final : detail::Backend {
+      std::unique_ptr<detail::Backend> b;
+      std::string name() const override { return b->name(); }
+      std::string deviceName() const override { return b->deviceName(); }
+      void setPositions(const Eigen::VectorXd& x) override { b->setPositions(x); }
+      void internalForces(Eigen::VectorXd& f) override { b->internalForces(f); }
+      void apply(const detail::SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override { b->apply(c, p, y); }
+      detail::LinearSolveStats solve(const detail::SystemCoeffs& c, const Eigen::VectorXd& r, Eigen::VectorXd& x) override {
+        // 50 ms: far beyond the whole step of this 400-element body (about 1 ms), whatever the load.
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        return b->solve(c, r, x);
+      }
+      double elasticEnergy() override { return b->elasticEnergy(); }
+    };
+    auto s2 = std::make_unique<Slow>();
+    s2->b = std::move(inner);
+    return s2;
+  };
+  return h;
+}
+
+TEST(Scheduler, CalibrationPicksTheFasterCandidateAndCachesIt) {
+  for (const std::string slow : {"host (Eigen, double)", "fake-gpu"}) {
+    SCOPED_TRACE("slow: " + slow);
+    int created = 0;
+    HookScope scope(fakeDevices(slow, &created));
+    const Scene scene = dynamicScene(boxBeam(), 4);
+    auto sim = Simulation::create(scene);
+    ASSERT_TRUE(sim) << sim.message();
+    auto rep = nlohmann::json::parse(sim->schedulerReport());
+    const std::string fast = slow == "fake-gpu" ? "reference" : "opencl:0 (fake-gpu)";
+    EXPECT_EQ(rep["choice"], fast) << rep.dump(1);
+    EXPECT_EQ(rep["from_cache"], false);
+    ASSERT_EQ(rep["candidates"].size(), 2u);
+    for (const auto& c : rep["candidates"]) EXPECT_TRUE(c["ms_per_step"].is_number()) << c.dump();
+    EXPECT_NE(rep["reason"].get<std::string>().find("calibration"), std::string::npos);
+    EXPECT_EQ(created, 3);  // one calibration backend per candidate + the body's own
+    // The fallback order ends with the reference backend.
+    EXPECT_EQ(rep["bodies"][0]["fallback_order"].back(), "reference");
+
+    // The cache file has one entry per candidate...
+    std::ifstream in(scope.cacheDir() + "/scheduler.json");
+    ASSERT_TRUE(in);
+    const auto cache = nlohmann::json::parse(in);
+    EXPECT_EQ(cache["entries"].size(), 2u) << cache.dump(1);
+
+    // ...and the next run decides from it without calibrating.
+    created = 0;
+    auto again = Simulation::create(scene);
+    ASSERT_TRUE(again) << again.message();
+    auto rep2 = nlohmann::json::parse(again->schedulerReport());
+    EXPECT_EQ(rep2["choice"], fast);
+    EXPECT_EQ(rep2["from_cache"], true);
+    EXPECT_EQ(created, 1);
+    // Same answer whichever backend ran it (both are reference backends underneath).
+    EXPECT_EQ(runToEnd(sim.value()), runToEnd(again.value()));
+  }
+}
+
+TEST(Scheduler, CacheIsKeyedBySizeAndAnalysis) {
+  int created = 0;
+  HookScope scope(fakeDevices("", &created));  // no slow candidate: only the counts matter here
+  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam(), 2)));
+  EXPECT_EQ(created, 3);
+  created = 0;
+  ASSERT_TRUE(Simulation::create(staticScene(boxBeam(), 1)));  // other analysis: calibrates again
+  EXPECT_EQ(created, 3);
+  created = 0;
+  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam({40, 2, 2}), 2)));  // 800 elements: next log2 bucket
+  EXPECT_EQ(created, 3);
+  created = 0;
+  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam({21, 2, 2}), 2)));  // 420 elements: same bucket as 400
+  EXPECT_EQ(created, 1);
+  EXPECT_EQ(detail::sizeBucket(400), 8);
+  EXPECT_EQ(detail::sizeBucket(420), 8);
+  EXPECT_EQ(detail::sizeBucket(800), 9);
+}
+
+TEST(Scheduler, CachedNumbersDecide) {
+  // A cache written by hand: the decision follows it, with no calibration at all.
+  int created = 0;
+  HookScope scope(fakeDevices("", &created));
+  nlohmann::json cache;
+  const std::string tail = "|test|dynamic|double|pcg|log2e=8";
+  cache["version"] = 1;
+  cache["entries"]["opencl|fake-gpu" + tail] = {{"ms_per_step", 0.5}};
+  cache["entries"]["reference|host (Eigen, double)" + tail] = {{"ms_per_step", 7.0}};
+  std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
+  auto sim = Simulation::create(dynamicScene(boxBeam(), 2));
+  ASSERT_TRUE(sim) << sim.message();
+  auto rep = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(rep["choice"], "opencl:0 (fake-gpu)") << rep.dump(1);
+  EXPECT_EQ(rep["from_cache"], true);
+  EXPECT_EQ(created, 1);
+  // A cached device error excludes the candidate.
+  cache["entries"]["opencl|fake-gpu" + tail] = {{"error", "DeviceError: no fp64"}};
+  std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
+  auto sim2 = Simulation::create(dynamicScene(boxBeam(), 2));
+  ASSERT_TRUE(sim2) << sim2.message();
+  rep = nlohmann::json::parse(sim2->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference") << rep.dump(1);
+  EXPECT_EQ(rep["candidates"][0]["error"], "DeviceError: no fp64");
+  // A damaged cache file is recalibrated and rewritten.
+  std::ofstream(scope.cacheDir() + "/scheduler.json") << "{not json";
+  created = 0;
+  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam(), 2)));
+  EXPECT_EQ(created, 3);
+  std::ifstream in(scope.cacheDir() + "/scheduler.json");
+  EXPECT_NO_THROW(nlohmann::json::parse(in));
+}
+
+TEST(Scheduler, HyperelasticAndCholeskyGoToTheReferenceWithoutCalibration) {
+  int created = 0;
+  HookScope scope(fakeDevices("", &created));
+  BodyDesc body = boxBeam();
+  body.formulation = Formulation::NeoHookean;
+  auto sim = Simulation::create(dynamicScene(body, 1));
+  ASSERT_TRUE(sim) << sim.message();
+  auto rep = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference");
+  EXPECT_NE(rep["reason"].get<std::string>().find("neo"), std::string::npos) << rep["reason"];
+  EXPECT_EQ(created, 1);
+
+  created = 0;
+  Scene chol = staticScene(boxBeam(), 1);
+  chol.solver.linearSolver = LinearSolverKind::Cholesky;
+  auto sim2 = Simulation::create(chol);
+  ASSERT_TRUE(sim2) << sim2.message();
+  rep = nlohmann::json::parse(sim2->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference");
+  EXPECT_NE(rep["reason"].get<std::string>().find("Cholesky"), std::string::npos);
+  EXPECT_EQ(created, 1);
+}
+
+TEST(Scheduler, SmallBodiesOnRealCandidatesStayOnTheReference) {
+  HookScope scope;  // real candidates of this build
+  auto sim = Simulation::create(dynamicScene(boxBeam({4, 2, 2}), 1));  // 80 elements
+  ASSERT_TRUE(sim) << sim.message();
+  auto rep = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference");
+  EXPECT_EQ(sim->backendName(), "reference");
+  EXPECT_TRUE(rep["candidates"].empty());
+}
+
+}  // namespace
+}  // namespace corofem::test
