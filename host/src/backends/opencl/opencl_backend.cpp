@@ -273,7 +273,8 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
          " element rest states for ", elems_, " tets and ", problem.dofCount(), " dofs for ", nodes_,
          " nodes");
   if (elems_ == 0) fail(ErrorCode::BadInput, "body '", problem.name, "' has no elements");
-  if (elems_ * kStoredKComponents >= (std::size_t(1) << 32) / 2)
+  const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
+  if ((elems_ + kStrideAlign) * widest >= (std::size_t(1) << 32) / 2)
     fail(ErrorCode::BadInput, "body '", problem.name, "': ", elems_, " elements exceed the OpenCL "
          "backend's 32-bit element indexing; split the body");
   stride_ = roundUp(elems_, kStrideAlign);
@@ -352,8 +353,13 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     // At rest (and always for the linear formulation) R = I, so a_i = grad N_i.
     createReal(rotGrad_, kRotGradComponents * S);
     upload(rotGrad_, geom.data(), kRotGradComponents * S);
-    createReal(quat_, quat.size());
-    upload(quat_, quat.data(), quat.size());
+    // The warm-start quaternions exist only for the Quaternion method (a 1-real stand-in otherwise).
+    if (solver.rotation == RotationMethod::Quaternion) {
+      createReal(quat_, quat.size());
+      upload(quat_, quat.data(), quat.size());
+    } else {
+      createReal(quat_, 1);
+    }
   }
   if (opts_.storedStiffness) {
     std::vector<double> K(kStoredKComponents * S, 0.0);
