@@ -291,9 +291,17 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
     return onlyReference("the Cholesky solver runs only on the reference backend");
   if (candidates.size() == 1) return onlyReference("no OpenCL device in this build or on this machine");
   const std::size_t elements = problem.elements.size();
-  if (elements < kMinDeviceElements && hooks().candidates.empty())
-    return onlyReference(std::to_string(elements) + " elements is below " + std::to_string(kMinDeviceElements) +
-                         ": a device launch costs more than the whole step");
+  std::size_t minElements = kMinDeviceElements;
+  if (const char* env = std::getenv("COROFEM_SCHEDULER_MIN_ELEMENTS"); env && *env) {
+    char* end = nullptr;
+    const long long v = std::strtoll(env, &end, 10);
+    if (*end != '\0' || v < 0)
+      fail(ErrorCode::BadInput, "COROFEM_SCHEDULER_MIN_ELEMENTS=\"", env, "\" is not an element count >= 0");
+    minElements = static_cast<std::size_t>(v);
+  }
+  if (elements < minElements && hooks().candidates.empty())
+    return onlyReference(std::to_string(elements) + " elements is below " + std::to_string(minElements) +
+                         " (COROFEM_SCHEDULER_MIN_ELEMENTS): a device launch costs more than the whole step");
 
   const std::string path = schedulerCachePath();
   json cache = readCache(path);

@@ -36,7 +36,8 @@
 
 namespace corofem::detail {
 
-/// Bodies smaller than this go to the reference backend under "auto" without calibration.
+/// Bodies smaller than this go to the reference backend under "auto" without calibration
+/// (COROFEM_SCHEDULER_MIN_ELEMENTS overrides it).
 constexpr std::size_t kMinDeviceElements = 512;
 /// Timed repetitions of the calibration step (after one warm-up).
 constexpr int kCalibrationRepeats = 3;
