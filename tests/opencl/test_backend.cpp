@@ -3,11 +3,12 @@
 // plus determinism, warm start, the convergence-check cadence and the adopted-context path.
 //
 // Tolerances. Double: PCG to a relative residual of 1e-10 versus the reference's direct solve;
-// the error is bounded by cond(A) * 1e-10 and cond(A) of these small, mass-dominated systems is
-// ~1e2..1e3, so 1e-7 relative; forces/products agree to rounding (1e-10 relative). Float: the
-// achievable relative residual is ~ eps_float * cond(A) ~ 1e-5; we ask PCG for 1e-5 and accept a
-// true residual (recomputed in double by the reference) of 1e-3 and forces/products to 1e-4
-// relative (positions rounded to float; see test_kernels.cpp).
+// the error is bounded by cond(A) * 1e-10 with cond(A) ~1e2 for these small, mass-dominated
+// systems (and well below the worst case for the static one): 1e-8 relative; forces/products agree
+// to rounding (1e-10 relative). Float: the achievable relative residual is ~ eps_float * cond(A)
+// ~ 1e-5..1e-4; we ask PCG for 1e-5 and accept a true residual (recomputed in double by the
+// reference) of 1e-3, the solution to 1e-3 and forces/products to 1e-4 relative (positions
+// rounded to float; see test_kernels.cpp).
 #include "backends/opencl/opencl_backend.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "util/error.hpp"
@@ -137,7 +138,11 @@ TEST_P(OpenCLBackendVsReference, SolveMatchesDirectSolveForEveryPreconditioner) 
       const double trueRes = (freeOnly(p, b - Ax)).norm() / freeOnly(p, b).norm();
       EXPECT_LE(trueRes, isDouble() ? 1e-9 : 1e-3) << what;
       EXPECT_NEAR(st.relativeResidual, trueRes, isDouble() ? 1e-9 : 1e-3) << what;
-      EXPECT_LE(relErr(xo, xr), isDouble() ? 1e-7 : 5e-2) << what;
+      // Double: cond(A) * 1e-10 (measured <= 3e-11). Float: the float operator itself is off by a
+      // few eps_float = 6e-8 relative, amplified by cond(A) ~ 1e3..1e4 (measured <= 3e-6).
+      EXPECT_LE(relErr(xo, xr), isDouble() ? 1e-8 : 1e-3) << what;
+      std::printf("[info] %s: |x - x_direct| / |x_direct| = %.2e, true residual %.2e\n", what.c_str(),
+                  relErr(xo, xr), trueRes);
       for (std::size_t d = 0; d < p.dofCount(); ++d)
         if (p.constrained[d]) EXPECT_EQ(xo[d], 0.0) << "constrained dof " << d;
     }
