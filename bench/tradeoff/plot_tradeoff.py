@@ -20,6 +20,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 
 FLOOR = 1e-16
 
@@ -122,6 +123,11 @@ def main():
             ax.scatter(ft, fe, facecolors="none", edgecolors="k", s=120, lw=1.2, zorder=4)
             ax.set_xscale("log")
             ax.set_yscale("log")
+            if max(t) / min(t) < 300:  # few decades: label the minor ticks too (2, 3, 5 ...)
+                fmt = matplotlib.ticker.FuncFormatter(lambda v, _: "%g" % v)
+                ax.xaxis.set_minor_formatter(fmt)
+                ax.xaxis.set_major_formatter(fmt)
+                ax.tick_params(axis="x", which="minor", labelsize=7)
             ax.set_xlabel("median wall time per step (ms)")
             ax.set_ylabel(title)
             ax.grid(True, which="both", alpha=0.3)
