@@ -11,7 +11,7 @@
 // Build switches (-D), chosen per problem: precision (COROFEM_DOUBLE), rotation method
 // (COROFEM_ROT_*), preconditioner (COROFEM_PRECOND_*), work-group size (COROFEM_WG), elements per
 // work-item (COROFEM_VEC: 8 on CPUs, 1 on GPUs), nodes per work-item in the reducing node kernels
-// (COROFEM_CHUNK: 16 on CPUs, 1 = local-memory trees on GPUs). Rayleigh damping needs no switch:
+// (COROFEM_CHUNK: 4 on CPUs; COROFEM_TREE_REDUCE: local-memory trees on GPUs). Rayleigh damping needs no switch:
 // C = alpha M + beta K^R folds into the two coefficients of M and K^R, so a problem without damping
 // runs exactly the same kernels with the same cost.
 // Tuning overrides for experiments (not for production): COROFEM_OPENCL_WG, COROFEM_OPENCL_VEC,
@@ -254,7 +254,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   vec_ = options.vectorWidth ? options.vectorWidth : (ctx_->info().gpu ? 1 : 8);
   if (const char* env = std::getenv("COROFEM_OPENCL_VEC"); env && *env && !options.vectorWidth)
     vec_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
-  chunk_ = options.nodeChunk ? options.nodeChunk : (ctx_->info().gpu ? 1 : 16);
+  chunk_ = options.nodeChunk ? options.nodeChunk : (ctx_->info().gpu ? 1 : 4);  // 4: enough work-groups to balance 2+ threads on small meshes
   if (const char* env = std::getenv("COROFEM_OPENCL_CHUNK"); env && *env && !options.nodeChunk)
     chunk_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
   if (vec_ != 1 && vec_ != 4 && vec_ != 8 && vec_ != 16)
