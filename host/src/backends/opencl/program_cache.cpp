@@ -13,6 +13,8 @@
 #include <sstream>
 #include <vector>
 
+#include <unistd.h>
+
 namespace corofem {
 struct EmbeddedSource {
   const char* name;
@@ -130,7 +132,9 @@ void storeBinary(Context& ctx, cl_program program, const std::string& file) {
   (void)ctx;
   std::error_code ec;
   fs::create_directories(fs::path(file).parent_path(), ec);
-  const std::string tmp = file + ".tmp" + std::to_string(reinterpret_cast<std::uintptr_t>(&bytes));
+  // Unique per process and call, so that concurrent test processes never share a temporary file.
+  const std::string tmp = file + ".tmp" + std::to_string(::getpid()) + "-" +
+                          std::to_string(reinterpret_cast<std::uintptr_t>(&bytes));
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return;
