@@ -43,18 +43,18 @@ void gather_sum(const uint nodeCount, __global const uint* restrict start,
  * lumped mass M. Rayleigh damping C = alpha M + beta K^R needs no code of its own: the host folds
  * it into massCoef = m + c alpha and the stiffness coefficient k + c beta.
  * project != 0 (inside PCG): y_d = 0 on constrained dofs (free[d] = 0): with p_d = 0 there, this is
- * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h)
- * give PCG its alpha. */
+ * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h,
+ * in sum_real: double in mixed precision) give PCG its alpha. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void gather_product(const uint nodeCount, __global const uint* restrict start,
                     __global const uint* restrict entries, __global const real* restrict elemOut,
                     __global const real* restrict mass, const real massCoef,
                     __global const real* restrict free, const uint project,
                     __global const real* restrict p, __global real* restrict y,
-                    __global real* restrict partials) {
+                    __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeCount, first, last);
-  real dot = (real)0;
+  sum_real dot = (sum_real)0;
   for (uint n = first; n < last; ++n) {
     real acc[3];
     gather_node(n, start, entries, elemOut, acc);
@@ -64,8 +64,8 @@ void gather_product(const uint nodeCount, __global const uint* restrict start,
       real yd = massCoef * mass[d] * pd + acc[k];
       if (project) yd *= free[d];
       y[d] = yd;
-      dot += pd * yd;
+      dot += (sum_real)pd * (sum_real)yd;  /* exact term in mixed precision */
     }
   }
-  COROFEM_PARTIAL_STORE(dot, (real)0, (real)0, partials);
+  COROFEM_PARTIAL_STORE(dot, (sum_real)0, (sum_real)0, partials);
 }

@@ -1,6 +1,9 @@
 /* Matrix-free preconditioned conjugate gradients on the projected system (constrained dofs: identity
  * rows and columns, their entries of x, r, z, p kept at 0). All scalars live in `scalars` on the
  * device (layout in corofem_layout.h); the host only reads them every checkEvery iterations.
+ * Vectors are `real`; the dot products, their partials and the scalars are `sum_real` (double in
+ * mixed precision, COROFEM_MIXED: float vectors and products, double sums and scalars). A kernel
+ * that updates vectors converts its scalar to `real` once (a no-op unless mixed).
  * One iteration (q = A p by element_product + gather_product, which also gives p . q per group):
  *   reduce_finish(Alpha):  alpha = rho / (p . q)
  *   pcg_update:            x += alpha p, r -= alpha q, z = M^-1 r, partial sums of r . z and r . r
@@ -37,17 +40,17 @@ __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_init(const uint nodeCount, __global const real* restrict b, __global const real* restrict q,
               __global const real* restrict free, __global const real* restrict minv,
               __global real* restrict r, __global real* restrict z, __global real* restrict p,
-              __global real* restrict partials) {
+              __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeCount, first, last);
-  real rz = 0, rr = 0, bb = 0;
+  sum_real rz = 0, rr = 0, bb = 0;
   for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       const real bd = free[d] * b[d];
       rn[k] = bd - free[d] * q[d];
-      bb += bd * bd;
+      bb += (sum_real)bd * (sum_real)bd;
     }
     apply_preconditioner(n, minv, rn, zn);
     for (int k = 0; k < 3; ++k) {
@@ -55,8 +58,8 @@ void pcg_init(const uint nodeCount, __global const real* restrict b, __global co
       r[d] = rn[k];
       z[d] = zn[k];
       p[d] = zn[k];
-      rz += rn[k] * zn[k];
-      rr += rn[k] * rn[k];
+      rz += (sum_real)rn[k] * (sum_real)zn[k];
+      rr += (sum_real)rn[k] * (sum_real)rn[k];
     }
   }
   COROFEM_PARTIAL_STORE(rz, rr, bb, partials);
@@ -64,14 +67,14 @@ void pcg_init(const uint nodeCount, __global const real* restrict b, __global co
 
 /* x += alpha p, r -= alpha q, z = M^-1 r; partials (r . z, r . r, 0). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_update(const uint nodeCount, __global const real* restrict scalars,
+void pcg_update(const uint nodeCount, __global const sum_real* restrict scalars,
                 __global const real* restrict p, __global const real* restrict q,
                 __global const real* restrict minv, __global real* restrict x,
-                __global real* restrict r, __global real* restrict z, __global real* restrict partials) {
+                __global real* restrict r, __global real* restrict z, __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeCount, first, last);
-  const real alpha = scalars[kScalarAlpha];
-  real rz = 0, rr = 0;
+  const real alpha = (real)scalars[kScalarAlpha];
+  sum_real rz = 0, rr = 0;
   for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
     for (int k = 0; k < 3; ++k) {
@@ -83,20 +86,21 @@ void pcg_update(const uint nodeCount, __global const real* restrict scalars,
     apply_preconditioner(n, minv, rn, zn);
     for (int k = 0; k < 3; ++k) {
       z[3 * n + k] = zn[k];
-      rz += rn[k] * zn[k];
-      rr += rn[k] * rn[k];
+      rz += (sum_real)rn[k] * (sum_real)zn[k];
+      rr += (sum_real)rn[k] * (sum_real)rn[k];
     }
   }
-  COROFEM_PARTIAL_STORE(rz, rr, (real)0, partials);
+  COROFEM_PARTIAL_STORE(rz, rr, (sum_real)0, partials);
 }
 
 /* p = z + beta p */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_direction(const uint dofCount, __global const real* restrict scalars,
+void pcg_direction(const uint dofCount, __global const sum_real* restrict scalars,
                    __global const real* restrict z, __global real* restrict p) {
   const uint d = get_global_id(0);
   if (d >= dofCount) return;
-  p[d] = z[d] + scalars[kScalarBeta] * p[d];
+  const real beta = (real)scalars[kScalarBeta];
+  p[d] = z[d] + beta * p[d];
 }
 
 /* Second stage of the dot products: one work-group sums the partialCount partial triples in a fixed
@@ -104,11 +108,11 @@ void pcg_direction(const uint dofCount, __global const real* restrict scalars,
  * non-positive p . A p (A not positive definite on the free dofs, or p = 0) sets alpha = 0 and
  * the breakdown flag instead of dividing. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void reduce_finish(const uint partialCount, __global const real* restrict partials,
-                   __global real* restrict scalars, const uint mode) {
-  __local real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
+void reduce_finish(const uint partialCount, __global const sum_real* restrict partials,
+                   __global sum_real* restrict scalars, const uint mode) {
+  __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
   const uint lid = get_local_id(0);
-  real a = 0, b = 0, c = 0;
+  sum_real a = 0, b = 0, c = 0;
   for (uint g = lid; g < partialCount; g += COROFEM_WG) {
     a += partials[kPartialComponents * g];
     b += partials[kPartialComponents * g + 1];
@@ -135,17 +139,17 @@ void reduce_finish(const uint partialCount, __global const real* restrict partia
     scalars[kScalarBeta] = 0;
     scalars[kScalarBreakdown] = 0;
   } else if (mode == kReduceAlpha) {
-    const real pq = s0[0];
+    const sum_real pq = s0[0];
     scalars[kScalarPq] = pq;
-    if (pq > (real)0) {
+    if (pq > (sum_real)0) {
       scalars[kScalarAlpha] = scalars[kScalarRho] / pq;
     } else {
       scalars[kScalarAlpha] = 0;
       scalars[kScalarBreakdown] = 1;
     }
   } else {
-    const real rho = scalars[kScalarRho], rhoNew = s0[0];
-    scalars[kScalarBeta] = rho != (real)0 ? rhoNew / rho : (real)0;
+    const sum_real rho = scalars[kScalarRho], rhoNew = s0[0];
+    scalars[kScalarBeta] = rho != (sum_real)0 ? rhoNew / rho : (sum_real)0;
     scalars[kScalarRho] = rhoNew;
     scalars[kScalarRr] = s1[0];
   }

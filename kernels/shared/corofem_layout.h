@@ -26,6 +26,17 @@ typedef float4 real4;
 #define REAL_EPS 1.1920929e-07f
 #define REAL_TINY 1e-30f
 #endif
+/* sum_real: the type of the PCG dot products (per-item partials, their reduction) and of the PCG
+ * scalars (rho, alpha, beta, norms). It is `real` except in mixed precision (COROFEM_MIXED, real =
+ * float): there every term of a dot product is formed exactly (a float times a float fits a double)
+ * and summed in double, so the rounding of the sum, ~ n eps_float |x||y| in float for n terms in
+ * the worst case, drops to the float rounding of the vectors themselves. */
+#if defined(COROFEM_MIXED) && !defined(COROFEM_DOUBLE)
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double sum_real;
+#else
+typedef real sum_real;
+#endif
 #define COROFEM_CONSTANT(type, name, value) enum { name = value }
 /* Helper functions: `static inline`, so that no external definition is ever needed (C99 inline
  * semantics would leave an undefined symbol wherever a compiler declines to inline). */
@@ -65,7 +76,7 @@ COROFEM_CONSTANT(unsigned, kElemOutComponents, 12);
 COROFEM_CONSTANT(unsigned, kNodeBlockComponents, 6);
 /* Per-node inverse preconditioner: 9 entries (row-major 3x3) for block diagonal, 3 for diagonal. */
 
-/* ---------------------------------------------------------------- PCG scalars on the device */
+/* ---------------------------------------------------------------- PCG scalars on the device (sum_real) */
 COROFEM_CONSTANT(unsigned, kScalarRho, 0);      /* rho = r . z (current)               */
 COROFEM_CONSTANT(unsigned, kScalarPq, 1);       /* p . A p                             */
 COROFEM_CONSTANT(unsigned, kScalarAlpha, 2);    /* rho / (p . A p)                     */
@@ -79,7 +90,7 @@ COROFEM_CONSTANT(unsigned, kScalarCount, 8);
 COROFEM_CONSTANT(unsigned, kReduceInit, 0);     /* partials (r.z, r.r, b.b) -> rho, rr, bb        */
 COROFEM_CONSTANT(unsigned, kReduceAlpha, 1);    /* partial (p.Ap) -> pq, alpha = rho / pq         */
 COROFEM_CONSTANT(unsigned, kReduceBeta, 2);     /* partials (r.z, r.r) -> beta = rho'/rho, rho, rr */
-COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-group: 3 reals        */
+COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-group: 3 sum_reals    */
 
 /* Default work-group size (overridden by -DCOROFEM_WG). Reductions need a power of two. */
 #ifndef COROFEM_WG

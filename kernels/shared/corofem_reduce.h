@@ -7,8 +7,8 @@
  *     a kernel at every barrier into separate work-item loops, which made the fused PCG kernels
  *     several times slower than their arithmetic).
  * Either way the summation order is fixed by the sizes alone, so results are reproducible bit for
- * bit. A kernel declares COROFEM_PARTIAL_LOCALS at its top and ends with
- * COROFEM_PARTIAL_STORE(a, b, c, partials) reached by every work-item. */
+ * bit. Partials are sum_real (corofem_layout.h: double in mixed precision). A kernel declares
+ * COROFEM_PARTIAL_LOCALS at its top and ends with COROFEM_PARTIAL_STORE(a, b, c, partials) reached by every work-item. */
 #ifndef COROFEM_REDUCE_H
 #define COROFEM_REDUCE_H
 #ifdef __OPENCL_C_VERSION__
@@ -19,8 +19,8 @@
 
 #ifdef COROFEM_TREE_REDUCE
 /* Fixed-order tree sum of three values over the work-group into partials[3 group + k]. */
-COROFEM_FN void group_sum3(__local real* s0, __local real* s1, __local real* s2, real a, real b, real c,
-                       __global real* partials) {
+COROFEM_FN void group_sum3(__local sum_real* s0, __local sum_real* s1, __local sum_real* s2, sum_real a,
+                           sum_real b, sum_real c, __global sum_real* partials) {
   const uint lid = get_local_id(0);
   s0[lid] = a;
   s1[lid] = b;
@@ -41,10 +41,10 @@ COROFEM_FN void group_sum3(__local real* s0, __local real* s1, __local real* s2,
     partials[kPartialComponents * g + 2] = s2[0];
   }
 }
-#define COROFEM_PARTIAL_LOCALS __local real s0_[COROFEM_WG], s1_[COROFEM_WG], s2_[COROFEM_WG];
+#define COROFEM_PARTIAL_LOCALS __local sum_real s0_[COROFEM_WG], s1_[COROFEM_WG], s2_[COROFEM_WG];
 #define COROFEM_PARTIAL_STORE(a, b, c, partials) group_sum3(s0_, s1_, s2_, (a), (b), (c), (partials))
 #else
-COROFEM_FN void item_store3(real a, real b, real c, __global real* partials) {
+COROFEM_FN void item_store3(sum_real a, sum_real b, sum_real c, __global sum_real* partials) {
   const uint i = get_global_id(0);
   partials[kPartialComponents * i] = a;
   partials[kPartialComponents * i + 1] = b;

@@ -106,7 +106,12 @@ struct AnalysisDesc {
 
 enum class LinearSolverKind { Pcg, Cholesky };  ///< Cholesky only on the reference backend
 enum class PreconditionerKind { None, Diagonal, BlockDiagonal };
-enum class Precision { Double, Float };
+/// Floating-point precision of a device backend (the reference backend always computes in double).
+enum class Precision {
+  Double,  ///< everything in double (needs cl_khr_fp64)
+  Float,   ///< everything in float
+  Mixed    ///< float vectors, element data and products; PCG dot products and scalars in double (needs cl_khr_fp64)
+};
 enum class RotationMethod { Polar, Svd, Quaternion, Qr };
 
 struct SolverDesc {

@@ -57,7 +57,9 @@ const Choices<LinearSolverKind> kLinearSolvers{{"pcg", LinearSolverKind::Pcg},
 const Choices<PreconditionerKind> kPreconditioners{{"none", PreconditionerKind::None},
                                                    {"diagonal", PreconditionerKind::Diagonal},
                                                    {"block_diagonal", PreconditionerKind::BlockDiagonal}};
-const Choices<Precision> kPrecisions{{"double", Precision::Double}, {"float", Precision::Float}};
+const Choices<Precision> kPrecisions{{"double", Precision::Double},
+                                     {"float", Precision::Float},
+                                     {"mixed", Precision::Mixed}};
 const Choices<Integrator> kIntegrators{{"newmark", Integrator::Newmark},
                                        {"backward_euler", Integrator::BackwardEuler}};
 const Choices<AnalysisDesc::Kind> kAnalysisKinds{{"static", AnalysisDesc::Kind::Static},

@@ -8,7 +8,8 @@
 //   apply          upload p; element_product + gather_product; download y
 //   solve          upload b, x; precond_invert; r = b - A x; PCG iterations (5 launches each, no
 //                  host read); read the scalars every checkEvery iterations; true residual; download x
-// Build switches (-D), chosen per problem: precision (COROFEM_DOUBLE), rotation method
+// Build switches (-D), chosen per problem: precision (COROFEM_DOUBLE; COROFEM_MIXED: float vectors
+// and products, PCG dot products, partials and scalars in double), rotation method
 // (COROFEM_ROT_*), preconditioner (COROFEM_PRECOND_*), work-group size (COROFEM_WG), elements per
 // work-item (COROFEM_VEC: 8 on CPUs, 1 on GPUs), nodes per work-item in the reducing node kernels
 // (COROFEM_CHUNK: 4 on CPUs; COROFEM_TREE_REDUCE: local-memory trees on GPUs). Rayleigh damping needs no switch:
@@ -174,6 +175,8 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   // -- transfers (blocking, through the staging area, converting to the device precision)
   void upload(const Buffer& buf, const double* src, std::size_t count);
   void download(const Buffer& buf, double* dst, std::size_t count);
+  /// Reads sum_real values (PCG scalars: double in mixed precision, else the vector precision).
+  void downloadSums(const Buffer& buf, double* dst, std::size_t count);
   template <class T>
   void uploadRaw(const Buffer& buf, const std::vector<T>& v) {
     checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, v.size() * sizeof(T), v.data(), 0,
@@ -206,7 +209,9 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::string options_;
   cl::ProgramBuild build_;
   bool double_ = false;
+  bool mixed_ = false;          ///< float vectors, double dot products and PCG scalars
   std::size_t realSize_ = sizeof(float);
+  std::size_t sumSize_ = sizeof(float);  ///< size of sum_real (corofem_layout.h)
   std::size_t wg_ = 64;
   std::size_t vec_ = 1;         ///< elements per work-item in the element kernels
   std::size_t elemItems_ = 0;   ///< work-items of the element kernels
@@ -246,10 +251,18 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
     fail(ErrorCode::BadInput, "body '", problem.name, "': the OpenCL backend solves with PCG only; "
          "\"cholesky\" is available on the reference backend (\"backend\": \"reference\")");
   double_ = solver.precision == Precision::Double;
-  if (double_ && !ctx_->info().fp64)
+  mixed_ = solver.precision == Precision::Mixed;
+  const bool fp64 = ctx_->info().fp64 && !options.assumeNoFp64;
+  if (double_ && !fp64)
     fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64); "
          "set the solver precision to \"float\" or choose another device");
+  if (mixed_ && !fp64)
+    fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64), which "
+         "the solver precision \"mixed\" needs for its dot products; set the precision to \"float\" "
+         "or choose another device");
   realSize_ = double_ ? sizeof(double) : sizeof(float);
+  // Mixed: the vectors are float (realSize_), the partial sums and PCG scalars double (sumSize_).
+  sumSize_ = double_ || mixed_ ? sizeof(double) : sizeof(float);
   wg_ = options.workGroupSize ? options.workGroupSize : kDefaultWorkGroup;
   vec_ = options.vectorWidth ? options.vectorWidth : (ctx_->info().gpu ? 1 : 8);
   if (const char* env = std::getenv("COROFEM_OPENCL_VEC"); env && *env && !options.vectorWidth)
@@ -296,6 +309,7 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_) +
              " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "");
   if (double_) options_ += " -DCOROFEM_DOUBLE";
+  if (mixed_) options_ += " -DCOROFEM_MIXED";
   switch (solver.rotation) {
     case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;
     case RotationMethod::Svd: options_ += " -DCOROFEM_ROT_SVD"; break;
@@ -410,8 +424,10 @@ OpenCLBackend::OpenCLBackend(const Problem& problem, const SolverDesc& solver,
   createReal(blocks_, kNodeBlockComponents * nodes_);
   createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodes_);
   for (Buffer* v : {&x_, &b_, &r_, &z_, &p_, &q_}) createReal(*v, dofs_);
-  createReal(partials_, kPartialComponents * std::max(elemGroups_, partialCount_));
-  createReal(scalars_, kScalarCount);
+  // Partials: the PCG node kernels write sum_real triples; element_energy writes one real per group
+  // into the same buffer (at most sumSize_ bytes each, so the sum_real size covers both).
+  partials_.create(c, kPartialComponents * std::max(elemGroups_, partialCount_) * sumSize_, dev_);
+  scalars_.create(c, kScalarCount * sumSize_, dev_);
   refreshBlocks();
   finish();
 }
@@ -440,6 +456,16 @@ void OpenCLBackend::download(const Buffer& buf, double* dst, std::size_t count) 
     const float* in = reinterpret_cast<const float*>(staging_.data());
     for (std::size_t i = 0; i < count; ++i) dst[i] = in[i];
   }
+}
+
+void OpenCLBackend::downloadSums(const Buffer& buf, double* dst, std::size_t count) {
+  if (!mixed_) {
+    download(buf, dst, count);
+    return;
+  }
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, count * sizeof(double), dst, 0, nullptr,
+                              nullptr),
+          "clEnqueueReadBuffer", dev_);
 }
 
 void OpenCLBackend::refreshBlocks(bool cornersWritten) {
@@ -580,7 +606,7 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
   const double tol = solver_.tolerance;
   const int checkEvery = std::max(1, solver_.checkEvery);
   std::vector<double> scalars(kScalarCount);
-  auto readScalars = [&]() { download(scalars_, scalars.data(), kScalarCount); };
+  auto readScalars = [&]() { downloadSums(scalars_, scalars.data(), kScalarCount); };
   auto relative = [&]() { return std::sqrt(std::max(0.0, scalars[kScalarRr]) / scalars[kScalarBb]); };
 
   readScalars();
@@ -614,7 +640,8 @@ LinearSolveStats OpenCLBackend::solve(const SystemCoeffs& c, const Eigen::Vector
   if (!finite)
     fail(ErrorCode::SolveFailed, "OpenCL PCG produced a non-finite residual after ", it, " iterations on "
          "device '", dev_, "' (the system matrix or the right-hand side holds NaN/Inf, or ",
-         double_ ? "double" : "float", " precision overflowed); check the material, time step and loads");
+         double_ ? "double" : mixed_ ? "mixed" : "float", " precision overflowed); check the material, "
+         "time step and loads");
   Eigen::VectorXd out(static_cast<Eigen::Index>(dofs_));
   download(x_, out.data(), dofs_);
   if (!out.allFinite())

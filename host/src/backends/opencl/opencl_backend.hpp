@@ -20,6 +20,7 @@ struct OpenCLOptions {
   std::size_t nodeChunk = 0;     ///< nodes per work-item in the PCG node kernels, 0 = default (1 on GPUs, CPUs: see the backend)
   int treeReduce = -1;           ///< 1: partial sums by local-memory trees (GPU style), 0: one per work-item, -1: by device type
   int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
+  bool assumeNoFp64 = false;     ///< tests: treat the device as lacking cl_khr_fp64 (the error path of double/mixed)
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.
