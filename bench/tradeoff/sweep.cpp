@@ -334,7 +334,14 @@ std::vector<double> surfaceDisplacement(const RunResult& r, const SurfaceMesh& s
 }
 
 const char* name(BackendKind b) { return b == BackendKind::OpenCL ? "opencl" : "reference"; }
-const char* name(Precision p) { return p == Precision::Float ? "float" : "double"; }
+const char* name(Precision p) {
+  switch (p) {
+    case Precision::Float: return "float";
+    case Precision::Double: return "double";
+    case Precision::Mixed: return "mixed";
+  }
+  return "?";
+}
 const char* name(PreconditionerKind p) {
   switch (p) {
     case PreconditionerKind::None: return "none";
@@ -390,7 +397,8 @@ std::vector<Knobs> fullKnobs(bool quick, bool withOpenCL) {
   }
   if (!withOpenCL) return out;
   const std::vector<double> clTols = quick ? std::vector<double>{1e-2, 1e-5} : std::vector<double>{1e-2, 1e-4, 1e-6};
-  for (auto prec : {Precision::Float, Precision::Double})
+  // Mixed: float vectors and products, PCG dot products and scalars in double.
+  for (auto prec : {Precision::Float, Precision::Mixed, Precision::Double})
     for (auto pc : (quick ? std::vector<PreconditionerKind>{PreconditionerKind::BlockDiagonal} : preconds))
       for (double tol : clTols) {
         Knobs k;
@@ -401,8 +409,8 @@ std::vector<Knobs> fullKnobs(bool quick, bool withOpenCL) {
         out.push_back(k);
       }
   for (auto rot : {RotationMethod::Svd, RotationMethod::Quaternion, RotationMethod::Qr})
-    for (auto prec : {Precision::Float, Precision::Double}) {
-      if (quick && prec == Precision::Double) continue;
+    for (auto prec : {Precision::Float, Precision::Mixed, Precision::Double}) {
+      if (quick && prec != Precision::Float) continue;
       Knobs k;
       k.backend = BackendKind::OpenCL;
       k.precision = prec;
@@ -420,7 +428,7 @@ std::vector<Knobs> fullKnobs(bool quick, bool withOpenCL) {
     k.maxIterations = cap;
     out.push_back(k);
   }
-  for (auto prec : {Precision::Float, Precision::Double}) {
+  for (auto prec : {Precision::Float, Precision::Mixed, Precision::Double}) {
     Knobs k;
     k.backend = BackendKind::OpenCL;
     k.precision = prec;
@@ -458,6 +466,17 @@ std::vector<Knobs> resolutionKnobs(bool withOpenCL) {
     d.precision = Precision::Double;
     d.tolerance = 1e-6;
     out.push_back(d);
+    // Mixed (float products, double dot products and PCG scalars) at the float and the double
+    // tolerance, and float at the double one: the three precisions side by side.
+    Knobs m = f;
+    m.precision = Precision::Mixed;
+    out.push_back(m);
+    Knobs m6 = m;
+    m6.tolerance = 1e-6;
+    out.push_back(m6);
+    Knobs f6 = f;
+    f6.tolerance = 1e-6;
+    out.push_back(f6);
   }
   return out;
 }
