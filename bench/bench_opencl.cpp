@@ -3,7 +3,8 @@
 // OpenCL device, plus a full dynamic step of a 10k-element beam (20 PCG iterations, transfers
 // included). Reports elements/s and the fraction of the device bandwidth measured here by a copy
 // kernel. Run:  bench_opencl --benchmark_format=json [--benchmark_filter=-1M]  (skip the 1M mesh)
-// Precision is float unless the name says double. Device work only (no transfers) except
+// Precision is float unless the name says double or mixed (pcg_iteration_mixed: float vectors and
+// products, dot products and PCG scalars in double; pcg_iteration_double for the third point). Device work only (no transfers) except
 // dynamic_step, which is what an application sees per frame.
 #include <benchmark/benchmark.h>
 
@@ -113,7 +114,7 @@ struct Config {
 /// 12-vector it writes; gather pass: 4 list entries and the 12-vector read back, plus per node
 /// the vectors it reads and writes.
 double bytesPerElement(const Config& c, const detail::Problem& p) {
-  const double r = c.precision == Precision::Float ? 4.0 : 8.0;
+  const double r = c.precision == Precision::Double ? 8.0 : 4.0;  // mixed: float vectors
   const double nodesPerElement = static_cast<double>(p.mesh.nodeCount()) / static_cast<double>(p.mesh.tetCount());
   switch (c.work) {
     case Work::Rotation:  // indices, 9 gradients, 12 corner positions -> 9 R + 9 a
@@ -260,6 +261,10 @@ int registerAll() {
       add(workName(Work::ProductStored), {dev, size, Work::ProductStored});
       if (devices[d].fp64) add("product_double", {dev, size, Work::Product, RotationMethod::Polar, Precision::Double});
       add(workName(Work::PcgIteration), {dev, size, Work::PcgIteration});
+      if (devices[d].fp64) {
+        add("pcg_iteration_mixed", {dev, size, Work::PcgIteration, RotationMethod::Polar, Precision::Mixed});
+        add("pcg_iteration_double", {dev, size, Work::PcgIteration, RotationMethod::Polar, Precision::Double});
+      }
     }
   }
   return 0;

@@ -71,7 +71,8 @@ def pareto(points):
 
 def style(r):
     """Colour by backend and precision, marker by the knob that differs from the baseline."""
-    colour = {"reference": "tab:blue", ("opencl", "float"): "tab:orange", ("opencl", "double"): "tab:green"}
+    colour = {"reference": "tab:blue", ("opencl", "float"): "tab:orange", ("opencl", "mixed"): "tab:purple",
+              ("opencl", "double"): "tab:green"}
     c = colour["reference"] if r["backend"] == "reference" else colour[(r["backend"], r["precision"])]
     if r["formulation"] == "linear":
         m = "x"
@@ -138,6 +139,7 @@ def main():
         from matplotlib.lines import Line2D
         handles = [Line2D([], [], color="tab:blue", marker="o", ls="", label="reference (Eigen, double)"),
                    Line2D([], [], color="tab:orange", marker="o", ls="", label="OpenCL float"),
+                   Line2D([], [], color="tab:purple", marker="o", ls="", label="OpenCL mixed (float, double dots)"),
                    Line2D([], [], color="tab:green", marker="o", ls="", label="OpenCL double"),
                    Line2D([], [], color="gray", marker="*", ls="", label="Cholesky"),
                    Line2D([], [], color="gray", marker="o", ls="", label="PCG, no precond."),
