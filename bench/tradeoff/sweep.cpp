@@ -23,6 +23,8 @@
 //              (48 x 160 quads as triangles, 7728 vertices), bound with bindSurface. Error: the
 //              surface vertices' displacement (deformSurface), final state, against the finest
 //              tet mesh solved by the reference.
+//   coupled_tol  only with --only coupled_tol: the 48x6x6 coupled mesh on the OpenCL backend,
+//              PCG tolerance 1e-5 to 1e-8 x float / mixed / double, against its own Cholesky solve.
 //
 // The reference of each (scene, mesh): reference backend, double, LDL^T (Cholesky), co-rotational,
 // statics to a relative residual of 1e-8 (the knob rows keep the default 1e-6; 1e-10 stalls at
@@ -650,6 +652,29 @@ int runSweep(const Options& options) {
         RunResult r = measure(buildScene(cl, k), reps);
         emit(cl, "finest_mesh_surface", k, r, fine,
              r.status == "ok" ? surfaceDisplacement(r, surface) : std::vector<double>{});
+      }
+  }
+
+  // coupled_tol (only when asked for by name: --only coupled_tol): the finest coupled mesh on the
+  // OpenCL backend at PCG tolerances 1e-5 to 1e-8 in float, mixed and double, against its own
+  // Cholesky solve: where each precision's error floor lies (docs/tradeoff.md, Mixed precision).
+  if (options.only == "coupled_tol" && withOpenCL) {
+    const int level = quick ? 3 : 6;
+    const SceneCase c{"coupled_tol", SceneKind::Coupled, level, steps};
+    Reference ref;
+    ref.run = runOnce(buildScene(c, cholesky()));
+    ref.compare = surfaceDisplacement(ref.run, surface);
+    std::fprintf(stderr, "coupled_tol reference (%s): %s\n", meshLabel(SceneKind::Coupled, level).c_str(),
+                 ref.run.status.c_str());
+    for (double tol : {1e-5, 3e-6, 1e-6, 3e-7, 1e-7, 1e-8})
+      for (Precision prec : {Precision::Float, Precision::Mixed, Precision::Double}) {
+        Knobs k;
+        k.backend = BackendKind::OpenCL;
+        k.precision = prec;
+        k.preconditioner = PreconditionerKind::BlockDiagonal;
+        k.tolerance = tol;
+        RunResult r = measure(buildScene(c, k), reps);
+        emit(c, "same_mesh_surface", k, r, ref, r.status == "ok" ? surfaceDisplacement(r, surface) : std::vector<double>{});
       }
   }
 

@@ -15,7 +15,7 @@ namespace {
 
 int usage() {
   std::fprintf(stderr,
-               "usage: corofem_tradeoff sweep [--quick] [--only fig8|cantilever_dyn|cantilever|coupled] [--no-opencl] "
+               "usage: corofem_tradeoff sweep [--quick] [--only fig8|cantilever_dyn|cantilever|coupled|coupled_tol] [--no-opencl] "
                "[--data DIR] --out FILE.csv\n"
                "       corofem_tradeoff fig5 [--quick] [--force-max N] [--increments K] [--data DIR] "
                "--out FILE.csv\n");
