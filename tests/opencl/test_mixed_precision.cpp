@@ -18,6 +18,8 @@
 #include "opencl/opencl_test_support.hpp"
 #include "util/error.hpp"
 
+#include <corofem/scene.hpp>
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -111,6 +113,16 @@ double trueResidual(detail::Backend& ref, const detail::Problem& p, const detail
 }
 
 }  // namespace
+
+TEST(OpenCLMixedPrecision, SceneValueMixedParses) {
+  // "precision": "mixed" (docs/scene-format.md); an unknown value still lists the three.
+  const auto scene = parseScene(R"({"bodies": [{"mesh": {"box": {}}}], "solver": {"precision": "mixed"}})", ".");
+  ASSERT_TRUE(scene) << scene.message();
+  EXPECT_EQ(scene->solver.precision, Precision::Mixed);
+  const auto bad = parseScene(R"({"bodies": [{"mesh": {"box": {}}}], "solver": {"precision": "half"}})", ".");
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.message().find("mixed"), std::string::npos) << bad.message();
+}
 
 TEST(OpenCLMixedPrecision, BuildsFloatVectorsWithDoubleSums) {
   COROFEM_REQUIRE_FP64_DEVICE(device);
