@@ -86,6 +86,17 @@ struct StaticDesc {
 
 enum class Integrator { Newmark, BackwardEuler };
 
+/// Bodies at rest sleep (analysis.sleep, dynamics): after `steps` consecutive steps with every free
+/// node slower than `velocity` and loads steady, a body's solve is skipped (positions held,
+/// velocities zero) until its loads or prescribed displacements move away from where they were
+/// when it fell asleep. See docs/scene-format.md.
+struct SleepDesc {
+  bool enabled = false;
+  double velocity = 1e-4;    ///< m/s, > 0: largest free-node speed of a quiet step
+  double loadChange = 1e-6;  ///< > 0: relative change |f(t) - f_ref| / |f_ref| of the external load that counts as a change
+  int steps = 10;            ///< >= 1: quiet steps before the body sleeps
+};
+
 struct DynamicDesc {
   Integrator integrator = Integrator::Newmark;
   double timeStep = 1.0 / 60.0;  ///< s, > 0
@@ -95,6 +106,7 @@ struct DynamicDesc {
   int newtonIterations = 1;      ///< Newton iterations per step (1 = linearised, as in the paper), >= 1
   double newtonTolerance = 1e-6; ///< relative residual that ends the Newton loop early
   int maxSubsteps = 1;           ///< a failed step is retried as 2, 4, ... substeps of timeStep/k, k <= this (1 = no retry), >= 1
+  SleepDesc sleep;               ///< bodies at rest skip their solve (off by default)
 };
 
 struct AnalysisDesc {

@@ -100,7 +100,9 @@ const std::vector<std::string> kStaticKeys{"type", "increments", "max_newton_ite
                                            "displacement_tolerance"};
 const std::vector<std::string> kDynamicKeys{"type",          "integrator",    "time_step",
                                             "steps",         "newmark_beta",  "newmark_gamma",
-                                            "newton_iterations", "newton_tolerance", "max_substeps"};
+                                            "newton_iterations", "newton_tolerance", "max_substeps",
+                                            "sleep"};
+const std::vector<std::string> kSleepKeys{"velocity", "load_change", "steps"};
 const std::vector<std::string> kSolverKeys{"linear_solver", "tolerance",  "max_iterations", "check_every",
                                            "preconditioner", "precision", "rotation"};
 const std::vector<std::string> kBackendKeys{"kind", "device"};
@@ -473,6 +475,20 @@ AnalysisDesc parseAnalysis(const Reader& r, const json& j, const std::string& pa
   o.read("newton_iterations", d.newtonIterations, {atLeastOne, "newton_iterations >= 1"});
   o.read("newton_tolerance", d.newtonTolerance, {positive, "newton_tolerance > 0"});
   o.read("max_substeps", d.maxSubsteps, {atLeastOne, "max_substeps >= 1"});
+  if (const json* sleep = o.get("sleep")) {
+    // true = the default thresholds; an object sets them (and turns sleeping on).
+    if (sleep->is_boolean()) {
+      d.sleep.enabled = r.boolean(*sleep, o.at("sleep"));
+    } else {
+      r.expectObject(*sleep, o.at("sleep"), "true, false or an object {\"velocity\": 1e-4, \"load_change\": 1e-6, \"steps\": 10}");
+      r.checkKeys(*sleep, o.at("sleep"), kSleepKeys);
+      const Obj so(r, *sleep, o.at("sleep"));
+      d.sleep.enabled = true;
+      so.read("velocity", d.sleep.velocity, {positive, "velocity > 0"});
+      so.read("load_change", d.sleep.loadChange, {positive, "load_change > 0"});
+      so.read("steps", d.sleep.steps, {atLeastOne, "steps >= 1"});
+    }
+  }
   return a;
 }
 

@@ -211,6 +211,11 @@ class DynamicSolver final : public BodySolver {
   BodyStepStats step(int index, int count) override;
   void rollback() override;
   double time() const { return t_; }
+  /// Step `index` of a sleeping body (analysis.sleep, decided by the Simulation): no solve; the
+  /// time advances by one step, the positions stay, velocities and accelerations become zero (the
+  /// body was below the sleep speed), f_ext moves to the new time (the loads do no work: nothing
+  /// moves). Keeps the rollback copy like step(). Returns zero iterations.
+  BodyStepStats idleStep(int index, int count);
 
  private:
   /// Everything a step changes (the committed state of the base class plus the integrator's).

@@ -296,6 +296,30 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
   return stats;
 }
 
+BodyStepStats DynamicSolver::idleStep(int, int) {
+  if (!started_) {
+    initialAcceleration();
+    started_ = true;
+  }
+  const State start = capture();
+  t_ = start.t + desc_.timeStep;
+  v_.setZero();
+  a_.setZero();
+  fextPrev_ = problem_.externalForce(t_, /*dynamic=*/true);
+  xPrev_ = start.x;
+  vPrev_ = start.v;
+  aPrev_ = start.a;
+  workPrev_ = start.work;
+  tPrev_ = start.t;
+  fextPrevSaved_ = start.fextPrev;
+  supportWorkSaved_ = start.supportWork;
+  reactionPrevSaved_ = start.reactionPrev;
+  BodyStepStats stats;
+  stats.newtonIterations = 0;
+  stats.converged = true;
+  return stats;
+}
+
 void DynamicSolver::rollback() {
   x_ = xPrev_;
   v_ = vPrev_;

@@ -56,6 +56,14 @@ struct Simulation::Impl {
     // Render surface bound to the tet mesh (paper Sec. 5), when the body names one.
     std::unique_ptr<SurfaceMesh> surface;
     std::unique_ptr<SurfaceBinding> binding;
+    // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and
+    // prescribed positions it fell asleep under (the reference a change is measured against).
+    struct Sleep {
+      bool asleep = false;
+      int quiet = 0;
+      long long sleptSteps = 0, wakes = 0;
+      Eigen::VectorXd fRef, xpRef;
+    } sleep;
   };
 
   Scene scene;
@@ -66,6 +74,59 @@ struct Simulation::Impl {
   int stepCount() const {
     return isStatic() ? std::max(1, scene.analysis.statics.increments) : std::max(1, scene.analysis.dynamics.steps);
   }
+  /// One body's step, or its idle step while it sleeps (analysis.sleep, dynamics only).
+  ///
+  /// Quiet step: every free node slower than sleep.velocity after the step, and the loads steady
+  /// over it: |f_ext(t1) - f_ext(t0)| <= loadChange |f_ext(t1)| and every prescribed target moved
+  /// less than velocity * h. After sleep.steps quiet steps in a row the body sleeps: its steps are
+  /// idle (positions held, velocities zero, time advancing) until f_ext drifts from the load it
+  /// fell asleep under by more than loadChange (relative) or a prescribed target by more than
+  /// velocity * h; then it wakes and takes that step normally.
+  /// What sleeping changes: the motion left out is that of a body slower than `velocity`, so the
+  /// positions differ from an awake run by at most about velocity x (time asleep) while the
+  /// motion keeps decaying (tests/schedule/test_sleep.cpp measures it).
+  detail::BodyStepStats stepBody(Body& b, int index, int count) {
+    const SleepDesc& cfg = scene.analysis.dynamics.sleep;
+    if (isStatic() || !cfg.enabled) return b.solver->step(index, count);
+    const double h = scene.analysis.dynamics.timeStep;
+    const double t0 = (index - 1) * h, t1 = index * h;
+    const detail::Problem& p = *b.problem;
+    const Eigen::VectorXd f1 = p.externalForce(t1, true);
+    Eigen::VectorXd xp1 = p.restPositions;
+    p.applyPrescribed(xp1, t1, true);
+    auto* dyn = dynamic_cast<detail::DynamicSolver*>(b.solver.get());
+    if (b.sleep.asleep && dyn) {
+      const bool loadMoved = (f1 - b.sleep.fRef).norm() > cfg.loadChange * b.sleep.fRef.norm();
+      const bool targetMoved = (xp1 - b.sleep.xpRef).cwiseAbs().maxCoeff() > cfg.velocity * h;
+      if (!loadMoved && !targetMoved) {
+        ++b.sleep.sleptSteps;
+        return dyn->idleStep(index, count);
+      }
+      b.sleep.asleep = false;
+      b.sleep.quiet = 0;
+      ++b.sleep.wakes;
+    }
+    const detail::BodyStepStats stats = b.solver->step(index, count);
+    const Eigen::VectorXd f0 = p.externalForce(t0, true);
+    Eigen::VectorXd xp0 = p.restPositions;
+    p.applyPrescribed(xp0, t0, true);
+    const bool steady = (f1 - f0).norm() <= cfg.loadChange * f1.norm() &&
+                        (xp1 - xp0).cwiseAbs().maxCoeff() <= cfg.velocity * h;
+    const Eigen::VectorXd& v = b.solver->velocities();
+    double maxSpeed = 0.0;
+    for (Eigen::Index n = 0; n + 2 < v.size(); n += 3) {
+      if (p.constrained[n] && p.constrained[n + 1] && p.constrained[n + 2]) continue;
+      maxSpeed = std::max(maxSpeed, v.segment<3>(n).norm());
+    }
+    b.sleep.quiet = steady && maxSpeed < cfg.velocity ? b.sleep.quiet + 1 : 0;
+    if (dyn && b.sleep.quiet >= std::max(1, cfg.steps)) {
+      b.sleep.asleep = true;
+      b.sleep.fRef = f1;
+      b.sleep.xpRef = xp1;
+    }
+    return stats;
+  }
+
   const Body& body(int index) const {
     if (index < 0 || index >= static_cast<int>(bodies.size()))
       detail::fail(ErrorCode::BadInput, "body index ", index, " is out of range: the scene has ", bodies.size(),
@@ -118,10 +179,12 @@ Status Simulation::step(StepReport* report) {
                    " steps taken); check finished() before step()");
     const int index = s.stepsTaken + 1;
     std::size_t done = 0;
+    std::vector<Impl::Body::Sleep> sleepBefore;
+    for (const Impl::Body& b : s.bodies) sleepBefore.push_back(b.sleep);
     try {
       for (; done < s.bodies.size(); ++done) {
         s.bodies[done].failover->setWhen("step " + std::to_string(index));
-        const detail::BodyStepStats b = s.bodies[done].solver->step(index, count);
+        const detail::BodyStepStats b = s.stepBody(s.bodies[done], index, count);
         r.newtonIterations += b.newtonIterations;
         r.linearIterations += b.linearIterations;
         r.residual = std::max(r.residual, b.residual);
@@ -132,6 +195,7 @@ Status Simulation::step(StepReport* report) {
       // The failing body restored itself; the bodies stepped before it go back one step so that
       // the whole scene stays at the last step every body completed.
       for (std::size_t b = 0; b < done; ++b) s.bodies[b].solver->rollback();
+      for (std::size_t b = 0; b < s.bodies.size(); ++b) s.bodies[b].sleep = sleepBefore[b];
       throw;
     }
     s.stepsTaken = index;
@@ -228,6 +292,8 @@ std::string Simulation::schedulerReport() const {
   for (const Impl::Body& b : impl_->bodies) {
     json s = json::parse(detail::scheduleJson(b.schedule));
     s["current"] = b.failover->current().label();
+    if (impl_->scene.analysis.dynamics.sleep.enabled && !impl_->isStatic())
+      s["sleep"] = {{"asleep", b.sleep.asleep}, {"slept_steps", b.sleep.sleptSteps}, {"wakes", b.sleep.wakes}};
     bodies.push_back(s);
     for (const detail::FallbackEvent& e : b.failover->events()) fallbacks.push_back(json::parse(detail::fallbackJson(e)));
   }
