@@ -156,6 +156,21 @@ TEST(Failover, ExplicitChoiceThatCannotStartIsAnError) {
 #endif
 }
 
+// "auto" with a device named is an explicit request for that OpenCL device.
+TEST(Failover, AutoWithADeviceNamedIsAnExplicitRequest) {
+  HookScope scope;
+  Scene scene = dynamicScene(boxBeam(), 2);
+  scene.backend.kind = BackendKind::Auto;
+  scene.backend.device = "no-such-device-xyz";
+  auto sim = Simulation::create(scene);
+  ASSERT_FALSE(sim);
+#ifdef COROFEM_WITH_OPENCL
+  EXPECT_EQ(sim.status().code(), ErrorCode::DeviceError) << sim.message();
+#else
+  EXPECT_EQ(sim.status().code(), ErrorCode::NotCompiledIn) << sim.message();
+#endif
+}
+
 #ifdef COROFEM_WITH_OPENCL
 // A real OpenCL device (PoCL here) failing in the middle of the run: the body finishes on the
 // reference backend. The steps before the failure ran on the device, so the answer equals the

@@ -196,6 +196,14 @@ DeviceRequest requestedDevice(const Scene& scene) {
     r.source = "scene";
     return r;
   }
+  // "auto" with a device named: the user chose that OpenCL device ("" is the scheduler's choice).
+  if (!scene.backend.device.empty()) {
+    DeviceRequest r;
+    r.kind = BackendKind::OpenCL;
+    r.device = scene.backend.device;
+    r.source = "the scene (\"backend.device\": \"" + scene.backend.device + "\")";
+    return r;
+  }
   if (const char* env = std::getenv("COROFEM_DEVICE"); env && *env) return parseDeviceSpec(env, "COROFEM_DEVICE");
   return {};
 }

@@ -69,7 +69,8 @@ struct DeviceRequest {
 /// Parses "reference", "opencl", "opencl:<index>", "opencl:<name substring>" or "auto". Throws
 /// Error(BadInput) naming `source` and listing the choices for anything else.
 DeviceRequest parseDeviceSpec(const std::string& spec, const std::string& source);
-/// The request in force: the scene's backend when not "auto", else COROFEM_DEVICE when set.
+/// The request in force: the scene's backend when not "auto" (or "auto" with a device named: that
+/// OpenCL device), else COROFEM_DEVICE when set.
 DeviceRequest requestedDevice(const Scene& scene);
 
 struct CandidateTiming {
