@@ -225,6 +225,8 @@ class DynamicSolver final : public BodySolver {
   };
   State capture() const;
   void restore(const State& s);
+  /// Makes `s` (the state before a step) what rollback() returns to.
+  void keepForRollback(const State& s);
 
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs (0 on constrained ones).
   void initialAcceleration();

@@ -3,6 +3,7 @@
 // DynamicSolver in body_solver.hpp.
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
+#include "util/format.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -13,12 +14,6 @@
 namespace corofem::detail {
 
 namespace {
-
-std::string sci(double value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%.1e", value);
-  return buffer;
-}
 
 /// Relative residual above which a step whose linear solves did not converge, and whose residual
 /// grew during the step, counts as blown up. Below it the step is merely inexact (the user traded
@@ -61,6 +56,17 @@ void DynamicSolver::initialAcceleration() {
   if (!allFinite(a_))
     fail(ErrorCode::SolveFailed, "body '", problem_.name,
          "': the initial acceleration is not finite; check the material, the loads and the initial velocity");
+}
+
+void DynamicSolver::keepForRollback(const State& s) {
+  xPrev_ = s.x;
+  vPrev_ = s.v;
+  aPrev_ = s.a;
+  workPrev_ = s.work;
+  tPrev_ = s.t;
+  fextPrevSaved_ = s.fextPrev;
+  supportWorkSaved_ = s.supportWork;
+  reactionPrevSaved_ = s.reactionPrev;
 }
 
 DynamicSolver::State DynamicSolver::capture() const {
@@ -139,14 +145,7 @@ BodyStepStats DynamicSolver::step(int index, int count) {
     std::fprintf(stderr, "dynamic step %d/%d: retried, succeeded with %d substeps\n", index, count, total.substeps);
 
   // The rollback copy is the state before the whole step, whatever the substeps.
-  xPrev_ = start.x;
-  vPrev_ = start.v;
-  aPrev_ = start.a;
-  workPrev_ = start.work;
-  tPrev_ = start.t;
-  fextPrevSaved_ = start.fextPrev;
-  supportWorkSaved_ = start.supportWork;
-  reactionPrevSaved_ = start.reactionPrev;
+  keepForRollback(start);
   return total;
 }
 
@@ -306,14 +305,7 @@ BodyStepStats DynamicSolver::idleStep(int, int) {
   v_.setZero();
   a_.setZero();
   fextPrev_ = problem_.externalForce(t_, /*dynamic=*/true);
-  xPrev_ = start.x;
-  vPrev_ = start.v;
-  aPrev_ = start.a;
-  workPrev_ = start.work;
-  tPrev_ = start.t;
-  fextPrevSaved_ = start.fextPrev;
-  supportWorkSaved_ = start.supportWork;
-  reactionPrevSaved_ = start.reactionPrev;
+  keepForRollback(start);
   BodyStepStats stats;
   stats.newtonIterations = 0;
   stats.converged = true;

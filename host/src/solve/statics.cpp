@@ -3,6 +3,7 @@
 // StaticSolver in body_solver.hpp.
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
+#include "util/format.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -15,12 +16,6 @@
 namespace corofem::detail {
 
 namespace {
-
-std::string sci(double value) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "%.1e", value);
-  return buffer;
-}
 
 /// Secant pairs kept by the quasi-Newton correction (L-BFGS memory).
 constexpr int kHistory = 8;
