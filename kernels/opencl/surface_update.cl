@@ -8,7 +8,11 @@
  *   1 surface_positions     x_v = sum_k w_vk x_{n_vk}                      (k = 0..3)
  *   2 surface_face_vectors  f_t = (x_b - x_a) x (x_c - x_a),  |f_t| = 2 area(t)
  *   3 surface_normals       n_v = normalise(sum_{t at v} f_t)  (area-weighted mean of face normals),
- *                           written with x_v as 6 floats per vertex (renderer vertex buffer).
+ *                           written with x_v + c as 6 floats per vertex (renderer vertex buffer).
+ * The node positions may be relative to an offset c (the OpenCL backend keeps them relative to the
+ * body's centroid so that float keeps its accuracy far from the origin): the weights sum to 1, so
+ * sum_k w_vk (x_{n_vk} - c) + c = x_v. Passes 1-2 work on the relative positions (the face vectors
+ * are differences, c cancels); pass 3 adds c to the position it writes. c = 0 for absolute input.
  */
 #ifdef COROFEM_SURFACE
 #ifndef COROFEM_EMBEDDED
@@ -43,10 +47,12 @@ __kernel void surface_face_vectors(const uint triangleCount, __global const uint
 }
 
 /* offsets/incident: CSR vertex -> incident triangles (ascending). out: 6 floats per vertex
- * (position, unit normal); the normal of a vertex without a non-degenerate triangle is 0. */
+ * (position + c, unit normal); the normal of a vertex without a non-degenerate triangle is 0.
+ * cx, cy, cz: the offset c of the node positions (0 for absolute positions). */
 __kernel void surface_normals(const uint vertexCount, __global const uint* restrict offsets,
                               __global const uint* restrict incident, __global const real* restrict faces,
-                              __global const real* restrict pos, __global float* restrict out) {
+                              __global const real* restrict pos, __global float* restrict out,
+                              const real cx, const real cy, const real cz) {
   const uint v = (uint)get_global_id(0);
   if (v >= vertexCount) return;
   real3 n = (real3)(0, 0, 0);
@@ -58,9 +64,9 @@ __kernel void surface_normals(const uint vertexCount, __global const uint* restr
   const real length = sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
   const real scale = length > (real)0 ? (real)1 / length : (real)0;
   __global float* dst = out + 6 * (size_t)v;
-  dst[0] = (float)pos[3 * v];
-  dst[1] = (float)pos[3 * v + 1];
-  dst[2] = (float)pos[3 * v + 2];
+  dst[0] = (float)(pos[3 * v] + cx);
+  dst[1] = (float)(pos[3 * v + 1] + cy);
+  dst[2] = (float)(pos[3 * v + 2] + cz);
   dst[3] = (float)(n.x * scale);
   dst[4] = (float)(n.y * scale);
   dst[5] = (float)(n.z * scale);

@@ -137,6 +137,89 @@ TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {
   ASSERT_NE(device->vertexBuffer(), nullptr);
 }
 
+/// updateFromDevice with node positions relative to an offset c (the OpenCL backend's centroid-relative
+/// buffer) writes the same surface as absolute positions: x_v = sum_k w_vk (x_k - c) + c.
+TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
+  const Scene s = makeScene();
+  const bool dbl = GetParam().doublePrecision;
+  auto ctx = detail::cl::Context::shared(std::to_string(GetParam().device));
+  DeviceSurfaceOptions o = options();
+  o.context = ctx->context();
+  o.queue = ctx->queue();
+  o.deviceId = ctx->device();
+  auto device = DeviceSurface::create(s.binding, o);
+  ASSERT_TRUE(device.isOk()) << device.message();
+  std::mt19937 rng(23);
+  // The body far from the origin (c ~ 100), where the absolute positions carry ~100x the rounding.
+  std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
+  const double c[3] = {100.25, -37.5, 64.125};
+  for (std::size_t i = 0; i < x.size(); ++i) x[i] += c[i % 3];
+  const std::size_t nodes = s.tets.nodeCount(), n = s.binding.vertexCount();
+  // Both inputs in the device precision, as device buffers.
+  auto upload = [&](bool relative) {
+    std::vector<unsigned char> bytes(3 * nodes * (dbl ? 8 : 4));
+    for (std::size_t i = 0; i < 3 * nodes; ++i) {
+      const double v = relative ? x[i] - c[i % 3] : x[i];
+      if (dbl) std::memcpy(&bytes[8 * i], &v, 8);
+      else {
+        const float f = static_cast<float>(v);
+        std::memcpy(&bytes[4 * i], &f, 4);
+      }
+    }
+    cl_int status = CL_SUCCESS;
+    cl_mem m = clCreateBuffer(ctx->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes.size(), bytes.data(),
+                              &status);
+    EXPECT_EQ(status, CL_SUCCESS);
+    return m;
+  };
+  cl_mem absolute = upload(false), relative = upload(true);
+  std::vector<float> a(6 * n, NAN), r(6 * n, NAN), r0(6 * n, NAN), host(6 * n);
+  ASSERT_TRUE(device->updateFromDevice(absolute).isOk());
+  ASSERT_TRUE(device->read(a.data()).isOk());
+  ASSERT_TRUE(device->updateFromDevice(relative, c).isOk());
+  ASSERT_TRUE(device->read(r.data()).isOk());
+  ASSERT_TRUE(device->updateFromDevice(relative, nullptr).isOk());  // offset 0: the relative surface
+  ASSERT_TRUE(device->read(r0.data()).isOk());
+  ASSERT_TRUE(device->updateFromDevice(relative).isOk());  // the old overload: no offset either
+  std::vector<float> r1(6 * n, NAN);
+  ASSERT_TRUE(device->read(r1.data()).isOk());
+  clReleaseMemObject(absolute);
+  clReleaseMemObject(relative);
+  SurfaceOutput out;
+  out.interleaved = host.data();
+  ASSERT_TRUE(deformSurface(s.binding, x.data(), nodes, out).isOk());
+  // Tolerances: a float ulp at |x| ~ 100 is 7.6e-6. Absolute float input: each node position rounds by
+  // half an ulp of ~100 and the weighted sum (|w| sum <= ~1.5) adds a few more: ~4e-5. Relative input +
+  // offset: rounding of ~1 plus the final float rounding at ~100: <= ~1e-5. Double arithmetic only
+  // rounds the float output (half an ulp, 3.8e-6). Normals: relative float positions lose about
+  // eps * 1 / edge(0.05) ~ 1e-5 in direction (2e-4 as in MatchesHostReference); absolute float input
+  // loses ~eps * 100 / 0.05 ~ 2.4e-4 per edge (a few edges per normal: 5e-3) -- the reason the backend
+  // keeps positions relative to the centroid.
+  const float posAbs = dbl ? 4e-6f : 6e-5f, posRel = dbl ? 4e-6f : 2e-5f;
+  const float nAbs = dbl ? 1e-6f : 5e-3f, nRel = dbl ? 1e-6f : 2e-4f;
+  float worstAbsPos = 0, worstRelPos = 0, worstAbsN = 0, worstRelN = 0, worstShift = 0, worstOldApi = 0;
+  for (std::size_t v = 0; v < n; ++v)
+    for (int k = 0; k < 3; ++k) {
+      worstAbsPos = std::max(worstAbsPos, std::abs(a[6 * v + k] - host[6 * v + k]));
+      worstRelPos = std::max(worstRelPos, std::abs(r[6 * v + k] - host[6 * v + k]));
+      worstAbsN = std::max(worstAbsN, std::abs(a[6 * v + 3 + k] - host[6 * v + 3 + k]));
+      worstRelN = std::max(worstRelN, std::abs(r[6 * v + 3 + k] - host[6 * v + 3 + k]));
+      // Without the offset the positions are the relative ones (shifted by -c); normals are the same bits.
+      worstShift = std::max(worstShift, std::abs(r0[6 * v + k] + static_cast<float>(c[k]) - r[6 * v + k]));
+      EXPECT_EQ(r0[6 * v + 3 + k], r[6 * v + 3 + k]);
+      worstOldApi = std::max(worstOldApi, std::abs(r1[6 * v + k] - r0[6 * v + k]));
+    }
+  std::printf("[ device   ] worst |position| difference: absolute input %.3g, relative + offset %.3g; normals "
+              "%.3g, %.3g\n",
+              worstAbsPos, worstRelPos, worstAbsN, worstRelN);
+  EXPECT_LE(worstAbsPos, posAbs);
+  EXPECT_LE(worstRelPos, posRel);
+  EXPECT_LE(worstAbsN, nAbs);
+  EXPECT_LE(worstRelN, nRel);
+  EXPECT_LE(worstShift, 2e-5f);  // two float roundings at |x| ~ 100 (ulp 7.6e-6)
+  EXPECT_EQ(worstOldApi, 0.0f);
+}
+
 INSTANTIATE_TEST_SUITE_P(Devices, EmbedDevice, ::testing::ValuesIn(deviceCases()),
                          [](const ::testing::TestParamInfo<DeviceCase>& info) { return info.param.name; });
 

@@ -156,6 +156,10 @@ class DeviceSurface {
   /// Enqueues the update from node positions already on the device: a buffer of 3 reals per node
   /// (float or double as DeviceSurfaceOptions::doublePrecision), e.g. the simulation's own buffer.
   Status updateFromDevice(_cl_mem* tetNodePositions);
+  /// As above, from node positions relative to an offset c (3 doubles; nullptr = 0), e.g. the OpenCL
+  /// backend's positions relative to the body's centroid: the weights sum to 1, so the kernel writes
+  /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c.
+  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset);
   /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update).
   Status read(float* interleaved) const;
   /// The output buffer (6 * vertexCount() floats), owned by this object; valid for its lifetime.

@@ -109,8 +109,19 @@ struct DeviceSurface::Impl {
             device());
   }
 
-  /// Enqueues the three passes reading node positions from `xBuffer`.
-  void run(cl_mem xBuffer) {
+  /// Sets the offset c added to the written positions (in the device precision).
+  void setOffset(const double* c) {
+    for (cl_uint a = 0; a < 3; ++a) {
+      const double value = c ? c[a] : 0.0;
+      if (doublePrecision) arg(normals.get(), 6 + a, value);
+      else arg(normals.get(), 6 + a, static_cast<float>(value));
+    }
+  }
+
+  /// Enqueues the three passes reading node positions from `xBuffer` (relative to `offset`, 3
+  /// doubles or nullptr for absolute positions).
+  void run(cl_mem xBuffer, const double* offset = nullptr) {
+    setOffset(offset);
     arg(positions.get(), 3, xBuffer);
     enqueue(positions.get(), vertexCount, "surface_positions");
     enqueue(faceVectors.get(), triangleCount, "surface_face_vectors");
@@ -193,6 +204,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
     k.arg(k.normals.get(), 3, k.faces.get());
     k.arg(k.normals.get(), 4, k.pos.get());
     k.arg(k.normals.get(), 5, k.out.get());
+    k.setOffset(nullptr);
     return DeviceSurface(std::move(impl));
   });
 }
@@ -225,6 +237,13 @@ Status DeviceSurface::updateFromDevice(_cl_mem* tetNodePositions) {
   return detail::guard([&] {
     if (!tetNodePositions) fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the buffer is null");
     impl_->run(tetNodePositions);
+  });
+}
+
+Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset) {
+  return detail::guard([&] {
+    if (!relativeTetNodePositions) fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the buffer is null");
+    impl_->run(relativeTetNodePositions, offset);
   });
 }
 
@@ -269,6 +288,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding&, const DeviceS
 }
 Status DeviceSurface::update(const double*, std::size_t) { return notCompiledIn(); }
 Status DeviceSurface::updateFromDevice(_cl_mem*) { return notCompiledIn(); }
+Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notCompiledIn(); }
 Status DeviceSurface::read(float*) const { return notCompiledIn(); }
 Status DeviceSurface::finish() const { return notCompiledIn(); }
 _cl_mem* DeviceSurface::vertexBuffer() const { return nullptr; }
