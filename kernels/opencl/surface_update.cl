@@ -48,11 +48,15 @@ __kernel void surface_face_vectors(const uint triangleCount, __global const uint
 
 /* offsets/incident: CSR vertex -> incident triangles (ascending). out: 6 floats per vertex
  * (position + c, unit normal); the normal of a vertex without a non-degenerate triangle is 0.
- * cx, cy, cz: the offset c of the node positions (0 for absolute positions). */
+ * The offset c of the node positions (0 for absolute positions) comes as c = chi + clo, both in the
+ * device precision: in float, chi = (float)c and clo = (float)(c - chi), so that the small relative
+ * position takes clo first and the sum rounds once, at the output's magnitude (half an ulp of |x|)
+ * instead of twice (c itself rounded to float, then the sum). In double, clo = 0. */
 __kernel void surface_normals(const uint vertexCount, __global const uint* restrict offsets,
                               __global const uint* restrict incident, __global const real* restrict faces,
                               __global const real* restrict pos, __global float* restrict out,
-                              const real cx, const real cy, const real cz) {
+                              const real chix, const real chiy, const real chiz, const real clox,
+                              const real cloy, const real cloz) {
   const uint v = (uint)get_global_id(0);
   if (v >= vertexCount) return;
   real3 n = (real3)(0, 0, 0);
@@ -64,9 +68,9 @@ __kernel void surface_normals(const uint vertexCount, __global const uint* restr
   const real length = sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
   const real scale = length > (real)0 ? (real)1 / length : (real)0;
   __global float* dst = out + 6 * (size_t)v;
-  dst[0] = (float)(pos[3 * v] + cx);
-  dst[1] = (float)(pos[3 * v + 1] + cy);
-  dst[2] = (float)(pos[3 * v + 2] + cz);
+  dst[0] = (float)((pos[3 * v] + clox) + chix);
+  dst[1] = (float)((pos[3 * v + 1] + cloy) + chiy);
+  dst[2] = (float)((pos[3 * v + 2] + cloz) + chiz);
   dst[3] = (float)(n.x * scale);
   dst[4] = (float)(n.y * scale);
   dst[5] = (float)(n.z * scale);

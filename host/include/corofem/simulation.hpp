@@ -68,7 +68,27 @@ class Simulation {
   const BindingStatistics* surfaceBinding(int body) const;
   /// The deformed surface at the current state: 3 doubles per vertex and, when `normals` is given,
   /// smooth unit normals (3 floats per vertex). BadInput for a body without a surface.
+  ///
+  /// On a body that runs on the OpenCL backend the surface is computed on the device, from the
+  /// backend's own node positions (no host round trip of the tet nodes; see surfaceDeviceBuffer),
+  /// and this call is the explicit read-back: the positions are then float-rounded (the device
+  /// buffer holds floats). On the reference backend it is computed on the host (deformSurface).
   Status readSurface(int body, std::vector<double>& positions, std::vector<float>* normals = nullptr) const;
+  /// The device buffer of the deformed surface (a cl_mem) when the body has a surface and runs on the
+  /// OpenCL backend, else nullptr (no surface, reference backend, built without OpenCL, or an update
+  /// that could not be enqueued). Layout: per vertex 6 float32 -- position x, y, z then unit normal
+  /// x, y, z -- a 24-byte stride (DeviceSurface::vertexBuffer), vertices in the order of
+  /// restSurface(body). The call enqueues the update on the backend's in-order command queue when the
+  /// body stepped since the last one and does not wait: work the application enqueues on that queue
+  /// afterwards sees the current surface; from another queue or API, call updateSurface() first. The
+  /// buffer belongs to the Simulation and stays valid until it is destroyed or the body moves to
+  /// another backend (a device failure); ask for it again after step() rather than caching it.
+  _cl_mem* surfaceDeviceBuffer(int body) const;
+  /// Brings the device surface of `body` up to date and waits for it (explicit synchronisation:
+  /// step() enqueues nothing for the surface; this or surfaceDeviceBuffer() does, lazily). Ok and
+  /// nothing to do when the body's surface is computed on the host. BadInput for a body without a
+  /// surface or an index out of range; DeviceError when the device fails.
+  Status updateSurface(int body) const;
   std::string backendName() const;  ///< "reference", "opencl"
   std::string deviceName() const;   ///< e.g. "host (Eigen, double)" or the OpenCL device name
 

@@ -109,12 +109,19 @@ struct DeviceSurface::Impl {
             device());
   }
 
-  /// Sets the offset c added to the written positions (in the device precision).
+  /// Sets the offset c added to the written positions: c = hi + lo in the device precision (in float
+  /// lo carries what float(c) drops, so the output rounds once; surface_update.cl).
   void setOffset(const double* c) {
     for (cl_uint a = 0; a < 3; ++a) {
       const double value = c ? c[a] : 0.0;
-      if (doublePrecision) arg(normals.get(), 6 + a, value);
-      else arg(normals.get(), 6 + a, static_cast<float>(value));
+      if (doublePrecision) {
+        arg(normals.get(), 6 + a, value);
+        arg(normals.get(), 9 + a, 0.0);
+      } else {
+        const float hi = static_cast<float>(value);
+        arg(normals.get(), 6 + a, hi);
+        arg(normals.get(), 9 + a, static_cast<float>(value - static_cast<double>(hi)));
+      }
     }
   }
 

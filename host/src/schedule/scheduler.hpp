@@ -152,6 +152,8 @@ class FailoverBackend final : public Backend {
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }
   const Candidate& current() const { return order_[index_]; }
+  /// The backend in use now (changes on a failover); owned by this object.
+  Backend* active() const { return current_.get(); }
   const std::vector<FallbackEvent>& events() const { return events_; }
 
  private:

@@ -54,8 +54,12 @@ double BodySolver::kineticEnergy() const {
 }
 
 double BodySolver::elasticEnergy() {
-  if (!backendAtCommitted_) setBackendPositions(x_, true);
+  syncBackendPositions();
   return backend_.elasticEnergy();
+}
+
+void BodySolver::syncBackendPositions() {
+  if (!backendAtCommitted_) setBackendPositions(x_, true);
 }
 
 double BodySolver::freeNorm(const Eigen::VectorXd& v) const { return (v.array() * freeMask_).matrix().norm(); }

@@ -55,6 +55,9 @@ class BodySolver {
   double kineticEnergy() const;
   /// Strain energy at the current positions (refreshes the backend's positions when needed).
   double elasticEnergy();
+  /// Makes the backend's positions the committed ones (a driver may have evaluated trial positions
+  /// last): then the backend's device buffers describe positions(). No-op when they already do.
+  void syncBackendPositions();
 
  protected:
   BodySolver(const Problem& problem, Backend& backend);

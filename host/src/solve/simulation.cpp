@@ -9,6 +9,10 @@
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
 
+#ifdef COROFEM_WITH_OPENCL
+#include "backends/opencl/opencl_backend.hpp"
+#endif
+
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -64,6 +68,13 @@ struct Simulation::Impl {
       long long sleptSteps = 0, wakes = 0;
       Eigen::VectorXd fRef, xpRef;
     } sleep;
+    // The surface on the device when the body runs on the OpenCL backend: a DeviceSurface on the
+    // backend's own context and queue, fed from the backend's position buffer (declared after the
+    // backend: destroyed first). `deviceFor` is the backend it was made for (a failover replaces
+    // the backend); `surfaceDirty`: the body stepped since the last update.
+    std::unique_ptr<DeviceSurface> deviceSurface;
+    const detail::Backend* deviceFor = nullptr;
+    bool surfaceDirty = true;
   };
 
   Scene scene;
@@ -127,6 +138,74 @@ struct Simulation::Impl {
     return stats;
   }
 
+#ifdef COROFEM_WITH_OPENCL
+  /// The OpenCL backend the body runs on now, or nullptr.
+  static detail::OpenCLBackendInternal* openclBackend(const Body& b) {
+    return dynamic_cast<detail::OpenCLBackendInternal*>(b.failover->active());
+  }
+#endif
+
+  /// Makes b.deviceSurface match the backend the body runs on now: created on an OpenCL backend's
+  /// context and queue (adopted) in its position precision, dropped on any other backend. Returns
+  /// it, or nullptr when the surface is computed on the host.
+  static DeviceSurface* deviceSurfaceOf(Body& b) {
+#ifdef COROFEM_WITH_OPENCL
+    if (!b.binding) return nullptr;
+    detail::OpenCLBackendInternal* cl = openclBackend(b);
+    if (cl != b.deviceFor) {
+      b.deviceSurface.reset();
+      b.deviceFor = nullptr;
+      b.surfaceDirty = true;
+      if (cl) {
+        DeviceSurfaceOptions o;
+        o.doublePrecision = cl->positionsAreDouble();
+        o.context = cl->context().context();
+        o.queue = cl->context().queue();
+        o.deviceId = cl->context().device();
+        Result<DeviceSurface> made = DeviceSurface::create(*b.binding, o);
+        if (!made) detail::fail(made.status().code(), "the body's surface on the OpenCL device: ", made.message());
+        b.deviceSurface = std::make_unique<DeviceSurface>(std::move(made.value()));
+        b.deviceFor = cl;
+      }
+    }
+    return b.deviceSurface.get();
+#else
+    (void)b;
+    return nullptr;
+#endif
+  }
+
+  /// Enqueues the device surface update when the body stepped since the last one: the backend's
+  /// positions are first made the committed ones (a driver may have left trial positions there),
+  /// then the kernels read the backend's centroid-relative position buffer and add the centroid.
+  /// Returns the device surface (nullptr on the host path).
+  static DeviceSurface* refreshDeviceSurface(Body& b) {
+    DeviceSurface* d = deviceSurfaceOf(b);
+#ifdef COROFEM_WITH_OPENCL
+    if (!d || !b.surfaceDirty) return d;
+    b.solver->syncBackendPositions();
+    // A device failure inside syncBackendPositions moves the body to another backend.
+    d = deviceSurfaceOf(b);
+    if (!d) return nullptr;
+    detail::OpenCLBackendInternal* cl = openclBackend(b);
+    Status st = d->updateFromDevice(cl->positionBuffer(), cl->positionCentroid());
+    if (!st) throw detail::Error(st.code(), st.message());
+    b.surfaceDirty = false;
+#endif
+    return d;
+  }
+
+  Body& bodyForSurface(int index) {
+    if (index < 0 || index >= static_cast<int>(bodies.size()))
+      detail::fail(ErrorCode::BadInput, "body index ", index, " is out of range: the scene has ", bodies.size(),
+                   " body(ies), numbered from 0");
+    Body& b = bodies[static_cast<std::size_t>(index)];
+    if (!b.binding)
+      detail::fail(ErrorCode::BadInput, "body '", scene.bodies[static_cast<std::size_t>(index)].name,
+                   "' has no surface; give it one with \"surface\": \"file.obj\" in the scene");
+    return b;
+  }
+
   const Body& body(int index) const {
     if (index < 0 || index >= static_cast<int>(bodies.size()))
       detail::fail(ErrorCode::BadInput, "body index ", index, " is out of range: the scene has ", bodies.size(),
@@ -157,6 +236,7 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       body.failover = failover.get();
       body.backend = std::move(failover);
       body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis);
+      Impl::deviceSurfaceOf(body);  // on an OpenCL backend: the surface's buffers and kernels now
       impl->bodies.push_back(std::move(body));
     }
     return Simulation(std::move(impl));
@@ -178,6 +258,7 @@ Status Simulation::step(StepReport* report) {
       detail::fail(ErrorCode::BadInput, "the analysis is finished (", count,
                    " steps taken); check finished() before step()");
     const int index = s.stepsTaken + 1;
+    for (Impl::Body& b : s.bodies) b.surfaceDirty = true;  // recomputed lazily (readSurface, surfaceDeviceBuffer)
     std::size_t done = 0;
     std::vector<Impl::Body::Sleep> sleepBefore;
     for (const Impl::Body& b : s.bodies) sleepBefore.push_back(b.sleep);
@@ -264,10 +345,22 @@ const BindingStatistics* Simulation::surfaceBinding(int body) const {
 
 Status Simulation::readSurface(int body, std::vector<double>& positions, std::vector<float>* normals) const {
   return detail::guard([&] {
-    const Impl::Body& b = impl_->body(body);
-    if (!b.binding)
-      detail::fail(ErrorCode::BadInput, "body '", impl_->scene.bodies[static_cast<std::size_t>(body)].name,
-                   "' has no surface; give it one with \"surface\": \"file.obj\" in the scene");
+    Impl::Body& b = impl_->bodyForSurface(body);
+    const std::size_t n = b.binding->vertexCount();
+    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
+      // Explicit read-back of the device buffer (6 floats per vertex: position, normal).
+      std::vector<float> interleaved(6 * n);
+      Status st = d->read(interleaved.data());
+      if (!st) throw detail::Error(st.code(), st.message());
+      positions.resize(3 * n);
+      if (normals) normals->resize(3 * n);
+      for (std::size_t v = 0; v < n; ++v)
+        for (std::size_t a = 0; a < 3; ++a) {
+          positions[3 * v + a] = interleaved[6 * v + a];
+          if (normals) (*normals)[3 * v + a] = interleaved[6 * v + 3 + a];
+        }
+      return;
+    }
     const Eigen::VectorXd& x = b.solver->positions();
     SurfaceOutput out;
     positions.resize(3 * b.binding->vertexCount());
@@ -278,6 +371,27 @@ Status Simulation::readSurface(int body, std::vector<double>& positions, std::ve
     }
     Status st = deformSurface(*b.binding, x.data(), b.mesh.nodeCount(), out);
     if (!st) throw detail::Error(st.code(), st.message());
+  });
+}
+
+_cl_mem* Simulation::surfaceDeviceBuffer(int body) const {
+  _cl_mem* buffer = nullptr;
+  const Status st = detail::guard([&] {
+    if (body < 0 || body >= bodyCount()) return;
+    Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
+    if (!b.binding) return;
+    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) buffer = d->vertexBuffer();
+  });
+  return st ? buffer : nullptr;
+}
+
+Status Simulation::updateSurface(int body) const {
+  return detail::guard([&] {
+    Impl::Body& b = impl_->bodyForSurface(body);
+    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
+      Status st = d->finish();
+      if (!st) throw detail::Error(st.code(), st.message());
+    }
   });
 }
 

@@ -124,6 +124,9 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   cl::ProgramOrigin programOrigin() const override { return build_.origin; }
   const cl::ProgramBuild& programBuild() const override { return build_; }
   cl::Context& context() override { return *ctx_; }
+  cl_mem positionBuffer() const override { return pos_.get(); }
+  bool positionsAreDouble() const override { return double_; }
+  const double* positionCentroid() const override { return centroid_; }
   void enqueueRotations() override;
   void enqueueForces() override;
   void enqueueElementForces() override;
@@ -228,6 +231,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::vector<std::uint8_t> constrained_;
   std::vector<unsigned char> staging_;
   Eigen::VectorXd relative_;  ///< positions relative to their centroid (setPositions)
+  double centroid_[3] = {0, 0, 0};  ///< that centroid
 
   Kernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_,
       kBlocks_, kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
@@ -494,6 +498,7 @@ void OpenCLBackend::setPositions(const Eigen::VectorXd& x) {
   for (std::size_t n = 0; n < nodes_; ++n)
     relative_.segment<3>(static_cast<Eigen::Index>(3 * n)) = x.segment<3>(static_cast<Eigen::Index>(3 * n)) - centroid;
   upload(pos_, relative_.data(), dofs_);
+  for (int a = 0; a < 3; ++a) centroid_[a] = centroid[a];
   enqueueRotations();
   if (formulation_ == Formulation::Corotational) refreshBlocks(true);  // the blocks rotate with R
 }

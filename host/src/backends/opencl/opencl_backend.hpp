@@ -35,6 +35,16 @@ class OpenCLBackendInternal : public Backend {
   virtual const cl::ProgramBuild& programBuild() const = 0;
   virtual cl::Context& context() = 0;
 
+  // The node positions on the device (e.g. for DeviceSurface::updateFromDevice, no host round trip):
+  // 3 reals per node (double when positionsAreDouble(), else float, also in mixed precision), those
+  // last given to setPositions, minus positionCentroid() (the mean of those positions, subtracted in
+  // double so that float keeps its resolution far from the origin): x_n = pos[n] + centroid.
+  /// The buffer of 3 * nodeCount relative positions; owned by the backend, valid for its lifetime.
+  virtual cl_mem positionBuffer() const = 0;
+  virtual bool positionsAreDouble() const = 0;
+  /// The centroid subtracted by the last setPositions (0 before the first).
+  virtual const double* positionCentroid() const = 0;
+
   // Device-only work for the benchmark (no transfers); finish() waits for it.
   virtual void enqueueRotations() = 0;         ///< rotations from the positions on the device
   virtual void enqueueForces() = 0;            ///< element forces + gather

@@ -1,0 +1,222 @@
+// The coupled surface through the Simulation: on the OpenCL backend it is recomputed on the device
+// from the backend's own (centroid-relative) position buffer, with no host round trip of the tet
+// nodes, and read back explicitly (readSurface) or drawn from surfaceDeviceBuffer(); on the
+// reference backend it is computed on the host. Both must describe the same deformed surface.
+#include <corofem/embed.hpp>
+#include <corofem/simulation.hpp>
+
+#include "solve/beam_helpers.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#ifdef COROFEM_WITH_OPENCL
+#include <CL/cl.h>
+#endif
+
+namespace corofem {
+namespace {
+
+using namespace corofem::test;
+
+/// The closed surface of the box [lo, hi], each face an m x m grid of quads split in two triangles,
+/// outward (counter-clockwise seen from outside). Vertices are not shared between faces.
+SurfaceMesh boxSurface(const std::array<double, 3>& lo, const std::array<double, 3>& hi, int m) {
+  SurfaceMesh s;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, w = (axis + 2) % 3;  // (u, w, axis) right-handed
+      const auto base = static_cast<std::uint32_t>(s.vertexCount());
+      for (int j = 0; j <= m; ++j)
+        for (int i = 0; i <= m; ++i) {
+          double p[3];
+          p[axis] = side ? hi[axis] : lo[axis];
+          p[u] = lo[u] + (hi[u] - lo[u]) * i / m;
+          p[w] = lo[w] + (hi[w] - lo[w]) * j / m;
+          s.vertices.insert(s.vertices.end(), {p[0], p[1], p[2]});
+        }
+      for (int j = 0; j < m; ++j)
+        for (int i = 0; i < m; ++i) {
+          const std::uint32_t a = base + j * (m + 1) + i, b = a + 1, c = a + (m + 1), d = c + 1;
+          if (side) s.triangles.insert(s.triangles.end(), {a, b, d, a, d, c});
+          else s.triangles.insert(s.triangles.end(), {a, d, b, a, c, d});
+        }
+    }
+  return s;
+}
+
+/// The Fig. 8 beam (0.8 x 0.1 x 0.1 m, E = 2e5 Pa) under gravity, 50 m from the origin (where the
+/// backend's centroid-relative positions matter in float), with a sub-box render surface written
+/// to a temporary folder. 20 Newmark steps.
+Scene surfaceScene(BackendKind backend, Precision precision) {
+  const std::array<double, 3> offset{50.0, 20.0, -30.0};
+  const auto dir = std::filesystem::temp_directory_path() / "corofem_embed_simulation";
+  std::filesystem::create_directories(dir);
+  const std::string obj = (dir / "inner_box.obj").string();
+  const Status written = writeSurfaceMesh(obj, boxSurface({0.02, 0.01, 0.01}, {0.78, 0.09, 0.09}, 8));
+  EXPECT_TRUE(written) << written.message();
+  BodyDesc body = cantileverBody(boxMesh({0, 0, 0}, {0.8, 0.1, 0.1}, {8, 1, 1}), offset[0], 2e5, 0.3, 1000.0,
+                                 Formulation::Corotational);
+  body.mesh.translate = offset;  // the surface moves with the mesh (scale, then translate)
+  body.surface = "inner_box.obj";
+  body.loads.push_back(gravity({0, -9.81, 0}));
+  body.material.rayleighMass = 4.0;
+  Scene scene = staticScene(body, 1, LinearSolverKind::Pcg);
+  scene.baseDir = dir.string();
+  scene.analysis.kind = AnalysisDesc::Kind::Dynamic;
+  scene.analysis.dynamics.timeStep = 0.01;
+  scene.analysis.dynamics.steps = 20;
+  scene.analysis.dynamics.newmarkGamma = 0.6;
+  scene.analysis.dynamics.newmarkBeta = 0.3025;
+  // Tight in double (the comparison is about the surface, not PCG noise); float reaches ~1e-6.
+  scene.solver.tolerance = precision == Precision::Double ? 1e-10 : 1e-6;
+  scene.solver.maxIterations = 5000;
+  scene.solver.precision = precision;
+  scene.backend.kind = backend;
+  return scene;
+}
+
+struct SurfaceState {
+  std::vector<double> positions, nodes;
+  std::vector<float> normals;
+};
+
+SurfaceState readState(const Simulation& sim) {
+  SurfaceState s;
+  const Status st = sim.readSurface(0, s.positions, &s.normals);
+  EXPECT_TRUE(st) << st.message();
+  EXPECT_TRUE(sim.readPositions(0, s.nodes));
+  return s;
+}
+
+double worstDifference(const std::vector<double>& a, const std::vector<double>& b) {
+  double worst = 0;
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i) worst = std::max(worst, std::abs(a[i] - b[i]));
+  return a.size() == b.size() ? worst : INFINITY;
+}
+double worstDifference(const std::vector<float>& a, const std::vector<float>& b) {
+  double worst = 0;
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i)
+    worst = std::max(worst, static_cast<double>(std::abs(a[i] - b[i])));
+  return a.size() == b.size() ? worst : INFINITY;
+}
+
+TEST(EmbedSimulation, ReferenceBackendKeepsTheSurfaceOnTheHost) {
+  auto sim = Simulation::create(surfaceScene(BackendKind::Reference, Precision::Double));
+  ASSERT_TRUE(sim) << sim.message();
+  EXPECT_EQ(sim->surfaceDeviceBuffer(0), nullptr);
+  EXPECT_EQ(sim->surfaceDeviceBuffer(5), nullptr);  // out of range: null, no crash
+  EXPECT_TRUE(sim->updateSurface(0)) << "nothing to do on the host path";
+  EXPECT_EQ(sim->updateSurface(7).code(), ErrorCode::BadInput);
+  ASSERT_TRUE(sim->step());
+  const SurfaceState s = readState(sim.value());
+  EXPECT_EQ(s.positions.size(), 3 * sim->restSurface(0)->vertexCount());
+  // The host path is deformSurface of the committed positions, exactly.
+  std::vector<double> expected(s.positions.size());
+  SurfaceBinding binding = *bindSurface(sim->restMesh(0), *sim->restSurface(0));
+  SurfaceOutput out;
+  out.positionsDouble = expected.data();
+  ASSERT_TRUE(deformSurface(binding, s.nodes.data(), sim->restMesh(0).nodeCount(), out));
+  EXPECT_EQ(s.positions, expected);
+}
+
+#ifdef COROFEM_WITH_OPENCL
+
+class EmbedSimulationOpenCL : public ::testing::TestWithParam<Precision> {};
+
+TEST_P(EmbedSimulationOpenCL, DeviceSurfaceMatchesTheReferenceRun) {
+  const Precision precision = GetParam();
+  const bool dbl = precision == Precision::Double;
+  auto sim = Simulation::create(surfaceScene(BackendKind::OpenCL, precision));
+  if (!sim && (sim.status().code() == ErrorCode::DeviceError || sim.status().code() == ErrorCode::BadInput))
+    GTEST_SKIP() << "no OpenCL device for this precision: " << sim.message();
+  ASSERT_TRUE(sim) << sim.message();
+  ASSERT_EQ(sim->backendName(), "opencl");
+  auto ref = Simulation::create(surfaceScene(BackendKind::Reference, precision));
+  ASSERT_TRUE(ref) << ref.message();
+  ASSERT_NE(sim->surfaceDeviceBuffer(0), nullptr);  // made at create()
+  const std::size_t n = sim->restSurface(0)->vertexCount();
+  const SurfaceBinding binding = *bindSurface(sim->restMesh(0), *sim->restSurface(0));
+
+  for (int k = 1; k <= 20; ++k) {
+    ASSERT_TRUE(sim->step()) << "step " << k;
+    ASSERT_TRUE(ref->step()) << "step " << k;
+    if (k % 10 != 0) continue;  // lazily: no surface work on the other steps
+    const SurfaceState dev = readState(sim.value()), host = readState(ref.value());
+    ASSERT_EQ(dev.positions.size(), 3 * n);
+    ASSERT_EQ(dev.normals.size(), 3 * n);
+
+    // (a) The device path against deformSurface of the OpenCL run's own committed positions: the
+    // float output rounds |x| ~ 50 m to half an ulp (1.9e-6 m, once: the centroid goes in as a
+    // float pair, surface_update.cl); float arithmetic on the centroid-relative positions
+    // (|x - c| <= 0.5 m) adds a few ulps of 0.5 (~1e-7). Normals: float face
+    // vectors of edges ~0.01 m lose eps * 0.5 / 0.01 ~ 6e-6 in direction, a few of them per normal;
+    // in double only the float output rounds (6e-8).
+    std::vector<double> own(3 * n);
+    std::vector<float> ownNormals(3 * n);
+    SurfaceOutput out;
+    out.positionsDouble = own.data();
+    out.normals = ownNormals.data();
+    ASSERT_TRUE(deformSurface(binding, dev.nodes.data(), sim->restMesh(0).nodeCount(), out));
+    const double ownPos = worstDifference(dev.positions, own), ownN = worstDifference(dev.normals, ownNormals);
+    EXPECT_LE(ownPos, 2.5e-6);
+    EXPECT_LE(ownN, dbl ? 1e-6 : 1e-4);
+
+    // (b) Against the reference backend's run: the drivers' difference (BackendAgreement: < 1e-6 m
+    // in double at PCG 1e-10; in float the node positions round at |x| ~ 60 m to 1.9e-6 m each step
+    // and PCG stops at 1e-6 of a ~3 cm step displacement: a few 1e-5 m after 20 steps) plus the
+    // output rounding of (a). Normals turn by the position difference over the element size
+    // (0.1 m): 1e-4 in float.
+    const double nodes = worstDifference(dev.nodes, host.nodes);
+    const double pos = worstDifference(dev.positions, host.positions);
+    const double nrm = worstDifference(dev.normals, host.normals);
+    std::printf("[ surface  ] %s step %d: nodes %.3g m; surface vs own nodes %.3g m, normals %.3g; vs reference "
+                "%.3g m, normals %.3g\n",
+                dbl ? "double" : "float", k, nodes, ownPos, ownN, pos, nrm);
+    EXPECT_LE(pos, dbl ? 3e-6 : 1e-4);
+    EXPECT_LE(nrm, dbl ? 1e-5 : 2e-3);
+  }
+
+  // The buffer as a renderer sees it after explicit synchronisation, read on a queue of our own:
+  // 6 floats per vertex, the same numbers readSurface returned.
+  ASSERT_TRUE(sim->updateSurface(0));
+  cl_mem buffer = sim->surfaceDeviceBuffer(0);
+  ASSERT_NE(buffer, nullptr);
+  std::size_t bytes = 0;
+  ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
+  EXPECT_GE(bytes, 6 * sizeof(float) * n);  // 24-byte stride
+  cl_context context = nullptr;
+  ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_CONTEXT, sizeof(context), &context, nullptr), CL_SUCCESS);
+  cl_device_id device = nullptr;
+  ASSERT_EQ(clGetContextInfo(context, CL_CONTEXT_DEVICES, sizeof(device), &device, nullptr), CL_SUCCESS);
+  cl_int status = CL_SUCCESS;
+  cl_command_queue queue = clCreateCommandQueue(context, device, 0, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  std::vector<float> drawn(6 * n, NAN);
+  EXPECT_EQ(clEnqueueReadBuffer(queue, buffer, CL_TRUE, 0, drawn.size() * sizeof(float), drawn.data(), 0, nullptr,
+                                nullptr),
+            CL_SUCCESS);
+  clReleaseCommandQueue(queue);
+  const SurfaceState last = readState(sim.value());
+  for (std::size_t v = 0; v < n; ++v)
+    for (std::size_t a = 0; a < 3; ++a) {
+      EXPECT_EQ(static_cast<double>(drawn[6 * v + a]), last.positions[3 * v + a]) << "vertex " << v;
+      EXPECT_EQ(drawn[6 * v + 3 + a], last.normals[3 * v + a]) << "vertex " << v;
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(Precisions, EmbedSimulationOpenCL, ::testing::Values(Precision::Float, Precision::Double),
+                         [](const ::testing::TestParamInfo<Precision>& info) {
+                           return std::string(info.param == Precision::Double ? "Double" : "Float");
+                         });
+
+#endif
+
+}  // namespace
+}  // namespace corofem
