@@ -14,11 +14,19 @@
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <random>
+#include <vector>
+
+#ifdef COROFEM_WITH_OPENCL
+#include "backends/opencl/cl_context.hpp"
+#include "backends/opencl/program_cache.hpp"
+#endif
 
 namespace {
 
@@ -197,6 +205,131 @@ void BM_DeviceSurface1M(benchmark::State& state) {
   state.SetLabel(device->deviceName());
 }
 BENCHMARK(BM_DeviceSurface1M)->Arg(0)->Arg(1)->ArgName("double")->Unit(benchmark::kMillisecond)->UseRealTime();
+
+/// Device bandwidth (bytes/s) measured with the copy kernel of bandwidth.cl on 64 MiB buffers (read +
+/// write counted), median of 9 runs after a warm-up; the approach of bench_opencl.cpp.
+double measuredBandwidth(detail::cl::Context& ctx) {
+  static double cached = 0;
+  if (cached > 0) return cached;
+  const auto build = detail::cl::buildProgram(ctx, "corofem", detail::cl::corofemProgramSource(),
+                                              "-cl-std=CL1.2 -DCOROFEM_WG=64");
+  cl_int status = CL_SUCCESS;
+  cl_kernel k = clCreateKernel(build.program, "bandwidth_copy", &status);
+  const std::size_t bytes = 64u << 20, count = bytes / 16;
+  cl_mem a = clCreateBuffer(ctx.context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
+  cl_mem b = clCreateBuffer(ctx.context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
+  const float one = 1.0f;
+  clEnqueueFillBuffer(ctx.queue(), a, &one, sizeof(one), 0, bytes, 0, nullptr, nullptr);
+  cl_uint n = static_cast<cl_uint>(count);
+  clSetKernelArg(k, 0, sizeof(n), &n);
+  clSetKernelArg(k, 1, sizeof(cl_mem), &a);
+  clSetKernelArg(k, 2, sizeof(cl_mem), &b);
+  std::vector<double> times;
+  for (int rep = 0; rep < 10; ++rep) {
+    const std::size_t global = count, local = 256;
+    const auto t0 = std::chrono::steady_clock::now();
+    clEnqueueNDRangeKernel(ctx.queue(), k, 1, nullptr, &global, &local, 0, nullptr, nullptr);
+    clFinish(ctx.queue());
+    const auto t1 = std::chrono::steady_clock::now();
+    if (rep > 0) times.push_back(std::chrono::duration<double>(t1 - t0).count());  // first: warm-up
+  }
+  std::sort(times.begin(), times.end());
+  clReleaseMemObject(a);
+  clReleaseMemObject(b);
+  clReleaseKernel(k);
+  cached = 2.0 * bytes / times[times.size() / 2];
+  std::fprintf(stderr, "[bench_embed] %s: copy bandwidth %.1f GB/s\n", ctx.deviceName().c_str(), cached / 1e9);
+  return cached;
+}
+
+/// updateFromDevice alone: the node positions are already on the device (as the OpenCL backend keeps
+/// them, relative to the centroid, which the kernel adds back), so a frame is the three kernels and
+/// finish(), no upload, no read-back. range(0): 1 = double, 0 = float.
+///
+/// bytes_per_vertex, the compulsory traffic of one frame per surface vertex (r = 4 or 8 bytes per
+/// real, T = triangles, N = tet nodes, n = vertices; every array touched once, caches assumed to hold
+/// the reuse):
+///   pass 1  node indices 16 + weights 4r read, positions 3r written; node positions 3r N / n gathered
+///   pass 2  triangle indices 12 T / n and positions 3r read, face vectors 3r T / n written
+///   pass 3  CSR offsets 4 + incidence 12 T / n, face vectors 3r T / n and positions 3r read, output 24 written
+/// (UV sphere: T / n ~ 2, N / n ~ 0.02: 192 B in float, 293 B in double). bandwidth_fraction = that
+/// traffic per second over the copy kernel's bandwidth on the same device.
+void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
+  static std::unique_ptr<SurfaceBinding> binding;
+  if (!binding) {
+    auto b = bindSurface(box100k(), sphere1M());
+    if (!b) {
+      state.SkipWithError(b.message().c_str());
+      return;
+    }
+    binding = std::make_unique<SurfaceBinding>(std::move(b).value());
+  }
+  const bool dbl = state.range(0) != 0;
+  std::shared_ptr<detail::cl::Context> ctx;
+  try {
+    const char* env = std::getenv("COROFEM_DEVICE");
+    ctx = detail::cl::Context::shared(env ? env : "");
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+    return;
+  }
+  DeviceSurfaceOptions options;
+  options.doublePrecision = dbl;
+  options.context = ctx->context();
+  options.queue = ctx->queue();
+  options.deviceId = ctx->device();
+  auto device = DeviceSurface::create(*binding, options);
+  if (!device) {
+    state.SkipWithError(device.message().c_str());
+    return;
+  }
+  // Node positions relative to their centroid, in the device precision, uploaded once.
+  std::mt19937 rng(2);
+  const std::vector<double> x = test::SmoothDeformation::random(rng, 2.5, true).apply(box100k().nodes);
+  const std::size_t nodes = box100k().nodeCount(), n = binding->vertexCount(), t = binding->triangles.size() / 3;
+  double c[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < 3 * nodes; ++i) c[i % 3] += x[i] / static_cast<double>(nodes);
+  std::vector<double> rel(3 * nodes);
+  std::vector<float> relF(3 * nodes);
+  for (std::size_t i = 0; i < 3 * nodes; ++i) relF[i] = static_cast<float>(rel[i] = x[i] - c[i % 3]);
+  cl_int status = CL_SUCCESS;
+  cl_mem positions = clCreateBuffer(ctx->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR,
+                                    3 * nodes * (dbl ? 8 : 4), dbl ? static_cast<void*>(rel.data()) : relF.data(),
+                                    &status);
+  if (status != CL_SUCCESS) {
+    state.SkipWithError("clCreateBuffer (node positions) failed");
+    return;
+  }
+  for (int warm = 0; warm < 2; ++warm)  // PoCL specialises kernels on their first launches
+    if (!device->updateFromDevice(positions, c) || !device->finish()) {
+      clReleaseMemObject(positions);
+      state.SkipWithError("warm-up update failed");
+      return;
+    }
+  for (auto _ : state) {
+    const Status s = device->updateFromDevice(positions, c);
+    const Status f = device->finish();
+    if (!s || !f) {
+      state.SkipWithError((s ? f : s).message().c_str());
+      break;
+    }
+  }
+  clReleaseMemObject(positions);
+  const double r = dbl ? 8.0 : 4.0, tn = static_cast<double>(t) / static_cast<double>(n);
+  const double bytesPerVertex = (16 + 4 * r + 3 * r + 3 * r * static_cast<double>(nodes) / static_cast<double>(n)) +
+                                (12 * tn + 3 * r + 3 * r * tn) + (4 + 12 * tn + 3 * r * tn + 3 * r + 24);
+  const double bandwidth = measuredBandwidth(*ctx);
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * n));
+  state.SetBytesProcessed(static_cast<std::int64_t>(static_cast<double>(state.iterations()) * bytesPerVertex *
+                                                    static_cast<double>(n)));
+  state.counters["bytes_per_vertex"] = bytesPerVertex;
+  state.counters["copy_GBps"] = bandwidth / 1e9;
+  state.counters["bandwidth_fraction"] = benchmark::Counter(
+      static_cast<double>(state.iterations()) * bytesPerVertex * static_cast<double>(n) / bandwidth,
+      benchmark::Counter::kIsRate);
+  state.SetLabel(device->deviceName());
+}
+BENCHMARK(BM_DeviceSurfaceFromDevice1M)->Arg(0)->Arg(1)->ArgName("double")->Unit(benchmark::kMillisecond)->UseRealTime();
 #endif
 
 }  // namespace
