@@ -70,10 +70,12 @@ struct Simulation::Impl {
     } sleep;
     // The surface on the device when the body runs on the OpenCL backend: a DeviceSurface on the
     // backend's own context and queue, fed from the backend's position buffer (declared after the
-    // backend: destroyed first). `deviceFor` is the backend it was made for (a failover replaces
-    // the backend); `surfaceDirty`: the body stepped since the last update.
+    // backend: destroyed first). `deviceFor` is the backend it was made for and `deviceEvents` the
+    // failover events then (a failover replaces the backend; a new one may reuse the address);
+    // `surfaceDirty`: the body stepped since the last update.
     std::unique_ptr<DeviceSurface> deviceSurface;
     const detail::Backend* deviceFor = nullptr;
+    std::size_t deviceEvents = 0;
     bool surfaceDirty = true;
   };
 
@@ -152,9 +154,10 @@ struct Simulation::Impl {
 #ifdef COROFEM_WITH_OPENCL
     if (!b.binding) return nullptr;
     detail::OpenCLBackendInternal* cl = openclBackend(b);
-    if (cl != b.deviceFor) {
+    if (cl != b.deviceFor || b.failover->events().size() != b.deviceEvents) {
       b.deviceSurface.reset();
       b.deviceFor = nullptr;
+      b.deviceEvents = b.failover->events().size();
       b.surfaceDirty = true;
       if (cl) {
         DeviceSurfaceOptions o;
