@@ -217,17 +217,6 @@ void dynamicStep(benchmark::State& state, int device) {
   state.SetLabel(b->deviceName());
 }
 
-// Not corofem::toString: registration runs during static initialisation.
-const char* rotationName(RotationMethod m) {
-  switch (m) {
-    case RotationMethod::Polar: return "polar";
-    case RotationMethod::Svd: return "svd";
-    case RotationMethod::Quaternion: return "quaternion";
-    case RotationMethod::Qr: return "qr";
-  }
-  return "?";
-}
-
 const char* workName(Work w) {
   switch (w) {
     case Work::Rotation: return "rotation";
@@ -255,7 +244,7 @@ int registerAll() {
       };
       for (RotationMethod m : {RotationMethod::Polar, RotationMethod::Svd, RotationMethod::Quaternion,
                                RotationMethod::Qr})
-        add(std::string("rotation_") + rotationName(m), {dev, size, Work::Rotation, m});
+        add(std::string("rotation_") + toString(m), {dev, size, Work::Rotation, m});
       add(workName(Work::Force), {dev, size, Work::Force});
       add(workName(Work::Product), {dev, size, Work::Product});
       add(workName(Work::ProductStored), {dev, size, Work::ProductStored});

@@ -335,33 +335,6 @@ std::vector<double> surfaceDisplacement(const RunResult& r, const SurfaceMesh& s
   return out;
 }
 
-const char* name(BackendKind b) { return b == BackendKind::OpenCL ? "opencl" : "reference"; }
-const char* name(Precision p) {
-  switch (p) {
-    case Precision::Float: return "float";
-    case Precision::Double: return "double";
-    case Precision::Mixed: return "mixed";
-  }
-  return "?";
-}
-const char* name(PreconditionerKind p) {
-  switch (p) {
-    case PreconditionerKind::None: return "none";
-    case PreconditionerKind::Diagonal: return "diagonal";
-    case PreconditionerKind::BlockDiagonal: return "block_diagonal";
-  }
-  return "?";
-}
-const char* name(RotationMethod m) {
-  switch (m) {
-    case RotationMethod::Polar: return "polar";
-    case RotationMethod::Svd: return "svd";
-    case RotationMethod::Quaternion: return "quaternion";
-    case RotationMethod::Qr: return "qr";
-  }
-  return "?";
-}
-const char* name(Formulation f) { return f == Formulation::Linear ? "linear" : "corotational"; }
 
 // ---- the knob sets ---------------------------------------------------------------------------
 
@@ -552,22 +525,22 @@ int runSweep(const Options& options) {
     char line[1024];
     std::snprintf(line, sizeof line,
                   "%s,%s,%s,%s,%s,%s,%s,%s,%g,%d,%zu,%s,%s,%.6g,%.6g,%d,%.6g,%.6g,%.4g,%.4g,%.3g,%s\n",
-                  c.name.c_str(), refKind, name(k.backend), clean(r.device).c_str(),
-                  k.backend == BackendKind::Reference ? "double" : name(k.precision),
-                  k.backend == BackendKind::Reference ? "polar" : name(k.rotation),
-                  k.linearSolver == LinearSolverKind::Cholesky ? "-" : name(k.preconditioner),
+                  c.name.c_str(), refKind, toString(k.backend), clean(r.device).c_str(),
+                  k.backend == BackendKind::Reference ? "double" : toString(k.precision),
+                  k.backend == BackendKind::Reference ? "polar" : toString(k.rotation),
+                  k.linearSolver == LinearSolverKind::Cholesky ? "-" : toString(k.preconditioner),
                   k.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg",
                   k.linearSolver == LinearSolverKind::Cholesky ? 0.0 : k.tolerance,
                   k.linearSolver == LinearSolverKind::Cholesky ? 0 : k.maxIterations,
                   tetCount(c.kind, c.level), meshLabel(c.kind, c.level).c_str(),
-                  name(k.formulation), r.msPerStep, r.msMin, r.steps, disp, energy, r.pcgPerStep,
+                  toString(k.formulation), r.msPerStep, r.msMin, r.steps, disp, energy, r.pcgPerStep,
                   r.newtonPerStep, r.convergedFraction, r.status.c_str());
     csv.file << line;
     csv.file.flush();
     std::fprintf(stderr, "  %-10s %-9s %-6s %-10s %-14s tol=%-6g cap=%-4d %-12s %-12s %8.3f ms  err=%.3g  %s\n",
-                 c.name.c_str(), name(k.backend), k.backend == BackendKind::Reference ? "double" : name(k.precision),
-                 name(k.rotation), k.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : name(k.preconditioner),
-                 k.tolerance, k.maxIterations, meshLabel(c.kind, c.level).c_str(), name(k.formulation),
+                 c.name.c_str(), toString(k.backend), k.backend == BackendKind::Reference ? "double" : toString(k.precision),
+                 toString(k.rotation), k.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : toString(k.preconditioner),
+                 k.tolerance, k.maxIterations, meshLabel(c.kind, c.level).c_str(), toString(k.formulation),
                  r.msPerStep, disp, r.status.c_str());
   };
 

@@ -13,10 +13,6 @@ namespace {
 
 class Incompressible : public testing::TestWithParam<BackendCase> {};
 
-const char* precondName(PreconditionerKind p) {
-  return p == PreconditionerKind::None ? "none" : p == PreconditionerKind::Diagonal ? "diagonal" : "block_diagonal";
-}
-
 BodyDesc cantilever(double nu) {
   BodyDesc body = makeBody(box({0, 0, 0}, {0.4, 0.1, 0.1}, {8, 2, 2}), 1e6, nu);
   body.fixed.push_back(planeSet(0, 0.0));
@@ -64,7 +60,7 @@ TEST_P(Incompressible, StaticSolveConvergesOrSaysSoForEveryPreconditioner) {
       ASSERT_TRUE(sim->readVelocities(0, v));
       EXPECT_TRUE(allFinite(x) && allFinite(v)) << "non-finite output at nu = " << nu;
       const double tip = maxAbs(displacements(*sim));
-      std::printf("  %-8g %-15s %-8s %7d %7d %11.3e %11.3f\n", nu, precondName(p), st ? "ok" : "FAILED",
+      std::printf("  %-8g %-15s %-8s %7d %7d %11.3e %11.3f\n", nu, toString(p), st ? "ok" : "FAILED",
                   report.newtonIterations, report.linearIterations, report.residual, tip / tipAt03);
       if (!st) {
         EXPECT_EQ(st.code(), ErrorCode::SolveFailed) << st.message();

@@ -183,8 +183,12 @@ Result<std::vector<std::uint32_t>> resolveNodeSet(const NodeSetDesc& set, const 
 Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir,
                              MeshReadReport* report = nullptr);
 
+/// The scene-file spelling of each enumerator ("corotational", "block_diagonal", ...). Safe to call
+/// during static initialisation (no dependence on other globals).
 const char* toString(Formulation f);
 const char* toString(RotationMethod m);
 const char* toString(BackendKind b);
+const char* toString(Precision p);
+const char* toString(PreconditionerKind p);
 
 }  // namespace corofem

@@ -45,15 +45,6 @@ namespace {
 
 using nlohmann::json;
 
-const char* precondName(PreconditionerKind p) {
-  switch (p) {
-    case PreconditionerKind::None: return "none";
-    case PreconditionerKind::Diagonal: return "diagonal";
-    case PreconditionerKind::BlockDiagonal: return "block_diagonal";
-  }
-  return "?";
-}
-
 /// Distinct node pairs that share an element (the off-diagonal 3x3 blocks of K).
 std::size_t edgeCount(const TetMesh& mesh) {
   std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
@@ -101,7 +92,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   f["analysis"] = dynamic ? "dynamic" : "static";
   if (dynamic) f["integrator"] = scene.analysis.dynamics.integrator == Integrator::Newmark ? "newmark" : "backward_euler";
   f["linear_solver"] = pcg ? "pcg" : "cholesky";
-  if (pcg) f["preconditioner"] = precondName(scene.solver.preconditioner);
+  if (pcg) f["preconditioner"] = toString(scene.solver.preconditioner);
   f["mass_terms"] = dynamic;
   f["damping"] = damping;
   f["surface_update"] = !desc.surface.empty();
