@@ -11,6 +11,7 @@
 #include "util/error.hpp"
 
 #include <iostream>
+#include <mutex>
 #include <utility>
 
 namespace corofem::detail {
@@ -27,6 +28,13 @@ FailoverBackend::FailoverBackend(const Problem& problem, const SolverDesc& solve
   }
 }
 
+FailoverBackend::FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
+                                 std::unique_ptr<Backend> first)
+    : problem_(problem), solver_(solver), order_(std::move(order)), current_(std::move(first)) {
+  if (order_.empty()) fail(ErrorCode::Internal, "body '", problem_.name, "': no backend candidate");
+  if (!current_) fail(ErrorCode::Internal, "body '", problem_.name, "': no first backend");
+}
+
 FailoverBackend::~FailoverBackend() = default;
 
 void FailoverBackend::advance(const std::string& call, const std::string& error) {
@@ -35,8 +43,17 @@ void FailoverBackend::advance(const std::string& call, const std::string& error)
     const std::size_t from = index_;
     ++index_;
     try {
-      std::unique_ptr<Backend> next = createBackendFor(problem_, solver_, order_[index_]);
+      std::unique_ptr<Backend> next;
+      {
+        // Bodies of a batch fail over together, each on its own thread (solve/batch_group.hpp):
+        // one backend is created at a time (device and program set-up is not known to be
+        // re-entrant in every driver).
+        static std::mutex creating;
+        std::lock_guard<std::mutex> lock(creating);
+        next = createBackendFor(problem_, solver_, order_[index_]);
+      }
       if (havePositions_) next->setPositions(lastX_);
+      // Replacing a batch view makes the body leave its group's rendezvous (its destructor).
       current_ = std::move(next);
     } catch (const Error& e) {
       if (e.code() != ErrorCode::DeviceError) throw;
@@ -45,9 +62,11 @@ void FailoverBackend::advance(const std::string& call, const std::string& error)
     }
     FallbackEvent ev{problem_.name, when_, call, order_[from].label(), order_[index_].label(), error};
     events_.push_back(ev);
-    std::clog << "corofem: body '" << ev.body << "': device failure on " << ev.from
-              << (ev.call == ev.when ? " at " + ev.when : " in " + ev.call + " (" + ev.when + ")") << ": " << ev.error
-              << "; continuing on " << ev.to << std::endl;
+    // One write, so that the lines of bodies failing over at once do not interleave.
+    std::clog << ("corofem: body '" + ev.body + "': device failure on " + ev.from +
+                  (ev.call == ev.when ? " at " + ev.when : " in " + ev.call + " (" + ev.when + ")") + ": " + ev.error +
+                  "; continuing on " + ev.to + "\n")
+              << std::flush;
     return;
   }
   current_.reset();

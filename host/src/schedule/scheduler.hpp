@@ -139,6 +139,10 @@ class FailoverBackend final : public Backend {
   /// the first candidate is thrown as is (an explicit choice that cannot start is an error).
   FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
                   bool fallbackAtCreate);
+  /// Starts on `first`, an already-made backend that stands for order[0] (a body's view of a
+  /// batch, solve/batch_group.hpp); a device failure moves to order[1], order[2], ... as above.
+  FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
+                  std::unique_ptr<Backend> first);
   ~FailoverBackend() override;
 
   std::string name() const override;
@@ -176,8 +180,10 @@ class FailoverBackend final : public Backend {
 };
 
 /// The plan of one body as JSON text: backend, features in use, buffers with their sizes and the
-/// estimated bytes moved per step (model in plan.cpp).
+/// estimated bytes moved per step (model in plan.cpp). `batchMates`: the names of the bodies
+/// (this one included) that share the device's buffers and launches with it, empty when it runs
+/// alone (solve/batch_group.hpp).
 std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& scene,
-                     const BodySchedule& schedule);
+                     const BodySchedule& schedule, const std::vector<std::string>& batchMates = {});
 
 }  // namespace corofem::detail

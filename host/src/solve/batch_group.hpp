@@ -1,0 +1,90 @@
+// BatchGroup: one Backend view per body over a shared BatchDevice, and the rendezvous that turns
+// the bodies' concurrent Backend calls into rounds (solve/batch.hpp explains the design).
+//
+// Rendezvous (all under one mutex; a body is Out, Running or Waiting):
+//   startStep(bodies, step)  every listed body whose view is alive becomes Running, and step(k) runs
+//                            for each on its own worker thread (a persistent pool: no thread is
+//                            created per step once the pool has grown to the largest step).
+//   a view call              Running -> Waiting with its request posted. When no body is Running
+//                            any more (every body still inside the step is Waiting) and no round is
+//                            in progress, one Waiting thread takes every posted request, runs the
+//                            round on the device without holding the lock, marks the answered
+//                            bodies Running again and wakes them.
+//   step(k) returns/throws   the body leaves (Running -> Out): the others no longer wait for it.
+//   the view is destroyed    (a FailoverBackend replaced it) the body leaves the same way and its
+//                            further calls go to its new backend, outside the group.
+//   a call by an Out body    a round of one, serialised with every other round on the device.
+// Invariant: Running + Waiting bodies are exactly the attached bodies inside the step that have
+// neither finished nor left; a round starts only when Running == 0, so every round holds the call
+// each of them makes next (at most one per body), and the step ends because every body either
+// posts (and is answered by the next round), finishes or leaves.
+#pragma once
+
+#include "solve/batch.hpp"
+
+#include <exception>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::detail {
+
+/// What a group's device has done so far.
+struct BatchGroupStats {
+  long long rounds = 0;         ///< rounds run (batched rounds and rounds of one)
+  long long requests = 0;       ///< requests answered
+  std::size_t largestRound = 0; ///< most requests in one round
+};
+
+class BatchGroup {
+ public:
+  explicit BatchGroup(std::unique_ptr<BatchDevice> device);
+  /// Joins the worker threads. Views may outlive the group (their calls are then rounds of one).
+  ~BatchGroup();
+  BatchGroup(const BatchGroup&) = delete;
+  BatchGroup& operator=(const BatchGroup&) = delete;
+
+  std::size_t bodyCount() const;
+  std::string name() const;
+  std::string deviceName() const;
+  std::size_t allocatedBytes() const;
+  BatchGroupStats stats() const;
+
+  /// The Backend of body `body` (< bodyCount()): its calls are requests of the group's rounds.
+  /// At most one view of a body is alive at a time (Error(Internal) otherwise). One thread at a
+  /// time calls a view (the body's driver).
+  std::unique_ptr<Backend> view(std::size_t body);
+  /// True while the body's view is alive.
+  bool attached(std::size_t body) const;
+
+  /// Starts step(k) for every k in `bodies` (distinct, < bodyCount()), each on its own worker
+  /// thread, and returns at once. One step at a time: finishStep() before the next startStep().
+  void startStep(const std::vector<std::size_t>& bodies, std::function<void(std::size_t)> step);
+  /// Waits for every step(k) of the step started last; returns what each threw (null = returned
+  /// normally), in the order of `bodies`.
+  std::vector<std::exception_ptr> finishStep();
+  /// startStep + finishStep.
+  std::vector<std::exception_ptr> runStep(const std::vector<std::size_t>& bodies, std::function<void(std::size_t)> step);
+
+  struct Shared;  ///< rendezvous state, shared with the views (batch_group.cpp)
+  struct Pool;    ///< the worker threads
+
+ private:
+  std::shared_ptr<Shared> shared_;
+  std::unique_ptr<Pool> pool_;
+};
+
+/// Creates the batch device for bodies scheduled on one OpenCL device: createOpenCLBatchDevice, or
+/// the factory set by setBatchDeviceFactoryForTesting.
+std::unique_ptr<BatchDevice> createBatchDeviceFor(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                                  const std::string& deviceSelector);
+
+using BatchDeviceFactory = std::function<std::unique_ptr<BatchDevice>(
+    const std::vector<const Problem*>& problems, const SolverDesc& solver, const std::string& deviceSelector)>;
+/// Test hook (not thread-safe; reset with an empty function). While set, the Simulation also
+/// batches bodies whose first candidate is not an OpenCL device (fake candidates of the tests).
+void setBatchDeviceFactoryForTesting(BatchDeviceFactory factory);
+bool batchDeviceFactoryForTesting();
+
+}  // namespace corofem::detail

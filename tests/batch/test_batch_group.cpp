@@ -1,0 +1,340 @@
+// BatchGroup's rendezvous on its own (solve/batch_group.hpp): rounds hold every body's next call,
+// bodies that finish, throw or fail over leave the count, and nothing deadlocks. The backends are
+// small fakes whose answers are functions of their inputs, so every answer can be checked exactly.
+#include "solve/batch_group.hpp"
+
+#include "util/error.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdlib>
+#include <iostream>
+#include <mutex>
+#include <random>
+#include <thread>
+
+namespace corofem::test {
+namespace {
+
+using detail::Backend;
+using detail::BatchGroup;
+using detail::Error;
+using detail::LinearSolveStats;
+using detail::SystemCoeffs;
+
+/// A backend whose answers are functions of the positions and the call's inputs (scaled by the
+/// body's own factor k): f = k x, A p = (m + d + s k) p, solve x = b / (m + d + s k), energy =
+/// k |x|^2. `failAt` > 0: the failAt-th call throws Error(DeviceError) (a device failure of this
+/// body only).
+class FakeBackend final : public Backend {
+ public:
+  FakeBackend(double k, int failAt = 0) : k_(k), failAt_(failAt) {}
+  std::string name() const override { return "fake"; }
+  std::string deviceName() const override { return "fake device"; }
+  void setPositions(const Eigen::VectorXd& x) override {
+    tick();
+    x_ = x;
+  }
+  void internalForces(Eigen::VectorXd& f) override {
+    tick();
+    f = k_ * x_;
+  }
+  void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override {
+    tick();
+    y = (c.mass + c.damping + c.stiffness * k_) * p;
+  }
+  LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override {
+    tick();
+    x = b / (c.mass + c.damping + c.stiffness * k_);
+    LinearSolveStats s;
+    s.iterations = static_cast<int>(k_);
+    s.converged = true;
+    return s;
+  }
+  double elasticEnergy() override {
+    tick();
+    return k_ * x_.squaredNorm();
+  }
+
+ private:
+  void tick() {
+    if (failAt_ > 0 && ++calls_ == failAt_) detail::fail(ErrorCode::DeviceError, "injected device failure");
+  }
+  double k_;
+  int failAt_;
+  int calls_ = 0;
+  Eigen::VectorXd x_ = Eigen::VectorXd::Zero(3);
+};
+
+std::unique_ptr<BatchGroup> fakeGroup(std::size_t bodies, const std::vector<int>& failAt = {}) {
+  std::vector<std::unique_ptr<Backend>> backends;
+  for (std::size_t i = 0; i < bodies; ++i)
+    backends.push_back(std::make_unique<FakeBackend>(1.0 + static_cast<double>(i), i < failAt.size() ? failAt[i] : 0));
+  return std::make_unique<BatchGroup>(detail::createLoopBatchDevice(std::move(backends)));
+}
+
+/// Aborts the test binary when a scope takes longer than `seconds`: a deadlock must fail, not hang
+/// the suite until the CTest timeout.
+class Watchdog {
+ public:
+  explicit Watchdog(int seconds) : thread_([this, seconds] {
+    std::unique_lock<std::mutex> lk(m_);
+    if (!cv_.wait_for(lk, std::chrono::seconds(seconds), [this] { return done_; })) {
+      std::cerr << "Watchdog: no progress in " << seconds << " s: the rendezvous deadlocked" << std::endl;
+      std::abort();
+    }
+  }) {}
+  ~Watchdog() {
+    {
+      std::lock_guard<std::mutex> lk(m_);
+      done_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool done_ = false;
+  std::thread thread_;
+};
+
+std::vector<std::size_t> allBodies(std::size_t n) {
+  std::vector<std::size_t> v(n);
+  for (std::size_t i = 0; i < n; ++i) v[i] = i;
+  return v;
+}
+
+TEST(BatchGroup, EveryRoundHoldsEveryBodysNextCall) {
+  // Body i makes i + 1 calls in the step: round r holds the bodies with more than r - 1 calls, so
+  // there are exactly max(i + 1) rounds, the first with every body, and sum(i + 1) requests.
+  Watchdog dog(60);
+  const std::size_t n = 12;
+  auto group = fakeGroup(n);
+  std::vector<std::unique_ptr<Backend>> views;
+  for (std::size_t i = 0; i < n; ++i) views.push_back(group->view(i));
+  std::vector<double> energy(n, 0.0);
+  const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+    Eigen::VectorXd x = Eigen::VectorXd::Constant(3, static_cast<double>(i));
+    for (std::size_t c = 0; c <= i; ++c) {
+      if (c == 0) views[i]->setPositions(x);
+      else energy[i] = views[i]->elasticEnergy();
+    }
+  });
+  ASSERT_EQ(errors.size(), n);
+  for (const auto& e : errors) EXPECT_FALSE(e);
+  const detail::BatchGroupStats st = group->stats();
+  EXPECT_EQ(st.rounds, static_cast<long long>(n));
+  EXPECT_EQ(st.requests, static_cast<long long>(n * (n + 1) / 2));
+  EXPECT_EQ(st.largestRound, n);
+  for (std::size_t i = 1; i < n; ++i)
+    EXPECT_EQ(energy[i], (1.0 + static_cast<double>(i)) * 3.0 * static_cast<double>(i * i)) << "body " << i;
+}
+
+TEST(BatchGroup, OutsideAStepACallIsARoundOfOne) {
+  auto group = fakeGroup(3);
+  auto view = group->view(1);
+  Eigen::VectorXd x = Eigen::VectorXd::Constant(3, 2.0), f;
+  view->setPositions(x);
+  view->internalForces(f);
+  EXPECT_EQ(f, 2.0 * x);  // k = 2 for body 1
+  Eigen::VectorXd b = Eigen::VectorXd::Constant(3, 12.0), y = Eigen::VectorXd::Zero(3);
+  const LinearSolveStats s = view->solve({1.0, 1.0, 2.0}, b, y);  // 1 + 1 + 2 * 2 = 6
+  EXPECT_EQ(y, Eigen::VectorXd::Constant(3, 2.0));
+  EXPECT_EQ(s.iterations, 2);
+  EXPECT_EQ(view->name(), "fake");
+  EXPECT_EQ(group->stats().rounds, 3);
+  EXPECT_EQ(group->stats().largestRound, 1u);
+  EXPECT_THROW(group->view(1), Error);  // one live view per body
+  EXPECT_THROW(group->view(3), Error);
+}
+
+TEST(BatchGroup, ThrowingAndFinishedBodiesLeaveTheRendezvous) {
+  Watchdog dog(60);
+  const std::size_t n = 6;
+  auto group = fakeGroup(n);
+  std::vector<std::unique_ptr<Backend>> views;
+  for (std::size_t i = 0; i < n; ++i) views.push_back(group->view(i));
+  // Body 0 returns at once, body 1 throws after one call, body 2 throws before any, the others
+  // make 4 calls: they must not wait for the first three.
+  const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+    if (i == 0) return;
+    if (i == 2) throw std::runtime_error("body 2 gave up");
+    Eigen::VectorXd x = Eigen::VectorXd::Ones(3), f;
+    views[i]->setPositions(x);
+    if (i == 1) throw std::runtime_error("body 1 gave up");
+    for (int c = 0; c < 3; ++c) views[i]->internalForces(f);
+    EXPECT_EQ(f, (1.0 + static_cast<double>(i)) * x);
+  });
+  EXPECT_FALSE(errors[0]);
+  EXPECT_TRUE(errors[1]);
+  EXPECT_TRUE(errors[2]);
+  for (std::size_t i = 3; i < n; ++i) EXPECT_FALSE(errors[i]);
+  EXPECT_EQ(group->stats().rounds, 4);  // the first holds bodies 1, 3, 4, 5
+  EXPECT_EQ(group->stats().largestRound, 4u);
+  try {
+    std::rethrow_exception(errors[1]);
+  } catch (const std::runtime_error& e) {
+    EXPECT_STREQ(e.what(), "body 1 gave up");
+  }
+  // The group works for the next step.
+  const auto again = group->runStep({3, 5}, [&](std::size_t i) {
+    Eigen::VectorXd f;
+    views[i]->internalForces(f);
+  });
+  EXPECT_FALSE(again[0]);
+  EXPECT_FALSE(again[1]);
+  EXPECT_EQ(group->stats().rounds, 5);
+}
+
+TEST(BatchGroup, ADeviceErrorFailsOnlyThatRequestAndAReplacedViewLeaves) {
+  Watchdog dog(60);
+  const std::size_t n = 4;
+  auto group = fakeGroup(n, {0, 2});  // body 1's second call fails like a device
+  std::vector<std::unique_ptr<Backend>> backends;
+  for (std::size_t i = 0; i < n; ++i) backends.push_back(group->view(i));
+  std::vector<int> calls(n, 0);
+  const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+    Eigen::VectorXd x = Eigen::VectorXd::Ones(3), f;
+    for (int c = 0; c < 5; ++c) {
+      try {
+        backends[i]->internalForces(f);
+      } catch (const Error& e) {
+        ASSERT_EQ(e.code(), ErrorCode::DeviceError);
+        // What FailoverBackend does: replace the view by the next backend and repeat the call.
+        backends[i] = std::make_unique<FakeBackend>(1.0 + static_cast<double>(i));
+        backends[i]->internalForces(f);
+      }
+      ++calls[i];
+    }
+  });
+  for (const auto& e : errors) EXPECT_FALSE(e);
+  for (int c : calls) EXPECT_EQ(c, 5);
+  EXPECT_FALSE(group->attached(1));
+  EXPECT_TRUE(group->attached(0));
+  EXPECT_EQ(group->stats().rounds, 5);
+  // Body 1 may have a view again (it would come back to the batch).
+  EXPECT_NO_THROW(group->view(1));
+}
+
+TEST(BatchGroup, ADeviceThatThrowsFailsEveryRequestOfTheRound) {
+  class Broken final : public detail::BatchDevice {
+   public:
+    std::string name() const override { return "broken"; }
+    std::string deviceName() const override { return "broken"; }
+    std::size_t bodyCount() const override { return 3; }
+    void run(std::vector<detail::BatchRequest*>&) override { detail::fail(ErrorCode::DeviceError, "the device is lost"); }
+  };
+  Watchdog dog(60);
+  BatchGroup group(std::make_unique<Broken>());
+  std::vector<std::unique_ptr<Backend>> views;
+  for (std::size_t i = 0; i < 3; ++i) views.push_back(group.view(i));
+  const auto errors = group.runStep(allBodies(3), [&](std::size_t i) {
+    Eigen::VectorXd f;
+    views[i]->internalForces(f);
+  });
+  for (const auto& e : errors) {
+    ASSERT_TRUE(e);
+    try {
+      std::rethrow_exception(e);
+    } catch (const Error& err) {
+      EXPECT_EQ(err.code(), ErrorCode::DeviceError);
+      EXPECT_NE(std::string(err.what()).find("the device is lost"), std::string::npos);
+    }
+  }
+  EXPECT_EQ(group.stats().rounds, 1);
+}
+
+TEST(BatchGroup, StressManyBodiesRandomExitsThrowsAndFailovers) {
+  // 100 bodies, 40 steps: each body in each step makes a random number of random calls, may return
+  // early, throw, or meet an injected device failure and fail over (its view replaced by a plain
+  // backend, as FailoverBackend does). Every answer is checked; the watchdog turns a deadlock into
+  // a failure. Random participation: some steps leave bodies out.
+  Watchdog dog(120);
+  const std::size_t n = 100;
+  std::mt19937 rng(12345);
+  std::vector<int> failAt(n, 0);
+  for (std::size_t i = 0; i < n; ++i)
+    if (i % 7 == 3) failAt[i] = 5 + static_cast<int>(rng() % 200);
+  auto group = fakeGroup(n, failAt);
+  std::vector<std::unique_ptr<Backend>> backends;
+  for (std::size_t i = 0; i < n; ++i) backends.push_back(group->view(i));
+  std::vector<Eigen::VectorXd> lastX(n, Eigen::VectorXd::Zero(3));  // what a new backend is given
+  std::atomic<long long> wrong{0}, failovers{0}, calls{0};
+  long long thrown = 0;
+  for (int step = 0; step < 40; ++step) {
+    std::vector<std::size_t> bodies;
+    for (std::size_t i = 0; i < n; ++i)
+      if (rng() % 10 != 0) bodies.push_back(i);
+    std::vector<unsigned> seeds(n);
+    for (auto& s : seeds) s = static_cast<unsigned>(rng());
+    const auto errors = group->runStep(bodies, [&](std::size_t i) {
+      std::mt19937 r(seeds[i]);
+      const double k = 1.0 + static_cast<double>(i);
+      const int count = static_cast<int>(r() % 12);
+      auto once = [&](auto&& fn) {
+        ++calls;
+        try {
+          fn();
+        } catch (const Error& e) {
+          if (e.code() != ErrorCode::DeviceError) throw;
+          ++failovers;
+          backends[i] = std::make_unique<FakeBackend>(k);
+          backends[i]->setPositions(lastX[i]);
+          fn();
+        }
+      };
+      for (int c = 0; c < count; ++c) {
+        const unsigned what = r() % 100;
+        if (what < 3) return;                                      // finishes early
+        if (what < 5) throw std::runtime_error("random failure");  // the step throws
+        Eigen::VectorXd x = Eigen::VectorXd::Constant(3, static_cast<double>(r() % 10)), out;
+        switch (what % 4) {
+          case 0: {
+            lastX[i] = x;
+            once([&] { backends[i]->setPositions(x); });
+            once([&] { backends[i]->internalForces(out); });
+            if (out != k * x) ++wrong;
+            break;
+          }
+          case 1: {
+            once([&] { backends[i]->apply({1.0, 0.5, 2.0}, x, out); });
+            if (out != (1.5 + 2.0 * k) * x) ++wrong;
+            break;
+          }
+          case 2: {
+            Eigen::VectorXd y = Eigen::VectorXd::Zero(3);
+            LinearSolveStats s;
+            once([&] { s = backends[i]->solve({1.0, 0.0, 1.0}, x, y); });
+            if (y != x / (1.0 + k) || s.iterations != static_cast<int>(k)) ++wrong;
+            break;
+          }
+          default: {
+            double e = 0;
+            lastX[i] = x;
+            once([&] { backends[i]->setPositions(x); });
+            once([&] { e = backends[i]->elasticEnergy(); });
+            if (e != k * x.squaredNorm()) ++wrong;
+          }
+        }
+      }
+    });
+    ASSERT_EQ(errors.size(), bodies.size());
+    for (const auto& e : errors) thrown += e ? 1 : 0;
+  }
+  EXPECT_EQ(wrong.load(), 0);
+  EXPECT_GT(failovers.load(), 0);
+  EXPECT_GT(thrown, 0);
+  const detail::BatchGroupStats st = group->stats();
+  EXPECT_GT(st.largestRound, 50u);  // the rounds really batch
+  EXPECT_LT(st.rounds, calls.load() / 10);
+  std::cout << "[ info ] " << calls.load() << " calls, " << st.rounds << " rounds, " << st.requests
+            << " batched requests, " << failovers.load() << " failovers, " << thrown << " thrown steps\n";
+}
+
+}  // namespace
+}  // namespace corofem::test
