@@ -18,6 +18,9 @@
  * Linear formulation: R = I, a_i = grad_i (uploaded once, compute_rotations never runs).
  *
  * Each work-item handles COROFEM_VEC consecutive elements with vector arithmetic (corofem_vector.h).
+ * Every kernel serves one or many bodies (segments, corofem_layout.h): a work-group finds its
+ * segment in elemSeg, returns at once when the segment is inactive, and takes the segment's
+ * material and coefficients from segCoef.
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -38,6 +41,14 @@ COROFEM_FN void load_element_block(uint e0, uint S, __global const uint* nodes, 
     for (int l = 0; l < COROFEM_VEC; ++l) b->node[c][l] = nodes[c * S + e0 + l];
   for (int k = 0; k < 9; ++k) b->a[k] = VLOAD(rotGrad + k * S + e0);
   b->volume = VLOAD(geom + kGeomVolume * S + e0);
+}
+
+/* The first element of this work-item and its segment; false when the work-item has nothing to do
+ * (inactive segment: the whole work-group; past the segment's last element). */
+COROFEM_FN bool element_items(__global const uint* elemSeg, __global const uint* segInfo, uint* e0, uint* s) {
+  *s = element_segment(elemSeg);
+  *e0 = get_global_id(0) * COROFEM_VEC;
+  return seg_info(segInfo, *s, kSegActive) != 0u && *e0 < seg_info(segInfo, *s, kSegElemEnd);
 }
 
 /* sum_{i=1..3} (v_i - v_0) a_i^T for a node vector v (3N) at the elements' corners (9 entries,
@@ -85,12 +96,13 @@ COROFEM_FN realv write_stress_times_gradients(uint e0, uint S, const realv* P, r
 
 /* Internal forces, Eq. 9: P = F R^T, E = sym(F R^T) - I. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void element_forces(const uint count, const uint S, __global const uint* restrict nodes,
+void element_forces(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
+                    __global const real* restrict segCoef, __global const uint* restrict nodes,
                     __global const real* restrict geom, __global const real* restrict rotGrad,
-                    __global const real* restrict pos, const real lambda, const real mu,
-                    __global real* restrict out) {
-  const uint e0 = get_global_id(0) * COROFEM_VEC;
-  if (e0 >= count) return;
+                    __global const real* restrict pos, __global real* restrict out) {
+  uint e0, s;
+  if (!element_items(elemSeg, segInfo, &e0, &s)) return;
+  const real lambda = seg_coef(segCoef, s, kCoefLambda), mu = seg_coef(segCoef, s, kCoefMu);
   ElemBlock b;
   load_element_block(e0, S, nodes, geom, rotGrad, &b);
   realv P[9];
@@ -99,17 +111,20 @@ void element_forces(const uint count, const uint S, __global const uint* restric
 }
 
 /* Strain energy V/2 S_w : E = 1/2 (R^T x - X)^T K (R^T x - X) per element, summed per work-group
- * (lanes, then a fixed tree order) into partials[group]. `out` is scratch (the forces). Padding
+ * (lanes, then a fixed tree order) into partials[group] (the host sums a segment's groups). `out` is scratch (the forces). Padding
  * lanes have V = 0 and contribute nothing. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void element_energy(const uint count, const uint S, __global const uint* restrict nodes,
+void element_energy(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
+                    __global const real* restrict segCoef, __global const uint* restrict nodes,
                     __global const real* restrict geom, __global const real* restrict rotGrad,
-                    __global const real* restrict pos, const real lambda, const real mu,
-                    __global real* restrict out, __global real* restrict partials) {
+                    __global const real* restrict pos, __global real* restrict out,
+                    __global real* restrict partials) {
   __local real sum[COROFEM_WG];
-  const uint e0 = get_global_id(0) * COROFEM_VEC, lid = get_local_id(0);
+  const uint s = element_segment(elemSeg), e0 = get_global_id(0) * COROFEM_VEC, lid = get_local_id(0);
+  if (seg_info(segInfo, s, kSegActive) == 0u) return; /* the whole work-group: before the barriers */
+  const real lambda = seg_coef(segCoef, s, kCoefLambda), mu = seg_coef(segCoef, s, kCoefMu);
   real energy = (real)0;
-  if (e0 < count) {
+  if (e0 < seg_info(segInfo, s, kSegElemEnd)) {
     ElemBlock b;
     load_element_block(e0, S, nodes, geom, rotGrad, &b);
     realv P[9];
@@ -122,17 +137,18 @@ void element_energy(const uint count, const uint S, __global const uint* restric
     if (lid < s) sum[lid] += sum[lid + s];
     barrier(CLK_LOCAL_MEM_FENCE);
   }
-  if (lid == 0) partials[get_group_id(0)] = sum[0];
+  if (lid == 0) partials[get_global_id(0) / COROFEM_WG] = sum[0]; /* the element work-group */
 }
 
-/* y_e = k R K R^T p_e (Eq. 11) from the gradients; lambda, mu already multiplied by k. */
+/* y_e = k R K R^T p_e (Eq. 11) from the gradients; the segment's lambda, mu already multiplied by k. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void element_product(const uint count, const uint S, __global const uint* restrict nodes,
+void element_product(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
+                     __global const real* restrict segCoef, __global const uint* restrict nodes,
                      __global const real* restrict geom, __global const real* restrict rotGrad,
-                     __global const real* restrict p, const real lambda, const real mu,
-                     __global real* restrict out) {
-  const uint e0 = get_global_id(0) * COROFEM_VEC;
-  if (e0 >= count) return;
+                     __global const real* restrict p, __global real* restrict out) {
+  uint e0, s;
+  if (!element_items(elemSeg, segInfo, &e0, &s)) return;
+  const real lambda = seg_coef(segCoef, s, kCoefProdLambda), mu = seg_coef(segCoef, s, kCoefProdMu);
   ElemBlock b;
   load_element_block(e0, S, nodes, geom, rotGrad, &b);
   realv P[9];
@@ -144,12 +160,14 @@ void element_product(const uint count, const uint S, __global const uint* restri
  * row) computed on the host by detail::linearStiffness. Reads 78 + 9 reals per element instead of
  * 10: kept to measure that trade (bench_opencl), not the default. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void element_product_stored(const uint count, const uint S, __global const uint* restrict nodes,
-                            __global const real* restrict stiffness, __global const real* restrict rot,
-                            __global const real* restrict p, const real k,
+void element_product_stored(const uint S, __global const uint* restrict elemSeg,
+                            __global const uint* restrict segInfo, __global const real* restrict segCoef,
+                            __global const uint* restrict nodes, __global const real* restrict stiffness,
+                            __global const real* restrict rot, __global const real* restrict p,
                             __global real* restrict out) {
-  const uint e0 = get_global_id(0) * COROFEM_VEC;
-  if (e0 >= count) return;
+  uint e0, s;
+  if (!element_items(elemSeg, segInfo, &e0, &s)) return;
+  const real k = seg_coef(segCoef, s, kCoefStiff);
   realv R[9];
   for (int j = 0; j < 9; ++j) R[j] = VLOAD(rot + j * S + e0);
   realv q[12], y[12];

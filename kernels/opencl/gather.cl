@@ -27,11 +27,11 @@ COROFEM_FN void gather_node(uint n, __global const uint* start, __global const u
 
 /* f_n = sum over incident elements (internal forces, Eq. 9 assembled). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void gather_sum(const uint nodeCount, __global const uint* restrict start,
-                __global const uint* restrict entries, __global const real* restrict elemOut,
-                __global real* restrict out) {
-  const uint n = get_global_id(0);
-  if (n >= nodeCount) return;
+void gather_sum(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                __global const uint* restrict start, __global const uint* restrict entries,
+                __global const real* restrict elemOut, __global real* restrict out) {
+  const uint n = get_global_id(0), s = node_segment(nodeSeg, n);
+  if (seg_info(segInfo, s, kSegActive) == 0u || n >= seg_info(segInfo, s, kSegNodeEnd)) return;
   real acc[3];
   gather_node(n, start, entries, elemOut, acc);
   out[3 * n] = acc[0];
@@ -40,20 +40,22 @@ void gather_sum(const uint nodeCount, __global const uint* restrict start,
 }
 
 /* y = massCoef M p + (element products, already scaled by the stiffness coefficient), with the
- * lumped mass M. Rayleigh damping C = alpha M + beta K^R needs no code of its own: the host folds
+ * lumped mass M (mass = NULL: no body of the device has mass, the term is 0) and the segment's
+ * massCoef. Rayleigh damping C = alpha M + beta K^R needs no code of its own: the host folds
  * it into massCoef = m + c alpha and the stiffness coefficient k + c beta.
  * project != 0 (inside PCG): y_d = 0 on constrained dofs (free[d] = 0): with p_d = 0 there, this is
  * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h,
  * in sum_real: double in mixed precision) give PCG its alpha. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void gather_product(const uint nodeCount, __global const uint* restrict start,
+void gather_product(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                    __global const real* restrict segCoef, __global const uint* restrict start,
                     __global const uint* restrict entries, __global const real* restrict elemOut,
-                    __global const real* restrict mass, const real massCoef,
-                    __global const real* restrict free, const uint project,
-                    __global const real* restrict p, __global real* restrict y,
+                    __global const real* restrict mass, __global const real* restrict free,
+                    const uint project, __global const real* restrict p, __global real* restrict y,
                     __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
-  COROFEM_NODE_RANGE(nodeCount, first, last);
+  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
+  const real massCoef = seg_coef(segCoef, s, kCoefMass);
   sum_real dot = (sum_real)0;
   for (uint n = first; n < last; ++n) {
     real acc[3];
@@ -61,7 +63,7 @@ void gather_product(const uint nodeCount, __global const uint* restrict start,
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       const real pd = p[d];
-      real yd = massCoef * mass[d] * pd + acc[k];
+      real yd = (mass ? massCoef * mass[d] * pd : (real)0) + acc[k];
       if (project) yd *= free[d];
       y[d] = yd;
       dot += (sum_real)pd * (sum_real)yd;  /* exact term in mixed precision */

@@ -10,7 +10,9 @@
  *   reduce_finish(Beta):   beta = (r . z)_new / rho, rho = (r . z)_new, rr = r . r
  *   pcg_direction:         p = z + beta p
  * Dot products are two-stage and deterministic: fixed-order partial sums (corofem_reduce.h), then
- * one work-group summing the partials in a fixed order.
+ * one work-group per segment summing the segment's partials in a fixed order.
+ * Many bodies (segments, corofem_layout.h) iterate together, each with its own scalars; a segment
+ * that has converged is marked inactive by the host and its work-groups return at once.
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -37,12 +39,13 @@ COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const re
 
 /* r = free (b - A x), z = M^-1 r, p = z; partials (r . z, r . r, |free b|^2). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_init(const uint nodeCount, __global const real* restrict b, __global const real* restrict q,
+void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+              __global const real* restrict b, __global const real* restrict q,
               __global const real* restrict free, __global const real* restrict minv,
               __global real* restrict r, __global real* restrict z, __global real* restrict p,
               __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
-  COROFEM_NODE_RANGE(nodeCount, first, last);
+  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
   sum_real rz = 0, rr = 0, bb = 0;
   for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
@@ -67,13 +70,14 @@ void pcg_init(const uint nodeCount, __global const real* restrict b, __global co
 
 /* x += alpha p, r -= alpha q, z = M^-1 r; partials (r . z, r . r, 0). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_update(const uint nodeCount, __global const sum_real* restrict scalars,
-                __global const real* restrict p, __global const real* restrict q,
-                __global const real* restrict minv, __global real* restrict x,
-                __global real* restrict r, __global real* restrict z, __global sum_real* restrict partials) {
+void pcg_update(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                __global const sum_real* restrict scalars, __global const real* restrict p,
+                __global const real* restrict q, __global const real* restrict minv,
+                __global real* restrict x, __global real* restrict r, __global real* restrict z,
+                __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
-  COROFEM_NODE_RANGE(nodeCount, first, last);
-  const real alpha = (real)scalars[kScalarAlpha];
+  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
+  const real alpha = (real)scalars[kScalarCount * s + kScalarAlpha];
   sum_real rz = 0, rr = 0;
   for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
@@ -95,28 +99,34 @@ void pcg_update(const uint nodeCount, __global const sum_real* restrict scalars,
 
 /* p = z + beta p */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_direction(const uint dofCount, __global const sum_real* restrict scalars,
-                   __global const real* restrict z, __global real* restrict p) {
-  const uint d = get_global_id(0);
-  if (d >= dofCount) return;
-  const real beta = (real)scalars[kScalarBeta];
+void pcg_direction(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                   __global const sum_real* restrict scalars, __global const real* restrict z,
+                   __global real* restrict p) {
+  const uint d = get_global_id(0), s = node_segment(nodeSeg, d / 3);
+  if (seg_info(segInfo, s, kSegActive) == 0u || d >= 3 * seg_info(segInfo, s, kSegNodeEnd)) return;
+  const real beta = (real)scalars[kScalarCount * s + kScalarBeta];
   p[d] = z[d] + beta * p[d];
 }
 
-/* Second stage of the dot products: one work-group sums the partialCount partial triples in a fixed
- * order, then updates the PCG scalars according to `mode` (kReduceInit/Alpha/Beta). A
- * non-positive p . A p (A not positive definite on the free dofs, or p = 0) sets alpha = 0 and
- * the breakdown flag instead of dividing. */
+/* Second stage of the dot products: work-group s sums segment s's partial triples in a fixed order
+ * (strided lanes, then a tree: the same order for a body alone or in a batch), then updates the
+ * segment's PCG scalars according to `mode` (kReduceInit/Alpha/Beta). A non-positive p . A p (A
+ * not positive definite on the free dofs, or p = 0) sets alpha = 0 and the breakdown flag instead
+ * of dividing. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void reduce_finish(const uint partialCount, __global const sum_real* restrict partials,
-                   __global sum_real* restrict scalars, const uint mode) {
+void reduce_finish(__global const uint* restrict segInfo, __global const sum_real* restrict partials,
+                   __global sum_real* restrict allScalars, const uint mode) {
   __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
-  const uint lid = get_local_id(0);
+  const uint lid = get_local_id(0), seg = get_global_id(0) / COROFEM_WG;
+  if (seg_info(segInfo, seg, kSegActive) == 0u) return; /* the whole work-group */
+  const uint partialCount = seg_info(segInfo, seg, kSegPartialCount);
+  __global const sum_real* own = partials + kPartialComponents * seg_info(segInfo, seg, kSegPartialBegin);
+  __global sum_real* scalars = allScalars + kScalarCount * seg;
   sum_real a = 0, b = 0, c = 0;
   for (uint g = lid; g < partialCount; g += COROFEM_WG) {
-    a += partials[kPartialComponents * g];
-    b += partials[kPartialComponents * g + 1];
-    c += partials[kPartialComponents * g + 2];
+    a += own[kPartialComponents * g];
+    b += own[kPartialComponents * g + 1];
+    c += own[kPartialComponents * g + 2];
   }
   s0[lid] = a;
   s1[lid] = b;

@@ -5,7 +5,8 @@
  * (from sigma = lambda tr(eps) I + 2 mu eps with eps = sym(u g_i^T)), so no 12x12 is needed.
  * corner_gradients + node_stiffness_blocks run after every rotation update (the blocks rotate with
  * the elements);
- * precond_invert mixes in the coefficients of the solve and inverts.
+ * precond_invert mixes in the coefficients of the solve and inverts. Each kernel takes its
+ * segment's (body's) material and coefficients (corofem_layout.h).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -16,10 +17,11 @@
  * node_stiffness_blocks to gather; used where compute_rotations does not run (linear formulation,
  * rest state). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void corner_gradients(const uint count, const uint S, __global const real* restrict geom,
-                      __global const real* restrict rotGrad, __global real* restrict out) {
-  const uint e0 = get_global_id(0) * COROFEM_VEC;
-  if (e0 >= count) return;
+void corner_gradients(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
+                      __global const real* restrict geom, __global const real* restrict rotGrad,
+                      __global real* restrict out) {
+  const uint s = element_segment(elemSeg), e0 = get_global_id(0) * COROFEM_VEC;
+  if (seg_info(segInfo, s, kSegActive) == 0u || e0 >= seg_info(segInfo, s, kSegElemEnd)) return;
   realv a[9];
   for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
   store_corner_gradients(out, e0, a);
@@ -29,12 +31,14 @@ void corner_gradients(const uint count, const uint S, __global const real* restr
  * a_c written by compute_rotations or corner_gradients and the rest volumes, in the fixed CSR
  * order. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void node_stiffness_blocks(const uint nodeCount, const uint S, __global const uint* restrict start,
-                           __global const uint* restrict entries, __global const real* restrict corners,
-                           __global const real* restrict geom, const real lambda, const real mu,
+void node_stiffness_blocks(const uint S, __global const uint* restrict nodeSeg,
+                           __global const uint* restrict segInfo, __global const real* restrict segCoef,
+                           __global const uint* restrict start, __global const uint* restrict entries,
+                           __global const real* restrict corners, __global const real* restrict geom,
                            __global real* restrict blocks) {
-  const uint n = get_global_id(0);
-  if (n >= nodeCount) return;
+  const uint n = get_global_id(0), s = node_segment(nodeSeg, n);
+  if (seg_info(segInfo, s, kSegActive) == 0u || n >= seg_info(segInfo, s, kSegNodeEnd)) return;
+  const real lambda = seg_coef(segCoef, s, kCoefLambda), mu = seg_coef(segCoef, s, kCoefMu);
   real b[6] = {0, 0, 0, 0, 0, 0};
   const uint end = start[n + 1];
   for (uint j = start[n]; j < end; ++j) {
@@ -58,15 +62,20 @@ void node_stiffness_blocks(const uint nodeCount, const uint S, __global const ui
  * Constrained dofs get 0 in the inverse so that z = M^-1 r stays 0 there. A non-positive pivot
  * (a node touched by no element and massless) falls back to 1. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void precond_invert(const uint nodeCount, __global const real* restrict blocks,
-                    __global const real* restrict mass, const real massCoef, const real stiffCoef,
-                    __global const real* restrict free, __global real* restrict minv) {
-  const uint n = get_global_id(0);
-  if (n >= nodeCount) return;
+void precond_invert(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                    __global const real* restrict segCoef, __global const real* restrict blocks,
+                    __global const real* restrict mass, __global const real* restrict free,
+                    __global real* restrict minv) {
+  const uint n = get_global_id(0), s = node_segment(nodeSeg, n);
+  if (seg_info(segInfo, s, kSegActive) == 0u || n >= seg_info(segInfo, s, kSegNodeEnd)) return;
+  const real massCoef = seg_coef(segCoef, s, kCoefMass), stiffCoef = seg_coef(segCoef, s, kCoefStiff);
   const real f0 = free[3 * n], f1 = free[3 * n + 1], f2 = free[3 * n + 2];
-  real d0 = stiffCoef * blocks[6 * n] + massCoef * mass[3 * n];
-  real d1 = stiffCoef * blocks[6 * n + 1] + massCoef * mass[3 * n + 1];
-  real d2 = stiffCoef * blocks[6 * n + 2] + massCoef * mass[3 * n + 2];
+  /* mass = NULL: no body on this device has mass (static problems) */
+  const real m0 = mass ? mass[3 * n] : (real)0, m1 = mass ? mass[3 * n + 1] : (real)0,
+             m2 = mass ? mass[3 * n + 2] : (real)0;
+  real d0 = stiffCoef * blocks[6 * n] + massCoef * m0;
+  real d1 = stiffCoef * blocks[6 * n + 1] + massCoef * m1;
+  real d2 = stiffCoef * blocks[6 * n + 2] + massCoef * m2;
 #ifdef COROFEM_PRECOND_BLOCK
   real b01 = stiffCoef * blocks[6 * n + 3] * f0 * f1;
   real b02 = stiffCoef * blocks[6 * n + 4] * f0 * f2;

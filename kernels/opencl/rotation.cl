@@ -12,7 +12,8 @@
  * Besides R, the kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force,
  * product and preconditioner kernels use instead of R (see element_force.cl), and, when a
  * preconditioner is used, the per-corner a_c that node_stiffness_blocks gathers (saving the
- * separate corner_gradients pass).
+ * separate corner_gradients pass). Only the work-groups of active segments (bodies) run.
+ * quat is NULL unless the method is COROFEM_ROT_QUAT.
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -351,13 +352,13 @@ COROFEM_FN Mat3 rotation_of(const Mat3* F, __global real* quat, uint e, uint S) 
  * then R and a_i = R grad N_i written as vectors. Padding lanes (zero gradients, F = 0) get R = I
  * from the SVD path's collapsed-element rule and write only into the padding. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void compute_rotations(const uint count, const uint S, __global const uint* restrict nodes,
-                       __global const real* restrict geom, __global const real* restrict pos,
-                       __global real* restrict rot, __global real* restrict rotGrad,
-                       __global real* restrict quat, __global real* restrict corners,
-                       const uint writeCorners) {
-  const uint e0 = get_global_id(0) * COROFEM_VEC;
-  if (e0 >= count) return;
+void compute_rotations(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
+                       __global const uint* restrict nodes, __global const real* restrict geom,
+                       __global const real* restrict pos, __global real* restrict rot,
+                       __global real* restrict rotGrad, __global real* restrict quat,
+                       __global real* restrict corners, const uint writeCorners) {
+  const uint s = element_segment(elemSeg), e0 = get_global_id(0) * COROFEM_VEC;
+  if (seg_info(segInfo, s, kSegActive) == 0u || e0 >= seg_info(segInfo, s, kSegElemEnd)) return;
 #if COROFEM_VEC == 1
   const Mat3 F = element_deformation_gradient(e0, S, nodes, geom, pos);
   const Mat3 R = rotation_of(&F, quat, e0, S);

@@ -77,6 +77,7 @@ COROFEM_CONSTANT(unsigned, kNodeBlockComponents, 6);
 /* Per-node inverse preconditioner: 9 entries (row-major 3x3) for block diagonal, 3 for diagonal. */
 
 /* ---------------------------------------------------------------- PCG scalars on the device (sum_real) */
+/* kScalarCount per segment: scalar k of segment s at kScalarCount * s + k.                        */
 COROFEM_CONSTANT(unsigned, kScalarRho, 0);      /* rho = r . z (current)               */
 COROFEM_CONSTANT(unsigned, kScalarPq, 1);       /* p . A p                             */
 COROFEM_CONSTANT(unsigned, kScalarAlpha, 2);    /* rho / (p . A p)                     */
@@ -97,5 +98,43 @@ COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-grou
 #define COROFEM_WG 64
 #endif
 COROFEM_CONSTANT(unsigned, kStrideAlign, 16);
+
+/* ---------------------------------------------------------------- segments (one per body) */
+/* One device can hold many bodies in the same buffers and launches (solve/batch.hpp); a single
+ * body is the case of one segment. Segment s owns the elements [elemBegin_s, elemBegin_s + E_s)
+ * and the nodes [nodeBegin_s, nodeBegin_s + N_s) of the shared arrays, where E_s is its element
+ * count padded to a multiple of COROFEM_WG * COROFEM_VEC and N_s its node count padded to a
+ * multiple of COROFEM_WG * COROFEM_CHUNK. So every work-group of every kernel lies in exactly one
+ * segment: an element work-group g in elemSeg[g], a node work-group in nodeSeg[first node / WG]
+ * (one entry per WG nodes). Element and node indices in the gather lists and corner lists are
+ * global. Padding elements have zero gradients and volume and the segment's first node as corners;
+ * padding nodes belong to no element, have zero mass and are constrained (free = 0), so they add
+ * exact zeros to every sum. The PCG partial sums of segment s are the triples
+ * [partialBegin_s, partialBegin_s + partialCount_s) and its PCG scalars kScalarCount * s + k.
+ * Per segment (uint) at segInfo[kSegInfoCount * s + k]:                                          */
+COROFEM_CONSTANT(unsigned, kSegActive, 0);       /* 0: the segment's work-groups return at once  */
+COROFEM_CONSTANT(unsigned, kSegElemEnd, 1);      /* one past its last real element (global)       */
+COROFEM_CONSTANT(unsigned, kSegNodeEnd, 2);      /* one past its last real node (global)          */
+COROFEM_CONSTANT(unsigned, kSegPartialBegin, 3); /* its first PCG partial triple                  */
+COROFEM_CONSTANT(unsigned, kSegPartialCount, 4); /* its number of PCG partial triples             */
+COROFEM_CONSTANT(unsigned, kSegInfoCount, 8);
+/* Per segment (real) at segCoef[kSegCoefCount * s + k]: the material and the coefficients of the
+ * current system A = m M + c C + k K^R with Rayleigh C = alpha M + beta K^R folded in.           */
+COROFEM_CONSTANT(unsigned, kCoefLambda, 0);      /* Lame lambda (forces, energy, preconditioner)  */
+COROFEM_CONSTANT(unsigned, kCoefMu, 1);          /* Lame mu                                       */
+COROFEM_CONSTANT(unsigned, kCoefProdLambda, 2);  /* (k + c beta) lambda (element products)        */
+COROFEM_CONSTANT(unsigned, kCoefProdMu, 3);      /* (k + c beta) mu                               */
+COROFEM_CONSTANT(unsigned, kCoefMass, 4);        /* m + c alpha                                   */
+COROFEM_CONSTANT(unsigned, kCoefStiff, 5);       /* k + c beta                                    */
+COROFEM_CONSTANT(unsigned, kSegCoefCount, 8);
+
+#ifdef __OPENCL_C_VERSION__
+/* Segment lookups. Work-group indices are taken as global id / WG (not get_group_id) so that the
+ * host may launch only the span of work-groups of the active segments with a global offset. */
+COROFEM_FN uint element_segment(__global const uint* elemSeg) { return elemSeg[get_global_id(0) / COROFEM_WG]; }
+COROFEM_FN uint node_segment(__global const uint* nodeSeg, uint node) { return nodeSeg[node / COROFEM_WG]; }
+COROFEM_FN uint seg_info(__global const uint* segInfo, uint s, uint k) { return segInfo[kSegInfoCount * s + k]; }
+COROFEM_FN real seg_coef(__global const real* segCoef, uint s, uint k) { return segCoef[kSegCoefCount * s + k]; }
+#endif
 
 #endif /* COROFEM_LAYOUT_H */

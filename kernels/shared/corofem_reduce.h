@@ -35,7 +35,7 @@ COROFEM_FN void group_sum3(__local sum_real* s0, __local sum_real* s1, __local s
     barrier(CLK_LOCAL_MEM_FENCE);
   }
   if (lid == 0) {
-    const uint g = get_group_id(0);
+    const uint g = get_global_id(0) / COROFEM_WG; /* the group, also under a global offset */
     partials[kPartialComponents * g] = s0[0];
     partials[kPartialComponents * g + 1] = s1[0];
     partials[kPartialComponents * g + 2] = s2[0];
@@ -54,10 +54,13 @@ COROFEM_FN void item_store3(sum_real a, sum_real b, sum_real c, __global sum_rea
 #define COROFEM_PARTIAL_STORE(a, b, c, partials) item_store3((a), (b), (c), (partials))
 #endif
 
-/* The nodes [first, last) of this work-item. */
-#define COROFEM_NODE_RANGE(nodeCount, first, last)               \
-  const uint first = get_global_id(0) * COROFEM_CHUNK;           \
-  const uint last = min(first + (uint)COROFEM_CHUNK, (nodeCount))
+/* The nodes [first, last) of this work-item and their segment s (corofem_layout.h); a work-group
+ * of an inactive segment returns at once (all its work-items alike, so before any barrier). */
+#define COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last)                    \
+  const uint first = get_global_id(0) * COROFEM_CHUNK;                          \
+  const uint s = node_segment((nodeSeg), first);                                \
+  if (seg_info((segInfo), s, kSegActive) == 0u) return;                         \
+  const uint last = min(first + (uint)COROFEM_CHUNK, seg_info((segInfo), s, kSegNodeEnd))
 
 #endif /* __OPENCL_C_VERSION__ */
 #endif /* COROFEM_REDUCE_H */

@@ -34,6 +34,11 @@ class OpenCLBackendInternal : public Backend {
   virtual cl::ProgramOrigin programOrigin() const = 0;
   virtual const cl::ProgramBuild& programBuild() const = 0;
   virtual cl::Context& context() = 0;
+  /// Bytes of device memory the backend allocated (the sum of its buffers' sizes). Only buffers
+  /// something reads exist: no mass buffer for a static problem (no nonzero lumped mass), the
+  /// stored K_e only with OpenCLOptions::storedStiffness, quaternions only for that rotation
+  /// method, preconditioner data only with a preconditioner.
+  virtual std::size_t allocatedBytes() const = 0;
 
   // The node positions on the device (e.g. for DeviceSurface::updateFromDevice, no host round trip):
   // 3 reals per node (double when positionsAreDouble(), else float, also in mixed precision), those
@@ -62,6 +67,15 @@ std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& prob
                                                              const SolverDesc& solver,
                                                              std::shared_ptr<cl::Context> context,
                                                              const OpenCLOptions& options = {});
+
+class BatchDevice;
+
+/// The OpenCL batch device (solve/batch.hpp: createOpenCLBatchDevice) on a given context and with
+/// the tuning options of the single backend (tests, benchmarks).
+std::unique_ptr<BatchDevice> createOpenCLBatchDeviceOn(const std::vector<const Problem*>& problems,
+                                                       const SolverDesc& solver,
+                                                       std::shared_ptr<cl::Context> context,
+                                                       const OpenCLOptions& options = {});
 
 /// The backend on an application's own context, queue and device (retained, never released
 /// beyond the backend's own references).

@@ -1,0 +1,884 @@
+// One or many bodies in shared OpenCL buffers (segment_engine.hpp): layout, transfers and the
+// per-op launch sequences. Build switches (-D), shared by all segments: precision (COROFEM_DOUBLE;
+// COROFEM_MIXED: float vectors and products, PCG dot products, partials and scalars in double),
+// rotation method (COROFEM_ROT_*), preconditioner (COROFEM_PRECOND_*), work-group size
+// (COROFEM_WG), elements per work-item (COROFEM_VEC: 8 on CPUs, 1 on GPUs), nodes per work-item in
+// the reducing node kernels (COROFEM_CHUNK: 4 on CPUs; COROFEM_TREE_REDUCE: local-memory trees on
+// GPUs). Per body (tables, no switch): Lame parameters, lumped mass, constraints, Rayleigh damping
+// (C = alpha M + beta K^R folds into the two coefficients of M and K^R), formulation (the linear one
+// never runs compute_rotations).
+// Tuning overrides for experiments (not for production): COROFEM_OPENCL_WG, COROFEM_OPENCL_VEC,
+// COROFEM_OPENCL_CHUNK, COROFEM_OPENCL_TREE, COROFEM_OPENCL_OPTIONS (extra compiler options),
+// COROFEM_OPENCL_PROFILE=1 (per-kernel device times printed when the engine is destroyed).
+#ifdef COROFEM_WITH_OPENCL
+
+#include "backends/opencl/segment_engine.hpp"
+
+#include "util/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+
+namespace corofem::detail {
+
+// The device layout constants (kScalarRho, kGeomVolume, kSegActive, ...), shared with the kernels.
+namespace layout {
+#include "../../../../kernels/shared/corofem_layout.h"
+}  // namespace layout
+
+namespace {
+
+using cl::checkCl;
+using namespace layout;
+
+constexpr std::size_t kDefaultWorkGroup = 64;
+
+std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
+
+/// The Error a request fails with (set into BatchRequest::error, rethrown by the body's view).
+template <class... Parts>
+std::exception_ptr errorOf(ErrorCode code, const Parts&... parts) {
+  try {
+    fail(code, parts...);
+  } catch (...) {
+    return std::current_exception();
+  }
+}
+
+bool hasNonzeroMass(const Problem& p) {
+  if (static_cast<std::size_t>(p.lumpedMass.size()) != p.dofCount()) return false;
+  for (Eigen::Index d = 0; d < p.lumpedMass.size(); ++d)
+    if (p.lumpedMass[d] != 0.0) return true;
+  return false;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------- RAII wrappers
+
+ClBuffer::~ClBuffer() {
+  if (mem_) clReleaseMemObject(mem_);
+}
+
+void ClBuffer::create(cl_context ctx, std::size_t bytes, const std::string& device) {
+  cl_int status = CL_SUCCESS;
+  const std::size_t size = std::max<std::size_t>(bytes, 16);
+  mem_ = clCreateBuffer(ctx, CL_MEM_READ_WRITE, size, nullptr, &status);
+  checkCl(status, "clCreateBuffer", device);
+  bytes_ = size;
+}
+
+ClKernel::~ClKernel() {
+  if (k_) clReleaseKernel(k_);
+}
+
+void ClKernel::create(cl_program program, const char* name, const std::string& device) {
+  cl_int status = CL_SUCCESS;
+  k_ = clCreateKernel(program, name, &status);
+  if (status != CL_SUCCESS)
+    fail(ErrorCode::DeviceError, "clCreateKernel('", name, "') failed with ", cl::errorString(status),
+         " on OpenCL device '", device, "'");
+  name_ = name;
+}
+
+// ---------------------------------------------------------------------------- set-up
+
+SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                             std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options)
+    : ctx_(std::move(ctx)), solver_(solver), precond_(solver.preconditioner),
+      storedStiffness_(options.storedStiffness) {
+  dev_ = ctx_->deviceName();
+  cl_command_queue_properties queueProps = 0;
+  clGetCommandQueueInfo(ctx_->queue(), CL_QUEUE_PROPERTIES, sizeof(queueProps), &queueProps, nullptr);
+  profile_ = (queueProps & CL_QUEUE_PROFILING_ENABLE) != 0;
+  if (problems.empty()) fail(ErrorCode::BadInput, "the OpenCL backend needs at least one body");
+  for (const Problem* problem : problems) {
+    if (problem->formulation != Formulation::Corotational && problem->formulation != Formulation::Linear)
+      fail(ErrorCode::BadInput, "body '", problem->name, "': the OpenCL backend implements the co-rotational "
+           "and linear formulations only, not '", toString(problem->formulation),
+           "'; use the reference backend (\"backend\": \"reference\") for this formulation");
+  }
+  if (solver.linearSolver != LinearSolverKind::Pcg)
+    fail(ErrorCode::BadInput, "body '", problems.front()->name, "': the OpenCL backend solves with PCG only; "
+         "\"cholesky\" is available on the reference backend (\"backend\": \"reference\")");
+  double_ = solver.precision == Precision::Double;
+  mixed_ = solver.precision == Precision::Mixed;
+  const bool fp64 = ctx_->info().fp64 && !options.assumeNoFp64;
+  if (double_ && !fp64)
+    fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64); "
+         "set the solver precision to \"float\" or choose another device");
+  if (mixed_ && !fp64)
+    fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64), which "
+         "the solver precision \"mixed\" needs for its dot products; set the precision to \"float\" "
+         "or choose another device");
+  realSize_ = double_ ? sizeof(double) : sizeof(float);
+  // Mixed: the vectors are float (realSize_), the partial sums and PCG scalars double (sumSize_).
+  sumSize_ = double_ || mixed_ ? sizeof(double) : sizeof(float);
+  wg_ = options.workGroupSize ? options.workGroupSize : kDefaultWorkGroup;
+  vec_ = options.vectorWidth ? options.vectorWidth : (ctx_->info().gpu ? 1 : 8);
+  if (const char* env = std::getenv("COROFEM_OPENCL_VEC"); env && *env && !options.vectorWidth)
+    vec_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
+  chunk_ = options.nodeChunk ? options.nodeChunk : (ctx_->info().gpu ? 1 : 4);  // 4: enough work-groups to balance 2+ threads on small meshes
+  if (const char* env = std::getenv("COROFEM_OPENCL_CHUNK"); env && *env && !options.nodeChunk)
+    chunk_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
+  if (vec_ != 1 && vec_ != 4 && vec_ != 8 && vec_ != 16)
+    fail(ErrorCode::BadInput, "OpenCL element vector width ", vec_, " must be 1, 4, 8 or 16");
+  if (const char* env = std::getenv("COROFEM_OPENCL_WG"); env && *env && !options.workGroupSize)
+    wg_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
+  if (wg_ == 0 || (wg_ & (wg_ - 1)) != 0 || wg_ > ctx_->info().maxWorkGroupSize)
+    fail(ErrorCode::BadInput, "OpenCL work-group size ", wg_, " must be a power of two <= ",
+         ctx_->info().maxWorkGroupSize, " on device '", dev_, "'");
+  treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
+  if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
+    treeReduce_ = std::string(env) != "0";  // tuning experiments
+
+  // -- segments: every body padded to whole work-groups of every kernel (corofem_layout.h)
+  const std::size_t elemAlign = std::max<std::size_t>(wg_ * vec_, kStrideAlign);
+  const std::size_t nodeAlign = wg_ * chunk_;
+  for (const Problem* problem : problems) {
+    Segment sg;
+    sg.problem = problem;
+    sg.nodes = problem->mesh.nodeCount();
+    sg.elems = problem->mesh.tetCount();
+    if (problem->elements.size() != sg.elems || problem->dofCount() != 3 * sg.nodes)
+      fail(ErrorCode::Internal, "OpenCL backend: problem '", problem->name, "' has ", problem->elements.size(),
+           " element rest states for ", sg.elems, " tets and ", problem->dofCount(), " dofs for ", sg.nodes,
+           " nodes");
+    if (sg.elems == 0) fail(ErrorCode::BadInput, "body '", problem->name, "' has no elements");
+    sg.elemBegin = stride_;
+    sg.elemSpan = roundUp(sg.elems, elemAlign);
+    stride_ += sg.elemSpan;
+    sg.nodeBegin = nodeTotal_;
+    sg.nodeSpan = roundUp(std::max<std::size_t>(sg.nodes, 1), nodeAlign);
+    nodeTotal_ += sg.nodeSpan;
+    // Partial triples: one per node-kernel work-item, or one per work-group with trees.
+    sg.partialBegin = treeReduce_ ? sg.nodeBegin / nodeAlign : sg.nodeBegin / chunk_;
+    sg.partialCount = treeReduce_ ? sg.nodeSpan / nodeAlign : sg.nodeSpan / chunk_;
+    partialTotal_ += sg.partialCount;
+    sg.corotational = problem->formulation == Formulation::Corotational;
+    sg.rayleighMass = problem->rayleighMass;
+    sg.rayleighStiffness = problem->rayleighStiffness;
+    sg.constrained.assign(3 * sg.nodes, 0);
+    if (problem->constrained.size() == 3 * sg.nodes) sg.constrained = problem->constrained;
+    hasMass_ = hasMass_ || hasNonzeroMass(*problem);
+    segs_.push_back(std::move(sg));
+  }
+  const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
+  if (stride_ * widest >= (std::size_t(1) << 32) / 2 || 9 * nodeTotal_ >= (std::size_t(1) << 32) / 2)
+    fail(ErrorCode::BadInput, "body '", problems.front()->name, "'", problems.size() > 1 ? " and the others" : "",
+         ": ", stride_, " (padded) elements exceed the OpenCL backend's 32-bit element indexing; split the "
+         "body or batch fewer bodies per device");
+
+  build(solver, options);
+  allocate(options);
+  setAllActive();
+  refreshBlocks(false);
+  finish();
+}
+
+SegmentEngine::~SegmentEngine() {
+  for (const auto& [kernel, entry] : profileTimes_)
+    std::fprintf(stderr, "[corofem opencl profile] %-24s %8ld launches %10.1f us each\n", kernel.c_str(),
+                 entry.first, 1e6 * entry.second / static_cast<double>(entry.first));
+}
+
+void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options) {
+  // -- program: only the features these problems use
+  options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_) +
+             " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "");
+  if (double_) options_ += " -DCOROFEM_DOUBLE";
+  if (mixed_) options_ += " -DCOROFEM_MIXED";
+  switch (solver.rotation) {
+    case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;
+    case RotationMethod::Svd: options_ += " -DCOROFEM_ROT_SVD"; break;
+    case RotationMethod::Quaternion: options_ += " -DCOROFEM_ROT_QUAT"; break;
+    case RotationMethod::Qr: options_ += " -DCOROFEM_ROT_QR"; break;
+  }
+  if (options.quaternionIterations > 0)
+    options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(options.quaternionIterations);
+  if (precond_ == PreconditionerKind::BlockDiagonal) options_ += " -DCOROFEM_PRECOND_BLOCK";
+  else if (precond_ == PreconditionerKind::Diagonal) options_ += " -DCOROFEM_PRECOND_DIAG";
+  if (const char* extra = std::getenv("COROFEM_OPENCL_OPTIONS"); extra && *extra)
+    options_ += std::string(" ") + extra;  // tuning experiments: extra compiler options
+  static const std::string source = cl::corofemProgramSource();
+  build_ = cl::buildProgram(*ctx_, "corofem", source, options_);
+  kRotations_.create(build_.program, "compute_rotations", dev_);
+  kForces_.create(build_.program, "element_forces", dev_);
+  kEnergy_.create(build_.program, "element_energy", dev_);
+  kProduct_.create(build_.program, "element_product", dev_);
+  kProductStored_.create(build_.program, "element_product_stored", dev_);
+  kGatherSum_.create(build_.program, "gather_sum", dev_);
+  kGatherProduct_.create(build_.program, "gather_product", dev_);
+  kBlocks_.create(build_.program, "node_stiffness_blocks", dev_);
+  kCornerGradients_.create(build_.program, "corner_gradients", dev_);
+  kPrecondInvert_.create(build_.program, "precond_invert", dev_);
+  kPcgInit_.create(build_.program, "pcg_init", dev_);
+  kPcgUpdate_.create(build_.program, "pcg_update", dev_);
+  kPcgDirection_.create(build_.program, "pcg_direction", dev_);
+  kReduceFinish_.create(build_.program, "reduce_finish", dev_);
+}
+
+void SegmentEngine::allocate(const OpenCLOptions& options) {
+  const std::size_t S = stride_, K = segs_.size();
+  cl_context c = ctx_->context();
+
+  // -- segment tables
+  segInfo_.assign(kSegInfoCount * K, 0);
+  segCoef_.assign(kSegCoefCount * K, 0.0);
+  std::vector<cl_uint> elemSeg(S / (wg_ * vec_)), nodeSeg(nodeTotal_ / wg_);
+  for (std::size_t s = 0; s < K; ++s) {
+    const Segment& sg = segs_[s];
+    cl_uint* info = &segInfo_[kSegInfoCount * s];
+    info[kSegActive] = 1;
+    info[kSegElemEnd] = static_cast<cl_uint>(sg.elemBegin + sg.elems);
+    info[kSegNodeEnd] = static_cast<cl_uint>(sg.nodeBegin + sg.nodes);
+    info[kSegPartialBegin] = static_cast<cl_uint>(sg.partialBegin);
+    info[kSegPartialCount] = static_cast<cl_uint>(sg.partialCount);
+    segCoef_[kSegCoefCount * s + kCoefLambda] = sg.problem->lame.lambda;
+    segCoef_[kSegCoefCount * s + kCoefMu] = sg.problem->lame.mu;
+    for (std::size_t g = sg.elemBegin / (wg_ * vec_); g < (sg.elemBegin + sg.elemSpan) / (wg_ * vec_); ++g)
+      elemSeg[g] = static_cast<cl_uint>(s);
+    for (std::size_t g = sg.nodeBegin / wg_; g < (sg.nodeBegin + sg.nodeSpan) / wg_; ++g)
+      nodeSeg[g] = static_cast<cl_uint>(s);
+  }
+  active_.assign(K, 1);
+  activeLo_ = 0;
+  activeHi_ = K;
+  segInfoBuf_.create(c, segInfo_.size() * sizeof(cl_uint), dev_);
+  uploadRaw(segInfoBuf_, segInfo_);
+  createReal(segCoefBuf_, segCoef_.size());
+  coefDirty_ = true;
+  flushCoefficients();
+  elemSeg_.create(c, elemSeg.size() * sizeof(cl_uint), dev_);
+  uploadRaw(elemSeg_, elemSeg);
+  nodeSeg_.create(c, nodeSeg.size() * sizeof(cl_uint), dev_);
+  uploadRaw(nodeSeg_, nodeSeg);
+
+  // -- element data, structure of arrays (kernels/shared/corofem_layout.h); padding elements:
+  // zero gradients and volume, corners at the segment's first node
+  {
+    std::vector<cl_uint> nodes(kElemNodeComponents * S, 0);
+    for (const Segment& sg : segs_)
+      for (std::size_t e = 0; e < sg.elemSpan; ++e)
+        for (std::size_t k = 0; k < 4; ++k)
+          nodes[k * S + sg.elemBegin + e] =
+              static_cast<cl_uint>(sg.nodeBegin + (e < sg.elems ? sg.problem->mesh.tets[4 * e + k] : 0));
+    elemNodes_.create(c, nodes.size() * sizeof(cl_uint), dev_);
+    uploadRaw(elemNodes_, nodes);
+  }
+  const bool quaternion = solver_.rotation == RotationMethod::Quaternion;
+  {
+    std::vector<double> geom(kGeomComponents * S, 0.0), rot(kRotComponents * S, 0.0),
+        quat(quaternion ? kQuatComponents * S : 0, 0.0);
+    for (const Segment& sg : segs_)
+      for (std::size_t e = 0; e < sg.elems; ++e) {
+        const ElementRest& rest = sg.problem->elements[e];
+        const std::size_t g = sg.elemBegin + e;
+        for (int i = 1; i < 4; ++i)
+          for (int k = 0; k < 3; ++k) geom[(3 * (i - 1) + k) * S + g] = rest.grad(i, k);
+        geom[kGeomVolume * S + g] = rest.volume;
+        rot[0 * S + g] = rot[4 * S + g] = rot[8 * S + g] = 1.0;
+        if (quaternion) quat[3 * S + g] = 1.0;
+      }
+    createReal(geom_, geom.size());
+    upload(geom_, geom.data(), 0, geom.size());
+    createReal(rot_, rot.size());
+    upload(rot_, rot.data(), 0, rot.size());
+    // At rest (and always for the linear formulation) R = I, so a_i = grad N_i.
+    createReal(rotGrad_, kRotGradComponents * S);
+    upload(rotGrad_, geom.data(), 0, kRotGradComponents * S);
+    // The warm-start quaternions exist only for the Quaternion method (the kernel gets NULL otherwise).
+    if (quaternion) {
+      createReal(quat_, quat.size());
+      upload(quat_, quat.data(), 0, quat.size());
+    }
+  }
+  if (options.storedStiffness) {
+    std::vector<double> K12(kStoredKComponents * S, 0.0);
+    for (const Segment& sg : segs_)
+      for (std::size_t e = 0; e < sg.elems; ++e) {
+        const Mat12 Ke = linearStiffness(sg.problem->elements[e], sg.problem->lame);
+        std::size_t idx = 0;
+        for (int r = 0; r < 12; ++r)
+          for (int col = r; col < 12; ++col, ++idx) K12[idx * S + sg.elemBegin + e] = Ke(r, col);
+      }
+    createReal(stiffness_, K12.size());
+    upload(stiffness_, K12.data(), 0, K12.size());
+  }
+  createReal(elemOut_, kElemOutComponents * S);
+
+  // -- node gather lists (CSR over all nodes, fixed order: by segment, element, then corner)
+  {
+    std::size_t entryCount = 0;
+    for (const Segment& sg : segs_) entryCount += 4 * sg.elems;
+    std::vector<cl_uint> start(nodeTotal_ + 1, 0), entries(entryCount);
+    for (const Segment& sg : segs_)
+      for (std::size_t e = 0; e < sg.elems; ++e)
+        for (int k = 0; k < 4; ++k) ++start[sg.nodeBegin + sg.problem->mesh.tets[4 * e + k] + 1];
+    for (std::size_t n = 0; n < nodeTotal_; ++n) start[n + 1] += start[n];
+    std::vector<cl_uint> fill(start.begin(), start.end() - 1);
+    for (const Segment& sg : segs_)
+      for (std::size_t e = 0; e < sg.elems; ++e) {
+        const std::size_t g = sg.elemBegin + e;
+        for (int k = 0; k < 4; ++k)
+          entries[fill[sg.nodeBegin + sg.problem->mesh.tets[4 * e + k]]++] =
+              static_cast<cl_uint>(((g / vec_) * 12 + 3 * k) * vec_ + g % vec_);
+      }
+    nodeStart_.create(c, start.size() * sizeof(cl_uint), dev_);
+    uploadRaw(nodeStart_, start);
+    nodeEntries_.create(c, entries.size() * sizeof(cl_uint), dev_);
+    uploadRaw(nodeEntries_, entries);
+  }
+
+  // -- node data (padding nodes: zero mass, constrained)
+  const std::size_t dofTotal = 3 * nodeTotal_;
+  posHost_.assign(dofTotal, 0.0);
+  packed_.assign(dofTotal, 0.0);
+  std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
+  for (const Segment& sg : segs_) {
+    for (std::size_t d = 0; d < sg.dofs(); ++d) {
+      posHost_[sg.dofBegin() + d] = sg.problem->restPositions[static_cast<Eigen::Index>(d)];
+      freeMask[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : 1.0;
+    }
+    if (hasMass_ && static_cast<std::size_t>(sg.problem->lumpedMass.size()) == sg.dofs())
+      for (std::size_t d = 0; d < sg.dofs(); ++d)
+        mass[sg.dofBegin() + d] = sg.problem->lumpedMass[static_cast<Eigen::Index>(d)];
+  }
+  createReal(pos_, dofTotal);
+  upload(pos_, posHost_.data(), 0, dofTotal);
+  // Static problems (no body with a nonzero lumped mass) get no mass buffer: the kernels see NULL.
+  if (hasMass_) {
+    createReal(mass_, dofTotal);
+    upload(mass_, mass.data(), 0, dofTotal);
+  }
+  createReal(free_, dofTotal);
+  upload(free_, freeMask.data(), 0, dofTotal);
+  if (precond_ != PreconditionerKind::None) {
+    createReal(blocks_, kNodeBlockComponents * nodeTotal_);
+    createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodeTotal_);
+  }
+  for (ClBuffer* v : {&x_, &b_, &r_, &z_, &p_, &q_}) createReal(*v, dofTotal);
+  // Partials: the PCG node kernels write sum_real triples; element_energy writes one real per
+  // element work-group into the same buffer (at most sumSize_ bytes each).
+  partials_.create(c, kPartialComponents * std::max(S / (wg_ * vec_), partialTotal_) * sumSize_, dev_);
+  scalars_.create(c, kScalarCount * K * sumSize_, dev_);
+}
+
+std::size_t SegmentEngine::allocatedBytes() const {
+  std::size_t sum = 0;
+  for (const ClBuffer* b : {&elemSeg_, &nodeSeg_, &segInfoBuf_, &segCoefBuf_, &elemNodes_, &geom_, &rot_,
+                            &rotGrad_, &quat_, &stiffness_, &elemOut_, &nodeStart_, &nodeEntries_, &pos_, &mass_,
+                            &free_, &blocks_, &minv_, &x_, &b_, &r_, &z_, &p_, &q_, &partials_, &scalars_})
+    sum += b->bytes();
+  return sum;
+}
+
+// ---------------------------------------------------------------------------- launching, tables
+
+void SegmentEngine::setArg(cl_kernel k, cl_uint i, cl_mem m) {
+  // m may be NULL (an absent optional buffer): the kernel sees a NULL pointer (OpenCL 1.2, 5.7.2).
+  checkCl(clSetKernelArg(k, i, sizeof(cl_mem), &m), "clSetKernelArg", dev_);
+}
+
+void SegmentEngine::setArg(cl_kernel k, cl_uint i, cl_uint v) {
+  checkCl(clSetKernelArg(k, i, sizeof(cl_uint), &v), "clSetKernelArg", dev_);
+}
+
+std::pair<std::size_t, std::size_t> SegmentEngine::spanItems(Span span, std::size_t lo, std::size_t hi) const {
+  const Segment& a = segs_[lo];
+  const Segment& b = segs_[hi - 1];
+  const std::size_t nodes = b.nodeBegin + b.nodeSpan - a.nodeBegin;
+  switch (span) {
+    case Span::Elements: return {a.elemBegin / vec_, (b.elemBegin + b.elemSpan - a.elemBegin) / vec_};
+    case Span::Nodes: return {a.nodeBegin, nodes};
+    case Span::NodeChunks: return {a.nodeBegin / chunk_, nodes / chunk_};
+    case Span::Dofs: return {3 * a.nodeBegin, 3 * nodes};
+    case Span::Segments: break;
+  }
+  return {lo * wg_, (hi - lo) * wg_};
+}
+
+void SegmentEngine::enqueue(const ClKernel& kernel, Span span) {
+  // Only the work-groups of the span of active segments are launched (a global offset; the
+  // kernels derive their work-group from the global id); inactive segments inside the span
+  // return at once.
+  const auto [offset, global] = spanItems(span, activeLo_, activeHi_);
+  cl_event event = nullptr;
+  const cl_int status = clEnqueueNDRangeKernel(ctx_->queue(), kernel.get(), 1, &offset, &global, &wg_, 0,
+                                               nullptr, profile_ ? &event : nullptr);
+  if (event) {
+    clWaitForEvents(1, &event);
+    cl_ulong t0 = 0, t1 = 0;
+    clGetEventProfilingInfo(event, CL_PROFILING_COMMAND_START, sizeof(t0), &t0, nullptr);
+    clGetEventProfilingInfo(event, CL_PROFILING_COMMAND_END, sizeof(t1), &t1, nullptr);
+    auto& entry = profileTimes_[kernel.name()];
+    entry.first += 1;
+    entry.second += static_cast<double>(t1 - t0) * 1e-9;
+    clReleaseEvent(event);
+  }
+  if (status != CL_SUCCESS)
+    fail(ErrorCode::DeviceError, "clEnqueueNDRangeKernel('", kernel.name(), "', ", global,
+         " work-items) failed with ", cl::errorString(status), " on OpenCL device '", dev_, "'");
+}
+
+void SegmentEngine::setActive(const std::vector<char>& active) {
+  bool changed = false;
+  activeLo_ = segs_.size();
+  activeHi_ = 0;
+  for (std::size_t s = 0; s < segs_.size(); ++s) {
+    const bool on = active[s] != 0;
+    if (on) {
+      activeLo_ = std::min(activeLo_, s);
+      activeHi_ = s + 1;
+    }
+    if (on != (active_[s] != 0)) {
+      changed = true;
+      active_[s] = on;
+      segInfo_[kSegInfoCount * s + kSegActive] = on ? 1 : 0;
+    }
+  }
+  if (changed) uploadRaw(segInfoBuf_, segInfo_);
+}
+
+void SegmentEngine::setCoefficients(std::size_t s, const SystemCoeffs& c) {
+  // A = m M + c (alpha M + beta K^R) + k K^R = (m + c alpha) M + (k + c beta) K^R.
+  const Segment& sg = segs_[s];
+  const double massCoef = c.mass + c.damping * sg.rayleighMass;
+  const double stiffCoef = c.stiffness + c.damping * sg.rayleighStiffness;
+  double* coef = &segCoef_[kSegCoefCount * s];
+  const double next[4] = {stiffCoef * coef[kCoefLambda], stiffCoef * coef[kCoefMu], massCoef, stiffCoef};
+  double* slot[4] = {&coef[kCoefProdLambda], &coef[kCoefProdMu], &coef[kCoefMass], &coef[kCoefStiff]};
+  for (int i = 0; i < 4; ++i)
+    if (*slot[i] != next[i]) {
+      *slot[i] = next[i];
+      coefDirty_ = true;
+    }
+}
+
+void SegmentEngine::flushCoefficients() {
+  if (!coefDirty_) return;
+  upload(segCoefBuf_, segCoef_.data(), 0, segCoef_.size());
+  coefDirty_ = false;
+}
+
+// ---------------------------------------------------------------------------- transfers
+
+void SegmentEngine::upload(const ClBuffer& buf, const double* src, std::size_t begin, std::size_t count) {
+  if (count == 0) return;
+  staging_.resize(count * realSize_);
+  if (double_) {
+    std::memcpy(staging_.data(), src + begin, count * sizeof(double));
+  } else {
+    float* out = reinterpret_cast<float*>(staging_.data());
+    for (std::size_t i = 0; i < count; ++i) out[i] = static_cast<float>(src[begin + i]);
+  }
+  checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, begin * realSize_, count * realSize_,
+                               staging_.data(), 0, nullptr, nullptr),
+          "clEnqueueWriteBuffer", dev_);
+}
+
+void SegmentEngine::download(const ClBuffer& buf, double* dst, std::size_t begin, std::size_t count) {
+  if (count == 0) return;
+  staging_.resize(count * realSize_);
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), buf.get(), CL_TRUE, begin * realSize_, count * realSize_,
+                              staging_.data(), 0, nullptr, nullptr),
+          "clEnqueueReadBuffer", dev_);
+  if (double_) {
+    std::memcpy(dst + begin, staging_.data(), count * sizeof(double));
+  } else {
+    const float* in = reinterpret_cast<const float*>(staging_.data());
+    for (std::size_t i = 0; i < count; ++i) dst[begin + i] = in[i];
+  }
+}
+
+void SegmentEngine::downloadSums(const ClBuffer& buf, double* dst, std::size_t count) {
+  if (!mixed_) {
+    download(buf, dst, 0, count);
+    return;
+  }
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, count * sizeof(double), dst, 0, nullptr,
+                              nullptr),
+          "clEnqueueReadBuffer", dev_);
+}
+
+template <class T>
+void SegmentEngine::uploadRaw(const ClBuffer& buf, const std::vector<T>& v) {
+  checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, v.size() * sizeof(T), v.data(), 0, nullptr,
+                               nullptr),
+          "clEnqueueWriteBuffer", dev_);
+}
+
+std::pair<std::size_t, std::size_t> SegmentEngine::dofRange(const std::vector<BatchRequest*>& requests) const {
+  std::size_t lo = 3 * nodeTotal_, hi = 0;
+  for (const BatchRequest* r : requests) {
+    const Segment& sg = segs_[r->body];
+    lo = std::min(lo, sg.dofBegin());
+    hi = std::max(hi, sg.dofBegin() + sg.dofs());
+  }
+  return {lo, std::max(lo, hi)};
+}
+
+void SegmentEngine::finish() { checkCl(clFinish(ctx_->queue()), "clFinish", dev_); }
+
+// ---------------------------------------------------------------------------- operations
+
+std::vector<BatchRequest*> SegmentEngine::checked(const std::vector<BatchRequest*>& requests,
+                                                  const char* what) const {
+  std::vector<BatchRequest*> ok;
+  for (BatchRequest* r : requests) {
+    if (r->body >= segs_.size()) {
+      r->error = errorOf(ErrorCode::Internal, "OpenCL batch: request for body ", r->body, " of ", segs_.size());
+      continue;
+    }
+    const std::size_t dofs = segs_[r->body].dofs();
+    const bool needsIn = r->op == BatchOp::SetPositions || r->op == BatchOp::Apply || r->op == BatchOp::Solve;
+    const bool needsOut = r->op != BatchOp::SetPositions && r->op != BatchOp::ElasticEnergy;
+    if (needsIn && (!r->in || static_cast<std::size_t>(r->in->size()) != dofs)) {
+      r->error = errorOf(ErrorCode::Internal, "OpenCL backend: body '", segs_[r->body].problem->name, "': ", what,
+                         " has ", r->in ? r->in->size() : 0, " entries, expected 3N = ", dofs);
+      continue;
+    }
+    if (needsOut && !r->out) {
+      r->error = errorOf(ErrorCode::Internal, "OpenCL backend: body '", segs_[r->body].problem->name, "': ", what,
+                         " has no output vector");
+      continue;
+    }
+    ok.push_back(r);
+  }
+  return ok;
+}
+
+void SegmentEngine::run(BatchOp op, const std::vector<BatchRequest*>& requests) {
+  switch (op) {
+    case BatchOp::SetPositions: setPositions(checked(requests, "the positions")); break;
+    case BatchOp::InternalForces: internalForces(checked(requests, "the forces")); break;
+    case BatchOp::Apply: apply(checked(requests, "the vector p of apply")); break;
+    case BatchOp::Solve: solve(checked(requests, "the right-hand side b")); break;
+    case BatchOp::ElasticEnergy: elasticEnergy(checked(requests, "the energy")); break;
+  }
+}
+
+void SegmentEngine::refreshBlocks(bool cornersWritten) {
+  if (precond_ == PreconditionerKind::None) return;
+  const cl_uint S = static_cast<cl_uint>(stride_);
+  if (!cornersWritten) launch(kCornerGradients_, Span::Elements, S, elemSeg_, segInfoBuf_, geom_, rotGrad_, elemOut_);
+  launch(kBlocks_, Span::Nodes, S, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_, geom_,
+         blocks_);
+}
+
+void SegmentEngine::enqueueRotations() {
+  std::vector<char> corotational(segs_.size());
+  for (std::size_t s = 0; s < segs_.size(); ++s) corotational[s] = segs_[s].corotational;
+  setActive(corotational);
+  launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
+         rotGrad_, quat_, elemOut_, cl_uint(precond_ != PreconditionerKind::None ? 1 : 0));
+}
+
+void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
+  if (requests.empty()) return;
+  // Every kernel uses positions only through differences (F = sum (x_i - x_0) grad N_i^T, forces
+  // and energy from F), so the device gets them relative to each body's centroid, subtracted in
+  // double: a float body 1e4 m from the origin keeps the resolution of one near it.
+  std::vector<char> rotate(segs_.size(), 0);
+  for (const BatchRequest* r : requests) {
+    Segment& sg = segs_[r->body];
+    const Eigen::VectorXd& x = *r->in;
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (std::size_t n = 0; n < sg.nodes; ++n) centroid += x.segment<3>(static_cast<Eigen::Index>(3 * n));
+    centroid /= static_cast<double>(std::max<std::size_t>(sg.nodes, 1));
+    for (std::size_t n = 0; n < sg.nodes; ++n)
+      for (int a = 0; a < 3; ++a)
+        posHost_[sg.dofBegin() + 3 * n + a] = x[static_cast<Eigen::Index>(3 * n + a)] - centroid[a];
+    for (int a = 0; a < 3; ++a) sg.centroid[a] = centroid[a];
+    rotate[r->body] = sg.corotational;
+  }
+  // One write of the packed range; the segments in between get their own unchanged positions.
+  const auto [lo, hi] = dofRange(requests);
+  upload(pos_, posHost_.data(), lo, hi - lo);
+  setActive(rotate);
+  launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
+         rotGrad_, quat_, elemOut_, cl_uint(precond_ != PreconditionerKind::None ? 1 : 0));
+  refreshBlocks(true);  // the blocks rotate with R (linear bodies: constant, not refreshed)
+}
+
+void SegmentEngine::enqueueElementForces() {
+  setAllActive();
+  launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
+         rotGrad_, pos_, elemOut_);
+}
+
+void SegmentEngine::enqueueForces() {
+  enqueueElementForces();
+  launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
+}
+
+void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
+  if (requests.empty()) return;
+  std::vector<char> active(segs_.size(), 0);
+  for (const BatchRequest* r : requests) active[r->body] = 1;
+  setActive(active);
+  launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
+         rotGrad_, pos_, elemOut_);
+  launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
+  const auto [lo, hi] = dofRange(requests);
+  download(q_, packed_.data(), lo, hi - lo);
+  for (BatchRequest* r : requests) {
+    const Segment& sg = segs_[r->body];
+    *r->out = Eigen::Map<const Eigen::VectorXd>(packed_.data() + sg.dofBegin(), static_cast<Eigen::Index>(sg.dofs()));
+  }
+}
+
+void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project) {
+  flushCoefficients();
+  const cl_uint S = static_cast<cl_uint>(stride_);
+  if (storedStiffness_)
+    launch(kProductStored_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, stiffness_, rot_, v,
+           elemOut_);
+  else
+    launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_, v,
+           elemOut_);
+  launch(kGatherProduct_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_,
+         mass_, free_, cl_uint(project ? 1 : 0), v, y, partials_);
+}
+
+void SegmentEngine::enqueueElementProduct(const SystemCoeffs& c) {
+  for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
+  flushCoefficients();
+  setAllActive();
+  const cl_uint S = static_cast<cl_uint>(stride_);
+  if (storedStiffness_)
+    launch(kProductStored_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, stiffness_, rot_, p_,
+           elemOut_);
+  else
+    launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_, p_,
+           elemOut_);
+}
+
+void SegmentEngine::enqueueProduct(const SystemCoeffs& c) {
+  for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
+  setAllActive();
+  product(p_, q_, false);
+}
+
+void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
+  if (requests.empty()) return;
+  std::vector<char> active(segs_.size(), 0);
+  for (const BatchRequest* r : requests) {
+    const Segment& sg = segs_[r->body];
+    std::copy(r->in->data(), r->in->data() + sg.dofs(), packed_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()));
+    setCoefficients(r->body, r->coeffs);
+    active[r->body] = 1;
+  }
+  // One write and one read of the packed range (the segments in between: scratch, not computed).
+  const auto [lo, hi] = dofRange(requests);
+  upload(p_, packed_.data(), lo, hi - lo);
+  setActive(active);
+  product(p_, q_, false);
+  download(q_, packed_.data(), lo, hi - lo);
+  for (BatchRequest* r : requests) {
+    const Segment& sg = segs_[r->body];
+    *r->out = Eigen::Map<const Eigen::VectorXd>(packed_.data() + sg.dofBegin(), static_cast<Eigen::Index>(sg.dofs()));
+  }
+}
+
+void SegmentEngine::pcgSetup() {
+  flushCoefficients();
+  if (precond_ != PreconditionerKind::None)
+    launch(kPrecondInvert_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, free_, minv_);
+  // r = b - A x (projected), z = M^-1 r, p = z, rho = r.z, rr = r.r, bb = b.b
+  product(x_, q_, true);
+  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, partials_);
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceInit));
+}
+
+void SegmentEngine::pcgIteration() {
+  product(p_, q_, true);  // q = A p, partial p.q
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceAlpha));
+  launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, p_, q_, minv_, x_, r_, z_, partials_);
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceBeta));
+  launch(kPcgDirection_, Span::Dofs, nodeSeg_, segInfoBuf_, scalars_, z_, p_);
+}
+
+void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
+  for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
+  setAllActive();
+  pcgSetup();
+  for (int i = 0; i < iterations; ++i) pcgIteration();
+}
+
+void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
+  // Per request: b checked and uploaded, x warm-started; zero right-hand sides answered at once.
+  struct Running {
+    BatchRequest* request;
+    double bb = 0.0;
+    bool finite = true;
+    bool iterating = true;
+  };
+  std::vector<Running> runs;
+  for (BatchRequest* r : requests) {
+    const Segment& sg = segs_[r->body];
+    const Eigen::VectorXd& b = *r->in;
+    Eigen::VectorXd& x = *r->out;
+    if (static_cast<std::size_t>(x.size()) != sg.dofs()) x = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(sg.dofs()));
+    r->stats = LinearSolveStats{};
+    double bb = 0.0;
+    for (std::size_t d = 0; d < sg.dofs(); ++d)
+      if (!sg.constrained[d]) bb += b[static_cast<Eigen::Index>(d)] * b[static_cast<Eigen::Index>(d)];
+    if (!std::isfinite(bb)) {
+      r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name, "': OpenCL PCG: the right-hand side "
+                         "is not finite (NaN or Inf in b); the state diverged before the linear solve");
+      continue;
+    }
+    if (bb == 0.0) {
+      x.setZero();
+      r->stats.converged = true;
+      continue;
+    }
+    setCoefficients(r->body, r->coeffs);
+    runs.push_back({r, bb});
+  }
+  if (runs.empty()) return;
+  std::vector<BatchRequest*> running;
+  for (const Running& run : runs) running.push_back(run.request);
+  const auto [lo, hi] = dofRange(running);
+  for (const Running& run : runs) {  // rows of constrained dofs ignored (zero, even if not finite)
+    const Segment& sg = segs_[run.request->body];
+    const Eigen::VectorXd& b = *run.request->in;
+    for (std::size_t d = 0; d < sg.dofs(); ++d)
+      packed_[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
+  }
+  upload(b_, packed_.data(), lo, hi - lo);
+  for (const Running& run : runs) {
+    const Segment& sg = segs_[run.request->body];
+    const Eigen::VectorXd& x = *run.request->out;
+    for (std::size_t d = 0; d < sg.dofs(); ++d) {
+      const double v = x[static_cast<Eigen::Index>(d)];
+      packed_[sg.dofBegin() + d] = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
+    }
+  }
+  upload(x_, packed_.data(), lo, hi - lo);
+
+  std::vector<char> active(segs_.size(), 0);
+  for (const Running& run : runs) active[run.request->body] = 1;
+  setActive(active);
+  pcgSetup();
+
+  // Every checkEvery iterations one read of all segments' scalars; a segment stops (inactive, its
+  // work-groups return at once) when converged, capped, broken down or not finite. Its iteration
+  // count is the iteration of that check: the one it would stop at alone.
+  const double tol = solver_.tolerance;
+  const int checkEvery = std::max(1, solver_.checkEvery);
+  std::vector<double> scalars(kScalarCount * segs_.size());
+  auto readScalars = [&]() { downloadSums(scalars_, scalars.data(), scalars.size()); };
+  auto scalar = [&](const Running& run, unsigned k) { return scalars[kScalarCount * run.request->body + k]; };
+  auto check = [&](Running& run, int it, bool breakdownStops) {
+    LinearSolveStats& stats = run.request->stats;
+    stats.relativeResidual = std::sqrt(std::max(0.0, scalar(run, kScalarRr)) / scalar(run, kScalarBb));
+    run.finite = std::isfinite(stats.relativeResidual);
+    stats.converged = run.finite && stats.relativeResidual <= tol;
+    stats.iterations = it;
+    if (!run.finite || stats.converged || (breakdownStops && scalar(run, kScalarBreakdown) != 0.0))
+      run.iterating = false;  // p.Ap <= 0: no further progress possible
+  };
+  readScalars();
+  for (Running& run : runs) check(run, 0, false);
+  int it = 0;
+  for (;;) {
+    bool any = false;
+    std::fill(active.begin(), active.end(), 0);
+    for (const Running& run : runs)
+      if (run.iterating) active[run.request->body] = any = true;
+    if (!any || it >= solver_.maxIterations) break;
+    setActive(active);
+    pcgIteration();
+    ++it;
+    if (it % checkEvery == 0 || it == solver_.maxIterations) {
+      readScalars();
+      for (Running& run : runs)
+        if (run.iterating) check(run, it, true);
+    }
+  }
+  for (Running& run : runs)
+    if (run.iterating) run.request->stats.iterations = it;  // capped
+
+  // The reported residual is the true one, |free (b - A x)| / |free b| (as the interface defines
+  // it), not the recurrence's estimate, which drifts from it in float: one more product. The
+  // convergence decision above stays the recurrence's (the standard PCG stop test).
+  std::fill(active.begin(), active.end(), 0);
+  bool anyTrue = false;
+  for (const Running& run : runs)
+    if (run.finite && run.request->stats.iterations > 0) active[run.request->body] = anyTrue = true;
+  if (anyTrue) {
+    setActive(active);
+    product(x_, q_, true);
+    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, partials_);
+    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceInit));
+    readScalars();
+    for (Running& run : runs)
+      if (active[run.request->body]) {
+        LinearSolveStats& stats = run.request->stats;
+        stats.relativeResidual = std::sqrt(std::max(0.0, scalar(run, kScalarRr)) / scalar(run, kScalarBb));
+        run.finite = std::isfinite(stats.relativeResidual);
+      }
+  }
+  download(x_, packed_.data(), lo, hi - lo);
+  for (Running& run : runs) {
+    BatchRequest* r = run.request;
+    const Segment& sg = segs_[r->body];
+    if (!run.finite) {
+      r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name, "': OpenCL PCG produced a non-finite "
+                         "residual after ", r->stats.iterations, " iterations on device '", dev_, "' (the system "
+                         "matrix or the right-hand side holds NaN/Inf, or ",
+                         double_ ? "double" : mixed_ ? "mixed" : "float", " precision overflowed); check the "
+                         "material, time step and loads");
+      continue;
+    }
+    const Eigen::Map<const Eigen::VectorXd> out(packed_.data() + sg.dofBegin(), static_cast<Eigen::Index>(sg.dofs()));
+    if (!out.allFinite()) {
+      r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name,
+                         "': OpenCL PCG produced a non-finite solution on device '", dev_, "'");
+      continue;
+    }
+    *r->out = out;
+  }
+}
+
+void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& requests) {
+  if (requests.empty()) return;
+  std::vector<char> active(segs_.size(), 0);
+  for (const BatchRequest* r : requests) active[r->body] = 1;
+  setActive(active);
+  launch(kEnergy_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_,
+         pos_, elemOut_, partials_);
+  // One read of the per-work-group partials of the active span, summed per segment in a fixed
+  // order (deterministic).
+  const std::size_t perGroup = wg_ * vec_;
+  const std::size_t lo = segs_[activeLo_].elemBegin / perGroup;
+  const std::size_t hi = (segs_[activeHi_ - 1].elemBegin + segs_[activeHi_ - 1].elemSpan) / perGroup;
+  std::vector<double> partial(hi);
+  download(partials_, partial.data(), lo, hi - lo);
+  for (BatchRequest* r : requests) {
+    const Segment& sg = segs_[r->body];
+    double sum = 0.0;
+    for (std::size_t g = sg.elemBegin / perGroup; g < (sg.elemBegin + sg.elemSpan) / perGroup; ++g) sum += partial[g];
+    r->energy = sum;
+  }
+}
+
+std::vector<double> SegmentEngine::readRotations(std::size_t s) {
+  const Segment& sg = segs_[s];
+  std::vector<double> soa(kRotComponents * stride_);
+  download(rot_, soa.data(), 0, soa.size());
+  std::vector<double> out(9 * sg.elems);
+  for (std::size_t e = 0; e < sg.elems; ++e)
+    for (std::size_t k = 0; k < 9; ++k) out[9 * e + k] = soa[k * stride_ + sg.elemBegin + e];
+  return out;
+}
+
+}  // namespace corofem::detail
+
+#endif  // COROFEM_WITH_OPENCL

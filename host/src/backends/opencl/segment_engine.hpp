@@ -1,0 +1,214 @@
+// The OpenCL device state and per-call work of one or more bodies held in shared buffers: each
+// body is a *segment* whose elements and nodes are padded to whole work-groups, so that every
+// kernel launch serves all bodies at once and each work-group reads its body's material,
+// coefficients, PCG scalars and `active` flag from per-segment tables (kernels/shared/
+// corofem_layout.h). The single-body OpenCL backend is the one-segment case; the OpenCL batch
+// device (solve/batch.hpp) is the many-segment case. Same kernels, same host logic: a body's
+// answer does not depend on the other segments (its sums run over its own partials in the same
+// order), so a batched body gets the bits it would get alone.
+//
+// Per call (requests of one op, at most one per segment; only their segments are active):
+//   SetPositions    one write of the packed relative positions; compute_rotations (+ blocks)
+//   InternalForces  element_forces + gather_sum; one read
+//   Apply           one write of p; element_product + gather_product; one read
+//   Solve           writes of b and x; precond_invert; r = b - A x; PCG iterations for all active
+//                   segments (5 launches each); every checkEvery iterations one read of all
+//                   segments' scalars, converged / capped / broken-down segments made inactive;
+//                   the true residual per segment; one read of x
+//   ElasticEnergy   element_energy; one read of the per-work-group partials, summed per segment
+#pragma once
+
+#include "backends/opencl/opencl_backend.hpp"
+#include "solve/batch.hpp"
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace corofem::detail {
+
+/// A device buffer released on destruction.
+class ClBuffer {
+ public:
+  ClBuffer() = default;
+  ClBuffer(const ClBuffer&) = delete;
+  ClBuffer& operator=(const ClBuffer&) = delete;
+  ~ClBuffer();
+  /// Allocates `bytes` (at least 16); the allocated size counts in bytes().
+  void create(cl_context ctx, std::size_t bytes, const std::string& device);
+  cl_mem get() const { return mem_; }
+  std::size_t bytes() const { return bytes_; }
+
+ private:
+  cl_mem mem_ = nullptr;
+  std::size_t bytes_ = 0;
+};
+
+/// A kernel released on destruction.
+class ClKernel {
+ public:
+  ClKernel() = default;
+  ClKernel(const ClKernel&) = delete;
+  ClKernel& operator=(const ClKernel&) = delete;
+  ~ClKernel();
+  void create(cl_program program, const char* name, const std::string& device);
+  cl_kernel get() const { return k_; }
+  const char* name() const { return name_; }
+
+ private:
+  cl_kernel k_ = nullptr;
+  const char* name_ = "";
+};
+
+class SegmentEngine {
+ public:
+  /// All problems share the program (precision, rotation method, preconditioner, options of
+  /// `solver`/`options`); each keeps its material, mass, Rayleigh damping, constraints and
+  /// formulation (co-rotational or linear). Throws Error(BadInput) for another formulation or
+  /// an empty body, Error(DeviceError) for a device problem. The problems must outlive the engine.
+  SegmentEngine(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options);
+  ~SegmentEngine();
+  SegmentEngine(const SegmentEngine&) = delete;
+  SegmentEngine& operator=(const SegmentEngine&) = delete;
+
+  std::size_t segmentCount() const { return segs_.size(); }
+
+  /// Runs requests that all have `op`, at most one per segment (request.body = segment). A
+  /// failure of one request (non-finite right-hand side or solution: SolveFailed; a vector of the
+  /// wrong size: Internal) sets its `error` and leaves the others running. A device failure
+  /// throws Error(DeviceError).
+  void run(BatchOp op, const std::vector<BatchRequest*>& requests);
+
+  cl::Context& context() { return *ctx_; }
+  std::string deviceDescription() const { return ctx_->info().describe(); }
+  const std::string& buildOptions() const { return options_; }
+  const cl::ProgramBuild& programBuild() const { return build_; }
+  /// Bytes of all device buffers allocated (each at its clCreateBuffer size).
+  std::size_t allocatedBytes() const;
+
+  /// Segment `s`'s rotations, 9 per element (row-major R), as last computed.
+  std::vector<double> readRotations(std::size_t s);
+  /// Segment 0's relative positions start at offset 0 of this buffer (3 reals per node).
+  cl_mem positionBuffer() const { return pos_.get(); }
+  bool positionsAreDouble() const { return double_; }
+  const double* positionCentroid(std::size_t s) const { return segs_[s].centroid; }
+
+  // Device-only work on every segment (benchmarks), no transfers.
+  void enqueueRotations();
+  void enqueueForces();
+  void enqueueElementForces();
+  void enqueueProduct(const SystemCoeffs& c);
+  void enqueueElementProduct(const SystemCoeffs& c);
+  void enqueuePcgIterations(const SystemCoeffs& c, int iterations);
+  void finish();
+
+ private:
+  struct Segment {
+    const Problem* problem = nullptr;
+    std::size_t nodes = 0, elems = 0;         ///< real counts
+    std::size_t nodeBegin = 0, nodeSpan = 0;  ///< padded range in the shared node arrays
+    std::size_t elemBegin = 0, elemSpan = 0;  ///< padded range in the shared element arrays
+    std::size_t partialBegin = 0, partialCount = 0;
+    bool corotational = true;
+    double rayleighMass = 0, rayleighStiffness = 0;
+    std::vector<std::uint8_t> constrained;    ///< 3 * nodes
+    double centroid[3] = {0, 0, 0};           ///< subtracted from the last positions set
+    std::size_t dofBegin() const { return 3 * nodeBegin; }
+    std::size_t dofs() const { return 3 * nodes; }
+  };
+  /// What a kernel's work-items cover: elements (VEC per item), nodes, node chunks (CHUNK per
+  /// item), dofs, or segments (one work-group each, reduce_finish).
+  enum class Span { Elements, Nodes, NodeChunks, Dofs, Segments };
+
+  // -- launching
+  void setArg(cl_kernel k, cl_uint i, cl_mem m);
+  void setArg(cl_kernel k, cl_uint i, const ClBuffer& b) { setArg(k, i, b.get()); }
+  void setArg(cl_kernel k, cl_uint i, cl_uint v);
+  template <class... Args>
+  void launch(const ClKernel& kernel, Span span, const Args&... args) {
+    if (activeLo_ >= activeHi_) return;  // no active segment
+    cl_uint index = 0;
+    (setArg(kernel.get(), index++, args), ...);
+    enqueue(kernel, span);
+  }
+  void enqueue(const ClKernel& kernel, Span span);
+  /// First work-item and count of `span` over the segments [lo, hi).
+  std::pair<std::size_t, std::size_t> spanItems(Span span, std::size_t lo, std::size_t hi) const;
+
+  // -- segment state
+  /// Marks exactly the segments with active[s] != 0 active (one small write when it changed).
+  void setActive(const std::vector<char>& active);
+  void setAllActive() { setActive(std::vector<char>(segs_.size(), 1)); }
+  /// The coefficients of A = m M + c C + k K^R for segment s, Rayleigh terms folded in.
+  void setCoefficients(std::size_t s, const SystemCoeffs& c);
+  void flushCoefficients();
+
+  // -- transfers (blocking, converting to the device precision); ranges in reals of the packed arrays
+  void upload(const ClBuffer& buf, const double* src, std::size_t begin, std::size_t count);
+  void download(const ClBuffer& buf, double* dst, std::size_t begin, std::size_t count);
+  void downloadSums(const ClBuffer& buf, double* dst, std::size_t count);
+  template <class T>
+  void uploadRaw(const ClBuffer& buf, const std::vector<T>& v);
+  void createReal(ClBuffer& buf, std::size_t count) { buf.create(ctx_->context(), count * realSize_, dev_); }
+  /// The packed dof range [begin, end) covering the given segments.
+  std::pair<std::size_t, std::size_t> dofRange(const std::vector<BatchRequest*>& requests) const;
+
+  // -- the operations
+  void build(const SolverDesc& solver, const OpenCLOptions& options);
+  void allocate(const OpenCLOptions& options);
+  void refreshBlocks(bool cornersWritten);
+  void product(const ClBuffer& v, const ClBuffer& y, bool project);
+  void pcgSetup();
+  void pcgIteration();
+  void setPositions(const std::vector<BatchRequest*>& requests);
+  void internalForces(const std::vector<BatchRequest*>& requests);
+  void apply(const std::vector<BatchRequest*>& requests);
+  void solve(const std::vector<BatchRequest*>& requests);
+  void elasticEnergy(const std::vector<BatchRequest*>& requests);
+  /// Requests whose vector has 3N entries (the others get an Internal error).
+  std::vector<BatchRequest*> checked(const std::vector<BatchRequest*>& requests, const char* what) const;
+
+  std::shared_ptr<cl::Context> ctx_;
+  std::string dev_;
+  bool profile_ = false;  ///< COROFEM_OPENCL_PROFILE: per-kernel device times, printed on destruction
+  std::map<std::string, std::pair<long, double>> profileTimes_;
+  SolverDesc solver_;
+  PreconditionerKind precond_;
+  bool storedStiffness_ = false;
+  std::string options_;
+  cl::ProgramBuild build_;
+  bool double_ = false;
+  bool mixed_ = false;                   ///< float vectors, double dot products and PCG scalars
+  std::size_t realSize_ = sizeof(float);
+  std::size_t sumSize_ = sizeof(float);  ///< size of sum_real (corofem_layout.h)
+  std::size_t wg_ = 64;
+  std::size_t vec_ = 1;                  ///< elements per work-item in the element kernels
+  std::size_t chunk_ = 1;                ///< nodes per work-item in the PCG node kernels
+  bool treeReduce_ = false;              ///< partial sums per work-group (GPUs) or per work-item
+  std::vector<Segment> segs_;
+  std::size_t stride_ = 0;               ///< S: all segments' padded elements
+  std::size_t nodeTotal_ = 0;            ///< all segments' padded nodes
+  std::size_t partialTotal_ = 0;
+  bool hasMass_ = false;                 ///< some body has a nonzero lumped mass
+
+  std::vector<cl_uint> segInfo_;         ///< host copy of the device table (kSegInfoCount per segment)
+  std::vector<double> segCoef_;          ///< host copy (kSegCoefCount per segment)
+  bool coefDirty_ = true;
+  std::vector<char> active_;
+  std::size_t activeLo_ = 0, activeHi_ = 0;  ///< span of the active segments
+  std::vector<double> posHost_;          ///< the device positions (relative), all segments
+  std::vector<double> packed_;           ///< staging of packed node vectors
+  std::vector<unsigned char> staging_;   ///< device-precision staging
+
+  ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
+      kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
+  ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
+  ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
+  ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, partials_, scalars_;
+};
+
+}  // namespace corofem::detail

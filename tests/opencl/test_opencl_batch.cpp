@@ -1,0 +1,509 @@
+// The OpenCL batch device (createOpenCLBatchDevice, solve/batch.hpp): several different bodies in
+// one set of buffers and launches, each request compared with one single-body OpenCL backend per
+// body and with the reference backend.
+//
+// Tolerances. Batch vs single backend: bit-identical, in double and in float. Both run the same
+// kernels of the same program; a body's elements and nodes start at multiples of the work-group
+// span, so every element sits in the same vector lane, every gather list has the same order and
+// every dot product sums the body's own partials in the same fixed order (reduce_finish: one
+// work-group per body); no arithmetic mixes two bodies. So any difference is a bug, not rounding.
+// Batch vs reference: as tests/opencl/test_backend.cpp (double: forces 1e-10 relative to the
+// largest entry, solutions cond(A) * tol ~ 1e-8; float: positions rounded to float give 1e-4 on
+// forces, the float operator times cond(A) ~1e3 gives 1e-3 on solutions).
+#include "backends/opencl/opencl_backend.hpp"
+#include "opencl/opencl_test_support.hpp"
+#include "solve/batch.hpp"
+#include "util/error.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+
+namespace corofem {
+namespace {
+
+using test::DeviceCase;
+using detail::BatchOp;
+using detail::BatchRequest;
+
+/// Five different bodies: different meshes (none a multiple of the work-group span), materials,
+/// densities, Rayleigh coefficients, constraints and one linear formulation.
+std::vector<detail::Problem> bodies() {
+  std::vector<detail::Problem> out;
+  auto clampBelow = [](detail::Problem& p, int axis, double limit, int components) {
+    for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
+      if (p.mesh.nodes[3 * n + axis] < limit)
+        for (int k = 0; k < components; ++k) p.constrained[3 * n + k] = 1;
+  };
+  {  // 0: the beam of test_backend.cpp (192 tets), damped, clamped at x = 0
+    detail::Problem p = test::makeProblem(test::boxMesh(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
+    p.name = "beam";
+    p.rayleighMass = 0.2;
+    p.rayleighStiffness = 0.01;
+    clampBelow(p, 0, 1e-9, 3);
+    out.push_back(std::move(p));
+  }
+  {  // 1: a stiff light slab (180 tets), no damping, x and y fixed on z = 0
+    detail::Problem p = test::makeProblem(test::boxMesh(5, 3, 2, 0.2, 0.3, 0.1), 3e6, 0.3, 500.0);
+    p.name = "slab";
+    clampBelow(p, 2, 1e-9, 2);
+    out.push_back(std::move(p));
+  }
+  {  // 2: a soup of 37 free random tetrahedra (only the mass holds it)
+    std::mt19937 rng(42);
+    detail::Problem p = test::makeProblem(test::randomSoup(37, rng), 2e4, 0.2, 1500.0);
+    p.name = "soup";
+    p.rayleighMass = 0.05;
+    out.push_back(std::move(p));
+  }
+  {  // 3: a linear cube (162 tets), mass damping only
+    detail::Problem p = test::makeProblem(test::boxMesh(3, 3, 3, 0.1, 0.1, 0.1), 1e6, 0.35, 800.0,
+                                          Formulation::Linear);
+    p.name = "linear-cube";
+    p.rayleighMass = 0.1;
+    clampBelow(p, 0, 1e-9, 3);
+    out.push_back(std::move(p));
+  }
+  {  // 4: a long soft bar (600 tets: more than one element work-group on CPUs), stiffness damping
+    detail::Problem p = test::makeProblem(test::boxMesh(25, 2, 2, 0.1, 0.05, 0.05), 5e5, 0.4, 1200.0);
+    p.name = "bar";
+    p.rayleighStiffness = 0.02;
+    clampBelow(p, 0, 1e-9, 3);
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+/// Rotated, bent positions (a different rotation per body).
+Eigen::VectorXd deformed(const detail::Problem& p, double angle) {
+  Eigen::VectorXd x = p.restPositions;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(angle, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) {
+    const Eigen::Vector3d X = p.restPositions.segment<3>(3 * n);
+    const Eigen::Vector3d u(0.02 * X.y(), -0.15 * X.x() * X.x(), 0.05 * X.x() * X.z());
+    x.segment<3>(3 * n) = R * (X + u) + Eigen::Vector3d(0.3, -0.1, 0.2);
+  }
+  return x;
+}
+
+Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
+  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
+  return v;
+}
+
+bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
+}
+
+double maxRel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  return (a - b).cwiseAbs().maxCoeff() / std::max(b.cwiseAbs().maxCoeff(), 1e-300);
+}
+
+class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
+ protected:
+  bool isDouble() const { return GetParam().precision == Precision::Double; }
+  SolverDesc solver() const {
+    SolverDesc s;
+    s.precision = GetParam().precision;
+    s.preconditioner = PreconditionerKind::BlockDiagonal;
+    s.tolerance = isDouble() ? 1e-10 : 1e-5;
+    s.maxIterations = 2000;
+    s.checkEvery = 4;
+    return s;
+  }
+  std::shared_ptr<detail::cl::Context> context() const {
+    return detail::cl::Context::shared(std::to_string(GetParam().device));
+  }
+  std::unique_ptr<detail::BatchDevice> batchOf(const std::vector<detail::Problem>& ps, const SolverDesc& s,
+                                               const detail::OpenCLOptions& o = {}) const {
+    std::vector<const detail::Problem*> ptrs;
+    for (const auto& p : ps) ptrs.push_back(&p);
+    return detail::createOpenCLBatchDeviceOn(ptrs, s, context(), o);
+  }
+  std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> singlesOf(const std::vector<detail::Problem>& ps,
+                                                                        const SolverDesc& s) const {
+    std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> out;
+    for (const auto& p : ps) out.push_back(detail::createOpenCLBackendOn(p, s, context()));
+    return out;
+  }
+  /// Runs a round and expects no request to fail.
+  static void runOk(detail::BatchDevice& device, std::vector<BatchRequest>& requests) {
+    std::vector<BatchRequest*> round;
+    for (auto& r : requests) round.push_back(&r);
+    device.run(round);
+    for (const auto& r : requests)
+      if (r.error) {
+        try {
+          std::rethrow_exception(r.error);
+        } catch (const std::exception& e) {
+          ADD_FAILURE() << "body " << r.body << ": " << e.what();
+        }
+      }
+  }
+  static BatchRequest request(BatchOp op, std::size_t body, const Eigen::VectorXd* in = nullptr,
+                              Eigen::VectorXd* out = nullptr, detail::SystemCoeffs c = {}) {
+    BatchRequest r;
+    r.op = op;
+    r.body = body;
+    r.in = in;
+    r.out = out;
+    r.coeffs = c;
+    return r;
+  }
+};
+
+TEST_P(OpenCLBatch, EveryRequestMatchesOneBackendPerBodyAndTheReference) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t K = ps.size();
+  const SolverDesc s = solver();
+  auto batch = batchOf(ps, s);
+  ASSERT_EQ(batch->bodyCount(), K);
+  EXPECT_EQ(batch->name(), "opencl");
+  auto singles = singlesOf(ps, s);
+  std::vector<std::unique_ptr<detail::Backend>> refs;
+  std::vector<Eigen::VectorXd> x(K), v(K), b(K);
+  for (std::size_t i = 0; i < K; ++i) {
+    refs.push_back(detail::createReferenceBackend(ps[i], s));
+    x[i] = deformed(ps[i], 0.3 + 0.4 * static_cast<double>(i));
+    v[i] = randomVector(ps[i].dofCount(), 100 + static_cast<unsigned>(i));
+    b[i] = randomVector(ps[i].dofCount(), 200 + static_cast<unsigned>(i));
+    singles[i]->setPositions(x[i]);
+    refs[i]->setPositions(x[i]);
+  }
+  {
+    std::vector<BatchRequest> round;
+    for (std::size_t i = 0; i < K; ++i) round.push_back(request(BatchOp::SetPositions, i, &x[i]));
+    runOk(*batch, round);
+  }
+  const double tolRef = isDouble() ? 1e-10 : 1e-4;
+  // Forces and energies of every body in one round each.
+  {
+    std::vector<Eigen::VectorXd> f(K);
+    std::vector<BatchRequest> round;
+    for (std::size_t i = 0; i < K; ++i) round.push_back(request(BatchOp::InternalForces, i, nullptr, &f[i]));
+    runOk(*batch, round);
+    for (std::size_t i = 0; i < K; ++i) {
+      Eigen::VectorXd fs, fr;
+      singles[i]->internalForces(fs);
+      refs[i]->internalForces(fr);
+      EXPECT_TRUE(sameBits(f[i], fs)) << ps[i].name << ": max rel. difference " << maxRel(f[i], fs);
+      EXPECT_LE(maxRel(f[i], fr), tolRef) << ps[i].name;
+    }
+  }
+  {
+    std::vector<BatchRequest> round;
+    for (std::size_t i = 0; i < K; ++i) round.push_back(request(BatchOp::ElasticEnergy, i));
+    runOk(*batch, round);
+    for (std::size_t i = 0; i < K; ++i) {
+      EXPECT_EQ(round[i].energy, singles[i]->elasticEnergy()) << ps[i].name;
+      EXPECT_NEAR(round[i].energy, refs[i]->elasticEnergy(), tolRef * refs[i]->elasticEnergy()) << ps[i].name;
+    }
+  }
+  // Products with each body's own coefficients (Newmark-like, static, mass only).
+  const detail::SystemCoeffs coeffs[3] = {{14400.0, 120.0, 1.0}, {0.0, 0.0, 1.0}, {1.0, 0.0, 0.0}};
+  {
+    std::vector<Eigen::VectorXd> y(K);
+    std::vector<BatchRequest> round;
+    for (std::size_t i = 0; i < K; ++i) round.push_back(request(BatchOp::Apply, i, &v[i], &y[i], coeffs[i % 3]));
+    runOk(*batch, round);
+    for (std::size_t i = 0; i < K; ++i) {
+      Eigen::VectorXd ys, yr;
+      singles[i]->apply(coeffs[i % 3], v[i], ys);
+      refs[i]->apply(coeffs[i % 3], v[i], yr);
+      EXPECT_TRUE(sameBits(y[i], ys)) << ps[i].name << ": max rel. difference " << maxRel(y[i], ys);
+      EXPECT_LE(maxRel(y[i], yr), tolRef) << ps[i].name;
+    }
+  }
+  // Solves (dynamic systems: the soup is held only by its mass).
+  {
+    std::vector<Eigen::VectorXd> sol(K);
+    std::vector<BatchRequest> round;
+    const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
+    for (std::size_t i = 0; i < K; ++i) {
+      sol[i] = Eigen::VectorXd::Constant(b[i].size(), 0.001);  // warm start
+      round.push_back(request(BatchOp::Solve, i, &b[i], &sol[i], dyn[i % 2]));
+    }
+    runOk(*batch, round);
+    for (std::size_t i = 0; i < K; ++i) {
+      Eigen::VectorXd xs = Eigen::VectorXd::Constant(b[i].size(), 0.001), xr = Eigen::VectorXd::Zero(b[i].size());
+      const detail::LinearSolveStats st = singles[i]->solve(dyn[i % 2], b[i], xs);
+      refs[i]->solve(dyn[i % 2], b[i], xr);
+      EXPECT_TRUE(round[i].stats.converged) << ps[i].name;
+      EXPECT_EQ(round[i].stats.iterations, st.iterations) << ps[i].name;
+      EXPECT_EQ(round[i].stats.relativeResidual, st.relativeResidual) << ps[i].name;
+      EXPECT_TRUE(sameBits(sol[i], xs)) << ps[i].name << ": max rel. difference " << maxRel(sol[i], xs);
+      EXPECT_LE((sol[i] - xr).norm() / xr.norm(), isDouble() ? 1e-8 : 1e-3) << ps[i].name;
+      for (std::size_t d = 0; d < ps[i].dofCount(); ++d)
+        if (ps[i].constrained[d]) EXPECT_EQ(sol[i][static_cast<Eigen::Index>(d)], 0.0);
+    }
+  }
+  // One round of mixed requests: every op at once, each body its own.
+  {
+    Eigen::VectorXd x2 = deformed(ps[0], -0.7), y1, f3, sol2 = Eigen::VectorXd::Zero(b[2].size());
+    std::vector<BatchRequest> round = {request(BatchOp::SetPositions, 0, &x2),
+                                       request(BatchOp::Apply, 1, &v[1], &y1, coeffs[0]),
+                                       request(BatchOp::Solve, 2, &b[2], &sol2, coeffs[0]),
+                                       request(BatchOp::InternalForces, 3, nullptr, &f3),
+                                       request(BatchOp::ElasticEnergy, 4)};
+    runOk(*batch, round);
+    singles[0]->setPositions(x2);
+    Eigen::VectorXd ys, fs, xs = Eigen::VectorXd::Zero(b[2].size());
+    singles[1]->apply(coeffs[0], v[1], ys);
+    singles[2]->solve(coeffs[0], b[2], xs);
+    singles[3]->internalForces(fs);
+    EXPECT_TRUE(sameBits(y1, ys));
+    EXPECT_TRUE(sameBits(sol2, xs));
+    EXPECT_TRUE(sameBits(f3, fs));
+    EXPECT_EQ(round[4].energy, singles[4]->elasticEnergy());
+    // Body 0's new positions took effect.
+    Eigen::VectorXd f0, fs0;
+    std::vector<BatchRequest> forces = {request(BatchOp::InternalForces, 0, nullptr, &f0)};
+    runOk(*batch, forces);
+    singles[0]->internalForces(fs0);
+    EXPECT_TRUE(sameBits(f0, fs0));
+  }
+}
+
+TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {
+  // An easy system (mass-dominated: cond ~ 1) and a hard one (static: cond ~ 1e3) of the same beam
+  // in one round: the easy body stops after fewer iterations while the hard one goes on, and each
+  // takes exactly the iterations it takes alone (its scalars and stop test are its own).
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  std::vector<detail::Problem> ps = bodies();
+  ps.resize(2);
+  ps[1] = ps[0];
+  ps[1].name = "beam-static";
+  SolverDesc s = solver();
+  s.checkEvery = 3;
+  auto batch = batchOf(ps, s);
+  auto singles = singlesOf(ps, s);
+  const Eigen::VectorXd x = deformed(ps[0], 0.5), b = randomVector(ps[0].dofCount(), 7);
+  const detail::SystemCoeffs easy{1e6, 0.0, 1.0}, hard{0.0, 0.0, 1.0};
+  std::vector<BatchRequest> set = {request(BatchOp::SetPositions, 0, &x), request(BatchOp::SetPositions, 1, &x)};
+  runOk(*batch, set);
+  Eigen::VectorXd xe = Eigen::VectorXd::Zero(b.size()), xh = xe;
+  std::vector<BatchRequest> round = {request(BatchOp::Solve, 0, &b, &xe, easy),
+                                     request(BatchOp::Solve, 1, &b, &xh, hard)};
+  runOk(*batch, round);
+  Eigen::VectorXd ae = Eigen::VectorXd::Zero(b.size()), ah = ae;
+  singles[0]->setPositions(x);
+  singles[1]->setPositions(x);
+  const auto alone0 = singles[0]->solve(easy, b, ae), alone1 = singles[1]->solve(hard, b, ah);
+  std::printf("[info] iterations in one round: easy %d, hard %d (alone: %d, %d)\n", round[0].stats.iterations,
+              round[1].stats.iterations, alone0.iterations, alone1.iterations);
+  EXPECT_TRUE(round[0].stats.converged);
+  EXPECT_TRUE(round[1].stats.converged);
+  EXPECT_LT(round[0].stats.iterations, round[1].stats.iterations);
+  EXPECT_EQ(round[0].stats.iterations, alone0.iterations);
+  EXPECT_EQ(round[1].stats.iterations, alone1.iterations);
+  EXPECT_EQ(round[0].stats.iterations % 3, 0) << "stops only at a check";
+  EXPECT_TRUE(sameBits(xe, ae));
+  EXPECT_TRUE(sameBits(xh, ah));
+  // An iteration cap stops both at the cap.
+  s.maxIterations = 5;
+  s.tolerance = 1e-14;
+  auto capped = batchOf(ps, s);
+  runOk(*capped, set);
+  xe.setZero();
+  xh.setZero();
+  runOk(*capped, round);
+  EXPECT_EQ(round[1].stats.iterations, 5);
+  EXPECT_FALSE(round[1].stats.converged);
+  EXPECT_TRUE(xh.allFinite());
+}
+
+TEST_P(OpenCLBatch, ARoundOfSomeBodiesLeavesTheOthersUntouched) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t K = ps.size();
+  auto batch = batchOf(ps, solver());
+  std::vector<Eigen::VectorXd> x(K), f0(K);
+  std::vector<BatchRequest> set, forces;
+  for (std::size_t i = 0; i < K; ++i) {
+    x[i] = deformed(ps[i], 0.2 * static_cast<double>(i + 1));
+    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+    forces.push_back(request(BatchOp::InternalForces, i, nullptr, &f0[i]));
+  }
+  runOk(*batch, set);
+  runOk(*batch, forces);
+  std::vector<BatchRequest> energy;
+  for (std::size_t i = 0; i < K; ++i) energy.push_back(request(BatchOp::ElasticEnergy, i));
+  runOk(*batch, energy);
+  // Bodies 1 and 3 move and solve; 0, 2 and 4 (around and between them in the buffers) do not.
+  const Eigen::VectorXd x1 = deformed(ps[1], -1.0), x3 = deformed(ps[3], 2.0);
+  const Eigen::VectorXd b1 = randomVector(ps[1].dofCount(), 1), b3 = randomVector(ps[3].dofCount(), 3);
+  Eigen::VectorXd s1 = Eigen::VectorXd::Zero(b1.size()), s3 = Eigen::VectorXd::Zero(b3.size());
+  std::vector<BatchRequest> some = {request(BatchOp::SetPositions, 1, &x1), request(BatchOp::SetPositions, 3, &x3)};
+  runOk(*batch, some);
+  std::vector<BatchRequest> solves = {request(BatchOp::Solve, 1, &b1, &s1, {0.0, 0.0, 1.0}),
+                                      request(BatchOp::Solve, 3, &b3, &s3, {0.0, 0.0, 1.0})};
+  runOk(*batch, solves);
+  std::vector<Eigen::VectorXd> f1(K);
+  std::vector<BatchRequest> again, energyAgain;
+  for (std::size_t i = 0; i < K; ++i) {
+    again.push_back(request(BatchOp::InternalForces, i, nullptr, &f1[i]));
+    energyAgain.push_back(request(BatchOp::ElasticEnergy, i));
+  }
+  runOk(*batch, again);
+  runOk(*batch, energyAgain);
+  auto singles = singlesOf(ps, solver());
+  for (std::size_t i : {0u, 2u, 4u}) {
+    EXPECT_TRUE(sameBits(f1[i], f0[i])) << ps[i].name;
+    EXPECT_EQ(energyAgain[i].energy, energy[i].energy) << ps[i].name;
+  }
+  singles[1]->setPositions(x1);
+  singles[3]->setPositions(x3);
+  Eigen::VectorXd g1, g3;
+  singles[1]->internalForces(g1);
+  singles[3]->internalForces(g3);
+  EXPECT_TRUE(sameBits(f1[1], g1));
+  EXPECT_TRUE(sameBits(f1[3], g3));
+  EXPECT_FALSE(sameBits(f1[1], f0[1])) << "body 1 moved";
+}
+
+TEST_P(OpenCLBatch, ANonFiniteRightHandSideFailsOnlyThatRequest) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t K = 3;
+  std::vector<detail::Problem> three(ps.begin(), ps.begin() + K);
+  auto batch = batchOf(three, solver());
+  auto singles = singlesOf(three, solver());
+  std::vector<Eigen::VectorXd> x(K), b(K), sol(K);
+  std::vector<BatchRequest> set, solves;
+  for (std::size_t i = 0; i < K; ++i) {
+    x[i] = deformed(three[i], 0.4);
+    b[i] = randomVector(three[i].dofCount(), 50 + static_cast<unsigned>(i));
+    sol[i] = Eigen::VectorXd::Zero(b[i].size());
+    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+    singles[i]->setPositions(x[i]);
+  }
+  b[1][11] = std::nan("");  // a free dof of the slab: that solve fails
+  ASSERT_FALSE(three[1].constrained[11]);
+  b[0][0] = std::nan("");  // a clamped dof of the beam: its row of b is ignored, the solve succeeds
+  ASSERT_TRUE(three[0].constrained[0]);
+  for (std::size_t i = 0; i < K; ++i) solves.push_back(request(BatchOp::Solve, i, &b[i], &sol[i], {1e4, 0.0, 1.0}));
+  runOk(*batch, set);
+  std::vector<BatchRequest*> round;
+  for (auto& r : solves) round.push_back(&r);
+  batch->run(round);
+  ASSERT_TRUE(solves[1].error);
+  try {
+    std::rethrow_exception(solves[1].error);
+  } catch (const detail::Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::SolveFailed);
+    EXPECT_NE(std::string(e.what()).find("not finite"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(three[1].name), std::string::npos) << e.what();
+  }
+  for (std::size_t i : {0u, 2u}) {
+    EXPECT_FALSE(solves[i].error) << three[i].name;
+    Eigen::VectorXd xs = Eigen::VectorXd::Zero(b[i].size());
+    singles[i]->solve({1e4, 0.0, 1.0}, b[i], xs);
+    EXPECT_TRUE(sameBits(sol[i], xs)) << three[i].name;
+  }
+  // Two requests for one body in a round are an error of that request, not of the round.
+  Eigen::VectorXd fa, fb;
+  std::vector<BatchRequest> twice = {request(BatchOp::InternalForces, 0, nullptr, &fa),
+                                     request(BatchOp::InternalForces, 0, nullptr, &fb)};
+  std::vector<BatchRequest*> twiceRound = {&twice[0], &twice[1]};
+  batch->run(twiceRound);
+  EXPECT_FALSE(twice[0].error);
+  EXPECT_TRUE(twice[1].error);
+}
+
+TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer) {
+  // The expected sizes follow kernels/shared/corofem_layout.h with the CPU configuration fixed
+  // here (work-group 64, 8 elements per work-item, 4 nodes per PCG work-item, per-item partials):
+  // elements padded to 512 per body, nodes to 256.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  detail::OpenCLOptions o;
+  o.workGroupSize = 64;
+  o.vectorWidth = 8;
+  o.nodeChunk = 4;
+  o.treeReduce = 0;
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t r = isDouble() ? 8 : 4;  // real; sum_real is the same outside mixed precision
+  auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
+                      bool stored, bool quaternion) {
+    std::size_t S = 0, N = 0, E = 0;
+    for (const detail::Problem* p : set) {
+      S += (p->mesh.tetCount() + 511) / 512 * 512;
+      N += (p->mesh.nodeCount() + 255) / 256 * 256;
+      E += p->mesh.tetCount();
+    }
+    const std::size_t K = set.size();
+    auto buf = [](std::size_t b) { return std::max<std::size_t>(b, 16); };  // the smallest buffer: 16 bytes
+    std::size_t bytes = buf(4 * (S / 512)) + buf(4 * (N / 64)) + 4 * 8 * K + r * 8 * K;  // segment tables
+    bytes += 4 * 4 * S + r * (10 + 9 + 9 + 12) * S;  // corners, geometry, R, a_i, element outputs
+    if (quaternion) bytes += r * 4 * S;
+    if (stored) bytes += r * 78 * S;
+    bytes += 4 * (N + 1) + 4 * 4 * E;  // gather lists
+    bytes += r * 3 * N * (1 + 1 + 6);  // positions, free mask, x b r z p q
+    if (mass) bytes += r * 3 * N;
+    if (pc != PreconditionerKind::None) bytes += r * (6 + (pc == PreconditionerKind::BlockDiagonal ? 9 : 3)) * N;
+    bytes += r * 3 * std::max(S / 512, N / 4) + r * 8 * K;  // partials, scalars
+    return bytes;
+  };
+  SolverDesc s = solver();
+  const detail::Problem& beam = ps[0];
+  detail::Problem staticBeam = beam;
+  staticBeam.lumpedMass.resize(0);  // how a static problem looks: no lumped mass
+  detail::Problem zeroMass = beam;
+  zeroMass.lumpedMass.setZero();
+  auto ctx = context();
+  const std::size_t dynamicBytes = detail::createOpenCLBackendOn(beam, s, ctx, o)->allocatedBytes();
+  EXPECT_EQ(dynamicBytes, expected({&beam}, true, s.preconditioner, false, false));
+  const std::size_t staticBytes = detail::createOpenCLBackendOn(staticBeam, s, ctx, o)->allocatedBytes();
+  EXPECT_EQ(staticBytes, expected({&beam}, false, s.preconditioner, false, false));
+  EXPECT_EQ(dynamicBytes - staticBytes, r * 3 * 256) << "exactly the mass buffer";
+  EXPECT_EQ(detail::createOpenCLBackendOn(zeroMass, s, ctx, o)->allocatedBytes(), staticBytes);
+  {
+    detail::OpenCLOptions stored = o;
+    stored.storedStiffness = true;
+    EXPECT_EQ(detail::createOpenCLBackendOn(beam, s, ctx, stored)->allocatedBytes(),
+              expected({&beam}, true, s.preconditioner, true, false));
+  }
+  {
+    SolverDesc q = s;
+    q.rotation = RotationMethod::Quaternion;
+    q.preconditioner = PreconditionerKind::None;
+    EXPECT_EQ(detail::createOpenCLBackendOn(beam, q, ctx, o)->allocatedBytes(),
+              expected({&beam}, true, PreconditionerKind::None, false, true));
+  }
+  std::vector<const detail::Problem*> all;
+  for (const auto& p : ps) all.push_back(&p);
+  EXPECT_EQ(batchOf(ps, s, o)->allocatedBytes(), expected(all, true, s.preconditioner, false, false));
+  // The static problem still solves (a mass coefficient meets no mass) like one with zero mass.
+  auto a = detail::createOpenCLBackendOn(staticBeam, s, ctx, o);
+  auto z = detail::createOpenCLBackendOn(zeroMass, s, ctx, o);
+  const Eigen::VectorXd x = deformed(beam, 0.1), b = randomVector(beam.dofCount(), 3);
+  a->setPositions(x);
+  z->setPositions(x);
+  Eigen::VectorXd xa = Eigen::VectorXd::Zero(b.size()), xz = xa;
+  EXPECT_TRUE(a->solve({100.0, 0.0, 1.0}, b, xa).converged);
+  z->solve({100.0, 0.0, 1.0}, b, xz);
+  EXPECT_TRUE(sameBits(xa, xz));
+}
+
+TEST_P(OpenCLBatch, UnsupportedFormulationIsBadInputNamingTheBody) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  std::vector<detail::Problem> ps = bodies();
+  ps[2].formulation = Formulation::NeoHookean;
+  try {
+    batchOf(ps, solver());
+    FAIL() << "expected BadInput";
+  } catch (const detail::Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::BadInput);
+    EXPECT_NE(std::string(e.what()).find("soup"), std::string::npos) << e.what();
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Devices, OpenCLBatch, ::testing::ValuesIn(test::deviceCases()), test::caseName);
+
+}  // namespace
+}  // namespace corofem
