@@ -141,6 +141,7 @@ enum class BackendKind { Auto, Reference, OpenCL };
 struct BackendDesc {
   BackendKind kind = BackendKind::Auto;
   std::string device;  ///< device name substring or index ("" = the scheduler's choice)
+  bool batch = true;   ///< bodies scheduled on one OpenCL device share its buffers and kernel launches
 };
 
 /// A probe: the mean displacement of a node set, written to probes.csv each step/increment.

@@ -105,7 +105,7 @@ const std::vector<std::string> kDynamicKeys{"type",          "integrator",    "t
 const std::vector<std::string> kSleepKeys{"velocity", "load_change", "steps"};
 const std::vector<std::string> kSolverKeys{"linear_solver", "tolerance",  "max_iterations", "check_every",
                                            "preconditioner", "precision", "rotation"};
-const std::vector<std::string> kBackendKeys{"kind", "device"};
+const std::vector<std::string> kBackendKeys{"kind", "device", "batch"};
 const std::vector<std::string> kOutputKeys{"probes", "vtk", "vtk_every", "surface_obj"};
 const std::vector<std::string> kProbeKeys{"name", "body", "nodes"};
 
@@ -525,6 +525,7 @@ BackendDesc parseBackend(const Reader& r, const json& j, const std::string& path
     else
       r.fail(o.at("device"), "expected a device name (substring) or a device index >= 0, got ", describe(*device));
   }
+  o.read("batch", b.batch);
   return b;
 }
 

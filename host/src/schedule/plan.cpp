@@ -60,7 +60,8 @@ std::size_t edgeCount(const TetMesh& mesh) {
 
 }  // namespace
 
-std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& scene, const BodySchedule& schedule) {
+std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& scene, const BodySchedule& schedule,
+                     const std::vector<std::string>& batchMates) {
   const bool dynamic = scene.analysis.kind == AnalysisDesc::Kind::Dynamic;
   const bool corot = problem.formulation == Formulation::Corotational;
   const bool hyper = problem.formulation == Formulation::StVenantKirchhoff || problem.formulation == Formulation::NeoHookean;
@@ -97,6 +98,17 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   f["damping"] = damping;
   f["surface_update"] = !desc.surface.empty();
   f["prescribed_displacements"] = !problem.prescribed.empty();
+  // Batching (solve/batch_group.hpp): the bodies of one device share its buffers and every launch;
+  // the buffers and bytes below are this body's share (its segment of the shared buffers).
+  const bool batched = batchMates.size() >= 2;
+  if (batched) {
+    std::string names;
+    for (const std::string& n : batchMates) names += (names.empty() ? "" : ", ") + n;
+    f["shared_launches"] = "one launch sequence for " + std::to_string(batchMates.size()) + " bodies: " + names;
+    j["shared_launches"] = batchMates;
+  } else {
+    f["shared_launches"] = false;
+  }
   json terms = json::array({"stiffness K_t"});
   if (dynamic) terms.push_back("lumped mass M");
   if (damping) terms.push_back("Rayleigh damping C = alpha M + beta K_t");
@@ -135,6 +147,9 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
                               : "element_product (K_t) + gather_product");
     if (precond) kernels.push_back(block ? "precond_invert (3x3 blocks)" : "precond_invert (diagonal)");
     kernels.push_back("pcg_init, pcg_update, pcg_direction, reduce_finish");
+    if (batched)
+      for (auto& k : kernels)
+        k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";
     product = E * (16 + 34 * r) + 16 * E + 4 * (N + 1) + 12 * E * r + D * r * (3 + (dynamic ? 1 : 0));
     pcgIter = product + 12 * D * r + (precond ? (block ? 9 : 3) * N * r : 0);
     newtonFixed = (corot ? E * (16 + 22 * r) : 0) + 2 * product + 5 * D * r;

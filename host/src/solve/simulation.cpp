@@ -6,6 +6,7 @@
 #include "schedule/scheduler.hpp"
 #include "scene/scene_paths.hpp"
 #include "solve/backend.hpp"
+#include "solve/batch_group.hpp"
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
 
@@ -19,6 +20,7 @@
 #include <cassert>
 #include <chrono>
 #include <cmath>
+#include <map>
 #include <utility>
 
 namespace corofem {
@@ -77,11 +79,42 @@ struct Simulation::Impl {
     const detail::Backend* deviceFor = nullptr;
     std::size_t deviceEvents = 0;
     bool surfaceDirty = true;
+    // Batching: the group this body's first backend is a view of (index into Impl::batches), and
+    // the body's index in that group; -1 = not batched.
+    int batch = -1;
+    std::size_t slot = 0;
+  };
+
+  /// Bodies scheduled on one device that share its buffers and launches (solve/batch_group.hpp).
+  /// Each body's FailoverBackend starts on its view of the group; a device failure moves the body
+  /// off the group to its next candidate.
+  struct Batch {
+    std::unique_ptr<detail::BatchGroup> group;
+    std::vector<std::size_t> bodies;  ///< scene body indices, in the group's order
+    std::string candidate;            ///< the device's candidate label
+  };
+  /// A set of bodies that could have shared a device but runs unbatched, and why.
+  struct Unbatched {
+    std::vector<std::size_t> bodies;
+    std::string candidate, reason;
   };
 
   Scene scene;
   std::vector<Body> bodies;
+  std::vector<Batch> batches;
+  std::vector<Unbatched> unbatched;
   int stepsTaken = 0;
+
+  // The drivers and views go first, then the groups (their workers and devices), then the
+  // problems the devices were made over.
+  ~Impl() {
+    for (Body& b : bodies) {
+      b.deviceSurface.reset();
+      b.solver.reset();
+      b.backend.reset();
+    }
+    batches.clear();
+  }
 
   bool isStatic() const { return scene.analysis.kind == AnalysisDesc::Kind::Static; }
   int stepCount() const {
@@ -138,6 +171,87 @@ struct Simulation::Impl {
       b.sleep.xpRef = xp1;
     }
     return stats;
+  }
+
+  /// Groups the bodies that share a device's buffers and launches: two or more bodies whose first
+  /// candidate is the same OpenCL device, with batching on (backend.batch) and no render surface
+  /// (the device surface update reads the body's own position buffer, which a batch does not
+  /// have). Each gets a FailoverBackend that starts on its view of the group. A batch that cannot
+  /// be made leaves its bodies unbatched (recorded with the reason), exactly as without batching.
+  void formBatches() {
+    if (!scene.backend.batch) return;
+    const bool testing = detail::batchDeviceFactoryForTesting();
+    std::map<std::string, std::vector<std::size_t>> byDevice;  // candidate label -> bodies, scene order
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+      const detail::Candidate& c = bodies[i].schedule.choice();
+      if ((c.kind == BackendKind::OpenCL || testing) && !bodies[i].binding) byDevice[c.label()].push_back(i);
+    }
+    for (const auto& [label, members] : byDevice) {
+      if (members.size() < 2) continue;
+      std::vector<const detail::Problem*> problems;
+      for (std::size_t i : members) problems.push_back(bodies[i].problem.get());
+      std::unique_ptr<detail::BatchDevice> device;
+      try {
+        device = detail::createBatchDeviceFor(problems, scene.solver, bodies[members.front()].schedule.choice().selector);
+      } catch (const detail::Error& e) {
+        unbatched.push_back({members, label, std::string(toString(e.code())) + ": " + e.what()});
+        continue;
+      } catch (const std::exception& e) {
+        unbatched.push_back({members, label, e.what()});
+        continue;
+      }
+      Batch batch;
+      batch.group = std::make_unique<detail::BatchGroup>(std::move(device));
+      batch.bodies = members;
+      batch.candidate = label;
+      for (std::size_t k = 0; k < members.size(); ++k) {
+        Body& b = bodies[members[k]];
+        auto failover = std::make_unique<detail::FailoverBackend>(*b.problem, scene.solver, b.schedule.order,
+                                                                  batch.group->view(k));
+        b.failover = failover.get();
+        b.backend = std::move(failover);
+        b.batch = static_cast<int>(batches.size());
+        b.slot = k;
+      }
+      batches.push_back(std::move(batch));
+    }
+  }
+
+  /// JSON of the body's batch: {"group", "device", "bodies": [names], "active"} (active: the body
+  /// still runs on its view; false after a failover), or null when it is not batched.
+  nlohmann::json batchJson(const Body& b) const {
+    if (b.batch < 0) return nullptr;
+    const Batch& g = batches[static_cast<std::size_t>(b.batch)];
+    nlohmann::json names = nlohmann::json::array();
+    for (std::size_t i : g.bodies) names.push_back(scene.bodies[i].name);
+    return {{"group", b.batch}, {"device", g.candidate}, {"bodies", names}, {"active", g.group->attached(b.slot)}};
+  }
+
+  /// The groups: [{"device", "bodies", "active_bodies", "rounds", "requests", "largest_round",
+  /// "allocated_bytes"}], and [{"device", "bodies", "reason"}] for bodies left unbatched.
+  nlohmann::json batchesJson() const {
+    nlohmann::json out = nlohmann::json::array();
+    for (const Batch& g : batches) {
+      nlohmann::json names = nlohmann::json::array(), active = nlohmann::json::array();
+      for (std::size_t k = 0; k < g.bodies.size(); ++k) {
+        names.push_back(scene.bodies[g.bodies[k]].name);
+        if (g.group->attached(k)) active.push_back(scene.bodies[g.bodies[k]].name);
+      }
+      const detail::BatchGroupStats st = g.group->stats();
+      out.push_back({{"device", g.candidate}, {"backend", g.group->name()}, {"bodies", names},
+                     {"active_bodies", active}, {"rounds", st.rounds}, {"requests", st.requests},
+                     {"largest_round", st.largestRound}, {"allocated_bytes", g.group->allocatedBytes()}});
+    }
+    return out;
+  }
+  nlohmann::json unbatchedJson() const {
+    nlohmann::json out = nlohmann::json::array();
+    for (const Unbatched& u : unbatched) {
+      nlohmann::json names = nlohmann::json::array();
+      for (std::size_t i : u.bodies) names.push_back(scene.bodies[i].name);
+      out.push_back({{"device", u.candidate}, {"bodies", names}, {"reason", u.reason}});
+    }
+    return out;
   }
 
 #ifdef COROFEM_WITH_OPENCL
@@ -234,13 +348,18 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       // Where the body runs: the explicit choice (scene / API, else COROFEM_DEVICE), or for "auto"
       // the scheduler's calibrated (or cached) choice; hyperelastic bodies always on the reference.
       body.schedule = detail::scheduleBody(desc, *body.problem, scene);
-      auto failover = std::make_unique<detail::FailoverBackend>(*body.problem, scene.solver, body.schedule.order,
-                                                                !body.schedule.explicitChoice);
-      body.failover = failover.get();
-      body.backend = std::move(failover);
+      impl->bodies.push_back(std::move(body));
+    }
+    impl->formBatches();
+    for (Impl::Body& body : impl->bodies) {
+      if (body.batch < 0) {
+        auto failover = std::make_unique<detail::FailoverBackend>(*body.problem, scene.solver, body.schedule.order,
+                                                                  !body.schedule.explicitChoice);
+        body.failover = failover.get();
+        body.backend = std::move(failover);
+      }
       body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis);
       Impl::deviceSurfaceOf(body);  // on an OpenCL backend: the surface's buffers and kernels now
-      impl->bodies.push_back(std::move(body));
     }
     return Simulation(std::move(impl));
   });
@@ -262,25 +381,60 @@ Status Simulation::step(StepReport* report) {
                    " steps taken); check finished() before step()");
     const int index = s.stepsTaken + 1;
     for (Impl::Body& b : s.bodies) b.surfaceDirty = true;  // recomputed lazily (readSurface, surfaceDeviceBuffer)
-    std::size_t done = 0;
+    const std::size_t n = s.bodies.size();
     std::vector<Impl::Body::Sleep> sleepBefore;
     for (const Impl::Body& b : s.bodies) sleepBefore.push_back(b.sleep);
-    try {
-      for (; done < s.bodies.size(); ++done) {
-        s.bodies[done].failover->setWhen("step " + std::to_string(index));
-        const detail::BodyStepStats b = s.stepBody(s.bodies[done], index, count);
-        r.newtonIterations += b.newtonIterations;
-        r.linearIterations += b.linearIterations;
-        r.residual = std::max(r.residual, b.residual);
-        r.linearResidual = std::max(r.linearResidual, b.linearResidual);
-        r.converged = r.converged && b.converged;
+    for (Impl::Body& b : s.bodies) b.failover->setWhen("step " + std::to_string(index));
+    // Each body's step is independent of the others', so their order does not change any answer:
+    // the batched bodies run concurrently, each on its group's worker thread (their Backend calls
+    // meet in the group's rounds), while the others step in scene order on this thread.
+    std::vector<detail::BodyStepStats> stats(n);
+    std::vector<char> completed(n, 0);
+    std::vector<std::exception_ptr> errors(n);
+    for (Impl::Batch& g : s.batches) {
+      std::vector<std::size_t> slots(g.bodies.size());
+      for (std::size_t k = 0; k < slots.size(); ++k) slots[k] = k;
+      g.group->startStep(slots, [&s, &g, &stats, &completed, index, count](std::size_t k) {
+        const std::size_t i = g.bodies[k];
+        stats[i] = s.stepBody(s.bodies[i], index, count);
+        completed[i] = 1;
+      });
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      if (s.bodies[i].batch >= 0) continue;
+      try {
+        stats[i] = s.stepBody(s.bodies[i], index, count);
+        completed[i] = 1;
+      } catch (...) {
+        errors[i] = std::current_exception();
+        break;  // the remaining unbatched bodies need not step: the scene goes back anyway
       }
-    } catch (...) {
-      // The failing body restored itself; the bodies stepped before it go back one step so that
-      // the whole scene stays at the last step every body completed.
-      for (std::size_t b = 0; b < done; ++b) s.bodies[b].solver->rollback();
-      for (std::size_t b = 0; b < s.bodies.size(); ++b) s.bodies[b].sleep = sleepBefore[b];
-      throw;
+    }
+    for (Impl::Batch& g : s.batches) {
+      const std::vector<std::exception_ptr> e = g.group->finishStep();
+      for (std::size_t k = 0; k < e.size(); ++k)
+        if (e[k]) errors[g.bodies[k]] = e[k];
+    }
+    // The report sums the bodies in scene order, up to the first one that failed.
+    std::size_t failed = n;
+    for (std::size_t i = 0; i < n && failed == n; ++i)
+      if (errors[i]) failed = i;
+    for (std::size_t i = 0; i < failed; ++i) {
+      const detail::BodyStepStats& b = stats[i];
+      r.newtonIterations += b.newtonIterations;
+      r.linearIterations += b.linearIterations;
+      r.residual = std::max(r.residual, b.residual);
+      r.linearResidual = std::max(r.linearResidual, b.linearResidual);
+      r.converged = r.converged && b.converged;
+    }
+    if (failed < n) {
+      // A failing body restored itself; the bodies that completed the step go back one step so
+      // that the whole scene stays at the last step every body completed. The error is that of
+      // the first failing body in scene order.
+      for (std::size_t b = 0; b < n; ++b)
+        if (completed[b]) s.bodies[b].solver->rollback();
+      for (std::size_t b = 0; b < n; ++b) s.bodies[b].sleep = sleepBefore[b];
+      std::rethrow_exception(errors[failed]);
     }
     s.stepsTaken = index;
     r.step = index;
@@ -411,6 +565,7 @@ std::string Simulation::schedulerReport() const {
     s["current"] = b.failover->current().label();
     if (impl_->scene.analysis.dynamics.sleep.enabled && !impl_->isStatic())
       s["sleep"] = {{"asleep", b.sleep.asleep}, {"slept_steps", b.sleep.sleptSteps}, {"wakes", b.sleep.wakes}};
+    s["batch"] = impl_->batchJson(b);
     bodies.push_back(s);
     for (const detail::FallbackEvent& e : b.failover->events()) fallbacks.push_back(json::parse(detail::fallbackJson(e)));
   }
@@ -422,6 +577,9 @@ std::string Simulation::schedulerReport() const {
   j["from_cache"] = first["from_cache"];
   j["bodies"] = bodies;
   j["fallbacks"] = fallbacks;
+  // Bodies that share a device's buffers and launches, and those that could have but run alone.
+  j["batches"] = impl_->batchesJson();
+  j["unbatched"] = impl_->unbatchedJson();
   return j.dump();
 }
 
@@ -436,9 +594,18 @@ std::string Simulation::planReport() const {
     const Impl::Body& b = impl_->bodies[i];
     detail::BodySchedule now = b.schedule;  // after a fallback at create, the backend in use
     now.order.insert(now.order.begin(), b.failover->current());
-    bodies.push_back(json::parse(detail::planJson(impl_->scene.bodies[i], *b.problem, impl_->scene, now)));
+    std::vector<std::string> mates;
+    if (b.batch >= 0) {  // the bodies still on the batch (a failover takes a body off it)
+      const Impl::Batch& g = impl_->batches[static_cast<std::size_t>(b.batch)];
+      if (g.group->attached(b.slot))
+        for (std::size_t k = 0; k < g.bodies.size(); ++k)
+          if (g.group->attached(k)) mates.push_back(impl_->scene.bodies[g.bodies[k]].name);
+    }
+    bodies.push_back(json::parse(detail::planJson(impl_->scene.bodies[i], *b.problem, impl_->scene, now, mates)));
   }
   j["bodies"] = bodies;
+  j["batches"] = impl_->batchesJson();
+  j["unbatched"] = impl_->unbatchedJson();
   return j.dump();
 }
 
