@@ -2,75 +2,230 @@
  * Compiled only with -DCOROFEM_SURFACE (DESIGN: no surface kernel without a surface mesh), so the
  * file adds nothing to the solver's program, which concatenates every .cl file of kernels/opencl.
  *
- * Three passes, one work-item per vertex or triangle, no atomics: the normals are gathered per
- * vertex over its incident triangles in the fixed (ascending) CSR order built on the host, so two
- * runs give the same bits.
- *   1 surface_positions     x_v = sum_k w_vk x_{n_vk}                      (k = 0..3)
- *   2 surface_face_vectors  f_t = (x_b - x_a) x (x_c - x_a),  |f_t| = 2 area(t)
- *   3 surface_normals       n_v = normalise(sum_{t at v} f_t)  (area-weighted mean of face normals),
- *                           written with x_v + c as 6 floats per vertex (renderer vertex buffer).
+ * Two passes (and a small third for rare vertices), no atomics, fixed summation order, so two runs
+ * give the same bits:
+ *   1 surface_positions  x_v = sum_k w_vk x_{n_vk}   (k = 0..3), into a scratch of 3 streams
+ *                        (x, y, z, each of stride S >= vertex count: structure of arrays).
+ *   2 surface_normals    n_v = normalise( sum_i (x_{r_i} - x_v) x (x_{r_{i+1}} - x_v) ),  i = 0..K-1
+ *                        cyclically (r_K = r_0), over the vertex's one-ring r_0..r_{K-1} (K slots,
+ *                        stream i at ring + i S), written with x_v + c as 6 floats per vertex.
+ *   3 surface_normals_overflow   the same sum over a longer one-ring, for the few vertices whose
+ *                        one-ring does not fit in K slots (pass 2 wrote a zero normal for them).
+ * Why pass 2 is the area-weighted normal of deformSurface: for a triangle (a, b, c) at v = a the
+ * ring holds b, c consecutively and (x_b - x_a) x (x_c - x_a) is its face vector f_t (|f_t| = 2 area);
+ * at v = b (or c) the pair is (c, a) (or (a, b)) and the cross product of the edges from v is the
+ * same f_t (it is invariant under cyclic relabelling). A closed fan r_0..r_{L-1} of L triangles
+ * (v, r_i, r_{i+1}) needs L slots; an open fan, a second fan or a lone triangle is ended by a slot
+ * holding v itself, and every term with v in it is exactly 0 (x_v - x_v = 0), as are padding slots
+ * (v). The host (device_surface.cpp) builds the rings from the binding's triangles. So per vertex
+ * the face vectors are recomputed from the one-ring instead of stored per triangle: no face buffer,
+ * no triangle list, no per-triangle pass.
+ *
+ * Pass 2 works on SURF_W consecutive vertices at once in vector types (lanes = vertices, the
+ * structure-of-arrays streams load as vectors). Where one ring slot of those SURF_W vertices holds
+ * SURF_W consecutive vertices (a regular mesh numbered row by row, as the benchmark's UV sphere), the
+ * neighbours' positions are one vector load; otherwise they are gathered lane by lane. Both read the
+ * same values, so the result does not depend on which path ran.
+ *
  * The node positions may be relative to an offset c (the OpenCL backend keeps them relative to the
  * body's centroid so that float keeps its accuracy far from the origin): the weights sum to 1, so
- * sum_k w_vk (x_{n_vk} - c) + c = x_v. Passes 1-2 work on the relative positions (the face vectors
- * are differences, c cancels); pass 3 adds c to the position it writes. c = 0 for absolute input.
+ * sum_k w_vk (x_{n_vk} - c) + c = x_v. The edge vectors are differences (c cancels); pass 2 adds c to
+ * the position it writes.
+ *
+ * Build options: SURF_K ring slots per vertex, SURF_W vertices per vector (8 or 16), SURF_VPW
+ * vertices per work-item in pass 1, SURF_BPW blocks of SURF_W vertices per work-item in pass 2
+ * (several per work-item amortise PoCL's per-work-item cost on a CPU; 1 on a GPU).
  */
 #ifdef COROFEM_SURFACE
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
 #endif
 
+#ifndef SURF_K
+#define SURF_K 6
+#endif
+#ifndef SURF_W
+#define SURF_W 16
+#endif
+#ifndef SURF_VPW
+#define SURF_VPW 1
+#endif
+#ifndef SURF_BPW
+#define SURF_BPW 1
+#endif
+
 /* nodes: 4 node indices per vertex; weights: 4 barycentric coordinates per vertex (sum 1; negative
- * ones extrapolate for vertices outside the tet mesh); x: 3 reals per tet node; pos: 3 per vertex. */
-__kernel void surface_positions(const uint vertexCount, __global const uint4* restrict nodes,
+ * ones extrapolate for vertices outside the tet mesh); x: 3 reals per tet node; pos: the scratch,
+ * component a of vertex v at pos[a * S + v]. */
+__kernel void surface_positions(const uint vertexCount, const uint S, __global const uint4* restrict nodes,
                                 __global const real4* restrict weights, __global const real* restrict x,
                                 __global real* restrict pos) {
-  const uint v = (uint)get_global_id(0);
-  if (v >= vertexCount) return;
-  const uint4 n = nodes[v];
-  const real4 w = weights[v];
-  for (uint a = 0; a < 3; ++a)
-    pos[3 * v + a] = w.x * x[3 * n.x + a] + w.y * x[3 * n.y + a] + w.z * x[3 * n.z + a] + w.w * x[3 * n.w + a];
-}
-
-/* triangles: 3 vertex indices per triangle; faces: 3 reals per triangle. */
-__kernel void surface_face_vectors(const uint triangleCount, __global const uint* restrict triangles,
-                                   __global const real* restrict pos, __global real* restrict faces) {
-  const uint t = (uint)get_global_id(0);
-  if (t >= triangleCount) return;
-  const uint a = triangles[3 * t], b = triangles[3 * t + 1], c = triangles[3 * t + 2];
-  const real3 xa = (real3)(pos[3 * a], pos[3 * a + 1], pos[3 * a + 2]);
-  const real3 e1 = (real3)(pos[3 * b], pos[3 * b + 1], pos[3 * b + 2]) - xa;
-  const real3 e2 = (real3)(pos[3 * c], pos[3 * c + 1], pos[3 * c + 2]) - xa;
-  faces[3 * t] = e1.y * e2.z - e1.z * e2.y;
-  faces[3 * t + 1] = e1.z * e2.x - e1.x * e2.z;
-  faces[3 * t + 2] = e1.x * e2.y - e1.y * e2.x;
-}
-
-/* offsets/incident: CSR vertex -> incident triangles (ascending). out: 6 floats per vertex
- * (position + c, unit normal); the normal of a vertex without a non-degenerate triangle is 0.
- * The offset c of the node positions (0 for absolute positions) comes as c = chi + clo, both in the
- * device precision: in float, chi = (float)c and clo = (float)(c - chi), so that the small relative
- * position takes clo first and the sum rounds once, at the output's magnitude (half an ulp of |x|)
- * instead of twice (c itself rounded to float, then the sum). In double, clo = 0. */
-__kernel void surface_normals(const uint vertexCount, __global const uint* restrict offsets,
-                              __global const uint* restrict incident, __global const real* restrict faces,
-                              __global const real* restrict pos, __global float* restrict out,
-                              const real chix, const real chiy, const real chiz, const real clox,
-                              const real cloy, const real cloz) {
-  const uint v = (uint)get_global_id(0);
-  if (v >= vertexCount) return;
-  real3 n = (real3)(0, 0, 0);
-  const uint end = offsets[v + 1];
-  for (uint q = offsets[v]; q < end; ++q) {
-    const uint t = incident[q];
-    n += (real3)(faces[3 * t], faces[3 * t + 1], faces[3 * t + 2]);
+  const uint v0 = (uint)get_global_id(0) * SURF_VPW;
+  const uint v1 = min(v0 + SURF_VPW, vertexCount);
+  for (uint v = v0; v < v1; ++v) {
+    const uint4 n = nodes[v];
+    const real4 w = weights[v];
+    const real3 p = w.x * vload3(n.x, x) + w.y * vload3(n.y, x) + w.z * vload3(n.z, x) + w.w * vload3(n.w, x);
+    pos[v] = p.x;
+    pos[S + v] = p.y;
+    pos[2 * S + v] = p.z;
   }
-  const real length = sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
-  const real scale = length > (real)0 ? (real)1 / length : (real)0;
+}
+
+/* Vector types of SURF_W lanes. */
+#define SURF_CAT2(a, b) a##b
+#define SURF_CAT(a, b) SURF_CAT2(a, b)
+#ifdef COROFEM_DOUBLE
+typedef SURF_CAT(double, SURF_W) realW;
+#else
+typedef SURF_CAT(float, SURF_W) realW;
+#endif
+typedef SURF_CAT(uint, SURF_W) uintW;
+typedef SURF_CAT(float, SURF_W) floatW;
+#define VLOADW(p) SURF_CAT(vload, SURF_W)(0, (p))
+#define CONVERT_FLOATW SURF_CAT(convert_float, SURF_W)
+
+#if SURF_W == 8
+#define SURF_LANES ((uintW)(0, 1, 2, 3, 4, 5, 6, 7))
+#define GATHERW(p, i) ((realW)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], (p)[(i).s5], \
+                               (p)[(i).s6], (p)[(i).s7]))
+/* lanes 0..7 all zero, as a few vector ORs (PoCL's all() extracts lane by lane) */
+inline bool surf_all_zero(uintW t) {
+  const uint4 t4 = t.lo | t.hi;
+  const uint2 t2 = t4.lo | t4.hi;
+  return (t2.x | t2.y) == 0;
+}
+#elif SURF_W == 16
+#define SURF_LANES ((uintW)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#define GATHERW(p, i) ((realW)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], (p)[(i).s5], \
+                               (p)[(i).s6], (p)[(i).s7], (p)[(i).s8], (p)[(i).s9], (p)[(i).sa], (p)[(i).sb], \
+                               (p)[(i).sc], (p)[(i).sd], (p)[(i).se], (p)[(i).sf]))
+inline bool surf_all_zero(uintW t) {
+  const uint8 t8 = t.lo | t.hi;
+  const uint4 t4 = t8.lo | t8.hi;
+  const uint2 t2 = t4.lo | t4.hi;
+  return (t2.x | t2.y) == 0;
+}
+#else
+#error "SURF_W must be 8 or 16"
+#endif
+
+/* Interleaves 8 vertices' position (ox, oy, oz) and normal (mx, my, mz) into 48 floats at d. */
+inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, float8 mx, float8 my, float8 mz) {
+  vstore8((float8)(ox.s0, oy.s0, oz.s0, mx.s0, my.s0, mz.s0, ox.s1, oy.s1), 0, d);
+  vstore8((float8)(oz.s1, mx.s1, my.s1, mz.s1, ox.s2, oy.s2, oz.s2, mx.s2), 0, d + 8);
+  vstore8((float8)(my.s2, mz.s2, ox.s3, oy.s3, oz.s3, mx.s3, my.s3, mz.s3), 0, d + 16);
+  vstore8((float8)(ox.s4, oy.s4, oz.s4, mx.s4, my.s4, mz.s4, ox.s5, oy.s5), 0, d + 24);
+  vstore8((float8)(oz.s5, mx.s5, my.s5, mz.s5, ox.s6, oy.s6, oz.s6, mx.s6), 0, d + 32);
+  vstore8((float8)(my.s6, mz.s6, ox.s7, oy.s7, oz.s7, mx.s7, my.s7, mz.s7), 0, d + 40);
+}
+
+/* The positions (x, y, z) of ring slot r of SURF_W vertices, relative to theirs (xx, xy, xz). */
+#define SURF_NEIGHBOUR(r, bx, by, bz)                                                      \
+  if (surf_all_zero((r) ^ ((uintW)((r).s0) + SURF_LANES))) {                               \
+    bx = VLOADW(px + (r).s0) - xx;                                                         \
+    by = VLOADW(py + (r).s0) - xy;                                                         \
+    bz = VLOADW(pz + (r).s0) - xz;                                                         \
+  } else {                                                                                 \
+    bx = GATHERW(px, r) - xx;                                                              \
+    by = GATHERW(py, r) - xy;                                                              \
+    bz = GATHERW(pz, r) - xz;                                                              \
+  }
+
+/* ring: SURF_K streams of stride S (slot i of vertex v at ring[i * S + v]; entries of the padding
+ * vertices v >= vertexCount hold v). out: 6 floats per vertex (position + c, unit normal); the normal
+ * of a vertex without a non-degenerate triangle is 0. The offset c of the node positions (0 for
+ * absolute positions) comes as c = chi + clo, both in the device precision: in float, chi = (float)c
+ * and clo = (float)(c - chi), so that the small relative position takes clo first and the sum rounds
+ * once, at the output's magnitude (half an ulp of |x|) instead of twice (c itself rounded to float,
+ * then the sum). In double, clo = 0. S is a multiple of SURF_W; the scratch's padding is zero. */
+__kernel void surface_normals(const uint vertexCount, const uint S, __global const uint* restrict ring,
+                              __global const real* restrict pos, __global float* restrict out, const real chix,
+                              const real chiy, const real chiz, const real clox, const real cloy, const real cloz) {
+  __global const real* px = pos;
+  __global const real* py = pos + S;
+  __global const real* pz = pos + 2 * S;
+  for (uint blk = 0; blk < SURF_BPW; ++blk) {
+    const uint v = ((uint)get_global_id(0) * SURF_BPW + blk) * SURF_W;
+    if (v >= vertexCount) return;
+    const realW xx = VLOADW(px + v), xy = VLOADW(py + v), xz = VLOADW(pz + v);
+    realW fx, fy, fz;
+    uintW r = VLOADW(ring + v);
+    SURF_NEIGHBOUR(r, fx, fy, fz)
+    realW ax = fx, ay = fy, az = fz, nx = 0, ny = 0, nz = 0;
+    for (uint i = 1; i < SURF_K; ++i) {
+      r = VLOADW(ring + i * S + v);
+      realW bx, by, bz;
+      SURF_NEIGHBOUR(r, bx, by, bz)
+      nx += ay * bz - az * by;
+      ny += az * bx - ax * bz;
+      nz += ax * by - ay * bx;
+      ax = bx;
+      ay = by;
+      az = bz;
+    }
+    nx += ay * fz - az * fy;  /* the closing term (r_{K-1}, r_0) */
+    ny += az * fx - ax * fz;
+    nz += ax * fy - ay * fx;
+    const realW length2 = nx * nx + ny * ny + nz * nz;
+    const realW scale = select((realW)0, (realW)1 / sqrt(length2), length2 > (realW)0);
+    const floatW ox = CONVERT_FLOATW((xx + clox) + chix), oy = CONVERT_FLOATW((xy + cloy) + chiy),
+                 oz = CONVERT_FLOATW((xz + cloz) + chiz);
+    const floatW mx = CONVERT_FLOATW(nx * scale), my = CONVERT_FLOATW(ny * scale), mz = CONVERT_FLOATW(nz * scale);
+    __global float* dst = out + 6 * (size_t)v;
+    if (v + SURF_W <= vertexCount) {
+#if SURF_W == 8
+      surf_store8(dst, ox, oy, oz, mx, my, mz);
+#else
+      surf_store8(dst, ox.lo, oy.lo, oz.lo, mx.lo, my.lo, mz.lo);
+      surf_store8(dst + 48, ox.hi, oy.hi, oz.hi, mx.hi, my.hi, mz.hi);
+#endif
+    } else {  /* the last, partial block: through private memory */
+      float tmp[6 * SURF_W];
+      const float* sx = (const float*)&ox;
+      const float* sy = (const float*)&oy;
+      const float* sz = (const float*)&oz;
+      const float* tx = (const float*)&mx;
+      const float* ty = (const float*)&my;
+      const float* tz = (const float*)&mz;
+      for (uint l = 0; l < vertexCount - v; ++l) {
+        tmp[6 * l] = sx[l];
+        tmp[6 * l + 1] = sy[l];
+        tmp[6 * l + 2] = sz[l];
+        tmp[6 * l + 3] = tx[l];
+        tmp[6 * l + 4] = ty[l];
+        tmp[6 * l + 5] = tz[l];
+      }
+      for (uint k = 0; k < 6 * (vertexCount - v); ++k) dst[k] = tmp[k];
+    }
+  }
+}
+
+/* The vertices whose one-ring does not fit in SURF_K slots (pass 2 wrote their position and a zero
+ * normal): vertex verts[k]'s ring is sequence[offsets[k] .. offsets[k + 1]), same rules, summed in
+ * the same cyclic order. */
+__kernel void surface_normals_overflow(const uint count, __global const uint* restrict verts,
+                                       __global const uint* restrict offsets, __global const uint* restrict sequence,
+                                       const uint S, __global const real* restrict pos,
+                                       __global float* restrict out) {
+  const uint k = (uint)get_global_id(0);
+  if (k >= count) return;
+  const uint v = verts[k];
+  const real3 xv = (real3)(pos[v], pos[S + v], pos[2 * S + v]);
+  const uint begin = offsets[k], end = offsets[k + 1];
+  uint q = sequence[begin];
+  const real3 first = (real3)(pos[q], pos[S + q], pos[2 * S + q]) - xv;
+  real3 a = first, n = (real3)(0, 0, 0);
+  for (uint i = begin + 1; i < end; ++i) {
+    q = sequence[i];
+    const real3 b = (real3)(pos[q], pos[S + q], pos[2 * S + q]) - xv;
+    n += (real3)(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+    a = b;
+  }
+  n += (real3)(a.y * first.z - a.z * first.y, a.z * first.x - a.x * first.z, a.x * first.y - a.y * first.x);
+  const real length2 = n.x * n.x + n.y * n.y + n.z * n.z;
+  const real scale = length2 > (real)0 ? (real)1 / sqrt(length2) : (real)0;
   __global float* dst = out + 6 * (size_t)v;
-  dst[0] = (float)((pos[3 * v] + clox) + chix);
-  dst[1] = (float)((pos[3 * v + 1] + cloy) + chiy);
-  dst[2] = (float)((pos[3 * v + 2] + cloz) + chiz);
   dst[3] = (float)(n.x * scale);
   dst[4] = (float)(n.y * scale);
   dst[5] = (float)(n.z * scale);

@@ -1,5 +1,6 @@
 // DeviceSurface: the per-frame coupled-mesh update on an OpenCL device (kernels/opencl/surface_update.cl),
-// the same passes as deformSurface (deform_surface.cpp). Without COROFEM_WITH_OPENCL every entry point
+// the same mathematics as deformSurface (deform_surface.cpp): positions, then per vertex the normal from
+// its one-ring (the ring layout is built here, once). Without COROFEM_WITH_OPENCL every entry point
 // reports ErrorCode::NotCompiledIn.
 #include <corofem/embed.hpp>
 
@@ -12,6 +13,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 #endif
 
 #include <utility>
@@ -62,16 +64,136 @@ struct KernelRelease {
 using Mem = std::unique_ptr<_cl_mem, MemRelease>;
 using Kernel = std::unique_ptr<_cl_kernel, KernelRelease>;
 
+/// The one-ring of vertex v as surface_normals reads it (surface_update.cl): a sequence r_0..r_{L-1}
+/// such that n_v = sum_i (x_{r_i} - x_v) x (x_{r_{i+1 mod L}} - x_v) is the sum of the face vectors of
+/// v's triangles. Each triangle (a, b, c) at v gives the pair (p, q) that follows v in its cyclic
+/// order ((b, c) at a, (c, a) at b, (a, b) at c). Pairs are chained where one's q is the next one's
+/// p (a fan); a vertex whose pairs form one closed fan gets just the fan, rotated to start at its
+/// smallest index (so that on a mesh numbered row by row the slots of consecutive vertices are
+/// consecutive vertices: one vector load in the kernel); otherwise each fan is followed by v itself
+/// (terms with v are exactly 0), a closed one after repeating its first vertex. Degenerate triangles
+/// (a repeated index, face vector exactly 0 on the host too) are left out. Deterministic: fans are
+/// started at open ends first, then in the binding's (ascending) triangle order.
+void oneRing(const SurfaceBinding& b, std::uint32_t v, std::vector<std::pair<std::uint32_t, std::uint32_t>>& pairs,
+             std::vector<std::uint32_t>& out) {
+  pairs.clear();
+  out.clear();
+  for (std::uint32_t q = b.vertexTriangleOffsets[v]; q < b.vertexTriangleOffsets[v + 1]; ++q) {
+    const std::uint32_t* t = &b.triangles[3 * static_cast<std::size_t>(b.vertexTriangles[q])];
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
+    if (t[0] == v) pairs.emplace_back(t[1], t[2]);
+    else if (t[1] == v) pairs.emplace_back(t[2], t[0]);
+    else pairs.emplace_back(t[0], t[1]);
+  }
+  const std::size_t d = pairs.size();
+  if (d == 0) return;
+  // Pairs sorted by their first vertex (then by position): the successor of a fan's last vertex is
+  // the first unused pair starting there.
+  std::vector<std::uint32_t> byFirst(d), seconds(d);
+  for (std::size_t i = 0; i < d; ++i) byFirst[i] = static_cast<std::uint32_t>(i), seconds[i] = pairs[i].second;
+  std::sort(byFirst.begin(), byFirst.end(), [&](std::uint32_t i, std::uint32_t j) {
+    return pairs[i].first != pairs[j].first ? pairs[i].first < pairs[j].first : i < j;
+  });
+  std::sort(seconds.begin(), seconds.end());
+  std::vector<char> used(d, 0);
+  auto successor = [&](std::uint32_t vertex) -> std::size_t {
+    auto it = std::lower_bound(byFirst.begin(), byFirst.end(), vertex,
+                               [&](std::uint32_t i, std::uint32_t key) { return pairs[i].first < key; });
+    for (; it != byFirst.end() && pairs[*it].first == vertex; ++it)
+      if (!used[*it]) return *it;
+    return d;
+  };
+  std::vector<std::vector<std::uint32_t>> fans;
+  std::vector<char> closed;
+  auto walk = [&](std::size_t start) {
+    std::vector<std::uint32_t> fan{pairs[start].first, pairs[start].second};
+    used[start] = 1;
+    for (std::size_t next = successor(fan.back()); next < d; next = successor(fan.back())) {
+      used[next] = 1;
+      fan.push_back(pairs[next].second);
+    }
+    const bool isClosed = fan.size() > 2 && fan.back() == fan.front();
+    if (isClosed) fan.pop_back();
+    fans.push_back(std::move(fan));
+    closed.push_back(isClosed);
+  };
+  for (std::size_t i = 0; i < d; ++i)  // open ends: no pair ends where this one starts
+    if (!used[i] && !std::binary_search(seconds.begin(), seconds.end(), pairs[i].first)) walk(i);
+  for (std::size_t i = 0; i < d; ++i)
+    if (!used[i]) walk(i);
+  if (fans.size() == 1 && closed[0]) {
+    out = std::move(fans[0]);
+    std::rotate(out.begin(), std::min_element(out.begin(), out.end()), out.end());
+    return;
+  }
+  for (std::size_t f = 0; f < fans.size(); ++f) {
+    out.insert(out.end(), fans[f].begin(), fans[f].end());
+    if (closed[f]) out.push_back(fans[f].front());
+    out.push_back(v);
+  }
+}
+
+/// The ring slots of every vertex (structure of arrays, stride `stride`), K = `slots` per vertex,
+/// and the rings longer than K. K minimises the bytes read per frame: K per vertex (4 bytes each) plus
+/// the overflow rings, counted 8 times over (their kernel runs one work-item per vertex, serially).
+struct RingLayout {
+  cl_uint slots = 1;
+  std::vector<cl_uint> ring;  ///< slots * stride
+  std::vector<cl_uint> overflowVertices, overflowOffsets{0}, overflowSequence;
+};
+
+RingLayout ringLayout(const SurfaceBinding& b, std::size_t stride) {
+  const std::size_t n = b.vertexCount();
+  constexpr std::size_t kMaxSlots = 32;
+  std::vector<std::vector<std::uint32_t>> rings(n);
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
+  std::vector<std::size_t> longer(kMaxSlots + 2, 0);  // longer[k]: sum of the lengths L > k
+  for (std::size_t v = 0; v < n; ++v) {
+    oneRing(b, static_cast<std::uint32_t>(v), pairs, rings[v]);
+    const std::size_t length = rings[v].size();
+    for (std::size_t k = 1; k <= kMaxSlots; ++k)
+      if (length > k) longer[k] += length;
+  }
+  RingLayout layout;
+  std::size_t best = std::numeric_limits<std::size_t>::max();
+  for (std::size_t k = 1; k <= kMaxSlots; ++k) {
+    const std::size_t cost = n * k + 8 * longer[k];
+    if (cost < best) best = cost, layout.slots = static_cast<cl_uint>(k);
+  }
+  const std::size_t K = layout.slots;
+  layout.ring.resize(K * stride);
+  for (std::size_t v = 0; v < stride; ++v) {
+    const cl_uint self = static_cast<cl_uint>(v);
+    std::vector<std::uint32_t> empty;
+    std::vector<std::uint32_t>& r = v < n ? rings[v] : empty;
+    std::size_t used = 0;
+    if (r.size() > K) {  // pass 3 computes this vertex's normal; pass 2 sees only v (normal 0)
+      layout.overflowVertices.push_back(self);
+      layout.overflowSequence.insert(layout.overflowSequence.end(), r.begin(), r.end());
+      layout.overflowOffsets.push_back(static_cast<cl_uint>(layout.overflowSequence.size()));
+    } else {
+      for (; used < r.size(); ++used) layout.ring[used * stride + v] = r[used];
+      // A closed single fan shorter than K: close it explicitly (r_{L-1}, r_0) before padding with v.
+      if (used > 0 && used < K && r.back() != self) layout.ring[used++ * stride + v] = r.front();
+    }
+    for (; used < K; ++used) layout.ring[used * stride + v] = self;
+  }
+  return layout;
+}
+
 }  // namespace
 
 struct DeviceSurface::Impl {
   std::shared_ptr<detail::cl::Context> ctx;
   bool doublePrecision = false;
   std::size_t realSize = 4;
-  cl_uint vertexCount = 0, triangleCount = 0;
+  cl_uint vertexCount = 0, stride = 0, overflowCount = 0;
   std::size_t nodeCount = 0;
-  Mem nodes, weights, triangles, offsets, incident, x, pos, faces, out;
-  Kernel positions, faceVectors, normals;
+  // Work per work-item and work-group sizes (create()): on a CPU several vertices per work-item
+  // amortise PoCL's per-work-item cost; on a GPU one.
+  std::size_t positionsPerItem = 1, blocksPerItem = 1, lanes = 16, positionsLocal = 64, normalsLocal = 64;
+  Mem nodes, weights, ring, x, pos, out, overflowVertices, overflowOffsets, overflowSequence;
+  Kernel positions, normals, overflow;
   std::vector<unsigned char> staging;  // node positions converted to the device precision
 
   const std::string& device() const { return ctx->deviceName(); }
@@ -99,12 +221,12 @@ struct DeviceSurface::Impl {
     checkCl(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg", device());
   }
 
-  /// One work-item per entry, in work-groups of 64 (the kernels skip the padding work-items):
-  /// leaving the size to the runtime lets some (PoCL) pick tiny groups.
-  void enqueue(cl_kernel k, std::size_t count, const char* name) {
-    if (count == 0) return;
-    const std::size_t local = std::clamp<std::size_t>(ctx->info().maxWorkGroupSize, 1, 64);
-    const std::size_t global = (count + local - 1) / local * local;
+  /// `items` work-items in work-groups of `local` (clamped to the device's limit; the kernels skip
+  /// the padding work-items): leaving the size to the runtime lets some (PoCL) pick tiny groups.
+  void enqueue(cl_kernel k, std::size_t items, std::size_t local, const char* name) {
+    if (items == 0) return;
+    local = std::clamp<std::size_t>(ctx->info().maxWorkGroupSize, 1, local);
+    const std::size_t global = (items + local - 1) / local * local;
     checkCl(clEnqueueNDRangeKernel(ctx->queue(), k, 1, nullptr, &global, &local, 0, nullptr, nullptr), name,
             device());
   }
@@ -115,24 +237,26 @@ struct DeviceSurface::Impl {
     for (cl_uint a = 0; a < 3; ++a) {
       const double value = c ? c[a] : 0.0;
       if (doublePrecision) {
-        arg(normals.get(), 6 + a, value);
-        arg(normals.get(), 9 + a, 0.0);
+        arg(normals.get(), 5 + a, value);
+        arg(normals.get(), 8 + a, 0.0);
       } else {
         const float hi = static_cast<float>(value);
-        arg(normals.get(), 6 + a, hi);
-        arg(normals.get(), 9 + a, static_cast<float>(value - static_cast<double>(hi)));
+        arg(normals.get(), 5 + a, hi);
+        arg(normals.get(), 8 + a, static_cast<float>(value - static_cast<double>(hi)));
       }
     }
   }
 
-  /// Enqueues the three passes reading node positions from `xBuffer` (relative to `offset`, 3
-  /// doubles or nullptr for absolute positions).
+  /// Enqueues the passes reading node positions from `xBuffer` (relative to `offset`, 3 doubles or
+  /// nullptr for absolute positions).
   void run(cl_mem xBuffer, const double* offset = nullptr) {
     setOffset(offset);
-    arg(positions.get(), 3, xBuffer);
-    enqueue(positions.get(), vertexCount, "surface_positions");
-    enqueue(faceVectors.get(), triangleCount, "surface_face_vectors");
-    enqueue(normals.get(), vertexCount, "surface_normals");
+    arg(positions.get(), 4, xBuffer);
+    const std::size_t per = lanes * blocksPerItem;
+    enqueue(positions.get(), (vertexCount + positionsPerItem - 1) / positionsPerItem, positionsLocal,
+            "surface_positions");
+    enqueue(normals.get(), (vertexCount + per - 1) / per, normalsLocal, "surface_normals");
+    enqueue(overflow.get(), overflowCount, 1, "surface_normals_overflow");
   }
 };
 
@@ -161,57 +285,96 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
     if (impl->doublePrecision && !impl->ctx->info().fp64)
       fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
            "' has no cl_khr_fp64; use float (doublePrecision = false) or another device");
-    impl->realSize = impl->doublePrecision ? sizeof(double) : sizeof(float);
-    impl->vertexCount = static_cast<cl_uint>(n);
-    impl->triangleCount = static_cast<cl_uint>(binding.triangles.size() / 3);
-    impl->nodeCount = binding.tetNodeCount;
-
-    // Weights in the device precision; node indices as uint4, triangles and CSR as uint.
-    std::vector<unsigned char> w(impl->realSize * 4 * n);
-    for (std::size_t i = 0; i < 4 * n; ++i) {
-      if (impl->doublePrecision) std::memcpy(&w[8 * i], &binding.weights[i], 8);
-      else {
-        const float f = static_cast<float>(binding.weights[i]);
-        std::memcpy(&w[4 * i], &f, 4);
-      }
-    }
-    const cl_mem_flags ro = CL_MEM_READ_ONLY, rw = CL_MEM_READ_WRITE;
-    impl->nodes = impl->buffer(ro, 4 * n * sizeof(cl_uint), binding.nodes.data(), "vertex node indices");
-    impl->weights = impl->buffer(ro, w.size(), w.data(), "weights");
-    impl->triangles = impl->buffer(ro, binding.triangles.size() * sizeof(cl_uint), binding.triangles.data(), "triangles");
-    impl->offsets = impl->buffer(ro, (n + 1) * sizeof(cl_uint), binding.vertexTriangleOffsets.data(), "adjacency offsets");
-    impl->incident = impl->buffer(ro, binding.vertexTriangles.size() * sizeof(cl_uint), binding.vertexTriangles.data(),
-                                  "adjacency");
-    impl->x = impl->buffer(ro, 3 * impl->nodeCount * impl->realSize, nullptr, "node positions");
-    impl->pos = impl->buffer(rw, 3 * n * impl->realSize, nullptr, "vertex positions");
-    impl->faces = impl->buffer(rw, binding.triangles.size() * impl->realSize, nullptr, "face vectors");
-    impl->out = impl->buffer(rw, 6 * n * sizeof(float), nullptr, "output vertex");
-
-    std::string buildOptions = "-cl-std=CL1.2 -DCOROFEM_SURFACE";
-    if (impl->doublePrecision) buildOptions += " -DCOROFEM_DOUBLE";
-    const detail::cl::ProgramBuild build =
-        detail::cl::buildProgram(*impl->ctx, "surface_update", surfaceProgramSource(), buildOptions);
-    impl->positions = impl->kernel(build.program, "surface_positions");
-    impl->faceVectors = impl->kernel(build.program, "surface_face_vectors");
-    impl->normals = impl->kernel(build.program, "surface_normals");
-
     Impl& k = *impl;
-    k.arg(k.positions.get(), 0, k.vertexCount);
-    k.arg(k.positions.get(), 1, k.nodes.get());
-    k.arg(k.positions.get(), 2, k.weights.get());
-    k.arg(k.positions.get(), 3, k.x.get());
-    k.arg(k.positions.get(), 4, k.pos.get());
-    k.arg(k.faceVectors.get(), 0, k.triangleCount);
-    k.arg(k.faceVectors.get(), 1, k.triangles.get());
-    k.arg(k.faceVectors.get(), 2, k.pos.get());
-    k.arg(k.faceVectors.get(), 3, k.faces.get());
-    k.arg(k.normals.get(), 0, k.vertexCount);
-    k.arg(k.normals.get(), 1, k.offsets.get());
-    k.arg(k.normals.get(), 2, k.incident.get());
-    k.arg(k.normals.get(), 3, k.faces.get());
-    k.arg(k.normals.get(), 4, k.pos.get());
-    k.arg(k.normals.get(), 5, k.out.get());
-    k.setOffset(nullptr);
+    try {
+      k.realSize = k.doublePrecision ? sizeof(double) : sizeof(float);
+      // Vectors of 16 floats or 8 doubles (one AVX-512 register, two AVX2 ones) in pass 2.
+      k.lanes = k.doublePrecision ? 8 : 16;
+      const bool cpu = !k.ctx->info().gpu;
+      k.positionsPerItem = cpu ? 16 : 1;
+      k.blocksPerItem = cpu ? 4 : 1;
+      k.positionsLocal = cpu ? 16 : 64;
+      k.normalsLocal = cpu ? 16 : 64;
+      // The kernels index with 32-bit integers: slot i of vertex v at i * S + v, 6 v floats per vertex.
+      const std::size_t stride = (n + 63) / 64 * 64;
+      if (6 * stride + 64 > std::numeric_limits<cl_uint>::max())
+        fail(ErrorCode::DeviceError, "the surface has ", n, " vertices, more than the device kernels' 32-bit "
+             "indices allow (", std::numeric_limits<cl_uint>::max() / 6 - 64, ")");
+      k.vertexCount = static_cast<cl_uint>(n);
+      k.stride = static_cast<cl_uint>(stride);
+      k.nodeCount = binding.tetNodeCount;
+      const RingLayout layout = ringLayout(binding, stride);
+      if (layout.slots * stride > std::numeric_limits<cl_uint>::max() ||
+          layout.overflowSequence.size() > std::numeric_limits<cl_uint>::max())
+        fail(ErrorCode::DeviceError, "the surface's one-rings (", layout.slots, " slots for ", n,
+             " vertices) exceed the device kernels' 32-bit indices");
+      k.overflowCount = static_cast<cl_uint>(layout.overflowVertices.size());
+
+      // Weights in the device precision; node indices as uint4; the ring as uint.
+      std::vector<unsigned char> w(k.realSize * 4 * n);
+      for (std::size_t i = 0; i < 4 * n; ++i) {
+        if (k.doublePrecision) std::memcpy(&w[8 * i], &binding.weights[i], 8);
+        else {
+          const float f = static_cast<float>(binding.weights[i]);
+          std::memcpy(&w[4 * i], &f, 4);
+        }
+      }
+      const cl_mem_flags ro = CL_MEM_READ_ONLY, rw = CL_MEM_READ_WRITE;
+      k.nodes = k.buffer(ro, 4 * n * sizeof(cl_uint), binding.nodes.data(), "vertex node indices");
+      k.weights = k.buffer(ro, w.size(), w.data(), "weights");
+      k.ring = k.buffer(ro, layout.ring.size() * sizeof(cl_uint), layout.ring.data(), "one-ring");
+      k.overflowVertices = k.buffer(ro, layout.overflowVertices.size() * sizeof(cl_uint),
+                                    layout.overflowVertices.data(), "long one-ring vertices");
+      k.overflowOffsets = k.buffer(ro, layout.overflowOffsets.size() * sizeof(cl_uint), layout.overflowOffsets.data(),
+                                   "long one-ring offsets");
+      k.overflowSequence = k.buffer(ro, layout.overflowSequence.size() * sizeof(cl_uint),
+                                    layout.overflowSequence.data(), "long one-rings");
+      k.x = k.buffer(ro, 3 * k.nodeCount * k.realSize, nullptr, "node positions");
+      // The scratch's padding (vertices n..S-1) is read by the last vector block: zero, once.
+      const std::vector<unsigned char> zeros(3 * stride * k.realSize, 0);
+      k.pos = k.buffer(rw, zeros.size(), zeros.data(), "vertex positions");
+      k.out = k.buffer(rw, 6 * n * sizeof(float), nullptr, "output vertex");
+
+      std::string buildOptions = "-cl-std=CL1.2 -DCOROFEM_SURFACE -DSURF_K=" + std::to_string(layout.slots) +
+                                 " -DSURF_W=" + std::to_string(k.lanes) +
+                                 " -DSURF_VPW=" + std::to_string(k.positionsPerItem) +
+                                 " -DSURF_BPW=" + std::to_string(k.blocksPerItem);
+      if (k.doublePrecision) buildOptions += " -DCOROFEM_DOUBLE";
+      const detail::cl::ProgramBuild build =
+          detail::cl::buildProgram(*k.ctx, "surface_update", surfaceProgramSource(), buildOptions);
+      k.positions = k.kernel(build.program, "surface_positions");
+      k.normals = k.kernel(build.program, "surface_normals");
+      k.overflow = k.kernel(build.program, "surface_normals_overflow");
+
+      k.arg(k.positions.get(), 0, k.vertexCount);
+      k.arg(k.positions.get(), 1, k.stride);
+      k.arg(k.positions.get(), 2, k.nodes.get());
+      k.arg(k.positions.get(), 3, k.weights.get());
+      k.arg(k.positions.get(), 4, k.x.get());
+      k.arg(k.positions.get(), 5, k.pos.get());
+      k.arg(k.normals.get(), 0, k.vertexCount);
+      k.arg(k.normals.get(), 1, k.stride);
+      k.arg(k.normals.get(), 2, k.ring.get());
+      k.arg(k.normals.get(), 3, k.pos.get());
+      k.arg(k.normals.get(), 4, k.out.get());
+      k.arg(k.overflow.get(), 0, k.overflowCount);
+      k.arg(k.overflow.get(), 1, k.overflowVertices.get());
+      k.arg(k.overflow.get(), 2, k.overflowOffsets.get());
+      k.arg(k.overflow.get(), 3, k.overflowSequence.get());
+      k.arg(k.overflow.get(), 4, k.stride);
+      k.arg(k.overflow.get(), 5, k.pos.get());
+      k.arg(k.overflow.get(), 6, k.out.get());
+      k.setOffset(nullptr);
+    } catch (const detail::Error& e) {
+      // Anything that fails from here on is the device's (memory, build, limits): one code, so that
+      // a caller can fall back to deformSurface on the host.
+      if (e.code() == ErrorCode::DeviceError) throw;
+      fail(ErrorCode::DeviceError, "DeviceSurface::create on device '", k.device(), "': ", e.what(),
+           "; update the surface on the host with deformSurface instead");
+    } catch (const std::bad_alloc&) {
+      fail(ErrorCode::DeviceError, "DeviceSurface::create on device '", k.device(), "': out of host memory while "
+           "preparing the surface's ", n, " vertices; update the surface on the host with deformSurface instead");
+    }
     return DeviceSurface(std::move(impl));
   });
 }
