@@ -358,11 +358,7 @@ std::vector<std::exception_ptr> BatchGroup::runStep(const std::vector<std::size_
 std::unique_ptr<BatchDevice> createBatchDeviceFor(const std::vector<const Problem*>& problems, const SolverDesc& solver,
                                                   const std::string& deviceSelector) {
   if (testFactory()) return testFactory()(problems, solver, deviceSelector);
-  // TODO(batchgroup): call createOpenCLBatchDevice(problems, solver, deviceSelector) once the
-  // OpenCL batch (helper batchcl) is in the library; until then no scene batches on a device.
-  (void)problems;
-  (void)solver;
-  fail(ErrorCode::NotCompiledIn, "the OpenCL batch device is not in this build yet (device ", deviceSelector, ")");
+  return createOpenCLBatchDevice(problems, solver, deviceSelector);
 }
 
 void setBatchDeviceFactoryForTesting(BatchDeviceFactory factory) { testFactory() = std::move(factory); }
