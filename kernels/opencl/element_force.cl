@@ -43,14 +43,6 @@ COROFEM_FN void load_element_block(uint e0, uint S, __global const uint* nodes, 
   b->volume = VLOAD(geom + kGeomVolume * S + e0);
 }
 
-/* The first element of this work-item and its segment; false when the work-item has nothing to do
- * (inactive segment: the whole work-group; past the segment's last element). */
-COROFEM_FN bool element_items(__global const uint* elemSeg, __global const uint* segInfo, uint* e0, uint* s) {
-  *s = element_segment(elemSeg);
-  *e0 = get_global_id(0) * COROFEM_VEC;
-  return seg_info(segInfo, *s, kSegActive) != 0u && *e0 < seg_info(segInfo, *s, kSegElemEnd);
-}
-
 /* sum_{i=1..3} (v_i - v_0) a_i^T for a node vector v (3N) at the elements' corners (9 entries,
  * row-major). */
 COROFEM_FN void corner_outer_sum(const ElemBlock* b, __global const real* v, realv* P) {

@@ -30,8 +30,8 @@ __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void gather_sum(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
                 __global const uint* restrict start, __global const uint* restrict entries,
                 __global const real* restrict elemOut, __global real* restrict out) {
-  const uint n = get_global_id(0), s = node_segment(nodeSeg, n);
-  if (seg_info(segInfo, s, kSegActive) == 0u || n >= seg_info(segInfo, s, kSegNodeEnd)) return;
+  uint n, s;
+  if (!node_item(nodeSeg, segInfo, &n, &s)) return;
   real acc[3];
   gather_node(n, start, entries, elemOut, acc);
   out[3 * n] = acc[0];

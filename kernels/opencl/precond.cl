@@ -20,8 +20,8 @@ __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void corner_gradients(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
                       __global const real* restrict geom, __global const real* restrict rotGrad,
                       __global real* restrict out) {
-  const uint s = element_segment(elemSeg), e0 = get_global_id(0) * COROFEM_VEC;
-  if (seg_info(segInfo, s, kSegActive) == 0u || e0 >= seg_info(segInfo, s, kSegElemEnd)) return;
+  uint e0, s;
+  if (!element_items(elemSeg, segInfo, &e0, &s)) return;
   realv a[9];
   for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
   store_corner_gradients(out, e0, a);
@@ -36,8 +36,8 @@ void node_stiffness_blocks(const uint S, __global const uint* restrict nodeSeg,
                            __global const uint* restrict start, __global const uint* restrict entries,
                            __global const real* restrict corners, __global const real* restrict geom,
                            __global real* restrict blocks) {
-  const uint n = get_global_id(0), s = node_segment(nodeSeg, n);
-  if (seg_info(segInfo, s, kSegActive) == 0u || n >= seg_info(segInfo, s, kSegNodeEnd)) return;
+  uint n, s;
+  if (!node_item(nodeSeg, segInfo, &n, &s)) return;
   const real lambda = seg_coef(segCoef, s, kCoefLambda), mu = seg_coef(segCoef, s, kCoefMu);
   real b[6] = {0, 0, 0, 0, 0, 0};
   const uint end = start[n + 1];
@@ -66,8 +66,8 @@ void precond_invert(__global const uint* restrict nodeSeg, __global const uint* 
                     __global const real* restrict segCoef, __global const real* restrict blocks,
                     __global const real* restrict mass, __global const real* restrict free,
                     __global real* restrict minv) {
-  const uint n = get_global_id(0), s = node_segment(nodeSeg, n);
-  if (seg_info(segInfo, s, kSegActive) == 0u || n >= seg_info(segInfo, s, kSegNodeEnd)) return;
+  uint n, s;
+  if (!node_item(nodeSeg, segInfo, &n, &s)) return;
   const real massCoef = seg_coef(segCoef, s, kCoefMass), stiffCoef = seg_coef(segCoef, s, kCoefStiff);
   const real f0 = free[3 * n], f1 = free[3 * n + 1], f2 = free[3 * n + 2];
   /* mass = NULL: no body on this device has mass (static problems) */

@@ -357,8 +357,8 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
                        __global const real* restrict pos, __global real* restrict rot,
                        __global real* restrict rotGrad, __global real* restrict quat,
                        __global real* restrict corners, const uint writeCorners) {
-  const uint s = element_segment(elemSeg), e0 = get_global_id(0) * COROFEM_VEC;
-  if (seg_info(segInfo, s, kSegActive) == 0u || e0 >= seg_info(segInfo, s, kSegElemEnd)) return;
+  uint e0, s;
+  if (!element_items(elemSeg, segInfo, &e0, &s)) return;
 #if COROFEM_VEC == 1
   const Mat3 F = element_deformation_gradient(e0, S, nodes, geom, pos);
   const Mat3 R = rotation_of(&F, quat, e0, S);

@@ -135,6 +135,13 @@ COROFEM_FN uint element_segment(__global const uint* elemSeg) { return elemSeg[g
 COROFEM_FN uint node_segment(__global const uint* nodeSeg, uint node) { return nodeSeg[node / COROFEM_WG]; }
 COROFEM_FN uint seg_info(__global const uint* segInfo, uint s, uint k) { return segInfo[kSegInfoCount * s + k]; }
 COROFEM_FN real seg_coef(__global const real* segCoef, uint s, uint k) { return segCoef[kSegCoefCount * s + k]; }
+/* The node of this work-item of a one-node-per-item kernel and its segment; false when there is
+ * nothing to do (inactive segment: the whole work-group; a padding node). */
+COROFEM_FN bool node_item(__global const uint* nodeSeg, __global const uint* segInfo, uint* n, uint* s) {
+  *n = get_global_id(0);
+  *s = node_segment(nodeSeg, *n);
+  return seg_info(segInfo, *s, kSegActive) != 0u && *n < seg_info(segInfo, *s, kSegNodeEnd);
+}
 #endif
 
 #endif /* COROFEM_LAYOUT_H */

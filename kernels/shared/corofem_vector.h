@@ -75,6 +75,15 @@ COROFEM_FN void store_corner(__global real* out, uint e0, int c, realv x, realv 
   VSTORE(z, base + 2 * COROFEM_VEC);
 }
 
+/* The first element of this work-item of an element kernel and its segment (corofem_layout.h);
+ * false when the work-item has nothing to do (inactive segment: the whole work-group; past the
+ * segment's last element). */
+COROFEM_FN bool element_items(__global const uint* elemSeg, __global const uint* segInfo, uint* e0, uint* s) {
+  *s = element_segment(elemSeg);
+  *e0 = get_global_id(0) * COROFEM_VEC;
+  return seg_info(segInfo, *s, kSegActive) != 0u && *e0 < seg_info(segInfo, *s, kSegElemEnd);
+}
+
 /* Sum of the lanes in a fixed order (deterministic). */
 COROFEM_FN real lane_sum(realv v) {
   real lanes[COROFEM_VEC];

@@ -79,6 +79,15 @@ inline detail::Problem makeProblem(const TetMesh& mesh, double E = 1e5, double n
   return p;
 }
 
+/// n entries uniform in [-1, 1], reproducible from the seed.
+inline Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
+  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
+  return v;
+}
+
 inline detail::Mat3 randomRotation(std::mt19937& rng) {
   std::normal_distribution<double> g(0.0, 1.0);
   Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));

@@ -64,13 +64,7 @@ class OpenCLBackendVsReference : public ::testing::TestWithParam<DeviceCase> {
   static double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
     return (a - b).norm() / std::max(b.norm(), 1e-300);
   }
-  static Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(-1.0, 1.0);
-    Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-    for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-    return v;
-  }
+  static Eigen::VectorXd randomVector(std::size_t n, unsigned seed) { return test::randomVector(n, seed); }
   static Eigen::VectorXd freeOnly(const detail::Problem& p, Eigen::VectorXd v) {
     for (std::size_t d = 0; d < p.dofCount(); ++d)
       if (p.constrained[d]) v[d] = 0;

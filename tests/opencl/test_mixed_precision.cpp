@@ -86,13 +86,7 @@ SolverDesc solverOf(Precision precision, double tolerance,
   return s;
 }
 
-Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-  return v;
-}
+using test::randomVector;
 
 Eigen::VectorXd freeOnly(const detail::Problem& p, Eigen::VectorXd v) {
   for (std::size_t d = 0; d < p.dofCount(); ++d)

@@ -27,6 +27,7 @@ namespace {
 using test::DeviceCase;
 using detail::BatchOp;
 using detail::BatchRequest;
+using test::randomVector;
 
 /// Five different bodies: different meshes (none a multiple of the work-group span), materials,
 /// densities, Rayleigh coefficients, constraints and one linear formulation.
@@ -88,14 +89,6 @@ Eigen::VectorXd deformed(const detail::Problem& p, double angle) {
   return x;
 }
 
-Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-  return v;
-}
-
 bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
 }
@@ -126,11 +119,13 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
     return detail::createOpenCLBatchDeviceOn(ptrs, s, context(), o);
   }
   std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> singlesOf(const std::vector<detail::Problem>& ps,
-                                                                        const SolverDesc& s) const {
+                                                                        const SolverDesc& s,
+                                                                        const detail::OpenCLOptions& o = {}) const {
     std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> out;
-    for (const auto& p : ps) out.push_back(detail::createOpenCLBackendOn(p, s, context()));
+    for (const auto& p : ps) out.push_back(detail::createOpenCLBackendOn(p, s, context(), o));
     return out;
   }
+  void everyRequestMatches(const detail::OpenCLOptions& o);
   /// Runs a round and expects no request to fail.
   static void runOk(detail::BatchDevice& device, std::vector<BatchRequest>& requests) {
     std::vector<BatchRequest*> round;
@@ -147,25 +142,20 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
   }
   static BatchRequest request(BatchOp op, std::size_t body, const Eigen::VectorXd* in = nullptr,
                               Eigen::VectorXd* out = nullptr, detail::SystemCoeffs c = {}) {
-    BatchRequest r;
-    r.op = op;
-    r.body = body;
-    r.in = in;
-    r.out = out;
-    r.coeffs = c;
-    return r;
+    return BatchRequest{op, body, c, in, out, {}, 0.0, nullptr};
   }
 };
 
-TEST_P(OpenCLBatch, EveryRequestMatchesOneBackendPerBodyAndTheReference) {
-  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+/// Every request type for every body (one round per type, then one round of mixed types),
+/// batch vs one single backend per body (same options) vs the reference.
+void OpenCLBatch::everyRequestMatches(const detail::OpenCLOptions& o) {
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t K = ps.size();
   const SolverDesc s = solver();
-  auto batch = batchOf(ps, s);
+  auto batch = batchOf(ps, s, o);
   ASSERT_EQ(batch->bodyCount(), K);
   EXPECT_EQ(batch->name(), "opencl");
-  auto singles = singlesOf(ps, s);
+  auto singles = singlesOf(ps, s, o);
   std::vector<std::unique_ptr<detail::Backend>> refs;
   std::vector<Eigen::VectorXd> x(K), v(K), b(K);
   for (std::size_t i = 0; i < K; ++i) {
@@ -268,6 +258,24 @@ TEST_P(OpenCLBatch, EveryRequestMatchesOneBackendPerBodyAndTheReference) {
     singles[0]->internalForces(fs0);
     EXPECT_TRUE(sameBits(f0, fs0));
   }
+}
+
+TEST_P(OpenCLBatch, EveryRequestMatchesOneBackendPerBodyAndTheReference) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  everyRequestMatches({});  // the device's default configuration (CPUs: 8 elements per item, chunks of 4 nodes)
+}
+
+TEST_P(OpenCLBatch, GpuKernelConfigurationMatchesToo) {
+  // One element per work-item, one node per PCG work-item and work-group tree reductions (the
+  // GPU configuration: partials per work-group, segments aligned to 32 nodes and 32 elements),
+  // here on whatever device is present.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  detail::OpenCLOptions o;
+  o.workGroupSize = 32;
+  o.vectorWidth = 1;
+  o.nodeChunk = 1;
+  o.treeReduce = 1;
+  everyRequestMatches(o);
 }
 
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {

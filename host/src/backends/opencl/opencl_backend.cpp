@@ -34,41 +34,15 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   std::string name() const override { return "opencl"; }
   std::string deviceName() const override { return engine_.deviceDescription(); }
 
-  void setPositions(const Eigen::VectorXd& x) override {
-    BatchRequest r;
-    r.op = BatchOp::SetPositions;
-    r.in = &x;
-    run(r);
-  }
-  void internalForces(Eigen::VectorXd& f) override {
-    BatchRequest r;
-    r.op = BatchOp::InternalForces;
-    r.out = &f;
-    run(r);
-  }
+  void setPositions(const Eigen::VectorXd& x) override { call(BatchOp::SetPositions, {}, &x); }
+  void internalForces(Eigen::VectorXd& f) override { call(BatchOp::InternalForces, {}, nullptr, &f); }
   void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override {
-    BatchRequest r;
-    r.op = BatchOp::Apply;
-    r.coeffs = c;
-    r.in = &p;
-    r.out = &y;
-    run(r);
+    call(BatchOp::Apply, c, &p, &y);
   }
   LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override {
-    BatchRequest r;
-    r.op = BatchOp::Solve;
-    r.coeffs = c;
-    r.in = &b;
-    r.out = &x;
-    run(r);
-    return r.stats;
+    return call(BatchOp::Solve, c, &b, &x).stats;
   }
-  double elasticEnergy() override {
-    BatchRequest r;
-    r.op = BatchOp::ElasticEnergy;
-    run(r);
-    return r.energy;
-  }
+  double elasticEnergy() override { return call(BatchOp::ElasticEnergy).energy; }
 
   std::vector<double> readRotations() override { return engine_.readRotations(0); }
   const std::string& buildOptions() const override { return engine_.buildOptions(); }
@@ -91,9 +65,12 @@ class OpenCLBackend final : public OpenCLBackendInternal {
 
  private:
   /// A round of one: the body's own Backend call; its failure is thrown here.
-  void run(BatchRequest& r) {
-    engine_.run(r.op, {&r});
+  BatchRequest call(BatchOp op, const SystemCoeffs& c = {}, const Eigen::VectorXd* in = nullptr,
+                    Eigen::VectorXd* out = nullptr) {
+    BatchRequest r{op, 0, c, in, out, {}, 0.0, nullptr};
+    engine_.run(op, {&r});
     if (r.error) std::rethrow_exception(r.error);
+    return r;
   }
 
   SegmentEngine engine_;

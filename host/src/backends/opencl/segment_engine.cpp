@@ -632,7 +632,7 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   }
 }
 
-void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project) {
+void SegmentEngine::elementProduct(const ClBuffer& v) {
   flushCoefficients();
   const cl_uint S = static_cast<cl_uint>(stride_);
   if (storedStiffness_)
@@ -641,21 +641,18 @@ void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project) 
   else
     launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_, v,
            elemOut_);
+}
+
+void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project) {
+  elementProduct(v);
   launch(kGatherProduct_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_,
          mass_, free_, cl_uint(project ? 1 : 0), v, y, partials_);
 }
 
 void SegmentEngine::enqueueElementProduct(const SystemCoeffs& c) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
-  flushCoefficients();
   setAllActive();
-  const cl_uint S = static_cast<cl_uint>(stride_);
-  if (storedStiffness_)
-    launch(kProductStored_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, stiffness_, rot_, p_,
-           elemOut_);
-  else
-    launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_, p_,
-           elemOut_);
+  elementProduct(p_);
 }
 
 void SegmentEngine::enqueueProduct(const SystemCoeffs& c) {

@@ -161,6 +161,7 @@ class SegmentEngine {
   void build(const SolverDesc& solver, const OpenCLOptions& options);
   void allocate(const OpenCLOptions& options);
   void refreshBlocks(bool cornersWritten);
+  void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
   void product(const ClBuffer& v, const ClBuffer& y, bool project);
   void pcgSetup();
   void pcgIteration();
