@@ -278,6 +278,15 @@ TEST_P(OpenCLBatch, GpuKernelConfigurationMatchesToo) {
   everyRequestMatches(o);
 }
 
+TEST_P(OpenCLBatch, TilesOfOneBodyMatchToo) {
+  // CPUs run the requesting bodies in tiles that fit the cache; a 1-byte budget makes every body
+  // its own tile (one launch sequence per body, per-tile transfers): the same answers.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  detail::OpenCLOptions o;
+  o.tileBytes = 1;
+  everyRequestMatches(o);
+}
+
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {
   // An easy system (mass-dominated: cond ~ 1) and a hard one (static: cond ~ 1e3) of the same beam
   // in one round: the easy body stops after fewer iterations while the hard one goes on, and each

@@ -8,7 +8,7 @@
 // (C = alpha M + beta K^R folds into the two coefficients of M and K^R), formulation (the linear one
 // never runs compute_rotations).
 // Tuning overrides for experiments (not for production): COROFEM_OPENCL_WG, COROFEM_OPENCL_VEC,
-// COROFEM_OPENCL_CHUNK, COROFEM_OPENCL_TREE, COROFEM_OPENCL_OPTIONS (extra compiler options),
+// COROFEM_OPENCL_CHUNK, COROFEM_OPENCL_TREE, COROFEM_OPENCL_TILE_BYTES, COROFEM_OPENCL_OPTIONS (extra compiler options),
 // COROFEM_OPENCL_PROFILE=1 (per-kernel device times printed when the engine is destroyed).
 #ifdef COROFEM_WITH_OPENCL
 
@@ -135,6 +135,18 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
   if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
     treeReduce_ = std::string(env) != "0";  // tuning experiments
+  // Tiles of bodies per launch sequence (CPUs only): a quarter of the device's global memory cache
+  // (the L3 on PoCL), measured on 100 bodies of 2160 elements (2-core EPYC, 32 MiB L3): tiles of
+  // ~20 bodies (~7 MB) solved 1.5x faster per body than one tile of 100 (~35 MB, streamed from
+  // memory every PCG iteration), with 5x the launches (still 20x fewer than one backend per body).
+  if (!ctx_->info().gpu) {
+    cl_ulong cache = 0;
+    clGetDeviceInfo(ctx_->device(), CL_DEVICE_GLOBAL_MEM_CACHE_SIZE, sizeof(cache), &cache, nullptr);
+    tileBytes_ = static_cast<std::size_t>(cache / 4);
+  }
+  if (options.tileBytes >= 0) tileBytes_ = static_cast<std::size_t>(options.tileBytes);
+  if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
+    tileBytes_ = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));  // tuning experiments (0: one tile)
 
   // -- segments: every body padded to whole work-groups of every kernel (corofem_layout.h)
   const std::size_t elemAlign = std::max<std::size_t>(wg_ * vec_, kStrideAlign);
@@ -553,13 +565,40 @@ std::vector<BatchRequest*> SegmentEngine::checked(const std::vector<BatchRequest
 }
 
 void SegmentEngine::run(BatchOp op, const std::vector<BatchRequest*>& requests) {
-  switch (op) {
-    case BatchOp::SetPositions: setPositions(checked(requests, "the positions")); break;
-    case BatchOp::InternalForces: internalForces(checked(requests, "the forces")); break;
-    case BatchOp::Apply: apply(checked(requests, "the vector p of apply")); break;
-    case BatchOp::Solve: solve(checked(requests, "the right-hand side b")); break;
-    case BatchOp::ElasticEnergy: elasticEnergy(checked(requests, "the energy")); break;
+  static const char* const what[] = {"the positions", "the forces", "the vector p of apply",
+                                     "the right-hand side b", "the energy"};
+  std::vector<BatchRequest*> ok = checked(requests, what[static_cast<int>(op)]);
+  std::sort(ok.begin(), ok.end(), [](const BatchRequest* a, const BatchRequest* b) { return a->body < b->body; });
+  // Tiles of consecutive bodies whose working set fits the device cache (CPUs): a whole PCG solve
+  // of a tile then runs on cached data, and an element pass's output is still cached for its
+  // gather. One tile on GPUs (tileBytes_ = 0).
+  std::vector<BatchRequest*> tile;
+  std::size_t bytes = 0;
+  auto runTile = [&]() {
+    switch (op) {
+      case BatchOp::SetPositions: setPositions(tile); break;
+      case BatchOp::InternalForces: internalForces(tile); break;
+      case BatchOp::Apply: apply(tile); break;
+      case BatchOp::Solve: solve(tile); break;
+      case BatchOp::ElasticEnergy: elasticEnergy(tile); break;
+    }
+    tile.clear();
+    bytes = 0;
+  };
+  for (BatchRequest* r : ok) {
+    const std::size_t w = workingSet(segs_[r->body]);
+    if (!tile.empty() && tileBytes_ > 0 && bytes + w > tileBytes_) runTile();
+    tile.push_back(r);
+    bytes += w;
   }
+  if (!tile.empty()) runTile();
+}
+
+std::size_t SegmentEngine::workingSet(const Segment& sg) const {
+  // Per element: 4 corners, 8 gather entries' worth of CSR, geometry, a_i and the output 12-vector;
+  // per node: CSR start, 8 node vectors (x b r z p q, free, mass) of 3, blocks and inverse.
+  return sg.elemSpan * (8 * sizeof(cl_uint) + (kGeomComponents + kRotGradComponents + kElemOutComponents) * realSize_) +
+         sg.nodeSpan * (sizeof(cl_uint) + (8 * 3 + kNodeBlockComponents + 9) * realSize_);
 }
 
 void SegmentEngine::refreshBlocks(bool cornersWritten) {

@@ -7,7 +7,8 @@
 // answer does not depend on the other segments (its sums run over its own partials in the same
 // order), so a batched body gets the bits it would get alone.
 //
-// Per call (requests of one op, at most one per segment; only their segments are active):
+// Per call (requests of one op, at most one per segment; only their segments are active; on CPUs
+// the requesting bodies run in tiles whose working set fits the cache, each tile as below):
 //   SetPositions    one write of the packed relative positions; compute_rotations (+ blocks)
 //   InternalForces  element_forces + gather_sum; one read
 //   Apply           one write of p; element_product + gather_product; one read
@@ -170,6 +171,8 @@ class SegmentEngine {
   void apply(const std::vector<BatchRequest*>& requests);
   void solve(const std::vector<BatchRequest*>& requests);
   void elasticEnergy(const std::vector<BatchRequest*>& requests);
+  /// Device bytes a PCG iteration of the segment touches (the tile budget's unit).
+  std::size_t workingSet(const Segment& sg) const;
   /// Requests whose vector has 3N entries (the others get an Internal error).
   std::vector<BatchRequest*> checked(const std::vector<BatchRequest*>& requests, const char* what) const;
 
@@ -190,6 +193,7 @@ class SegmentEngine {
   std::size_t vec_ = 1;                  ///< elements per work-item in the element kernels
   std::size_t chunk_ = 1;                ///< nodes per work-item in the PCG node kernels
   bool treeReduce_ = false;              ///< partial sums per work-group (GPUs) or per work-item
+  std::size_t tileBytes_ = 0;            ///< working set of the bodies run together (0: all at once)
   std::vector<Segment> segs_;
   std::size_t stride_ = 0;               ///< S: all segments' padded elements
   std::size_t nodeTotal_ = 0;            ///< all segments' padded nodes
