@@ -4,6 +4,7 @@
 #include "util/error.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <condition_variable>
 #include <mutex>
 #include <thread>
@@ -83,16 +84,20 @@ struct BatchGroup::Shared {
   BatchGroupStats stats;
 
   /// The device work of one round, outside the lock. A throw from run() fails every request.
-  void execute(std::vector<BatchRequest*>& round) {
+  /// Returns the seconds spent in it.
+  double execute(std::vector<BatchRequest*>& round) {
+    const auto t0 = std::chrono::steady_clock::now();
     try {
       device->run(round);
     } catch (...) {
       const std::exception_ptr e = std::current_exception();
       for (BatchRequest* r : round) r->error = e;
     }
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
 
-  void count(std::size_t requests) {
+  void count(std::size_t requests, double seconds) {
+    stats.deviceSeconds += seconds;
     ++stats.rounds;
     stats.requests += static_cast<long long>(requests);
     stats.largestRound = std::max(stats.largestRound, requests);
@@ -117,9 +122,9 @@ struct BatchGroup::Shared {
       roundBusy = true;
       lk.unlock();
       std::vector<BatchRequest*> round{&req};
-      execute(round);
+      const double seconds = execute(round);
       lk.lock();
-      count(1);
+      count(1, seconds);
       roundBusy = false;
       cv.notify_all();
     } else {
@@ -143,9 +148,9 @@ struct BatchGroup::Shared {
           waiting -= taken.size();
           roundBusy = true;
           lk.unlock();
-          execute(round);
+          const double seconds = execute(round);
           lk.lock();
-          count(round.size());
+          count(round.size(), seconds);
           // Answered bodies are Running again before anyone can start the next round, so that
           // round waits for their next calls.
           for (std::size_t i : taken) {

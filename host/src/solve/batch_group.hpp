@@ -35,6 +35,7 @@ struct BatchGroupStats {
   long long rounds = 0;         ///< rounds run (batched rounds and rounds of one)
   long long requests = 0;       ///< requests answered
   std::size_t largestRound = 0; ///< most requests in one round
+  double deviceSeconds = 0.0;   ///< wall time inside BatchDevice::run (the rest of a step is the drivers' host work and the rendezvous)
 };
 
 class BatchGroup {

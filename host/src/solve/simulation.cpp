@@ -228,7 +228,7 @@ struct Simulation::Impl {
   }
 
   /// The groups: [{"device", "bodies", "active_bodies", "rounds", "requests", "largest_round",
-  /// "allocated_bytes"}], and [{"device", "bodies", "reason"}] for bodies left unbatched.
+  /// "device_seconds", "allocated_bytes"}], and [{"device", "bodies", "reason"}] for bodies left unbatched.
   nlohmann::json batchesJson() const {
     nlohmann::json out = nlohmann::json::array();
     for (const Batch& g : batches) {
@@ -240,7 +240,8 @@ struct Simulation::Impl {
       const detail::BatchGroupStats st = g.group->stats();
       out.push_back({{"device", g.candidate}, {"backend", g.group->name()}, {"bodies", names},
                      {"active_bodies", active}, {"rounds", st.rounds}, {"requests", st.requests},
-                     {"largest_round", st.largestRound}, {"allocated_bytes", g.group->allocatedBytes()}});
+                     {"largest_round", st.largestRound}, {"device_seconds", st.deviceSeconds},
+                     {"allocated_bytes", g.group->allocatedBytes()}});
     }
     return out;
   }

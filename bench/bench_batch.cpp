@@ -1,0 +1,196 @@
+// Many bodies, one set of launches (issue 5): 100 bodies of 2,000 elements each, stepped
+//   batched    in one Simulation whose bodies share the device's buffers and launches
+//              (solve/batch_group.hpp, the default);
+//   separate   as 100 separate Simulations of one body each (what an application without batching
+//              does), stepped one after the other;
+//   unbatched  in one Simulation with "backend": {"batch": false} (100 backends, stepped in turn).
+// All on one OpenCL device (default: the first GPU, else the first device, i.e. the PoCL CPU
+// device here; COROFEM_BENCH_DEVICE names another), float precision, dynamic (Newmark, one
+// Newton iteration, the paper's linearised step), PCG to 1e-4 relative, diagonal preconditioner.
+// The bodies are cantilevers (box mesh 20 x 4 x 5 cells, 5 tets per cell = 2,000 elements, 630
+// nodes), clamped at x = 0 under gravity, with 100 different materials (Young's modulus 2e5 to
+// 2e6 Pa, Poisson 0.25 to 0.45, density 800 to 1200, every third with Rayleigh damping), so their
+// PCG iteration counts differ: a converged body stops costing work in the batch.
+//
+// A second variant gives every body the same material (same PCG counts), which separates the
+// saving of shared launches from the cost of iterating until the slowest body has converged.
+//
+// One benchmark iteration = kStepsPerSample steps of the whole set with each of the three, taken
+// alternately so that all three go through the same physical states; the counters are set-steps
+// per second (one set-step = every body advanced one step) and the ratios. Each configuration is
+// created and warmed up (one step) once, outside the timing.
+//
+//   ./build/bench/bench_batch --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
+//       --benchmark_out=bench_batch.json --benchmark_out_format=json
+#include <corofem/corofem.hpp>
+
+#include <benchmark/benchmark.h>
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <cstdlib>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace corofem;
+using Clock = std::chrono::steady_clock;
+
+/// Bodies in the set (COROFEM_BENCH_BODIES overrides the 100 of the issue, for exploring scaling).
+const int kBodies = [] {
+  const char* n = std::getenv("COROFEM_BENCH_BODIES");
+  return n && *n ? std::max(2, std::atoi(n)) : 100;
+}();
+constexpr int kStepsPerSample = 3;
+
+/// Body i of the set; `varied` false gives every body the same material (body 0's stiffness at
+/// the middle of the range), which isolates the launch sharing from the spread of PCG counts.
+BodyDesc body(int i, bool varied) {
+  BodyDesc b;
+  b.name = "body" + std::to_string(i);
+  BoxSpec box;
+  box.max = {1.0, 0.2, 0.25};
+  box.cells = {20, 4, 5};
+  box.tetsPerCell = 5;
+  b.mesh.box = box;
+  b.mesh.translate = {0.0, 0.0, 0.5 * i};
+  const double f = varied ? static_cast<double>(i) / (kBodies - 1) : 0.5;  // 0 .. 1 over the bodies
+  b.material.youngsModulus = 2e5 * std::pow(10.0, f);        // 2e5 .. 2e6 Pa
+  b.material.poissonRatio = varied ? 0.25 + 0.2 * static_cast<double>((i * 37) % kBodies) / kBodies : 0.35;
+  b.material.density = varied ? 800 + 400 * static_cast<double>((i * 61) % kBodies) / kBodies : 1000;
+  b.material.rayleighMass = varied && i % 3 == 0 ? 2.0 : 0.0;
+  NodeSetDesc clamp;
+  clamp.kind = NodeSetDesc::Kind::Plane;
+  clamp.planePoint = {0, 0, 0};
+  clamp.planeNormal = {1, 0, 0};
+  clamp.planeTolerance = 1e-9;
+  b.fixed.push_back(clamp);
+  LoadDesc g;
+  g.kind = LoadDesc::Kind::Gravity;
+  g.vector = {0, -9.81, 0};
+  b.loads.push_back(g);
+  return b;
+}
+
+Scene scene(const std::vector<BodyDesc>& bodies, bool batch) {
+  Scene s;
+  s.name = "bench_batch";
+  s.bodies = bodies;
+  s.analysis.kind = AnalysisDesc::Kind::Dynamic;
+  s.analysis.dynamics.timeStep = 1.0 / 60.0;
+  s.analysis.dynamics.steps = 1000000;  // never finished within a run
+  s.analysis.dynamics.newtonIterations = 1;
+  s.solver.precision = Precision::Float;
+  s.solver.tolerance = 1e-4;
+  s.solver.maxIterations = 200;
+  s.solver.preconditioner = PreconditionerKind::Diagonal;
+  s.backend.kind = BackendKind::OpenCL;
+  if (const char* d = std::getenv("COROFEM_BENCH_DEVICE"); d && *d) s.backend.device = d;
+  s.backend.batch = batch;
+  return s;
+}
+
+Simulation make(const Scene& s) {
+  Result<Simulation> sim = Simulation::create(s);
+  if (!sim) {
+    std::cerr << "bench_batch: " << sim.message() << std::endl;
+    std::exit(1);
+  }
+  Simulation out = std::move(sim.value());
+  if (!out.step()) std::exit(1);  // warm-up: first launches, lazy set-up
+  return out;
+}
+
+struct Setups {
+  Simulation batched, unbatched;
+  std::vector<Simulation> separate;
+};
+
+Setups& setups(bool varied) {
+  static std::unique_ptr<Setups> made[2];
+  std::unique_ptr<Setups>& s = made[varied ? 1 : 0];
+  if (!s) {
+    std::vector<BodyDesc> bodies;
+    for (int i = 0; i < kBodies; ++i) bodies.push_back(body(i, varied));
+    Simulation batched = make(scene(bodies, true));
+    Simulation unbatched = make(scene(bodies, false));
+    std::vector<Simulation> separate;
+    for (const BodyDesc& b : bodies) separate.push_back(make(scene({b}, true)));
+    s.reset(new Setups{std::move(batched), std::move(unbatched), std::move(separate)});
+    const nlohmann::json sched = nlohmann::json::parse(s->batched.schedulerReport());
+    std::cerr << "bench_batch: " << kBodies << " bodies of " << s->batched.restMesh(0).tetCount() << " elements ("
+              << (varied ? "varied" : "uniform") << " materials) on " << s->batched.deviceName() << "; batches: "
+              << sched["batches"].size() << " (" << (sched["batches"].empty() ? 0 : sched["batches"][0]["bodies"].size())
+              << " bodies in the first)" << (sched["unbatched"].empty() ? "" : "; unbatched: " + sched["unbatched"].dump())
+              << std::endl;
+    if (sched["batches"].size() != 1) std::exit(1);
+  }
+  return *s;
+}
+
+double secondsOf(const std::function<void()>& fn) {
+  const auto t0 = Clock::now();
+  fn();
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+int stepOrDie(Simulation& sim, long long& pcg) {
+  StepReport r;
+  const Status st = sim.step(&r);
+  if (!st) {
+    std::cerr << "bench_batch: step failed: " << st.message() << std::endl;
+    std::exit(1);
+  }
+  pcg += r.linearIterations;
+  return r.linearIterations;
+}
+
+void BM_HundredBodies(benchmark::State& state) {
+  Setups& s = setups(state.range(0) != 0);
+  const auto deviceSeconds = [&] {
+    return nlohmann::json::parse(s.batched.schedulerReport())["batches"][0]["device_seconds"].get<double>();
+  };
+  const double device0 = deviceSeconds();
+  double tBatched = 0, tSeparate = 0, tUnbatched = 0;
+  long long pcgBatched = 0, pcgSeparate = 0, pcgUnbatched = 0, pcgSlowest = 0;
+  for (auto _ : state) {
+    for (int k = 0; k < kStepsPerSample; ++k) {
+      tBatched += secondsOf([&] { stepOrDie(s.batched, pcgBatched); });
+      int slowest = 0;
+      tSeparate += secondsOf([&] {
+        for (Simulation& sim : s.separate) slowest = std::max(slowest, stepOrDie(sim, pcgSeparate));
+      });
+      pcgSlowest += slowest;
+      tUnbatched += secondsOf([&] { stepOrDie(s.unbatched, pcgUnbatched); });
+    }
+  }
+  const double steps = static_cast<double>(state.iterations()) * kStepsPerSample;
+  state.counters["batched_set_steps_per_s"] = steps / tBatched;
+  state.counters["separate_set_steps_per_s"] = steps / tSeparate;
+  state.counters["unbatched_scene_set_steps_per_s"] = steps / tUnbatched;
+  state.counters["ratio_batched_vs_separate"] = tSeparate / tBatched;
+  state.counters["ratio_batched_vs_unbatched_scene"] = tUnbatched / tBatched;
+  // PCG iterations per body-step of each (the same work, or the runs drifted apart).
+  state.counters["pcg_per_body_step_batched"] = pcgBatched / (steps * kBodies);
+  state.counters["pcg_per_body_step_separate"] = pcgSeparate / (steps * kBodies);
+  state.counters["pcg_per_body_step_unbatched"] = pcgUnbatched / (steps * kBodies);
+  // The batch's PCG runs until its slowest body converges (converged bodies' work-groups return
+  // at once, but the launches go on): the slowest body's count per step.
+  state.counters["pcg_slowest_body_step"] = pcgSlowest / steps;
+  state.counters["body_steps_per_s_batched"] = steps * kBodies / tBatched;
+  // Share of the batched step spent in the device's rounds (the rest: host driver work, rendezvous).
+  state.counters["batched_device_fraction"] = (deviceSeconds() - device0) / tBatched;
+}
+// Arg: 1 = varied materials (the issue's benchmark), 0 = one material for all.
+BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+
+}  // namespace
+
+BENCHMARK_MAIN();
