@@ -97,15 +97,15 @@ void pcg_update(__global const uint* restrict nodeSeg, __global const uint* rest
   COROFEM_PARTIAL_STORE(rz, rr, (sum_real)0, partials);
 }
 
-/* p = z + beta p */
+/* p = z + beta p, COROFEM_CHUNK nodes per work-item like the other PCG node kernels (one dof per
+ * work-item made this trivial kernel cost as much as pcg_update on PoCL). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_direction(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
                    __global const sum_real* restrict scalars, __global const real* restrict z,
                    __global real* restrict p) {
-  const uint d = get_global_id(0), s = node_segment(nodeSeg, d / 3);
-  if (seg_info(segInfo, s, kSegActive) == 0u || d >= 3 * seg_info(segInfo, s, kSegNodeEnd)) return;
+  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
   const real beta = (real)scalars[kScalarCount * s + kScalarBeta];
-  p[d] = z[d] + beta * p[d];
+  for (uint d = 3 * first; d < 3 * last; ++d) p[d] = z[d] + beta * p[d];
 }
 
 /* Second stage of the dot products: work-group s sums segment s's partial triples in a fixed order

@@ -408,7 +408,6 @@ std::pair<std::size_t, std::size_t> SegmentEngine::spanItems(Span span, std::siz
     case Span::Elements: return {a.elemBegin / vec_, (b.elemBegin + b.elemSpan - a.elemBegin) / vec_};
     case Span::Nodes: return {a.nodeBegin, nodes};
     case Span::NodeChunks: return {a.nodeBegin / chunk_, nodes / chunk_};
-    case Span::Dofs: return {3 * a.nodeBegin, 3 * nodes};
     case Span::Segments: break;
   }
   return {lo * wg_, (hi - lo) * wg_};
@@ -736,7 +735,7 @@ void SegmentEngine::pcgIteration() {
   launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceAlpha));
   launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, p_, q_, minv_, x_, r_, z_, partials_);
   launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceBeta));
-  launch(kPcgDirection_, Span::Dofs, nodeSeg_, segInfoBuf_, scalars_, z_, p_);
+  launch(kPcgDirection_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, z_, p_);
 }
 
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {

@@ -122,8 +122,8 @@ class SegmentEngine {
     std::size_t dofs() const { return 3 * nodes; }
   };
   /// What a kernel's work-items cover: elements (VEC per item), nodes, node chunks (CHUNK per
-  /// item), dofs, or segments (one work-group each, reduce_finish).
-  enum class Span { Elements, Nodes, NodeChunks, Dofs, Segments };
+  /// item), or segments (one work-group each, reduce_finish).
+  enum class Span { Elements, Nodes, NodeChunks, Segments };
 
   // -- launching
   void setArg(cl_kernel k, cl_uint i, cl_mem m);
