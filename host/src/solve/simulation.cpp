@@ -392,14 +392,25 @@ Status Simulation::step(StepReport* report) {
     std::vector<detail::BodyStepStats> stats(n);
     std::vector<char> completed(n, 0);
     std::vector<std::exception_ptr> errors(n);
-    for (Impl::Batch& g : s.batches) {
-      std::vector<std::size_t> slots(g.bodies.size());
-      for (std::size_t k = 0; k < slots.size(); ++k) slots[k] = k;
-      g.group->startStep(slots, [&s, &g, &stats, &completed, index, count](std::size_t k) {
-        const std::size_t i = g.bodies[k];
-        stats[i] = s.stepBody(s.bodies[i], index, count);
-        completed[i] = 1;
-      });
+    std::size_t started = 0;  // groups whose workers run now (they use this frame's vectors)
+    try {
+      for (Impl::Batch& g : s.batches) {
+        std::vector<std::size_t> slots(g.bodies.size());
+        for (std::size_t k = 0; k < slots.size(); ++k) slots[k] = k;
+        g.group->startStep(slots, [&s, &g, &stats, &completed, index, count](std::size_t k) {
+          const std::size_t i = g.bodies[k];
+          stats[i] = s.stepBody(s.bodies[i], index, count);
+          completed[i] = 1;
+        });
+        ++started;
+      }
+    } catch (...) {
+      // A group that could not start (no thread): wait for those that did, undo them, report it.
+      for (std::size_t k = 0; k < started; ++k) s.batches[k].group->finishStep();
+      for (std::size_t b = 0; b < n; ++b)
+        if (completed[b]) s.bodies[b].solver->rollback();
+      for (std::size_t b = 0; b < n; ++b) s.bodies[b].sleep = sleepBefore[b];
+      throw;
     }
     for (std::size_t i = 0; i < n; ++i) {
       if (s.bodies[i].batch >= 0) continue;
