@@ -14,6 +14,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 
 namespace corofem::test {
@@ -50,12 +51,23 @@ const detail::Candidate& batchCandidate() {
   return c;
 }
 
+/// The number after `prefix` in a body name ("flaky12" -> 12), or 0 when the name lacks it.
+int suffix(const std::string& name, const std::string& prefix) {
+  if (name.rfind(prefix, 0) != 0 || name.size() == prefix.size()) return 0;
+  return std::atoi(name.c_str() + prefix.size());
+}
+
 /// The backend every body gets, batched or not: the reference backend; body "flaky" fails its
-/// 7th solve; body `faulty` (when named) fails like a device at its 3rd solve.
-std::unique_ptr<detail::Backend> bodyBackend(const detail::Problem& p, const SolverDesc& s, const std::string& faulty) {
+/// 7th solve ("flakyN": its N-th); in the batch, body `faulty` (when named) fails like a device at
+/// its 3rd solve, and "faultyN" at its N-th.
+std::unique_ptr<detail::Backend> bodyBackend(const detail::Problem& p, const SolverDesc& s, const std::string& faulty,
+                                             bool inBatch = false) {
   auto b = detail::createReferenceBackend(p, s);
   if (p.name == "flaky") return std::make_unique<FlakyBackend>(std::move(b), 7);
+  if (const int n = suffix(p.name, "flaky")) return std::make_unique<FlakyBackend>(std::move(b), n);
   if (!faulty.empty() && p.name == faulty) return detail::injectFaults(std::move(b), {detail::FaultKind::Launch, 3});
+  if (const int n = suffix(p.name, "faulty"); n && inBatch)
+    return detail::injectFaults(std::move(b), {detail::FaultKind::Launch, n});
   return b;
 }
 
@@ -100,7 +112,7 @@ class LoopBatchScope {
       EXPECT_EQ(selector, "7");
       if (made) ++*made;
       std::vector<std::unique_ptr<detail::Backend>> backends;
-      for (const detail::Problem* p : problems) backends.push_back(bodyBackend(*p, s, faulty));
+      for (const detail::Problem* p : problems) backends.push_back(bodyBackend(*p, s, faulty, true));
       std::unique_ptr<detail::BatchDevice> d = detail::createLoopBatchDevice(std::move(backends));
       if (lostAt > 0) d = std::make_unique<LosingDevice>(std::move(d), lostAt);
       return d;
@@ -395,6 +407,45 @@ TEST(BatchSimulation, SceneKeyBackendBatch) {
   Result<Scene> bad = parseScene(base + R"({"batch": "no"}})", ".");
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.message().find("backend.batch"), std::string::npos) << bad.message();
+}
+
+TEST(BatchSimulation, StressManyBodiesFailingSleepingAndFailingOver) {
+  // 40 small bodies of 8 sizes and 40 materials, 30 steps, sleep on: every fifth fails one step
+  // (at a different solve each), every seventh of the others loses its device in the batch at a
+  // different solve and fails over, three are unloaded and fall asleep. Step by step bit-identical
+  // to the same scene unbatched; the failed steps are repeated by the loop in run(). Several
+  // bodies fail steps here, so this also holds the unbatched path to the batched one's rule: every
+  // body takes every step attempt, the failing step included (else the flaky bodies' solve counts,
+  // and so their failures, would drift apart between the two runs).
+  Scene scene = dynamicScene(boxBeam({4, 1, 1}), 30);
+  scene.bodies.clear();
+  std::size_t faultyCount = 0;
+  for (int i = 0; i < 40; ++i) {
+    BodyDesc b = boxBeam({3 + i % 8, 1 + i % 2, 1});
+    const bool flaky = i % 5 == 1, faulty = !flaky && i % 7 == 2;
+    b.name = flaky ? "flaky" + std::to_string(3 + 2 * i) : faulty ? "faulty" + std::to_string(2 + i) : "b" + std::to_string(i);
+    faultyCount += faulty ? 1 : 0;
+    b.material.youngsModulus = 5e5 * (1 + i % 9);
+    b.material.density = 700 + 17 * i;
+    b.material.rayleighMass = i % 4 == 0 ? 1.5 : 0.0;
+    b.mesh.translate = {0, 0, 0.3 * i};
+    if (i % 13 == 3) b.loads.clear();  // at rest: falls asleep
+    scene.bodies.push_back(b);
+  }
+  ASSERT_EQ(faultyCount, 5u);
+  scene.analysis.dynamics.sleep.enabled = true;
+  scene.analysis.dynamics.sleep.steps = 2;
+  const Trace alone = unbatched(scene);
+  HookScope scope(hooks());
+  LoopBatchScope batch;
+  const Trace batched = run(scene);
+  expectSameRun(batched, alone);
+  int failures = 0;
+  for (const std::string& st : batched.statuses) failures += st.empty() ? 0 : 1;
+  EXPECT_GE(failures, 4) << "the flaky bodies were meant to fail steps";
+  EXPECT_EQ(batched.scheduler["fallbacks"].size(), faultyCount) << batched.scheduler["fallbacks"].dump(1);
+  EXPECT_EQ(batched.scheduler["batches"][0]["active_bodies"].size(), 40u - faultyCount);
+  EXPECT_EQ(batched.scheduler["batches"][0]["largest_round"], 40);
 }
 
 // ------------------------------------------------------------------ OpenCL

@@ -418,8 +418,11 @@ Status Simulation::step(StepReport* report) {
         stats[i] = s.stepBody(s.bodies[i], index, count);
         completed[i] = 1;
       } catch (...) {
+        // The other bodies still take their step (and go back with the scene below), as the
+        // batched bodies do: every body's backend then sees the same sequence of calls whether it
+        // is batched or not, so stateful backends (the quaternion method's warm start) give the
+        // same bits either way.
         errors[i] = std::current_exception();
-        break;  // the remaining unbatched bodies need not step: the scene goes back anyway
       }
     }
     for (Impl::Batch& g : s.batches) {
