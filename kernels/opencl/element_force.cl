@@ -30,15 +30,16 @@
 /* The VEC elements e0 .. e0 + VEC - 1: corner node indices, rotated gradients a_1..a_3
  * (a[3 (i-1) + k]) and volumes. */
 typedef struct {
-  uint node[4][COROFEM_VEC];
+  uintv node[4];
   realv a[9];
   realv volume;
 } ElemBlock;
 
 COROFEM_FN void load_element_block(uint e0, uint S, __global const uint* nodes, __global const real* geom,
                                __global const real* rotGrad, ElemBlock* b) {
-  for (int c = 0; c < 4; ++c)
-    for (int l = 0; l < COROFEM_VEC; ++l) b->node[c][l] = nodes[c * S + e0 + l];
+  #pragma unroll
+  for (int c = 0; c < 4; ++c) b->node[c] = VLOAD_INDEX(nodes + c * S + e0);
+  #pragma unroll
   for (int k = 0; k < 9; ++k) b->a[k] = VLOAD(rotGrad + k * S + e0);
   b->volume = VLOAD(geom + kGeomVolume * S + e0);
 }
@@ -47,11 +48,16 @@ COROFEM_FN void load_element_block(uint e0, uint S, __global const uint* nodes, 
  * row-major). */
 COROFEM_FN void corner_outer_sum(const ElemBlock* b, __global const real* v, realv* P) {
   realv v0[3];
+  #pragma unroll
   for (int j = 0; j < 3; ++j) v0[j] = gather_node_component(v, b->node[0], j);
+  #pragma unroll
   for (int k = 0; k < 9; ++k) P[k] = (realv)0;
+  #pragma unroll
   for (int i = 1; i < 4; ++i) {
+    #pragma unroll
     for (int j = 0; j < 3; ++j) {
       const realv d = gather_node_component(v, b->node[i], j) - v0[j];
+      #pragma unroll
       for (int k = 0; k < 3; ++k) P[3 * j + k] += d * b->a[3 * (i - 1) + k];
     }
   }
@@ -72,6 +78,7 @@ COROFEM_FN realv write_stress_times_gradients(uint e0, uint S, const realv* P, r
   const realv sxx = V * (lt + m2 * exx), syy = V * (lt + m2 * eyy), szz = V * (lt + m2 * ezz);
   const realv sxy = V * (m2 * exy), sxz = V * (m2 * exz), syz = V * (m2 * eyz);
   realv y0x = (realv)0, y0y = (realv)0, y0z = (realv)0;
+  #pragma unroll
   for (int i = 0; i < 3; ++i) {
     const realv ax = b->a[3 * i], ay = b->a[3 * i + 1], az = b->a[3 * i + 2];
     const realv yx = sxx * ax + sxy * ay + sxz * az;
@@ -161,28 +168,34 @@ void element_product_stored(const uint S, __global const uint* restrict elemSeg,
   if (!element_items(elemSeg, segInfo, &e0, &s)) return;
   const real k = seg_coef(segCoef, s, kCoefStiff);
   realv R[9];
+  #pragma unroll
   for (int j = 0; j < 9; ++j) R[j] = VLOAD(rot + j * S + e0);
   realv q[12], y[12];
+  #pragma unroll
   for (int c = 0; c < 4; ++c) {
-    uint idx[COROFEM_VEC];
-    for (int l = 0; l < COROFEM_VEC; ++l) idx[l] = nodes[c * S + e0 + l];
+    const uintv idx = VLOAD_INDEX(nodes + c * S + e0);
     const realv px = gather_node_component(p, idx, 0), py = gather_node_component(p, idx, 1),
                 pz = gather_node_component(p, idx, 2);
+    #pragma unroll
     for (int j = 0; j < 3; ++j) q[3 * c + j] = R[j] * px + R[3 + j] * py + R[6 + j] * pz; /* R^T p */
     y[3 * c] = y[3 * c + 1] = y[3 * c + 2] = (realv)0;
   }
   uint idx = 0;
+  #pragma unroll
   for (int r = 0; r < 12; ++r) {
     y[r] += VLOAD(stiffness + idx * S + e0) * q[r];
     ++idx;
+    #pragma unroll
     for (int c = r + 1; c < 12; ++c, ++idx) {
       const realv kv = VLOAD(stiffness + idx * S + e0);
       y[r] += kv * q[c];
       y[c] += kv * q[r];
     }
   }
+  #pragma unroll
   for (int c = 0; c < 4; ++c) {
     realv w[3];
+    #pragma unroll
     for (int j = 0; j < 3; ++j)
       w[j] = k * (R[3 * j] * y[3 * c] + R[3 * j + 1] * y[3 * c + 1] + R[3 * j + 2] * y[3 * c + 2]);
     store_corner(out, e0, c, w[0], w[1], w[2]);

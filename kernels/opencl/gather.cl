@@ -60,6 +60,7 @@ void gather_product(__global const uint* restrict nodeSeg, __global const uint* 
   for (uint n = first; n < last; ++n) {
     real acc[3];
     gather_node(n, start, entries, elemOut, acc);
+    #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       const real pd = p[d];

@@ -9,6 +9,7 @@ typedef struct { real m[9]; } Mat3;
 
 COROFEM_FN Mat3 mat3_identity(void) {
   Mat3 r;
+  #pragma unroll
   for (int i = 0; i < 9; ++i) r.m[i] = (real)0;
   r.m[0] = r.m[4] = r.m[8] = (real)1;
   return r;
@@ -37,6 +38,7 @@ COROFEM_FN Mat3 mat3_cofactor(const Mat3* a) {
 
 COROFEM_FN real mat3_norm2(const Mat3* a) {
   real s = (real)0;
+  #pragma unroll
   for (int i = 0; i < 9; ++i) s += a->m[i] * a->m[i];
   return s;
 }
@@ -44,7 +46,9 @@ COROFEM_FN real mat3_norm2(const Mat3* a) {
 /* C = A^T B */
 COROFEM_FN Mat3 mat3_tmul(const Mat3* a, const Mat3* b) {
   Mat3 c;
+  #pragma unroll
   for (int i = 0; i < 3; ++i)
+    #pragma unroll
     for (int j = 0; j < 3; ++j)
       c.m[3 * i + j] = a->m[i] * b->m[j] + a->m[3 + i] * b->m[3 + j] + a->m[6 + i] * b->m[6 + j];
   return c;

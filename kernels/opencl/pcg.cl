@@ -49,6 +49,7 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
   sum_real rz = 0, rr = 0, bb = 0;
   for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
+    #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       const real bd = free[d] * b[d];
@@ -56,6 +57,7 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
       bb += (sum_real)bd * (sum_real)bd;
     }
     apply_preconditioner(n, minv, rn, zn);
+    #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       r[d] = rn[k];
@@ -81,6 +83,7 @@ void pcg_update(__global const uint* restrict nodeSeg, __global const uint* rest
   sum_real rz = 0, rr = 0;
   for (uint n = first; n < last; ++n) {
     real rn[3], zn[3];
+    #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       x[d] += alpha * p[d];
@@ -88,6 +91,7 @@ void pcg_update(__global const uint* restrict nodeSeg, __global const uint* rest
       r[d] = rn[k];
     }
     apply_preconditioner(n, minv, rn, zn);
+    #pragma unroll
     for (int k = 0; k < 3; ++k) {
       z[3 * n + k] = zn[k];
       rz += (sum_real)rn[k] * (sum_real)zn[k];

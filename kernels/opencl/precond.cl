@@ -23,6 +23,7 @@ void corner_gradients(const uint S, __global const uint* restrict elemSeg, __glo
   uint e0, s;
   if (!element_items(elemSeg, segInfo, &e0, &s)) return;
   realv a[9];
+  #pragma unroll
   for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
   store_corner_gradients(out, e0, a);
 }
@@ -54,6 +55,7 @@ void node_stiffness_blocks(const uint S, __global const uint* restrict nodeSeg,
     b[4] += lm * ax * az;
     b[5] += lm * ay * az;
   }
+  #pragma unroll
   for (int k = 0; k < 6; ++k) blocks[6 * n + k] = b[k];
 }
 

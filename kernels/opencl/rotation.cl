@@ -38,13 +38,17 @@ COROFEM_FN Mat3 element_deformation_gradient(uint e, uint S, __global const uint
   const uint n0 = nodes[e];
   const real x0 = pos[3 * n0], y0 = pos[3 * n0 + 1], z0 = pos[3 * n0 + 2];
   Mat3 F;
+  #pragma unroll
   for (int k = 0; k < 9; ++k) F.m[k] = (real)0;
+  #pragma unroll
   for (int i = 1; i < 4; ++i) {
     const uint n = nodes[i * S + e];
     const real d[3] = {pos[3 * n] - x0, pos[3 * n + 1] - y0, pos[3 * n + 2] - z0};
     const real g[3] = {geom[(3 * (i - 1)) * S + e], geom[(3 * (i - 1) + 1) * S + e],
                        geom[(3 * (i - 1) + 2) * S + e]};
+    #pragma unroll
     for (int j = 0; j < 3; ++j)
+      #pragma unroll
       for (int k = 0; k < 3; ++k) F.m[3 * j + k] += d[j] * g[k];
   }
   return F;
@@ -65,16 +69,19 @@ COROFEM_FN void jacobi_rotate(real* a, real* v, int p, int q) {
   else
     t = (theta >= (real)0 ? (real)1 : (real)-1) / (fabs(theta) + sqrt(theta * theta + (real)1));
   const real c = (real)1 / sqrt(t * t + (real)1), s = t * c;
+  #pragma unroll
   for (int k = 0; k < 3; ++k) {
     const real akp = a[3 * k + p], akq = a[3 * k + q];
     a[3 * k + p] = c * akp - s * akq;
     a[3 * k + q] = s * akp + c * akq;
   }
+  #pragma unroll
   for (int k = 0; k < 3; ++k) {
     const real apk = a[3 * p + k], aqk = a[3 * q + k];
     a[3 * p + k] = c * apk - s * aqk;
     a[3 * q + k] = s * apk + c * aqk;
   }
+  #pragma unroll
   for (int k = 0; k < 3; ++k) {
     const real vkp = v[3 * k + p], vkq = v[3 * k + q];
     v[3 * k + p] = c * vkp - s * vkq;
@@ -86,6 +93,7 @@ COROFEM_FN void swap_columns(real* a, real* v, int p, int q) {
   real t = a[3 * p + p];
   a[3 * p + p] = a[3 * q + q];
   a[3 * q + q] = t;
+  #pragma unroll
   for (int k = 0; k < 3; ++k) {
     t = v[3 * k + p];
     v[3 * k + p] = v[3 * k + q];
@@ -102,6 +110,7 @@ COROFEM_FN void swap_columns(real* a, real* v, int p, int q) {
 COROFEM_FN Mat3 rotation_svd(const Mat3* F) {
   real a[9];
   Mat3 FtF = mat3_tmul(F, F);
+  #pragma unroll
   for (int k = 0; k < 9; ++k) a[k] = FtF.m[k];
   real v[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
   const real scale2 = a[0] * a[0] + a[4] * a[4] + a[8] * a[8];
@@ -125,6 +134,7 @@ COROFEM_FN Mat3 rotation_svd(const Mat3* F) {
     v[8] = -v[8];
   }
   real u1[3], u2[3], u3[3];
+  #pragma unroll
   for (int j = 0; j < 3; ++j) {
     u1[j] = F->m[3 * j] * v[0] + F->m[3 * j + 1] * v[3] + F->m[3 * j + 2] * v[6];
     u2[j] = F->m[3 * j] * v[1] + F->m[3 * j + 1] * v[4] + F->m[3 * j + 2] * v[7];
@@ -135,8 +145,10 @@ COROFEM_FN Mat3 rotation_svd(const Mat3* F) {
     /* F ~ 0: the element collapsed to a point; no rotation can be read off. */
     return mat3_identity();
   }
+  #pragma unroll
   for (int j = 0; j < 3; ++j) u1[j] /= n1;
   real d = u1[0] * u2[0] + u1[1] * u2[1] + u1[2] * u2[2];
+  #pragma unroll
   for (int j = 0; j < 3; ++j) u2[j] -= d * u1[j];
   real n2 = sqrt(u2[0] * u2[0] + u2[1] * u2[1] + u2[2] * u2[2]);
   if (!(n2 > (real)16 * REAL_EPS * n1)) {
@@ -144,15 +156,19 @@ COROFEM_FN Mat3 rotation_svd(const Mat3* F) {
     int k = 0;
     if (fabs(u1[1]) < fabs(u1[k])) k = 1;
     if (fabs(u1[2]) < fabs(u1[k])) k = 2;
+    #pragma unroll
     for (int j = 0; j < 3; ++j) u2[j] = (j == k ? (real)1 : (real)0) - u1[k] * u1[j];
     n2 = sqrt(u2[0] * u2[0] + u2[1] * u2[1] + u2[2] * u2[2]);
   }
+  #pragma unroll
   for (int j = 0; j < 3; ++j) u2[j] /= n2;
   u3[0] = u1[1] * u2[2] - u1[2] * u2[1];
   u3[1] = u1[2] * u2[0] - u1[0] * u2[2];
   u3[2] = u1[0] * u2[1] - u1[1] * u2[0];
   Mat3 R;
+  #pragma unroll
   for (int j = 0; j < 3; ++j)
+    #pragma unroll
     for (int k = 0; k < 3; ++k)
       R.m[3 * j + k] = u1[j] * v[3 * k] + u2[j] * v[3 * k + 1] + u3[j] * v[3 * k + 2];
   return R;
@@ -178,6 +194,7 @@ COROFEM_FN Mat3 rotation_polar(const Mat3* F) {
     const real g = sqrt(sqrt(c2 / (det * det * r2)));
     const real hr = (real)0.5 * g, hc = (real)0.5 / (g * det);
     real diff2 = (real)0;
+    #pragma unroll
     for (int k = 0; k < 9; ++k) {
       const real nk = hr * R.m[k] + hc * C.m[k];
       diff2 += (nk - R.m[k]) * (nk - R.m[k]);
@@ -214,6 +231,7 @@ COROFEM_FN Mat3 rotation_quaternion(const Mat3* F, real4* qInOut) {
   for (int it = 0; it < COROFEM_QUAT_ITERS; ++it) {
     const Mat3 R = quat_to_matrix(q);
     real ox = 0, oy = 0, oz = 0, dot = 0;
+    #pragma unroll
     for (int c = 0; c < 3; ++c) {
       const real rx = R.m[c], ry = R.m[3 + c], rz = R.m[6 + c];
       const real fx = F->m[c], fy = F->m[3 + c], fz = F->m[6 + c];
@@ -253,11 +271,14 @@ COROFEM_FN Mat3 rotation_qr(const Mat3* F) {
   const real fn = sqrt(mat3_norm2(F));
   const real n1 = sqrt(r1[0] * r1[0] + r1[1] * r1[1] + r1[2] * r1[2]);
   if (!(n1 > (real)1e-3 * fn)) return rotation_svd(F);
+  #pragma unroll
   for (int j = 0; j < 3; ++j) r1[j] /= n1;
   const real d = r1[0] * r2[0] + r1[1] * r2[1] + r1[2] * r2[2];
+  #pragma unroll
   for (int j = 0; j < 3; ++j) r2[j] -= d * r1[j];
   const real n2 = sqrt(r2[0] * r2[0] + r2[1] * r2[1] + r2[2] * r2[2]);
   if (!(n2 > (real)1e-3 * fn)) return rotation_svd(F);
+  #pragma unroll
   for (int j = 0; j < 3; ++j) r2[j] /= n2;
   Mat3 R;
   R.m[0] = r1[0];
@@ -280,11 +301,13 @@ COROFEM_FN Mat3 rotation_qr(const Mat3* F) {
  * inverted or degenerate (det F <= 1e-6 |F|^3) or not converged. */
 COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
   realv fn2 = (realv)0;
+  #pragma unroll
   for (int k = 0; k < 9; ++k) fn2 += F[k] * F[k];
   const realv detF = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
                      F[2] * (F[3] * F[7] - F[4] * F[6]);
   const maskv bad = !(detF > (real)1e-6 * fn2 * sqrt(fn2));
   maskv done = bad;
+  #pragma unroll
   for (int k = 0; k < 9; ++k) R[k] = F[k];
   for (int it = 0; it < COROFEM_POLAR_ITERS; ++it) {
     realv C[9];
@@ -299,6 +322,7 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
     C[8] = R[0] * R[4] - R[1] * R[3];
     const realv det = R[0] * C[0] + R[1] * C[1] + R[2] * C[2];
     realv r2 = (realv)0, c2 = (realv)0;
+    #pragma unroll
     for (int k = 0; k < 9; ++k) {
       r2 += R[k] * R[k];
       c2 += C[k] * C[k];
@@ -306,6 +330,7 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
     const realv g = sqrt(sqrt(c2 / (det * det * r2)));
     const realv hr = (real)0.5 * g, hc = (real)0.5 / (g * det);
     realv diff2 = (realv)0;
+    #pragma unroll
     for (int k = 0; k < 9; ++k) {
       const realv nk = hr * R[k] + hc * C[k];
       diff2 += (nk - R[k]) * (nk - R[k]);
@@ -324,6 +349,7 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
  * (store_corner), for node_stiffness_blocks (precond.cl). */
 COROFEM_FN void store_corner_gradients(__global real* out, uint e0, const realv* a) {
   store_corner(out, e0, 0, -(a[0] + a[3] + a[6]), -(a[1] + a[4] + a[7]), -(a[2] + a[5] + a[8]));
+  #pragma unroll
   for (int c = 1; c < 4; ++c) store_corner(out, e0, c, a[3 * (c - 1)], a[3 * (c - 1) + 1], a[3 * (c - 1) + 2]);
 }
 
@@ -362,10 +388,13 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
 #if COROFEM_VEC == 1
   const Mat3 F = element_deformation_gradient(e0, S, nodes, geom, pos);
   const Mat3 R = rotation_of(&F, quat, e0, S);
+  #pragma unroll
   for (int k = 0; k < 9; ++k) rot[k * S + e0] = R.m[k];
   real a[9];
+  #pragma unroll
   for (int i = 0; i < 3; ++i) {
     const real g0 = geom[(3 * i) * S + e0], g1 = geom[(3 * i + 1) * S + e0], g2 = geom[(3 * i + 2) * S + e0];
+    #pragma unroll
     for (int j = 0; j < 3; ++j) {
       a[3 * i + j] = R.m[3 * j] * g0 + R.m[3 * j + 1] * g1 + R.m[3 * j + 2] * g2;
       rotGrad[(3 * i + j) * S + e0] = a[3 * i + j];
@@ -374,18 +403,23 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
   if (writeCorners) store_corner_gradients(corners, e0, a);
 #else
   /* F = sum_{i=1..3} (x_i - x_0) grad N_i^T, VEC elements at once */
-  uint idx[4][COROFEM_VEC];
-  for (int c = 0; c < 4; ++c)
-    for (int l = 0; l < COROFEM_VEC; ++l) idx[c][l] = nodes[c * S + e0 + l];
+  uintv idx[4];
+  #pragma unroll
+  for (int c = 0; c < 4; ++c) idx[c] = VLOAD_INDEX(nodes + c * S + e0);
   realv g[9], F[9], x0[3];
+  #pragma unroll
   for (int k = 0; k < 9; ++k) {
     g[k] = VLOAD(geom + k * S + e0);
     F[k] = (realv)0;
   }
+  #pragma unroll
   for (int j = 0; j < 3; ++j) x0[j] = gather_node_component(pos, idx[0], j);
+  #pragma unroll
   for (int i = 1; i < 4; ++i)
+    #pragma unroll
     for (int j = 0; j < 3; ++j) {
       const realv d = gather_node_component(pos, idx[i], j) - x0[j];
+      #pragma unroll
       for (int k = 0; k < 3; ++k) F[3 * j + k] += d * g[3 * (i - 1) + k];
     }
   realv R[9];
@@ -397,6 +431,7 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
   if (any(scalarLanes)) {
     real lanesF[9][COROFEM_VEC], lanesR[9][COROFEM_VEC];
     int lanesScalar[COROFEM_VEC];
+    #pragma unroll
     for (int k = 0; k < 9; ++k) {
       VSTORE(F[k], lanesF[k]);
 #if defined(COROFEM_ROT_SVD) || defined(COROFEM_ROT_QUAT) || defined(COROFEM_ROT_QR)
@@ -408,24 +443,31 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
       maskv m = scalarLanes;
       real tmp[COROFEM_VEC];
       VSTORE(select((realv)0, (realv)1, m), tmp);
+      #pragma unroll
       for (int l = 0; l < COROFEM_VEC; ++l) lanesScalar[l] = tmp[l] != (real)0;
     }
     for (int l = 0; l < COROFEM_VEC; ++l) {
       if (!lanesScalar[l]) continue;
       Mat3 Fl;
+      #pragma unroll
       for (int k = 0; k < 9; ++k) Fl.m[k] = lanesF[k][l];
 #if defined(COROFEM_ROT_SVD) || defined(COROFEM_ROT_QUAT) || defined(COROFEM_ROT_QR)
       const Mat3 Rl = rotation_of(&Fl, quat, e0 + l, S);
 #else
       const Mat3 Rl = rotation_svd(&Fl);
 #endif
+      #pragma unroll
       for (int k = 0; k < 9; ++k) lanesR[k][l] = Rl.m[k];
     }
+    #pragma unroll
     for (int k = 0; k < 9; ++k) R[k] = VLOAD(lanesR[k]);
   }
+  #pragma unroll
   for (int k = 0; k < 9; ++k) VSTORE(R[k], rot + k * S + e0);
   realv a[9];
+  #pragma unroll
   for (int i = 0; i < 3; ++i)
+    #pragma unroll
     for (int j = 0; j < 3; ++j) {
       a[3 * i + j] = R[3 * j] * g[3 * i] + R[3 * j + 1] * g[3 * i + 1] + R[3 * j + 2] * g[3 * i + 2];
       VSTORE(a[3 * i + j], rotGrad + (3 * i + j) * S + e0);

@@ -57,11 +57,34 @@ typedef uint16 uintv;
 #error "COROFEM_VEC must be 1, 4, 8 or 16"
 #endif
 
-/* Component `comp` of the node vector v (3N) at the VEC nodes idx[0..VEC-1]: a gather. */
-COROFEM_FN realv gather_node_component(__global const real* v, const uint* idx, uint comp) {
-  real lanes[COROFEM_VEC];
-  for (int l = 0; l < COROFEM_VEC; ++l) lanes[l] = v[3 * idx[l] + comp];
-  return VLOAD(lanes);
+/* Node indices of VEC consecutive elements (one corner's stream of the SoA layout) as a vector. */
+#if COROFEM_VEC == 1
+#define VLOAD_INDEX(ptr) (*(ptr))
+#define COROFEM_GATHER(v, i, c) ((v)[3 * (i) + (c)])
+#elif COROFEM_VEC == 4
+#define VLOAD_INDEX(ptr) vload4(0, (ptr))
+#define COROFEM_GATHER(v, i, c) \
+  ((realv)((v)[3 * (i).s0 + (c)], (v)[3 * (i).s1 + (c)], (v)[3 * (i).s2 + (c)], (v)[3 * (i).s3 + (c)]))
+#elif COROFEM_VEC == 8
+#define VLOAD_INDEX(ptr) vload8(0, (ptr))
+#define COROFEM_GATHER(v, i, c)                                                                        \
+  ((realv)((v)[3 * (i).s0 + (c)], (v)[3 * (i).s1 + (c)], (v)[3 * (i).s2 + (c)], (v)[3 * (i).s3 + (c)], \
+           (v)[3 * (i).s4 + (c)], (v)[3 * (i).s5 + (c)], (v)[3 * (i).s6 + (c)], (v)[3 * (i).s7 + (c)]))
+#else
+#define VLOAD_INDEX(ptr) vload16(0, (ptr))
+#define COROFEM_GATHER(v, i, c)                                                                        \
+  ((realv)((v)[3 * (i).s0 + (c)], (v)[3 * (i).s1 + (c)], (v)[3 * (i).s2 + (c)], (v)[3 * (i).s3 + (c)], \
+           (v)[3 * (i).s4 + (c)], (v)[3 * (i).s5 + (c)], (v)[3 * (i).s6 + (c)], (v)[3 * (i).s7 + (c)], \
+           (v)[3 * (i).s8 + (c)], (v)[3 * (i).s9 + (c)], (v)[3 * (i).sa + (c)], (v)[3 * (i).sb + (c)], \
+           (v)[3 * (i).sc + (c)], (v)[3 * (i).sd + (c)], (v)[3 * (i).se + (c)], (v)[3 * (i).sf + (c)]))
+#endif
+
+/* Component `comp` of the node vector v (3N) at the VEC nodes idx: a gather, built as a vector
+ * literal. (Writing the lanes to a private array and loading it as a vector, as this did first,
+ * made PoCL keep the arrays on the stack and stall on store forwarding: the element kernels ran
+ * 1.7x slower.) */
+COROFEM_FN realv gather_node_component(__global const real* v, uintv idx, uint comp) {
+  return COROFEM_GATHER(v, idx, comp);
 }
 
 /* Element output 12-vectors in blocks of COROFEM_VEC elements (corofem_layout.h): component k of
@@ -89,6 +112,7 @@ COROFEM_FN real lane_sum(realv v) {
   real lanes[COROFEM_VEC];
   VSTORE(v, lanes);
   real s = (real)0;
+  #pragma unroll
   for (int l = 0; l < COROFEM_VEC; ++l) s += lanes[l];
   return s;
 }
