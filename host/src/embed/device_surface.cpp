@@ -2,6 +2,8 @@
 // the same mathematics as deformSurface (deform_surface.cpp): positions, then per vertex the normal from
 // its one-ring (the ring layout is built here, once). Without COROFEM_WITH_OPENCL every entry point
 // reports ErrorCode::NotCompiledIn.
+#include "embed/device_surface.hpp"
+
 #include <corofem/embed.hpp>
 
 #include "util/error.hpp"
@@ -182,6 +184,13 @@ RingLayout ringLayout(const SurfaceBinding& b, std::size_t stride) {
 }
 
 }  // namespace
+
+namespace detail {
+DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding) {
+  const RingLayout layout = ringLayout(binding, binding.vertexCount());
+  return {layout.slots, layout.overflowVertices.size(), layout.overflowSequence.size()};
+}
+}  // namespace detail
 
 struct DeviceSurface::Impl {
   std::shared_ptr<detail::cl::Context> ctx;
@@ -437,6 +446,10 @@ std::size_t DeviceSurface::vertexCount() const { return impl_->vertexCount; }
 std::string DeviceSurface::deviceName() const { return impl_->device(); }
 
 #else  // no OpenCL in this build
+
+namespace detail {
+DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding&) { return {}; }
+}  // namespace detail
 
 struct DeviceSurface::Impl {};
 
