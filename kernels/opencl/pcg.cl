@@ -1,16 +1,25 @@
 /* Matrix-free preconditioned conjugate gradients on the projected system (constrained dofs: identity
- * rows and columns, their entries of x, r, z, p kept at 0). All scalars live in `scalars` on the
- * device (layout in corofem_layout.h); the host only reads them every checkEvery iterations.
- * Vectors are `real`; the dot products, their partials and the scalars are `sum_real` (double in
- * mixed precision, COROFEM_MIXED: float vectors and products, double sums and scalars). A kernel
- * that updates vectors converts its scalar to `real` once (a no-op unless mixed).
- * One iteration (q = A p by element_product + gather_product, which also gives p . q per group):
- *   reduce_finish(Alpha):  alpha = rho / (p . q)
- *   pcg_update:            x += alpha p, r -= alpha q, z = M^-1 r, partial sums of r . z and r . r
- *   reduce_finish(Beta):   beta = (r . z)_new / rho, rho = (r . z)_new, rr = r . r
- *   pcg_direction:         p = z + beta p
- * Dot products are two-stage and deterministic: fixed-order partial sums (corofem_reduce.h), then
- * one work-group per segment summing the segment's partials in a fixed order.
+ * rows and columns, their entries of x, r, u, p, w, s kept at 0), in the single-reduction form of
+ * Chronopoulos and Gear (1989; "Method 1" of D'Azevedo, Eijkhout and Romine 1993, PETSc's
+ * KSPCGUseSingleReduction). Mathematically the same iterates as the textbook PCG; per iteration it
+ * needs one global reduction instead of two, so one iteration is 4 launches instead of 6:
+ *   pcg_update:            p = u + beta p,  s = w + beta s   (s = A p, by recurrence)
+ *                          x += alpha p,    r -= alpha s,    u = M^-1 r
+ *                          partials of gamma' = r . u and r . r
+ *   element_product(u) + gather_product:  w = A u, partials of delta' = u . w
+ *   reduce_finish(Step):   beta = gamma' / gamma, alpha = gamma' / (delta' - beta gamma' / alpha)
+ * Why the denominator is p . A p: with s_i = A p_i, (p_{i+1}, A p_{i+1}) = (u_{i+1}, w_{i+1}) +
+ * beta (u_{i+1}, A p_i) (A-conjugacy drops (p_i, A p_{i+1})), and A p_i = (r_i - r_{i+1}) / alpha_i
+ * with (u_{i+1}, r_i) = 0 gives (u_{i+1}, A p_i) = -gamma_{i+1} / alpha_i.
+ * Set-up (r = b - A x, u = M^-1 r, w = A u, p = s = 0, alpha_0 = gamma_0 / delta_0, beta_0 = 0) costs
+ * one product more than the textbook form; afterwards both do one product per iteration.
+ * All scalars live in `scalars` on the device (layout in corofem_layout.h); the host only reads them
+ * every checkEvery iterations. Vectors are `real`; the dot products, their partials and the scalars
+ * are `sum_real` (double in mixed precision, COROFEM_MIXED: float vectors and products, double sums
+ * and scalars). A kernel that updates vectors converts its scalars to `real` once (a no-op unless
+ * mixed). Dot products are two-stage and deterministic: fixed-order partial sums (corofem_reduce.h),
+ * then one work-group per segment summing the segment's partials in a fixed order; pcg_update
+ * writes its partials to `partials`, gather_product to `partialsW`.
  * Many bodies (segments, corofem_layout.h) iterate together, each with its own scalars; a segment
  * that has converged is marked inactive by the host and its work-groups return at once.
  */
@@ -37,18 +46,18 @@ COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const re
 #endif
 }
 
-/* r = free (b - A x), z = M^-1 r, p = z; partials (r . z, r . r, |free b|^2). */
+/* r = free (b - A x) (q = A x), u = M^-1 r, p = s = 0; partials (r . u, r . r, |free b|^2). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
               __global const real* restrict b, __global const real* restrict q,
               __global const real* restrict free, __global const real* restrict minv,
-              __global real* restrict r, __global real* restrict z, __global real* restrict p,
-              __global sum_real* restrict partials) {
+              __global real* restrict r, __global real* restrict u, __global real* restrict p,
+              __global real* restrict sv, __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
-  sum_real rz = 0, rr = 0, bb = 0;
+  sum_real ru = 0, rr = 0, bb = 0;
   for (uint n = first; n < last; ++n) {
-    real rn[3], zn[3];
+    real rn[3], un[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
@@ -56,115 +65,136 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
       rn[k] = bd - free[d] * q[d];
       bb += (sum_real)bd * (sum_real)bd;
     }
-    apply_preconditioner(n, minv, rn, zn);
+    apply_preconditioner(n, minv, rn, un);
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       r[d] = rn[k];
-      z[d] = zn[k];
-      p[d] = zn[k];
-      rz += (sum_real)rn[k] * (sum_real)zn[k];
+      u[d] = un[k];
+      p[d] = (real)0;
+      sv[d] = (real)0;
+      ru += (sum_real)rn[k] * (sum_real)un[k];
       rr += (sum_real)rn[k] * (sum_real)rn[k];
     }
   }
-  COROFEM_PARTIAL_STORE(rz, rr, bb, partials);
+  COROFEM_PARTIAL_STORE(ru, rr, bb, partials);
 }
 
-/* x += alpha p, r -= alpha q, z = M^-1 r; partials (r . z, r . r, 0). */
+/* p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; partials (r . u, r . r, 0). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_update(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-                __global const sum_real* restrict scalars, __global const real* restrict p,
-                __global const real* restrict q, __global const real* restrict minv,
-                __global real* restrict x, __global real* restrict r, __global real* restrict z,
+                __global const sum_real* restrict scalars, __global const real* restrict w,
+                __global const real* restrict minv, __global real* restrict p, __global real* restrict sv,
+                __global real* restrict x, __global real* restrict r, __global real* restrict u,
                 __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
   const real alpha = (real)scalars[kScalarCount * s + kScalarAlpha];
-  sum_real rz = 0, rr = 0;
+  const real beta = (real)scalars[kScalarCount * s + kScalarBeta];
+  sum_real ru = 0, rr = 0;
   for (uint n = first; n < last; ++n) {
-    real rn[3], zn[3];
+    real rn[3], un[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
-      x[d] += alpha * p[d];
-      rn[k] = r[d] - alpha * q[d];
+      const real pd = u[d] + beta * p[d], sd = w[d] + beta * sv[d];
+      p[d] = pd;
+      sv[d] = sd;
+      x[d] += alpha * pd;
+      rn[k] = r[d] - alpha * sd;
       r[d] = rn[k];
     }
-    apply_preconditioner(n, minv, rn, zn);
+    apply_preconditioner(n, minv, rn, un);
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
-      z[3 * n + k] = zn[k];
-      rz += (sum_real)rn[k] * (sum_real)zn[k];
+      u[3 * n + k] = un[k];
+      ru += (sum_real)rn[k] * (sum_real)un[k];
       rr += (sum_real)rn[k] * (sum_real)rn[k];
     }
   }
-  COROFEM_PARTIAL_STORE(rz, rr, (sum_real)0, partials);
+  COROFEM_PARTIAL_STORE(ru, rr, (sum_real)0, partials);
 }
 
-/* p = z + beta p, COROFEM_CHUNK nodes per work-item like the other PCG node kernels (one dof per
- * work-item made this trivial kernel cost as much as pcg_update on PoCL). */
-__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_direction(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-                   __global const sum_real* restrict scalars, __global const real* restrict z,
-                   __global real* restrict p) {
-  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
-  const real beta = (real)scalars[kScalarCount * s + kScalarBeta];
-  for (uint d = 3 * first; d < 3 * last; ++d) p[d] = z[d] + beta * p[d];
+/* The scalars of one segment from its sums (work-item 0 of reduce_finish). One exit only: PoCL 3.1
+ * ran the code after reduce_finish's barriers on every work-item when it held a second return. */
+COROFEM_FN void update_scalars(__global uint* segInfo, uint seg, __global sum_real* scalars, uint mode, sum_real tol2,
+                               sum_real gammaNew, sum_real rr, sum_real bbSum, sum_real delta) {
+  if (mode == kReduceResidual) {
+    scalars[kScalarRr] = rr;
+    scalars[kScalarBb] = bbSum;
+  } else {
+    sum_real beta = (sum_real)0, pq = delta, bb = bbSum;
+    if (mode == kReduceInit) {
+      scalars[kScalarBb] = bb;
+      scalars[kScalarIterations] = 0;
+    } else {
+      const sum_real gamma = scalars[kScalarRho], alpha = scalars[kScalarAlpha];
+      bb = scalars[kScalarBb];
+      beta = gamma != (sum_real)0 ? gammaNew / gamma : (sum_real)0;
+      pq = alpha != (sum_real)0 ? delta - beta * gammaNew / alpha : (sum_real)0;
+      scalars[kScalarIterations] += 1;
+    }
+    scalars[kScalarRho] = gammaNew;
+    scalars[kScalarRr] = rr;
+    scalars[kScalarBeta] = beta;
+    scalars[kScalarPq] = pq;
+    const bool breakdown = !(pq > (sum_real)0);
+    scalars[kScalarAlpha] = breakdown ? (sum_real)0 : gammaNew / pq;
+    scalars[kScalarBreakdown] = breakdown ? 1 : 0;
+    const uint stop = !isfinite(rr) ? kStopNonFinite : rr <= tol2 * bb ? kStopConverged
+                                                        : breakdown ? kStopBreakdown : kStopRunning;
+    scalars[kScalarStop] = (sum_real)stop;
+    if (stop != kStopRunning) segInfo[kSegInfoCount * seg + kSegActive] = 0u;
+  }
 }
 
-/* Second stage of the dot products: work-group s sums segment s's partial triples in a fixed order
- * (strided lanes, then a tree: the same order for a body alone or in a batch), then updates the
- * segment's PCG scalars according to `mode` (kReduceInit/Alpha/Beta). A non-positive p . A p (A
- * not positive definite on the free dofs, or p = 0) sets alpha = 0 and the breakdown flag instead
- * of dividing. */
+/* Second stage of the dot products: work-group s sums segment s's partials of pcg_init/pcg_update
+ * (`partials`: r . u, r . r, b . b) and, except in kReduceResidual, of gather_product (`partialsW`:
+ * u . w in component 0), then updates the segment's PCG scalars according to `mode`:
+ *   kReduceInit      gamma, rr, bb; alpha = gamma / delta, beta = 0; iterations = 0
+ *   kReduceStep      beta = gamma' / gamma, alpha = gamma' / (delta' - beta gamma' / alpha), gamma, rr;
+ *                    iterations + 1
+ *   kReduceResidual  rr, bb only (the true residual after the solve)
+ * A non-positive p . A p (A not positive definite on the free dofs, or p = 0) sets alpha = 0 and the
+ * breakdown flag instead of dividing. In kReduceInit and kReduceStep the convergence test runs here,
+ * after every iteration (tol2 = tolerance^2): a converged, broken-down or non-finite segment records
+ * why (kScalarStop) and becomes inactive, so the iterations the host enqueued ahead of its next
+ * read of the scalars cost that segment nothing and leave its x as it was at the stop. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void reduce_finish(__global const uint* restrict segInfo, __global const sum_real* restrict partials,
-                   __global sum_real* restrict allScalars, const uint mode) {
-  __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG];
+void reduce_finish(__global uint* restrict segInfo, __global const sum_real* restrict partials,
+                   __global const sum_real* restrict partialsW, __global sum_real* restrict allScalars,
+                   const uint mode, const sum_real tol2) {
+  __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
   const uint lid = get_local_id(0), seg = get_global_id(0) / COROFEM_WG;
-  if (seg_info(segInfo, seg, kSegActive) == 0u) return; /* the whole work-group */
-  const uint partialCount = seg_info(segInfo, seg, kSegPartialCount);
+  /* An inactive segment's group sums too but changes nothing. (Returning here at once, as the other
+   * kernels do, made PoCL 3.1 run update_scalars on every work-item once it could clear the flag.) */
+  const bool active = seg_info(segInfo, seg, kSegActive) != 0u;
+  const uint count = seg_info(segInfo, seg, kSegPartialCount);
   __global const sum_real* own = partials + kPartialComponents * seg_info(segInfo, seg, kSegPartialBegin);
-  __global sum_real* scalars = allScalars + kScalarCount * seg;
-  sum_real a = 0, b = 0, c = 0;
-  for (uint g = lid; g < partialCount; g += COROFEM_WG) {
+  __global const sum_real* ownW = partialsW + kPartialComponents * seg_info(segInfo, seg, kSegPartialBegin);
+  /* Fixed order: strided lanes, then a tree (the same for a body alone or in a batch). Both buffers
+   * in every mode (kReduceResidual ignores partialsW): one loop and one tree. */
+  sum_real a = 0, b = 0, c = 0, d = 0;
+  for (uint g = lid; g < count; g += COROFEM_WG) {
     a += own[kPartialComponents * g];
     b += own[kPartialComponents * g + 1];
     c += own[kPartialComponents * g + 2];
+    d += ownW[kPartialComponents * g];
   }
   s0[lid] = a;
   s1[lid] = b;
   s2[lid] = c;
+  s3[lid] = d;
   barrier(CLK_LOCAL_MEM_FENCE);
   for (uint s = COROFEM_WG / 2; s > 0; s >>= 1) {
     if (lid < s) {
       s0[lid] += s0[lid + s];
       s1[lid] += s1[lid + s];
       s2[lid] += s2[lid + s];
+      s3[lid] += s3[lid + s];
     }
     barrier(CLK_LOCAL_MEM_FENCE);
   }
-  if (lid != 0) return;
-  if (mode == kReduceInit) {
-    scalars[kScalarRho] = s0[0];
-    scalars[kScalarRr] = s1[0];
-    scalars[kScalarBb] = s2[0];
-    scalars[kScalarAlpha] = 0;
-    scalars[kScalarBeta] = 0;
-    scalars[kScalarBreakdown] = 0;
-  } else if (mode == kReduceAlpha) {
-    const sum_real pq = s0[0];
-    scalars[kScalarPq] = pq;
-    if (pq > (sum_real)0) {
-      scalars[kScalarAlpha] = scalars[kScalarRho] / pq;
-    } else {
-      scalars[kScalarAlpha] = 0;
-      scalars[kScalarBreakdown] = 1;
-    }
-  } else {
-    const sum_real rho = scalars[kScalarRho], rhoNew = s0[0];
-    scalars[kScalarBeta] = rho != (sum_real)0 ? rhoNew / rho : (sum_real)0;
-    scalars[kScalarRho] = rhoNew;
-    scalars[kScalarRr] = s1[0];
-  }
+  if (lid == 0 && active)
+    update_scalars(segInfo, seg, allScalars + kScalarCount * seg, mode, tol2, s0[0], s1[0], s2[0], s3[0]);
 }

@@ -78,19 +78,27 @@ COROFEM_CONSTANT(unsigned, kNodeBlockComponents, 6);
 
 /* ---------------------------------------------------------------- PCG scalars on the device (sum_real) */
 /* kScalarCount per segment: scalar k of segment s at kScalarCount * s + k.                        */
-COROFEM_CONSTANT(unsigned, kScalarRho, 0);      /* rho = r . z (current)               */
-COROFEM_CONSTANT(unsigned, kScalarPq, 1);       /* p . A p                             */
-COROFEM_CONSTANT(unsigned, kScalarAlpha, 2);    /* rho / (p . A p)                     */
-COROFEM_CONSTANT(unsigned, kScalarBeta, 3);     /* rho_new / rho_old                   */
+COROFEM_CONSTANT(unsigned, kScalarRho, 0);      /* gamma = r . u (current, u = M^-1 r) */
+COROFEM_CONSTANT(unsigned, kScalarPq, 1);       /* p . A p (from the recurrence)       */
+COROFEM_CONSTANT(unsigned, kScalarAlpha, 2);    /* gamma / (p . A p)                   */
+COROFEM_CONSTANT(unsigned, kScalarBeta, 3);     /* gamma_new / gamma_old               */
 COROFEM_CONSTANT(unsigned, kScalarRr, 4);       /* r . r (free dofs)                   */
 COROFEM_CONSTANT(unsigned, kScalarBb, 5);       /* b . b (free dofs)                   */
 COROFEM_CONSTANT(unsigned, kScalarBreakdown, 6);/* 1 when p . A p <= 0 was met         */
-COROFEM_CONSTANT(unsigned, kScalarCount, 8);
+COROFEM_CONSTANT(unsigned, kScalarIterations, 7);/* iterations done (counted on the device) */
+COROFEM_CONSTANT(unsigned, kScalarStop, 8);     /* why the segment stopped: kStop*     */
+COROFEM_CONSTANT(unsigned, kScalarCount, 12);
+/* Values of kScalarStop: reduce_finish tests every iteration and makes a stopped segment inactive
+ * (segInfo), so that the iterations the host has already enqueued return at once for it. */
+COROFEM_CONSTANT(unsigned, kStopRunning, 0);
+COROFEM_CONSTANT(unsigned, kStopConverged, 1);   /* r . r <= tol^2 b . b                   */
+COROFEM_CONSTANT(unsigned, kStopBreakdown, 2);   /* p . A p <= 0: no further progress       */
+COROFEM_CONSTANT(unsigned, kStopNonFinite, 3);   /* r . r is NaN or Inf                     */
 
-/* Modes of reduce_finish (which scalars the partial sums become). */
-COROFEM_CONSTANT(unsigned, kReduceInit, 0);     /* partials (r.z, r.r, b.b) -> rho, rr, bb        */
-COROFEM_CONSTANT(unsigned, kReduceAlpha, 1);    /* partial (p.Ap) -> pq, alpha = rho / pq         */
-COROFEM_CONSTANT(unsigned, kReduceBeta, 2);     /* partials (r.z, r.r) -> beta = rho'/rho, rho, rr */
+/* Modes of reduce_finish (pcg.cl: which scalars the partial sums become). */
+COROFEM_CONSTANT(unsigned, kReduceInit, 0);     /* (r.u, r.r, b.b), u.w -> gamma, rr, bb, alpha, beta = 0 */
+COROFEM_CONSTANT(unsigned, kReduceStep, 1);     /* (r.u, r.r), u.w -> beta, alpha, gamma, rr              */
+COROFEM_CONSTANT(unsigned, kReduceResidual, 2); /* (r.u, r.r, b.b) -> rr, bb (the true residual)          */
 COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-group: 3 sum_reals    */
 
 /* Default work-group size (overridden by -DCOROFEM_WG). Reductions need a power of two. */

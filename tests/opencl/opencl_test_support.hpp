@@ -13,6 +13,7 @@
 #endif
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <string>
 #include <vector>
@@ -86,6 +87,11 @@ inline Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
   Eigen::VectorXd v(static_cast<Eigen::Index>(n));
   for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
   return v;
+}
+
+/// Whether two vectors hold the same bits (same size, memcmp-equal).
+inline bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
 }
 
 inline detail::Mat3 randomRotation(std::mt19937& rng) {

@@ -24,6 +24,7 @@
 namespace corofem {
 namespace {
 
+using test::sameBits;
 using test::DeviceCase;
 using detail::BatchOp;
 using detail::BatchRequest;
@@ -87,10 +88,6 @@ Eigen::VectorXd deformed(const detail::Problem& p, double angle) {
     x.segment<3>(3 * n) = R * (X + u) + Eigen::Vector3d(0.3, -0.1, 0.2);
   }
   return x;
-}
-
-bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
 }
 
 double maxRel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
@@ -460,10 +457,10 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     if (quaternion) bytes += r * 4 * S;
     if (stored) bytes += r * 78 * S;
     bytes += 4 * (N + 1) + 4 * 4 * E;  // gather lists
-    bytes += r * 3 * N * (1 + 1 + 6);  // positions, free mask, x b r z p q
+    bytes += r * 3 * N * (1 + 1 + 7);  // positions, free mask, x b r u p w s
     if (mass) bytes += r * 3 * N;
     if (pc != PreconditionerKind::None) bytes += r * (6 + (pc == PreconditionerKind::BlockDiagonal ? 9 : 3)) * N;
-    bytes += r * 3 * std::max(S / 512, N / 4) + r * 8 * K;  // partials, scalars
+    bytes += r * 3 * std::max(S / 512, N / 4) + r * 3 * (N / 4) + r * 12 * K;  // two partial buffers, scalars
     return bytes;
   };
   SolverDesc s = solver();

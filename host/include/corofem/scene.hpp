@@ -130,7 +130,7 @@ struct SolverDesc {
   LinearSolverKind linearSolver = LinearSolverKind::Pcg;
   double tolerance = 1e-6;        ///< PCG relative residual |r| / |b|, > 0
   int maxIterations = 1000;       ///< PCG iteration cap, >= 1
-  int checkEvery = 4;             ///< PCG convergence check every k iterations (device backends), >= 1
+  int checkEvery = 4;             ///< device backends: host read of the PCG state every k iterations (the device stops at convergence itself), >= 1
   PreconditionerKind preconditioner = PreconditionerKind::Diagonal;
   Precision precision = Precision::Double;
   RotationMethod rotation = RotationMethod::Polar;

@@ -139,19 +139,19 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
       buffer("node_blocks", dv, 6 * N * r);
       buffer("preconditioner_inverse", dv, (block ? 9 : 3) * N * r);
     }
-    buffer("pcg_vectors (x b r z p q)", dv, 6 * D * r);
+    buffer("pcg_vectors (x b r u p w s)", dv, 7 * D * r);
     if (corot) kernels.push_back(std::string("compute_rotations (") + toString(problem.rotation) + ")");
     kernels.push_back("element_forces + gather_forces");
     kernels.push_back(dynamic ? (damping ? "element_product (M, C, K_t) + gather_product"
                                          : "element_product (M, K_t) + gather_product")
                               : "element_product (K_t) + gather_product");
     if (precond) kernels.push_back(block ? "precond_invert (3x3 blocks)" : "precond_invert (diagonal)");
-    kernels.push_back("pcg_init, pcg_update, pcg_direction, reduce_finish");
+    kernels.push_back("pcg_init, pcg_update, reduce_finish (single-reduction PCG)");
     if (batched)
       for (auto& k : kernels)
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";
     product = E * (16 + 34 * r) + 16 * E + 4 * (N + 1) + 12 * E * r + D * r * (3 + (dynamic ? 1 : 0));
-    pcgIter = product + 12 * D * r + (precond ? (block ? 9 : 3) * N * r : 0);
+    pcgIter = product + 11 * D * r + (precond ? (block ? 9 : 3) * N * r : 0);
     newtonFixed = (corot ? E * (16 + 22 * r) : 0) + 2 * product + 5 * D * r;
   } else {
     const double nnz = 9 * (N + 2 * static_cast<double>(edgeCount(problem.mesh)));

@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <exception>
 
 namespace corofem::detail {
@@ -230,7 +231,6 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   kPrecondInvert_.create(build_.program, "precond_invert", dev_);
   kPcgInit_.create(build_.program, "pcg_init", dev_);
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
-  kPcgDirection_.create(build_.program, "pcg_direction", dev_);
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
 }
 
@@ -373,10 +373,11 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     createReal(blocks_, kNodeBlockComponents * nodeTotal_);
     createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodeTotal_);
   }
-  for (ClBuffer* v : {&x_, &b_, &r_, &z_, &p_, &q_}) createReal(*v, dofTotal);
+  for (ClBuffer* v : {&x_, &b_, &r_, &z_, &p_, &q_, &s_}) createReal(*v, dofTotal);
   // Partials: the PCG node kernels write sum_real triples; element_energy writes one real per
-  // element work-group into the same buffer (at most sumSize_ bytes each).
+  // element work-group into the first buffer (at most sumSize_ bytes each).
   partials_.create(c, kPartialComponents * std::max(S / (wg_ * vec_), partialTotal_) * sumSize_, dev_);
+  partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
 }
 
@@ -384,7 +385,8 @@ std::size_t SegmentEngine::allocatedBytes() const {
   std::size_t sum = 0;
   for (const ClBuffer* b : {&elemSeg_, &nodeSeg_, &segInfoBuf_, &segCoefBuf_, &elemNodes_, &geom_, &rot_,
                             &rotGrad_, &quat_, &stiffness_, &elemOut_, &nodeStart_, &nodeEntries_, &pos_, &mass_,
-                            &free_, &blocks_, &minv_, &x_, &b_, &r_, &z_, &p_, &q_, &partials_, &scalars_})
+                            &free_, &blocks_, &minv_, &x_, &b_, &r_, &z_, &p_, &q_, &s_, &partials_, &partialsW_,
+                            &scalars_})
     sum += b->bytes();
   return sum;
 }
@@ -398,6 +400,15 @@ void SegmentEngine::setArg(cl_kernel k, cl_uint i, cl_mem m) {
 
 void SegmentEngine::setArg(cl_kernel k, cl_uint i, cl_uint v) {
   checkCl(clSetKernelArg(k, i, sizeof(cl_uint), &v), "clSetKernelArg", dev_);
+}
+
+void SegmentEngine::setArg(cl_kernel k, cl_uint i, SumReal v) {
+  if (sumSize_ == sizeof(double)) {
+    checkCl(clSetKernelArg(k, i, sizeof(double), &v.value), "clSetKernelArg", dev_);
+  } else {
+    const float f = static_cast<float>(v.value);
+    checkCl(clSetKernelArg(k, i, sizeof(float), &f), "clSetKernelArg", dev_);
+  }
 }
 
 std::pair<std::size_t, std::size_t> SegmentEngine::spanItems(Span span, std::size_t lo, std::size_t hi) const {
@@ -452,7 +463,8 @@ void SegmentEngine::setActive(const std::vector<char>& active) {
       segInfo_[kSegInfoCount * s + kSegActive] = on ? 1 : 0;
     }
   }
-  if (changed) uploadRaw(segInfoBuf_, segInfo_);
+  if (changed || segInfoStale_) uploadRaw(segInfoBuf_, segInfo_);
+  segInfoStale_ = false;
 }
 
 void SegmentEngine::setCoefficients(std::size_t s, const SystemCoeffs& c) {
@@ -595,9 +607,9 @@ void SegmentEngine::run(BatchOp op, const std::vector<BatchRequest*>& requests) 
 
 std::size_t SegmentEngine::workingSet(const Segment& sg) const {
   // Per element: 4 corners, 8 gather entries' worth of CSR, geometry, a_i and the output 12-vector;
-  // per node: CSR start, 8 node vectors (x b r z p q, free, mass) of 3, blocks and inverse.
+  // per node: CSR start, 9 node vectors (x b r u p w s, free, mass) of 3, blocks and inverse.
   return sg.elemSpan * (8 * sizeof(cl_uint) + (kGeomComponents + kRotGradComponents + kElemOutComponents) * realSize_) +
-         sg.nodeSpan * (sizeof(cl_uint) + (8 * 3 + kNodeBlockComponents + 9) * realSize_);
+         sg.nodeSpan * (sizeof(cl_uint) + (9 * 3 + kNodeBlockComponents + 9) * realSize_);
 }
 
 void SegmentEngine::refreshBlocks(bool cornersWritten) {
@@ -681,10 +693,10 @@ void SegmentEngine::elementProduct(const ClBuffer& v) {
            elemOut_);
 }
 
-void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project) {
+void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials) {
   elementProduct(v);
   launch(kGatherProduct_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_,
-         mass_, free_, cl_uint(project ? 1 : 0), v, y, partials_);
+         mass_, free_, cl_uint(project ? 1 : 0), v, y, partials);
 }
 
 void SegmentEngine::enqueueElementProduct(const SystemCoeffs& c) {
@@ -696,7 +708,7 @@ void SegmentEngine::enqueueElementProduct(const SystemCoeffs& c) {
 void SegmentEngine::enqueueProduct(const SystemCoeffs& c) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
-  product(p_, q_, false);
+  product(p_, q_, false, partialsW_);
 }
 
 void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
@@ -712,7 +724,7 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   const auto [lo, hi] = dofRange(requests);
   upload(p_, packed_.data(), lo, hi - lo);
   setActive(active);
-  product(p_, q_, false);
+  product(p_, q_, false, partialsW_);
   download(q_, packed_.data(), lo, hi - lo);
   for (BatchRequest* r : requests) {
     const Segment& sg = segs_[r->body];
@@ -724,18 +736,21 @@ void SegmentEngine::pcgSetup() {
   flushCoefficients();
   if (precond_ != PreconditionerKind::None)
     launch(kPrecondInvert_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, free_, minv_);
-  // r = b - A x (projected), z = M^-1 r, p = z, rho = r.z, rr = r.r, bb = b.b
-  product(x_, q_, true);
-  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, partials_);
-  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceInit));
+  // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
+  // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
+  product(x_, q_, true, partialsW_);
+  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+  product(z_, q_, true, partialsW_);
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceInit),
+         SumReal{solver_.tolerance * solver_.tolerance});
 }
 
 void SegmentEngine::pcgIteration() {
-  product(p_, q_, true);  // q = A p, partial p.q
-  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceAlpha));
-  launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, p_, q_, minv_, x_, r_, z_, partials_);
-  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceBeta));
-  launch(kPcgDirection_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, z_, p_);
+  // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta
+  launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, q_, minv_, p_, s_, x_, r_, z_, partials_);
+  product(z_, q_, true, partialsW_);
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceStep),
+         SumReal{solver_.tolerance * solver_.tolerance});
 }
 
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
@@ -802,43 +817,95 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   setActive(active);
   pcgSetup();
 
-  // Every checkEvery iterations one read of all segments' scalars; a segment stops (inactive, its
-  // work-groups return at once) when converged, capped, broken down or not finite. Its iteration
-  // count is the iteration of that check: the one it would stop at alone.
-  const double tol = solver_.tolerance;
+  // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
+  // inactive on its own, so the host enqueues checkEvery iterations ahead of what it has read: each
+  // chunk of iterations is followed by a non-blocking read of all segments' scalars, and the host
+  // waits for a read only while the next chunk is already queued. It learns of a stop at most one
+  // chunk late, and that late chunk costs the stopped segment nothing (its work-groups return at
+  // once): the answer and the iteration count are those of checking every iteration, whatever
+  // checkEvery is. The host narrows the launched span to the segments it still sees running and
+  // never writes the segment table while iterating (that could revive a segment the device stopped).
+  segInfoStale_ = true;
   const int checkEvery = std::max(1, solver_.checkEvery);
-  std::vector<double> scalars(kScalarCount * segs_.size());
-  auto readScalars = [&]() { downloadSums(scalars_, scalars.data(), scalars.size()); };
-  auto scalar = [&](const Running& run, unsigned k) { return scalars[kScalarCount * run.request->body + k]; };
-  auto check = [&](Running& run, int it, bool breakdownStops) {
-    LinearSolveStats& stats = run.request->stats;
-    stats.relativeResidual = std::sqrt(std::max(0.0, scalar(run, kScalarRr)) / scalar(run, kScalarBb));
-    run.finite = std::isfinite(stats.relativeResidual);
-    stats.converged = run.finite && stats.relativeResidual <= tol;
-    stats.iterations = it;
-    if (!run.finite || stats.converged || (breakdownStops && scalar(run, kScalarBreakdown) != 0.0))
-      run.iterating = false;  // p.Ap <= 0: no further progress possible
+  const int maxIterations = std::max(0, solver_.maxIterations);
+  struct Read {
+    std::vector<unsigned char> bytes;
+    cl_event event = nullptr;
   };
-  readScalars();
-  for (Running& run : runs) check(run, 0, false);
-  int it = 0;
-  for (;;) {
-    bool any = false;
-    std::fill(active.begin(), active.end(), 0);
-    for (const Running& run : runs)
-      if (run.iterating) active[run.request->body] = any = true;
-    if (!any || it >= solver_.maxIterations) break;
-    setActive(active);
-    pcgIteration();
-    ++it;
-    if (it % checkEvery == 0 || it == solver_.maxIterations) {
-      readScalars();
-      for (Running& run : runs)
-        if (run.iterating) check(run, it, true);
+  std::deque<Read> reads;
+  auto issueRead = [&]() {
+    Read r;
+    r.bytes.resize(kScalarCount * segs_.size() * sumSize_);
+    checkCl(clEnqueueReadBuffer(ctx_->queue(), scalars_.get(), CL_FALSE, 0, r.bytes.size(), r.bytes.data(), 0,
+                                nullptr, &r.event),
+            "clEnqueueReadBuffer", dev_);
+    reads.push_back(std::move(r));
+  };
+  std::vector<double> scalars(kScalarCount * segs_.size());
+  auto collect = [&]() {  // waits for the oldest read and takes the stops it shows
+    Read r = std::move(reads.front());
+    reads.pop_front();
+    const cl_int status = clWaitForEvents(1, &r.event);
+    clReleaseEvent(r.event);
+    checkCl(status, "clWaitForEvents (PCG scalars)", dev_);
+    for (std::size_t i = 0; i < scalars.size(); ++i)
+      scalars[i] = sumSize_ == sizeof(double) ? reinterpret_cast<const double*>(r.bytes.data())[i]
+                                              : reinterpret_cast<const float*>(r.bytes.data())[i];
+    for (Running& run : runs) {
+      if (!run.iterating) continue;
+      const double* sc = &scalars[kScalarCount * run.request->body];
+      LinearSolveStats& stats = run.request->stats;
+      stats.iterations = static_cast<int>(sc[kScalarIterations]);
+      stats.relativeResidual = std::sqrt(std::max(0.0, sc[kScalarRr]) / sc[kScalarBb]);
+      const auto stop = static_cast<unsigned>(sc[kScalarStop]);
+      if (stop == kStopRunning) continue;
+      run.iterating = false;
+      stats.converged = stop == kStopConverged;
+      run.finite = stop != kStopNonFinite && std::isfinite(stats.relativeResidual);
     }
+  };
+  auto narrowSpan = [&]() {  // the host's view only: the device's table stays as the device left it
+    activeLo_ = segs_.size();
+    activeHi_ = 0;
+    for (const Running& run : runs)
+      if (run.iterating) {
+        activeLo_ = std::min(activeLo_, run.request->body);
+        activeHi_ = std::max(activeHi_, run.request->body + 1);
+      }
+  };
+  int enqueued = 0;
+  auto enqueueChunk = [&]() {
+    const int n = std::min(checkEvery, maxIterations - enqueued);
+    for (int i = 0; i < n; ++i) pcgIteration();
+    enqueued += n;
+    issueRead();
+  };
+  issueRead();                                  // the set-up's scalars (a warm start may already have converged)
+  if (enqueued < maxIterations) enqueueChunk();  // runs while that read travels
+  try {
+    for (;;) {
+      collect();
+      bool any = false;
+      for (const Running& run : runs) any = any || run.iterating;
+      if (!any || reads.empty()) break;  // all stopped, or the read after the last allowed iteration was taken
+      if (enqueued < maxIterations) {
+        narrowSpan();
+        enqueueChunk();
+      }
+    }
+  } catch (...) {
+    for (Read& r : reads) {
+      clWaitForEvents(1, &r.event);
+      clReleaseEvent(r.event);
+    }
+    throw;
+  }
+  for (Read& r : reads) {  // a chunk enqueued after everything had stopped: no-ops, wait and drop its read
+    clWaitForEvents(1, &r.event);
+    clReleaseEvent(r.event);
   }
   for (Running& run : runs)
-    if (run.iterating) run.request->stats.iterations = it;  // capped
+    if (run.iterating) run.request->stats.iterations = maxIterations;  // capped
 
   // The reported residual is the true one, |free (b - A x)| / |free b| (as the interface defines
   // it), not the recurrence's estimate, which drifts from it in float: one more product. The
@@ -849,14 +916,16 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     if (run.finite && run.request->stats.iterations > 0) active[run.request->body] = anyTrue = true;
   if (anyTrue) {
     setActive(active);
-    product(x_, q_, true);
-    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, partials_);
-    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, scalars_, cl_uint(kReduceInit));
-    readScalars();
+    product(x_, q_, true, partialsW_);
+    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
+           SumReal{0.0});
+    downloadSums(scalars_, scalars.data(), scalars.size());
     for (Running& run : runs)
       if (active[run.request->body]) {
+        const double* sc = &scalars[kScalarCount * run.request->body];
         LinearSolveStats& stats = run.request->stats;
-        stats.relativeResidual = std::sqrt(std::max(0.0, scalar(run, kScalarRr)) / scalar(run, kScalarBb));
+        stats.relativeResidual = std::sqrt(std::max(0.0, sc[kScalarRr]) / sc[kScalarBb]);
         run.finite = std::isfinite(stats.relativeResidual);
       }
   }

@@ -12,10 +12,11 @@
 //   SetPositions    one write of the packed relative positions; compute_rotations (+ blocks)
 //   InternalForces  element_forces + gather_sum; one read
 //   Apply           one write of p; element_product + gather_product; one read
-//   Solve           writes of b and x; precond_invert; r = b - A x; PCG iterations for all active
-//                   segments (5 launches each); every checkEvery iterations one read of all
-//                   segments' scalars, converged / capped / broken-down segments made inactive;
-//                   the true residual per segment; one read of x
+//   Solve           writes of b and x; precond_invert; r = b - A x, w = A M^-1 r; PCG iterations
+//                   for all active segments (4 launches each, kernels/opencl/pcg.cl), the device
+//                   stopping each segment at convergence, breakdown or a non-finite residual;
+//                   after every checkEvery iterations a non-blocking read of all segments'
+//                   scalars, waited for one chunk later; the true residual per segment; one read of x
 //   ElasticEnergy   element_energy; one read of the per-work-group partials, summed per segment
 #pragma once
 
@@ -129,6 +130,11 @@ class SegmentEngine {
   void setArg(cl_kernel k, cl_uint i, cl_mem m);
   void setArg(cl_kernel k, cl_uint i, const ClBuffer& b) { setArg(k, i, b.get()); }
   void setArg(cl_kernel k, cl_uint i, cl_uint v);
+  /// A kernel argument of type sum_real (corofem_layout.h: float, or double in double/mixed precision).
+  struct SumReal {
+    double value;
+  };
+  void setArg(cl_kernel k, cl_uint i, SumReal v);
   template <class... Args>
   void launch(const ClKernel& kernel, Span span, const Args&... args) {
     if (activeLo_ >= activeHi_) return;  // no active segment
@@ -163,7 +169,8 @@ class SegmentEngine {
   void allocate(const OpenCLOptions& options);
   void refreshBlocks(bool cornersWritten);
   void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
-  void product(const ClBuffer& v, const ClBuffer& y, bool project);
+  /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
+  void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials);
   void pcgSetup();
   void pcgIteration();
   void setPositions(const std::vector<BatchRequest*>& requests);
@@ -204,16 +211,19 @@ class SegmentEngine {
   std::vector<double> segCoef_;          ///< host copy (kSegCoefCount per segment)
   bool coefDirty_ = true;
   std::vector<char> active_;
+  bool segInfoStale_ = false;            ///< the device may have deactivated segments (PCG stops): upload next time
   std::size_t activeLo_ = 0, activeHi_ = 0;  ///< span of the active segments
   std::vector<double> posHost_;          ///< the device positions (relative), all segments
   std::vector<double> packed_;           ///< staging of packed node vectors
   std::vector<unsigned char> staging_;   ///< device-precision staging
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
-      kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kPcgDirection_, kReduceFinish_;
+      kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kReduceFinish_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
   ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
-  ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, partials_, scalars_;
+  // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
+  // partials_ takes pcg_init/pcg_update's and element_energy's sums, partialsW_ gather_product's.
+  ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
 };
 
 }  // namespace corofem::detail
