@@ -194,6 +194,8 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
 }
 
 SegmentEngine::~SegmentEngine() {
+  if (!writes_.empty()) clFinish(ctx_->queue());  // the pending writes read their host bytes until done
+  writesDone();
   for (const auto& [kernel, entry] : profileTimes_)
     std::fprintf(stderr, "[corofem opencl profile] %-24s %8ld launches %10.1f us each\n", kernel.c_str(),
                  entry.first, 1e6 * entry.second / static_cast<double>(entry.first));
@@ -490,18 +492,40 @@ void SegmentEngine::flushCoefficients() {
 
 // ---------------------------------------------------------------------------- transfers
 
+void SegmentEngine::enqueueWrite(const ClBuffer& buf, std::size_t offset, std::vector<unsigned char>&& bytes) {
+  // Non-blocking: the host goes on enqueuing while the copy travels. The bytes stay alive (here)
+  // until the write's event says it is done; a blocking read (download) drains them all.
+  while (!writes_.empty()) {
+    cl_int status = CL_QUEUED;
+    clGetEventInfo(writes_.front().event, CL_EVENT_COMMAND_EXECUTION_STATUS, sizeof(status), &status, nullptr);
+    if (status != CL_COMPLETE && writes_.size() < kMaxPendingWrites) break;
+    const cl_int wait = status == CL_COMPLETE ? CL_SUCCESS : clWaitForEvents(1, &writes_.front().event);
+    clReleaseEvent(writes_.front().event);
+    writes_.pop_front();
+    checkCl(wait, "clWaitForEvents (write)", dev_);
+  }
+  PendingWrite w{std::move(bytes), nullptr};
+  checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_FALSE, offset, w.bytes.size(), w.bytes.data(), 0, nullptr,
+                               &w.event),
+          "clEnqueueWriteBuffer", dev_);
+  writes_.push_back(std::move(w));
+}
+
+void SegmentEngine::writesDone() {
+  for (PendingWrite& w : writes_) clReleaseEvent(w.event);  // complete: a blocking command followed them
+  writes_.clear();
+}
+
 void SegmentEngine::upload(const ClBuffer& buf, const double* src, std::size_t begin, std::size_t count) {
   if (count == 0) return;
-  staging_.resize(count * realSize_);
+  std::vector<unsigned char> bytes(count * realSize_);
   if (double_) {
-    std::memcpy(staging_.data(), src + begin, count * sizeof(double));
+    std::memcpy(bytes.data(), src + begin, count * sizeof(double));
   } else {
-    float* out = reinterpret_cast<float*>(staging_.data());
+    float* out = reinterpret_cast<float*>(bytes.data());
     for (std::size_t i = 0; i < count; ++i) out[i] = static_cast<float>(src[begin + i]);
   }
-  checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, begin * realSize_, count * realSize_,
-                               staging_.data(), 0, nullptr, nullptr),
-          "clEnqueueWriteBuffer", dev_);
+  enqueueWrite(buf, begin * realSize_, std::move(bytes));
 }
 
 void SegmentEngine::download(const ClBuffer& buf, double* dst, std::size_t begin, std::size_t count) {
@@ -510,6 +534,7 @@ void SegmentEngine::download(const ClBuffer& buf, double* dst, std::size_t begin
   checkCl(clEnqueueReadBuffer(ctx_->queue(), buf.get(), CL_TRUE, begin * realSize_, count * realSize_,
                               staging_.data(), 0, nullptr, nullptr),
           "clEnqueueReadBuffer", dev_);
+  writesDone();
   if (double_) {
     std::memcpy(dst + begin, staging_.data(), count * sizeof(double));
   } else {
@@ -526,13 +551,13 @@ void SegmentEngine::downloadSums(const ClBuffer& buf, double* dst, std::size_t c
   checkCl(clEnqueueReadBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, count * sizeof(double), dst, 0, nullptr,
                               nullptr),
           "clEnqueueReadBuffer", dev_);
+  writesDone();
 }
 
 template <class T>
 void SegmentEngine::uploadRaw(const ClBuffer& buf, const std::vector<T>& v) {
-  checkCl(clEnqueueWriteBuffer(ctx_->queue(), buf.get(), CL_TRUE, 0, v.size() * sizeof(T), v.data(), 0, nullptr,
-                               nullptr),
-          "clEnqueueWriteBuffer", dev_);
+  const auto* data = reinterpret_cast<const unsigned char*>(v.data());
+  enqueueWrite(buf, 0, std::vector<unsigned char>(data, data + v.size() * sizeof(T)));
 }
 
 std::pair<std::size_t, std::size_t> SegmentEngine::dofRange(const std::vector<BatchRequest*>& requests) const {
@@ -545,7 +570,10 @@ std::pair<std::size_t, std::size_t> SegmentEngine::dofRange(const std::vector<Ba
   return {lo, std::max(lo, hi)};
 }
 
-void SegmentEngine::finish() { checkCl(clFinish(ctx_->queue()), "clFinish", dev_); }
+void SegmentEngine::finish() {
+  checkCl(clFinish(ctx_->queue()), "clFinish", dev_);
+  writesDone();
+}
 
 // ---------------------------------------------------------------------------- operations
 

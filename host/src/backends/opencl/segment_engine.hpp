@@ -24,6 +24,7 @@
 #include "solve/batch.hpp"
 
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <memory>
 #include <string>
@@ -154,7 +155,16 @@ class SegmentEngine {
   void setCoefficients(std::size_t s, const SystemCoeffs& c);
   void flushCoefficients();
 
-  // -- transfers (blocking, converting to the device precision); ranges in reals of the packed arrays
+  // -- transfers, converting to the device precision; ranges in reals of the packed arrays. Writes
+  // are non-blocking (enqueueWrite keeps their bytes until done), reads blocking.
+  struct PendingWrite {
+    std::vector<unsigned char> bytes;
+    cl_event event;
+  };
+  static constexpr std::size_t kMaxPendingWrites = 16;
+  void enqueueWrite(const ClBuffer& buf, std::size_t offset, std::vector<unsigned char>&& bytes);
+  /// Releases the pending writes; only after a blocking command that followed them.
+  void writesDone();
   void upload(const ClBuffer& buf, const double* src, std::size_t begin, std::size_t count);
   void download(const ClBuffer& buf, double* dst, std::size_t begin, std::size_t count);
   void downloadSums(const ClBuffer& buf, double* dst, std::size_t count);
@@ -215,7 +225,8 @@ class SegmentEngine {
   std::size_t activeLo_ = 0, activeHi_ = 0;  ///< span of the active segments
   std::vector<double> posHost_;          ///< the device positions (relative), all segments
   std::vector<double> packed_;           ///< staging of packed node vectors
-  std::vector<unsigned char> staging_;   ///< device-precision staging
+  std::vector<unsigned char> staging_;   ///< device-precision staging of blocking reads
+  std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
       kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kReduceFinish_;
