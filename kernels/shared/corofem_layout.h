@@ -34,8 +34,12 @@ typedef float4 real4;
 #if defined(COROFEM_MIXED) && !defined(COROFEM_DOUBLE)
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double sum_real;
+typedef double4 sum_real4;
+#define TO_SUM4(v) convert_double4(v)
 #else
 typedef real sum_real;
+typedef real4 sum_real4;
+#define TO_SUM4(v) (v)
 #endif
 #define COROFEM_CONSTANT(type, name, value) enum { name = value }
 /* Helper functions: `static inline`, so that no external definition is ever needed (C99 inline
