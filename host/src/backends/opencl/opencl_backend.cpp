@@ -8,8 +8,10 @@
 //                  node_stiffness_blocks (preconditioner blocks, rotated with the elements)
 //   internalForces element_forces + gather_sum; download f
 //   apply          upload p; element_product + gather_product; download y
-//   solve          upload b, x; precond_invert; r = b - A x; PCG iterations (5 launches each, no
-//                  host read); read the scalars every checkEvery iterations; true residual; download x
+//   solve          upload b, x; precond_invert; r = b - A x, w = A M^-1 r; single-reduction PCG
+//                  iterations (4 launches each, no host read), stopped on the device at convergence;
+//                  non-blocking reads of the scalars every checkEvery iterations; true residual;
+//                  download x
 // Build switches and tuning overrides: segment_engine.cpp.
 #ifdef COROFEM_WITH_OPENCL
 
