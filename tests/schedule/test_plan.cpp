@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 namespace corofem::test {
 namespace {
@@ -113,6 +114,71 @@ TEST(Plan, SizesFollowTheModel) {
   // Linear formulation: no rotations.
   scene.bodies[0].formulation = Formulation::Linear;
   for (const json& b : plans(scene)) EXPECT_FALSE(anyBufferContains(b, "rotation")) << b["buffers"].dump(1);
+}
+
+// On a real OpenCL device the plan also lists what the backend allocated, buffer by buffer (the
+// engine's own list, each at its clCreateBuffer size): only what the scene reads.
+TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
+  bool opencl = false;
+  for (const detail::Candidate& c : detail::listCandidates()) opencl = opencl || c.kind == BackendKind::OpenCL;
+  if (!opencl) GTEST_SKIP() << "no OpenCL device (or built without COROFEM_WITH_OPENCL)";
+  HookScope scope;
+  auto allocated = [](const Scene& scene) {
+    auto sim = Simulation::create(scene);
+    EXPECT_TRUE(sim) << sim.message();
+    return sim ? json::parse(sim->planReport()) : json();
+  };
+  auto names = [](const json& list) {
+    std::set<std::string> out;
+    for (const auto& b : list) out.insert(b["name"].get<std::string>());
+    return out;
+  };
+  auto total = [](const json& list) {
+    long long sum = 0;
+    for (const auto& b : list) sum += b["bytes"].get<long long>();
+    return sum;
+  };
+  Scene stat = staticScene(boxBeam(), 1), dyn = dynamicScene(boxBeam(), 2);
+  for (Scene* sc : {&stat, &dyn}) {
+    sc->backend.kind = BackendKind::OpenCL;
+    sc->solver.precision = Precision::Float;
+  }
+  const json ps = allocated(stat), pd = allocated(dyn);
+  ASSERT_FALSE(ps.is_null() || pd.is_null());
+  const json& bs = ps["bodies"][0];
+  const json& bd = pd["bodies"][0];
+  ASSERT_TRUE(bs.contains("device_buffers_allocated")) << bs.dump(1);
+  ASSERT_TRUE(bd.contains("device_buffers_allocated")) << bd.dump(1);
+  EXPECT_EQ(total(bs["device_buffers_allocated"]), bs["device_bytes_allocated"].get<long long>());
+  EXPECT_EQ(total(bd["device_buffers_allocated"]), bd["device_bytes_allocated"].get<long long>());
+  const std::set<std::string> s = names(bs["device_buffers_allocated"]), d = names(bd["device_buffers_allocated"]);
+  EXPECT_EQ(s.count("lumped_mass"), 0u) << "a static scene allocates no mass";
+  EXPECT_EQ(d.count("lumped_mass"), 1u);
+  EXPECT_EQ(d.size(), s.size() + 1) << "the mass buffer is all a dynamic scene adds";
+  EXPECT_EQ(s.count("quaternions") + s.count("stored_stiffness_Ke"), 0u) << "not used by this scene";
+  // 400 float elements padded to 512 (WG 64 x 8 per work-item on CPUs, 64 x 1 on GPUs: 448), 189 nodes.
+  long long positions = -1;
+  for (const auto& b : bd["device_buffers_allocated"])
+    if (b["name"] == "positions") positions = b["bytes"].get<long long>();
+  EXPECT_GE(positions, 3 * 189 * 4);
+  // The quaternion method adds exactly its warm-start buffer.
+  dyn.solver.rotation = RotationMethod::Quaternion;
+  const json pq = allocated(dyn);
+  ASSERT_FALSE(pq.is_null());
+  const std::set<std::string> q = names(pq["bodies"][0]["device_buffers_allocated"]);
+  EXPECT_EQ(q.size(), d.size() + 1);
+  EXPECT_EQ(q.count("quaternions"), 1u);
+  // Two bodies sharing the device: their buffers are the batch's, listed once, summing to its total.
+  Scene two = dynamicScene(boxBeam(), 2);
+  two.bodies.push_back(boxBeam({8, 2, 2}));
+  two.bodies[1].name = "second";
+  two.backend.kind = BackendKind::OpenCL;
+  two.solver.precision = Precision::Float;
+  const json p2 = allocated(two);
+  ASSERT_FALSE(p2.is_null());
+  ASSERT_EQ(p2["batches"].size(), 1u) << p2.dump(1);
+  EXPECT_EQ(total(p2["batches"][0]["buffers"]), p2["batches"][0]["allocated_bytes"].get<long long>());
+  EXPECT_FALSE(p2["bodies"][0].contains("device_buffers_allocated"));
 }
 
 // `corofem run --plan` prints the plan and runs nothing (no output folder).

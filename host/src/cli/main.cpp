@@ -110,12 +110,24 @@ int printPlan(const Simulation& sim, bool asJson) {
     for (const auto& buf : b["buffers"])
       std::cout << "    " << buf["name"].get<std::string>() << " [" << buf["where"].get<std::string>() << "] "
                 << humanBytes(buf["bytes"].get<double>()) << '\n';
+    if (b.contains("device_bytes_allocated")) {
+      std::cout << "  device buffers allocated (" << humanBytes(b["device_bytes_allocated"].get<double>())
+                << " in all):\n";
+      for (const auto& buf : b["device_buffers_allocated"])
+        std::cout << "    " << buf["name"].get<std::string>() << ' ' << humanBytes(buf["bytes"].get<double>()) << '\n';
+    }
     const auto& m = b["bytes_moved"];
     std::cout << "  bytes moved (estimate): " << humanBytes(m["per_pcg_iteration"].get<double>()) << " per PCG iteration, "
               << humanBytes(m["per_newton_iteration_without_pcg"].get<double>()) << " per Newton iteration besides PCG, "
               << "at most " << humanBytes(m["per_step_upper_bound"].get<double>()) << " per step ("
               << m["newton_iterations"] << " Newton iteration(s), " << m["newton_iterations_is"].get<std::string>()
               << ", PCG cap " << m["pcg_iteration_cap"] << ")\n";
+  }
+  for (const auto& g : plan["batches"]) {
+    std::cout << "batch on " << g["device"].get<std::string>() << " (" << g["bodies"].size() << " bodies, one set of "
+              << "launches): device buffers allocated " << humanBytes(g["allocated_bytes"].get<double>()) << '\n';
+    for (const auto& buf : g["buffers"])
+      std::cout << "    " << buf["name"].get<std::string>() << ' ' << humanBytes(buf["bytes"].get<double>()) << '\n';
   }
   return kExitOk;
 }

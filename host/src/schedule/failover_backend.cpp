@@ -116,4 +116,8 @@ double FailoverBackend::elasticEnergy() {
   return guarded("elasticEnergy", [&](Backend& b) { return b.elasticEnergy(); });
 }
 
+std::vector<DeviceBuffer> FailoverBackend::deviceBuffers() const {
+  return current_ ? current_->deviceBuffers() : std::vector<DeviceBuffer>{};
+}
+
 }  // namespace corofem::detail

@@ -152,6 +152,7 @@ class FailoverBackend final : public Backend {
   void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override;
   LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override;
   double elasticEnergy() override;
+  std::vector<DeviceBuffer> deviceBuffers() const override;
 
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }

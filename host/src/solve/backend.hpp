@@ -25,6 +25,12 @@ struct SystemCoeffs {
   double stiffness = 1.0;
 };
 
+/// A device buffer a backend allocated: what it holds and its size at allocation.
+struct DeviceBuffer {
+  std::string name;
+  std::size_t bytes = 0;
+};
+
 struct LinearSolveStats {
   int iterations = 0;             ///< PCG iterations (0 for a direct solve)
   double relativeResidual = 0.0;  ///< |b - A x| / |b| on the free dofs (0 when b = 0)
@@ -54,6 +60,11 @@ class Backend {
 
   /// Strain energy at the current positions (J).
   virtual double elasticEnergy() = 0;
+
+  /// The device buffers this backend allocated, each at its allocated size (what `corofem run
+  /// --plan` reports as allocated). Empty for host backends and for a body's view of a batch (the
+  /// batch reports the buffers its bodies share).
+  virtual std::vector<DeviceBuffer> deviceBuffers() const { return {}; }
 };
 
 /// The reference backend: assembled sparse matrices, Eigen's CG (diagonal preconditioner) or

@@ -66,6 +66,8 @@ class BatchDevice {
   virtual void run(std::vector<BatchRequest*>& round) = 0;
   /// Bytes of device memory this batch allocated (0 for host devices).
   virtual std::size_t allocatedBytes() const { return 0; }
+  /// The device buffers its bodies share (empty for host devices).
+  virtual std::vector<DeviceBuffer> deviceBuffers() const { return {}; }
 };
 
 /// The batch as a loop over one Backend per body (reference or any other): no speed-up, but

@@ -283,6 +283,7 @@ std::size_t BatchGroup::bodyCount() const { return shared_->slots.size(); }
 std::string BatchGroup::name() const { return shared_->device->name(); }
 std::string BatchGroup::deviceName() const { return shared_->device->deviceName(); }
 std::size_t BatchGroup::allocatedBytes() const { return shared_->device->allocatedBytes(); }
+std::vector<DeviceBuffer> BatchGroup::deviceBuffers() const { return shared_->device->deviceBuffers(); }
 BatchGroupStats BatchGroup::stats() const {
   std::lock_guard<std::mutex> lk(shared_->m);
   return shared_->stats;

@@ -50,6 +50,7 @@ class BatchGroup {
   std::string name() const;
   std::string deviceName() const;
   std::size_t allocatedBytes() const;
+  std::vector<DeviceBuffer> deviceBuffers() const;  ///< the buffers its bodies share
   BatchGroupStats stats() const;
 
   /// The Backend of body `body` (< bodyCount()): its calls are requests of the group's rounds.

@@ -227,8 +227,16 @@ struct Simulation::Impl {
     return {{"group", b.batch}, {"device", g.candidate}, {"bodies", names}, {"active", g.group->attached(b.slot)}};
   }
 
+  /// [{"name", "bytes"}] of device buffers.
+  static nlohmann::json buffersJson(const std::vector<detail::DeviceBuffer>& buffers) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const detail::DeviceBuffer& d : buffers) out.push_back({{"name", d.name}, {"bytes", d.bytes}});
+    return out;
+  }
+
   /// The groups: [{"device", "bodies", "active_bodies", "rounds", "requests", "largest_round",
-  /// "device_seconds", "allocated_bytes"}], and [{"device", "bodies", "reason"}] for bodies left unbatched.
+  /// "device_seconds", "allocated_bytes", "buffers"}], and [{"device", "bodies", "reason"}] for bodies
+  /// left unbatched.
   nlohmann::json batchesJson() const {
     nlohmann::json out = nlohmann::json::array();
     for (const Batch& g : batches) {
@@ -241,7 +249,8 @@ struct Simulation::Impl {
       out.push_back({{"device", g.candidate}, {"backend", g.group->name()}, {"bodies", names},
                      {"active_bodies", active}, {"rounds", st.rounds}, {"requests", st.requests},
                      {"largest_round", st.largestRound}, {"device_seconds", st.deviceSeconds},
-                     {"allocated_bytes", g.group->allocatedBytes()}});
+                     {"allocated_bytes", g.group->allocatedBytes()},
+                     {"buffers", buffersJson(g.group->deviceBuffers())}});
     }
     return out;
   }
@@ -345,6 +354,9 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       body.mesh = std::move(mesh.value());
       if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
       body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
+      // A static analysis never uses the mass (statics solve K_t du = r; gravity is rho g V / 4 per
+      // node, built from the density above): zero, the device backends allocate no mass buffer.
+      if (scene.analysis.kind == AnalysisDesc::Kind::Static) body.problem->lumpedMass.setZero();
 
       // Where the body runs: the explicit choice (scene / API, else COROFEM_DEVICE), or for "auto"
       // the scheduler's calibrated (or cached) choice; hyperelastic bodies always on the reference.
@@ -616,7 +628,17 @@ std::string Simulation::planReport() const {
         for (std::size_t k = 0; k < g.bodies.size(); ++k)
           if (g.group->attached(k)) mates.push_back(impl_->scene.bodies[g.bodies[k]].name);
     }
-    bodies.push_back(json::parse(detail::planJson(impl_->scene.bodies[i], *b.problem, impl_->scene, now, mates)));
+    json body = json::parse(detail::planJson(impl_->scene.bodies[i], *b.problem, impl_->scene, now, mates));
+    // What the body's own device backend allocated, buffer by buffer (the estimate above is the
+    // model; a batched body's buffers are the batch's, listed under "batches").
+    const std::vector<detail::DeviceBuffer> allocated = b.backend->deviceBuffers();
+    if (!allocated.empty()) {
+      body["device_buffers_allocated"] = Impl::buffersJson(allocated);
+      std::size_t total = 0;
+      for (const detail::DeviceBuffer& d : allocated) total += d.bytes;
+      body["device_bytes_allocated"] = total;
+    }
+    bodies.push_back(body);
   }
   j["bodies"] = bodies;
   j["batches"] = impl_->batchesJson();

@@ -52,6 +52,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   const cl::ProgramBuild& programBuild() const override { return engine_.programBuild(); }
   cl::Context& context() override { return engine_.context(); }
   std::size_t allocatedBytes() const override { return engine_.allocatedBytes(); }
+  std::vector<DeviceBuffer> deviceBuffers() const override { return engine_.buffers(); }
   cl_mem positionBuffer() const override { return engine_.positionBuffer(); }
   bool positionsAreDouble() const override { return engine_.positionsAreDouble(); }
   const double* positionCentroid() const override { return engine_.positionCentroid(0); }

@@ -26,6 +26,7 @@ class OpenCLBatchDevice final : public BatchDevice {
   std::string deviceName() const override { return engine_.deviceDescription(); }
   std::size_t bodyCount() const override { return engine_.segmentCount(); }
   std::size_t allocatedBytes() const override { return engine_.allocatedBytes(); }
+  std::vector<DeviceBuffer> deviceBuffers() const override { return engine_.buffers(); }
 
   void run(std::vector<BatchRequest*>& round) override {
     constexpr std::size_t kOps = 5;  // BatchOp values, in the order they run

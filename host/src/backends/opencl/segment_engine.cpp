@@ -383,13 +383,31 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
 }
 
+std::vector<DeviceBuffer> SegmentEngine::buffers() const {
+  const std::pair<const char*, const ClBuffer*> all[] = {
+      {"element_segments", &elemSeg_},      {"node_segments", &nodeSeg_},
+      {"segment_info", &segInfoBuf_},       {"segment_coefficients", &segCoefBuf_},
+      {"element_nodes", &elemNodes_},       {"element_geometry", &geom_},
+      {"rotations", &rot_},                 {"rotated_gradients", &rotGrad_},
+      {"quaternions", &quat_},              {"stored_stiffness_Ke", &stiffness_},
+      {"element_output", &elemOut_},        {"gather_starts", &nodeStart_},
+      {"gather_entries", &nodeEntries_},    {"positions", &pos_},
+      {"lumped_mass", &mass_},              {"free_mask", &free_},
+      {"node_blocks", &blocks_},            {"preconditioner_inverse", &minv_},
+      {"pcg_x", &x_},                       {"pcg_b", &b_},
+      {"pcg_r", &r_},                       {"pcg_u", &z_},
+      {"pcg_p", &p_},                       {"pcg_w", &q_},
+      {"pcg_s", &s_},                       {"partial_sums", &partials_},
+      {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_}};
+  std::vector<DeviceBuffer> out;
+  for (const auto& [name, buffer] : all)
+    if (buffer->get()) out.push_back({name, buffer->bytes()});
+  return out;
+}
+
 std::size_t SegmentEngine::allocatedBytes() const {
   std::size_t sum = 0;
-  for (const ClBuffer* b : {&elemSeg_, &nodeSeg_, &segInfoBuf_, &segCoefBuf_, &elemNodes_, &geom_, &rot_,
-                            &rotGrad_, &quat_, &stiffness_, &elemOut_, &nodeStart_, &nodeEntries_, &pos_, &mass_,
-                            &free_, &blocks_, &minv_, &x_, &b_, &r_, &z_, &p_, &q_, &s_, &partials_, &partialsW_,
-                            &scalars_})
-    sum += b->bytes();
+  for (const DeviceBuffer& b : buffers()) sum += b.bytes;
   return sum;
 }
 

@@ -90,8 +90,10 @@ class SegmentEngine {
   std::string deviceDescription() const { return ctx_->info().describe(); }
   const std::string& buildOptions() const { return options_; }
   const cl::ProgramBuild& programBuild() const { return build_; }
-  /// Bytes of all device buffers allocated (each at its clCreateBuffer size).
+  /// Bytes of all device buffers allocated (each at its clCreateBuffer size): the sum of buffers().
   std::size_t allocatedBytes() const;
+  /// Every buffer allocated, named for what it holds, at its clCreateBuffer size.
+  std::vector<DeviceBuffer> buffers() const;
 
   /// Segment `s`'s rotations, 9 per element (row-major R), as last computed.
   std::vector<double> readRotations(std::size_t s);
