@@ -888,7 +888,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     reads.push_back(std::move(r));
   };
   std::vector<double> scalars(kScalarCount * segs_.size());
-  auto collect = [&]() {  // waits for the oldest read and takes the stops it shows
+  auto collectLast = [&]() {  // waits for the oldest read: its scalars into `scalars`
     Read r = std::move(reads.front());
     reads.pop_front();
     const cl_int status = clWaitForEvents(1, &r.event);
@@ -897,6 +897,9 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     for (std::size_t i = 0; i < scalars.size(); ++i)
       scalars[i] = sumSize_ == sizeof(double) ? reinterpret_cast<const double*>(r.bytes.data())[i]
                                               : reinterpret_cast<const float*>(r.bytes.data())[i];
+  };
+  auto collect = [&]() {  // waits for the oldest read and takes the stops it shows
+    collectLast();
     for (Running& run : runs) {
       if (!run.iterating) continue;
       const double* sc = &scalars[kScalarCount * run.request->body];
@@ -946,10 +949,10 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     }
     throw;
   }
-  for (Read& r : reads) {  // a chunk enqueued after everything had stopped: no-ops, wait and drop its read
-    clWaitForEvents(1, &r.event);
-    clReleaseEvent(r.event);
-  }
+  // A chunk enqueued after everything had stopped (no-ops): its read is dropped without waiting; its
+  // bytes stay alive until the blocking read of x below has drained the queue.
+  std::deque<Read> dropped = std::move(reads);
+  reads.clear();
   for (Running& run : runs)
     if (run.iterating) run.request->stats.iterations = maxIterations;  // capped
 
@@ -966,7 +969,25 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
            SumReal{0.0});
-    downloadSums(scalars_, scalars.data(), scalars.size());
+    issueRead();  // completes with the blocking read of x below: one synchronisation for both
+  }
+  auto releaseReads = [](std::deque<Read>& list, bool wait) {
+    for (Read& r : list) {
+      if (wait) clWaitForEvents(1, &r.event);  // the device may still write into r.bytes
+      clReleaseEvent(r.event);
+    }
+    list.clear();
+  };
+  try {
+    download(x_, packed_.data(), lo, hi - lo);
+  } catch (...) {
+    releaseReads(dropped, true);
+    releaseReads(reads, true);
+    throw;
+  }
+  releaseReads(dropped, false);  // complete: the blocking read of x followed them
+  if (anyTrue) {
+    collectLast();
     for (Running& run : runs)
       if (active[run.request->body]) {
         const double* sc = &scalars[kScalarCount * run.request->body];
@@ -975,7 +996,6 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
         run.finite = std::isfinite(stats.relativeResidual);
       }
   }
-  download(x_, packed_.data(), lo, hi - lo);
   for (Running& run : runs) {
     BatchRequest* r = run.request;
     const Segment& sg = segs_[r->body];
