@@ -25,17 +25,16 @@ void corner_gradients(const uint S, __global const uint* restrict elemSeg, __glo
   realv a[9];
   #pragma unroll
   for (int k = 0; k < 9; ++k) a[k] = VLOAD(rotGrad + k * S + e0);
-  store_corner_gradients(out, e0, a);
+  store_corner_gradients(out, e0, a, VLOAD(geom + kGeomVolume * S + e0));
 }
 
-/* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T, from the
- * a_c written by compute_rotations or corner_gradients and the rest volumes, in the fixed CSR
- * order. */
+/* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T
+ * = V ((lambda + mu) a_c a_c^T + mu |a_c|^2 I), from the sqrt(V) a_c written by compute_rotations
+ * or corner_gradients, in the fixed CSR order. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void node_stiffness_blocks(const uint S, __global const uint* restrict nodeSeg,
-                           __global const uint* restrict segInfo, __global const real* restrict segCoef,
-                           __global const uint* restrict start, __global const uint* restrict entries,
-                           __global const real* restrict corners, __global const real* restrict geom,
+void node_stiffness_blocks(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                           __global const real* restrict segCoef, __global const uint* restrict start,
+                           __global const uint* restrict entries, __global const real* restrict corners,
                            __global real* restrict blocks) {
   uint n, s;
   if (!node_item(nodeSeg, segInfo, &n, &s)) return;
@@ -43,11 +42,9 @@ void node_stiffness_blocks(const uint S, __global const uint* restrict nodeSeg,
   real b[6] = {0, 0, 0, 0, 0, 0};
   const uint end = start[n + 1];
   for (uint j = start[n]; j < end; ++j) {
-    const uint at = entries[j];
-    const uint e = (at / (12 * COROFEM_VEC)) * COROFEM_VEC + at % COROFEM_VEC;
-    const real ax = corners[at], ay = corners[at + COROFEM_VEC], az = corners[at + 2 * COROFEM_VEC];
-    const real V = geom[kGeomVolume * S + e];
-    const real lm = V * (lambda + mu), iso = V * mu * (ax * ax + ay * ay + az * az);
+    __global const real* c = corners + (size_t)entries[j];
+    const real ax = c[0], ay = c[COROFEM_VEC], az = c[2 * COROFEM_VEC];
+    const real lm = lambda + mu, iso = mu * (ax * ax + ay * ay + az * az);
     b[0] += lm * ax * ax + iso;
     b[1] += lm * ay * ay + iso;
     b[2] += lm * az * az + iso;

@@ -345,12 +345,15 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
 
 /* ------------------------------------------------------------------ corner data for the preconditioner */
 
-/* a_c (a_0 = -(a_1 + a_2 + a_3)) of the VEC elements e0.. in the element output layout
- * (store_corner), for node_stiffness_blocks (precond.cl). */
-COROFEM_FN void store_corner_gradients(__global real* out, uint e0, const realv* a) {
-  store_corner(out, e0, 0, -(a[0] + a[3] + a[6]), -(a[1] + a[4] + a[7]), -(a[2] + a[5] + a[8]));
+/* sqrt(V) a_c (a_0 = -(a_1 + a_2 + a_3)) of the VEC elements e0.. in the element output layout
+ * (store_corner), for node_stiffness_blocks (precond.cl): with the volume folded in, the node
+ * gather there needs no per-element lookup of V. */
+COROFEM_FN void store_corner_gradients(__global real* out, uint e0, const realv* a, realv volume) {
+  const realv w = sqrt(volume);
+  store_corner(out, e0, 0, -w * (a[0] + a[3] + a[6]), -w * (a[1] + a[4] + a[7]), -w * (a[2] + a[5] + a[8]));
   #pragma unroll
-  for (int c = 1; c < 4; ++c) store_corner(out, e0, c, a[3 * (c - 1)], a[3 * (c - 1) + 1], a[3 * (c - 1) + 2]);
+  for (int c = 1; c < 4; ++c)
+    store_corner(out, e0, c, w * a[3 * (c - 1)], w * a[3 * (c - 1) + 1], w * a[3 * (c - 1) + 2]);
 }
 
 /* ------------------------------------------------------------------ the kernel */
@@ -400,7 +403,7 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
       rotGrad[(3 * i + j) * S + e0] = a[3 * i + j];
     }
   }
-  if (writeCorners) store_corner_gradients(corners, e0, a);
+  if (writeCorners) store_corner_gradients(corners, e0, a, VLOAD(geom + kGeomVolume * S + e0));
 #else
   /* F = sum_{i=1..3} (x_i - x_0) grad N_i^T, VEC elements at once */
   uintv idx[4];
@@ -472,6 +475,6 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
       a[3 * i + j] = R[3 * j] * g[3 * i] + R[3 * j + 1] * g[3 * i + 1] + R[3 * j + 2] * g[3 * i + 2];
       VSTORE(a[3 * i + j], rotGrad + (3 * i + j) * S + e0);
     }
-  if (writeCorners) store_corner_gradients(corners, e0, a);
+  if (writeCorners) store_corner_gradients(corners, e0, a, VLOAD(geom + kGeomVolume * S + e0));
 #endif
 }

@@ -662,8 +662,7 @@ void SegmentEngine::refreshBlocks(bool cornersWritten) {
   if (precond_ == PreconditionerKind::None) return;
   const cl_uint S = static_cast<cl_uint>(stride_);
   if (!cornersWritten) launch(kCornerGradients_, Span::Elements, S, elemSeg_, segInfoBuf_, geom_, rotGrad_, elemOut_);
-  launch(kBlocks_, Span::Nodes, S, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_, geom_,
-         blocks_);
+  launch(kBlocks_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_, blocks_);
 }
 
 void SegmentEngine::enqueueRotations() {
