@@ -36,6 +36,8 @@ struct DeviceCase {
   std::string name;
 };
 
+void PrintTo(const DeviceCase& c, std::ostream* os) { *os << c.name; }
+
 std::vector<DeviceCase> deviceCases() {
   std::vector<DeviceCase> out;
   const auto devices = detail::cl::listDevices();

@@ -22,6 +22,10 @@
 #endif
 
 namespace corofem {
+
+/// How GoogleTest (and so CTest's test list) prints a precision: its name.
+inline void PrintTo(Precision p, std::ostream* os) { *os << toString(p); }
+
 namespace {
 
 using namespace corofem::test;

@@ -46,6 +46,9 @@ struct BackendCase {
   }
 };
 
+/// How GoogleTest (and so CTest's test list) prints a case: what it runs on, not its bytes.
+inline void PrintTo(const BackendCase& c, std::ostream* os) { *os << c.describe(); }
+
 /// Reference, then OpenCL double and float on every device. A case that cannot run (library built
 /// without OpenCL, no device, no fp64) stays in the list with the reason, so that the skip shows.
 inline std::vector<BackendCase> backendCases() {

@@ -28,6 +28,8 @@ struct InversionCase {
   bool mustRecover = true;
 };
 
+void PrintTo(const InversionCase& c, std::ostream* os) { *os << c.backend.describe() << ", " << toString(c.rotation); }
+
 std::vector<InversionCase> inversionCases() {
   std::vector<InversionCase> out;
   for (const BackendCase& c : backendCases()) {

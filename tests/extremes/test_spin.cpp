@@ -116,6 +116,8 @@ struct RotationCase {
   RotationMethod rotation = RotationMethod::Polar;
 };
 
+void PrintTo(const RotationCase& c, std::ostream* os) { *os << c.backend.describe() << ", " << toString(c.rotation); }
+
 std::vector<RotationCase> rotationCases() {
   std::vector<RotationCase> out;
   for (const BackendCase& c : backendCases()) {

@@ -49,6 +49,8 @@ struct FuzzCase {
   const char* companion;  // TetGen partner copied unchanged, or nullptr
 };
 
+void PrintTo(const FuzzCase& c, std::ostream* os) { *os << c.file; }
+
 class Fuzz : public ::testing::TestWithParam<FuzzCase> {};
 
 TEST_P(Fuzz, MutatedFilesLoadOrFailWithBadInputNamingTheFile) {

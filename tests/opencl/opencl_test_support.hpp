@@ -27,6 +27,9 @@ struct DeviceCase {
   Precision precision = Precision::Double;
 };
 
+/// How GoogleTest (and so CTest's test list) prints a case: its name, not its bytes.
+inline void PrintTo(const DeviceCase& c, std::ostream* os) { *os << c.name; }
+
 inline std::vector<DeviceCase> deviceCases(bool bothPrecisions = true) {
   std::vector<DeviceCase> out;
   const auto devices = detail::cl::listDevices();

@@ -16,6 +16,11 @@ using corofem::test::boxMesh;
 using corofem::test::elementNodes;
 using corofem::test::makeProblem;
 
+namespace corofem {
+/// How GoogleTest (and so CTest's test list) prints a formulation: its name.
+inline void PrintTo(Formulation f, std::ostream* os) { *os << toString(f); }
+}  // namespace corofem
+
 namespace {
 
 /// Dense tangent of the whole mesh, assembled here from the element functions (independent of the

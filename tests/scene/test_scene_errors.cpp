@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cctype>
+
 namespace corofem {
 namespace {
 
@@ -98,6 +100,18 @@ struct RangeCase {
   std::string message;
 };
 
+void PrintTo(const RangeCase& c, std::ostream* os) {
+  for (const std::string& o : c.overrides) *os << o << ' ';
+}
+
+/// The test's name: its index and the overrides, with every other character as '_'.
+std::string rangeName(const ::testing::TestParamInfo<RangeCase>& info) {
+  std::string name = std::to_string(info.index);
+  for (const std::string& o : info.param.overrides)
+    for (char c : "_" + o) name += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+  return name;
+}
+
 class SceneRangeErrors : public ::testing::TestWithParam<RangeCase> {};
 
 TEST_P(SceneRangeErrors, OutOfRangeNamesTheConditionAndThePath) {
@@ -161,7 +175,8 @@ INSTANTIATE_TEST_SUITE_P(
                   "solver.max_iterations: 0 is out of range: must satisfy max_iterations >= 1"},
         RangeCase{{"solver.check_every=-2"}, "solver.check_every: -2 is out of range: must satisfy check_every >= 1"},
         RangeCase{{"output.vtk_every=-1"}, "output.vtk_every: -1 is out of range: must satisfy vtk_every >= 0"},
-        RangeCase{{"analysis.steps=3e9"}, "analysis.steps: 3000000000 is out of range: must be at most 2147483647"}));
+        RangeCase{{"analysis.steps=3e9"}, "analysis.steps: 3000000000 is out of range: must be at most 2147483647"}),
+    rangeName);
 
 TEST(SceneErrors, BoundaryValuesInsideTheRangesAreAccepted) {
   // The closed ends of the ranges: beta = 0.5, gamma = 0.5 and 1, damping = 0, vtk_every = 0.
