@@ -928,10 +928,33 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     enqueued += n;
     issueRead();
   };
+  // The reported residual is the true one, |free (b - A x)| / |free b| (as the interface defines
+  // it), not the recurrence's estimate, which drifts from it in float: one more product, for the
+  // bodies that iterated. Once the last allowed iteration is queued nothing can follow it, so the
+  // pass is queued at once for every body that may have iterated (those that stop in the last chunk
+  // included; a result the host then finds it does not need is ignored), without the device
+  // waiting for the host to read the last scalars.
+  std::vector<char> residualFor(segs_.size(), 0);
+  bool residualQueued = false;
+  auto queueResidual = [&]() {
+    bool any = false;
+    std::vector<char> on(segs_.size(), 0);
+    for (const Running& run : runs)
+      if (run.iterating || (run.finite && run.request->stats.iterations > 0)) on[run.request->body] = any = true;
+    residualQueued = true;
+    if (!any) return;
+    residualFor = on;
+    setActive(on);  // after every queued iteration: no segment the device stopped can be revived
+    product(x_, q_, true, partialsW_);
+    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
+           SumReal{0.0});
+  };
   issueRead();                                  // the set-up's scalars (a warm start may already have converged)
   if (enqueued < maxIterations) enqueueChunk();  // runs while that read travels
   try {
     for (;;) {
+      if (enqueued >= maxIterations && !residualQueued && enqueued > 0) queueResidual();
       collect();
       bool any = false;
       for (const Running& run : runs) any = any || run.iterating;
@@ -955,21 +978,15 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   for (Running& run : runs)
     if (run.iterating) run.request->stats.iterations = maxIterations;  // capped
 
-  // The reported residual is the true one, |free (b - A x)| / |free b| (as the interface defines
-  // it), not the recurrence's estimate, which drifts from it in float: one more product. The
-  // convergence decision above stays the recurrence's (the standard PCG stop test).
-  std::fill(active.begin(), active.end(), 0);
+  // The true residual (queued above when the iteration cap was reached, else now). The convergence
+  // decision above stays the recurrence's (the standard PCG stop test).
+  if (!residualQueued) queueResidual();
   bool anyTrue = false;
-  for (const Running& run : runs)
-    if (run.finite && run.request->stats.iterations > 0) active[run.request->body] = anyTrue = true;
-  if (anyTrue) {
-    setActive(active);
-    product(x_, q_, true, partialsW_);
-    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
-    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
-           SumReal{0.0});
-    issueRead();  // completes with the blocking read of x below: one synchronisation for both
+  for (const Running& run : runs) {
+    active[run.request->body] = residualFor[run.request->body] && run.finite && run.request->stats.iterations > 0;
+    anyTrue = anyTrue || active[run.request->body];
   }
+  if (anyTrue) issueRead();  // completes with the blocking read of x below: one synchronisation for both
   auto releaseReads = [](std::deque<Read>& list, bool wait) {
     for (Read& r : list) {
       if (wait) clWaitForEvents(1, &r.event);  // the device may still write into r.bytes
