@@ -184,7 +184,8 @@ void runKernel(benchmark::State& state, Config c) {
 
 /// One frame of a linearised implicit step as an application runs it: upload positions,
 /// rotations + preconditioner blocks, internal forces down, PCG (20 iterations) with b and the
-/// warm start up and the solution down. Float, diagonal preconditioner, checkEvery 4.
+/// warm start up and the solution down. Float, diagonal preconditioner, checkEvery 4. The positions
+/// alternate between two states 1 degree of rotation apart, like consecutive frames.
 void dynamicStep(benchmark::State& state, int device) {
   static std::unique_ptr<detail::Problem> beam;
   if (!beam) {
@@ -200,13 +201,24 @@ void dynamicStep(benchmark::State& state, int device) {
   s.maxIterations = 20;
   s.checkEvery = 4;
   auto b = detail::createOpenCLBackendOn(*beam, s, detail::cl::Context::shared(std::to_string(device)));
-  const Eigen::VectorXd x = deformed(*beam);
-  Eigen::VectorXd f, v = Eigen::VectorXd::Zero(x.size());
+  // Two states a step apart, taken in turns: the bent beam, and the same turned by a further 1
+  // degree about its centroid (a body turning at 1 rad/s at 60 Hz), so that every step's
+  // rotations differ from the previous step's as in a running simulation.
+  Eigen::VectorXd x[2] = {deformed(*beam), deformed(*beam)};
+  {
+    const std::size_t nodes = beam->mesh.nodeCount();
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (std::size_t n = 0; n < nodes; ++n) c += x[0].segment<3>(3 * n) / static_cast<double>(nodes);
+    const Eigen::Matrix3d turn = Eigen::AngleAxisd(M_PI / 180.0, Eigen::Vector3d(0.3, 0.5, 1.0).normalized()).toRotationMatrix();
+    for (std::size_t n = 0; n < nodes; ++n) x[1].segment<3>(3 * n) = c + turn * (x[0].segment<3>(3 * n) - c);
+  }
+  Eigen::VectorXd f, v = Eigen::VectorXd::Zero(x[0].size());
   const double dt = 1.0 / 60.0;
   const detail::SystemCoeffs coeffs{1.0, 0.5 * dt, 0.25 * dt * dt};  // Newmark on velocities
   int iterations = 0;
+  long step = 0;
   for (auto _ : state) {
-    b->setPositions(x);
+    b->setPositions(x[step++ % 2]);
     b->internalForces(f);
     Eigen::VectorXd rhs = -dt * f;
     const auto st = b->solve(coeffs, rhs, v);
