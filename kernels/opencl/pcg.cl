@@ -8,6 +8,7 @@
  *                          partials of gamma' = r . u and r . r
  *   element_product(u) + gather_product:  w = A u, partials of delta' = u . w
  *   reduce_finish(Step):   beta = gamma' / gamma, alpha = gamma' / (delta' - beta gamma' / alpha)
+ * (the iteration cap's last iteration has no successor: pcg_update and reduce_finish(Last) only)
  * Why the denominator is p . A p: with s_i = A p_i, (p_{i+1}, A p_{i+1}) = (u_{i+1}, w_{i+1}) +
  * beta (u_{i+1}, A p_i) (A-conjugacy drops (p_i, A p_{i+1})), and A p_i = (r_i - r_{i+1}) / alpha_i
  * with (u_{i+1}, r_i) = 0 gives (u_{i+1}, A p_i) = -gamma_{i+1} / alpha_i.
@@ -152,24 +153,30 @@ COROFEM_FN void update_scalars(__global uint* segInfo, uint seg, __global sum_re
     scalars[kScalarRr] = rr;
     scalars[kScalarBb] = bbSum;
   } else {
-    sum_real beta = (sum_real)0, pq = delta, bb = bbSum;
+    sum_real bb = bbSum;
     if (mode == kReduceInit) {
       scalars[kScalarBb] = bb;
       scalars[kScalarIterations] = 0;
     } else {
-      const sum_real gamma = scalars[kScalarRho], alpha = scalars[kScalarAlpha];
       bb = scalars[kScalarBb];
-      beta = gamma != (sum_real)0 ? gammaNew / gamma : (sum_real)0;
-      pq = alpha != (sum_real)0 ? delta - beta * gammaNew / alpha : (sum_real)0;
       scalars[kScalarIterations] += 1;
+    }
+    bool breakdown = false;
+    if (mode != kReduceLast) {  /* the next iteration's alpha and beta (the cap's last has none) */
+      sum_real beta = (sum_real)0, pq = delta;
+      if (mode == kReduceStep) {
+        const sum_real gamma = scalars[kScalarRho], alpha = scalars[kScalarAlpha];
+        beta = gamma != (sum_real)0 ? gammaNew / gamma : (sum_real)0;
+        pq = alpha != (sum_real)0 ? delta - beta * gammaNew / alpha : (sum_real)0;
+      }
+      scalars[kScalarBeta] = beta;
+      scalars[kScalarPq] = pq;
+      breakdown = !(pq > (sum_real)0);
+      scalars[kScalarAlpha] = breakdown ? (sum_real)0 : gammaNew / pq;
+      scalars[kScalarBreakdown] = breakdown ? 1 : 0;
     }
     scalars[kScalarRho] = gammaNew;
     scalars[kScalarRr] = rr;
-    scalars[kScalarBeta] = beta;
-    scalars[kScalarPq] = pq;
-    const bool breakdown = !(pq > (sum_real)0);
-    scalars[kScalarAlpha] = breakdown ? (sum_real)0 : gammaNew / pq;
-    scalars[kScalarBreakdown] = breakdown ? 1 : 0;
     const uint stop = !isfinite(rr) ? kStopNonFinite : rr <= tol2 * bb ? kStopConverged
                                                         : breakdown ? kStopBreakdown : kStopRunning;
     scalars[kScalarStop] = (sum_real)stop;
@@ -184,6 +191,8 @@ COROFEM_FN void update_scalars(__global uint* segInfo, uint seg, __global sum_re
  *   kReduceStep      beta = gamma' / gamma, alpha = gamma' / (delta' - beta gamma' / alpha), gamma, rr;
  *                    iterations + 1
  *   kReduceResidual  rr, bb only (the true residual after the solve)
+ *   kReduceLast      gamma, rr, iterations + 1: the iteration cap's last iteration, after which no
+ *                    alpha or beta is needed, so its product w = A u is not computed either
  * A non-positive p . A p (A not positive definite on the free dofs, or p = 0) sets alpha = 0 and the
  * breakdown flag instead of dividing. In kReduceInit and kReduceStep the convergence test runs here,
  * after every iteration (tol2 = tolerance^2): a converged, broken-down or non-finite segment records

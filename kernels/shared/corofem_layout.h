@@ -103,6 +103,7 @@ COROFEM_CONSTANT(unsigned, kStopNonFinite, 3);   /* r . r is NaN or Inf         
 COROFEM_CONSTANT(unsigned, kReduceInit, 0);     /* (r.u, r.r, b.b), u.w -> gamma, rr, bb, alpha, beta = 0 */
 COROFEM_CONSTANT(unsigned, kReduceStep, 1);     /* (r.u, r.r), u.w -> beta, alpha, gamma, rr              */
 COROFEM_CONSTANT(unsigned, kReduceResidual, 2); /* (r.u, r.r, b.b) -> rr, bb (the true residual)          */
+COROFEM_CONSTANT(unsigned, kReduceLast, 3);     /* (r.u, r.r) -> gamma, rr: the cap's last iteration     */
 COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-group: 3 sum_reals    */
 
 /* Default work-group size (overridden by -DCOROFEM_WG). Reductions need a power of two. */

@@ -790,19 +790,20 @@ void SegmentEngine::pcgSetup() {
          SumReal{solver_.tolerance * solver_.tolerance});
 }
 
-void SegmentEngine::pcgIteration() {
-  // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta
+void SegmentEngine::pcgIteration(bool last) {
+  // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta.
+  // The iteration cap's last iteration has no successor: no w = A u, only gamma and r . r.
   launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, q_, minv_, p_, s_, x_, r_, z_, partials_);
-  product(z_, q_, true, partialsW_);
-  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceStep),
-         SumReal{solver_.tolerance * solver_.tolerance});
+  if (!last) product(z_, q_, true, partialsW_);
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_,
+         cl_uint(last ? kReduceLast : kReduceStep), SumReal{solver_.tolerance * solver_.tolerance});
 }
 
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
   pcgSetup();
-  for (int i = 0; i < iterations; ++i) pcgIteration();
+  for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
 }
 
 void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
@@ -924,7 +925,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   int enqueued = 0;
   auto enqueueChunk = [&]() {
     const int n = std::min(checkEvery, maxIterations - enqueued);
-    for (int i = 0; i < n; ++i) pcgIteration();
+    for (int i = 0; i < n; ++i) pcgIteration(enqueued + i + 1 == maxIterations);
     enqueued += n;
     issueRead();
   };

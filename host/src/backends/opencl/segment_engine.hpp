@@ -184,7 +184,8 @@ class SegmentEngine {
   /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
   void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials);
   void pcgSetup();
-  void pcgIteration();
+  /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
+  void pcgIteration(bool last = false);
   void setPositions(const std::vector<BatchRequest*>& requests);
   void internalForces(const std::vector<BatchRequest*>& requests);
   void apply(const std::vector<BatchRequest*>& requests);
