@@ -61,10 +61,10 @@ Eigen::VectorXd deformed(const detail::Problem& p) {
 }
 
 /// Device bandwidth (bytes/s) measured with the copy kernel of bandwidth.cl on 64 MiB buffers
-/// (read + write counted), median of 9 runs; cached per device.
+/// (read + write counted), median of 9 runs. Measured again by every benchmark right after its own
+/// timing loop, so that the fraction pairs two measurements taken under the same load (the machine
+/// is shared; one measurement per run once caught a slow spell and skewed every fraction).
 double measuredBandwidth(int device) {
-  static std::map<int, double> cache;
-  if (auto it = cache.find(device); it != cache.end()) return it->second;
   auto ctx = detail::cl::Context::shared(std::to_string(device));
   const auto build = detail::cl::buildProgram(*ctx, "corofem", detail::cl::corofemProgramSource(),
                                               "-cl-std=CL1.2 -DCOROFEM_WG=64");
@@ -95,7 +95,7 @@ double measuredBandwidth(int device) {
   clReleaseKernel(k);
   std::fprintf(stderr, "[bench_opencl] device %d (%s): copy bandwidth %.1f GB/s\n", device,
                ctx->deviceName().c_str(), bw / 1e9);
-  return cache[device] = bw;
+  return bw;
 }
 
 enum class Work { Rotation, Force, Product, ProductStored, PcgIteration };
@@ -175,6 +175,7 @@ void runKernel(benchmark::State& state, Config c) {
   state.counters["elements_per_s"] =
       benchmark::Counter(elems * perIteration * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
   const double bw = measuredBandwidth(c.device);
+  state.counters["copy_GBps"] = bw / 1e9;
   state.counters["bandwidth_fraction"] = benchmark::Counter(
       elems * perIteration * bytesPerElement(c, p) * static_cast<double>(state.iterations()) / bw,
       benchmark::Counter::kIsRate);
