@@ -14,15 +14,15 @@
  * with (u_{i+1}, r_i) = 0 gives (u_{i+1}, A p_i) = -gamma_{i+1} / alpha_i.
  * Set-up (r = b - A x, u = M^-1 r, w = A u, p = s = 0, alpha_0 = gamma_0 / delta_0, beta_0 = 0) costs
  * one product more than the textbook form; afterwards both do one product per iteration.
- * All scalars live in `scalars` on the device (layout in corofem_layout.h); the host only reads them
- * every checkEvery iterations. Vectors are `real`; the dot products, their partials and the scalars
+ * All scalars live in `scalars` on the device (layout in corofem_layout.h); the host reads them
+ * without blocking after every checkEvery iterations. Vectors are `real`; the dot products, their partials and the scalars
  * are `sum_real` (double in mixed precision, COROFEM_MIXED: float vectors and products, double sums
  * and scalars). A kernel that updates vectors converts its scalars to `real` once (a no-op unless
  * mixed). Dot products are two-stage and deterministic: fixed-order partial sums (corofem_reduce.h),
  * then one work-group per segment summing the segment's partials in a fixed order; pcg_update
  * writes its partials to `partials`, gather_product to `partialsW`.
  * Many bodies (segments, corofem_layout.h) iterate together, each with its own scalars; a segment
- * that has converged is marked inactive by the host and its work-groups return at once.
+ * that has stopped is marked inactive by reduce_finish itself and its work-groups return at once.
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -185,8 +185,8 @@ COROFEM_FN void update_scalars(__global uint* segInfo, uint seg, __global sum_re
 }
 
 /* Second stage of the dot products: work-group s sums segment s's partials of pcg_init/pcg_update
- * (`partials`: r . u, r . r, b . b) and, except in kReduceResidual, of gather_product (`partialsW`:
- * u . w in component 0), then updates the segment's PCG scalars according to `mode`:
+ * (`partials`: r . u, r . r, b . b) and, in kReduceInit and kReduceStep, of gather_product
+ * (`partialsW`: u . w in component 0), then updates the segment's PCG scalars according to `mode`:
  *   kReduceInit      gamma, rr, bb; alpha = gamma / delta, beta = 0; iterations = 0
  *   kReduceStep      beta = gamma' / gamma, alpha = gamma' / (delta' - beta gamma' / alpha), gamma, rr;
  *                    iterations + 1
@@ -194,7 +194,7 @@ COROFEM_FN void update_scalars(__global uint* segInfo, uint seg, __global sum_re
  *   kReduceLast      gamma, rr, iterations + 1: the iteration cap's last iteration, after which no
  *                    alpha or beta is needed, so its product w = A u is not computed either
  * A non-positive p . A p (A not positive definite on the free dofs, or p = 0) sets alpha = 0 and the
- * breakdown flag instead of dividing. In kReduceInit and kReduceStep the convergence test runs here,
+ * breakdown flag instead of dividing. In every mode but kReduceResidual the convergence test runs here,
  * after every iteration (tol2 = tolerance^2): a converged, broken-down or non-finite segment records
  * why (kScalarStop) and becomes inactive, so the iterations the host enqueued ahead of its next
  * read of the scalars cost that segment nothing and leave its x as it was at the stop. */
@@ -211,7 +211,7 @@ void reduce_finish(__global uint* restrict segInfo, __global const sum_real* res
   __global const sum_real* own = partials + kPartialComponents * seg_info(segInfo, seg, kSegPartialBegin);
   __global const sum_real* ownW = partialsW + kPartialComponents * seg_info(segInfo, seg, kSegPartialBegin);
   /* Fixed order: strided lanes, then a tree (the same for a body alone or in a batch). Both buffers
-   * in every mode (kReduceResidual ignores partialsW): one loop and one tree. */
+   * in every mode (kReduceResidual and kReduceLast ignore partialsW): one loop and one tree. */
   sum_real a = 0, b = 0, c = 0, d = 0;
   for (uint g = lid; g < count; g += COROFEM_WG) {
     a += own[kPartialComponents * g];

@@ -92,6 +92,10 @@ int printPlan(const Simulation& sim, bool asJson) {
     std::cout << plan.dump(2) << '\n';
     return kExitOk;
   }
+  auto printBuffers = [](const nlohmann::json& list) {  // [{"name", "bytes"}], one per line
+    for (const auto& buf : list)
+      std::cout << "    " << buf["name"].get<std::string>() << ' ' << humanBytes(buf["bytes"].get<double>()) << '\n';
+  };
   std::cout << "plan of scene '" << plan["scene"].get<std::string>() << "': " << plan["analysis"].get<std::string>()
             << ", " << plan["steps"] << (plan["analysis"] == "static" ? " increment(s)" : " step(s)") << '\n';
   for (const auto& b : plan["bodies"]) {
@@ -113,8 +117,7 @@ int printPlan(const Simulation& sim, bool asJson) {
     if (b.contains("device_bytes_allocated")) {
       std::cout << "  device buffers allocated (" << humanBytes(b["device_bytes_allocated"].get<double>())
                 << " in all):\n";
-      for (const auto& buf : b["device_buffers_allocated"])
-        std::cout << "    " << buf["name"].get<std::string>() << ' ' << humanBytes(buf["bytes"].get<double>()) << '\n';
+      printBuffers(b["device_buffers_allocated"]);
     }
     const auto& m = b["bytes_moved"];
     std::cout << "  bytes moved (estimate): " << humanBytes(m["per_pcg_iteration"].get<double>()) << " per PCG iteration, "
@@ -126,8 +129,7 @@ int printPlan(const Simulation& sim, bool asJson) {
   for (const auto& g : plan["batches"]) {
     std::cout << "batch on " << g["device"].get<std::string>() << " (" << g["bodies"].size() << " bodies, one set of "
               << "launches): device buffers allocated " << humanBytes(g["allocated_bytes"].get<double>()) << '\n';
-    for (const auto& buf : g["buffers"])
-      std::cout << "    " << buf["name"].get<std::string>() << ' ' << humanBytes(buf["bytes"].get<double>()) << '\n';
+    printBuffers(g["buffers"]);
   }
   return kExitOk;
 }

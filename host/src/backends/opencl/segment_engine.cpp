@@ -951,6 +951,13 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
            SumReal{0.0});
   };
+  auto releaseReads = [](std::deque<Read>& list, bool wait) {
+    for (Read& r : list) {
+      if (wait) clWaitForEvents(1, &r.event);  // the device may still write into r.bytes
+      clReleaseEvent(r.event);
+    }
+    list.clear();
+  };
   issueRead();                                  // the set-up's scalars (a warm start may already have converged)
   if (enqueued < maxIterations) enqueueChunk();  // runs while that read travels
   try {
@@ -966,10 +973,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       }
     }
   } catch (...) {
-    for (Read& r : reads) {
-      clWaitForEvents(1, &r.event);
-      clReleaseEvent(r.event);
-    }
+    releaseReads(reads, true);
     throw;
   }
   // A chunk enqueued after everything had stopped (no-ops): its read is dropped without waiting; its
@@ -988,13 +992,6 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     anyTrue = anyTrue || active[run.request->body];
   }
   if (anyTrue) issueRead();  // completes with the blocking read of x below: one synchronisation for both
-  auto releaseReads = [](std::deque<Read>& list, bool wait) {
-    for (Read& r : list) {
-      if (wait) clWaitForEvents(1, &r.event);  // the device may still write into r.bytes
-      clReleaseEvent(r.event);
-    }
-    list.clear();
-  };
   try {
     download(x_, packed_.data(), lo, hi - lo);
   } catch (...) {
