@@ -198,8 +198,18 @@ class SegmentEngine {
 
   std::shared_ptr<cl::Context> ctx_;
   std::string dev_;
-  bool profile_ = false;  ///< COROFEM_OPENCL_PROFILE: per-kernel device times, printed on destruction
-  std::map<std::string, std::pair<long, double>> profileTimes_;
+  /// COROFEM_OPENCL_PROFILE: per kernel, its launches, device time and the device's idle time
+  /// before it (the previous command's end to its start: launch overhead and host round trips),
+  /// printed on destruction. Events are kept, not waited for, and harvested once complete.
+  struct ProfileEntry {
+    long launches = 0;
+    double busy = 0.0, idleBefore = 0.0;
+  };
+  bool profile_ = false;
+  std::map<std::string, ProfileEntry> profileTimes_;
+  std::deque<std::pair<std::string, cl_event>> profileEvents_;
+  cl_ulong profileLastEnd_ = 0;
+  void harvestProfile(bool all);
   SolverDesc solver_;
   PreconditionerKind precond_;
   bool storedStiffness_ = false;
