@@ -254,6 +254,44 @@ TEST_P(OpenCLBackendVsReference, WarmStartZeroRhsAndIterationCadence) {
   EXPECT_GT(st.relativeResidual, 0.0);
 }
 
+// A solve warm-started from the previous solution uploads no x (the device still holds it). Each
+// warm start below must give the bits of a fresh backend given the same start: the previous
+// solution itself, the same with one entry changed (must be uploaded), and the previous solution
+// again after another solve from a different start (the device's x moved on).
+TEST_P(OpenCLBackendVsReference, WarmStartFromThePreviousSolutionMatchesAFreshUpload) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), b1 = randomVector(p.dofCount(), 21), b2 = randomVector(p.dofCount(), 22);
+  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
+  SolverDesc s = solver();
+  s.maxIterations = 9;  // capped: the answers depend on the start
+  s.tolerance = 1e-14;
+  auto fresh = [&](const Eigen::VectorXd& start, const Eigen::VectorXd& rhs) {
+    auto other = openclBackend(p, s);
+    other->setPositions(x);
+    Eigen::VectorXd out = start;
+    other->solve(c, rhs, out);
+    return out;
+  };
+  auto ocl = openclBackend(p, s);
+  ocl->setPositions(x);
+  Eigen::VectorXd first = Eigen::VectorXd::Zero(b1.size());
+  ocl->solve(c, b1, first);
+  const Eigen::VectorXd previous = first;
+  Eigen::VectorXd same = previous;
+  ocl->solve(c, b2, same);
+  EXPECT_TRUE(test::sameBits(same, fresh(previous, b2))) << "warm start = the previous solution";
+  Eigen::VectorXd changed = same;
+  const Eigen::Index d = changed.size() - 1;  // a free dof (the beam is clamped at x = 0)
+  changed[d] += 0.125;
+  const Eigen::VectorXd changedStart = changed;
+  ocl->solve(c, b1, changed);
+  EXPECT_TRUE(test::sameBits(changed, fresh(changedStart, b1))) << "warm start with one entry changed";
+  Eigen::VectorXd back = previous;
+  ocl->solve(c, b2, back);
+  EXPECT_TRUE(test::sameBits(back, same)) << "warm start = an older solution";
+}
+
 TEST_P(OpenCLBackendVsReference, BodyFarFromTheOriginKeepsItsAccuracy) {
   // The beam translated by ~2e4 m: float positions there have a resolution of ~1e-3 m, larger
   // than the strains' displacements; the backend uploads positions relative to their centroid, so

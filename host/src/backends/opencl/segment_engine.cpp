@@ -802,10 +802,13 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   }
 }
 
-void SegmentEngine::pcgSetup() {
+void SegmentEngine::pcgPrecondition() {
   flushCoefficients();
   if (precond_ != PreconditionerKind::None)
     launch(kPrecondInvert_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, free_, minv_);
+}
+
+void SegmentEngine::pcgSetup() {
   // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
   // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
   product(x_, q_, true, partialsW_);
@@ -827,6 +830,8 @@ void SegmentEngine::pcgIteration(bool last) {
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
+  xOnDevice_.clear();  // the iterations change x
+  pcgPrecondition();
   pcgSetup();
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
 }
@@ -872,6 +877,11 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     for (std::size_t d = 0; d < sg.dofs(); ++d)
       packed_[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
   }
+  // The preconditioner needs neither b nor x: it is queued first and runs while the host packs them.
+  std::vector<char> active(segs_.size(), 0);
+  for (const Running& run : runs) active[run.request->body] = 1;
+  setActive(active);
+  pcgPrecondition();
   upload(b_, packed_.data(), lo, hi - lo);
   for (const Running& run : runs) {
     const Segment& sg = segs_[run.request->body];
@@ -881,11 +891,19 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       packed_[sg.dofBegin() + d] = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
     }
   }
-  upload(x_, packed_.data(), lo, hi - lo);
-
-  std::vector<char> active(segs_.size(), 0);
-  for (const Running& run : runs) active[run.request->body] = 1;
-  setActive(active);
+  // The segments in between are scratch (not computed), so only the running ones must match.
+  if (xOnDevice_.size() != packed_.size()) xOnDevice_.assign(packed_.size(), std::nan(""));
+  bool xThere = true;
+  for (const Running& run : runs) {
+    const Segment& sg = segs_[run.request->body];
+    xThere = xThere && std::equal(packed_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()),
+                                  packed_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin() + sg.dofs()),
+                                  xOnDevice_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()));
+  }
+  if (!xThere) upload(x_, packed_.data(), lo, hi - lo);
+  // From here the iterations change x on the device: unknown until the download below.
+  std::fill(xOnDevice_.begin() + static_cast<std::ptrdiff_t>(lo), xOnDevice_.begin() + static_cast<std::ptrdiff_t>(hi),
+            std::nan(""));
   pcgSetup();
 
   // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
@@ -1025,6 +1043,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     throw;
   }
   releaseReads(dropped, false);  // complete: the blocking read of x followed them
+  std::copy(packed_.begin() + static_cast<std::ptrdiff_t>(lo), packed_.begin() + static_cast<std::ptrdiff_t>(hi),
+            xOnDevice_.begin() + static_cast<std::ptrdiff_t>(lo));
   if (anyTrue) {
     collectLast();
     for (Running& run : runs)

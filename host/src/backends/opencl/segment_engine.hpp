@@ -183,6 +183,9 @@ class SegmentEngine {
   void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
   /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
   void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials);
+  /// M^-1 from the blocks and the flushed coefficients (nothing without a preconditioner).
+  void pcgPrecondition();
+  /// r = b - A x, u = M^-1 r, w = A u and the first scalars (after pcgPrecondition).
   void pcgSetup();
   /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
   void pcgIteration(bool last = false);
@@ -238,6 +241,9 @@ class SegmentEngine {
   std::size_t activeLo_ = 0, activeHi_ = 0;  ///< span of the active segments
   std::vector<double> posHost_;          ///< the device positions (relative), all segments
   std::vector<double> packed_;           ///< staging of packed node vectors
+  /// What the device's x holds per dof (as the host last wrote or read it; NaN: unknown), so that a
+  /// solve warm-started from the previous solution (an application's usual frame) uploads no x.
+  std::vector<double> xOnDevice_;
   std::vector<unsigned char> staging_;   ///< device-precision staging of blocking reads
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
