@@ -309,6 +309,7 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
   maskv done = bad;
   #pragma unroll
   for (int k = 0; k < 9; ++k) R[k] = F[k];
+  realv diffPrev2 = (realv)1; /* |R_k - R_k-1|_F^2 of the previous step */
   for (int it = 0; it < COROFEM_POLAR_ITERS; ++it) {
     realv C[9];
     C[0] = R[4] * R[8] - R[5] * R[7];
@@ -321,13 +322,19 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
     C[7] = R[2] * R[3] - R[0] * R[5];
     C[8] = R[0] * R[4] - R[1] * R[3];
     const realv det = R[0] * C[0] + R[1] * C[1] + R[2] * C[2];
-    realv r2 = (realv)0, c2 = (realv)0;
-    #pragma unroll
-    for (int k = 0; k < 9; ++k) {
-      r2 += R[k] * R[k];
-      c2 += C[k] * C[k];
+    /* Scaled while some running lane still takes large steps (relative step above 1e-2, as
+     * Higham advises); near convergence g -> 1 anyway, and plain Newton saves its two roots and a
+     * division (rotation_polar: 1.08x at 10k elements, no change at 100k; A/B on PoCL). */
+    realv g = (realv)1;
+    if (any(!done & (diffPrev2 > (real)3e-4))) {
+      realv r2 = (realv)0, c2 = (realv)0;
+      #pragma unroll
+      for (int k = 0; k < 9; ++k) {
+        r2 += R[k] * R[k];
+        c2 += C[k] * C[k];
+      }
+      g = sqrt(sqrt(c2 / (det * det * r2)));
     }
-    const realv g = sqrt(sqrt(c2 / (det * det * r2)));
     const realv hr = (real)0.5 * g, hc = (real)0.5 / (g * det);
     realv diff2 = (realv)0;
     #pragma unroll
@@ -337,6 +344,7 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
       R[k] = select(nk, R[k], done);
     }
     done = done | (diff2 < (real)3 * REAL_EPS);
+    diffPrev2 = diff2;
     if (all(done)) break;
   }
   return bad | !done;
