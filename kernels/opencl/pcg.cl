@@ -47,10 +47,11 @@ COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const re
 #endif
 }
 
-/* r = free (b - A x) (q = A x), u = M^-1 r, p = s = 0; partials (r . u, r . r, |free b|^2). */
+/* r = free (b - A x) (q = A x; zeroStart != 0: x = 0, q is not read), u = M^-1 r, p = s = 0;
+ * partials (r . u, r . r, |free b|^2). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-              __global const real* restrict b, __global const real* restrict q,
+              const uint zeroStart, __global const real* restrict b, __global const real* restrict q,
               __global const real* restrict free, __global const real* restrict minv,
               __global real* restrict r, __global real* restrict u, __global real* restrict p,
               __global real* restrict sv, __global sum_real* restrict partials) {
@@ -63,7 +64,7 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;
       const real bd = free[d] * b[d];
-      rn[k] = bd - free[d] * q[d];
+      rn[k] = zeroStart ? bd : bd - free[d] * q[d];
       bb += (sum_real)bd * (sum_real)bd;
     }
     apply_preconditioner(n, minv, rn, un);

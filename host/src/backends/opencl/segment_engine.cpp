@@ -808,11 +808,12 @@ void SegmentEngine::pcgPrecondition() {
     launch(kPrecondInvert_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, free_, minv_);
 }
 
-void SegmentEngine::pcgSetup() {
+void SegmentEngine::pcgSetup(bool zeroStart) {
   // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
   // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
-  product(x_, q_, true, partialsW_);
-  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+  if (!zeroStart) product(x_, q_, true, partialsW_);  // a zero start needs no A x
+  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, cl_uint(zeroStart ? 1 : 0), b_, q_, free_, minv_, r_,
+         z_, p_, s_, partials_);
   product(z_, q_, true, partialsW_);
   launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceInit),
          SumReal{solver_.tolerance * solver_.tolerance});
@@ -832,7 +833,7 @@ void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) 
   setAllActive();
   xOnDevice_.clear();  // the iterations change x
   pcgPrecondition();
-  pcgSetup();
+  pcgSetup(false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
 }
 
@@ -901,10 +902,17 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                                   xOnDevice_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()));
   }
   if (!xThere) upload(x_, packed_.data(), lo, hi - lo);
+  // A start of x = 0 on every running body (Newton's corrections start there) skips r = b - A x's
+  // product. Only the running segments decide: the product is launched over them alone.
+  bool zeroStart = true;
+  for (const Running& run : runs) {
+    const Segment& sg = segs_[run.request->body];
+    for (std::size_t d = sg.dofBegin(); d < sg.dofBegin() + sg.dofs() && zeroStart; ++d) zeroStart = packed_[d] == 0.0;
+  }
   // From here the iterations change x on the device: unknown until the download below.
   std::fill(xOnDevice_.begin() + static_cast<std::ptrdiff_t>(lo), xOnDevice_.begin() + static_cast<std::ptrdiff_t>(hi),
             std::nan(""));
-  pcgSetup();
+  pcgSetup(zeroStart);
 
   // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
   // inactive on its own, so the host enqueues checkEvery iterations ahead of what it has read: each
@@ -990,7 +998,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     residualFor = on;
     setActive(on);  // after every queued iteration: no segment the device stopped can be revived
     product(x_, q_, true, partialsW_);
-    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, cl_uint(0), b_, q_, free_, minv_, r_, z_, p_, s_,
+           partials_);
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
            SumReal{0.0});
   };

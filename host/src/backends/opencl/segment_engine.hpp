@@ -185,8 +185,9 @@ class SegmentEngine {
   void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials);
   /// M^-1 from the blocks and the flushed coefficients (nothing without a preconditioner).
   void pcgPrecondition();
-  /// r = b - A x, u = M^-1 r, w = A u and the first scalars (after pcgPrecondition).
-  void pcgSetup();
+  /// r = b - A x, u = M^-1 r, w = A u and the first scalars (after pcgPrecondition); `zeroStart`:
+  /// x = 0 on every active segment, so r = b without a product.
+  void pcgSetup(bool zeroStart);
   /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
   void pcgIteration(bool last = false);
   void setPositions(const std::vector<BatchRequest*>& requests);
