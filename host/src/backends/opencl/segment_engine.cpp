@@ -892,23 +892,19 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       packed_[sg.dofBegin() + d] = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
     }
   }
-  // The segments in between are scratch (not computed), so only the running ones must match.
+  // Only the running segments decide (those in between are scratch, not computed): x is uploaded
+  // unless the device holds it already, and a start of x = 0 on every running body (Newton's
+  // corrections start there) skips the product of r = b - A x.
   if (xOnDevice_.size() != packed_.size()) xOnDevice_.assign(packed_.size(), std::nan(""));
-  bool xThere = true;
+  bool xThere = true, zeroStart = true;
   for (const Running& run : runs) {
     const Segment& sg = segs_[run.request->body];
-    xThere = xThere && std::equal(packed_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()),
-                                  packed_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin() + sg.dofs()),
-                                  xOnDevice_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()));
+    for (std::size_t d = sg.dofBegin(); d < sg.dofBegin() + sg.dofs(); ++d) {
+      xThere = xThere && packed_[d] == xOnDevice_[d];
+      zeroStart = zeroStart && packed_[d] == 0.0;
+    }
   }
   if (!xThere) upload(x_, packed_.data(), lo, hi - lo);
-  // A start of x = 0 on every running body (Newton's corrections start there) skips r = b - A x's
-  // product. Only the running segments decide: the product is launched over them alone.
-  bool zeroStart = true;
-  for (const Running& run : runs) {
-    const Segment& sg = segs_[run.request->body];
-    for (std::size_t d = sg.dofBegin(); d < sg.dofBegin() + sg.dofs() && zeroStart; ++d) zeroStart = packed_[d] == 0.0;
-  }
   // From here the iterations change x on the device: unknown until the download below.
   std::fill(xOnDevice_.begin() + static_cast<std::ptrdiff_t>(lo), xOnDevice_.begin() + static_cast<std::ptrdiff_t>(hi),
             std::nan(""));
