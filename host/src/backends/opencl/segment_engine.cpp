@@ -74,6 +74,56 @@ void ClBuffer::create(cl_context ctx, std::size_t bytes, const std::string& devi
   bytes_ = size;
 }
 
+HostStage::~HostStage() {
+  if (pending_) clReleaseEvent(pending_);
+  if (mem_ && host_) {
+    cl_event unmapped = nullptr;
+    if (clEnqueueUnmapMemObject(queue_, mem_, host_, 0, nullptr, &unmapped) == CL_SUCCESS && unmapped) {
+      clWaitForEvents(1, &unmapped);
+      clReleaseEvent(unmapped);
+    }
+  }
+  if (mem_) clReleaseMemObject(mem_);
+  if (queue_) clReleaseCommandQueue(queue_);
+}
+
+void HostStage::create(cl_context ctx, cl_command_queue queue, std::size_t bytes, const std::string& device) {
+  cl_int status = CL_SUCCESS;
+  const std::size_t size = std::max<std::size_t>(bytes, 16);
+  mem_ = clCreateBuffer(ctx, CL_MEM_READ_WRITE | CL_MEM_ALLOC_HOST_PTR, size, nullptr, &status);
+  checkCl(status, "clCreateBuffer (pinned host stage)", device);
+  queue_ = queue;
+  clRetainCommandQueue(queue_);
+  host_ = static_cast<unsigned char*>(
+      clEnqueueMapBuffer(queue_, mem_, CL_TRUE, CL_MAP_READ | CL_MAP_WRITE, 0, size, 0, nullptr, nullptr, &status));
+  checkCl(status, "clEnqueueMapBuffer (pinned host stage)", device);
+  std::memset(host_, 0, size);
+}
+
+unsigned char* HostStage::writable() {
+  if (pending_) {
+    const cl_int status = clWaitForEvents(1, &pending_);
+    clReleaseEvent(pending_);
+    pending_ = nullptr;
+    checkCl(status, "clWaitForEvents (host stage write)", "");
+  }
+  return host_;
+}
+
+void HostStage::write(cl_mem to, std::size_t offset, std::size_t bytes, const std::string& device) {
+  if (bytes == 0) return;
+  writable();  // at most one write in flight per stage
+  checkCl(clEnqueueWriteBuffer(queue_, to, CL_FALSE, offset, bytes, host_ + offset, 0, nullptr, &pending_),
+          "clEnqueueWriteBuffer", device);
+}
+
+void HostStage::read(cl_mem from, std::size_t offset, std::size_t bytes, const std::string& device) {
+  if (bytes == 0) return;
+  writable();
+  checkCl(clEnqueueReadBuffer(queue_, from, CL_TRUE, offset, bytes, host_ + offset, 0, nullptr, nullptr),
+          "clEnqueueReadBuffer", device);
+}
+
 ClKernel::~ClKernel() {
   if (k_) clReleaseKernel(k_);
 }
@@ -381,20 +431,20 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
 
   // -- node data (padding nodes: zero mass, constrained)
   const std::size_t dofTotal = 3 * nodeTotal_;
-  posHost_.assign(dofTotal, 0.0);
-  packed_.assign(dofTotal, 0.0);
+  for (HostStage* stage : {&posStage_, &bStage_, &xStage_, &readStage_})
+    stage->create(c, ctx_->queue(), dofTotal * realSize_, dev_);
+  xKnown_.assign(K, 0);
   std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
   for (const Segment& sg : segs_) {
-    for (std::size_t d = 0; d < sg.dofs(); ++d) {
-      posHost_[sg.dofBegin() + d] = sg.problem->restPositions[static_cast<Eigen::Index>(d)];
-      freeMask[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : 1.0;
-    }
+    const Eigen::VectorXd& rest = sg.problem->restPositions;
+    putReals(posStage_.writable(), sg.dofBegin(), sg.dofs(), [&](std::size_t d) { return rest[static_cast<Eigen::Index>(d)]; });
+    for (std::size_t d = 0; d < sg.dofs(); ++d) freeMask[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : 1.0;
     if (hasMass_ && static_cast<std::size_t>(sg.problem->lumpedMass.size()) == sg.dofs())
       for (std::size_t d = 0; d < sg.dofs(); ++d)
         mass[sg.dofBegin() + d] = sg.problem->lumpedMass[static_cast<Eigen::Index>(d)];
   }
   createReal(pos_, dofTotal);
-  upload(pos_, posHost_.data(), 0, dofTotal);
+  posStage_.write(pos_.get(), 0, dofTotal * realSize_, dev_);
   // Static problems (no body with a nonzero lumped mass) get no mass buffer: the kernels see NULL.
   if (hasMass_) {
     createReal(mass_, dofTotal);
@@ -597,6 +647,14 @@ void SegmentEngine::downloadSums(const ClBuffer& buf, double* dst, std::size_t c
   writesDone();
 }
 
+void SegmentEngine::getReals(const unsigned char* base, std::size_t begin, std::size_t count,
+                             Eigen::VectorXd& out) const {
+  out.resize(static_cast<Eigen::Index>(count));
+  withReals(base, begin, [&](const auto* in) {
+    for (std::size_t d = 0; d < count; ++d) out[static_cast<Eigen::Index>(d)] = static_cast<double>(in[d]);
+  });
+}
+
 template <class T>
 void SegmentEngine::uploadRaw(const ClBuffer& buf, const std::vector<T>& v) {
   const auto* data = reinterpret_cast<const unsigned char*>(v.data());
@@ -704,21 +762,21 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
   // and energy from F), so the device gets them relative to each body's centroid, subtracted in
   // double: a float body 1e4 m from the origin keeps the resolution of one near it.
   std::vector<char> rotate(segs_.size(), 0);
+  unsigned char* stage = posStage_.writable();
   for (const BatchRequest* r : requests) {
     Segment& sg = segs_[r->body];
     const Eigen::VectorXd& x = *r->in;
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
     for (std::size_t n = 0; n < sg.nodes; ++n) centroid += x.segment<3>(static_cast<Eigen::Index>(3 * n));
     centroid /= static_cast<double>(std::max<std::size_t>(sg.nodes, 1));
-    for (std::size_t n = 0; n < sg.nodes; ++n)
-      for (int a = 0; a < 3; ++a)
-        posHost_[sg.dofBegin() + 3 * n + a] = x[static_cast<Eigen::Index>(3 * n + a)] - centroid[a];
+    putReals(stage, sg.dofBegin(), sg.dofs(),
+             [&](std::size_t d) { return x[static_cast<Eigen::Index>(d)] - centroid[static_cast<Eigen::Index>(d % 3)]; });
     for (int a = 0; a < 3; ++a) sg.centroid[a] = centroid[a];
     rotate[r->body] = sg.corotational;
   }
   // One write of the packed range; the segments in between get their own unchanged positions.
   const auto [lo, hi] = dofRange(requests);
-  upload(pos_, posHost_.data(), lo, hi - lo);
+  posStage_.write(pos_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   setActive(rotate);
   launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
          rotGrad_, quat_, elemOut_, cl_uint(precond_ != PreconditionerKind::None ? 1 : 0));
@@ -745,11 +803,9 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
          rotGrad_, pos_, elemOut_);
   launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
   const auto [lo, hi] = dofRange(requests);
-  download(q_, packed_.data(), lo, hi - lo);
-  for (BatchRequest* r : requests) {
-    const Segment& sg = segs_[r->body];
-    *r->out = Eigen::Map<const Eigen::VectorXd>(packed_.data() + sg.dofBegin(), static_cast<Eigen::Index>(sg.dofs()));
-  }
+  readStage_.read(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  writesDone();
+  for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
 }
 
 void SegmentEngine::elementProduct(const ClBuffer& v) {
@@ -784,22 +840,22 @@ void SegmentEngine::enqueueProduct(const SystemCoeffs& c) {
 void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   if (requests.empty()) return;
   std::vector<char> active(segs_.size(), 0);
+  unsigned char* stage = bStage_.writable();
   for (const BatchRequest* r : requests) {
     const Segment& sg = segs_[r->body];
-    std::copy(r->in->data(), r->in->data() + sg.dofs(), packed_.begin() + static_cast<std::ptrdiff_t>(sg.dofBegin()));
+    const Eigen::VectorXd& v = *r->in;
+    putReals(stage, sg.dofBegin(), sg.dofs(), [&](std::size_t d) { return v[static_cast<Eigen::Index>(d)]; });
     setCoefficients(r->body, r->coeffs);
     active[r->body] = 1;
   }
   // One write and one read of the packed range (the segments in between: scratch, not computed).
   const auto [lo, hi] = dofRange(requests);
-  upload(p_, packed_.data(), lo, hi - lo);
+  bStage_.write(p_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   setActive(active);
   product(p_, q_, false, partialsW_);
-  download(q_, packed_.data(), lo, hi - lo);
-  for (BatchRequest* r : requests) {
-    const Segment& sg = segs_[r->body];
-    *r->out = Eigen::Map<const Eigen::VectorXd>(packed_.data() + sg.dofBegin(), static_cast<Eigen::Index>(sg.dofs()));
-  }
+  readStage_.read(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  writesDone();
+  for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
 }
 
 void SegmentEngine::pcgPrecondition() {
@@ -831,7 +887,7 @@ void SegmentEngine::pcgIteration(bool last) {
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
-  xOnDevice_.clear();  // the iterations change x
+  std::fill(xKnown_.begin(), xKnown_.end(), 0);  // the iterations change x
   pcgPrecondition();
   pcgSetup(false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
@@ -846,15 +902,23 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     bool iterating = true;
   };
   std::vector<Running> runs;
+  unsigned char* bStage = bStage_.writable();
   for (BatchRequest* r : requests) {
     const Segment& sg = segs_[r->body];
     const Eigen::VectorXd& b = *r->in;
     Eigen::VectorXd& x = *r->out;
     if (static_cast<std::size_t>(x.size()) != sg.dofs()) x = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(sg.dofs()));
     r->stats = LinearSolveStats{};
+    // b packed into its stage in device precision (constrained rows zero, even if not finite) in
+    // the pass that sums b . b over the free dofs.
     double bb = 0.0;
-    for (std::size_t d = 0; d < sg.dofs(); ++d)
-      if (!sg.constrained[d]) bb += b[static_cast<Eigen::Index>(d)] * b[static_cast<Eigen::Index>(d)];
+    withReals(bStage, sg.dofBegin(), [&](auto* out) {
+      for (std::size_t d = 0; d < sg.dofs(); ++d) {
+        const double v = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
+        bb += v * v;
+        out[d] = static_cast<std::remove_pointer_t<decltype(out)>>(v);
+      }
+    });
     if (!std::isfinite(bb)) {
       r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name, "': OpenCL PCG: the right-hand side "
                          "is not finite (NaN or Inf in b); the state diverged before the linear solve");
@@ -872,42 +936,39 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   std::vector<BatchRequest*> running;
   for (const Running& run : runs) running.push_back(run.request);
   const auto [lo, hi] = dofRange(running);
-  for (const Running& run : runs) {  // rows of constrained dofs ignored (zero, even if not finite)
-    const Segment& sg = segs_[run.request->body];
-    const Eigen::VectorXd& b = *run.request->in;
-    for (std::size_t d = 0; d < sg.dofs(); ++d)
-      packed_[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
-  }
-  // The preconditioner needs neither b nor x: it is queued first and runs while the host packs them.
+  // The preconditioner needs neither b nor x: it is queued first and runs while the host packs x.
   std::vector<char> active(segs_.size(), 0);
   for (const Running& run : runs) active[run.request->body] = 1;
   setActive(active);
   pcgPrecondition();
-  upload(b_, packed_.data(), lo, hi - lo);
+  bStage_.write(b_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  // x in one pass: packed (constrained and non-finite entries zero) into its stage, compared bit
+  // for bit with what the device holds, and tested for zero. Only the running segments decide
+  // (those in between are scratch, not computed): x is uploaded unless the device holds it already,
+  // and a start of x = 0 on every running body (Newton's corrections start there) skips the
+  // product of r = b - A x.
+  bool xThere = true, zeroStart = true;
+  unsigned char* xStage = xStage_.writable();
   for (const Running& run : runs) {
     const Segment& sg = segs_[run.request->body];
     const Eigen::VectorXd& x = *run.request->out;
-    for (std::size_t d = 0; d < sg.dofs(); ++d) {
-      const double v = x[static_cast<Eigen::Index>(d)];
-      packed_[sg.dofBegin() + d] = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
-    }
+    bool same = xKnown_[run.request->body] != 0;
+    withReals(xStage, sg.dofBegin(), [&](auto* out) {
+      using T = std::remove_pointer_t<decltype(out)>;
+      for (std::size_t d = 0; d < sg.dofs(); ++d) {
+        const double v = x[static_cast<Eigen::Index>(d)];
+        const double packed = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
+        const T t = static_cast<T>(packed);
+        same = same && std::memcmp(&t, &out[d], sizeof(T)) == 0;
+        zeroStart = zeroStart && packed == 0.0;
+        out[d] = t;
+      }
+    });
+    xThere = xThere && same;
   }
-  // Only the running segments decide (those in between are scratch, not computed): x is uploaded
-  // unless the device holds it already, and a start of x = 0 on every running body (Newton's
-  // corrections start there) skips the product of r = b - A x.
-  if (xOnDevice_.size() != packed_.size()) xOnDevice_.assign(packed_.size(), std::nan(""));
-  bool xThere = true, zeroStart = true;
-  for (const Running& run : runs) {
-    const Segment& sg = segs_[run.request->body];
-    for (std::size_t d = sg.dofBegin(); d < sg.dofBegin() + sg.dofs(); ++d) {
-      xThere = xThere && packed_[d] == xOnDevice_[d];
-      zeroStart = zeroStart && packed_[d] == 0.0;
-    }
-  }
-  if (!xThere) upload(x_, packed_.data(), lo, hi - lo);
-  // From here the iterations change x on the device: unknown until the download below.
-  std::fill(xOnDevice_.begin() + static_cast<std::ptrdiff_t>(lo), xOnDevice_.begin() + static_cast<std::ptrdiff_t>(hi),
-            std::nan(""));
+  if (!xThere) xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  // From here the iterations change x on the device: unknown until the read below.
+  for (const Running& run : runs) xKnown_[run.request->body] = 0;
   pcgSetup(zeroStart);
 
   // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
@@ -1041,15 +1102,16 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   }
   if (anyTrue) issueRead();  // completes with the blocking read of x below: one synchronisation for both
   try {
-    download(x_, packed_.data(), lo, hi - lo);
+    xStage_.read(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+    writesDone();
   } catch (...) {
     releaseReads(dropped, true);
     releaseReads(reads, true);
     throw;
   }
   releaseReads(dropped, false);  // complete: the blocking read of x followed them
-  std::copy(packed_.begin() + static_cast<std::ptrdiff_t>(lo), packed_.begin() + static_cast<std::ptrdiff_t>(hi),
-            xOnDevice_.begin() + static_cast<std::ptrdiff_t>(lo));
+  for (std::size_t s = 0; s < segs_.size(); ++s)  // the stage holds the device's x over [lo, hi)
+    if (segs_[s].dofBegin() >= lo && segs_[s].dofBegin() < hi) xKnown_[s] = 1;
   if (anyTrue) {
     collectLast();
     for (Running& run : runs)
@@ -1071,13 +1133,17 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                          "material, time step and loads");
       continue;
     }
-    const Eigen::Map<const Eigen::VectorXd> out(packed_.data() + sg.dofBegin(), static_cast<Eigen::Index>(sg.dofs()));
-    if (!out.allFinite()) {
+    bool finite = true;
+    withReals(xStage_.data(), sg.dofBegin(), [&](const auto* out) {
+      finite = Eigen::Map<const Eigen::Matrix<std::remove_cv_t<std::remove_pointer_t<decltype(out)>>, Eigen::Dynamic, 1>>(
+                   out, static_cast<Eigen::Index>(sg.dofs())).allFinite();
+    });
+    if (!finite) {  // the caller's x stays as it was
       r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name,
                          "': OpenCL PCG produced a non-finite solution on device '", dev_, "'");
       continue;
     }
-    *r->out = out;
+    getReals(xStage_.data(), sg.dofBegin(), sg.dofs(), *r->out);
   }
 }
 

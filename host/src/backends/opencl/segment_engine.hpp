@@ -28,6 +28,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -48,6 +49,34 @@ class ClBuffer {
  private:
   cl_mem mem_ = nullptr;
   std::size_t bytes_ = 0;
+};
+
+/// Host memory for the transfers of one node vector, in device precision: allocated by the driver
+/// (CL_MEM_ALLOC_HOST_PTR, page-locked on GPU drivers, so a copy runs at the bus's rate with no
+/// intermediate copy by the driver) and mapped for the stage's life. Reused by every transfer, so no
+/// transfer allocates (a fresh vector of a 1M-element body's 3N reals page-faults through 2 MB).
+/// The host writes into it only after the last non-blocking write that reads from it is done.
+class HostStage {
+ public:
+  HostStage() = default;
+  HostStage(const HostStage&) = delete;
+  HostStage& operator=(const HostStage&) = delete;
+  ~HostStage();
+  void create(cl_context ctx, cl_command_queue queue, std::size_t bytes, const std::string& device);
+  /// The memory, after waiting for the write in flight from it (if any).
+  unsigned char* writable();
+  /// The memory as it is (for a blocking read into it, or reading it).
+  unsigned char* data() const { return host_; }
+  /// Non-blocking write of [offset, offset + bytes) of the stage into `to` at the same offset.
+  void write(cl_mem to, std::size_t offset, std::size_t bytes, const std::string& device);
+  /// Blocking read of [offset, offset + bytes) of `from` into the stage at the same offset.
+  void read(cl_mem from, std::size_t offset, std::size_t bytes, const std::string& device);
+
+ private:
+  cl_mem mem_ = nullptr;
+  cl_command_queue queue_ = nullptr;
+  unsigned char* host_ = nullptr;
+  cl_event pending_ = nullptr;  ///< the last non-blocking write from the stage
 };
 
 /// A kernel released on destruction.
@@ -172,6 +201,25 @@ class SegmentEngine {
   void downloadSums(const ClBuffer& buf, double* dst, std::size_t count);
   template <class T>
   void uploadRaw(const ClBuffer& buf, const std::vector<T>& v);
+  /// fn(T* reals) with T the device's real type (float or double), at real `begin` of `base`
+  /// (a stage's memory; const bytes give const reals).
+  template <class Byte, class Fn>
+  void withReals(Byte* base, std::size_t begin, Fn&& fn) const {
+    constexpr bool ro = std::is_const_v<Byte>;
+    if (realSize_ == sizeof(double))
+      fn(reinterpret_cast<std::conditional_t<ro, const double, double>*>(base) + begin);
+    else
+      fn(reinterpret_cast<std::conditional_t<ro, const float, float>*>(base) + begin);
+  }
+  /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device precision.
+  template <class Fn>
+  void putReals(unsigned char* base, std::size_t begin, std::size_t count, Fn&& value) const {
+    withReals(base, begin, [&](auto* out) {
+      for (std::size_t d = 0; d < count; ++d) out[d] = static_cast<std::remove_pointer_t<decltype(out)>>(value(d));
+    });
+  }
+  /// out = reals [begin, begin + count) of `base`, in double (resized only if its size differs).
+  void getReals(const unsigned char* base, std::size_t begin, std::size_t count, Eigen::VectorXd& out) const;
   void createReal(ClBuffer& buf, std::size_t count) { buf.create(ctx_->context(), count * realSize_, dev_); }
   /// The packed dof range [begin, end) covering the given segments.
   std::pair<std::size_t, std::size_t> dofRange(const std::vector<BatchRequest*>& requests) const;
@@ -240,12 +288,16 @@ class SegmentEngine {
   std::vector<char> active_;
   bool segInfoStale_ = false;            ///< the device may have deactivated segments (PCG stops): upload next time
   std::size_t activeLo_ = 0, activeHi_ = 0;  ///< span of the active segments
-  std::vector<double> posHost_;          ///< the device positions (relative), all segments
-  std::vector<double> packed_;           ///< staging of packed node vectors
-  /// What the device's x holds per dof (as the host last wrote or read it; NaN: unknown), so that a
-  /// solve warm-started from the previous solution (an application's usual frame) uploads no x.
-  std::vector<double> xOnDevice_;
-  std::vector<unsigned char> staging_;   ///< device-precision staging of blocking reads
+  // Pinned stages of the per-step transfers, each filled or read in one pass that also converts
+  // precision (and checks, packs, compares) while touching the user's vector once.
+  HostStage posStage_;                   ///< the device positions (relative), all segments
+  HostStage bStage_;                     ///< b of solve, p of apply
+  HostStage xStage_;                     ///< x of solve: what the host last wrote to or read from x_
+  HostStage readStage_;                  ///< blocking reads (forces, products)
+  /// Per segment: the device's x equals xStage_'s (bit for bit), so that a solve warm-started from
+  /// the previous solution (an application's usual frame) uploads no x.
+  std::vector<char> xKnown_;
+  std::vector<unsigned char> staging_;   ///< device-precision staging of other blocking reads
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,

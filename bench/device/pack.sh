@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Packs what a lent GPU machine (no package registry there) needs to run corofem's tests and
+# benchmarks into .gpu/ (ignored by git; the device tool carries it): the Release binaries built
+# here, stripped; the libraries they link that the machine's CUDA image lacks (the OpenCL ICD loader
+# and Google Benchmark from Debian 12); and ../shared/data. Run from the repository root after
+# `cmake --preset opencl && cmake --build build`, then call the device tool with carry [".gpu"] and
+# the command `bash bench/device/run_on_gpu.sh`.
+set -euo pipefail
+root=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$root"
+ex=$(git rev-parse --git-path info/exclude); mkdir -p "$(dirname "$ex")"
+grep -qx "/.gpu/" "$ex" 2>/dev/null || echo "/.gpu/" >> "$ex"
+rm -rf .gpu && mkdir -p .gpu/bin .gpu/lib
+for b in build/tests/test_* build/bench/bench_* build/corofem; do
+  [[ -x $b && -f $b ]] || continue
+  strip -o ".gpu/bin/$(basename "$b")" "$b"
+done
+for lib in libOpenCL.so.1 libbenchmark.so.1debian; do
+  cp -L "$(ldconfig -p | awk -v l="$lib" '$1 == l {print $NF; exit}')" .gpu/lib/
+done
+if [[ -d ../shared/data ]]; then
+  mkdir -p .gpu/data && cp -r ../shared/data/. .gpu/data/
+fi
+du -sh .gpu
