@@ -2,7 +2,10 @@
 # Runs on the lent GPU machine (see pack.sh): points the carried OpenCL ICD loader at NVIDIA's
 # OpenCL driver, runs every test binary (each OpenCL test runs on every device present, here the
 # GPU) and the OpenCL benchmarks, and leaves logs and JSON in $OUT. STAGES (default
-# "probe tests bench") chooses what runs; BENCH_FILTER narrows bench_opencl.
+# "probe tests bench") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
+# narrows it), profile (COROFEM_OPENCL_PROFILE on the 10k and 1M steps), ab (the dynamic steps of
+# the bench_opencl binaries named in AB, in turns), sweep (work-group sizes), more (bench_backends,
+# bench_embed, bench_batch).
 set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
@@ -38,23 +41,53 @@ if [[ $stages == *tests* ]]; then
   done
   wait "${pids[@]}"
   sort /tmp/logs/exits
-  grep -h -E '^\[  (FAILED|PASSED|SKIPPED) ' /tmp/logs/test_*.log | sort | uniq -c | sort -rn | head -60
+  for f in /tmp/logs/test_*.log; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
+  grep -h -E '^\[  FAILED  \]' /tmp/logs/test_*.log | head -40
 fi
 
+B=$g/bin
 if [[ $stages == *bench* ]]; then
-  B=$g/bin
   timeout 420 "$B/bench_opencl" --benchmark_filter="${BENCH_FILTER:-dev0}" \
     --benchmark_out="$OUT/bench_opencl.json" --benchmark_out_format=json > /tmp/logs/bench_opencl.txt 2>&1
   echo "bench_opencl exit $?"
-  [[ $stages == *more* ]] && {
-    timeout 300 "$B/bench_backends" --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
-      --benchmark_out="$OUT/bench_backends.json" --benchmark_out_format=json > /tmp/logs/bench_backends.txt 2>&1
-    timeout 200 "$B/bench_embed" --benchmark_filter='DeviceSurface1M|DeviceSurfaceFromDevice1M' \
-      --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
-      --benchmark_out="$OUT/bench_embed.json" --benchmark_out_format=json > /tmp/logs/bench_embed.txt 2>&1
-    timeout 300 "$B/bench_batch" --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
-      --benchmark_out="$OUT/bench_batch.json" --benchmark_out_format=json > /tmp/logs/bench_batch.txt 2>&1
-  }
-  grep -E 'median|copy bandwidth|ERROR' /tmp/logs/bench_*.txt | cut -c1-200 | head -150
+  grep -E 'median' /tmp/logs/bench_opencl.txt | cut -c1-160
+fi
+
+if [[ $stages == *profile* ]]; then  # per kernel: launches, device time, device idle before it
+  for size in 10k 1M; do
+    COROFEM_OPENCL_PROFILE=1 timeout 120 "$B/bench_opencl" --benchmark_filter="dynamic_step_20pcg/dev0/$size" \
+      --benchmark_repetitions=1 --benchmark_min_time=1 2>&1 | grep -E 'profile\]|median' > "/tmp/logs/profile_$size.txt"
+    echo "== profile $size"; cat "/tmp/logs/profile_$size.txt" | cut -c25-160
+  done
+fi
+
+if [[ $stages == *ab* ]]; then  # A/B: the binaries named in AB (in .gpu/bin), in turns, twice
+  for round in 1 2; do
+    for b in ${AB:-bench_opencl}; do
+      timeout 150 "$B/$b" --benchmark_filter='dynamic_step' --benchmark_repetitions=3 \
+        --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v b=$b '{print b, $1, $2, $3, "cpu", $4, $5}'
+    done
+  done | tee /tmp/logs/ab.txt
+fi
+
+if [[ $stages == *sweep* ]]; then  # work-group sizes on the GPU
+  for wg in 64 128 256; do
+    COROFEM_OPENCL_WG=$wg timeout 120 "$B/bench_opencl" --benchmark_filter='(product|pcg_iteration|rotation_polar|internal_force)/dev0/(10k|1M)|dynamic_step_20pcg/dev0/(10k|1M)' \
+      --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v wg=$wg '{print "wg" wg, $1, $2, $3}'
+  done | tee /tmp/logs/sweep.txt
+fi
+
+if [[ $stages == *more* ]]; then
+  timeout 240 "$B/bench_backends" --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
+    --benchmark_out="$OUT/bench_backends.json" --benchmark_out_format=json > /tmp/logs/bench_backends.txt 2>&1
+  echo "bench_backends exit $?"
+  timeout 150 "$B/bench_embed" --benchmark_filter='DeviceSurface1M|DeviceSurfaceFromDevice1M' \
+    --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
+    --benchmark_out="$OUT/bench_embed.json" --benchmark_out_format=json > /tmp/logs/bench_embed.txt 2>&1
+  echo "bench_embed exit $?"
+  timeout 240 "$B/bench_batch" --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
+    --benchmark_out="$OUT/bench_batch.json" --benchmark_out_format=json > /tmp/logs/bench_batch.txt 2>&1
+  echo "bench_batch exit $?"
+  grep -h median /tmp/logs/bench_backends.txt /tmp/logs/bench_embed.txt /tmp/logs/bench_batch.txt | cut -c1-150
 fi
 tar -C /tmp -czf "$OUT/logs.tar.gz" logs
