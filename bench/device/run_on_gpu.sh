@@ -4,13 +4,15 @@
 # GPU) and the OpenCL benchmarks, and leaves logs and JSON in $OUT. STAGES (default
 # "probe tests bench") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
 # narrows it), profile (COROFEM_OPENCL_PROFILE on the 10k and 1M steps), ab (the dynamic steps of
-# the bench_opencl binaries named in AB, in turns), sweep (work-group sizes), more (bench_backends,
+# the bench_opencl binaries named in AB, in turns), envab (bench_opencl under each environment
+# setting in ENVAB, in turns), sweep (work-group sizes), more (bench_backends,
 # bench_embed, bench_batch).
 set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/logs
 stages=${STAGES:-probe tests bench}
+has() { [[ " $stages " == *" $1 "* ]]; }
 export LD_LIBRARY_PATH=$g/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 export COROFEM_DATA_DIR=$g/data COROFEM_KERNEL_CACHE=/tmp/corofem-kernels
 # The test binaries know the project as /work/main and the data as ../shared/data beside it.
@@ -22,7 +24,7 @@ icd=$(find /usr/local/nvidia /usr/lib /usr/lib64 /usr/local/cuda* -name 'libnvid
 mkdir -p /tmp/icd && echo "${icd:-libnvidia-opencl.so.1}" > /tmp/icd/nvidia.icd
 export OCL_ICD_VENDORS=/tmp/icd OCL_ICD_FILENAMES=${icd:-libnvidia-opencl.so.1}
 
-if [[ $stages == *probe* ]]; then
+if has probe; then
   {
     nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.sm,clocks.mem --format=csv
     grep PRETTY /etc/os-release; ldd --version | head -1; nproc
@@ -32,7 +34,7 @@ if [[ $stages == *probe* ]]; then
   } 2>&1 | tee "$OUT/probe.log"
 fi
 
-if [[ $stages == *tests* ]]; then
+if has tests; then
   pids=()
   for t in "$g"/bin/test_*; do
     n=$(basename "$t")
@@ -46,14 +48,14 @@ if [[ $stages == *tests* ]]; then
 fi
 
 B=$g/bin
-if [[ $stages == *bench* ]]; then
+if has bench; then
   timeout 420 "$B/bench_opencl" --benchmark_filter="${BENCH_FILTER:-dev0}" \
     --benchmark_out="$OUT/bench_opencl.json" --benchmark_out_format=json > /tmp/logs/bench_opencl.txt 2>&1
   echo "bench_opencl exit $?"
   grep -E 'median' /tmp/logs/bench_opencl.txt | cut -c1-160
 fi
 
-if [[ $stages == *profile* ]]; then  # per kernel: launches, device time, device idle before it
+if has profile; then  # per kernel: launches, device time, device idle before it
   for size in 10k 1M; do
     COROFEM_OPENCL_PROFILE=1 timeout 120 "$B/bench_opencl" --benchmark_filter="dynamic_step_20pcg/dev0/$size" \
       --benchmark_repetitions=1 --benchmark_min_time=1 2>&1 | grep -E 'profile\]|median' > "/tmp/logs/profile_$size.txt"
@@ -61,7 +63,7 @@ if [[ $stages == *profile* ]]; then  # per kernel: launches, device time, device
   done
 fi
 
-if [[ $stages == *ab* ]]; then  # A/B: the binaries named in AB (in .gpu/bin), in turns, twice
+if has ab; then  # A/B: the binaries named in AB (in .gpu/bin), in turns, twice
   for round in 1 2; do
     for b in ${AB:-bench_opencl}; do
       timeout 150 "$B/$b" --benchmark_filter='dynamic_step' --benchmark_repetitions=3 \
@@ -70,14 +72,23 @@ if [[ $stages == *ab* ]]; then  # A/B: the binaries named in AB (in .gpu/bin), i
   done | tee /tmp/logs/ab.txt
 fi
 
-if [[ $stages == *sweep* ]]; then  # work-group sizes on the GPU
+if has envab; then  # A/B of environment settings (ENVAB, e.g. "COROFEM_OPENCL_FUSED=0 COROFEM_OPENCL_FUSED=1"), in turns, twice
+  for round in 1 2; do
+    for v in ${ENVAB:-X=0}; do
+      env "$v" timeout 150 "$B/bench_opencl" --benchmark_filter="${ENVAB_FILTER:-dynamic_step|pcg_iteration/dev0/(1k|10k|1M)}" \
+        --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v b=$v '{print b, $1, $2, $3}'
+    done
+  done | tee /tmp/logs/envab.txt
+fi
+
+if has sweep; then  # work-group sizes on the GPU
   for wg in 64 128 256; do
     COROFEM_OPENCL_WG=$wg timeout 120 "$B/bench_opencl" --benchmark_filter='(product|pcg_iteration|rotation_polar|internal_force)/dev0/(10k|1M)|dynamic_step_20pcg/dev0/(10k|1M)' \
       --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v wg=$wg '{print "wg" wg, $1, $2, $3}'
   done | tee /tmp/logs/sweep.txt
 fi
 
-if [[ $stages == *more* ]]; then
+if has more; then
   timeout 240 "$B/bench_backends" --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
     --benchmark_out="$OUT/bench_backends.json" --benchmark_out_format=json > /tmp/logs/bench_backends.txt 2>&1
   echo "bench_backends exit $?"

@@ -46,16 +46,11 @@ void gather_sum(__global const uint* restrict nodeSeg, __global const uint* rest
  * project != 0 (inside PCG): y_d = 0 on constrained dofs (free[d] = 0): with p_d = 0 there, this is
  * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h,
  * in sum_real: double in mixed precision) give PCG its alpha. */
-__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void gather_product(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-                    __global const real* restrict segCoef, __global const uint* restrict start,
-                    __global const uint* restrict entries, __global const real* restrict elemOut,
-                    __global const real* restrict mass, __global const real* restrict free,
-                    const uint project, __global const real* restrict p, __global real* restrict y,
-                    __global sum_real* restrict partials) {
-  COROFEM_PARTIAL_LOCALS
-  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
-  const real massCoef = seg_coef(segCoef, s, kCoefMass);
+/* The node loop of gather_product for the work-item's nodes [first, last): y and its p . y sum. */
+COROFEM_FN sum_real gather_product_nodes(uint first, uint last, real massCoef, __global const uint* start,
+                                         __global const uint* entries, __global const real* elemOut,
+                                         __global const real* mass, __global const real* free, uint project,
+                                         __global const real* p, __global real* y) {
   sum_real dot = (sum_real)0;
   for (uint n = first; n < last; ++n) {
     real acc[3];
@@ -70,5 +65,19 @@ void gather_product(__global const uint* restrict nodeSeg, __global const uint* 
       dot += (sum_real)pd * (sum_real)yd;  /* exact term in mixed precision */
     }
   }
+  return dot;
+}
+
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void gather_product(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                    __global const real* restrict segCoef, __global const uint* restrict start,
+                    __global const uint* restrict entries, __global const real* restrict elemOut,
+                    __global const real* restrict mass, __global const real* restrict free,
+                    const uint project, __global const real* restrict p, __global real* restrict y,
+                    __global sum_real* restrict partials) {
+  COROFEM_PARTIAL_LOCALS
+  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
+  const sum_real dot = gather_product_nodes(first, last, seg_coef(segCoef, s, kCoefMass), start, entries, elemOut,
+                                            mass, free, project, p, y);
   COROFEM_PARTIAL_STORE(dot, (sum_real)0, (sum_real)0, partials);
 }

@@ -157,6 +157,7 @@ TEST_P(OpenCLBackendVsReference, GpuAndCpuKernelConfigurationsAgree) {
     o.vectorWidth = width;
     o.nodeChunk = width == 1 ? 1 : 0;
     o.treeReduce = width == 1 ? 1 : -1;
+    o.fusedReduce = width == 1 ? 1 : -1;  // GPUs finish the PCG sums in gather_product_finish
     auto ocl = openclBackend(p, solver(), o);
     ocl->setPositions(x);
     sols[config] = Eigen::VectorXd::Zero(b.size());
@@ -290,6 +291,52 @@ TEST_P(OpenCLBackendVsReference, WarmStartFromThePreviousSolutionMatchesAFreshUp
   Eigen::VectorXd back = previous;
   ocl->solve(c, b2, back);
   EXPECT_TRUE(test::sameBits(back, same)) << "warm start = an older solution";
+}
+
+TEST_P(OpenCLBackendVsReference, FusedReductionGivesTheBitsOfReduceFinish) {
+  // GPUs finish the PCG's sums in the last work-group of gather_product_finish instead of a
+  // reduce_finish launch: the same sums in the same order, so the same bits, iteration counts and
+  // stops, here on whatever device is present, in the GPU configuration: a solve that converges
+  // (the stop test deactivates the body inside the fused kernel), one capped at its iteration limit
+  // (the cap's last iteration keeps reduce_finish), and warm starts from each.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), b1 = randomVector(p.dofCount(), 41), b2 = randomVector(p.dofCount(), 42);
+  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
+  struct Run {
+    Eigen::VectorXd sol[3];
+    detail::LinearSolveStats stats[3];
+  } runs[2];
+  for (int fused : {0, 1}) {
+    detail::OpenCLOptions o;
+    o.vectorWidth = 1;
+    o.nodeChunk = 1;
+    o.treeReduce = 1;
+    o.fusedReduce = fused;
+    auto ocl = openclBackend(p, solver(), o);
+    EXPECT_EQ(ocl->buildOptions().find("COROFEM_FUSED_REDUCE") != std::string::npos, fused == 1);
+    ocl->setPositions(x);
+    Run& r = runs[fused];
+    r.sol[0] = Eigen::VectorXd::Zero(b1.size());
+    r.stats[0] = ocl->solve(c, b1, r.sol[0]);
+    EXPECT_TRUE(r.stats[0].converged);
+    r.sol[1] = r.sol[0];
+    r.stats[1] = ocl->solve(c, b2, r.sol[1]);  // warm start from the previous solution
+    SolverDesc capped = solver();
+    capped.maxIterations = 7;
+    auto cap = openclBackend(p, capped, o);
+    cap->setPositions(x);
+    r.sol[2] = r.sol[1];
+    r.stats[2] = cap->solve(c, b1, r.sol[2]);
+    EXPECT_EQ(r.stats[2].iterations, 7);
+  }
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_TRUE(test::sameBits(runs[1].sol[k], runs[0].sol[k])) << "solve " << k;
+    EXPECT_EQ(runs[1].stats[k].iterations, runs[0].stats[k].iterations) << "solve " << k;
+    EXPECT_EQ(runs[1].stats[k].converged, runs[0].stats[k].converged) << "solve " << k;
+    EXPECT_EQ(runs[1].stats[k].relativeResidual, runs[0].stats[k].relativeResidual) << "solve " << k;
+  }
+  EXPECT_GT(runs[0].stats[0].iterations, 8) << "a solve long enough to run the fused kernel many times";
 }
 
 TEST_P(OpenCLBackendVsReference, BodyFarFromTheOriginKeepsItsAccuracy) {

@@ -272,6 +272,7 @@ TEST_P(OpenCLBatch, GpuKernelConfigurationMatchesToo) {
   o.vectorWidth = 1;
   o.nodeChunk = 1;
   o.treeReduce = 1;
+  o.fusedReduce = 1;  // each segment's sums finished by its own last work-group
   everyRequestMatches(o);
 }
 

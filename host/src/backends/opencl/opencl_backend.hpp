@@ -19,6 +19,9 @@ struct OpenCLOptions {
   std::size_t vectorWidth = 0;   ///< elements per work-item in the element kernels (1, 4, 8, 16), 0 = 8 on CPUs, 1 on GPUs
   std::size_t nodeChunk = 0;     ///< nodes per work-item in the PCG node kernels, 0 = default (1 on GPUs, CPUs: see the backend)
   int treeReduce = -1;           ///< 1: partial sums by local-memory trees (GPU style), 0: one per work-item, -1: by device type
+  /// 1: the PCG's second-stage sums run in the last work-group of gather_product_finish (one launch
+  /// fewer per iteration; needs treeReduce), 0: in reduce_finish, -1: by device type (GPUs: 1)
+  int fusedReduce = -1;
   int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
   bool assumeNoFp64 = false;     ///< tests: treat the device as lacking cl_khr_fp64 (the error path of double/mixed)
   long long tileBytes = -1;      ///< batches: bodies run together up to this working set; -1 = by device (CPUs: a quarter of the cache, GPUs: all), 0 = all

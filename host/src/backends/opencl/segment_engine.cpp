@@ -187,6 +187,14 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
   if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
     treeReduce_ = std::string(env) != "0";  // tuning experiments
+  fusedReduce_ = options.fusedReduce >= 0 ? options.fusedReduce != 0 : ctx_->info().gpu;
+  if (const char* env = std::getenv("COROFEM_OPENCL_FUSED"); env && *env && options.fusedReduce < 0)
+    fusedReduce_ = std::string(env) != "0";  // tuning experiments
+  if (fusedReduce_ && !treeReduce_) {
+    if (options.fusedReduce == 1)
+      fail(ErrorCode::BadInput, "OpenCL option fusedReduce needs treeReduce (one partial per work-group)");
+    fusedReduce_ = false;  // by device type or environment: only where it applies
+  }
   // Tiles of bodies per launch sequence (CPUs only): a quarter of the device's global memory cache
   // (the L3 on PoCL), measured on 100 bodies of 2160 elements (2-core EPYC, 32 MiB L3): tiles of
   // ~20 bodies (~7 MB) solved 1.5x faster per body than one tile of 100 (~35 MB, streamed from
@@ -285,7 +293,8 @@ void SegmentEngine::harvestProfile(bool all) {
 void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options) {
   // -- program: only the features these problems use
   options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_) +
-             " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "");
+             " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "") +
+             (fusedReduce_ ? " -DCOROFEM_FUSED_REDUCE" : "");
   if (double_) options_ += " -DCOROFEM_DOUBLE";
   if (mixed_) options_ += " -DCOROFEM_MIXED";
   switch (solver.rotation) {
@@ -315,6 +324,7 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   kPcgInit_.create(build_.program, "pcg_init", dev_);
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
+  if (fusedReduce_) kGatherProductFinish_.create(build_.program, "gather_product_finish", dev_);
 }
 
 void SegmentEngine::allocate(const OpenCLOptions& options) {
@@ -462,6 +472,10 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   partials_.create(c, kPartialComponents * std::max(S / (wg_ * vec_), partialTotal_) * sumSize_, dev_);
   partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
+  if (fusedReduce_) {
+    counters_.create(c, K * sizeof(cl_uint), dev_);
+    uploadRaw(counters_, std::vector<cl_uint>(K, 0u));
+  }
 }
 
 std::vector<DeviceBuffer> SegmentEngine::buffers() const {
@@ -479,7 +493,8 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"pcg_r", &r_},                       {"pcg_u", &z_},
       {"pcg_p", &p_},                       {"pcg_w", &q_},
       {"pcg_s", &s_},                       {"partial_sums", &partials_},
-      {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_}};
+      {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_},
+      {"reduce_counters", &counters_}};
   std::vector<DeviceBuffer> out;
   for (const auto& [name, buffer] : all)
     if (buffer->get()) out.push_back({name, buffer->bytes()});
@@ -870,18 +885,30 @@ void SegmentEngine::pcgSetup(bool zeroStart) {
   if (!zeroStart) product(x_, q_, true, partialsW_);  // a zero start needs no A x
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, cl_uint(zeroStart ? 1 : 0), b_, q_, free_, minv_, r_,
          z_, p_, s_, partials_);
-  product(z_, q_, true, partialsW_);
-  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceInit),
-         SumReal{solver_.tolerance * solver_.tolerance});
+  productAndFinish(kReduceInit);
+}
+
+void SegmentEngine::productAndFinish(cl_uint mode) {
+  const SumReal tol2{solver_.tolerance * solver_.tolerance};
+  if (fusedReduce_) {
+    elementProduct(z_);
+    launch(kGatherProductFinish_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_,
+           elemOut_, mass_, free_, z_, q_, partials_, partialsW_, scalars_, counters_, mode, tol2);
+  } else {
+    product(z_, q_, true, partialsW_);
+    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, mode, tol2);
+  }
 }
 
 void SegmentEngine::pcgIteration(bool last) {
   // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta.
   // The iteration cap's last iteration has no successor: no w = A u, only gamma and r . r.
   launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, q_, minv_, p_, s_, x_, r_, z_, partials_);
-  if (!last) product(z_, q_, true, partialsW_);
-  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_,
-         cl_uint(last ? kReduceLast : kReduceStep), SumReal{solver_.tolerance * solver_.tolerance});
+  if (last)
+    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceLast),
+           SumReal{solver_.tolerance * solver_.tolerance});
+  else
+    productAndFinish(kReduceStep);
 }
 
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {

@@ -231,6 +231,9 @@ class SegmentEngine {
   void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
   /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
   void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials);
+  /// w = A u (projected) into q_, then reduce_finish's scalar update in `mode`: one kernel fewer
+  /// with fusedReduce_ (gather_product_finish), else product + reduce_finish.
+  void productAndFinish(cl_uint mode);
   /// M^-1 from the blocks and the flushed coefficients (nothing without a preconditioner).
   void pcgPrecondition();
   /// r = b - A x, u = M^-1 r, w = A u and the first scalars (after pcgPrecondition); `zeroStart`:
@@ -275,6 +278,7 @@ class SegmentEngine {
   std::size_t vec_ = 1;                  ///< elements per work-item in the element kernels
   std::size_t chunk_ = 1;                ///< nodes per work-item in the PCG node kernels
   bool treeReduce_ = false;              ///< partial sums per work-group (GPUs) or per work-item
+  bool fusedReduce_ = false;             ///< PCG sums finished in gather_product_finish (needs treeReduce_)
   std::size_t tileBytes_ = 0;            ///< working set of the bodies run together (0: all at once)
   std::vector<Segment> segs_;
   std::size_t stride_ = 0;               ///< S: all segments' padded elements
@@ -301,12 +305,13 @@ class SegmentEngine {
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
-      kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kReduceFinish_;
+      kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
   ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
   // partials_ takes pcg_init/pcg_update's and element_energy's sums, partialsW_ gather_product's.
   ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
+  ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
 };
 
 }  // namespace corofem::detail
