@@ -13,7 +13,8 @@
 //   InternalForces  element_forces + gather_sum; one read
 //   Apply           one write of p; element_product + gather_product; one read
 //   Solve           writes of b and x; precond_invert; r = b - A x, w = A M^-1 r; PCG iterations
-//                   for all active segments (4 launches each, kernels/opencl/pcg.cl), the device
+//                   for all active segments (4 launches each, 3 with fusedReduce_ on GPUs;
+//                   kernels/opencl/pcg.cl), the device
 //                   stopping each segment at convergence, breakdown or a non-finite residual;
 //                   after every checkEvery iterations a non-blocking read of all segments'
 //                   scalars, waited for one chunk later; the true residual per segment; one read of x
