@@ -665,8 +665,10 @@ void SegmentEngine::downloadSums(const ClBuffer& buf, double* dst, std::size_t c
 void SegmentEngine::getReals(const unsigned char* base, std::size_t begin, std::size_t count,
                              Eigen::VectorXd& out) const {
   out.resize(static_cast<Eigen::Index>(count));
-  withReals(base, begin, [&](const auto* in) {
-    for (std::size_t d = 0; d < count; ++d) out[static_cast<Eigen::Index>(d)] = static_cast<double>(in[d]);
+  parallelChunks(count, kHostChunk, [&](std::size_t, std::size_t lo, std::size_t hi) {
+    withReals(base, begin, [&](const auto* in) {
+      for (std::size_t d = lo; d < hi; ++d) out[static_cast<Eigen::Index>(d)] = static_cast<double>(in[d]);
+    });
   });
 }
 
@@ -781,8 +783,16 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
   for (const BatchRequest* r : requests) {
     Segment& sg = segs_[r->body];
     const Eigen::VectorXd& x = *r->in;
+    // Summed per chunk of nodes, the chunks in order: the same bits with any number of threads.
+    constexpr std::size_t nodeChunk = kHostChunk / 2;
+    std::vector<Eigen::Vector3d> parts(chunkCount(sg.nodes, nodeChunk), Eigen::Vector3d::Zero());
+    parallelChunks(sg.nodes, nodeChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (std::size_t n = lo; n < hi; ++n) sum += x.segment<3>(static_cast<Eigen::Index>(3 * n));
+      parts[c] = sum;
+    });
     Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-    for (std::size_t n = 0; n < sg.nodes; ++n) centroid += x.segment<3>(static_cast<Eigen::Index>(3 * n));
+    for (const Eigen::Vector3d& part : parts) centroid += part;
     centroid /= static_cast<double>(std::max<std::size_t>(sg.nodes, 1));
     putReals(stage, sg.dofBegin(), sg.dofs(),
              [&](std::size_t d) { return x[static_cast<Eigen::Index>(d)] - centroid[static_cast<Eigen::Index>(d % 3)]; });
@@ -937,15 +947,21 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     if (static_cast<std::size_t>(x.size()) != sg.dofs()) x = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(sg.dofs()));
     r->stats = LinearSolveStats{};
     // b packed into its stage in device precision (constrained rows zero, even if not finite) in
-    // the pass that sums b . b over the free dofs.
-    double bb = 0.0;
-    withReals(bStage, sg.dofBegin(), [&](auto* out) {
-      for (std::size_t d = 0; d < sg.dofs(); ++d) {
-        const double v = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
-        bb += v * v;
-        out[d] = static_cast<std::remove_pointer_t<decltype(out)>>(v);
-      }
+    // the pass that sums b . b over the free dofs (per chunk, the chunks in order).
+    std::vector<double> bbParts(chunkCount(sg.dofs(), kHostChunk), 0.0);
+    parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+      withReals(bStage, sg.dofBegin(), [&](auto* out) {
+        double sum = 0.0;
+        for (std::size_t d = lo; d < hi; ++d) {
+          const double v = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
+          sum += v * v;
+          out[d] = static_cast<std::remove_pointer_t<decltype(out)>>(v);
+        }
+        bbParts[c] = sum;
+      });
     });
+    double bb = 0.0;
+    for (double part : bbParts) bb += part;
     if (!std::isfinite(bb)) {
       r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name, "': OpenCL PCG: the right-hand side "
                          "is not finite (NaN or Inf in b); the state diverged before the linear solve");
@@ -979,19 +995,28 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   for (const Running& run : runs) {
     const Segment& sg = segs_[run.request->body];
     const Eigen::VectorXd& x = *run.request->out;
-    bool same = xKnown_[run.request->body] != 0;
-    withReals(xStage, sg.dofBegin(), [&](auto* out) {
-      using T = std::remove_pointer_t<decltype(out)>;
-      for (std::size_t d = 0; d < sg.dofs(); ++d) {
-        const double v = x[static_cast<Eigen::Index>(d)];
-        const double packed = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
-        const T t = static_cast<T>(packed);
-        same = same && std::memcmp(&t, &out[d], sizeof(T)) == 0;
-        zeroStart = zeroStart && packed == 0.0;
-        out[d] = t;
-      }
+    const bool known = xKnown_[run.request->body] != 0;
+    std::vector<char> sameParts(chunkCount(sg.dofs(), kHostChunk), 1), zeroParts(sameParts.size(), 1);
+    parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+      withReals(xStage, sg.dofBegin(), [&](auto* out) {
+        using T = std::remove_pointer_t<decltype(out)>;
+        bool same = known, zero = true;
+        for (std::size_t d = lo; d < hi; ++d) {
+          const double v = x[static_cast<Eigen::Index>(d)];
+          const double packed = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
+          const T t = static_cast<T>(packed);
+          same = same && std::memcmp(&t, &out[d], sizeof(T)) == 0;
+          zero = zero && packed == 0.0;
+          out[d] = t;
+        }
+        sameParts[c] = same;
+        zeroParts[c] = zero;
+      });
     });
-    xThere = xThere && same;
+    for (std::size_t c = 0; c < sameParts.size(); ++c) {
+      xThere = xThere && known && sameParts[c];
+      zeroStart = zeroStart && zeroParts[c];
+    }
   }
   if (!xThere) xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   // From here the iterations change x on the device: unknown until the read below.
@@ -1160,11 +1185,15 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                          "material, time step and loads");
       continue;
     }
-    bool finite = true;
-    withReals(xStage_.data(), sg.dofBegin(), [&](const auto* out) {
-      finite = Eigen::Map<const Eigen::Matrix<std::remove_cv_t<std::remove_pointer_t<decltype(out)>>, Eigen::Dynamic, 1>>(
-                   out, static_cast<Eigen::Index>(sg.dofs())).allFinite();
+    std::vector<char> finiteParts(chunkCount(sg.dofs(), kHostChunk), 1);
+    parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+      withReals(xStage_.data(), sg.dofBegin() + lo, [&](const auto* out) {
+        finiteParts[c] = Eigen::Map<const Eigen::Matrix<std::remove_cv_t<std::remove_pointer_t<decltype(out)>>,
+                                                        Eigen::Dynamic, 1>>(out, static_cast<Eigen::Index>(hi - lo))
+                             .allFinite();
+      });
     });
+    const bool finite = std::all_of(finiteParts.begin(), finiteParts.end(), [](char f) { return f != 0; });
     if (!finite) {  // the caller's x stays as it was
       r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name,
                          "': OpenCL PCG produced a non-finite solution on device '", dev_, "'");

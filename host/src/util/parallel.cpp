@@ -1,0 +1,117 @@
+#include "util/parallel.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <cstdlib>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace corofem::detail {
+
+namespace {
+
+/// Workers sleep on a condition variable between jobs (no spinning: on a CPU OpenCL device they
+/// share the cores with its threads). One job at a time; the caller works on it too.
+class Pool {
+ public:
+  explicit Pool(std::size_t threads) {
+    for (std::size_t i = 1; i < threads; ++i) workers_.emplace_back([this] { work(); });
+  }
+  ~Pool() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    for (std::thread& t : workers_) t.join();
+  }
+  std::size_t threads() const { return workers_.size() + 1; }
+
+  /// false (nothing run) when another thread holds the pool.
+  bool run(std::size_t chunks, std::size_t n, std::size_t chunkSize,
+           const std::function<void(std::size_t, std::size_t, std::size_t)>& fn) {
+    std::unique_lock<std::mutex> busy(busy_, std::try_to_lock);
+    if (!busy.owns_lock()) return false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      fn_ = &fn;
+      n_ = n;
+      chunkSize_ = chunkSize;
+      chunks_ = chunks;
+      next_.store(0);
+      done_ = 0;
+      ++generation_;
+    }
+    wake_.notify_all();
+    const std::size_t mine = drain();
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_ += mine;
+    // Every chunk done and every worker that took this job out of it: none can touch the next.
+    finished_.wait(lock, [&] { return done_ == chunks_ && active_ == 0; });
+    fn_ = nullptr;  // a worker waking from now on finds no job to take
+    return true;
+  }
+
+ private:
+  std::size_t drain() {  // chunks taken by this thread until none is left
+    std::size_t count = 0;
+    for (std::size_t c = next_.fetch_add(1); c < chunks_; c = next_.fetch_add(1), ++count)
+      (*fn_)(c, c * chunkSize_, std::min(n_, (c + 1) * chunkSize_));
+    return count;
+  }
+  void work() {
+    std::size_t seen = 0;
+    for (;;) {
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        wake_.wait(lock, [&] { return stop_ || (generation_ != seen && fn_ != nullptr); });
+        if (stop_) return;
+        seen = generation_;
+        ++active_;  // taken under the lock that ends the job: taken before its end, or not at all
+      }
+      const std::size_t mine = drain();
+      std::lock_guard<std::mutex> lock(mutex_);
+      done_ += mine;
+      --active_;
+      if (done_ == chunks_ && active_ == 0) finished_.notify_one();
+    }
+  }
+
+  std::vector<std::thread> workers_;
+  std::mutex busy_;   ///< held by the caller of the job in progress
+  std::mutex mutex_;  ///< guards the job's description and done_
+  std::condition_variable wake_, finished_;
+  const std::function<void(std::size_t, std::size_t, std::size_t)>* fn_ = nullptr;
+  std::size_t n_ = 0, chunkSize_ = 1, chunks_ = 0, done_ = 0, generation_ = 0;
+  std::size_t active_ = 0;  ///< workers inside the current job
+  std::atomic<std::size_t> next_{0};
+  bool stop_ = false;
+};
+
+Pool& pool() {
+  static Pool p(hostThreads());
+  return p;
+}
+
+}  // namespace
+
+std::size_t hostThreads() {
+  static const std::size_t n = [] {
+    if (const char* env = std::getenv("COROFEM_HOST_THREADS"); env && *env)
+      return std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));
+    return std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 8);
+  }();
+  return n;
+}
+
+void parallelChunks(std::size_t n, std::size_t chunkSize,
+                    const std::function<void(std::size_t chunk, std::size_t begin, std::size_t end)>& fn) {
+  chunkSize = std::max<std::size_t>(chunkSize, 1);
+  const std::size_t chunks = chunkCount(n, chunkSize);
+  if (chunks > 1 && hostThreads() > 1 && pool().run(chunks, n, chunkSize, fn)) return;
+  for (std::size_t c = 0; c < chunks; ++c) fn(c, c * chunkSize, std::min(n, (c + 1) * chunkSize));
+}
+
+}  // namespace corofem::detail
