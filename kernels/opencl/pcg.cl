@@ -279,7 +279,7 @@ void gather_product_finish(__global const uint* restrict nodeSeg, __global uint*
     mem_fence(CLK_GLOBAL_MEM_FENCE);  /* the partial before the count */
     lastGroup = active && atomic_inc(counters + s) + 1u == seg_info(segInfo, s, kSegPartialCount) ? 1u : 0u;
   }
-  barrier(CLK_LOCAL_MEM_FENCE);
+  barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);  /* lastGroup, and the group's own partial */
   /* Every group runs the tree's barriers (none inside a branch, for PoCL's sake); only the last
    * group of an active segment loads the partials. */
   const bool mine = lastGroup != 0u;

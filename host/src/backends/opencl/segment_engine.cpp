@@ -187,7 +187,10 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
   if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
     treeReduce_ = std::string(env) != "0";  // tuning experiments
-  fusedReduce_ = options.fusedReduce >= 0 ? options.fusedReduce != 0 : ctx_->info().gpu;
+  // Off unless asked for: OpenCL 1.2 orders memory between work-groups only through atomics, and
+  // NVIDIA's compiler turns mem_fence(CLK_GLOBAL_MEM_FENCE) into a block-scope fence (membar.cta),
+  // so the last group's view of the other groups' partials is not guaranteed (kernels/opencl/README.md).
+  fusedReduce_ = options.fusedReduce > 0;
   if (const char* env = std::getenv("COROFEM_OPENCL_FUSED"); env && *env && options.fusedReduce < 0)
     fusedReduce_ = std::string(env) != "0";  // tuning experiments
   if (fusedReduce_ && !treeReduce_) {
@@ -928,6 +931,7 @@ void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) 
   pcgPrecondition();
   pcgSetup(false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
+  segInfoStale_ = true;  // the device may have stopped a segment: the next setActive uploads the table
 }
 
 void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
@@ -951,11 +955,12 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     std::vector<double> bbParts(chunkCount(sg.dofs(), kHostChunk), 0.0);
     parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       withReals(bStage, sg.dofBegin(), [&](auto* out) {
+        using T = std::remove_pointer_t<decltype(out)>;
         double sum = 0.0;
         for (std::size_t d = lo; d < hi; ++d) {
-          const double v = sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)];
-          sum += v * v;
-          out[d] = static_cast<std::remove_pointer_t<decltype(out)>>(v);
+          const T v = static_cast<T>(sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)]);
+          sum += static_cast<double>(v) * static_cast<double>(v);  // of what the device gets: b below
+          out[d] = v;                                                // float's range is 0 there too
         }
         bbParts[c] = sum;
       });
@@ -964,7 +969,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     for (double part : bbParts) bb += part;
     if (!std::isfinite(bb)) {
       r->error = errorOf(ErrorCode::SolveFailed, "body '", sg.problem->name, "': OpenCL PCG: the right-hand side "
-                         "is not finite (NaN or Inf in b); the state diverged before the linear solve");
+                         "is not finite (NaN or Inf in b, or beyond the range of ", double_ ? "double" : "float", "); the state "
+                         "diverged before the linear solve");
       continue;
     }
     if (bb == 0.0) {
@@ -995,7 +1001,9 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   for (const Running& run : runs) {
     const Segment& sg = segs_[run.request->body];
     const Eigen::VectorXd& x = *run.request->out;
+    // The stage changes now and the upload below may fail: unknown until it is done.
     const bool known = xKnown_[run.request->body] != 0;
+    xKnown_[run.request->body] = 0;
     std::vector<char> sameParts(chunkCount(sg.dofs(), kHostChunk), 1), zeroParts(sameParts.size(), 1);
     parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       withReals(xStage, sg.dofBegin(), [&](auto* out) {
@@ -1020,7 +1028,6 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   }
   if (!xThere) xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   // From here the iterations change x on the device: unknown until the read below.
-  for (const Running& run : runs) xKnown_[run.request->body] = 0;
   pcgSetup(zeroStart);
 
   // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
@@ -1153,6 +1160,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     anyTrue = anyTrue || active[run.request->body];
   }
   if (anyTrue) issueRead();  // completes with the blocking read of x below: one synchronisation for both
+  for (std::size_t s = 0; s < segs_.size(); ++s)  // the read overwrites [lo, hi) of the stage
+    if (segs_[s].dofBegin() >= lo && segs_[s].dofBegin() < hi) xKnown_[s] = 0;
   try {
     xStage_.read(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
     writesDone();
