@@ -16,6 +16,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <limits>
 #include <random>
 
 namespace corofem {
@@ -337,6 +338,65 @@ TEST_P(OpenCLBackendVsReference, FusedReductionGivesTheBitsOfReduceFinish) {
     EXPECT_EQ(runs[1].stats[k].relativeResidual, runs[0].stats[k].relativeResidual) << "solve " << k;
   }
   EXPECT_GT(runs[0].stats[0].iterations, 8) << "a solve long enough to run the fused kernel many times";
+}
+
+TEST_P(OpenCLBackendVsReference, HostPassesInChunksGiveTheAnswersOfOnePass) {
+  // The host packs, converts and checks node vectors in chunks of 65,536 entries on its threads (a
+  // 1M-element body makes 9); chunks of 7 and 96 entries run the test beam's 459 dofs the same way.
+  // Forces and products as in one pass (only the centroid's sum is in another order: rounding), the
+  // solve to its tolerance; and within each chunking, bit for bit, the warm start against a fresh
+  // upload, a NaN in the last chunk of the start taken as 0, and a non-finite b found in a chunk
+  // other than the first.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), v = randomVector(p.dofCount(), 51), b1 = randomVector(p.dofCount(), 52),
+                        b2 = randomVector(p.dofCount(), 53);
+  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
+  SolverDesc s = solver();
+  s.maxIterations = 9;  // capped: the answers depend on the start
+  s.tolerance = 1e-14;
+  auto run = [&](std::size_t chunk, Eigen::VectorXd& f, Eigen::VectorXd& y, Eigen::VectorXd& sol) {
+    detail::OpenCLOptions o;
+    o.hostChunk = chunk;
+    auto ocl = openclBackend(p, s, o);
+    ocl->setPositions(x);
+    ocl->internalForces(f);
+    ocl->apply(c, v, y);
+    sol = Eigen::VectorXd::Zero(b1.size());
+    ocl->solve(c, b1, sol);
+    return ocl;
+  };
+  Eigen::VectorXd f0, y0, sol0;
+  run(0, f0, y0, sol0);
+  const double tol = isDouble() ? 1e-12 : 2e-5;
+  for (std::size_t chunk : {std::size_t{7}, std::size_t{96}}) {
+    Eigen::VectorXd f, y, sol;
+    auto ocl = run(chunk, f, y, sol);
+    EXPECT_LE(relErr(f, f0), tol) << "chunk " << chunk;
+    EXPECT_LE(relErr(y, y0), tol) << "chunk " << chunk;
+    EXPECT_LE(relErr(sol, sol0), isDouble() ? 1e-9 : 1e-3) << "chunk " << chunk;
+    auto fresh = [&](const Eigen::VectorXd& start, const Eigen::VectorXd& rhs) {
+      detail::OpenCLOptions o;
+      o.hostChunk = chunk;
+      auto other = openclBackend(p, s, o);
+      other->setPositions(x);
+      Eigen::VectorXd out = start;
+      other->solve(c, rhs, out);
+      return out;
+    };
+    const Eigen::VectorXd previous = sol;
+    ocl->solve(c, b2, sol);  // warm start from the previous solution: no upload of x
+    EXPECT_TRUE(test::sameBits(sol, fresh(previous, b2))) << "chunk " << chunk;
+    Eigen::VectorXd nanStart = sol, zeroed = sol;
+    nanStart[nanStart.size() - 2] = std::nan("");
+    zeroed[zeroed.size() - 2] = 0.0;
+    ocl->solve(c, b1, nanStart);
+    EXPECT_TRUE(test::sameBits(nanStart, fresh(zeroed, b1))) << "chunk " << chunk;
+    Eigen::VectorXd badB = b1, untouched = sol;
+    badB[badB.size() - 1] = std::numeric_limits<double>::infinity();
+    EXPECT_THROW(ocl->solve(c, badB, untouched), detail::Error) << "chunk " << chunk;
+    EXPECT_TRUE(test::sameBits(untouched, sol)) << "the caller's x stays as it was";
+  }
 }
 
 TEST_P(OpenCLBackendVsReference, BodyFarFromTheOriginKeepsItsAccuracy) {

@@ -23,6 +23,9 @@ struct OpenCLOptions {
   /// fewer per iteration; needs treeReduce), 0 or -1 (default): in reduce_finish. Opt-in: OpenCL
   /// 1.2 gives its cross-work-group publication no device-scope fence (kernels/opencl/README.md).
   int fusedReduce = -1;
+  /// Entries per chunk of the host's passes over node vectors (util/parallel.hpp), 0 = the
+  /// default (65,536); tests set small ones to run the chunked passes on small meshes.
+  std::size_t hostChunk = 0;
   int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
   bool assumeNoFp64 = false;     ///< tests: treat the device as lacking cl_khr_fp64 (the error path of double/mixed)
   long long tileBytes = -1;      ///< batches: bodies run together up to this working set; -1 = by device (CPUs: a quarter of the cache, GPUs: all), 0 = all

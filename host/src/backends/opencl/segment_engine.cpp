@@ -191,6 +191,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   // NVIDIA's compiler turns mem_fence(CLK_GLOBAL_MEM_FENCE) into a block-scope fence (membar.cta),
   // so the last group's view of the other groups' partials is not guaranteed (kernels/opencl/README.md).
   fusedReduce_ = options.fusedReduce > 0;
+  hostChunk_ = options.hostChunk ? options.hostChunk : kHostChunk;
   if (const char* env = std::getenv("COROFEM_OPENCL_FUSED"); env && *env && options.fusedReduce < 0)
     fusedReduce_ = std::string(env) != "0";  // tuning experiments
   if (fusedReduce_ && !treeReduce_) {
@@ -668,7 +669,7 @@ void SegmentEngine::downloadSums(const ClBuffer& buf, double* dst, std::size_t c
 void SegmentEngine::getReals(const unsigned char* base, std::size_t begin, std::size_t count,
                              Eigen::VectorXd& out) const {
   out.resize(static_cast<Eigen::Index>(count));
-  parallelChunks(count, kHostChunk, [&](std::size_t, std::size_t lo, std::size_t hi) {
+  parallelChunks(count, hostChunk_, [&](std::size_t, std::size_t lo, std::size_t hi) {
     withReals(base, begin, [&](const auto* in) {
       for (std::size_t d = lo; d < hi; ++d) out[static_cast<Eigen::Index>(d)] = static_cast<double>(in[d]);
     });
@@ -787,7 +788,7 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
     Segment& sg = segs_[r->body];
     const Eigen::VectorXd& x = *r->in;
     // Summed per chunk of nodes, the chunks in order: the same bits with any number of threads.
-    constexpr std::size_t nodeChunk = kHostChunk / 2;
+    const std::size_t nodeChunk = std::max<std::size_t>(1, hostChunk_ / 2);
     std::vector<Eigen::Vector3d> parts(chunkCount(sg.nodes, nodeChunk), Eigen::Vector3d::Zero());
     parallelChunks(sg.nodes, nodeChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
@@ -952,8 +953,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     r->stats = LinearSolveStats{};
     // b packed into its stage in device precision (constrained rows zero, even if not finite) in
     // the pass that sums b . b over the free dofs (per chunk, the chunks in order).
-    std::vector<double> bbParts(chunkCount(sg.dofs(), kHostChunk), 0.0);
-    parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+    std::vector<double> bbParts(chunkCount(sg.dofs(), hostChunk_), 0.0);
+    parallelChunks(sg.dofs(), hostChunk_, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       withReals(bStage, sg.dofBegin(), [&](auto* out) {
         using T = std::remove_pointer_t<decltype(out)>;
         double sum = 0.0;
@@ -1004,8 +1005,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     // The stage changes now and the upload below may fail: unknown until it is done.
     const bool known = xKnown_[run.request->body] != 0;
     xKnown_[run.request->body] = 0;
-    std::vector<char> sameParts(chunkCount(sg.dofs(), kHostChunk), 1), zeroParts(sameParts.size(), 1);
-    parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+    std::vector<char> sameParts(chunkCount(sg.dofs(), hostChunk_), 1), zeroParts(sameParts.size(), 1);
+    parallelChunks(sg.dofs(), hostChunk_, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       withReals(xStage, sg.dofBegin(), [&](auto* out) {
         using T = std::remove_pointer_t<decltype(out)>;
         bool same = known, zero = true;
@@ -1194,8 +1195,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                          "material, time step and loads");
       continue;
     }
-    std::vector<char> finiteParts(chunkCount(sg.dofs(), kHostChunk), 1);
-    parallelChunks(sg.dofs(), kHostChunk, [&](std::size_t c, std::size_t lo, std::size_t hi) {
+    std::vector<char> finiteParts(chunkCount(sg.dofs(), hostChunk_), 1);
+    parallelChunks(sg.dofs(), hostChunk_, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       withReals(xStage_.data(), sg.dofBegin() + lo, [&](const auto* out) {
         finiteParts[c] = Eigen::Map<const Eigen::Matrix<std::remove_cv_t<std::remove_pointer_t<decltype(out)>>,
                                                         Eigen::Dynamic, 1>>(out, static_cast<Eigen::Index>(hi - lo))

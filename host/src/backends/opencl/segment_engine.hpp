@@ -217,11 +217,12 @@ class SegmentEngine {
   /// body's 3N = 525k entries make 9 chunks; a body of up to 21,845 nodes is one chunk, run inline
   /// (on an H200's host, 100k elements in two chunks ran 7 % slower than inline).
   static constexpr std::size_t kHostChunk = std::size_t{1} << 16;
+  std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
   template <class Fn>
   void putReals(unsigned char* base, std::size_t begin, std::size_t count, Fn&& value) const {
-    parallelChunks(count, kHostChunk, [&](std::size_t, std::size_t lo, std::size_t hi) {
+    parallelChunks(count, hostChunk_, [&](std::size_t, std::size_t lo, std::size_t hi) {
       withReals(base, begin, [&](auto* out) {
         for (std::size_t d = lo; d < hi; ++d) out[d] = static_cast<std::remove_pointer_t<decltype(out)>>(value(d));
       });

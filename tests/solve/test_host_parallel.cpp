@@ -1,0 +1,85 @@
+// The host's chunked passes (util/parallel.hpp) that the OpenCL backend runs over large node
+// vectors: every index once in its fixed chunk, per-chunk results combinable in chunk order, and
+// two callers at once (the second runs on its own thread). CI's 2-core machine runs the pool with
+// one worker beside the caller, so the threaded path runs here.
+#include "util/parallel.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <thread>
+#include <vector>
+
+namespace corofem {
+namespace {
+
+using detail::chunkCount;
+using detail::parallelChunks;
+
+TEST(HostParallel, EveryIndexOnceInItsFixedChunk) {
+  EXPECT_GE(detail::hostThreads(), 1u);
+  for (std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{7}, std::size_t{4096}, std::size_t{4097},
+                        std::size_t{1000003}}) {
+    for (std::size_t chunk : {std::size_t{1}, std::size_t{7}, std::size_t{4096}}) {
+      if (n > 100000 && chunk == 1) continue;  // a million jobs of one index: slow, nothing new
+      std::vector<std::atomic<int>> hits(n), seen(chunkCount(n, chunk));
+      std::atomic<int> misplaced{0};
+      parallelChunks(n, chunk, [&](std::size_t c, std::size_t begin, std::size_t end) {
+        if (begin != c * chunk || end != std::min(n, begin + chunk) || begin >= end) ++misplaced;
+        ++seen[c];
+        for (std::size_t i = begin; i < end; ++i) ++hits[i];
+      });
+      EXPECT_EQ(misplaced.load(), 0) << "n " << n << " chunk " << chunk;
+      EXPECT_TRUE(std::all_of(seen.begin(), seen.end(), [](const std::atomic<int>& h) { return h.load() == 1; }))
+          << "n " << n << " chunk " << chunk;
+      EXPECT_TRUE(std::all_of(hits.begin(), hits.end(), [](const std::atomic<int>& h) { return h.load() == 1; }))
+          << "n " << n << " chunk " << chunk;
+    }
+  }
+}
+
+/// Sum of v over fixed chunks, the chunks added in order: what the backend does for b . b and the
+/// centroid.
+double chunkedSum(const std::vector<double>& v, std::size_t chunk) {
+  std::vector<double> parts(chunkCount(v.size(), chunk), 0.0);
+  parallelChunks(v.size(), chunk, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    double s = 0.0;
+    for (std::size_t i = begin; i < end; ++i) s += v[i];
+    parts[c] = s;
+  });
+  double sum = 0.0;
+  for (double p : parts) sum += p;
+  return sum;
+}
+
+TEST(HostParallel, ChunkedSumsHaveTheBitsOfTheSameChunksAddedInOrderOnOneThread) {
+  std::vector<double> v(300001);
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::sin(0.37 * static_cast<double>(i)) * (1.0 + 1e-3 * i);
+  for (std::size_t chunk : {std::size_t{1000}, std::size_t{65536}}) {
+    double serial = 0.0;
+    for (std::size_t begin = 0; begin < v.size(); begin += chunk) {
+      double s = 0.0;
+      for (std::size_t i = begin; i < std::min(v.size(), begin + chunk); ++i) s += v[i];
+      serial += s;
+    }
+    for (int repeat = 0; repeat < 5; ++repeat) EXPECT_EQ(chunkedSum(v, chunk), serial) << "chunk " << chunk;
+  }
+}
+
+TEST(HostParallel, TwoCallersAtOnceBothFinishWithTheirOwnAnswers) {
+  std::vector<double> a(100000, 1.0), b(100000, 2.0);
+  std::atomic<int> wrong{0};
+  auto caller = [&](const std::vector<double>& v, double expected) {
+    for (int job = 0; job < 300; ++job)
+      if (chunkedSum(v, 1000) != expected) ++wrong;
+  };
+  std::thread first(caller, std::cref(a), 100000.0), second(caller, std::cref(b), 200000.0);
+  first.join();
+  second.join();
+  EXPECT_EQ(wrong.load(), 0);
+}
+
+}  // namespace
+}  // namespace corofem
