@@ -251,9 +251,10 @@ void reduce_finish(__global uint* restrict segInfo, __global const sum_real* res
  * reduce_finish's second stage for that segment: the same sums in the same order, so the same bits,
  * without a launch of its own (PCG set-up and iterations on GPUs, where a launch costs more than
  * the sums). Every work-group of an active segment counts itself done in counters[s] after storing
- * its partial (one per work-group: COROFEM_TREE_REDUCE); the one whose count completes the
+ * its partial or partials; the one whose count completes the
  * segment's sums them, updates the scalars and resets the count for the next launch. Inactive
- * segments return at once, as reduce_finish leaves their scalars alone. */
+ * segments count nothing, as reduce_finish leaves their scalars alone. With per-work-item partials
+ * (CPUs) a group counts itself once all its items have stored theirs. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void gather_product_finish(__global const uint* restrict nodeSeg, __global uint* restrict segInfo,
                            __global const real* restrict segCoef, __global const uint* restrict start,
@@ -274,10 +275,18 @@ void gather_product_finish(__global const uint* restrict nodeSeg, __global uint*
   const uint last = active ? min(first + (uint)COROFEM_CHUNK, seg_info(segInfo, s, kSegNodeEnd)) : first;
   const sum_real dot = gather_product_nodes(first, last, seg_coef(segCoef, s, kCoefMass), start, entries, elemOut,
                                             mass, free, 1u, p, y);
-  group_sum3(s0, s1, s2, dot, (sum_real)0, (sum_real)0, partialsW);  /* inactive: a zero nobody reads */
+  /* The partials (inactive: zeros nobody reads), then the number of work-groups of the segment. */
+#ifdef COROFEM_TREE_REDUCE
+  group_sum3(s0, s1, s2, dot, (sum_real)0, (sum_real)0, partialsW);  /* one per group, by work-item 0 */
+  const uint groups = seg_info(segInfo, s, kSegPartialCount);
+#else
+  item_store3(dot, (sum_real)0, (sum_real)0, partialsW);  /* one per work-item */
+  barrier(CLK_GLOBAL_MEM_FENCE);                          /* all of the group's before it counts itself */
+  const uint groups = seg_info(segInfo, s, kSegPartialCount) / COROFEM_WG;
+#endif
   if (lid == 0) {
     mem_fence(CLK_GLOBAL_MEM_FENCE);  /* the partial before the count */
-    lastGroup = active && atomic_inc(counters + s) + 1u == seg_info(segInfo, s, kSegPartialCount) ? 1u : 0u;
+    lastGroup = active && atomic_inc(counters + s) + 1u == groups ? 1u : 0u;
   }
   barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);  /* lastGroup, and the group's own partial */
   /* Every group runs the tree's barriers (none inside a branch, for PoCL's sake); only the last

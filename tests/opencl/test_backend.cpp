@@ -295,49 +295,53 @@ TEST_P(OpenCLBackendVsReference, WarmStartFromThePreviousSolutionMatchesAFreshUp
 }
 
 TEST_P(OpenCLBackendVsReference, FusedReductionGivesTheBitsOfReduceFinish) {
-  // GPUs finish the PCG's sums in the last work-group of gather_product_finish instead of a
-  // reduce_finish launch: the same sums in the same order, so the same bits, iteration counts and
-  // stops, here on whatever device is present, in the GPU configuration: a solve that converges
-  // (the stop test deactivates the body inside the fused kernel), one capped at its iteration limit
-  // (the cap's last iteration keeps reduce_finish), and warm starts from each.
+  // Opt-in (OpenCLOptions::fusedReduce): the PCG's sums finished in the last work-group of
+  // gather_product_finish instead of a reduce_finish launch: the same sums in the same order, so
+  // the same bits, iteration counts and stops, in the GPU configuration (one partial per
+  // work-group) and the CPU one (one per work-item), here on whatever device is present: a solve
+  // that converges (the stop test deactivates the body inside the fused kernel), a warm start from
+  // it, and one capped at its iteration limit (the cap's last iteration keeps reduce_finish).
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const detail::Problem p = beam();
   const Eigen::VectorXd x = bent(p), b1 = randomVector(p.dofCount(), 41), b2 = randomVector(p.dofCount(), 42);
   const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
-  struct Run {
-    Eigen::VectorXd sol[3];
-    detail::LinearSolveStats stats[3];
-  } runs[2];
-  for (int fused : {0, 1}) {
-    detail::OpenCLOptions o;
-    o.vectorWidth = 1;
-    o.nodeChunk = 1;
-    o.treeReduce = 1;
-    o.fusedReduce = fused;
-    auto ocl = openclBackend(p, solver(), o);
-    EXPECT_EQ(ocl->buildOptions().find("COROFEM_FUSED_REDUCE") != std::string::npos, fused == 1);
-    ocl->setPositions(x);
-    Run& r = runs[fused];
-    r.sol[0] = Eigen::VectorXd::Zero(b1.size());
-    r.stats[0] = ocl->solve(c, b1, r.sol[0]);
-    EXPECT_TRUE(r.stats[0].converged);
-    r.sol[1] = r.sol[0];
-    r.stats[1] = ocl->solve(c, b2, r.sol[1]);  // warm start from the previous solution
-    SolverDesc capped = solver();
-    capped.maxIterations = 7;
-    auto cap = openclBackend(p, capped, o);
-    cap->setPositions(x);
-    r.sol[2] = r.sol[1];
-    r.stats[2] = cap->solve(c, b1, r.sol[2]);
-    EXPECT_EQ(r.stats[2].iterations, 7);
+  for (bool gpuConfig : {true, false}) {
+    struct Run {
+      Eigen::VectorXd sol[3];
+      detail::LinearSolveStats stats[3];
+    } runs[2];
+    for (int fused : {0, 1}) {
+      detail::OpenCLOptions o;
+      o.vectorWidth = gpuConfig ? 1 : 8;
+      o.nodeChunk = gpuConfig ? 1 : 4;
+      o.treeReduce = gpuConfig ? 1 : 0;
+      o.fusedReduce = fused;
+      auto ocl = openclBackend(p, solver(), o);
+      EXPECT_EQ(ocl->buildOptions().find("COROFEM_FUSED_REDUCE") != std::string::npos, fused == 1);
+      ocl->setPositions(x);
+      Run& r = runs[fused];
+      r.sol[0] = Eigen::VectorXd::Zero(b1.size());
+      r.stats[0] = ocl->solve(c, b1, r.sol[0]);
+      EXPECT_TRUE(r.stats[0].converged);
+      r.sol[1] = r.sol[0];
+      r.stats[1] = ocl->solve(c, b2, r.sol[1]);  // warm start from the previous solution
+      SolverDesc capped = solver();
+      capped.maxIterations = 7;
+      auto cap = openclBackend(p, capped, o);
+      cap->setPositions(x);
+      r.sol[2] = r.sol[1];
+      r.stats[2] = cap->solve(c, b1, r.sol[2]);
+      EXPECT_EQ(r.stats[2].iterations, 7);
+    }
+    const char* config = gpuConfig ? "GPU configuration" : "CPU configuration";
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_TRUE(test::sameBits(runs[1].sol[k], runs[0].sol[k])) << config << ", solve " << k;
+      EXPECT_EQ(runs[1].stats[k].iterations, runs[0].stats[k].iterations) << config << ", solve " << k;
+      EXPECT_EQ(runs[1].stats[k].converged, runs[0].stats[k].converged) << config << ", solve " << k;
+      EXPECT_EQ(runs[1].stats[k].relativeResidual, runs[0].stats[k].relativeResidual) << config << ", solve " << k;
+    }
+    EXPECT_GT(runs[0].stats[0].iterations, 8) << "a solve long enough to run the fused kernel many times";
   }
-  for (int k = 0; k < 3; ++k) {
-    EXPECT_TRUE(test::sameBits(runs[1].sol[k], runs[0].sol[k])) << "solve " << k;
-    EXPECT_EQ(runs[1].stats[k].iterations, runs[0].stats[k].iterations) << "solve " << k;
-    EXPECT_EQ(runs[1].stats[k].converged, runs[0].stats[k].converged) << "solve " << k;
-    EXPECT_EQ(runs[1].stats[k].relativeResidual, runs[0].stats[k].relativeResidual) << "solve " << k;
-  }
-  EXPECT_GT(runs[0].stats[0].iterations, 8) << "a solve long enough to run the fused kernel many times";
 }
 
 TEST_P(OpenCLBackendVsReference, HostPassesInChunksGiveTheAnswersOfOnePass) {

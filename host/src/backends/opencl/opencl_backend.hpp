@@ -20,7 +20,7 @@ struct OpenCLOptions {
   std::size_t nodeChunk = 0;     ///< nodes per work-item in the PCG node kernels, 0 = default (1 on GPUs, CPUs: see the backend)
   int treeReduce = -1;           ///< 1: partial sums by local-memory trees (GPU style), 0: one per work-item, -1: by device type
   /// 1: the PCG's second-stage sums run in the last work-group of gather_product_finish (one launch
-  /// fewer per iteration; needs treeReduce), 0 or -1 (default): in reduce_finish. Opt-in: OpenCL
+  /// fewer per iteration), 0 or -1 (default): in reduce_finish. Opt-in: OpenCL
   /// 1.2 gives its cross-work-group publication no device-scope fence (kernels/opencl/README.md).
   int fusedReduce = -1;
   /// Entries per chunk of the host's passes over node vectors (util/parallel.hpp), 0 = the

@@ -194,11 +194,6 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   hostChunk_ = options.hostChunk ? options.hostChunk : kHostChunk;
   if (const char* env = std::getenv("COROFEM_OPENCL_FUSED"); env && *env && options.fusedReduce < 0)
     fusedReduce_ = std::string(env) != "0";  // tuning experiments
-  if (fusedReduce_ && !treeReduce_) {
-    if (options.fusedReduce == 1)
-      fail(ErrorCode::BadInput, "OpenCL option fusedReduce needs treeReduce (one partial per work-group)");
-    fusedReduce_ = false;  // by device type or environment: only where it applies
-  }
   // Tiles of bodies per launch sequence (CPUs only): a quarter of the device's global memory cache
   // (the L3 on PoCL), measured on 100 bodies of 2160 elements (2-core EPYC, 32 MiB L3): tiles of
   // ~20 bodies (~7 MB) solved 1.5x faster per body than one tile of 100 (~35 MB, streamed from
