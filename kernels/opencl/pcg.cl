@@ -273,8 +273,10 @@ void gather_product_finish(__global const uint* restrict nodeSeg, __global uint*
   const uint s = node_segment(nodeSeg, first);
   const bool active = seg_info(segInfo, s, kSegActive) != 0u;
   const uint last = active ? min(first + (uint)COROFEM_CHUNK, seg_info(segInfo, s, kSegNodeEnd)) : first;
-  const sum_real dot = gather_product_nodes(first, last, seg_coef(segCoef, s, kCoefMass), start, entries, elemOut,
-                                            mass, free, 1u, p, y);
+  sum_real sums[3];
+  gather_product_nodes(first, last, seg_coef(segCoef, s, kCoefMass), start, entries, elemOut, mass, free, 1u, p,
+                       (__global const real*)0, y, sums);
+  const sum_real dot = sums[0];
   /* The partials (inactive: zeros nobody reads), then the number of work-groups of the segment. */
 #ifdef COROFEM_TREE_REDUCE
   group_sum3(s0, s1, s2, dot, (sum_real)0, (sum_real)0, partialsW);  /* one per group, by work-item 0 */

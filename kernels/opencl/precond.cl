@@ -41,19 +41,27 @@ void node_stiffness_blocks(__global const uint* restrict nodeSeg, __global const
   const real lambda = seg_coef(segCoef, s, kCoefLambda), mu = seg_coef(segCoef, s, kCoefMu);
   real b[6] = {0, 0, 0, 0, 0, 0};
   const uint end = start[n + 1];
+  const real lm = lambda + mu;
   for (uint j = start[n]; j < end; ++j) {
     __global const real* c = corners + (size_t)entries[j];
     const real ax = c[0], ay = c[COROFEM_VEC], az = c[2 * COROFEM_VEC];
-    const real lm = lambda + mu, iso = mu * (ax * ax + ay * ay + az * az);
+    const real iso = mu * (ax * ax + ay * ay + az * az);
     b[0] += lm * ax * ax + iso;
     b[1] += lm * ay * ay + iso;
     b[2] += lm * az * az + iso;
+#ifdef COROFEM_PRECOND_BLOCK /* the diagonal preconditioner reads only the diagonal */
     b[3] += lm * ax * ay;
     b[4] += lm * ax * az;
     b[5] += lm * ay * az;
+#endif
   }
+#ifdef COROFEM_PRECOND_BLOCK
   #pragma unroll
   for (int k = 0; k < 6; ++k) blocks[6 * n + k] = b[k];
+#else
+  #pragma unroll
+  for (int k = 0; k < 3; ++k) blocks[6 * n + k] = b[k];
+#endif
 }
 
 /* B = k blocks + massCoef diag(m), rows/columns of constrained dofs replaced by the identity,

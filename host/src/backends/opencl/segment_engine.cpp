@@ -843,10 +843,12 @@ void SegmentEngine::elementProduct(const ClBuffer& v) {
            elemOut_);
 }
 
-void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials) {
+void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials,
+                            const ClBuffer* residualOf) {
+  static const ClBuffer none;  // a NULL argument: y = A v
   elementProduct(v);
   launch(kGatherProduct_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_,
-         mass_, free_, cl_uint(project ? 1 : 0), v, y, partials);
+         mass_, free_, cl_uint(project ? 1 : 0), v, y, partials, residualOf ? *residualOf : none);
 }
 
 void SegmentEngine::enqueueElementProduct(const SystemCoeffs& c) {
@@ -1109,9 +1111,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     if (!any) return;
     residualFor = on;
     setActive(on);  // after every queued iteration: no segment the device stopped can be revived
-    product(x_, q_, true, partialsW_);
-    launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, cl_uint(0), b_, q_, free_, minv_, r_, z_, p_, s_,
-           partials_);
+    // r = free b - A x and its sums from the gather itself (what pcg_init would form: the same bits)
+    product(x_, r_, true, partials_, &b_);
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceResidual),
            SumReal{0.0});
   };

@@ -240,7 +240,9 @@ class SegmentEngine {
   void refreshBlocks(bool cornersWritten);
   void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
   /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
-  void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials);
+  /// With `residualOf` (b): y = free b - A v instead, and the sums (0, y . y, |free b|^2).
+  void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials,
+               const ClBuffer* residualOf = nullptr);
   /// w = A u (projected) into q_, then reduce_finish's scalar update in `mode`: one kernel fewer
   /// with fusedReduce_ (gather_product_finish), else product + reduce_finish.
   void productAndFinish(cl_uint mode);
