@@ -474,6 +474,41 @@ TEST_P(OpenCLBackendVsReference, AdoptedContextGivesTheSameForces) {
   clReleaseContext(ctx);
 }
 
+TEST_P(OpenCLBackendVsReference, AdoptingAnOutOfOrderOrForeignQueueIsAClearError) {
+  // The backend orders its work by the queue alone: it refuses an out-of-order queue, and a queue
+  // of another context, with a message that says what to pass instead.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const auto info = detail::cl::listDevices().at(static_cast<std::size_t>(GetParam().device));
+  cl_int status = CL_SUCCESS;
+  cl_context ctx = clCreateContext(nullptr, 1, &info.device, nullptr, nullptr, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  cl_context other = clCreateContext(nullptr, 1, &info.device, nullptr, nullptr, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  auto expectBadInput = [&](cl_command_queue queue, const char* words) {
+    try {
+      detail::createOpenCLBackendAdopting(p, solver(), ctx, queue, info.device);
+      ADD_FAILURE() << "expected BadInput mentioning '" << words << "'";
+    } catch (const detail::Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::BadInput);
+      EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+    }
+  };
+  cl_command_queue foreign = clCreateCommandQueue(other, info.device, 0, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  expectBadInput(foreign, "another context");
+  clReleaseCommandQueue(foreign);
+  cl_command_queue unordered = clCreateCommandQueue(ctx, info.device, CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE, &status);
+  if (status == CL_SUCCESS) {
+    expectBadInput(unordered, "out of order");
+    clReleaseCommandQueue(unordered);
+  } else {
+    EXPECT_EQ(status, CL_INVALID_QUEUE_PROPERTIES) << "the device may refuse out-of-order queues, nothing else";
+  }
+  clReleaseContext(other);
+  clReleaseContext(ctx);
+}
+
 INSTANTIATE_TEST_SUITE_P(Devices, OpenCLBackendVsReference, ::testing::ValuesIn(test::deviceCases()),
                          test::caseName);
 

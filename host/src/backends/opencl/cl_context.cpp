@@ -155,6 +155,25 @@ std::shared_ptr<Context> Context::adopt(cl_context context, cl_command_queue que
                               "non-null");
   std::shared_ptr<Context> ctx(new Context());
   ctx->info_ = queryDevice(device);
+  // The backend orders its commands (non-blocking writes, kernels, reads of the PCG scalars) by the
+  // queue alone: an out-of-order queue, or one of another context or device, would run them wrong.
+  cl_context queueContext = nullptr;
+  cl_device_id queueDevice = nullptr;
+  cl_command_queue_properties properties = 0;
+  checkCl(clGetCommandQueueInfo(queue, CL_QUEUE_CONTEXT, sizeof(queueContext), &queueContext, nullptr),
+          "clGetCommandQueueInfo(CL_QUEUE_CONTEXT)", ctx->info_.name);
+  checkCl(clGetCommandQueueInfo(queue, CL_QUEUE_DEVICE, sizeof(queueDevice), &queueDevice, nullptr),
+          "clGetCommandQueueInfo(CL_QUEUE_DEVICE)", ctx->info_.name);
+  checkCl(clGetCommandQueueInfo(queue, CL_QUEUE_PROPERTIES, sizeof(properties), &properties, nullptr),
+          "clGetCommandQueueInfo(CL_QUEUE_PROPERTIES)", ctx->info_.name);
+  if (queueContext != context || queueDevice != device)
+    fail(ErrorCode::BadInput, "adopting an OpenCL context on '", ctx->info_.name, "': the command queue belongs "
+         "to another ", queueContext != context ? "context" : "device", "; pass the queue created for this "
+         "context and device");
+  if (properties & CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE)
+    fail(ErrorCode::BadInput, "adopting an OpenCL context on '", ctx->info_.name, "': the command queue is "
+         "out of order, and the backend relies on the queue's order; create an in-order queue for it "
+         "(without CL_QUEUE_OUT_OF_ORDER_EXEC_MODE_ENABLE)");
   checkCl(clRetainContext(context), "clRetainContext", ctx->info_.name);
   ctx->context_ = context;
   checkCl(clRetainCommandQueue(queue), "clRetainCommandQueue", ctx->info_.name);
