@@ -12,6 +12,10 @@
 #include <thread>
 #include <vector>
 
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 namespace corofem {
 namespace {
 
@@ -79,6 +83,27 @@ TEST(HostParallel, TwoCallersAtOnceBothFinishWithTheirOwnAnswers) {
   first.join();
   second.join();
   EXPECT_EQ(wrong.load(), 0);
+}
+
+TEST(HostParallel, AForkedChildUsesItAndExitsNormally) {
+  // After fork the child has none of the pool's workers. It must still run chunked passes (on the
+  // caller alone) and exit through the static destructors without waiting for the parent's workers
+  // (a destroyed pool hung there in pthread_cond_destroy).
+  std::vector<double> v(100000, 1.0);
+  ASSERT_EQ(chunkedSum(v, 1000), 100000.0);  // the pool and its workers exist
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) std::exit(chunkedSum(v, 1000) == 100000.0 ? 0 : 1);
+  int status = 0;
+  pid_t done = 0;
+  for (int i = 0; i < 200 && (done = waitpid(child, &status, WNOHANG)) == 0; ++i) usleep(50000);
+  if (done == 0) {
+    kill(child, SIGKILL);
+    waitpid(child, &status, 0);
+    FAIL() << "the forked child did not exit within 10 s";
+  }
+  ASSERT_EQ(done, child);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "child status " << status;
 }
 
 }  // namespace

@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <atomic>
 #include <condition_variable>
+#include <cstdio>
 #include <cstdlib>
+#include <system_error>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -17,7 +19,12 @@ namespace {
 class Pool {
  public:
   explicit Pool(std::size_t threads) {
-    for (std::size_t i = 1; i < threads; ++i) workers_.emplace_back([this] { work(); });
+    // A thread the system refuses (a pids limit, RLIMIT_NPROC) leaves the pool with those it got;
+    // with none, parallelChunks runs on the caller.
+    try {
+      for (std::size_t i = 1; i < threads; ++i) workers_.emplace_back([this] { work(); });
+    } catch (const std::system_error&) {
+    }
   }
   ~Pool() {
     {
@@ -91,17 +98,28 @@ class Pool {
 };
 
 Pool& pool() {
-  static Pool p(hostThreads());
-  return p;
+  // Never destroyed: its workers sleep until the process ends. Destroying it at exit would hang a
+  // forked child in pthread_cond_destroy (the parent's sleeping workers count as waiters there), and
+  // a static destructor elsewhere could still call parallelChunks.
+  static Pool* p = new Pool(hostThreads());
+  return *p;
 }
 
 }  // namespace
 
 std::size_t hostThreads() {
   static const std::size_t n = [] {
-    if (const char* env = std::getenv("COROFEM_HOST_THREADS"); env && *env)
-      return std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));
-    return std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 8);
+    const std::size_t byHardware = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 8);
+    const char* env = std::getenv("COROFEM_HOST_THREADS");
+    if (!env || !*env) return byHardware;
+    char* end = nullptr;
+    const long asked = std::strtol(env, &end, 10);
+    if (*end != '\0' || asked < 1) {
+      std::fprintf(stderr, "[corofem] COROFEM_HOST_THREADS='%s' is not a whole number of at least 1; using %zu "
+                   "host threads\n", env, byHardware);
+      return byHardware;
+    }
+    return static_cast<std::size_t>(std::min<long>(asked, 64));  // more than 64 gains nothing here
   }();
   return n;
 }

@@ -20,7 +20,8 @@ void parallelChunks(std::size_t n, std::size_t chunkSize,
 /// Number of chunks parallelChunks makes of n.
 inline std::size_t chunkCount(std::size_t n, std::size_t chunkSize) { return (n + chunkSize - 1) / chunkSize; }
 
-/// Threads the pool runs with: $COROFEM_HOST_THREADS if set (>= 1), else the hardware's, at most 8.
+/// Threads the pool asks for: $COROFEM_HOST_THREADS if set (1 to 64; anything else is reported on
+/// stderr and ignored), else the hardware's, at most 8. The system may grant fewer.
 std::size_t hostThreads();
 
 }  // namespace corofem::detail
