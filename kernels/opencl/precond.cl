@@ -13,6 +13,14 @@
 #include "../shared/corofem_vector.h"
 #endif
 
+/* Reals per node in `blocks`: the symmetric block (xx, yy, zz, xy, xz, yz) for the block
+ * preconditioner, its diagonal (xx, yy, zz) for the diagonal one. */
+#ifdef COROFEM_PRECOND_BLOCK
+#define COROFEM_NODE_BLOCK 6
+#else
+#define COROFEM_NODE_BLOCK 3
+#endif
+
 /* Element pass: a_c of every corner into the element output buffer (store_corner), for
  * node_stiffness_blocks to gather; used where compute_rotations does not run (linear formulation,
  * rest state). */
@@ -28,7 +36,7 @@ void corner_gradients(const uint S, __global const uint* restrict elemSeg, __glo
   store_corner_gradients(out, e0, a, VLOAD(geom + kGeomVolume * S + e0));
 }
 
-/* blocks[6 n + (xx, yy, zz, xy, xz, yz)] = sum over incident (e, c) of R K_e,cc R^T
+/* blocks[COROFEM_NODE_BLOCK n + (xx, yy, zz[, xy, xz, yz])] = sum over incident (e, c) of R K_e,cc R^T
  * = V ((lambda + mu) a_c a_c^T + mu |a_c|^2 I), from the sqrt(V) a_c written by compute_rotations
  * or corner_gradients, in the fixed CSR order. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
@@ -57,10 +65,10 @@ void node_stiffness_blocks(__global const uint* restrict nodeSeg, __global const
   }
 #ifdef COROFEM_PRECOND_BLOCK
   #pragma unroll
-  for (int k = 0; k < 6; ++k) blocks[6 * n + k] = b[k];
+  for (int k = 0; k < 6; ++k) blocks[COROFEM_NODE_BLOCK * n + k] = b[k];
 #else
   #pragma unroll
-  for (int k = 0; k < 3; ++k) blocks[6 * n + k] = b[k];
+  for (int k = 0; k < 3; ++k) blocks[COROFEM_NODE_BLOCK * n + k] = b[k];
 #endif
 }
 
@@ -80,13 +88,13 @@ void precond_invert(__global const uint* restrict nodeSeg, __global const uint* 
   /* mass = NULL: no body on this device has mass (static problems) */
   const real m0 = mass ? mass[3 * n] : (real)0, m1 = mass ? mass[3 * n + 1] : (real)0,
              m2 = mass ? mass[3 * n + 2] : (real)0;
-  real d0 = stiffCoef * blocks[6 * n] + massCoef * m0;
-  real d1 = stiffCoef * blocks[6 * n + 1] + massCoef * m1;
-  real d2 = stiffCoef * blocks[6 * n + 2] + massCoef * m2;
+  real d0 = stiffCoef * blocks[COROFEM_NODE_BLOCK * n] + massCoef * m0;
+  real d1 = stiffCoef * blocks[COROFEM_NODE_BLOCK * n + 1] + massCoef * m1;
+  real d2 = stiffCoef * blocks[COROFEM_NODE_BLOCK * n + 2] + massCoef * m2;
 #ifdef COROFEM_PRECOND_BLOCK
-  real b01 = stiffCoef * blocks[6 * n + 3] * f0 * f1;
-  real b02 = stiffCoef * blocks[6 * n + 4] * f0 * f2;
-  real b12 = stiffCoef * blocks[6 * n + 5] * f1 * f2;
+  real b01 = stiffCoef * blocks[COROFEM_NODE_BLOCK * n + 3] * f0 * f1;
+  real b02 = stiffCoef * blocks[COROFEM_NODE_BLOCK * n + 4] * f0 * f2;
+  real b12 = stiffCoef * blocks[COROFEM_NODE_BLOCK * n + 5] * f1 * f2;
   if (f0 == (real)0) d0 = 1;
   if (f1 == (real)0) d1 = 1;
   if (f2 == (real)0) d2 = 1;

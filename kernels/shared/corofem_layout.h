@@ -76,7 +76,8 @@ COROFEM_CONSTANT(unsigned, kElemOutComponents, 12);
  * x component of corner c of element e; y and z follow B and 2 B later.                          */
 
 /* Per-node preconditioner input: symmetric 3x3 block sum of the rotated element stiffness blocks
- * sum_e R K_e,ii R^T (xx, yy, zz, xy, xz, yz) at 6 n + k.                                        */
+ * sum_e R K_e,ii R^T (xx, yy, zz, xy, xz, yz) at 6 n + k; its diagonal only, at 3 n + k, for the
+ * diagonal preconditioner (precond.cl, COROFEM_NODE_BLOCK).                                      */
 COROFEM_CONSTANT(unsigned, kNodeBlockComponents, 6);
 /* Per-node inverse preconditioner: 9 entries (row-major 3x3) for block diagonal, 3 for diagonal. */
 

@@ -460,7 +460,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     bytes += 4 * (N + 1) + 4 * 4 * E;  // gather lists
     bytes += r * 3 * N * (1 + 1 + 7);  // positions, free mask, x b r u p w s
     if (mass) bytes += r * 3 * N;
-    if (pc != PreconditionerKind::None) bytes += r * (6 + (pc == PreconditionerKind::BlockDiagonal ? 9 : 3)) * N;
+    if (pc != PreconditionerKind::None)  // node blocks and inverse: 6 + 9 per node, or diagonals 3 + 3
+      bytes += r * (pc == PreconditionerKind::BlockDiagonal ? 6 + 9 : 3 + 3) * N;
     bytes += r * 3 * std::max(S / 512, N / 4) + r * 3 * (N / 4) + r * 12 * K;  // two partial buffers, scalars
     return bytes;
   };
@@ -489,6 +490,12 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     q.preconditioner = PreconditionerKind::None;
     EXPECT_EQ(detail::createOpenCLBackendOn(beam, q, ctx, o)->allocatedBytes(),
               expected({&beam}, true, PreconditionerKind::None, false, true));
+  }
+  {
+    SolverDesc d = s;  // the diagonal preconditioner: diagonal blocks (3 per node), not 6
+    d.preconditioner = PreconditionerKind::Diagonal;
+    EXPECT_EQ(detail::createOpenCLBackendOn(beam, d, ctx, o)->allocatedBytes(),
+              expected({&beam}, true, PreconditionerKind::Diagonal, false, false));
   }
   std::vector<const detail::Problem*> all;
   for (const auto& p : ps) all.push_back(&p);

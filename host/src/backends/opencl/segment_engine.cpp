@@ -462,7 +462,8 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   createReal(free_, dofTotal);
   upload(free_, freeMask.data(), 0, dofTotal);
   if (precond_ != PreconditionerKind::None) {
-    createReal(blocks_, kNodeBlockComponents * nodeTotal_);
+    // The block preconditioner reads 6 reals per node, the diagonal one 3 (precond.cl).
+    createReal(blocks_, (precond_ == PreconditionerKind::BlockDiagonal ? kNodeBlockComponents : 3) * nodeTotal_);
     createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodeTotal_);
   }
   for (ClBuffer* v : {&x_, &b_, &r_, &z_, &p_, &q_, &s_}) createReal(*v, dofTotal);
