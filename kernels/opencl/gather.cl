@@ -39,13 +39,13 @@ void gather_sum(__global const uint* restrict nodeSeg, __global const uint* rest
   out[3 * n + 2] = acc[2];
 }
 
-/* y = massCoef M p + (element products, already scaled by the stiffness coefficient), with the
- * lumped mass M (mass = NULL: no body of the device has mass, the term is 0) and the segment's
- * massCoef. Rayleigh damping C = alpha M + beta K^R needs no code of its own: the host folds
- * it into massCoef = m + c alpha and the stiffness coefficient k + c beta.
- * project != 0 (inside PCG): y_d = 0 on constrained dofs (free[d] = 0): with p_d = 0 there, this is
- * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h,
- * in sum_real: double in mixed precision) give PCG its alpha. */
+/* (A p)_d of dof d of node n from the node's gathered element products acc_k (k = d - 3 n). */
+COROFEM_FN real product_entry(uint d, real acc, real massCoef, __global const real* mass,
+                              __global const real* free, uint project, real pd) {
+  const real yd = (mass ? massCoef * mass[d] * pd : (real)0) + acc;
+  return project ? yd * free[d] : yd;
+}
+
 /* The node loop of gather_product for the work-item's nodes [first, last): y = A p and the sum
  * p . y into sums[0]; or, with a right-hand side rb (the true residual after a solve), y = free b -
  * A p (projected) and the sums r . r, |free b|^2 into sums[1], sums[2], as pcg_init forms them from
@@ -64,9 +64,7 @@ COROFEM_FN void gather_product_nodes(uint first, uint last, real massCoef, __glo
       #pragma unroll
       for (int k = 0; k < 3; ++k) {
         const uint d = 3 * n + k;
-        const real pd = p[d];
-        real yd = (mass ? massCoef * mass[d] * pd : (real)0) + acc[k];
-        if (project) yd *= free[d];
+        const real pd = p[d], yd = product_entry(d, acc[k], massCoef, mass, free, project, pd);
         y[d] = yd;
         dot += (sum_real)pd * (sum_real)yd;  /* exact term in mixed precision */
       }
@@ -78,8 +76,7 @@ COROFEM_FN void gather_product_nodes(uint first, uint last, real massCoef, __glo
       #pragma unroll
       for (int k = 0; k < 3; ++k) {
         const uint d = 3 * n + k;
-        real yd = (mass ? massCoef * mass[d] * p[d] : (real)0) + acc[k];
-        if (project) yd *= free[d];
+        const real yd = product_entry(d, acc[k], massCoef, mass, free, project, p[d]);
         const real bd = free[d] * rb[d], rd = bd - yd;
         y[d] = rd;
         bb += (sum_real)bd * (sum_real)bd;
@@ -92,6 +89,14 @@ COROFEM_FN void gather_product_nodes(uint first, uint last, real massCoef, __glo
   sums[2] = bb;
 }
 
+/* y = massCoef M p + (element products, already scaled by the stiffness coefficient), with the
+ * lumped mass M (mass = NULL: no body of the device has mass, the term is 0) and the segment's
+ * massCoef. Rayleigh damping C = alpha M + beta K^R needs no code of its own: the host folds
+ * it into massCoef = m + c alpha and the stiffness coefficient k + c beta.
+ * project != 0 (inside PCG): y_d = 0 on constrained dofs (free[d] = 0): with p_d = 0 there, this is
+ * the identity row/column of the projected system. The partial sums of p . y (corofem_reduce.h,
+ * in sum_real: double in mixed precision) give PCG its alpha. With rb (b) instead: y = free b - A p,
+ * the true residual after a solve, and its sums (gather_product_nodes). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void gather_product(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
                     __global const real* restrict segCoef, __global const uint* restrict start,
