@@ -25,14 +25,16 @@
  * structure-of-arrays streams load as vectors). Where one ring slot of those SURF_W vertices holds
  * SURF_W consecutive vertices (a regular mesh numbered row by row, as the benchmark's UV sphere), the
  * neighbours' positions are one vector load; otherwise they are gathered lane by lane. Both read the
- * same values, so the result does not depend on which path ran.
+ * same values, so the result does not depend on which path ran. SURF_W = 1 (GPUs) is one vertex per
+ * work-item in scalars: there the lanes are the work-items of a warp, whose loads of consecutive
+ * vertices coalesce, and 16-wide vectors per work-item would only cost registers and occupancy.
  *
  * The node positions may be relative to an offset c (the OpenCL backend keeps them relative to the
  * body's centroid so that float keeps its accuracy far from the origin): the weights sum to 1, so
  * sum_k w_vk (x_{n_vk} - c) + c = x_v. The edge vectors are differences (c cancels); pass 2 adds c to
  * the position it writes.
  *
- * Build options: SURF_K ring slots per vertex, SURF_W vertices per vector (8 or 16), SURF_VPW
+ * Build options: SURF_K ring slots per vertex, SURF_W vertices per vector (1, 8 or 16), SURF_VPW
  * vertices per work-item in pass 1, SURF_BPW blocks of SURF_W vertices per work-item in pass 2
  * (several per work-item amortise PoCL's per-work-item cost on a CPU; 1 on a GPU).
  */
@@ -75,6 +77,18 @@ __kernel void surface_positions(const uint vertexCount, const uint S, __global c
 /* Vector types of SURF_W lanes. */
 #define SURF_CAT2(a, b) a##b
 #define SURF_CAT(a, b) SURF_CAT2(a, b)
+#if SURF_W == 1
+typedef real realW;
+typedef uint uintW;
+typedef float floatW;
+#define VLOADW(p) (*(p))
+#define CONVERT_FLOATW(x) ((float)(x))
+#define SURF_FIRST(r) (r)
+#define SURF_LANES 0u
+#define GATHERW(p, i) ((p)[(i)])
+#define SURF_INV_LENGTH(l2) ((l2) > (realW)0 ? (realW)1 / sqrt(l2) : (realW)0)
+inline bool surf_all_zero(uintW t) { return t == 0u; }
+#else
 #ifdef COROFEM_DOUBLE
 typedef SURF_CAT(double, SURF_W) realW;
 #else
@@ -84,8 +98,13 @@ typedef SURF_CAT(uint, SURF_W) uintW;
 typedef SURF_CAT(float, SURF_W) floatW;
 #define VLOADW(p) SURF_CAT(vload, SURF_W)(0, (p))
 #define CONVERT_FLOATW SURF_CAT(convert_float, SURF_W)
+#define SURF_FIRST(r) ((r).s0)
+#define SURF_INV_LENGTH(l2) select((realW)0, (realW)1 / sqrt(l2), (l2) > (realW)0)
+#endif
 
-#if SURF_W == 8
+#if SURF_W == 1
+/* one vertex per work-item: no lane helpers */
+#elif SURF_W == 8
 #define SURF_LANES ((uintW)(0, 1, 2, 3, 4, 5, 6, 7))
 #define GATHERW(p, i) ((realW)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], (p)[(i).s5], \
                                (p)[(i).s6], (p)[(i).s7]))
@@ -107,7 +126,7 @@ inline bool surf_all_zero(uintW t) {
   return (t2.x | t2.y) == 0;
 }
 #else
-#error "SURF_W must be 8 or 16"
+#error "SURF_W must be 1, 8 or 16"
 #endif
 
 /* Interleaves 8 vertices' position (ox, oy, oz) and normal (mx, my, mz) into 48 floats at d. */
@@ -122,10 +141,10 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
 
 /* The positions (x, y, z) of ring slot r of SURF_W vertices, relative to theirs (xx, xy, xz). */
 #define SURF_NEIGHBOUR(r, bx, by, bz)                                                      \
-  if (surf_all_zero((r) ^ ((uintW)((r).s0) + SURF_LANES))) {                               \
-    bx = VLOADW(px + (r).s0) - xx;                                                         \
-    by = VLOADW(py + (r).s0) - xy;                                                         \
-    bz = VLOADW(pz + (r).s0) - xz;                                                         \
+  if (surf_all_zero((r) ^ ((uintW)SURF_FIRST(r) + SURF_LANES))) {                          \
+    bx = VLOADW(px + SURF_FIRST(r)) - xx;                                                  \
+    by = VLOADW(py + SURF_FIRST(r)) - xy;                                                  \
+    bz = VLOADW(pz + SURF_FIRST(r)) - xz;                                                  \
   } else {                                                                                 \
     bx = GATHERW(px, r) - xx;                                                              \
     by = GATHERW(py, r) - xy;                                                              \
@@ -168,11 +187,19 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     ny += az * fx - ax * fz;
     nz += ax * fy - ay * fx;
     const realW length2 = nx * nx + ny * ny + nz * nz;
-    const realW scale = select((realW)0, (realW)1 / sqrt(length2), length2 > (realW)0);
+    const realW scale = SURF_INV_LENGTH(length2);
     const floatW ox = CONVERT_FLOATW((xx + clox) + chix), oy = CONVERT_FLOATW((xy + cloy) + chiy),
                  oz = CONVERT_FLOATW((xz + cloz) + chiz);
     const floatW mx = CONVERT_FLOATW(nx * scale), my = CONVERT_FLOATW(ny * scale), mz = CONVERT_FLOATW(nz * scale);
     __global float* dst = out + 6 * (size_t)v;
+#if SURF_W == 1
+    dst[0] = ox;
+    dst[1] = oy;
+    dst[2] = oz;
+    dst[3] = mx;
+    dst[4] = my;
+    dst[5] = mz;
+#else
     if (v + SURF_W <= vertexCount) {
 #if SURF_W == 8
       surf_store8(dst, ox, oy, oz, mx, my, mz);
@@ -198,6 +225,7 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
       }
       for (uint k = 0; k < 6 * (vertexCount - v); ++k) dst[k] = tmp[k];
     }
+#endif
   }
 }
 

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 
@@ -117,6 +118,50 @@ TEST_P(EmbedDevice, MatchesHostReference) {
     EXPECT_LE(worstPos, posTol);
     EXPECT_LE(worstNormal, nTol);
   }
+}
+
+/// Pass 2's vertices per work-item (COROFEM_SURFACE_LANES: 1 on GPUs, 8 or 16 vectors on CPUs) change
+/// how the work is cut, not the mathematics: every width matches the host reference within the
+/// tolerances of MatchesHostReference, including the vertices of the last, partial block. A width the
+/// kernels do not have is refused with the fix.
+TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
+  struct LanesEnv {  // restores the environment whatever the test's outcome
+    ~LanesEnv() { unsetenv("COROFEM_SURFACE_LANES"); }
+  } restore;
+  const Scene s = makeScene();
+  const std::size_t n = s.binding.vertexCount();
+  std::mt19937 rng(29);
+  const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
+  std::vector<float> host(6 * n);
+  SurfaceOutput o;
+  o.interleaved = host.data();
+  ASSERT_TRUE(deformSurface(s.binding, x.data(), s.tets.nodeCount(), o).isOk());
+  const bool dbl = GetParam().doublePrecision;
+  const float posTol = dbl ? 5e-7f : 4e-6f, nTol = dbl ? 1e-6f : 2e-4f;
+  for (const char* lanes : {"1", "8", "16"}) {
+    setenv("COROFEM_SURFACE_LANES", lanes, 1);
+    auto device = DeviceSurface::create(s.binding, options());
+    ASSERT_TRUE(device.isOk()) << lanes << " lanes: " << device.message();
+    std::vector<float> dev(6 * n, NAN);
+    ASSERT_TRUE(device->update(x.data(), s.tets.nodeCount()).isOk());
+    ASSERT_TRUE(device->read(dev.data()).isOk());
+    float worstPos = 0, worstNormal = 0;
+    for (std::size_t v = 0; v < n; ++v)
+      for (int c = 0; c < 3; ++c) {
+        worstPos = std::max(worstPos, std::abs(dev[6 * v + c] - host[6 * v + c]));  // NaN fails below
+        worstNormal = std::max(worstNormal, std::abs(dev[6 * v + 3 + c] - host[6 * v + 3 + c]));
+        ASSERT_TRUE(std::isfinite(dev[6 * v + c]) && std::isfinite(dev[6 * v + 3 + c])) << lanes << " lanes, vertex " << v;
+      }
+    std::printf("[ device   ] %s lanes: worst |position| difference %.3g, worst |normal| difference %.3g\n", lanes,
+                worstPos, worstNormal);
+    EXPECT_LE(worstPos, posTol) << lanes << " lanes";
+    EXPECT_LE(worstNormal, nTol) << lanes << " lanes";
+  }
+  setenv("COROFEM_SURFACE_LANES", "4", 1);
+  auto refused = DeviceSurface::create(s.binding, options());
+  ASSERT_FALSE(refused.isOk());
+  EXPECT_EQ(refused.status().code(), ErrorCode::BadInput);
+  EXPECT_NE(refused.message().find("COROFEM_SURFACE_LANES='4': give 1, 8 or 16"), std::string::npos) << refused.message();
 }
 
 TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {

@@ -14,6 +14,7 @@
 #include "backends/opencl/program_cache.hpp"
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #endif
@@ -294,12 +295,22 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
     if (impl->doublePrecision && !impl->ctx->info().fp64)
       fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
            "' has no cl_khr_fp64; use float (doublePrecision = false) or another device");
+    std::size_t lanesOverride = 0;  // COROFEM_SURFACE_LANES: tests and tuning
+    if (const char* env = std::getenv("COROFEM_SURFACE_LANES"); env && *env) {
+      const std::string lanes(env);
+      if (lanes != "1" && lanes != "8" && lanes != "16")
+        fail(ErrorCode::BadInput, "COROFEM_SURFACE_LANES='", lanes, "': give 1, 8 or 16 (vertices per work-item "
+             "vector in the surface normal pass), or unset it for the device's default");
+      lanesOverride = static_cast<std::size_t>(std::stoul(lanes));
+    }
     Impl& k = *impl;
     try {
       k.realSize = k.doublePrecision ? sizeof(double) : sizeof(float);
-      // Vectors of 16 floats or 8 doubles (one AVX-512 register, two AVX2 ones) in pass 2.
-      k.lanes = k.doublePrecision ? 8 : 16;
+      // Pass 2 on CPUs: vectors of 16 floats or 8 doubles (one AVX-512 register, two AVX2 ones). On
+      // GPUs one vertex per work-item (SURF_W = 1): a warp's loads of consecutive vertices coalesce,
+      // while 16-wide vectors per work-item cost registers and leave 16x fewer work-items.
       const bool cpu = !k.ctx->info().gpu;
+      k.lanes = lanesOverride ? lanesOverride : !cpu ? 1 : k.doublePrecision ? 8 : 16;
       k.positionsPerItem = cpu ? 16 : 1;
       k.blocksPerItem = cpu ? 4 : 1;
       k.positionsLocal = cpu ? 16 : 64;
