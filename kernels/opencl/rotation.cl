@@ -2,7 +2,8 @@
  * the simplified co-rotational formulation uses in Eq. 9 (forces) and Eq. 11 (K^R = R K R^T).
  * One work-item per element. The method is chosen at build time:
  *   COROFEM_ROT_POLAR  Higham's scaled Newton iteration for the polar factor, with a fallback to
- *                      the SVD path for inverted, degenerate or non-converging elements;
+ *                      the SVD path for inverted, degenerate or non-converging elements; on CPUs
+ *                      (vector path) the Newton-Schulz iteration where F is near-orthogonal;
  *   COROFEM_ROT_SVD    Jacobi eigen-decomposition of F^T F, R = U V^T, smallest singular direction
  *                      flipped when det F < 0 (the reference's convention: always a proper rotation);
  *   COROFEM_ROT_QUAT   Mueller et al. 2016, "A robust method to extract the rotational part of
@@ -296,6 +297,16 @@ COROFEM_FN Mat3 rotation_qr(const Mat3* F) {
 /* ------------------------------------------------------------------ vectorised polar */
 
 #if COROFEM_VEC > 1
+/* g = the symmetric R^T R of COROFEM_VEC matrices (row-major R): (0,0) (1,1) (2,2) (0,1) (0,2) (1,2). */
+COROFEM_FN void polar_gram(const realv* R, realv* g) {
+  g[0] = R[0] * R[0] + R[3] * R[3] + R[6] * R[6];
+  g[1] = R[1] * R[1] + R[4] * R[4] + R[7] * R[7];
+  g[2] = R[2] * R[2] + R[5] * R[5] + R[8] * R[8];
+  g[3] = R[0] * R[1] + R[3] * R[4] + R[6] * R[7];
+  g[4] = R[0] * R[2] + R[3] * R[5] + R[6] * R[8];
+  g[5] = R[1] * R[2] + R[4] * R[5] + R[7] * R[8];
+}
+
 /* rotation_polar on COROFEM_VEC elements at once (the same iteration and stop test per lane; a
  * lane that has converged keeps its value). Returns the lanes that must take the SVD path:
  * inverted or degenerate (det F <= 1e-6 |F|^3) or not converged. */
@@ -306,6 +317,43 @@ COROFEM_FN maskv rotation_polar_v(const realv* F, realv* R) {
   const realv detF = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) +
                      F[2] * (F[3] * F[7] - F[4] * F[6]);
   const maskv bad = !(detF > (real)1e-6 * fn2 * sqrt(fn2));
+  /* Near-orthogonal F, the small strains of most frames: every running lane with |F^T F - I|_F <= 1/2
+   * (singular values in [0.70, 1.22]). There the Newton-Schulz iteration R <- R (3 I - R^T R) / 2
+   * converges quadratically to the same polar factor (a singular value 1 + d becomes
+   * 1 - 1.5 d^2 - 0.5 d^3) with multiplications only, where the scaled Newton below needs a
+   * determinant, two roots and two divisions per step. Lanes bound for the SVD path iterate on R = I. */
+  {
+    realv g[6];  /* F^T F: (0,0) (1,1) (2,2) (0,1) (0,2) (1,2) */
+    polar_gram(F, g);
+    const realv e2 = (g[0] - (real)1) * (g[0] - (real)1) + (g[1] - (real)1) * (g[1] - (real)1) +
+                     (g[2] - (real)1) * (g[2] - (real)1) + (real)2 * (g[3] * g[3] + g[4] * g[4] + g[5] * g[5]);
+    if (all(bad | (e2 <= (real)0.25))) {
+      #pragma unroll
+      for (int k = 0; k < 9; ++k) R[k] = select(F[k], (k % 4 == 0) ? (realv)1 : (realv)0, bad);
+      maskv converged = bad;
+      for (int it = 0; it < COROFEM_POLAR_ITERS; ++it) {
+        if (it > 0) polar_gram(R, g);
+        /* H = (R^T R - I) / 2, R <- R - R H; |R^T R - I|_F^2 < 3 eps leaves an error ~ eps after this step */
+        const realv h[6] = {(real)0.5 * (g[0] - (real)1), (real)0.5 * (g[1] - (real)1), (real)0.5 * (g[2] - (real)1),
+                            (real)0.5 * g[3], (real)0.5 * g[4], (real)0.5 * g[5]};
+        const realv err2 = (real)4 * (h[0] * h[0] + h[1] * h[1] + h[2] * h[2] +
+                                      (real)2 * (h[3] * h[3] + h[4] * h[4] + h[5] * h[5]));
+        #pragma unroll
+        for (int j = 0; j < 3; ++j) {
+          const realv r0 = R[3 * j], r1 = R[3 * j + 1], r2 = R[3 * j + 2];
+          const realv n0 = r0 - (r0 * h[0] + r1 * h[3] + r2 * h[4]);
+          const realv n1 = r1 - (r0 * h[3] + r1 * h[1] + r2 * h[5]);
+          const realv n2 = r2 - (r0 * h[4] + r1 * h[5] + r2 * h[2]);
+          R[3 * j] = select(n0, r0, converged);
+          R[3 * j + 1] = select(n1, r1, converged);
+          R[3 * j + 2] = select(n2, r2, converged);
+        }
+        converged = converged | (err2 < (real)3 * REAL_EPS);
+        if (all(converged)) break;
+      }
+      return bad | !converged;
+    }
+  }
   maskv done = bad;
   #pragma unroll
   for (int k = 0; k < 9; ++k) R[k] = F[k];

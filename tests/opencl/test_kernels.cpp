@@ -127,6 +127,27 @@ TEST_P(OpenCLKernels, RotationsMatchPolarDecompositionOnWellShapedElements) {
   }
 }
 
+// The polar method's two iterations: vectors of elements whose F^T F is within 1/2 of I take the
+// Newton-Schulz iteration (the small strains of most frames, 0.01 and 0.05 here), the others the
+// scaled Newton one (0.4: most vectors hold a lane beyond the bound; 0.15 mixes both). Every strain
+// gives the reference's polar factor and a proper rotation to the precision's tolerance.
+TEST_P(OpenCLKernels, PolarMatchesReferenceOnBothSidesOfTheNewtonSchulzBound) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  std::mt19937 rng(31);
+  for (double strain : {0.01, 0.05, 0.15, 0.4}) {
+    for (std::size_t n : kSizes) {
+      const detail::Problem p = test::makeProblem(test::randomSoup(n, rng));
+      auto b = backend(p, RotationMethod::Polar);
+      const Eigen::VectorXd x = deform(p.mesh, Shape::WellShaped, rng, strain);
+      b->setPositions(x);
+      const double err = rotationError(b->readRotations(), p, x, rotTol(), "Polar");
+      EXPECT_LE(err, rotTol()) << "strain " << strain << ", " << n << " elements";
+      if (n == 1001)
+        std::printf("[info] strain %.2f, %zu elements: max |R - R_reference| entry %.3g\n", strain, n, err);
+    }
+  }
+}
+
 // Stretches of 1/30 to 30: the scaled Newton iteration of the polar method must take its scaled
 // steps here (near convergence it drops the scaling) and still converge, or hand the element to
 // the SVD path; either way the reference's polar factor, to a tolerance that depends on how the
