@@ -10,10 +10,12 @@
  *                      deformations", warm-started from the previous rotation kept as a quaternion;
  *   COROFEM_ROT_QR     Gram-Schmidt of F's columns (cheap edge frame; equals the polar factor only
  *                      for pure rotations: the error grows with the shear).
- * Besides R, the kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force,
- * product and preconditioner kernels use instead of R (see element_force.cl), and, when a
- * preconditioner is used, the per-corner a_c that node_stiffness_blocks gathers (saving the
- * separate corner_gradients pass). Only the work-groups of active segments (bodies) run.
+ * The kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force, product and
+ * preconditioner kernels use instead of R (see element_force.cl), and, when a preconditioner is
+ * used, the per-corner a_c that node_stiffness_blocks gathers (saving the separate
+ * corner_gradients pass). R itself only with writeR: the stored-K_e product reads it, the other
+ * kernels do not (the host asks for it when it reads the rotations back; 9 of the 30 reals an
+ * element writes). Only the work-groups of active segments (bodies) run.
  * quat is NULL unless the method is COROFEM_ROT_QUAT.
  */
 #ifndef COROFEM_EMBEDDED
@@ -441,14 +443,16 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
                        __global const uint* restrict nodes, __global const real* restrict geom,
                        __global const real* restrict pos, __global real* restrict rot,
                        __global real* restrict rotGrad, __global real* restrict quat,
-                       __global real* restrict corners, const uint writeCorners) {
+                       __global real* restrict corners, const uint writeCorners, const uint writeR) {
   uint e0, s;
   if (!element_items(elemSeg, segInfo, &e0, &s)) return;
 #if COROFEM_VEC == 1
   const Mat3 F = element_deformation_gradient(e0, S, nodes, geom, pos);
   const Mat3 R = rotation_of(&F, quat, e0, S);
-  #pragma unroll
-  for (int k = 0; k < 9; ++k) rot[k * S + e0] = R.m[k];
+  if (writeR) {
+    #pragma unroll
+    for (int k = 0; k < 9; ++k) rot[k * S + e0] = R.m[k];
+  }
   real a[9];
   #pragma unroll
   for (int i = 0; i < 3; ++i) {
@@ -521,8 +525,10 @@ void compute_rotations(const uint S, __global const uint* restrict elemSeg, __gl
     #pragma unroll
     for (int k = 0; k < 9; ++k) R[k] = VLOAD(lanesR[k]);
   }
-  #pragma unroll
-  for (int k = 0; k < 9; ++k) VSTORE(R[k], rot + k * S + e0);
+  if (writeR) {
+    #pragma unroll
+    for (int k = 0; k < 9; ++k) VSTORE(R[k], rot + k * S + e0);
+  }
   realv a[9];
   #pragma unroll
   for (int i = 0; i < 3; ++i)

@@ -443,6 +443,8 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   for (HostStage* stage : {&posStage_, &bStage_, &xStage_, &readStage_})
     stage->create(c, ctx_->queue(), dofTotal * realSize_, dev_);
   xKnown_.assign(K, 0);
+  rAlways_ = storedStiffness_ || solver_.rotation == RotationMethod::Quaternion;
+  rStale_.assign(K, 0);  // R = I uploaded below until a rotation pass runs
   std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
   for (const Segment& sg : segs_) {
     const Eigen::VectorXd& rest = sg.problem->restPositions;
@@ -765,12 +767,18 @@ void SegmentEngine::refreshBlocks(bool cornersWritten) {
   launch(kBlocks_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_, blocks_);
 }
 
+void SegmentEngine::launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR) {
+  setActive(rotate);
+  launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
+         rotGrad_, quat_, elemOut_, cl_uint(writeCorners ? 1 : 0), cl_uint(writeR ? 1 : 0));
+  for (std::size_t s = 0; s < segs_.size(); ++s)
+    if (rotate[s]) rStale_[s] = !writeR;
+}
+
 void SegmentEngine::enqueueRotations() {
   std::vector<char> corotational(segs_.size());
   for (std::size_t s = 0; s < segs_.size(); ++s) corotational[s] = segs_[s].corotational;
-  setActive(corotational);
-  launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
-         rotGrad_, quat_, elemOut_, cl_uint(precond_ != PreconditionerKind::None ? 1 : 0));
+  launchRotations(corotational, precond_ != PreconditionerKind::None, rAlways_);
 }
 
 void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
@@ -802,9 +810,7 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
   // One write of the packed range; the segments in between get their own unchanged positions.
   const auto [lo, hi] = dofRange(requests);
   posStage_.write(pos_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
-  setActive(rotate);
-  launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
-         rotGrad_, quat_, elemOut_, cl_uint(precond_ != PreconditionerKind::None ? 1 : 0));
+  launchRotations(rotate, precond_ != PreconditionerKind::None, rAlways_);
   refreshBlocks(true);  // the blocks rotate with R (linear bodies: constant, not refreshed)
 }
 
@@ -1234,6 +1240,13 @@ void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& requests) {
 
 std::vector<double> SegmentEngine::readRotations(std::size_t s) {
   const Segment& sg = segs_[s];
+  if (rStale_[s]) {
+    // The last rotation pass wrote no R: run it again for this body with R (from the same positions,
+    // so the same a_i, bit for bit; not the corners: the blocks were formed from the first pass).
+    std::vector<char> only(segs_.size(), 0);
+    only[s] = 1;
+    launchRotations(only, false, true);
+  }
   std::vector<double> soa(kRotComponents * stride_);
   download(rot_, soa.data(), 0, soa.size());
   std::vector<double> out(9 * sg.elems);

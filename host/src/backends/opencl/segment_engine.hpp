@@ -238,6 +238,9 @@ class SegmentEngine {
   void build(const SolverDesc& solver, const OpenCLOptions& options);
   void allocate(const OpenCLOptions& options);
   void refreshBlocks(bool cornersWritten);
+  /// compute_rotations on the segments with rotate[s] (made the active ones); R itself only with
+  /// writeR (rStale_ records the segments left without it).
+  void launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR);
   void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
   /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
   /// With `residualOf` (b): y = free b - A v instead, and the sums (0, y . y, |free b|^2).
@@ -280,6 +283,11 @@ class SegmentEngine {
   SolverDesc solver_;
   PreconditionerKind precond_;
   bool storedStiffness_ = false;
+  /// Every rotation pass writes R: the stored-K_e product reads it, and the Quaternion method cannot
+  /// run a pass again for readRotations (each pass advances its warm start). Otherwise R is written
+  /// only when read back.
+  bool rAlways_ = false;
+  std::vector<char> rStale_;             ///< per segment: rotated since R was last written
   std::string options_;
   cl::ProgramBuild build_;
   bool double_ = false;
