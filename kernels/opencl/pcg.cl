@@ -27,9 +27,10 @@
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
 #include "../shared/corofem_reduce.h"
+#include "precond.cl"
 #endif
 
-/* z = M^-1 r for the dofs of node n (M^-1 from precond_invert). */
+/* z = M^-1 r for the dofs of node n (M^-1 as pcg_init stored it). */
 COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const real* r, real* z) {
 #if defined(COROFEM_PRECOND_BLOCK)
   __global const real* m = minv + 9 * n;
@@ -47,18 +48,34 @@ COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const re
 #endif
 }
 
-/* r = free (b - A x) (q = A x; zeroStart != 0: x = 0, q is not read), u = M^-1 r, p = s = 0;
- * partials (r . u, r . r, |free b|^2). */
+/* M^-1 of the solve's coefficients from the node blocks (node_preconditioner, precond.cl), stored
+ * for pcg_update; r = free (b - A x) (q = A x; zeroStart != 0: x = 0, q is not read), u = M^-1 r,
+ * p = s = 0; partials (r . u, r . r, |free b|^2). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-              const uint zeroStart, __global const real* restrict b, __global const real* restrict q,
-              __global const real* restrict free, __global const real* restrict minv,
+              __global const real* restrict segCoef, __global const real* restrict blocks,
+              __global const real* restrict mass, const uint zeroStart, __global const real* restrict b,
+              __global const real* restrict q, __global const real* restrict free, __global real* restrict minv,
               __global real* restrict r, __global real* restrict u, __global real* restrict p,
               __global real* restrict sv, __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+  const real massCoef = seg_coef(segCoef, s, kCoefMass), stiffCoef = seg_coef(segCoef, s, kCoefStiff);
+#endif
   sum_real ru = 0, rr = 0, bb = 0;
   for (uint n = first; n < last; ++n) {
+#if defined(COROFEM_PRECOND_BLOCK)
+    real m[9];
+    node_preconditioner(n, massCoef, stiffCoef, blocks, mass, free, m);
+    #pragma unroll
+    for (int k = 0; k < 9; ++k) minv[9 * n + k] = m[k];
+#elif defined(COROFEM_PRECOND_DIAG)
+    real m[3];
+    node_preconditioner(n, massCoef, stiffCoef, blocks, mass, free, m);
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) minv[3 * n + k] = m[k];
+#endif
     real rn[3], un[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {

@@ -4,9 +4,8 @@
  *   R K_e,ii R^T = V ((lambda + mu) a_i a_i^T + mu |a_i|^2 I)
  * (from sigma = lambda tr(eps) I + 2 mu eps with eps = sym(u g_i^T)), so no 12x12 is needed.
  * corner_gradients + node_stiffness_blocks run after every rotation update (the blocks rotate with
- * the elements);
- * precond_invert mixes in the coefficients of the solve and inverts. Each kernel takes its
- * segment's (body's) material and coefficients (corofem_layout.h).
+ * the elements); node_preconditioner mixes in the coefficients of the solve and inverts, inside
+ * pcg_init (pcg.cl). Each takes its segment's (body's) material and coefficients (corofem_layout.h).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -72,18 +71,13 @@ void node_stiffness_blocks(__global const uint* restrict nodeSeg, __global const
 #endif
 }
 
-/* B = k blocks + massCoef diag(m), rows/columns of constrained dofs replaced by the identity,
- * inverted: minv[9 n + 3 i + j] (COROFEM_PRECOND_BLOCK) or minv[3 n + i] (COROFEM_PRECOND_DIAG).
- * Constrained dofs get 0 in the inverse so that z = M^-1 r stays 0 there. A non-positive pivot
- * (a node touched by no element and massless) falls back to 1. */
-__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void precond_invert(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-                    __global const real* restrict segCoef, __global const real* restrict blocks,
-                    __global const real* restrict mass, __global const real* restrict free,
-                    __global real* restrict minv) {
-  uint n, s;
-  if (!node_item(nodeSeg, segInfo, &n, &s)) return;
-  const real massCoef = seg_coef(segCoef, s, kCoefMass), stiffCoef = seg_coef(segCoef, s, kCoefStiff);
+/* B = k blocks + massCoef diag(m) of node n, rows/columns of constrained dofs replaced by the
+ * identity, inverted into m (9 entries, row-major 3x3, with COROFEM_PRECOND_BLOCK; 3 with
+ * COROFEM_PRECOND_DIAG). Constrained dofs get 0 in the inverse so that z = M^-1 r stays 0 there. A
+ * non-positive pivot (a node touched by no element and massless) falls back to 1. pcg_init forms it
+ * for every node of a solve (the coefficients are the solve's) and stores it for pcg_update. */
+COROFEM_FN void node_preconditioner(uint n, real massCoef, real stiffCoef, __global const real* blocks,
+                                    __global const real* mass, __global const real* free, real* m) {
   const real f0 = free[3 * n], f1 = free[3 * n + 1], f2 = free[3 * n + 2];
   /* mass = NULL: no body on this device has mass (static problems) */
   const real m0 = mass ? mass[3 * n] : (real)0, m1 = mass ? mass[3 * n + 1] : (real)0,
@@ -102,7 +96,6 @@ void precond_invert(__global const uint* restrict nodeSeg, __global const uint* 
   const real c00 = d1 * d2 - b12 * b12, c01 = b02 * b12 - b01 * d2, c02 = b01 * b12 - b02 * d1;
   const real c11 = d0 * d2 - b02 * b02, c12 = b01 * b02 - d0 * b12, c22 = d0 * d1 - b01 * b01;
   const real det = d0 * c00 + b01 * c01 + b02 * c02;
-  __global real* m = minv + 9 * n;
   if (det > (real)0 && d0 > (real)0 && d1 > (real)0 && d2 > (real)0) {
     const real inv = (real)1 / det;
     m[0] = c00 * inv * f0;      m[1] = c01 * inv * f0 * f1; m[2] = c02 * inv * f0 * f2;
@@ -114,8 +107,8 @@ void precond_invert(__global const uint* restrict nodeSeg, __global const uint* 
     m[8] = f2 * (d2 > (real)0 ? (real)1 / d2 : (real)1);
   }
 #else
-  minv[3 * n] = f0 * (d0 > (real)0 ? (real)1 / d0 : (real)1);
-  minv[3 * n + 1] = f1 * (d1 > (real)0 ? (real)1 / d1 : (real)1);
-  minv[3 * n + 2] = f2 * (d2 > (real)0 ? (real)1 / d2 : (real)1);
+  m[0] = f0 * (d0 > (real)0 ? (real)1 / d0 : (real)1);
+  m[1] = f1 * (d1 > (real)0 ? (real)1 / d1 : (real)1);
+  m[2] = f2 * (d2 > (real)0 ? (real)1 / d2 : (real)1);
 #endif
 }

@@ -145,8 +145,9 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     kernels.push_back(dynamic ? (damping ? "element_product (M, C, K_t) + gather_product"
                                          : "element_product (M, K_t) + gather_product")
                               : "element_product (K_t) + gather_product");
-    if (precond) kernels.push_back(block ? "precond_invert (3x3 blocks)" : "precond_invert (diagonal)");
-    kernels.push_back("pcg_init, pcg_update, reduce_finish (single-reduction PCG)");
+    kernels.push_back(std::string("pcg_init") +
+                      (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
+                      ", pcg_update, reduce_finish (single-reduction PCG)");
     if (batched)
       for (auto& k : kernels)
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";

@@ -8,7 +8,7 @@
 //                  node_stiffness_blocks (preconditioner blocks, rotated with the elements)
 //   internalForces element_forces + gather_sum; download f
 //   apply          upload p; element_product + gather_product; download y
-//   solve          upload b, x; precond_invert; r = b - A x, w = A M^-1 r; single-reduction PCG
+//   solve          upload b, x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); single-reduction PCG
 //                  iterations (4 launches each, no host read), stopped on the device at convergence;
 //                  non-blocking reads of the scalars every checkEvery iterations; true residual;
 //                  download x

@@ -319,7 +319,6 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   kGatherProduct_.create(build_.program, "gather_product", dev_);
   kBlocks_.create(build_.program, "node_stiffness_blocks", dev_);
   kCornerGradients_.create(build_.program, "corner_gradients", dev_);
-  kPrecondInvert_.create(build_.program, "precond_invert", dev_);
   kPcgInit_.create(build_.program, "pcg_init", dev_);
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
@@ -891,18 +890,14 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
 }
 
-void SegmentEngine::pcgPrecondition() {
-  flushCoefficients();
-  if (precond_ != PreconditionerKind::None)
-    launch(kPrecondInvert_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, free_, minv_);
-}
-
 void SegmentEngine::pcgSetup(bool zeroStart) {
   // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
   // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
+  flushCoefficients();
   if (!zeroStart) product(x_, q_, true, partialsW_);  // a zero start needs no A x
-  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, cl_uint(zeroStart ? 1 : 0), b_, q_, free_, minv_, r_,
-         z_, p_, s_, partials_);
+  // M^-1 of the coefficients is formed here too (pcg_init), stored for the iterations.
+  launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
+         b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
   productAndFinish(kReduceInit);
 }
 
@@ -933,7 +928,6 @@ void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) 
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
   std::fill(xKnown_.begin(), xKnown_.end(), 0);  // the iterations change x
-  pcgPrecondition();
   pcgSetup(false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
   segInfoStale_ = true;  // the device may have stopped a segment: the next setActive uploads the table
@@ -990,11 +984,9 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   std::vector<BatchRequest*> running;
   for (const Running& run : runs) running.push_back(run.request);
   const auto [lo, hi] = dofRange(running);
-  // The preconditioner needs neither b nor x: it is queued first and runs while the host packs x.
   std::vector<char> active(segs_.size(), 0);
   for (const Running& run : runs) active[run.request->body] = 1;
   setActive(active);
-  pcgPrecondition();
   bStage_.write(b_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   // x in one pass: packed (constrained and non-finite entries zero) into its stage, compared bit
   // for bit with what the device holds, and tested for zero. Only the running segments decide

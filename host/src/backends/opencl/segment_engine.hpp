@@ -12,7 +12,7 @@
 //   SetPositions    one write of the packed relative positions; compute_rotations (+ blocks)
 //   InternalForces  element_forces + gather_sum; one read
 //   Apply           one write of p; element_product + gather_product; one read
-//   Solve           writes of b and x; precond_invert; r = b - A x, w = A M^-1 r; PCG iterations
+//   Solve           writes of b and x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); PCG iterations
 //                   for all active segments (4 launches each, 3 with fusedReduce_ on GPUs;
 //                   kernels/opencl/pcg.cl), the device
 //                   stopping each segment at convergence, breakdown or a non-finite residual;
@@ -249,9 +249,8 @@ class SegmentEngine {
   /// w = A u (projected) into q_, then reduce_finish's scalar update in `mode`: one kernel fewer
   /// with fusedReduce_ (gather_product_finish), else product + reduce_finish.
   void productAndFinish(cl_uint mode);
-  /// M^-1 from the blocks and the flushed coefficients (nothing without a preconditioner).
-  void pcgPrecondition();
-  /// r = b - A x, u = M^-1 r, w = A u and the first scalars (after pcgPrecondition); `zeroStart`:
+  /// M^-1 from the blocks and the coefficients (nothing without a preconditioner), r = b - A x,
+  /// u = M^-1 r, w = A u and the first scalars; `zeroStart`:
   /// x = 0 on every active segment, so r = b without a product.
   void pcgSetup(bool zeroStart);
   /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
@@ -325,7 +324,7 @@ class SegmentEngine {
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
-      kCornerGradients_, kPrecondInvert_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_;
+      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
   ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
