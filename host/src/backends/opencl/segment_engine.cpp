@@ -124,6 +124,15 @@ void HostStage::read(cl_mem from, std::size_t offset, std::size_t bytes, const s
           "clEnqueueReadBuffer", device);
 }
 
+cl_event HostStage::readLater(cl_mem from, std::size_t offset, std::size_t bytes, const std::string& device) {
+  if (bytes == 0) return nullptr;
+  writable();
+  cl_event done = nullptr;
+  checkCl(clEnqueueReadBuffer(queue_, from, CL_FALSE, offset, bytes, host_ + offset, 0, nullptr, &done),
+          "clEnqueueReadBuffer", device);
+  return done;
+}
+
 ClKernel::~ClKernel() {
   if (k_) clReleaseKernel(k_);
 }
@@ -442,6 +451,9 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   for (HostStage* stage : {&posStage_, &bStage_, &xStage_, &readStage_})
     stage->create(c, ctx_->queue(), dofTotal * realSize_, dev_);
   xKnown_.assign(K, 0);
+  warmLast_.assign(K, 0);
+  axReady_.assign(K, 0);
+  axCoef_.assign(kSegCoefCount * K, 0.0);
   rAlways_ = storedStiffness_ || solver_.rotation == RotationMethod::Quaternion;
   rStale_.assign(K, 0);  // R = I uploaded below until a rotation pass runs
   std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
@@ -771,7 +783,10 @@ void SegmentEngine::launchRotations(const std::vector<char>& rotate, bool writeC
   launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
          rotGrad_, quat_, elemOut_, cl_uint(writeCorners ? 1 : 0), cl_uint(writeR ? 1 : 0));
   for (std::size_t s = 0; s < segs_.size(); ++s)
-    if (rotate[s]) rStale_[s] = !writeR;
+    if (rotate[s]) {
+      rStale_[s] = !writeR;
+      axReady_[s] = 0;  // A changed with the rotations
+    }
 }
 
 void SegmentEngine::enqueueRotations() {
@@ -820,6 +835,7 @@ void SegmentEngine::enqueueElementForces() {
 }
 
 void SegmentEngine::enqueueForces() {
+  std::fill(axReady_.begin(), axReady_.end(), 0);
   enqueueElementForces();
   launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
 }
@@ -832,8 +848,29 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
          rotGrad_, pos_, elemOut_);
   launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
+  std::fill(axReady_.begin(), axReady_.end(), 0);  // q_ now holds forces
   const auto [lo, hi] = dofRange(requests);
-  readStage_.read(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  cl_event forces = readStage_.readLater(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  // A solve usually follows, and one warm-started from the solution the device still holds (an
+  // application's frame, warm-started from the previous velocities) begins with A x. Queued behind
+  // the read, that product runs while the host takes the forces and forms b; the solve uses it
+  // when x and the coefficients are still those it was formed with (axReady_), else forms its own.
+  std::vector<char> speculate(segs_.size(), 0);
+  bool any = false;
+  for (const BatchRequest* r : requests)
+    if (warmLast_[r->body] && xKnown_[r->body]) speculate[r->body] = any = true;
+  if (any) {
+    setActive(speculate);
+    product(x_, q_, true, partialsW_);
+    for (std::size_t s = 0; s < segs_.size(); ++s)
+      if (speculate[s]) {
+        axReady_[s] = 1;
+        std::copy_n(&segCoef_[kSegCoefCount * s], kSegCoefCount, &axCoef_[kSegCoefCount * s]);
+      }
+  }
+  const cl_int status = forces ? clWaitForEvents(1, &forces) : CL_SUCCESS;
+  if (forces) clReleaseEvent(forces);
+  checkCl(status, "clWaitForEvents (forces)", dev_);
   writesDone();
   for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
 }
@@ -866,6 +903,7 @@ void SegmentEngine::enqueueElementProduct(const SystemCoeffs& c) {
 void SegmentEngine::enqueueProduct(const SystemCoeffs& c) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
+  std::fill(axReady_.begin(), axReady_.end(), 0);
   product(p_, q_, false, partialsW_);
 }
 
@@ -884,17 +922,18 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   const auto [lo, hi] = dofRange(requests);
   bStage_.write(p_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   setActive(active);
+  std::fill(axReady_.begin(), axReady_.end(), 0);
   product(p_, q_, false, partialsW_);
   readStage_.read(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   writesDone();
   for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
 }
 
-void SegmentEngine::pcgSetup(bool zeroStart) {
+void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx) {
   // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
   // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
   flushCoefficients();
-  if (!zeroStart) product(x_, q_, true, partialsW_);  // a zero start needs no A x
+  if (!zeroStart && !haveAx) product(x_, q_, true, partialsW_);  // a zero start needs no A x
   // M^-1 of the coefficients is formed here too (pcg_init), stored for the iterations.
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
          b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
@@ -928,7 +967,8 @@ void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) 
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   setAllActive();
   std::fill(xKnown_.begin(), xKnown_.end(), 0);  // the iterations change x
-  pcgSetup(false);
+  std::fill(axReady_.begin(), axReady_.end(), 0);
+  pcgSetup(false, false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
   segInfoStale_ = true;  // the device may have stopped a segment: the next setActive uploads the table
 }
@@ -1024,8 +1064,17 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     }
   }
   if (!xThere) xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  // A x formed behind the forces (internalForces) serves if x and every coefficient are unchanged.
+  bool haveAx = !zeroStart && xThere;
+  for (const Running& run : runs) {
+    const std::size_t s = run.request->body;
+    haveAx = haveAx && axReady_[s] &&
+             std::equal(&segCoef_[kSegCoefCount * s], &segCoef_[kSegCoefCount * (s + 1)], &axCoef_[kSegCoefCount * s]);
+    warmLast_[s] = !zeroStart;
+  }
+  std::fill(axReady_.begin(), axReady_.end(), 0);  // q_ is the iterations' from here
   // From here the iterations change x on the device: unknown until the read below.
-  pcgSetup(zeroStart);
+  pcgSetup(zeroStart, haveAx);
 
   // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
   // inactive on its own, so the host enqueues checkEvery iterations ahead of what it has read: each

@@ -73,6 +73,9 @@ class HostStage {
   void write(cl_mem to, std::size_t offset, std::size_t bytes, const std::string& device);
   /// Blocking read of [offset, offset + bytes) of `from` into the stage at the same offset.
   void read(cl_mem from, std::size_t offset, std::size_t bytes, const std::string& device);
+  /// The same read, not blocking: the caller waits for the event returned (and releases it) before
+  /// it reads the stage (nullptr for an empty range).
+  cl_event readLater(cl_mem from, std::size_t offset, std::size_t bytes, const std::string& device);
 
  private:
   cl_mem mem_ = nullptr;
@@ -250,9 +253,10 @@ class SegmentEngine {
   /// with fusedReduce_ (gather_product_finish), else product + reduce_finish.
   void productAndFinish(cl_uint mode);
   /// M^-1 from the blocks and the coefficients (nothing without a preconditioner), r = b - A x,
-  /// u = M^-1 r, w = A u and the first scalars; `zeroStart`:
+  /// u = M^-1 r, w = A u and the first scalars; `haveAx`: q_ holds A x already (internalForces);
+  /// `zeroStart`:
   /// x = 0 on every active segment, so r = b without a product.
-  void pcgSetup(bool zeroStart);
+  void pcgSetup(bool zeroStart, bool haveAx);
   /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
   void pcgIteration(bool last = false);
   void setPositions(const std::vector<BatchRequest*>& requests);
@@ -320,6 +324,12 @@ class SegmentEngine {
   /// Per segment: the device's x equals xStage_'s (bit for bit), so that a solve warm-started from
   /// the previous solution (an application's usual frame) uploads no x.
   std::vector<char> xKnown_;
+  /// Per segment: its last solve started from a nonzero x (so the next one likely does too).
+  std::vector<char> warmLast_;
+  /// Per segment: q_ holds free(A x_) formed by internalForces with the coefficients axCoef_ (and
+  /// the rotations and x of now); cleared by anything that writes q_.
+  std::vector<char> axReady_;
+  std::vector<double> axCoef_;
   std::vector<unsigned char> staging_;   ///< device-precision staging of other blocking reads
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
