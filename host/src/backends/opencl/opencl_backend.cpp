@@ -4,9 +4,10 @@
 // PCG whose scalars stay on the device (kernels/opencl/).
 //
 // Per call:
-//   setPositions   upload x; compute_rotations (R, a_i = R grad N_i); corner_gradients +
+//   setPositions   upload x; compute_rotations (a_i = R grad N_i; R when read); corner_gradients +
 //                  node_stiffness_blocks (preconditioner blocks, rotated with the elements)
-//   internalForces element_forces + gather_sum; download f
+//   internalForces element_forces + gather_sum; download f (a warm-started body's A x is queued
+//                  behind it for the next solve)
 //   apply          upload p; element_product + gather_product; download y
 //   solve          upload b, x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); single-reduction PCG
 //                  iterations (4 launches each, no host read), stopped on the device at convergence;

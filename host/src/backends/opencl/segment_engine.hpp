@@ -10,7 +10,9 @@
 // Per call (requests of one op, at most one per segment; only their segments are active; on CPUs
 // the requesting bodies run in tiles whose working set fits the cache, each tile as below):
 //   SetPositions    one write of the packed relative positions; compute_rotations (+ blocks)
-//   InternalForces  element_forces + gather_sum; one read
+//   InternalForces  element_forces + gather_sum; one read, not blocking, with A x queued behind it
+//                   for the bodies whose last solve was warm-started (used by the next solve if
+//                   x, the rotations and the coefficients are unchanged)
 //   Apply           one write of p; element_product + gather_product; one read
 //   Solve           writes of b and x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); PCG iterations
 //                   for all active segments (4 launches each, 3 with fusedReduce_ on GPUs;
