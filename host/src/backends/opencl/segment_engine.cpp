@@ -860,8 +860,16 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   for (const BatchRequest* r : requests)
     if (warmLast_[r->body] && xKnown_[r->body]) speculate[r->body] = any = true;
   if (any) {
-    setActive(speculate);
-    product(x_, q_, true, partialsW_);
+    try {
+      setActive(speculate);
+      product(x_, q_, true, partialsW_);
+    } catch (...) {
+      if (forces) {  // the read still writes into the stage: wait for it before the stage is reused
+        clWaitForEvents(1, &forces);
+        clReleaseEvent(forces);
+      }
+      throw;
+    }
     for (std::size_t s = 0; s < segs_.size(); ++s)
       if (speculate[s]) {
         axReady_[s] = 1;
