@@ -48,6 +48,19 @@ COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const re
 #endif
 }
 
+/* z = M^-1 r with the node's inverse m in private memory (as node_preconditioner formed it). */
+COROFEM_FN void apply_node_inverse(const real* m, const real* r, real* z) {
+#if defined(COROFEM_PRECOND_BLOCK)
+  z[0] = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];
+  z[1] = m[3] * r[0] + m[4] * r[1] + m[5] * r[2];
+  z[2] = m[6] * r[0] + m[7] * r[1] + m[8] * r[2];
+#else
+  z[0] = m[0] * r[0];
+  z[1] = m[1] * r[1];
+  z[2] = m[2] * r[2];
+#endif
+}
+
 /* M^-1 of the solve's coefficients from the node blocks (node_preconditioner, precond.cl), stored
  * for pcg_update; r = free (b - A x) (q = A x; zeroStart != 0: x = 0, q is not read), u = M^-1 r,
  * p = s = 0; partials (r . u, r . r, |free b|^2). */
@@ -84,7 +97,11 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
       rn[k] = zeroStart ? bd : bd - free[d] * q[d];
       bb += (sum_real)bd * (sum_real)bd;
     }
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+    apply_node_inverse(m, rn, un);  /* from the private inverse, not a read back of what was stored */
+#else
     apply_preconditioner(n, minv, rn, un);
+#endif
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const uint d = 3 * n + k;

@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <random>
+#include <string>
 
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
@@ -126,7 +127,12 @@ TEST_P(EmbedDevice, MatchesHostReference) {
 /// kernels do not have is refused with the fix.
 TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
   struct LanesEnv {  // restores the environment whatever the test's outcome
-    ~LanesEnv() { unsetenv("COROFEM_SURFACE_LANES"); }
+    const char* was = std::getenv("COROFEM_SURFACE_LANES");
+    std::string value = was ? was : "";
+    ~LanesEnv() {
+      if (was) setenv("COROFEM_SURFACE_LANES", value.c_str(), 1);
+      else unsetenv("COROFEM_SURFACE_LANES");
+    }
   } restore;
   const Scene s = makeScene();
   const std::size_t n = s.binding.vertexCount();

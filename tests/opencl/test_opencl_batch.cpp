@@ -285,6 +285,56 @@ TEST_P(OpenCLBatch, TilesOfOneBodyMatchToo) {
   everyRequestMatches(o);
 }
 
+// Frames of every body in one batch: positions, forces, a solve. The even bodies warm-start each
+// solve from their previous solution (so internalForces queues their A x behind the forces' read,
+// for only some of the round's bodies, with its own segment table and coefficient uploads); the odd
+// ones start from zero. Every solution and count equals the body's own backend's, bit for bit, in
+// both the default and the one-body-per-tile configurations.
+TEST_P(OpenCLBatch, WarmAndColdStartsInOneRoundMatchEachBodyAlone) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t K = ps.size();
+  SolverDesc s = solver();
+  s.maxIterations = 10;  // capped: each answer depends on its start and on A x
+  s.tolerance = 1e-14;
+  for (std::size_t tileBytes : {std::size_t{0}, std::size_t{1}}) {
+    detail::OpenCLOptions o;
+    if (tileBytes) o.tileBytes = static_cast<long long>(tileBytes);
+    auto batch = batchOf(ps, s, o);
+    auto singles = singlesOf(ps, s, o);
+    std::vector<Eigen::VectorXd> sol(K), alone(K);
+    for (std::size_t i = 0; i < K; ++i) sol[i] = alone[i] = Eigen::VectorXd::Zero(ps[i].dofCount());
+    for (int frame = 0; frame < 4; ++frame) {
+      std::vector<Eigen::VectorXd> x(K), b(K), f(K);
+      std::vector<BatchRequest> set, forces, solves;
+      const detail::SystemCoeffs c = frame < 2 ? detail::SystemCoeffs{14400.0, 120.0, 1.0}
+                                               : detail::SystemCoeffs{3600.0, 60.0, 1.0};
+      for (std::size_t i = 0; i < K; ++i) {
+        x[i] = deformed(ps[i], 0.2 * frame + 0.3 * static_cast<double>(i));
+        b[i] = randomVector(ps[i].dofCount(), 300 + 10 * static_cast<unsigned>(frame) + static_cast<unsigned>(i));
+        if (i % 2 == 1) sol[i].setZero(), alone[i].setZero();
+      }
+      for (std::size_t i = 0; i < K; ++i) set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+      for (std::size_t i = 0; i < K; ++i) forces.push_back(request(BatchOp::InternalForces, i, nullptr, &f[i]));
+      for (std::size_t i = 0; i < K; ++i) solves.push_back(request(BatchOp::Solve, i, &b[i], &sol[i], c));
+      runOk(*batch, set);
+      runOk(*batch, forces);
+      runOk(*batch, solves);
+      for (std::size_t i = 0; i < K; ++i) {
+        Eigen::VectorXd fs;
+        singles[i]->setPositions(x[i]);
+        singles[i]->internalForces(fs);
+        const detail::LinearSolveStats st = singles[i]->solve(c, b[i], alone[i]);
+        EXPECT_TRUE(sameBits(f[i], fs)) << ps[i].name << ", frame " << frame;
+        EXPECT_TRUE(sameBits(sol[i], alone[i])) << ps[i].name << ", frame " << frame << ", tiles " << tileBytes
+                                                << ": max rel. difference " << maxRel(sol[i], alone[i]);
+        EXPECT_EQ(solves[i].stats.iterations, st.iterations) << ps[i].name << ", frame " << frame;
+        EXPECT_EQ(solves[i].stats.relativeResidual, st.relativeResidual) << ps[i].name << ", frame " << frame;
+      }
+    }
+  }
+}
+
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {
   // An easy system (mass-dominated: cond ~ 1) and a hard one (static: cond ~ 1e3) of the same beam
   // in one round: the easy body stops after fewer iterations while the hard one goes on, and each

@@ -455,7 +455,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   axReady_.assign(K, 0);
   axCoef_.assign(kSegCoefCount * K, 0.0);
   rAlways_ = storedStiffness_ || solver_.rotation == RotationMethod::Quaternion;
-  rStale_.assign(K, 0);  // R = I uploaded below until a rotation pass runs
+  rStale_.assign(K, 0);  // R = I (uploaded with the element data) until a rotation pass runs
   std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
   for (const Segment& sg : segs_) {
     const Eigen::VectorXd& rest = sg.problem->restPositions;
@@ -779,14 +779,13 @@ void SegmentEngine::refreshBlocks(bool cornersWritten) {
 }
 
 void SegmentEngine::launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR) {
+  for (std::size_t s = 0; s < segs_.size(); ++s)
+    if (rotate[s]) axReady_[s] = 0;  // A changes with the rotations (the positions may already be up)
   setActive(rotate);
   launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
          rotGrad_, quat_, elemOut_, cl_uint(writeCorners ? 1 : 0), cl_uint(writeR ? 1 : 0));
   for (std::size_t s = 0; s < segs_.size(); ++s)
-    if (rotate[s]) {
-      rStale_[s] = !writeR;
-      axReady_[s] = 0;  // A changed with the rotations
-    }
+    if (rotate[s]) rStale_[s] = !writeR;
 }
 
 void SegmentEngine::enqueueRotations() {
@@ -848,17 +847,19 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
          rotGrad_, pos_, elemOut_);
   launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
-  std::fill(axReady_.begin(), axReady_.end(), 0);  // q_ now holds forces
-  const auto [lo, hi] = dofRange(requests);
-  cl_event forces = readStage_.readLater(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  for (const BatchRequest* r : requests) axReady_[r->body] = 0;  // their q_ now holds forces
   // A solve usually follows, and one warm-started from the solution the device still holds (an
   // application's frame, warm-started from the previous velocities) begins with A x. Queued behind
-  // the read, that product runs while the host takes the forces and forms b; the solve uses it
-  // when x and the coefficients are still those it was formed with (axReady_), else forms its own.
+  // the read of the forces, that product runs while the host takes them and forms b; the solve uses
+  // it when x, the rotations and the coefficients are still those it was formed with (axReady_),
+  // else forms its own. For the bodies whose last solve was warm-started: a body that is only
+  // evaluated (no solve follows) pays one product for nothing.
   std::vector<char> speculate(segs_.size(), 0);
   bool any = false;
   for (const BatchRequest* r : requests)
     if (warmLast_[r->body] && xKnown_[r->body]) speculate[r->body] = any = true;
+  const auto [lo, hi] = dofRange(requests);
+  cl_event forces = readStage_.readLater(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   if (any) {
     try {
       setActive(speculate);
@@ -870,16 +871,17 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
       }
       throw;
     }
-    for (std::size_t s = 0; s < segs_.size(); ++s)
-      if (speculate[s]) {
-        axReady_[s] = 1;
-        std::copy_n(&segCoef_[kSegCoefCount * s], kSegCoefCount, &axCoef_[kSegCoefCount * s]);
-      }
   }
   const cl_int status = forces ? clWaitForEvents(1, &forces) : CL_SUCCESS;
   if (forces) clReleaseEvent(forces);
   checkCl(status, "clWaitForEvents (forces)", dev_);
-  writesDone();
+  // Not writesDone(): writes queued after the read (the segment table, the coefficients of the
+  // product above) may still be waiting; the next blocking read releases them.
+  for (std::size_t s = 0; s < segs_.size(); ++s)
+    if (speculate[s]) {
+      axReady_[s] = 1;
+      std::copy_n(&segCoef_[kSegCoefCount * s], kSegCoefCount, &axCoef_[kSegCoefCount * s]);
+    }
   for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
 }
 
@@ -930,7 +932,7 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   const auto [lo, hi] = dofRange(requests);
   bStage_.write(p_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   setActive(active);
-  std::fill(axReady_.begin(), axReady_.end(), 0);
+  for (const BatchRequest* r : requests) axReady_[r->body] = 0;  // their q_ takes the product
   product(p_, q_, false, partialsW_);
   readStage_.read(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   writesDone();
@@ -1066,10 +1068,13 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
         zeroParts[c] = zero;
       });
     });
+    bool bodyZero = true;
     for (std::size_t c = 0; c < sameParts.size(); ++c) {
       xThere = xThere && known && sameParts[c];
-      zeroStart = zeroStart && zeroParts[c];
+      bodyZero = bodyZero && zeroParts[c];
     }
+    zeroStart = zeroStart && bodyZero;
+    warmLast_[run.request->body] = !bodyZero;  // its own start, not the round's
   }
   if (!xThere) xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   // A x formed behind the forces (internalForces) serves if x and every coefficient are unchanged.
@@ -1078,9 +1083,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     const std::size_t s = run.request->body;
     haveAx = haveAx && axReady_[s] &&
              std::equal(&segCoef_[kSegCoefCount * s], &segCoef_[kSegCoefCount * (s + 1)], &axCoef_[kSegCoefCount * s]);
-    warmLast_[s] = !zeroStart;
   }
-  std::fill(axReady_.begin(), axReady_.end(), 0);  // q_ is the iterations' from here
+  for (const Running& run : runs) axReady_[run.request->body] = 0;  // their q_ is the iterations' from here
   // From here the iterations change x on the device: unknown until the read below.
   pcgSetup(zeroStart, haveAx);
 
