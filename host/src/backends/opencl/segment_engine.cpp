@@ -1076,7 +1076,11 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     zeroStart = zeroStart && bodyZero;
     warmLast_[run.request->body] = !bodyZero;  // its own start, not the round's
   }
-  if (!xThere) xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  if (!xThere) {
+    xStage_.write(x_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+    for (std::size_t s = 0; s < segs_.size(); ++s)  // the write covers the bodies in between too
+      if (segs_[s].dofBegin() >= lo && segs_[s].dofBegin() < hi) axReady_[s] = 0;
+  }
   // A x formed behind the forces (internalForces) serves if x and every coefficient are unchanged.
   bool haveAx = !zeroStart && xThere;
   for (const Running& run : runs) {
