@@ -228,8 +228,9 @@ class DynamicSolver final : public BodySolver {
   };
   State capture() const;
   void restore(const State& s);
-  /// Makes `s` (the state before a step) what rollback() returns to.
-  void keepForRollback(const State& s);
+  /// Makes `s` (the state before a step) what rollback() returns to; its vectors are moved, not
+  /// copied (a step of a 10k-element body copied 5 vectors of 3N doubles here).
+  void keepForRollback(State&& s);
 
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs (0 on constrained ones).
   void initialAcceleration();

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string>
+#include <utility>
 
 namespace corofem::detail {
 
@@ -58,15 +59,15 @@ void DynamicSolver::initialAcceleration() {
          "': the initial acceleration is not finite; check the material, the loads and the initial velocity");
 }
 
-void DynamicSolver::keepForRollback(const State& s) {
-  xPrev_ = s.x;
-  vPrev_ = s.v;
-  aPrev_ = s.a;
+void DynamicSolver::keepForRollback(State&& s) {
+  xPrev_ = std::move(s.x);
+  vPrev_ = std::move(s.v);
+  aPrev_ = std::move(s.a);
   workPrev_ = s.work;
   tPrev_ = s.t;
-  fextPrevSaved_ = s.fextPrev;
+  fextPrevSaved_ = std::move(s.fextPrev);
   supportWorkSaved_ = s.supportWork;
-  reactionPrevSaved_ = s.reactionPrev;
+  reactionPrevSaved_ = std::move(s.reactionPrev);
 }
 
 DynamicSolver::State DynamicSolver::capture() const {
@@ -99,7 +100,7 @@ BodyStepStats DynamicSolver::step(int index, int count) {
     initialAcceleration();
     started_ = true;
   }
-  const State start = capture();
+  State start = capture();
   const double h = desc_.timeStep;
   const int maxSubsteps = std::max(1, desc_.maxSubsteps);
   const std::string where = "time step " + std::to_string(index) + "/" + std::to_string(count);
@@ -145,7 +146,7 @@ BodyStepStats DynamicSolver::step(int index, int count) {
     std::fprintf(stderr, "dynamic step %d/%d: retried, succeeded with %d substeps\n", index, count, total.substeps);
 
   // The rollback copy is the state before the whole step, whatever the substeps.
-  keepForRollback(start);
+  keepForRollback(std::move(start));
   return total;
 }
 
@@ -300,12 +301,12 @@ BodyStepStats DynamicSolver::idleStep(int, int) {
     initialAcceleration();
     started_ = true;
   }
-  const State start = capture();
+  State start = capture();
   t_ = start.t + desc_.timeStep;
   v_.setZero();
   a_.setZero();
   fextPrev_ = problem_.externalForce(t_, /*dynamic=*/true);
-  keepForRollback(start);
+  keepForRollback(std::move(start));
   BodyStepStats stats;
   stats.newtonIterations = 0;
   stats.converged = true;
