@@ -30,24 +30,6 @@
 #include "precond.cl"
 #endif
 
-/* z = M^-1 r for the dofs of node n (M^-1 as pcg_init stored it). */
-COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const real* r, real* z) {
-#if defined(COROFEM_PRECOND_BLOCK)
-  __global const real* m = minv + 9 * n;
-  z[0] = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];
-  z[1] = m[3] * r[0] + m[4] * r[1] + m[5] * r[2];
-  z[2] = m[6] * r[0] + m[7] * r[1] + m[8] * r[2];
-#elif defined(COROFEM_PRECOND_DIAG)
-  z[0] = minv[3 * n] * r[0];
-  z[1] = minv[3 * n + 1] * r[1];
-  z[2] = minv[3 * n + 2] * r[2];
-#else
-  z[0] = r[0];
-  z[1] = r[1];
-  z[2] = r[2];
-#endif
-}
-
 /* z = M^-1 r with the node's inverse m in private memory (as node_preconditioner formed it). */
 COROFEM_FN void apply_node_inverse(const real* m, const real* r, real* z) {
 #if defined(COROFEM_PRECOND_BLOCK)
@@ -58,6 +40,21 @@ COROFEM_FN void apply_node_inverse(const real* m, const real* r, real* z) {
   z[0] = m[0] * r[0];
   z[1] = m[1] * r[1];
   z[2] = m[2] * r[2];
+#endif
+}
+
+/* z = M^-1 r for the dofs of node n (M^-1 as pcg_init stored it; the identity without a
+ * preconditioner). */
+COROFEM_FN void apply_preconditioner(uint n, __global const real* minv, const real* r, real* z) {
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+  real m[COROFEM_NODE_INVERSE];
+  #pragma unroll
+  for (int k = 0; k < COROFEM_NODE_INVERSE; ++k) m[k] = minv[COROFEM_NODE_INVERSE * n + k];
+  apply_node_inverse(m, r, z);
+#else
+  z[0] = r[0];
+  z[1] = r[1];
+  z[2] = r[2];
 #endif
 }
 
@@ -78,16 +75,11 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
 #endif
   sum_real ru = 0, rr = 0, bb = 0;
   for (uint n = first; n < last; ++n) {
-#if defined(COROFEM_PRECOND_BLOCK)
-    real m[9];
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+    real m[COROFEM_NODE_INVERSE];
     node_preconditioner(n, massCoef, stiffCoef, blocks, mass, free, m);
     #pragma unroll
-    for (int k = 0; k < 9; ++k) minv[9 * n + k] = m[k];
-#elif defined(COROFEM_PRECOND_DIAG)
-    real m[3];
-    node_preconditioner(n, massCoef, stiffCoef, blocks, mass, free, m);
-    #pragma unroll
-    for (int k = 0; k < 3; ++k) minv[3 * n + k] = m[k];
+    for (int k = 0; k < COROFEM_NODE_INVERSE; ++k) minv[COROFEM_NODE_INVERSE * n + k] = m[k];
 #endif
     real rn[3], un[3];
     #pragma unroll

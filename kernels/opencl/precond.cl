@@ -19,6 +19,12 @@
 #else
 #define COROFEM_NODE_BLOCK 3
 #endif
+/* Reals per node in `minv`, the inverse: a row-major 3x3 (block) or the diagonal's 3. */
+#ifdef COROFEM_PRECOND_BLOCK
+#define COROFEM_NODE_INVERSE 9
+#else
+#define COROFEM_NODE_INVERSE 3
+#endif
 
 /* Element pass: a_c of every corner into the element output buffer (store_corner), for
  * node_stiffness_blocks to gather; used where compute_rotations does not run (linear formulation,

@@ -860,21 +860,22 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
     if (warmLast_[r->body] && xKnown_[r->body]) speculate[r->body] = any = true;
   const auto [lo, hi] = dofRange(requests);
   cl_event forces = readStage_.readLater(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
+  auto waitForForces = [&]() {  // also on an error below: the read writes into the stage until done
+    const cl_int status = forces ? clWaitForEvents(1, &forces) : CL_SUCCESS;
+    if (forces) clReleaseEvent(forces);
+    forces = nullptr;
+    return status;
+  };
   if (any) {
     try {
       setActive(speculate);
       product(x_, q_, true, partialsW_);
     } catch (...) {
-      if (forces) {  // the read still writes into the stage: wait for it before the stage is reused
-        clWaitForEvents(1, &forces);
-        clReleaseEvent(forces);
-      }
+      waitForForces();
       throw;
     }
   }
-  const cl_int status = forces ? clWaitForEvents(1, &forces) : CL_SUCCESS;
-  if (forces) clReleaseEvent(forces);
-  checkCl(status, "clWaitForEvents (forces)", dev_);
+  checkCl(waitForForces(), "clWaitForEvents (forces)", dev_);
   // Not writesDone(): writes queued after the read (the segment table, the coefficients of the
   // product above) may still be waiting; the next blocking read releases them.
   for (std::size_t s = 0; s < segs_.size(); ++s)
