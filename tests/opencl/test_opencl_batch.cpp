@@ -11,6 +11,7 @@
 // largest entry, solutions cond(A) * tol ~ 1e-8; float: positions rounded to float give 1e-4 on
 // forces, the float operator times cond(A) ~1e3 gives 1e-3 on solutions).
 #include "backends/opencl/opencl_backend.hpp"
+#include "backends/opencl/segment_engine.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "solve/batch.hpp"
 #include "util/error.hpp"
@@ -283,6 +284,18 @@ TEST_P(OpenCLBatch, TilesOfOneBodyMatchToo) {
   detail::OpenCLOptions o;
   o.tileBytes = 1;
   everyRequestMatches(o);
+}
+
+// The CPU tile budget (segment_engine.cpp: measured on 8 and 32 MiB L3s): 8 MiB where the cache
+// holds it, the whole cache below that, a quarter of it above 32 MiB.
+TEST(OpenCLBatchTiles, DefaultTileBytesFollowsTheCache) {
+  constexpr std::size_t MiB = std::size_t{1} << 20;
+  EXPECT_EQ(detail::defaultTileBytes(0), 0u);  // no cache reported: one tile
+  EXPECT_EQ(detail::defaultTileBytes(2 * MiB), 2 * MiB);
+  EXPECT_EQ(detail::defaultTileBytes(8 * MiB), 8 * MiB);
+  EXPECT_EQ(detail::defaultTileBytes(16 * MiB), 8 * MiB);
+  EXPECT_EQ(detail::defaultTileBytes(32 * MiB), 8 * MiB);
+  EXPECT_EQ(detail::defaultTileBytes(96 * MiB), 24 * MiB);
 }
 
 // Frames of every body in one batch: positions, forces, a solve. The even bodies warm-start each

@@ -28,7 +28,7 @@ struct OpenCLOptions {
   std::size_t hostChunk = 0;
   int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
   bool assumeNoFp64 = false;     ///< tests: treat the device as lacking cl_khr_fp64 (the error path of double/mixed)
-  long long tileBytes = -1;      ///< batches: bodies run together up to this working set; -1 = by device (CPUs: a quarter of the cache, GPUs: all), 0 = all
+  long long tileBytes = -1;      ///< batches: bodies run together up to this working set; -1 = by device (CPUs: defaultTileBytes of the cache, GPUs: all), 0 = all
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.

@@ -148,6 +148,18 @@ void ClKernel::create(cl_program program, const char* name, const std::string& d
 
 // ---------------------------------------------------------------------------- set-up
 
+std::size_t defaultTileBytes(std::size_t cacheBytes) {
+  // Measured with bench_batch (100 bodies of 2,000 elements, float, PoCL on 2 cores):
+  // - 32 MiB L3: tiles of ~20 bodies (~7 MB) solved 1.5x faster per body than one tile of 100
+  //   (~35 MB, streamed from memory every PCG iteration), with 5x the launches.
+  // - 8 MiB L3: tiles of 2 MiB (a quarter of the cache, the earlier rule: 4 bodies a tile) gave
+  //   1.75-1.90x the throughput of separate runs, 6-8 MiB tiles 2.4-2.6x (three rounds in turns):
+  //   there a tile's launches cost more than the misses of a working set the size of the cache.
+  // So: up to 8 MiB, at least a quarter of the cache, at most the cache.
+  constexpr std::size_t kTileCap = std::size_t{8} << 20;
+  return std::min(cacheBytes, std::max(cacheBytes / 4, kTileCap));
+}
+
 SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const SolverDesc& solver,
                              std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options)
     : ctx_(std::move(ctx)), solver_(solver), precond_(solver.preconditioner),
@@ -203,14 +215,11 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   hostChunk_ = options.hostChunk ? options.hostChunk : kHostChunk;
   if (const char* env = std::getenv("COROFEM_OPENCL_FUSED"); env && *env && options.fusedReduce < 0)
     fusedReduce_ = std::string(env) != "0";  // tuning experiments
-  // Tiles of bodies per launch sequence (CPUs only): a quarter of the device's global memory cache
-  // (the L3 on PoCL), measured on 100 bodies of 2160 elements (2-core EPYC, 32 MiB L3): tiles of
-  // ~20 bodies (~7 MB) solved 1.5x faster per body than one tile of 100 (~35 MB, streamed from
-  // memory every PCG iteration), with 5x the launches (still 20x fewer than one backend per body).
+  // Tiles of bodies per launch sequence (CPUs only; defaultTileBytes).
   if (!ctx_->info().gpu) {
     cl_ulong cache = 0;
     clGetDeviceInfo(ctx_->device(), CL_DEVICE_GLOBAL_MEM_CACHE_SIZE, sizeof(cache), &cache, nullptr);
-    tileBytes_ = static_cast<std::size_t>(cache / 4);
+    tileBytes_ = defaultTileBytes(static_cast<std::size_t>(cache));
   }
   if (options.tileBytes >= 0) tileBytes_ = static_cast<std::size_t>(options.tileBytes);
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)

@@ -102,6 +102,12 @@ class ClKernel {
   const char* name_ = "";
 };
 
+/// The working set of the bodies a batch runs together on a CPU device whose last-level cache holds
+/// `cacheBytes` (CL_DEVICE_GLOBAL_MEM_CACHE_SIZE): at least a quarter of the cache and up to
+/// 8 MiB, never more than the cache (segment_engine.cpp says what was measured). 0 (one tile) when
+/// the device reports no cache.
+std::size_t defaultTileBytes(std::size_t cacheBytes);
+
 class SegmentEngine {
  public:
   /// All problems share the program (precision, rotation method, preconditioner, options of
