@@ -300,9 +300,13 @@ double measuredBandwidth(detail::cl::Context& ctx) {
 /// vertex, or the 1 MB of node positions):
 ///   pass 1 (positions)  node indices 16 + weights 4r read, the 3r position scratch written, node
 ///                       positions 3r N / n read;
-///   pass 2 (normals)    ring 4K read, the 3r scratch read, the 24-byte output vertex written;
+///   pass 2 (normals)    the ring entries read (4 bytes each: K per vertex, but none for a slot
+///                       that holds consecutive vertices across its block of vector lanes) and the
+///                       blocks' K + 1 run words, the 3r scratch read, the 24-byte output vertex
+///                       written;
 ///   pass 3 (long rings) per such vertex 8 bytes of index + 4 per ring entry read, 12 written.
-/// (UV sphere: K = 6, 2 poles of 1000 entries: 104.3 B in float, 144.5 B in double.) Not counted, as
+/// (UV sphere: K = 6, 2 poles of 1000 entries: 104.3 B in float, 144.5 B in double, when every
+/// slot's entries are read; with the runs, fewer: ring_bytes_per_vertex says how many.) Not counted, as
 /// this design no longer moves them: triangles, face vectors, the triangle CSR. The 12 / 24 MB
 /// scratch may stay in the 32 MB L3 between the passes; it is counted as moved anyway (written and
 /// read). bandwidth_fraction = (bytes / time) / the copy kernel's bandwidth on the same device, in
@@ -369,10 +373,14 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
     }
   }
   clReleaseMemObject(positions);
-  const detail::DeviceSurfaceLayout layout = detail::deviceSurfaceLayout(*binding);
+  const std::size_t lanes = std::getenv("COROFEM_SURFACE_LANES")
+                                ? std::strtoul(std::getenv("COROFEM_SURFACE_LANES"), nullptr, 10)
+                                : detail::defaultSurfaceLanes(ctx->info().gpu, dbl);
+  const detail::DeviceSurfaceLayout layout = detail::deviceSurfaceLayout(*binding, lanes);
   const double r = dbl ? 8.0 : 4.0, nv = static_cast<double>(n);
   const double bytes = nv * (16 + 4 * r + 3 * r) + 3 * r * static_cast<double>(nodes) +        // pass 1
-                       nv * (4.0 * static_cast<double>(layout.slots) + 3 * r + 24) +           // pass 2
+                       4.0 * static_cast<double>(layout.ringEntriesRead + layout.runWords) +  // pass 2
+                       nv * (3 * r + 24) +
                        static_cast<double>(layout.overflowVertices) * (8 + 12) +                // pass 3
                        4.0 * static_cast<double>(layout.overflowEntries);
   const double bandwidth = measuredBandwidth(*ctx);
@@ -380,6 +388,7 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
   state.SetBytesProcessed(static_cast<std::int64_t>(static_cast<double>(state.iterations()) * bytes));
   state.counters["bytes_per_vertex"] = bytes / nv;
   state.counters["ring_slots"] = static_cast<double>(layout.slots);
+  state.counters["ring_bytes_per_vertex"] = 4.0 * static_cast<double>(layout.ringEntriesRead + layout.runWords) / nv;
   state.counters["copy_GBps"] = bandwidth / 1e9;
   state.counters["bandwidth_fraction"] =
       benchmark::Counter(static_cast<double>(state.iterations()) * bytes / bandwidth, benchmark::Counter::kIsRate);

@@ -24,8 +24,11 @@
  * Pass 2 works on SURF_W consecutive vertices at once in vector types (lanes = vertices, the
  * structure-of-arrays streams load as vectors). Where one ring slot of those SURF_W vertices holds
  * SURF_W consecutive vertices (a regular mesh numbered row by row, as the benchmark's UV sphere), the
- * neighbours' positions are one vector load; otherwise they are gathered lane by lane. Both read the
- * same values, so the result does not depend on which path ran. SURF_W = 1 (GPUs) is one vertex per
+ * neighbours' positions are one vector load; otherwise they are gathered lane by lane. Which slots of
+ * a block are such runs, and where each starts, is found once on the host (blockRuns), so the kernel
+ * tests nothing per slot and reads no ring entries for such a slot (a row-by-row mesh then streams
+ * SURF_K + 1 words per block instead of SURF_K per vertex). Both paths read the same values, so the
+ * result does not depend on which ran. SURF_W = 1 (GPUs) is one vertex per
  * work-item in scalars: there the lanes are the work-items of a warp, whose loads of consecutive
  * vertices coalesce, and 16-wide vectors per work-item would only cost registers and occupancy.
  *
@@ -83,11 +86,8 @@ typedef uint uintW;
 typedef float floatW;
 #define VLOADW(p) (*(p))
 #define CONVERT_FLOATW(x) ((float)(x))
-#define SURF_FIRST(r) (r)
-#define SURF_LANES 0u
 #define GATHERW(p, i) ((p)[(i)])
 #define SURF_INV_LENGTH(l2) ((l2) > (realW)0 ? (realW)1 / sqrt(l2) : (realW)0)
-inline bool surf_all_zero(uintW t) { return t == 0u; }
 #else
 #ifdef COROFEM_DOUBLE
 typedef SURF_CAT(double, SURF_W) realW;
@@ -98,33 +98,18 @@ typedef SURF_CAT(uint, SURF_W) uintW;
 typedef SURF_CAT(float, SURF_W) floatW;
 #define VLOADW(p) SURF_CAT(vload, SURF_W)(0, (p))
 #define CONVERT_FLOATW SURF_CAT(convert_float, SURF_W)
-#define SURF_FIRST(r) ((r).s0)
 #define SURF_INV_LENGTH(l2) select((realW)0, (realW)1 / sqrt(l2), (l2) > (realW)0)
 #endif
 
 #if SURF_W == 1
 /* one vertex per work-item: no lane helpers */
 #elif SURF_W == 8
-#define SURF_LANES ((uintW)(0, 1, 2, 3, 4, 5, 6, 7))
 #define GATHERW(p, i) ((realW)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], (p)[(i).s5], \
                                (p)[(i).s6], (p)[(i).s7]))
-/* lanes 0..7 all zero, as a few vector ORs (PoCL's all() extracts lane by lane) */
-inline bool surf_all_zero(uintW t) {
-  const uint4 t4 = t.lo | t.hi;
-  const uint2 t2 = t4.lo | t4.hi;
-  return (t2.x | t2.y) == 0;
-}
 #elif SURF_W == 16
-#define SURF_LANES ((uintW)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
 #define GATHERW(p, i) ((realW)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], (p)[(i).s5], \
                                (p)[(i).s6], (p)[(i).s7], (p)[(i).s8], (p)[(i).s9], (p)[(i).sa], (p)[(i).sb], \
                                (p)[(i).sc], (p)[(i).sd], (p)[(i).se], (p)[(i).sf]))
-inline bool surf_all_zero(uintW t) {
-  const uint8 t8 = t.lo | t.hi;
-  const uint4 t4 = t8.lo | t8.hi;
-  const uint2 t2 = t4.lo | t4.hi;
-  return (t2.x | t2.y) == 0;
-}
 #else
 #error "SURF_W must be 1, 8 or 16"
 #endif
@@ -139,17 +124,33 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
   vstore8((float8)(my.s6, mz.s6, ox.s7, oy.s7, oz.s7, mx.s7, my.s7, mz.s7), 0, d + 40);
 }
 
-/* The positions (x, y, z) of ring slot r of SURF_W vertices, relative to theirs (xx, xy, xz). */
-#define SURF_NEIGHBOUR(r, bx, by, bz)                                                      \
-  if (surf_all_zero((r) ^ ((uintW)SURF_FIRST(r) + SURF_LANES))) {                          \
-    bx = VLOADW(px + SURF_FIRST(r)) - xx;                                                  \
-    by = VLOADW(py + SURF_FIRST(r)) - xy;                                                  \
-    bz = VLOADW(pz + SURF_FIRST(r)) - xz;                                                  \
-  } else {                                                                                 \
-    bx = GATHERW(px, r) - xx;                                                              \
-    by = GATHERW(py, r) - xy;                                                              \
-    bz = GATHERW(pz, r) - xz;                                                              \
+/* The positions (x, y, z) of ring slot i of the SURF_W vertices v.., relative to theirs (xx, xy, xz).
+ * runs[0] (from the host, per block) has bit i set when the slot holds SURF_W consecutive vertices
+ * q, q + 1, .. (a mesh numbered row by row), and then runs[1 + i] = q: the neighbours are vector
+ * loads and the slot's ring entries are not read at all. Otherwise the entries are read and the
+ * neighbours gathered lane by lane. Both read the same positions. */
+#if SURF_W == 1
+#define SURF_NEIGHBOUR(i, bx, by, bz)           \
+  {                                             \
+    const uint q = ring[(i) * S + v];           \
+    bx = px[q] - xx;                            \
+    by = py[q] - xy;                            \
+    bz = pz[q] - xz;                            \
   }
+#else
+#define SURF_NEIGHBOUR(i, bx, by, bz)                     \
+  if ((runs[0] >> (i)) & 1u) {                            \
+    const uint q = runs[1 + (i)];                         \
+    bx = VLOADW(px + q) - xx;                             \
+    by = VLOADW(py + q) - xy;                             \
+    bz = VLOADW(pz + q) - xz;                             \
+  } else {                                                \
+    const uintW r = VLOADW(ring + (i) * S + v);           \
+    bx = GATHERW(px, r) - xx;                             \
+    by = GATHERW(py, r) - xy;                             \
+    bz = GATHERW(pz, r) - xz;                             \
+  }
+#endif
 
 /* ring: SURF_K streams of stride S (slot i of vertex v at ring[i * S + v]; entries of the padding
  * vertices v >= vertexCount hold v). out: 6 floats per vertex (position + c, unit normal); the normal
@@ -157,10 +158,13 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
  * absolute positions) comes as c = chi + clo, both in the device precision: in float, chi = (float)c
  * and clo = (float)(c - chi), so that the small relative position takes clo first and the sum rounds
  * once, at the output's magnitude (half an ulp of |x|) instead of twice (c itself rounded to float,
- * then the sum). In double, clo = 0. S is a multiple of SURF_W; the scratch's padding is zero. */
+ * then the sum). In double, clo = 0. S is a multiple of SURF_W; the scratch's padding is zero.
+ * blockRuns: per block of SURF_W vertices SURF_K + 1 words: which ring slots hold SURF_W consecutive
+ * vertices (bit i), then each such slot's first vertex (SURF_NEIGHBOUR); not read with SURF_W = 1. */
 __kernel void surface_normals(const uint vertexCount, const uint S, __global const uint* restrict ring,
                               __global const real* restrict pos, __global float* restrict out, const real chix,
-                              const real chiy, const real chiz, const real clox, const real cloy, const real cloz) {
+                              const real chiy, const real chiz, const real clox, const real cloy, const real cloz,
+                              __global const uint* restrict blockRuns) {
   __global const real* px = pos;
   __global const real* py = pos + S;
   __global const real* pz = pos + 2 * S;
@@ -168,14 +172,15 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     const uint v = ((uint)get_global_id(0) * SURF_BPW + blk) * SURF_W;
     if (v >= vertexCount) return;
     const realW xx = VLOADW(px + v), xy = VLOADW(py + v), xz = VLOADW(pz + v);
+#if SURF_W > 1
+    __global const uint* runs = blockRuns + (v / SURF_W) * (SURF_K + 1);
+#endif
     realW fx, fy, fz;
-    uintW r = VLOADW(ring + v);
-    SURF_NEIGHBOUR(r, fx, fy, fz)
+    SURF_NEIGHBOUR(0, fx, fy, fz)
     realW ax = fx, ay = fy, az = fz, nx = 0, ny = 0, nz = 0;
     for (uint i = 1; i < SURF_K; ++i) {
-      r = VLOADW(ring + i * S + v);
       realW bx, by, bz;
-      SURF_NEIGHBOUR(r, bx, by, bz)
+      SURF_NEIGHBOUR(i, bx, by, bz)
       nx += ay * bz - az * by;
       ny += az * bx - ax * bz;
       nz += ax * by - ay * bx;

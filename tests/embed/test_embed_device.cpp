@@ -7,14 +7,17 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <numeric>
 #include <random>
 #include <string>
 
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
+#include "embed/device_surface.hpp"
 #endif
 
 namespace corofem {
@@ -76,13 +79,27 @@ struct Scene {
   SurfaceBinding binding;
 };
 
-Scene makeScene() {
+/// `shuffled`: the sphere's vertices renumbered at random, so that no ring slot of a block of
+/// vertices holds consecutive vertices (the normal pass gathers every neighbour lane by lane);
+/// otherwise the row-by-row numbering, where most do (vector loads from the block's run start).
+Scene makeScene(bool shuffled = false) {
   Scene s;
   BoxSpec spec;
   spec.cells = {6, 6, 6};
   s.tets = *generateBox(spec);
   s.surface = test::uvSphere({0.5, 0.5, 0.5}, 0.42, 37, 53);
   s.surface.vertices.insert(s.surface.vertices.end(), {1.02, 0.5, 0.5, 0.5, -0.03, 0.5});
+  if (shuffled) {
+    const std::size_t n = s.surface.vertexCount();
+    std::vector<std::uint32_t> to(n);
+    std::iota(to.begin(), to.end(), 0u);
+    std::shuffle(to.begin(), to.end(), std::mt19937(5));
+    std::vector<double> moved(3 * n);
+    for (std::size_t v = 0; v < n; ++v)
+      for (int c = 0; c < 3; ++c) moved[3 * to[v] + c] = s.surface.vertices[3 * v + c];
+    s.surface.vertices = moved;
+    for (std::uint32_t& t : s.surface.triangles) t = to[t];
+  }
   s.binding = *bindSurface(s.tets, s.surface);
   return s;
 }
@@ -123,8 +140,12 @@ TEST_P(EmbedDevice, MatchesHostReference) {
 
 /// Pass 2's vertices per work-item (COROFEM_SURFACE_LANES: 1 on GPUs, 8 or 16 vectors on CPUs) change
 /// how the work is cut, not the mathematics: every width matches the host reference within the
-/// tolerances of MatchesHostReference, including the vertices of the last, partial block. A width the
-/// kernels do not have is refused with the fix.
+/// tolerances of MatchesHostReference, including the vertices of the last, partial block. Both
+/// numberings of the sphere: row by row, where some ring slots of a block of vertices hold
+/// consecutive vertices and others do not (rows of 53 vertices cut the blocks of 8 and 16), and
+/// shuffled, where none do, so that both of the normal pass's ways of reading a slot (vector loads
+/// from the run's start, or the slot's entries gathered lane by lane) are checked at every width. A
+/// width the kernels do not have is refused with the fix.
 TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
   struct LanesEnv {  // restores the environment whatever the test's outcome
     const char* was = std::getenv("COROFEM_SURFACE_LANES");
@@ -134,35 +155,48 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
       else unsetenv("COROFEM_SURFACE_LANES");
     }
   } restore;
-  const Scene s = makeScene();
-  const std::size_t n = s.binding.vertexCount();
-  std::mt19937 rng(29);
-  const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
-  std::vector<float> host(6 * n);
-  SurfaceOutput o;
-  o.interleaved = host.data();
-  ASSERT_TRUE(deformSurface(s.binding, x.data(), s.tets.nodeCount(), o).isOk());
-  const bool dbl = GetParam().doublePrecision;
-  const float posTol = dbl ? 5e-7f : 4e-6f, nTol = dbl ? 1e-6f : 2e-4f;
-  for (const char* lanes : {"1", "8", "16"}) {
-    setenv("COROFEM_SURFACE_LANES", lanes, 1);
-    auto device = DeviceSurface::create(s.binding, options());
-    ASSERT_TRUE(device.isOk()) << lanes << " lanes: " << device.message();
-    std::vector<float> dev(6 * n, NAN);
-    ASSERT_TRUE(device->update(x.data(), s.tets.nodeCount()).isOk());
-    ASSERT_TRUE(device->read(dev.data()).isOk());
-    float worstPos = 0, worstNormal = 0;
-    for (std::size_t v = 0; v < n; ++v)
-      for (int c = 0; c < 3; ++c) {
-        worstPos = std::max(worstPos, std::abs(dev[6 * v + c] - host[6 * v + c]));  // NaN fails below
-        worstNormal = std::max(worstNormal, std::abs(dev[6 * v + 3 + c] - host[6 * v + 3 + c]));
-        ASSERT_TRUE(std::isfinite(dev[6 * v + c]) && std::isfinite(dev[6 * v + 3 + c])) << lanes << " lanes, vertex " << v;
-      }
-    std::printf("[ device   ] %s lanes: worst |position| difference %.3g, worst |normal| difference %.3g\n", lanes,
-                worstPos, worstNormal);
-    EXPECT_LE(worstPos, posTol) << lanes << " lanes";
-    EXPECT_LE(worstNormal, nTol) << lanes << " lanes";
+  for (bool shuffled : {false, true}) {
+    SCOPED_TRACE(shuffled ? "vertices shuffled" : "vertices row by row");
+    const Scene s = makeScene(shuffled);
+    const std::size_t n = s.binding.vertexCount();
+    for (std::size_t lanes : {8, 16}) {  // the layout the kernels get: runs in some slots, or in none
+      const detail::DeviceSurfaceLayout layout = detail::deviceSurfaceLayout(s.binding, lanes);
+      const std::size_t all = layout.slots * ((n + 63) / 64 * 64);
+      if (shuffled) EXPECT_GT(layout.ringEntriesRead, all * 9 / 10) << lanes << " lanes";
+      else EXPECT_LT(layout.ringEntriesRead, all / 2) << lanes << " lanes";
+      EXPECT_GT(layout.ringEntriesRead, 0u) << lanes << " lanes";
+      EXPECT_EQ(layout.runWords, all / layout.slots / lanes * (layout.slots + 1)) << lanes << " lanes";
+    }
+    std::mt19937 rng(29);
+    const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
+    std::vector<float> host(6 * n);
+    SurfaceOutput o;
+    o.interleaved = host.data();
+    ASSERT_TRUE(deformSurface(s.binding, x.data(), s.tets.nodeCount(), o).isOk());
+    const bool dbl = GetParam().doublePrecision;
+    const float posTol = dbl ? 5e-7f : 4e-6f, nTol = dbl ? 1e-6f : 2e-4f;
+    for (const char* lanes : {"1", "8", "16"}) {
+      setenv("COROFEM_SURFACE_LANES", lanes, 1);
+      auto device = DeviceSurface::create(s.binding, options());
+      ASSERT_TRUE(device.isOk()) << lanes << " lanes: " << device.message();
+      std::vector<float> dev(6 * n, NAN);
+      ASSERT_TRUE(device->update(x.data(), s.tets.nodeCount()).isOk());
+      ASSERT_TRUE(device->read(dev.data()).isOk());
+      float worstPos = 0, worstNormal = 0;
+      for (std::size_t v = 0; v < n; ++v)
+        for (int c = 0; c < 3; ++c) {
+          worstPos = std::max(worstPos, std::abs(dev[6 * v + c] - host[6 * v + c]));  // NaN fails below
+          worstNormal = std::max(worstNormal, std::abs(dev[6 * v + 3 + c] - host[6 * v + 3 + c]));
+          ASSERT_TRUE(std::isfinite(dev[6 * v + c]) && std::isfinite(dev[6 * v + 3 + c]))
+              << lanes << " lanes, vertex " << v;
+        }
+      std::printf("[ device   ] %s, %s lanes: worst |position| difference %.3g, worst |normal| difference %.3g\n",
+                  shuffled ? "shuffled" : "row by row", lanes, worstPos, worstNormal);
+      EXPECT_LE(worstPos, posTol) << lanes << " lanes";
+      EXPECT_LE(worstNormal, nTol) << lanes << " lanes";
+    }
   }
+  const Scene s = makeScene();
   setenv("COROFEM_SURFACE_LANES", "4", 1);
   auto refused = DeviceSurface::create(s.binding, options());
   ASSERT_FALSE(refused.isOk());

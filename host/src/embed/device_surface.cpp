@@ -14,6 +14,7 @@
 #include "backends/opencl/program_cache.hpp"
 
 #include <algorithm>
+#include <bitset>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -22,6 +23,10 @@
 #include <utility>
 
 namespace corofem {
+
+namespace detail {
+std::size_t defaultSurfaceLanes(bool gpu, bool doublePrecision) { return gpu ? 1 : doublePrecision ? 8 : 16; }
+}  // namespace detail
 
 #ifdef COROFEM_WITH_OPENCL
 
@@ -136,6 +141,12 @@ void oneRing(const SurfaceBinding& b, std::uint32_t v, std::vector<std::pair<std
   }
 }
 
+/// The streams' stride: the vertex count rounded up to whole blocks of every vector width.
+std::size_t paddedVertexCount(std::size_t n) { return (n + 63) / 64 * 64; }
+
+/// The most ring slots per vertex (longer rings go to the overflow pass).
+constexpr std::size_t kMaxRingSlots = 32;
+
 /// The ring slots of every vertex (structure of arrays, stride `stride`), K = `slots` per vertex,
 /// and the rings longer than K. K minimises the bytes read per frame: K per vertex (4 bytes each) plus
 /// the overflow rings, counted 8 times over (their kernel runs one work-item per vertex, serially).
@@ -147,19 +158,18 @@ struct RingLayout {
 
 RingLayout ringLayout(const SurfaceBinding& b, std::size_t stride) {
   const std::size_t n = b.vertexCount();
-  constexpr std::size_t kMaxSlots = 32;
   std::vector<std::vector<std::uint32_t>> rings(n);
   std::vector<std::pair<std::uint32_t, std::uint32_t>> pairs;
-  std::vector<std::size_t> longer(kMaxSlots + 2, 0);  // longer[k]: sum of the lengths L > k
+  std::vector<std::size_t> longer(kMaxRingSlots + 2, 0);  // longer[k]: sum of the lengths L > k
   for (std::size_t v = 0; v < n; ++v) {
     oneRing(b, static_cast<std::uint32_t>(v), pairs, rings[v]);
     const std::size_t length = rings[v].size();
-    for (std::size_t k = 1; k <= kMaxSlots; ++k)
+    for (std::size_t k = 1; k <= kMaxRingSlots; ++k)
       if (length > k) longer[k] += length;
   }
   RingLayout layout;
   std::size_t best = std::numeric_limits<std::size_t>::max();
-  for (std::size_t k = 1; k <= kMaxSlots; ++k) {
+  for (std::size_t k = 1; k <= kMaxRingSlots; ++k) {
     const std::size_t cost = n * k + 8 * longer[k];
     if (cost < best) best = cost, layout.slots = static_cast<cl_uint>(k);
   }
@@ -184,12 +194,41 @@ RingLayout ringLayout(const SurfaceBinding& b, std::size_t stride) {
   return layout;
 }
 
+/// Per block of `lanes` vertices (the normal pass's vectors), slots + 1 words: bit i of the first set
+/// when ring slot i of the block holds `lanes` consecutive vertices r, r + 1, ..., and word 1 + i = r
+/// for such a slot (0 otherwise). The kernel then loads the neighbours as vectors from r without
+/// reading the slot's ring entries (surface_update.cl, SURF_NEIGHBOUR). Empty with one lane (GPUs).
+std::vector<cl_uint> blockRuns(const RingLayout& layout, std::size_t stride, std::size_t lanes) {
+  std::vector<cl_uint> runs;
+  if (lanes <= 1) return runs;
+  static_assert(kMaxRingSlots <= 32, "one bit per slot in a 32-bit word");
+  const std::size_t K = layout.slots, words = K + 1;
+  runs.assign(stride / lanes * words, 0);
+  for (std::size_t b = 0; b < stride / lanes; ++b)
+    for (std::size_t i = 0; i < K; ++i) {
+      const cl_uint* r = &layout.ring[i * stride + b * lanes];
+      bool run = true;
+      for (std::size_t l = 1; l < lanes && run; ++l) run = r[l] == r[0] + l;
+      if (run) {
+        runs[b * words] |= cl_uint{1} << i;
+        runs[b * words + 1 + i] = r[0];
+      }
+    }
+  return runs;
+}
+
 }  // namespace
 
 namespace detail {
-DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding) {
-  const RingLayout layout = ringLayout(binding, binding.vertexCount());
-  return {layout.slots, layout.overflowVertices.size(), layout.overflowSequence.size()};
+DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding, std::size_t lanes) {
+  const std::size_t stride = paddedVertexCount(binding.vertexCount());
+  const RingLayout layout = ringLayout(binding, stride);
+  const std::vector<cl_uint> runs = blockRuns(layout, stride, lanes);
+  DeviceSurfaceLayout out{layout.slots, layout.overflowVertices.size(), layout.overflowSequence.size(),
+                          layout.slots * stride, runs.size()};
+  for (std::size_t b = 0; b < runs.size(); b += layout.slots + 1)  // a run slot's entries: not read
+    out.ringEntriesRead -= std::bitset<32>(runs[b]).count() * lanes;
+  return out;
 }
 }  // namespace detail
 
@@ -202,7 +241,7 @@ struct DeviceSurface::Impl {
   // Work per work-item and work-group sizes (create()): on a CPU several vertices per work-item
   // amortise PoCL's per-work-item cost; on a GPU one.
   std::size_t positionsPerItem = 1, blocksPerItem = 1, lanes = 16, positionsLocal = 64, normalsLocal = 64;
-  Mem nodes, weights, ring, x, pos, out, overflowVertices, overflowOffsets, overflowSequence;
+  Mem nodes, weights, ring, ringRuns, x, pos, out, overflowVertices, overflowOffsets, overflowSequence;
   Kernel positions, normals, overflow;
   std::vector<unsigned char> staging;  // node positions converted to the device precision
 
@@ -310,13 +349,13 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       // GPUs one vertex per work-item (SURF_W = 1): a warp's loads of consecutive vertices coalesce,
       // while 16-wide vectors per work-item cost registers and leave 16x fewer work-items.
       const bool cpu = !k.ctx->info().gpu;
-      k.lanes = lanesOverride ? lanesOverride : !cpu ? 1 : k.doublePrecision ? 8 : 16;
+      k.lanes = lanesOverride ? lanesOverride : detail::defaultSurfaceLanes(!cpu, k.doublePrecision);
       k.positionsPerItem = cpu ? 16 : 1;
       k.blocksPerItem = cpu ? 4 : 1;
       k.positionsLocal = cpu ? 16 : 64;
       k.normalsLocal = cpu ? 16 : 64;
       // The kernels index with 32-bit integers: slot i of vertex v at i * S + v, 6 v floats per vertex.
-      const std::size_t stride = (n + 63) / 64 * 64;
+      const std::size_t stride = paddedVertexCount(n);
       if (6 * stride + 64 > std::numeric_limits<cl_uint>::max())
         fail(ErrorCode::DeviceError, "the surface has ", n, " vertices, more than the device kernels' 32-bit "
              "indices allow (", std::numeric_limits<cl_uint>::max() / 6 - 64, ")");
@@ -343,6 +382,8 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.nodes = k.buffer(ro, 4 * n * sizeof(cl_uint), binding.nodes.data(), "vertex node indices");
       k.weights = k.buffer(ro, w.size(), w.data(), "weights");
       k.ring = k.buffer(ro, layout.ring.size() * sizeof(cl_uint), layout.ring.data(), "one-ring");
+      const std::vector<cl_uint> runs = blockRuns(layout, stride, k.lanes);
+      k.ringRuns = k.buffer(ro, runs.size() * sizeof(cl_uint), runs.data(), "one-ring runs");
       k.overflowVertices = k.buffer(ro, layout.overflowVertices.size() * sizeof(cl_uint),
                                     layout.overflowVertices.data(), "long one-ring vertices");
       k.overflowOffsets = k.buffer(ro, layout.overflowOffsets.size() * sizeof(cl_uint), layout.overflowOffsets.data(),
@@ -377,6 +418,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.arg(k.normals.get(), 2, k.ring.get());
       k.arg(k.normals.get(), 3, k.pos.get());
       k.arg(k.normals.get(), 4, k.out.get());
+      k.arg(k.normals.get(), 11, k.ringRuns.get());
       k.arg(k.overflow.get(), 0, k.overflowCount);
       k.arg(k.overflow.get(), 1, k.overflowVertices.get());
       k.arg(k.overflow.get(), 2, k.overflowOffsets.get());
@@ -459,7 +501,7 @@ std::string DeviceSurface::deviceName() const { return impl_->device(); }
 #else  // no OpenCL in this build
 
 namespace detail {
-DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding&) { return {}; }
+DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding&, std::size_t) { return {}; }
 }  // namespace detail
 
 struct DeviceSurface::Impl {};
