@@ -373,9 +373,9 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
     }
   }
   clReleaseMemObject(positions);
-  const std::size_t lanes = std::getenv("COROFEM_SURFACE_LANES")
-                                ? std::strtoul(std::getenv("COROFEM_SURFACE_LANES"), nullptr, 10)
-                                : detail::defaultSurfaceLanes(ctx->info().gpu, dbl);
+  const char* lanesEnv = std::getenv("COROFEM_SURFACE_LANES");  // as DeviceSurface::create reads it
+  const std::size_t lanes = lanesEnv && *lanesEnv ? std::strtoul(lanesEnv, nullptr, 10)
+                                                  : detail::defaultSurfaceLanes(ctx->info().gpu, dbl);
   const detail::DeviceSurfaceLayout layout = detail::deviceSurfaceLayout(*binding, lanes);
   const double r = dbl ? 8.0 : 4.0, nv = static_cast<double>(n);
   const double bytes = nv * (16 + 4 * r + 3 * r) + 3 * r * static_cast<double>(nodes) +        // pass 1

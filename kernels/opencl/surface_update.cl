@@ -26,7 +26,7 @@
  * SURF_W consecutive vertices (a regular mesh numbered row by row, as the benchmark's UV sphere), the
  * neighbours' positions are one vector load; otherwise they are gathered lane by lane. Which slots of
  * a block are such runs, and where each starts, is found once on the host (blockRuns), so the kernel
- * tests nothing per slot and reads no ring entries for such a slot (a row-by-row mesh then streams
+ * compares no ring entries per slot (one bit says which way) and reads none for such a slot (a row-by-row mesh then streams
  * SURF_K + 1 words per block instead of SURF_K per vertex). Both paths read the same values, so the
  * result does not depend on which ran. SURF_W = 1 (GPUs) is one vertex per
  * work-item in scalars: there the lanes are the work-items of a warp, whose loads of consecutive
@@ -125,8 +125,8 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
 }
 
 /* The positions (x, y, z) of ring slot i of the SURF_W vertices v.., relative to theirs (xx, xy, xz).
- * runs[0] (from the host, per block) has bit i set when the slot holds SURF_W consecutive vertices
- * q, q + 1, .. (a mesh numbered row by row), and then runs[1 + i] = q: the neighbours are vector
+ * runMask = runs[0] (from the host, per block) has bit i set when the slot holds SURF_W consecutive
+ * vertices q, q + 1, .. (a mesh numbered row by row), and then runs[1 + i] = q: the neighbours are vector
  * loads and the slot's ring entries are not read at all. Otherwise the entries are read and the
  * neighbours gathered lane by lane. Both read the same positions. */
 #if SURF_W == 1
@@ -139,7 +139,7 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
   }
 #else
 #define SURF_NEIGHBOUR(i, bx, by, bz)                     \
-  if ((runs[0] >> (i)) & 1u) {                            \
+  if ((runMask >> (i)) & 1u) {                            \
     const uint q = runs[1 + (i)];                         \
     bx = VLOADW(px + q) - xx;                             \
     by = VLOADW(py + q) - xy;                             \
@@ -174,6 +174,7 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     const realW xx = VLOADW(px + v), xy = VLOADW(py + v), xz = VLOADW(pz + v);
 #if SURF_W > 1
     __global const uint* runs = blockRuns + (v / SURF_W) * (SURF_K + 1);
+    const uint runMask = runs[0];
 #endif
     realW fx, fy, fz;
     SURF_NEIGHBOUR(0, fx, fy, fz)

@@ -88,7 +88,9 @@ Scene makeScene(bool shuffled = false) {
   spec.cells = {6, 6, 6};
   s.tets = *generateBox(spec);
   s.surface = test::uvSphere({0.5, 0.5, 0.5}, 0.42, 37, 53);
-  s.surface.vertices.insert(s.surface.vertices.end(), {1.02, 0.5, 0.5, 0.5, -0.03, 0.5});
+  // Three stray vertices (no triangle, normal 0): two outside the box (extrapolated), one inside,
+  // so that the 1,913 vertices end in a partial block at every vector width (8 and 16).
+  s.surface.vertices.insert(s.surface.vertices.end(), {1.02, 0.5, 0.5, 0.5, -0.03, 0.5, 0.5, 0.5, 0.5});
   if (shuffled) {
     const std::size_t n = s.surface.vertexCount();
     std::vector<std::uint32_t> to(n);
@@ -159,6 +161,7 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
     SCOPED_TRACE(shuffled ? "vertices shuffled" : "vertices row by row");
     const Scene s = makeScene(shuffled);
     const std::size_t n = s.binding.vertexCount();
+    ASSERT_NE(n % 8, 0u) << "the last block must be partial at every width";
     for (std::size_t lanes : {8, 16}) {  // the layout the kernels get: runs in some slots, or in none
       const detail::DeviceSurfaceLayout layout = detail::deviceSurfaceLayout(s.binding, lanes);
       const std::size_t all = layout.slots * ((n + 63) / 64 * 64);

@@ -103,8 +103,8 @@ class ClKernel {
 };
 
 /// The working set of the bodies a batch runs together on a CPU device whose last-level cache holds
-/// `cacheBytes` (CL_DEVICE_GLOBAL_MEM_CACHE_SIZE): at least a quarter of the cache and up to
-/// 8 MiB, never more than the cache (segment_engine.cpp says what was measured). 0 (one tile) when
+/// `cacheBytes` (CL_DEVICE_GLOBAL_MEM_CACHE_SIZE): 8 MiB, or a quarter of the cache where that is
+/// more, never more than the cache (segment_engine.cpp says what was measured). 0 (one tile) when
 /// the device reports no cache.
 std::size_t defaultTileBytes(std::size_t cacheBytes);
 
