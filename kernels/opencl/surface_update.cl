@@ -114,6 +114,13 @@ typedef SURF_CAT(float, SURF_W) floatW;
 #error "SURF_W must be 1, 8 or 16"
 #endif
 
+/* Interleaves 8 vertices' (a, b, c) into 24 floats at d (one separate stream). */
+inline void surf_store8x3(__global float* d, float8 a, float8 b, float8 c) {
+  vstore8((float8)(a.s0, b.s0, c.s0, a.s1, b.s1, c.s1, a.s2, b.s2), 0, d);
+  vstore8((float8)(c.s2, a.s3, b.s3, c.s3, a.s4, b.s4, c.s4, a.s5), 0, d + 8);
+  vstore8((float8)(b.s5, c.s5, a.s6, b.s6, c.s6, a.s7, b.s7, c.s7), 0, d + 16);
+}
+
 /* Interleaves 8 vertices' position (ox, oy, oz) and normal (mx, my, mz) into 48 floats at d. */
 inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, float8 mx, float8 my, float8 mz) {
   vstore8((float8)(ox.s0, oy.s0, oz.s0, mx.s0, my.s0, mz.s0, ox.s1, oy.s1), 0, d);
@@ -153,8 +160,10 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
 #endif
 
 /* ring: SURF_K streams of stride S (slot i of vertex v at ring[i * S + v]; entries of the padding
- * vertices v >= vertexCount hold v). out: 6 floats per vertex (position + c, unit normal); the normal
- * of a vertex without a non-degenerate triangle is 0. The offset c of the node positions (0 for
+ * vertices v >= vertexCount hold v). out: 6 floats per vertex (position + c, unit normal); with
+ * SURF_SEPARATE (DeviceSurfaceOptions::separateStreams) two streams of 3 floats per vertex instead,
+ * the positions in out and the normals in nout (not read otherwise). The normal of a vertex without a
+ * non-degenerate triangle is 0. The offset c of the node positions (0 for
  * absolute positions) comes as c = chi + clo, both in the device precision: in float, chi = (float)c
  * and clo = (float)(c - chi), so that the small relative position takes clo first and the sum rounds
  * once, at the output's magnitude (half an ulp of |x|) instead of twice (c itself rounded to float,
@@ -164,7 +173,7 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
 __kernel void surface_normals(const uint vertexCount, const uint S, __global const uint* restrict ring,
                               __global const real* restrict pos, __global float* restrict out, const real chix,
                               const real chiy, const real chiz, const real clox, const real cloy, const real cloz,
-                              __global const uint* restrict blockRuns) {
+                              __global const uint* restrict blockRuns, __global float* restrict nout) {
   __global const real* px = pos;
   __global const real* py = pos + S;
   __global const real* pz = pos + 2 * S;
@@ -197,6 +206,45 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     const floatW ox = CONVERT_FLOATW((xx + clox) + chix), oy = CONVERT_FLOATW((xy + cloy) + chiy),
                  oz = CONVERT_FLOATW((xz + cloz) + chiz);
     const floatW mx = CONVERT_FLOATW(nx * scale), my = CONVERT_FLOATW(ny * scale), mz = CONVERT_FLOATW(nz * scale);
+#ifdef SURF_SEPARATE
+    __global float* pdst = out + 3 * (size_t)v;
+    __global float* ndst = nout + 3 * (size_t)v;
+#if SURF_W == 1
+    pdst[0] = ox;
+    pdst[1] = oy;
+    pdst[2] = oz;
+    ndst[0] = mx;
+    ndst[1] = my;
+    ndst[2] = mz;
+#else
+    if (v + SURF_W <= vertexCount) {
+#if SURF_W == 8
+      surf_store8x3(pdst, ox, oy, oz);
+      surf_store8x3(ndst, mx, my, mz);
+#else
+      surf_store8x3(pdst, ox.lo, oy.lo, oz.lo);
+      surf_store8x3(pdst + 24, ox.hi, oy.hi, oz.hi);
+      surf_store8x3(ndst, mx.lo, my.lo, mz.lo);
+      surf_store8x3(ndst + 24, mx.hi, my.hi, mz.hi);
+#endif
+    } else {  /* the last, partial block: lane by lane */
+      const float* sx = (const float*)&ox;
+      const float* sy = (const float*)&oy;
+      const float* sz = (const float*)&oz;
+      const float* tx = (const float*)&mx;
+      const float* ty = (const float*)&my;
+      const float* tz = (const float*)&mz;
+      for (uint l = 0; l < vertexCount - v; ++l) {
+        pdst[3 * l] = sx[l];
+        pdst[3 * l + 1] = sy[l];
+        pdst[3 * l + 2] = sz[l];
+        ndst[3 * l] = tx[l];
+        ndst[3 * l + 1] = ty[l];
+        ndst[3 * l + 2] = tz[l];
+      }
+    }
+#endif
+#else /* interleaved */
     __global float* dst = out + 6 * (size_t)v;
 #if SURF_W == 1
     dst[0] = ox;
@@ -232,6 +280,7 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
       for (uint k = 0; k < 6 * (vertexCount - v); ++k) dst[k] = tmp[k];
     }
 #endif
+#endif /* SURF_SEPARATE */
   }
 }
 
@@ -241,7 +290,7 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
 __kernel void surface_normals_overflow(const uint count, __global const uint* restrict verts,
                                        __global const uint* restrict offsets, __global const uint* restrict sequence,
                                        const uint S, __global const real* restrict pos,
-                                       __global float* restrict out) {
+                                       __global float* restrict out, __global float* restrict nout) {
   const uint k = (uint)get_global_id(0);
   if (k >= count) return;
   const uint v = verts[k];
@@ -259,9 +308,13 @@ __kernel void surface_normals_overflow(const uint count, __global const uint* re
   n += (real3)(a.y * first.z - a.z * first.y, a.z * first.x - a.x * first.z, a.x * first.y - a.y * first.x);
   const real length2 = n.x * n.x + n.y * n.y + n.z * n.z;
   const real scale = length2 > (real)0 ? (real)1 / sqrt(length2) : (real)0;
-  __global float* dst = out + 6 * (size_t)v;
-  dst[3] = (float)(n.x * scale);
-  dst[4] = (float)(n.y * scale);
-  dst[5] = (float)(n.z * scale);
+#ifdef SURF_SEPARATE
+  __global float* dst = nout + 3 * (size_t)v;
+#else
+  __global float* dst = out + 6 * (size_t)v + 3;
+#endif
+  dst[0] = (float)(n.x * scale);
+  dst[1] = (float)(n.y * scale);
+  dst[2] = (float)(n.z * scale);
 }
 #endif /* COROFEM_SURFACE */

@@ -18,6 +18,8 @@
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
 #include "embed/device_surface.hpp"
+
+#include <CL/cl.h>
 #endif
 
 namespace corofem {
@@ -205,6 +207,70 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
   ASSERT_FALSE(refused.isOk());
   EXPECT_EQ(refused.status().code(), ErrorCode::BadInput);
   EXPECT_NE(refused.message().find("COROFEM_SURFACE_LANES='4': give 1, 8 or 16"), std::string::npos) << refused.message();
+}
+
+/// DeviceSurfaceOptions::separateStreams writes the same values as the interleaved layout, bit for bit,
+/// into two buffers of 3 floats per vertex, at every lane width and for both numberings (runs and
+/// gathers, the last block partial); each layout reads back as either (read(interleaved) and
+/// read(positions, normals)), and a null pointer is refused.
+TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
+  struct LanesEnv {  // restores the environment whatever the test's outcome
+    const char* was = std::getenv("COROFEM_SURFACE_LANES");
+    std::string value = was ? was : "";
+    ~LanesEnv() {
+      if (was) setenv("COROFEM_SURFACE_LANES", value.c_str(), 1);
+      else unsetenv("COROFEM_SURFACE_LANES");
+    }
+  } restore;
+  for (bool shuffled : {false, true}) {
+    const Scene s = makeScene(shuffled);
+    const std::size_t n = s.binding.vertexCount();
+    std::mt19937 rng(31);
+    const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
+    for (const char* lanes : {"1", "8", "16"}) {
+      SCOPED_TRACE(std::string(shuffled ? "shuffled, " : "row by row, ") + lanes + " lanes");
+      setenv("COROFEM_SURFACE_LANES", lanes, 1);
+      DeviceSurfaceOptions o = options();
+      auto interleaved = DeviceSurface::create(s.binding, o);
+      o.separateStreams = true;
+      auto separate = DeviceSurface::create(s.binding, o);
+      ASSERT_TRUE(interleaved.isOk()) << interleaved.message();
+      ASSERT_TRUE(separate.isOk()) << separate.message();
+      EXPECT_FALSE(interleaved->separateStreams());
+      EXPECT_TRUE(separate->separateStreams());
+      EXPECT_EQ(interleaved->normalBuffer(), nullptr);
+      ASSERT_NE(separate->normalBuffer(), nullptr);
+      for (auto [buffer, floats] : {std::pair{interleaved->vertexBuffer(), 6 * n},
+                                    std::pair{separate->vertexBuffer(), 3 * n},
+                                    std::pair{separate->normalBuffer(), 3 * n}}) {
+        std::size_t bytes = 0;
+        ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
+        EXPECT_EQ(bytes, floats * sizeof(float));
+      }
+      ASSERT_TRUE(interleaved->update(x.data(), s.tets.nodeCount()).isOk());
+      ASSERT_TRUE(separate->update(x.data(), s.tets.nodeCount()).isOk());
+      std::vector<float> whole(6 * n, NAN), wholeFromSeparate(6 * n, NAN);
+      std::vector<float> p(3 * n, NAN), m(3 * n, NAN), pFromWhole(3 * n, NAN), mFromWhole(3 * n, NAN);
+      ASSERT_TRUE(interleaved->read(whole.data()).isOk());
+      ASSERT_TRUE(separate->read(p.data(), m.data()).isOk());
+      ASSERT_TRUE(separate->read(wholeFromSeparate.data()).isOk());
+      ASSERT_TRUE(interleaved->read(pFromWhole.data(), mFromWhole.data()).isOk());
+      std::size_t differ = 0;
+      for (std::size_t v = 0; v < n; ++v)
+        for (int c = 0; c < 3; ++c) {
+          ASSERT_TRUE(std::isfinite(whole[6 * v + c]) && std::isfinite(whole[6 * v + 3 + c])) << "vertex " << v;
+          differ += std::memcmp(&p[3 * v + c], &whole[6 * v + c], sizeof(float)) != 0;
+          differ += std::memcmp(&m[3 * v + c], &whole[6 * v + 3 + c], sizeof(float)) != 0;
+        }
+      EXPECT_EQ(differ, 0u) << "of " << 6 * n << " floats";
+      EXPECT_EQ(std::memcmp(wholeFromSeparate.data(), whole.data(), whole.size() * sizeof(float)), 0);
+      EXPECT_EQ(std::memcmp(pFromWhole.data(), p.data(), p.size() * sizeof(float)), 0);
+      EXPECT_EQ(std::memcmp(mFromWhole.data(), m.data(), m.size() * sizeof(float)), 0);
+      const Status refused = separate->read(p.data(), nullptr);
+      EXPECT_EQ(refused.code(), ErrorCode::BadInput);
+      EXPECT_NE(refused.message().find("normals pointer is null"), std::string::npos) << refused.message();
+    }
+  }
 }
 
 TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {

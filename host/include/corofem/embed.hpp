@@ -128,11 +128,17 @@ struct DeviceSurfaceOptions {
   _cl_context* context = nullptr;
   _cl_command_queue* queue = nullptr;  ///< in-order queue on `context`
   _cl_device_id* deviceId = nullptr;   ///< device of `queue`
+  /// Output layout on the device: false (the default), one buffer of 6 floats per vertex (position,
+  /// normal: SurfaceOutput::interleaved); true, two separate streams of 3 floats per vertex, the
+  /// positions in vertexBuffer() and the normals in normalBuffer(), for renderers that bind them as
+  /// separate vertex buffers. The same values either way, bit for bit.
+  bool separateStreams = false;
 };
 
 /// The per-frame coupled-mesh update on an OpenCL device (kernels/opencl/surface_update.cl): the same
 /// mathematics as deformSurface, into a device buffer of 6 floats per vertex (position, unit normal;
-/// the SurfaceOutput::interleaved layout) that a renderer can draw from. Built only with
+/// the SurfaceOutput::interleaved layout), or two buffers of 3 floats per vertex
+/// (DeviceSurfaceOptions::separateStreams), that a renderer can draw from. Built only with
 /// COROFEM_WITH_OPENCL; otherwise create() returns ErrorCode::NotCompiledIn.
 ///
 ///   auto gpu = corofem::DeviceSurface::create(binding);              // Result<DeviceSurface>
@@ -160,10 +166,19 @@ class DeviceSurface {
   /// backend's positions relative to the body's centroid: the weights sum to 1, so the kernel writes
   /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c.
   Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset);
-  /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update).
+  /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update), in either
+  /// layout (separate streams are interleaved on the host).
   Status read(float* interleaved) const;
-  /// The output buffer (6 * vertexCount() floats), owned by this object; valid for its lifetime.
+  /// Blocking read of the output as two streams of 3 floats per vertex, positions and normals, in
+  /// either layout (an interleaved buffer is split on the host). Errors: BadInput for a null pointer.
+  Status read(float* positions, float* normals) const;
+  /// The output buffer, owned by this object and valid for its lifetime: 6 * vertexCount() floats
+  /// (interleaved), or with separateStreams the 3 * vertexCount() floats of the positions.
   _cl_mem* vertexBuffer() const;
+  /// With separateStreams, the normals' buffer (3 * vertexCount() floats); nullptr otherwise.
+  _cl_mem* normalBuffer() const;
+  /// Whether the output is two streams (DeviceSurfaceOptions::separateStreams).
+  bool separateStreams() const;
   /// Blocks until all enqueued work is done.
   Status finish() const;
 

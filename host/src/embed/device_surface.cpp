@@ -18,6 +18,8 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <string>
+#include <vector>
 #endif
 
 #include <utility>
@@ -241,7 +243,8 @@ struct DeviceSurface::Impl {
   // Work per work-item and work-group sizes (create()): on a CPU several vertices per work-item
   // amortise PoCL's per-work-item cost; on a GPU one.
   std::size_t positionsPerItem = 1, blocksPerItem = 1, lanes = 16, positionsLocal = 64, normalsLocal = 64;
-  Mem nodes, weights, ring, ringRuns, x, pos, out, overflowVertices, overflowOffsets, overflowSequence;
+  Mem nodes, weights, ring, ringRuns, x, pos, out, normalsOut, overflowVertices, overflowOffsets, overflowSequence;
+  bool separate = false;  ///< DeviceSurfaceOptions::separateStreams: out holds positions, normalsOut normals
   Kernel positions, normals, overflow;
   std::vector<unsigned char> staging;  // node positions converted to the device precision
 
@@ -268,6 +271,12 @@ struct DeviceSurface::Impl {
   template <class T>
   void arg(cl_kernel k, cl_uint index, const T& value) {
     checkCl(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg", device());
+  }
+
+  /// Blocking read of `floats` floats of `buffer` into `dst`.
+  void readBuffer(cl_mem buffer, std::size_t floats, float* dst, const char* what) const {
+    checkCl(clEnqueueReadBuffer(ctx->queue(), buffer, CL_TRUE, 0, floats * sizeof(float), dst, 0, nullptr, nullptr),
+            (std::string("clEnqueueReadBuffer (") + what + ")").c_str(), device());
   }
 
   /// `items` work-items in work-groups of `local` (clamped to the device's limit; the kernels skip
@@ -394,13 +403,17 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       // The scratch's padding (vertices n..S-1) is read by the last vector block: zero, once.
       const std::vector<unsigned char> zeros(3 * stride * k.realSize, 0);
       k.pos = k.buffer(rw, zeros.size(), zeros.data(), "vertex positions");
-      k.out = k.buffer(rw, 6 * n * sizeof(float), nullptr, "output vertex");
+      k.separate = options.separateStreams;
+      k.out = k.buffer(rw, (k.separate ? 3 : 6) * n * sizeof(float), nullptr,
+                       k.separate ? "output positions" : "output vertex");
+      k.normalsOut = k.buffer(rw, k.separate ? 3 * n * sizeof(float) : 0, nullptr, "output normals");
 
       std::string buildOptions = "-cl-std=CL1.2 -DCOROFEM_SURFACE -DSURF_K=" + std::to_string(layout.slots) +
                                  " -DSURF_W=" + std::to_string(k.lanes) +
                                  " -DSURF_VPW=" + std::to_string(k.positionsPerItem) +
                                  " -DSURF_BPW=" + std::to_string(k.blocksPerItem);
       if (k.doublePrecision) buildOptions += " -DCOROFEM_DOUBLE";
+      if (k.separate) buildOptions += " -DSURF_SEPARATE";
       const detail::cl::ProgramBuild build =
           detail::cl::buildProgram(*k.ctx, "surface_update", surfaceProgramSource(), buildOptions);
       k.positions = k.kernel(build.program, "surface_positions");
@@ -419,6 +432,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.arg(k.normals.get(), 3, k.pos.get());
       k.arg(k.normals.get(), 4, k.out.get());
       k.arg(k.normals.get(), 11, k.ringRuns.get());
+      k.arg(k.normals.get(), 12, k.normalsOut.get());
       k.arg(k.overflow.get(), 0, k.overflowCount);
       k.arg(k.overflow.get(), 1, k.overflowVertices.get());
       k.arg(k.overflow.get(), 2, k.overflowOffsets.get());
@@ -426,6 +440,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.arg(k.overflow.get(), 4, k.stride);
       k.arg(k.overflow.get(), 5, k.pos.get());
       k.arg(k.overflow.get(), 6, k.out.get());
+      k.arg(k.overflow.get(), 7, k.normalsOut.get());
       k.setOffset(nullptr);
     } catch (const detail::Error& e) {
       // Anything that fails from here on is the device's (memory, build, limits): one code, so that
@@ -484,9 +499,42 @@ Status DeviceSurface::read(float* interleaved) const {
     if (!interleaved) fail(ErrorCode::BadInput, "DeviceSurface::read: the output pointer is null");
     const Impl& k = *impl_;
     if (k.vertexCount == 0) return;
-    checkCl(clEnqueueReadBuffer(k.ctx->queue(), k.out.get(), CL_TRUE, 0, 6 * sizeof(float) * k.vertexCount,
-                                interleaved, 0, nullptr, nullptr),
-            "clEnqueueReadBuffer (surface vertices)", k.device());
+    const std::size_t n = k.vertexCount;
+    if (!k.separate) {
+      k.readBuffer(k.out.get(), 6 * n, interleaved, "surface vertices");
+      return;
+    }
+    std::vector<float> positions(3 * n), normals(3 * n);
+    k.readBuffer(k.out.get(), 3 * n, positions.data(), "surface positions");
+    k.readBuffer(k.normalsOut.get(), 3 * n, normals.data(), "surface normals");
+    for (std::size_t v = 0; v < n; ++v)
+      for (int c = 0; c < 3; ++c) {
+        interleaved[6 * v + c] = positions[3 * v + c];
+        interleaved[6 * v + 3 + c] = normals[3 * v + c];
+      }
+  });
+}
+
+Status DeviceSurface::read(float* positions, float* normals) const {
+  return detail::guard([&] {
+    if (!positions || !normals)
+      fail(ErrorCode::BadInput, "DeviceSurface::read: the ", !positions ? "positions" : "normals",
+           " pointer is null; give two arrays of 3 floats per vertex");
+    const Impl& k = *impl_;
+    if (k.vertexCount == 0) return;
+    const std::size_t n = k.vertexCount;
+    if (k.separate) {
+      k.readBuffer(k.out.get(), 3 * n, positions, "surface positions");
+      k.readBuffer(k.normalsOut.get(), 3 * n, normals, "surface normals");
+      return;
+    }
+    std::vector<float> interleaved(6 * n);
+    k.readBuffer(k.out.get(), 6 * n, interleaved.data(), "surface vertices");
+    for (std::size_t v = 0; v < n; ++v)
+      for (int c = 0; c < 3; ++c) {
+        positions[3 * v + c] = interleaved[6 * v + c];
+        normals[3 * v + c] = interleaved[6 * v + 3 + c];
+      }
   });
 }
 
@@ -495,6 +543,8 @@ Status DeviceSurface::finish() const {
 }
 
 _cl_mem* DeviceSurface::vertexBuffer() const { return impl_->out.get(); }
+_cl_mem* DeviceSurface::normalBuffer() const { return impl_->separate ? impl_->normalsOut.get() : nullptr; }
+bool DeviceSurface::separateStreams() const { return impl_->separate; }
 std::size_t DeviceSurface::vertexCount() const { return impl_->vertexCount; }
 std::string DeviceSurface::deviceName() const { return impl_->device(); }
 
@@ -526,8 +576,11 @@ Status DeviceSurface::update(const double*, std::size_t) { return notCompiledIn(
 Status DeviceSurface::updateFromDevice(_cl_mem*) { return notCompiledIn(); }
 Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notCompiledIn(); }
 Status DeviceSurface::read(float*) const { return notCompiledIn(); }
+Status DeviceSurface::read(float*, float*) const { return notCompiledIn(); }
 Status DeviceSurface::finish() const { return notCompiledIn(); }
 _cl_mem* DeviceSurface::vertexBuffer() const { return nullptr; }
+_cl_mem* DeviceSurface::normalBuffer() const { return nullptr; }
+bool DeviceSurface::separateStreams() const { return false; }
 std::size_t DeviceSurface::vertexCount() const { return 0; }
 std::string DeviceSurface::deviceName() const { return {}; }
 
