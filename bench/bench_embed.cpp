@@ -292,7 +292,8 @@ double measuredBandwidth(detail::cl::Context& ctx) {
 /// them, relative to the centroid, which the kernel adds back), so a frame is the kernels and
 /// finish(), no upload, no read-back. range(0): 1 = double, 0 = float; range(1): 0 = the sphere's
 /// own row-by-row numbering (sphere1M), 1 = renumbered along a Morton curve (sphere1MMorton: the
-/// normal pass gathers its neighbours lane by lane instead of loading them as vectors).
+/// normal pass gathers its neighbours lane by lane instead of loading them as vectors); range(2): 1 =
+/// the output as two separate streams (DeviceSurfaceOptions::separateStreams; the same bytes).
 ///
 /// bytes_per_vertex: the least traffic one frame of this layout moves, per surface vertex (r = 4 or 8
 /// bytes per real, n = vertices, N = 22491 tet nodes, K = ring slots per vertex; each array counted
@@ -312,7 +313,7 @@ double measuredBandwidth(detail::cl::Context& ctx) {
 /// read). bandwidth_fraction = (bytes / time) / the copy kernel's bandwidth on the same device, in
 /// the same run (measuredBandwidth).
 void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
-  const bool dbl = state.range(0) != 0, morton = state.range(1) != 0;
+  const bool dbl = state.range(0) != 0, morton = state.range(1) != 0, separate = state.range(2) != 0;
   static std::unique_ptr<SurfaceBinding> bindings[2];
   std::unique_ptr<SurfaceBinding>& binding = bindings[morton ? 1 : 0];
   if (!binding) {
@@ -333,6 +334,7 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
   }
   DeviceSurfaceOptions options;
   options.doublePrecision = dbl;
+  options.separateStreams = separate;
   options.context = ctx->context();
   options.queue = ctx->queue();
   options.deviceId = ctx->device();
@@ -395,11 +397,12 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
   state.SetLabel(device->deviceName());
 }
 BENCHMARK(BM_DeviceSurfaceFromDevice1M)
-    ->Args({0, 0})
-    ->Args({1, 0})
-    ->Args({0, 1})
-    ->Args({1, 1})
-    ->ArgNames({"double", "morton"})
+    ->Args({0, 0, 0})
+    ->Args({1, 0, 0})
+    ->Args({0, 1, 0})
+    ->Args({1, 1, 0})
+    ->Args({0, 0, 1})
+    ->ArgNames({"double", "morton", "separate"})
     ->Unit(benchmark::kMillisecond)
     ->MeasureProcessCPUTime()  // CPU: all threads of the process (PoCL's workers)
     ->UseRealTime();
