@@ -114,6 +114,20 @@ typedef SURF_CAT(float, SURF_W) floatW;
 #error "SURF_W must be 1, 8 or 16"
 #endif
 
+#if SURF_W > 1
+/* The first `count` (< SURF_W) lanes' (a, b, c), lane l at d + l * stride (the last, partial block). */
+inline void surf_store_partial(__global float* d, uint stride, uint count, floatW a, floatW b, floatW c) {
+  const float* pa = (const float*)&a;
+  const float* pb = (const float*)&b;
+  const float* pc = (const float*)&c;
+  for (uint l = 0; l < count; ++l) {
+    d[stride * l] = pa[l];
+    d[stride * l + 1] = pb[l];
+    d[stride * l + 2] = pc[l];
+  }
+}
+#endif
+
 /* Interleaves 8 vertices' (a, b, c) into 24 floats at d (one separate stream). */
 inline void surf_store8x3(__global float* d, float8 a, float8 b, float8 c) {
   vstore8((float8)(a.s0, b.s0, c.s0, a.s1, b.s1, c.s1, a.s2, b.s2), 0, d);
@@ -227,21 +241,9 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
       surf_store8x3(ndst, mx.lo, my.lo, mz.lo);
       surf_store8x3(ndst + 24, mx.hi, my.hi, mz.hi);
 #endif
-    } else {  /* the last, partial block: lane by lane */
-      const float* sx = (const float*)&ox;
-      const float* sy = (const float*)&oy;
-      const float* sz = (const float*)&oz;
-      const float* tx = (const float*)&mx;
-      const float* ty = (const float*)&my;
-      const float* tz = (const float*)&mz;
-      for (uint l = 0; l < vertexCount - v; ++l) {
-        pdst[3 * l] = sx[l];
-        pdst[3 * l + 1] = sy[l];
-        pdst[3 * l + 2] = sz[l];
-        ndst[3 * l] = tx[l];
-        ndst[3 * l + 1] = ty[l];
-        ndst[3 * l + 2] = tz[l];
-      }
+    } else {  /* the last, partial block */
+      surf_store_partial(pdst, 3, vertexCount - v, ox, oy, oz);
+      surf_store_partial(ndst, 3, vertexCount - v, mx, my, mz);
     }
 #endif
 #else /* interleaved */
@@ -261,23 +263,9 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
       surf_store8(dst, ox.lo, oy.lo, oz.lo, mx.lo, my.lo, mz.lo);
       surf_store8(dst + 48, ox.hi, oy.hi, oz.hi, mx.hi, my.hi, mz.hi);
 #endif
-    } else {  /* the last, partial block: through private memory */
-      float tmp[6 * SURF_W];
-      const float* sx = (const float*)&ox;
-      const float* sy = (const float*)&oy;
-      const float* sz = (const float*)&oz;
-      const float* tx = (const float*)&mx;
-      const float* ty = (const float*)&my;
-      const float* tz = (const float*)&mz;
-      for (uint l = 0; l < vertexCount - v; ++l) {
-        tmp[6 * l] = sx[l];
-        tmp[6 * l + 1] = sy[l];
-        tmp[6 * l + 2] = sz[l];
-        tmp[6 * l + 3] = tx[l];
-        tmp[6 * l + 4] = ty[l];
-        tmp[6 * l + 5] = tz[l];
-      }
-      for (uint k = 0; k < 6 * (vertexCount - v); ++k) dst[k] = tmp[k];
+    } else {  /* the last, partial block */
+      surf_store_partial(dst, 6, vertexCount - v, ox, oy, oz);
+      surf_store_partial(dst + 3, 6, vertexCount - v, mx, my, mz);
     }
 #endif
 #endif /* SURF_SEPARATE */

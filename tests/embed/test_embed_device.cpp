@@ -142,6 +142,16 @@ TEST_P(EmbedDevice, MatchesHostReference) {
   }
 }
 
+/// Restores COROFEM_SURFACE_LANES as the user had it, whatever a test's outcome.
+struct ScopedSurfaceLanes {
+  const char* was = std::getenv("COROFEM_SURFACE_LANES");
+  std::string value = was ? was : "";
+  ~ScopedSurfaceLanes() {
+    if (was) setenv("COROFEM_SURFACE_LANES", value.c_str(), 1);
+    else unsetenv("COROFEM_SURFACE_LANES");
+  }
+};
+
 /// Pass 2's vertices per work-item (COROFEM_SURFACE_LANES: 1 on GPUs, 8 or 16 vectors on CPUs) change
 /// how the work is cut, not the mathematics: every width matches the host reference within the
 /// tolerances of MatchesHostReference, including the vertices of the last, partial block. Both
@@ -151,14 +161,7 @@ TEST_P(EmbedDevice, MatchesHostReference) {
 /// from the run's start, or the slot's entries gathered lane by lane) are checked at every width. A
 /// width the kernels do not have is refused with the fix.
 TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
-  struct LanesEnv {  // restores the environment whatever the test's outcome
-    const char* was = std::getenv("COROFEM_SURFACE_LANES");
-    std::string value = was ? was : "";
-    ~LanesEnv() {
-      if (was) setenv("COROFEM_SURFACE_LANES", value.c_str(), 1);
-      else unsetenv("COROFEM_SURFACE_LANES");
-    }
-  } restore;
+  const ScopedSurfaceLanes restore;
   for (bool shuffled : {false, true}) {
     SCOPED_TRACE(shuffled ? "vertices shuffled" : "vertices row by row");
     const Scene s = makeScene(shuffled);
@@ -214,14 +217,7 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
 /// gathers, the last block partial); each layout reads back as either (read(interleaved) and
 /// read(positions, normals)), and a null pointer is refused.
 TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
-  struct LanesEnv {  // restores the environment whatever the test's outcome
-    const char* was = std::getenv("COROFEM_SURFACE_LANES");
-    std::string value = was ? was : "";
-    ~LanesEnv() {
-      if (was) setenv("COROFEM_SURFACE_LANES", value.c_str(), 1);
-      else unsetenv("COROFEM_SURFACE_LANES");
-    }
-  } restore;
+  const ScopedSurfaceLanes restore;
   for (bool shuffled : {false, true}) {
     const Scene s = makeScene(shuffled);
     const std::size_t n = s.binding.vertexCount();
