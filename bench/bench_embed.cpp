@@ -375,10 +375,8 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
     }
   }
   clReleaseMemObject(positions);
-  const char* lanesEnv = std::getenv("COROFEM_SURFACE_LANES");  // as DeviceSurface::create reads it
-  const std::size_t lanes = lanesEnv && *lanesEnv ? std::strtoul(lanesEnv, nullptr, 10)
-                                                  : detail::defaultSurfaceLanes(ctx->info().gpu, dbl);
-  const detail::DeviceSurfaceLayout layout = detail::deviceSurfaceLayout(*binding, lanes);
+  const detail::DeviceSurfaceLayout layout =
+      detail::deviceSurfaceLayout(*binding, detail::surfaceLanes(ctx->info().gpu, dbl));  // create() took it
   const double r = dbl ? 8.0 : 4.0, nv = static_cast<double>(n);
   const double bytes = nv * (16 + 4 * r + 3 * r) + 3 * r * static_cast<double>(nodes) +        // pass 1
                        4.0 * static_cast<double>(layout.ringEntriesRead + layout.runWords) +  // pass 2

@@ -26,9 +26,9 @@
  * SURF_W consecutive vertices (a regular mesh numbered row by row, as the benchmark's UV sphere), the
  * neighbours' positions are one vector load; otherwise they are gathered lane by lane. Which slots of
  * a block are such runs, and where each starts, is found once on the host (blockRuns), so the kernel
- * compares no ring entries per slot (one bit says which way) and reads none for such a slot (a row-by-row mesh then streams
- * SURF_K + 1 words per block instead of SURF_K per vertex). Both paths read the same values, so the
- * result does not depend on which ran. SURF_W = 1 (GPUs) is one vertex per
+ * compares no ring entries per slot (one bit says which way) and reads none for such a slot (a
+ * row-by-row mesh then streams SURF_K + 1 words per block instead of SURF_K per vertex). Both paths
+ * read the same values, so the result does not depend on which ran. SURF_W = 1 (GPUs) is one vertex per
  * work-item in scalars: there the lanes are the work-items of a warp, whose loads of consecutive
  * vertices coalesce, and 16-wide vectors per work-item would only cost registers and occupancy.
  *
@@ -220,9 +220,16 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     const floatW ox = CONVERT_FLOATW((xx + clox) + chix), oy = CONVERT_FLOATW((xy + cloy) + chiy),
                  oz = CONVERT_FLOATW((xz + cloz) + chiz);
     const floatW mx = CONVERT_FLOATW(nx * scale), my = CONVERT_FLOATW(ny * scale), mz = CONVERT_FLOATW(nz * scale);
+    /* position and normal of vertex v at pdst and ndst; vertex v + l at + l * SURF_STRIDE */
 #ifdef SURF_SEPARATE
+#define SURF_STRIDE 3u
     __global float* pdst = out + 3 * (size_t)v;
     __global float* ndst = nout + 3 * (size_t)v;
+#else
+#define SURF_STRIDE 6u
+    __global float* pdst = out + 6 * (size_t)v;
+    __global float* ndst = pdst + 3;
+#endif
 #if SURF_W == 1
     pdst[0] = ox;
     pdst[1] = oy;
@@ -232,43 +239,25 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     ndst[2] = mz;
 #else
     if (v + SURF_W <= vertexCount) {
-#if SURF_W == 8
+#if defined(SURF_SEPARATE) && SURF_W == 8
       surf_store8x3(pdst, ox, oy, oz);
       surf_store8x3(ndst, mx, my, mz);
-#else
+#elif defined(SURF_SEPARATE)
       surf_store8x3(pdst, ox.lo, oy.lo, oz.lo);
       surf_store8x3(pdst + 24, ox.hi, oy.hi, oz.hi);
       surf_store8x3(ndst, mx.lo, my.lo, mz.lo);
       surf_store8x3(ndst + 24, mx.hi, my.hi, mz.hi);
+#elif SURF_W == 8
+      surf_store8(pdst, ox, oy, oz, mx, my, mz);
+#else
+      surf_store8(pdst, ox.lo, oy.lo, oz.lo, mx.lo, my.lo, mz.lo);
+      surf_store8(pdst + 48, ox.hi, oy.hi, oz.hi, mx.hi, my.hi, mz.hi);
 #endif
     } else {  /* the last, partial block */
-      surf_store_partial(pdst, 3, vertexCount - v, ox, oy, oz);
-      surf_store_partial(ndst, 3, vertexCount - v, mx, my, mz);
+      surf_store_partial(pdst, SURF_STRIDE, vertexCount - v, ox, oy, oz);
+      surf_store_partial(ndst, SURF_STRIDE, vertexCount - v, mx, my, mz);
     }
 #endif
-#else /* interleaved */
-    __global float* dst = out + 6 * (size_t)v;
-#if SURF_W == 1
-    dst[0] = ox;
-    dst[1] = oy;
-    dst[2] = oz;
-    dst[3] = mx;
-    dst[4] = my;
-    dst[5] = mz;
-#else
-    if (v + SURF_W <= vertexCount) {
-#if SURF_W == 8
-      surf_store8(dst, ox, oy, oz, mx, my, mz);
-#else
-      surf_store8(dst, ox.lo, oy.lo, oz.lo, mx.lo, my.lo, mz.lo);
-      surf_store8(dst + 48, ox.hi, oy.hi, oz.hi, mx.hi, my.hi, mz.hi);
-#endif
-    } else {  /* the last, partial block */
-      surf_store_partial(dst, 6, vertexCount - v, ox, oy, oz);
-      surf_store_partial(dst + 3, 6, vertexCount - v, mx, my, mz);
-    }
-#endif
-#endif /* SURF_SEPARATE */
   }
 }
 

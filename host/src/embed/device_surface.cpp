@@ -15,19 +15,31 @@
 
 #include <algorithm>
 #include <bitset>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
-#include <string>
 #include <vector>
 #endif
 
+#include <cstdlib>
+#include <string>
 #include <utility>
 
 namespace corofem {
 
 namespace detail {
-std::size_t defaultSurfaceLanes(bool gpu, bool doublePrecision) { return gpu ? 1 : doublePrecision ? 8 : 16; }
+std::size_t surfaceLanes(bool gpu, bool doublePrecision) {
+  if (const char* env = std::getenv("COROFEM_SURFACE_LANES"); env && *env) {  // tests and tuning
+    const std::string lanes(env);
+    if (lanes != "1" && lanes != "8" && lanes != "16")
+      fail(ErrorCode::BadInput, "COROFEM_SURFACE_LANES='", lanes, "': give 1, 8 or 16 (vertices per work-item "
+           "vector in the surface normal pass), or unset it for the device's default");
+    return static_cast<std::size_t>(std::stoul(lanes));
+  }
+  // CPUs: vectors of 16 floats or 8 doubles (one AVX-512 register, two AVX2 ones). GPUs: one vertex
+  // per work-item (SURF_W = 1): a warp's loads of consecutive vertices coalesce, while 16-wide
+  // vectors per work-item cost registers and leave 16x fewer work-items.
+  return gpu ? 1 : doublePrecision ? 8 : 16;
+}
 }  // namespace detail
 
 #ifdef COROFEM_WITH_OPENCL
@@ -273,6 +285,13 @@ struct DeviceSurface::Impl {
     checkCl(clSetKernelArg(k, index, sizeof(T), &value), "clSetKernelArg", device());
   }
 
+  /// Copies 3 floats per vertex from src (every `from` floats) to dst (every `to` floats): the
+  /// host-side change between the interleaved layout and separate streams.
+  static void copyTriples(const float* src, std::size_t from, float* dst, std::size_t to, std::size_t n) {
+    for (std::size_t v = 0; v < n; ++v)
+      for (int c = 0; c < 3; ++c) dst[to * v + c] = src[from * v + c];
+  }
+
   /// Blocking read of `floats` floats of `buffer` into `dst`.
   void readBuffer(cl_mem buffer, std::size_t floats, float* dst, const char* what) const {
     checkCl(clEnqueueReadBuffer(ctx->queue(), buffer, CL_TRUE, 0, floats * sizeof(float), dst, 0, nullptr, nullptr),
@@ -343,22 +362,12 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
     if (impl->doublePrecision && !impl->ctx->info().fp64)
       fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
            "' has no cl_khr_fp64; use float (doublePrecision = false) or another device");
-    std::size_t lanesOverride = 0;  // COROFEM_SURFACE_LANES: tests and tuning
-    if (const char* env = std::getenv("COROFEM_SURFACE_LANES"); env && *env) {
-      const std::string lanes(env);
-      if (lanes != "1" && lanes != "8" && lanes != "16")
-        fail(ErrorCode::BadInput, "COROFEM_SURFACE_LANES='", lanes, "': give 1, 8 or 16 (vertices per work-item "
-             "vector in the surface normal pass), or unset it for the device's default");
-      lanesOverride = static_cast<std::size_t>(std::stoul(lanes));
-    }
+    const std::size_t lanes = detail::surfaceLanes(impl->ctx->info().gpu, impl->doublePrecision);
     Impl& k = *impl;
     try {
       k.realSize = k.doublePrecision ? sizeof(double) : sizeof(float);
-      // Pass 2 on CPUs: vectors of 16 floats or 8 doubles (one AVX-512 register, two AVX2 ones). On
-      // GPUs one vertex per work-item (SURF_W = 1): a warp's loads of consecutive vertices coalesce,
-      // while 16-wide vectors per work-item cost registers and leave 16x fewer work-items.
       const bool cpu = !k.ctx->info().gpu;
-      k.lanes = lanesOverride ? lanesOverride : detail::defaultSurfaceLanes(!cpu, k.doublePrecision);
+      k.lanes = lanes;
       k.positionsPerItem = cpu ? 16 : 1;
       k.blocksPerItem = cpu ? 4 : 1;
       k.positionsLocal = cpu ? 16 : 64;
@@ -507,11 +516,8 @@ Status DeviceSurface::read(float* interleaved) const {
     std::vector<float> positions(3 * n), normals(3 * n);
     k.readBuffer(k.out.get(), 3 * n, positions.data(), "surface positions");
     k.readBuffer(k.normalsOut.get(), 3 * n, normals.data(), "surface normals");
-    for (std::size_t v = 0; v < n; ++v)
-      for (int c = 0; c < 3; ++c) {
-        interleaved[6 * v + c] = positions[3 * v + c];
-        interleaved[6 * v + 3 + c] = normals[3 * v + c];
-      }
+    Impl::copyTriples(positions.data(), 3, interleaved, 6, n);
+    Impl::copyTriples(normals.data(), 3, interleaved + 3, 6, n);
   });
 }
 
@@ -530,11 +536,8 @@ Status DeviceSurface::read(float* positions, float* normals) const {
     }
     std::vector<float> interleaved(6 * n);
     k.readBuffer(k.out.get(), 6 * n, interleaved.data(), "surface vertices");
-    for (std::size_t v = 0; v < n; ++v)
-      for (int c = 0; c < 3; ++c) {
-        positions[3 * v + c] = interleaved[6 * v + c];
-        normals[3 * v + c] = interleaved[6 * v + 3 + c];
-      }
+    Impl::copyTriples(interleaved.data(), 6, positions, 3, n);
+    Impl::copyTriples(interleaved.data() + 3, 6, normals, 3, n);
   });
 }
 

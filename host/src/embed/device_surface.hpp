@@ -25,8 +25,9 @@ struct DeviceSurfaceLayout {
 /// (the same functions). Without OpenCL: zeros.
 DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding, std::size_t lanes);
 
-/// Vertices per work-item vector in the normal pass unless COROFEM_SURFACE_LANES says otherwise: 1 on
+/// Vertices per work-item vector in the normal pass, as DeviceSurface::create chooses them:
+/// COROFEM_SURFACE_LANES (1, 8 or 16; another value throws Error(BadInput) naming the fix), else 1 on
 /// GPUs, 16 in float and 8 in double on CPUs.
-std::size_t defaultSurfaceLanes(bool gpu, bool doublePrecision);
+std::size_t surfaceLanes(bool gpu, bool doublePrecision);
 
 }  // namespace corofem::detail
