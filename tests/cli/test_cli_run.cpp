@@ -139,6 +139,7 @@ TEST(CliRun, CoupledSurfaceIsWrittenAndReported) {
   EXPECT_EQ(surface.at("vertices").get<int>(), 2194);  // SOURCES.md: liver-smooth.obj
   EXPECT_EQ(surface.at("inside").get<int>() + surface.at("outside").get<int>(), 2194);
   EXPECT_GT(surface.at("largest_distance").get<double>(), 0.0);  // the smooth surface bulges out of the coarse mesh
+  EXPECT_EQ(surface.at("layout"), "interleaved");
   EXPECT_TRUE(fs::exists(out / "liver_surface.pvd"));
   EXPECT_TRUE(fs::exists(out / "surface" / "liver_surface_000010.obj"));
   // The deformed OBJ differs from the rest one (the handle moved) but has the same size.

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <numeric>
 #include <random>
 #include <string>
@@ -267,6 +268,37 @@ TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
       EXPECT_NE(refused.message().find("normals pointer is null"), std::string::npos) << refused.message();
     }
   }
+}
+
+/// buffers() lists what was allocated, with the sizes OpenCL reports; the upload buffer of host node
+/// positions appears with the first update() (a surface fed from device positions never has it).
+TEST_P(EmbedDevice, ListsItsBuffersAsAllocated) {
+  const Scene s = makeScene();
+  auto device = DeviceSurface::create(s.binding, options());
+  ASSERT_TRUE(device.isOk()) << device.message();
+  auto sizes = [&] {
+    std::map<std::string, std::size_t> out;
+    std::size_t total = 0;
+    for (const DeviceSurfaceBuffer& b : device->buffers()) {
+      EXPECT_EQ(out.count(b.name), 0u) << b.name << " listed twice";
+      out[b.name] = b.bytes;
+      total += b.bytes;
+    }
+    EXPECT_EQ(total, device->allocatedBytes());
+    return out;
+  };
+  std::map<std::string, std::size_t> before = sizes();
+  EXPECT_EQ(before.count("node positions"), 0u);
+  std::size_t bytes = 0;
+  ASSERT_EQ(clGetMemObjectInfo(device->vertexBuffer(), CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
+  EXPECT_EQ(before["output vertex"], bytes);
+  EXPECT_EQ(bytes, 6 * sizeof(float) * s.binding.vertexCount());
+  ASSERT_TRUE(device->update(s.tets.nodes.data(), s.tets.nodeCount()).isOk());
+  ASSERT_TRUE(device->update(s.tets.nodes.data(), s.tets.nodeCount()).isOk());  // made once
+  std::map<std::string, std::size_t> after = sizes();
+  EXPECT_EQ(after["node positions"], 3 * s.tets.nodeCount() * (GetParam().doublePrecision ? 8 : 4));
+  after.erase("node positions");
+  EXPECT_EQ(after, before);
 }
 
 TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {

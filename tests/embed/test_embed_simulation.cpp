@@ -8,12 +8,15 @@
 #include "solve/beam_helpers.hpp"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -122,6 +125,11 @@ TEST(EmbedSimulation, ReferenceBackendKeepsTheSurfaceOnTheHost) {
   ASSERT_TRUE(sim) << sim.message();
   EXPECT_EQ(sim->surfaceDeviceBuffer(0), nullptr);
   EXPECT_EQ(sim->surfaceDeviceBuffer(5), nullptr);  // out of range: null, no crash
+  EXPECT_EQ(sim->surfaceNormalDeviceBuffer(0), nullptr);
+  EXPECT_EQ(sim->surfaceNormalDeviceBuffer(-1), nullptr);
+  const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][0]["surface"];
+  EXPECT_EQ(plan["where"], "host") << plan.dump(1);
+  EXPECT_FALSE(plan.contains("device_buffers_allocated"));
   EXPECT_TRUE(sim->updateSurface(0)) << "nothing to do on the host path";
   EXPECT_EQ(sim->updateSurface(7).code(), ErrorCode::BadInput);
   ASSERT_TRUE(sim->step());
@@ -137,6 +145,31 @@ TEST(EmbedSimulation, ReferenceBackendKeepsTheSurfaceOnTheHost) {
 }
 
 #ifdef COROFEM_WITH_OPENCL
+
+/// The size of a device buffer, as OpenCL reports it.
+std::size_t bufferBytes(cl_mem buffer) {
+  std::size_t bytes = 0;
+  EXPECT_EQ(clGetMemObjectInfo(buffer, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
+  return bytes;
+}
+
+/// `count` floats of a device buffer as a renderer would see them: read on a queue of our own, made
+/// on the buffer's context (NaN where the read fails).
+std::vector<float> drawnFloats(cl_mem buffer, std::size_t count) {
+  std::vector<float> out(count, NAN);
+  cl_context context = nullptr;
+  cl_device_id device = nullptr;
+  cl_int status = CL_SUCCESS;
+  EXPECT_EQ(clGetMemObjectInfo(buffer, CL_MEM_CONTEXT, sizeof(context), &context, nullptr), CL_SUCCESS);
+  EXPECT_EQ(clGetContextInfo(context, CL_CONTEXT_DEVICES, sizeof(device), &device, nullptr), CL_SUCCESS);
+  cl_command_queue queue = clCreateCommandQueue(context, device, 0, &status);
+  EXPECT_EQ(status, CL_SUCCESS);
+  if (status != CL_SUCCESS) return out;
+  EXPECT_EQ(clEnqueueReadBuffer(queue, buffer, CL_TRUE, 0, count * sizeof(float), out.data(), 0, nullptr, nullptr),
+            CL_SUCCESS);
+  clReleaseCommandQueue(queue);
+  return out;
+}
 
 class EmbedSimulationOpenCL : public ::testing::TestWithParam<Precision> {};
 
@@ -200,27 +233,83 @@ TEST_P(EmbedSimulationOpenCL, DeviceSurfaceMatchesTheReferenceRun) {
   ASSERT_TRUE(sim->updateSurface(0));
   cl_mem buffer = sim->surfaceDeviceBuffer(0);
   ASSERT_NE(buffer, nullptr);
-  std::size_t bytes = 0;
-  ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
-  EXPECT_GE(bytes, 6 * sizeof(float) * n);  // 24-byte stride
-  cl_context context = nullptr;
-  ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_CONTEXT, sizeof(context), &context, nullptr), CL_SUCCESS);
-  cl_device_id device = nullptr;
-  ASSERT_EQ(clGetContextInfo(context, CL_CONTEXT_DEVICES, sizeof(device), &device, nullptr), CL_SUCCESS);
-  cl_int status = CL_SUCCESS;
-  cl_command_queue queue = clCreateCommandQueue(context, device, 0, &status);
-  ASSERT_EQ(status, CL_SUCCESS);
-  std::vector<float> drawn(6 * n, NAN);
-  EXPECT_EQ(clEnqueueReadBuffer(queue, buffer, CL_TRUE, 0, drawn.size() * sizeof(float), drawn.data(), 0, nullptr,
-                                nullptr),
-            CL_SUCCESS);
-  clReleaseCommandQueue(queue);
+  EXPECT_EQ(sim->surfaceNormalDeviceBuffer(0), nullptr);  // interleaved: one buffer
+  EXPECT_EQ(bufferBytes(buffer), 6 * sizeof(float) * n);  // 24-byte stride
+  const std::vector<float> drawn = drawnFloats(buffer, 6 * n);
   const SurfaceState last = readState(sim.value());
   for (std::size_t v = 0; v < n; ++v)
     for (std::size_t a = 0; a < 3; ++a) {
       EXPECT_EQ(static_cast<double>(drawn[6 * v + a]), last.positions[3 * v + a]) << "vertex " << v;
       EXPECT_EQ(drawn[6 * v + 3 + a], last.normals[3 * v + a]) << "vertex " << v;
     }
+}
+
+/// "surface_layout": "separate" gives the renderer two buffers, positions and normals, 3 float32 per
+/// vertex, holding bit for bit what the interleaved buffer holds for the same run (both runs are on
+/// one device, deterministic: the same node positions). The plan names the layout and lists the
+/// surface's device buffers as allocated; readSurface returns the same arrays for both layouts.
+TEST(EmbedSimulation, SeparateLayoutHoldsTheInterleavedValuesInTwoBuffers) {
+  const Scene one = surfaceScene(BackendKind::OpenCL, Precision::Float);
+  Scene two = one;
+  two.bodies[0].surfaceLayout = SurfaceLayout::Separate;
+  auto interleaved = Simulation::create(one);
+  if (!interleaved && interleaved.status().code() == ErrorCode::DeviceError)
+    GTEST_SKIP() << "no OpenCL device: " << interleaved.message();
+  ASSERT_TRUE(interleaved) << interleaved.message();
+  auto separate = Simulation::create(two);
+  ASSERT_TRUE(separate) << separate.message();
+  for (int k = 1; k <= 5; ++k) {
+    ASSERT_TRUE(interleaved->step()) << "interleaved, step " << k;
+    ASSERT_TRUE(separate->step()) << "separate, step " << k;
+  }
+  const std::size_t n = separate->restSurface(0)->vertexCount();
+
+  ASSERT_TRUE(interleaved->updateSurface(0));
+  ASSERT_TRUE(separate->updateSurface(0));
+  cl_mem both = interleaved->surfaceDeviceBuffer(0), positions = separate->surfaceDeviceBuffer(0),
+         normals = separate->surfaceNormalDeviceBuffer(0);
+  ASSERT_NE(both, nullptr);
+  ASSERT_NE(positions, nullptr);
+  ASSERT_NE(normals, nullptr);
+  EXPECT_NE(positions, normals);
+  EXPECT_EQ(bufferBytes(positions), 3 * sizeof(float) * n);  // 12-byte strides
+  EXPECT_EQ(bufferBytes(normals), 3 * sizeof(float) * n);
+  const std::vector<float> b = drawnFloats(both, 6 * n), p = drawnFloats(positions, 3 * n),
+                           q = drawnFloats(normals, 3 * n);
+  std::size_t differ = 0;
+  for (std::size_t v = 0; v < n; ++v)
+    for (std::size_t a = 0; a < 3; ++a) {
+      differ += std::memcmp(&b[6 * v + a], &p[3 * v + a], sizeof(float)) != 0;
+      differ += std::memcmp(&b[6 * v + 3 + a], &q[3 * v + a], sizeof(float)) != 0;
+    }
+  EXPECT_EQ(differ, 0u) << "of " << 6 * n << " floats";
+  const SurfaceState si = readState(interleaved.value()), ss = readState(separate.value());
+  EXPECT_EQ(si.positions, ss.positions);
+  EXPECT_EQ(si.normals, ss.normals);
+  EXPECT_FALSE(std::isnan(ss.normals.front()));
+
+  // The plan: the layout, the buffers as allocated (their sizes add up, the outputs are the
+  // buffers above), and no upload buffer for host positions (the surface reads the solver's own).
+  const nlohmann::json plan = nlohmann::json::parse(separate->planReport())["bodies"][0]["surface"];
+  EXPECT_EQ(plan["where"], "device") << plan.dump(1);
+  EXPECT_EQ(plan["layout"], "separate");
+  EXPECT_EQ(plan["vertices"], n);
+  std::size_t total = 0;
+  std::map<std::string, std::size_t> byName;
+  for (const auto& x : plan["device_buffers_allocated"]) {
+    total += x["bytes"].get<std::size_t>();
+    byName[x["name"].get<std::string>()] = x["bytes"].get<std::size_t>();
+  }
+  EXPECT_EQ(total, plan["device_bytes_allocated"].get<std::size_t>());
+  EXPECT_EQ(byName["output positions"], bufferBytes(positions));
+  EXPECT_EQ(byName["output normals"], bufferBytes(normals));
+  EXPECT_EQ(byName.count("node positions"), 0u) << plan.dump(1);
+  const nlohmann::json planOne = nlohmann::json::parse(interleaved->planReport())["bodies"][0]["surface"];
+  EXPECT_EQ(planOne["layout"], "interleaved");
+  bool found = false;
+  for (const auto& x : planOne["device_buffers_allocated"])
+    if (x["name"] == "output vertex") found = x["bytes"].get<std::size_t>() == bufferBytes(both);
+  EXPECT_TRUE(found) << planOne.dump(1);
 }
 
 // Mixed keeps float positions on the device (the float tolerances apply).

@@ -37,6 +37,17 @@ TEST(EnumNames, SolverEnumerationsParseBack) {
         << toString(p);
 }
 
+TEST(EnumNames, SurfaceLayoutsParseBack) {
+  // The parser reads the layout only next to a surface (it is an error without one); the file need
+  // not exist for parsing.
+  for (SurfaceLayout l : {SurfaceLayout::Interleaved, SurfaceLayout::Separate})
+    EXPECT_EQ(parse(std::string(R"(, "surface": "s.obj", "surface_layout": ")") + toString(l) + "\"", "")
+                  .bodies.at(0)
+                  .surfaceLayout,
+              l)
+        << toString(l);
+}
+
 TEST(EnumNames, BackendsParseBack) {
   for (BackendKind b : {BackendKind::Auto, BackendKind::Reference, BackendKind::OpenCL})
     EXPECT_EQ(parse("", std::string(R"(, "backend": ")") + toString(b) + "\"").backend.kind, b) << toString(b);

@@ -50,6 +50,14 @@ TEST(SceneErrors, GravityTakesNoNodes) {
                   "bodies[0].loads[0].nodes: only force and displacement loads take \"nodes\"");
 }
 
+TEST(SceneErrors, SurfaceLayoutNeedsASurfaceAndAKnownLayout) {
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}, "surface_layout": "separate"}]})"),
+            "bodies[0].surface_layout: lays out a render surface, but the body has none; add \"surface\": "
+            "\"file.obj\" or remove \"surface_layout\"");
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}, "surface": "s.obj", "surface_layout": "split"}]})"),
+            "bodies[0].surface_layout: unknown value \"split\"; valid values are \"interleaved\" or \"separate\"");
+}
+
 TEST(SceneErrors, DuplicateKeyIsReportedWithItsPath) {
   EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}, {"mesh": {"box": {}}, "name": "a", "name": "b"}]})"),
             "bodies[1].name: duplicate key (the same key appears twice in one object)");

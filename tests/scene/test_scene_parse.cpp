@@ -42,6 +42,7 @@ TEST(SceneParse, MinimalSceneTakesEveryDefault) {
   EXPECT_EQ(b.initialVelocity, (Vec3{0, 0, 0}));
   EXPECT_EQ(b.initialAngularVelocity, (Vec3{0, 0, 0}));
   EXPECT_TRUE(b.surface.empty());
+  EXPECT_EQ(b.surfaceLayout, SurfaceLayout::Interleaved);
 
   EXPECT_EQ(s.analysis.kind, d.analysis.kind);
   EXPECT_EQ(s.analysis.statics.increments, d.analysis.statics.increments);
@@ -91,7 +92,7 @@ const char* kFullScene = R"({
                {"type": "displacement", "vector": [0.1, 0, 0], "nodes": {"plane": {"point": [0.8, 0, 0], "normal": [2, 0, 0]}}}],
      "initial_velocity": [1, 0, 0],
      "initial_angular_velocity": [0, 0, 3.5],
-     "surface": "beam.obj"},
+     "surface": "beam.obj", "surface_layout": "separate"},
     {"mesh": {"file": "other.msh"}, "formulation": "neo_hookean"},
     {"mesh": "third.veg", "formulation": "stvk"}
   ],
@@ -156,6 +157,7 @@ TEST(SceneParse, EveryKeyReachesItsField) {
   EXPECT_EQ(b.initialVelocity, (Vec3{1, 0, 0}));
   EXPECT_EQ(b.initialAngularVelocity, (Vec3{0, 0, 3.5}));
   EXPECT_EQ(b.surface, "beam.obj");
+  EXPECT_EQ(b.surfaceLayout, SurfaceLayout::Separate);
 
   EXPECT_EQ(s.bodies[1].name, "body1");  // unnamed bodies are "body", "body1", ...
   EXPECT_EQ(s.bodies[1].mesh.file, "other.msh");

@@ -135,6 +135,12 @@ struct DeviceSurfaceOptions {
   bool separateStreams = false;
 };
 
+/// One device buffer of a DeviceSurface: what it holds and its size as allocated.
+struct DeviceSurfaceBuffer {
+  std::string name;
+  std::size_t bytes = 0;
+};
+
 /// The per-frame coupled-mesh update on an OpenCL device (kernels/opencl/surface_update.cl): the same
 /// mathematics as deformSurface, into a device buffer of 6 floats per vertex (position, unit normal;
 /// the SurfaceOutput::interleaved layout), or two buffers of 3 floats per vertex
@@ -181,6 +187,11 @@ class DeviceSurface {
   bool separateStreams() const;
   /// Blocks until all enqueued work is done.
   Status finish() const;
+  /// The device buffers it holds now, as allocated (an empty stream still takes a 16-byte buffer:
+  /// OpenCL has no empty ones). The node positions' upload buffer appears after the first update()
+  /// (updateFromDevice reads the caller's buffer and needs none).
+  std::vector<DeviceSurfaceBuffer> buffers() const;
+  std::size_t allocatedBytes() const;  ///< the sum of buffers()
 
   std::size_t vertexCount() const;
   std::string deviceName() const;  ///< the device the kernels run on

@@ -64,6 +64,11 @@ struct LoadDesc {
   double rampTime = 0.0;  ///< dynamics: the load grows linearly from 0 over this time (s), >= 0
 };
 
+/// How a body's render surface is laid out in its device buffer (OpenCL backend): one buffer of 6
+/// float32 per vertex (position, normal), or two buffers of 3 (positions, normals) for renderers
+/// that bind them as separate vertex streams. The same values either way, bit for bit.
+enum class SurfaceLayout { Interleaved, Separate };
+
 /// One deformable body.
 struct BodyDesc {
   std::string name = "body";
@@ -75,6 +80,7 @@ struct BodyDesc {
   Vec3 initialVelocity{0, 0, 0};          ///< m/s, dynamics only
   Vec3 initialAngularVelocity{0, 0, 0};   ///< rad/s about the body's rest centroid, dynamics only
   std::string surface;                    ///< optional render surface (.obj) driven by the body
+  SurfaceLayout surfaceLayout = SurfaceLayout::Interleaved;  ///< the surface's device buffers (no effect on the host path)
 };
 
 struct StaticDesc {
@@ -191,5 +197,6 @@ const char* toString(RotationMethod m);
 const char* toString(BackendKind b);
 const char* toString(Precision p);
 const char* toString(PreconditionerKind p);
+const char* toString(SurfaceLayout l);
 
 }  // namespace corofem

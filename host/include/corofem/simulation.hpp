@@ -76,14 +76,21 @@ class Simulation {
   Status readSurface(int body, std::vector<double>& positions, std::vector<float>* normals = nullptr) const;
   /// The device buffer of the deformed surface (a cl_mem) when the body has a surface and runs on the
   /// OpenCL backend, else nullptr (no surface, reference backend, built without OpenCL, or an update
-  /// that could not be enqueued). Layout: per vertex 6 float32 -- position x, y, z then unit normal
-  /// x, y, z -- a 24-byte stride (DeviceSurface::vertexBuffer), vertices in the order of
+  /// that could not be enqueued). Layout (BodyDesc::surfaceLayout, scene key "surface_layout"):
+  /// interleaved (the default), per vertex 6 float32 -- position x, y, z then unit normal x, y, z --
+  /// a 24-byte stride (DeviceSurface::vertexBuffer); separate, the positions only, 3 float32 per
+  /// vertex (a 12-byte stride), the normals in surfaceNormalDeviceBuffer(). Vertices in the order of
   /// restSurface(body). The call enqueues the update on the backend's in-order command queue when the
   /// body stepped since the last one and does not wait: work the application enqueues on that queue
   /// afterwards sees the current surface; from another queue or API, call updateSurface() first. The
   /// buffer belongs to the Simulation and stays valid until it is destroyed or the body moves to
   /// another backend (a device failure); ask for it again after step() rather than caching it.
   _cl_mem* surfaceDeviceBuffer(int body) const;
+  /// With "surface_layout": "separate", the device buffer of the surface's unit normals, 3 float32 per
+  /// vertex, updated together with surfaceDeviceBuffer() (the same rules: lazily enqueued, valid until
+  /// step() or a device failure); nullptr for the interleaved layout and wherever surfaceDeviceBuffer()
+  /// is nullptr.
+  _cl_mem* surfaceNormalDeviceBuffer(int body) const;
   /// Brings the device surface of `body` up to date and waits for it (explicit synchronisation:
   /// step() enqueues nothing for the surface; this or surfaceDeviceBuffer() does, lazily). Ok and
   /// nothing to do when the body's surface is computed on the host. BadInput for a body without a

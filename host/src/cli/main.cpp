@@ -119,6 +119,16 @@ int printPlan(const Simulation& sim, bool asJson) {
                 << " in all):\n";
       printBuffers(b["device_buffers_allocated"]);
     }
+    if (b.contains("surface")) {
+      const auto& sf = b["surface"];
+      std::cout << "  render surface: " << sf["vertices"] << " vertices, " << sf["triangles"] << " triangles, updated on the "
+                << sf["where"].get<std::string>() << "; " << sf["output"].get<std::string>() << '\n';
+      if (sf.contains("device_bytes_allocated")) {
+        std::cout << "  surface device buffers allocated (" << humanBytes(sf["device_bytes_allocated"].get<double>())
+                  << " in all):\n";
+        printBuffers(sf["device_buffers_allocated"]);
+      }
+    }
     const auto& m = b["bytes_moved"];
     std::cout << "  bytes moved (estimate): " << humanBytes(m["per_pcg_iteration"].get<double>()) << " per PCG iteration, "
               << humanBytes(m["per_newton_iteration_without_pcg"].get<double>()) << " per Newton iteration besides PCG, "

@@ -259,6 +259,7 @@ struct DeviceSurface::Impl {
   bool separate = false;  ///< DeviceSurfaceOptions::separateStreams: out holds positions, normalsOut normals
   Kernel positions, normals, overflow;
   std::vector<unsigned char> staging;  // node positions converted to the device precision
+  std::vector<DeviceSurfaceBuffer> allocated;  ///< every buffer() made, in order (buffers())
 
   const std::string& device() const { return ctx->deviceName(); }
 
@@ -270,6 +271,7 @@ struct DeviceSurface::Impl {
     if (status != CL_SUCCESS)
       fail(ErrorCode::DeviceError, "DeviceSurface: allocating the ", what, " buffer (", bytes, " bytes) failed with ",
            detail::cl::errorString(status), " on device '", device(), "'");
+    allocated.push_back({what, bytes ? bytes : 16});
     return Mem(m);
   }
 
@@ -408,7 +410,8 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
                                    "long one-ring offsets");
       k.overflowSequence = k.buffer(ro, layout.overflowSequence.size() * sizeof(cl_uint),
                                     layout.overflowSequence.data(), "long one-rings");
-      k.x = k.buffer(ro, 3 * k.nodeCount * k.realSize, nullptr, "node positions");
+      // k.x, the upload buffer of update()'s host positions, is made by the first update(): a
+      // Simulation feeds the backend's own buffer (updateFromDevice) and never needs it.
       // The scratch's padding (vertices n..S-1) is read by the last vector block: zero, once.
       const std::vector<unsigned char> zeros(3 * stride * k.realSize, 0);
       k.pos = k.buffer(rw, zeros.size(), zeros.data(), "vertex positions");
@@ -433,7 +436,6 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.arg(k.positions.get(), 1, k.stride);
       k.arg(k.positions.get(), 2, k.nodes.get());
       k.arg(k.positions.get(), 3, k.weights.get());
-      k.arg(k.positions.get(), 4, k.x.get());
       k.arg(k.positions.get(), 5, k.pos.get());
       k.arg(k.normals.get(), 0, k.vertexCount);
       k.arg(k.normals.get(), 1, k.stride);
@@ -482,6 +484,7 @@ Status DeviceSurface::update(const double* tetNodePositions, std::size_t tetNode
       for (std::size_t i = 0; i < 3 * k.nodeCount; ++i) f[i] = static_cast<float>(tetNodePositions[i]);
       src = k.staging.data();
     }
+    if (!k.x) k.x = k.buffer(CL_MEM_READ_ONLY, bytes, nullptr, "node positions");
     if (bytes)
       checkCl(clEnqueueWriteBuffer(k.ctx->queue(), k.x.get(), CL_TRUE, 0, bytes, src, 0, nullptr, nullptr),
               "clEnqueueWriteBuffer (node positions)", k.device());
@@ -545,6 +548,12 @@ Status DeviceSurface::finish() const {
   return detail::guard([&] { checkCl(clFinish(impl_->ctx->queue()), "clFinish", impl_->device()); });
 }
 
+std::vector<DeviceSurfaceBuffer> DeviceSurface::buffers() const { return impl_->allocated; }
+std::size_t DeviceSurface::allocatedBytes() const {
+  std::size_t total = 0;
+  for (const DeviceSurfaceBuffer& b : impl_->allocated) total += b.bytes;
+  return total;
+}
 _cl_mem* DeviceSurface::vertexBuffer() const { return impl_->out.get(); }
 _cl_mem* DeviceSurface::normalBuffer() const { return impl_->separate ? impl_->normalsOut.get() : nullptr; }
 bool DeviceSurface::separateStreams() const { return impl_->separate; }
@@ -581,6 +590,8 @@ Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notComp
 Status DeviceSurface::read(float*) const { return notCompiledIn(); }
 Status DeviceSurface::read(float*, float*) const { return notCompiledIn(); }
 Status DeviceSurface::finish() const { return notCompiledIn(); }
+std::vector<DeviceSurfaceBuffer> DeviceSurface::buffers() const { return {}; }
+std::size_t DeviceSurface::allocatedBytes() const { return 0; }
 _cl_mem* DeviceSurface::vertexBuffer() const { return nullptr; }
 _cl_mem* DeviceSurface::normalBuffer() const { return nullptr; }
 bool DeviceSurface::separateStreams() const { return false; }

@@ -235,7 +235,8 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
                                   {"inside", stats->insideCount},
                                   {"outside", stats->outsideCount},
                                   {"largest_distance", stats->largestDistance},
-                                  {"max_distance_allowed", stats->maxDistanceUsed}};
+                                  {"max_distance_allowed", stats->maxDistanceUsed},
+                                  {"layout", toString(scene.bodies[static_cast<std::size_t>(b)].surfaceLayout)}};
     }
   }
   j["bodies"] = bodies;

@@ -60,6 +60,8 @@ const Choices<PreconditionerKind> kPreconditioners{{"none", PreconditionerKind::
 const Choices<Precision> kPrecisions{{"double", Precision::Double},
                                      {"float", Precision::Float},
                                      {"mixed", Precision::Mixed}};
+const Choices<SurfaceLayout> kSurfaceLayouts{{"interleaved", SurfaceLayout::Interleaved},
+                                             {"separate", SurfaceLayout::Separate}};
 const Choices<Integrator> kIntegrators{{"newmark", Integrator::Newmark},
                                        {"backward_euler", Integrator::BackwardEuler}};
 const Choices<AnalysisDesc::Kind> kAnalysisKinds{{"static", AnalysisDesc::Kind::Static},
@@ -86,7 +88,7 @@ std::vector<std::string> namesOf(const Choices<E>& table) {
 const std::vector<std::string> kSceneKeys{"name", "bodies", "analysis", "solver", "backend", "output"};
 const std::vector<std::string> kBodyKeys{"name",  "mesh",  "material",         "formulation",
                                          "fixed", "loads", "initial_velocity", "initial_angular_velocity",
-                                         "surface"};
+                                         "surface", "surface_layout"};
 const std::vector<std::string> kMeshKeys{"file", "box", "scale", "translate"};
 const std::vector<std::string> kBoxMeshKeys{"min", "max", "cells", "tets_per_cell"};
 const std::vector<std::string> kMaterialKeys{"youngs_modulus", "poisson_ratio", "density", "rayleigh_mass",
@@ -442,6 +444,10 @@ BodyDesc parseBody(const Reader& r, const json& j, const std::string& path, std:
   o.read("initial_velocity", body.initialVelocity);
   o.read("initial_angular_velocity", body.initialAngularVelocity);
   o.read("surface", body.surface);
+  o.read("surface_layout", body.surfaceLayout, kSurfaceLayouts);
+  if (o.get("surface_layout") && body.surface.empty())
+    r.fail(o.at("surface_layout"), "lays out a render surface, but the body has none; add \"surface\": \"file.obj\" "
+           "or remove \"surface_layout\"");
   return body;
 }
 
@@ -789,6 +795,13 @@ const char* toString(Precision p) {
     case Precision::Double: return "double";
     case Precision::Float: return "float";
     case Precision::Mixed: return "mixed";
+  }
+  return "?";
+}
+const char* toString(SurfaceLayout l) {
+  switch (l) {
+    case SurfaceLayout::Interleaved: return "interleaved";
+    case SurfaceLayout::Separate: return "separate";
   }
   return "?";
 }

@@ -173,7 +173,10 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   // Driver state on the host (BodySolver): committed and rollback copies.
   buffer("state: positions (+ rollback)", "host", 2 * D * 8);
   if (dynamic) buffer("state: velocities, accelerations (+ rollback)", "host", 4 * D * 8);
-  if (!desc.surface.empty()) kernels.push_back("surface update (barycentric, host)");
+  if (!desc.surface.empty())
+    kernels.push_back(device ? std::string("surface_positions + surface_normals (on the device, ") +
+                                   toString(desc.surfaceLayout) + " output; see \"surface\")"
+                             : std::string("surface update (barycentric, host, on request)"));
   j["kernels"] = kernels;
   j["buffers"] = buffers;
   double total = 0;

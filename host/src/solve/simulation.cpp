@@ -79,6 +79,7 @@ struct Simulation::Impl {
     const detail::Backend* deviceFor = nullptr;
     std::size_t deviceEvents = 0;
     bool surfaceDirty = true;
+    bool separateStreams = false;  ///< BodyDesc::surfaceLayout == Separate: positions and normals in two buffers
     // Batching: the group this body's first backend is a view of (index into Impl::batches), and
     // the body's index in that group; -1 = not batched.
     int batch = -1;
@@ -234,6 +235,35 @@ struct Simulation::Impl {
     return out;
   }
 
+  /// The render surface of a body in the plan: where it is updated, its layout, and on the device
+  /// the buffers its DeviceSurface allocated (not counted in the backend's device_buffers_allocated).
+  static nlohmann::json surfacePlanJson(const Body& b) {
+    nlohmann::json j;
+    j["vertices"] = b.binding->vertexCount();
+    j["triangles"] = b.surface->triangleCount();
+    // The surface made for the backend the body runs on now (after a failover it is remade lazily).
+    const DeviceSurface* d = nullptr;
+#ifdef COROFEM_WITH_OPENCL
+    if (b.deviceSurface && b.deviceFor == openclBackend(b) && b.failover->events().size() == b.deviceEvents)
+      d = b.deviceSurface.get();
+#endif
+    j["where"] = d ? "device" : "host";
+    if (d) {
+      j["layout"] = d->separateStreams() ? "separate" : "interleaved";
+      j["output"] = d->separateStreams()
+                        ? "two buffers of 3 float32 per vertex: positions (surfaceDeviceBuffer), normals "
+                          "(surfaceNormalDeviceBuffer)"
+                        : "one buffer of 6 float32 per vertex: position, normal (surfaceDeviceBuffer)";
+      nlohmann::json buffers = nlohmann::json::array();
+      for (const DeviceSurfaceBuffer& x : d->buffers()) buffers.push_back({{"name", x.name}, {"bytes", x.bytes}});
+      j["device_buffers_allocated"] = buffers;
+      j["device_bytes_allocated"] = d->allocatedBytes();
+    } else {
+      j["output"] = "host arrays on request (readSurface; the layout applies to device buffers only)";
+    }
+    return j;
+  }
+
   /// The groups: [{"device", "bodies", "active_bodies", "rounds", "requests", "largest_round",
   /// "device_seconds", "allocated_bytes", "buffers"}], and [{"device", "bodies", "reason"}] for bodies
   /// left unbatched.
@@ -289,6 +319,7 @@ struct Simulation::Impl {
         o.context = cl->context().context();
         o.queue = cl->context().queue();
         o.deviceId = cl->context().device();
+        o.separateStreams = b.separateStreams;
         Result<DeviceSurface> made = DeviceSurface::create(*b.binding, o);
         if (!made) detail::fail(made.status().code(), "the body's surface on the OpenCL device: ", made.message());
         b.deviceSurface = std::make_unique<DeviceSurface>(std::move(made.value()));
@@ -353,6 +384,7 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
       body.mesh = std::move(mesh.value());
       if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
+      body.separateStreams = desc.surfaceLayout == SurfaceLayout::Separate;
       body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
       // A static analysis never uses the mass (statics solve K_t du = r; gravity is rho g V / 4 per
       // node, built from the density above): zero, the device backends allocate no mass buffer.
@@ -569,6 +601,17 @@ _cl_mem* Simulation::surfaceDeviceBuffer(int body) const {
   return st ? buffer : nullptr;
 }
 
+_cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
+  _cl_mem* buffer = nullptr;
+  const Status st = detail::guard([&] {
+    if (body < 0 || body >= bodyCount()) return;
+    Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
+    if (!b.binding || !b.separateStreams) return;
+    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) buffer = d->normalBuffer();
+  });
+  return st ? buffer : nullptr;
+}
+
 Status Simulation::updateSurface(int body) const {
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
@@ -638,6 +681,7 @@ std::string Simulation::planReport() const {
       for (const detail::DeviceBuffer& d : allocated) total += d.bytes;
       body["device_bytes_allocated"] = total;
     }
+    if (b.binding) body["surface"] = Impl::surfacePlanJson(b);
     bodies.push_back(body);
   }
   j["bodies"] = bodies;
