@@ -517,7 +517,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     const std::size_t K = set.size();
     auto buf = [](std::size_t b) { return std::max<std::size_t>(b, 16); };  // the smallest buffer: 16 bytes
     std::size_t bytes = buf(4 * (S / 512)) + buf(4 * (N / 64)) + 4 * 8 * K + r * 8 * K;  // segment tables
-    bytes += 4 * 4 * S + r * (10 + 9 + 9 + 12) * S;  // corners, geometry, R, a_i, element outputs
+    bytes += 4 * 4 * S + r * (10 + 9 + 12) * S;  // corners, geometry, a_i, element outputs
+    if (stored || quaternion) bytes += r * 9 * S;   // R: read by those kernels only
     if (quaternion) bytes += r * 4 * S;
     if (stored) bytes += r * 78 * S;
     bytes += 4 * (N + 1) + 4 * 4 * E;  // gather lists
@@ -541,6 +542,20 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   EXPECT_EQ(staticBytes, expected({&beam}, false, s.preconditioner, false, false));
   EXPECT_EQ(dynamicBytes - staticBytes, r * 3 * 256) << "exactly the mass buffer";
   EXPECT_EQ(detail::createOpenCLBackendOn(zeroMass, s, ctx, o)->allocatedBytes(), staticBytes);
+  {
+    // R is made when first read back (readRotations), and then it is the identity at rest.
+    auto b = detail::createOpenCLBackendOn(beam, s, ctx, o);
+    const std::vector<double> R = b->readRotations();
+    EXPECT_EQ(b->allocatedBytes(), dynamicBytes + r * 9 * 512);
+    ASSERT_EQ(R.size(), 9 * beam.mesh.tetCount());
+    for (std::size_t i = 0; i < R.size(); ++i) ASSERT_EQ(R[i], i % 9 % 4 == 0 ? 1.0 : 0.0) << i;
+  }
+  {
+    // The linear formulation rotates nothing: its kernels read the rest gradients of the geometry.
+    detail::Problem linear = beam;
+    linear.formulation = Formulation::Linear;
+    EXPECT_EQ(detail::createOpenCLBackendOn(linear, s, ctx, o)->allocatedBytes(), dynamicBytes - r * 9 * 512);
+  }
   {
     detail::OpenCLOptions stored = o;
     stored.storedStiffness = true;

@@ -104,7 +104,8 @@ TEST(Plan, SizesFollowTheModel) {
   };
   EXPECT_EQ(bytesOf(dev, "element_nodes"), 16 * 400);
   EXPECT_EQ(bytesOf(dev, "positions"), 3 * 189 * 8);
-  EXPECT_EQ(bytesOf(dev, "rotations"), 9 * 400 * 8);
+  EXPECT_EQ(bytesOf(dev, "rotated_gradients"), 9 * 400 * 8);
+  EXPECT_EQ(bytesOf(dev, "rotations"), -1) << "the polar method's kernels never read R";
   scene.solver.precision = Precision::Float;
   const std::vector<json> pf = plans(scene);
   ASSERT_EQ(pf.size(), 2u);
@@ -156,18 +157,32 @@ TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
   EXPECT_EQ(d.count("lumped_mass"), 1u);
   EXPECT_EQ(d.size(), s.size() + 1) << "the mass buffer is all a dynamic scene adds";
   EXPECT_EQ(s.count("quaternions") + s.count("stored_stiffness_Ke"), 0u) << "not used by this scene";
+  // The polar method's kernels read the rotated gradients a_i, never R itself.
+  EXPECT_EQ(d.count("rotated_gradients"), 1u);
+  EXPECT_EQ(d.count("rotations"), 0u) << "R is read by no kernel of this scene";
   // 400 float elements padded to 512 (WG 64 x 8 per work-item on CPUs, 64 x 1 on GPUs: 448), 189 nodes.
   long long positions = -1;
   for (const auto& b : bd["device_buffers_allocated"])
     if (b["name"] == "positions") positions = b["bytes"].get<long long>();
   EXPECT_GE(positions, 3 * 189 * 4);
-  // The quaternion method adds exactly its warm-start buffer.
-  dyn.solver.rotation = RotationMethod::Quaternion;
-  const json pq = allocated(dyn);
+  // The quaternion method adds exactly its warm-start buffer and R (from which it starts).
+  Scene quatScene = dyn;
+  quatScene.solver.rotation = RotationMethod::Quaternion;
+  const json pq = allocated(quatScene);
   ASSERT_FALSE(pq.is_null());
   const std::set<std::string> q = names(pq["bodies"][0]["device_buffers_allocated"]);
-  EXPECT_EQ(q.size(), d.size() + 1);
+  EXPECT_EQ(q.size(), d.size() + 2);
   EXPECT_EQ(q.count("quaternions"), 1u);
+  EXPECT_EQ(q.count("rotations"), 1u);
+  // The linear formulation rotates nothing: no R, and its kernels read the rest gradients in
+  // element_geometry instead of a copy.
+  Scene linearScene = dyn;
+  linearScene.bodies[0].formulation = Formulation::Linear;
+  const json pl = allocated(linearScene);
+  ASSERT_FALSE(pl.is_null());
+  const std::set<std::string> l = names(pl["bodies"][0]["device_buffers_allocated"]);
+  EXPECT_EQ(l.size(), d.size() - 1);
+  EXPECT_EQ(l.count("rotated_gradients") + l.count("rotations"), 0u);
   // Two bodies sharing the device: their buffers are the batch's, listed once, summing to its total.
   Scene two = dynamicScene(boxBeam(), 2);
   two.bodies.push_back(boxBeam({8, 2, 2}));

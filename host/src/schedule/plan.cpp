@@ -13,8 +13,9 @@
 //   surface update           bodies with a render surface
 //
 // Buffer layout of the OpenCL backend (sizes from kernels/shared/corofem_layout.h: 4 node indices,
-// 10 geometry reals (9 gradients + volume), 9 rotation reals, 9 rotated-gradient reals, 4
-// quaternion reals, 12 element-output reals per element; 6 node-block reals per node) and of the
+// 10 geometry reals (9 gradients + volume), 9 rotated-gradient reals (co-rotational), 9 rotation
+// and 4 quaternion reals (Quaternion method), 12 element-output reals per element; 6 node-block
+// reals per node) and of the
 // reference backend (CSR matrix with 9 entries per node pair that shares an element).
 //
 // Bytes model (r = bytes per real: 8 double, 4 float; D = 3 N dofs; E elements):
@@ -126,9 +127,12 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     buffer("element_nodes", dv, 16 * E);
     buffer("element_geometry", dv, 10 * E * r);
     if (corot) {
-      buffer("rotations", dv, 9 * E * r);
+      // R itself only for the Quaternion method (its warm start); the other kernels read a_i.
+      if (problem.rotation == RotationMethod::Quaternion) {
+        buffer("rotations", dv, 9 * E * r);
+        buffer("quaternions", dv, 4 * E * r);
+      }
       buffer("rotated_gradients", dv, 9 * E * r);
-      if (problem.rotation == RotationMethod::Quaternion) buffer("quaternions", dv, 4 * E * r);
     }
     buffer("element_output", dv, 12 * E * r);
     buffer("gather_lists", dv, 4 * (N + 1) + 16 * E);

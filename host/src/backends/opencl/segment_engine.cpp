@@ -393,9 +393,11 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     uploadRaw(elemNodes_, nodes);
   }
   const bool quaternion = solver_.rotation == RotationMethod::Quaternion;
+  rAlways_ = storedStiffness_ || quaternion;
+  bool anyCorotational = false;
+  for (const Segment& sg : segs_) anyCorotational = anyCorotational || sg.corotational;
   {
-    std::vector<double> geom(kGeomComponents * S, 0.0), rot(kRotComponents * S, 0.0),
-        quat(quaternion ? kQuatComponents * S : 0, 0.0);
+    std::vector<double> geom(kGeomComponents * S, 0.0), quat(quaternion ? kQuatComponents * S : 0, 0.0);
     for (const Segment& sg : segs_)
       for (std::size_t e = 0; e < sg.elems; ++e) {
         const ElementRest& rest = sg.problem->elements[e];
@@ -403,16 +405,20 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
         for (int i = 1; i < 4; ++i)
           for (int k = 0; k < 3; ++k) geom[(3 * (i - 1) + k) * S + g] = rest.grad(i, k);
         geom[kGeomVolume * S + g] = rest.volume;
-        rot[0 * S + g] = rot[4 * S + g] = rot[8 * S + g] = 1.0;
         if (quaternion) quat[3 * S + g] = 1.0;
       }
     createReal(geom_, geom.size());
     upload(geom_, geom.data(), 0, geom.size());
-    createReal(rot_, rot.size());
-    upload(rot_, rot.data(), 0, rot.size());
-    // At rest (and always for the linear formulation) R = I, so a_i = grad N_i.
-    createReal(rotGrad_, kRotGradComponents * S);
-    upload(rotGrad_, geom.data(), 0, kRotGradComponents * S);
+    // R itself only where a kernel reads it (stored K_e, the Quaternion method); otherwise the first
+    // readRotations makes it (ensureRotations).
+    if (rAlways_) ensureRotations();
+    // At rest (and always for the linear formulation) R = I, so a_i = grad N_i. Without a
+    // co-rotational body nothing ever changes them: the kernels read the gradients of geom_, whose
+    // first 9 components have the layout of a_i (rotatedGradients()), and no copy is made.
+    if (anyCorotational) {
+      createReal(rotGrad_, kRotGradComponents * S);
+      upload(rotGrad_, geom.data(), 0, kRotGradComponents * S);
+    }
     // The warm-start quaternions exist only for the Quaternion method (the kernel gets NULL otherwise).
     if (quaternion) {
       createReal(quat_, quat.size());
@@ -464,8 +470,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   warmLast_.assign(K, 0);
   axReady_.assign(K, 0);
   axCoef_.assign(kSegCoefCount * K, 0.0);
-  rAlways_ = storedStiffness_ || solver_.rotation == RotationMethod::Quaternion;
-  rStale_.assign(K, 0);  // R = I (uploaded with the element data) until a rotation pass runs
+  rStale_.assign(K, 0);  // R = I (ensureRotations uploads it) until a rotation pass runs
   std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
   for (const Segment& sg : segs_) {
     const Eigen::VectorXd& rest = sg.problem->restPositions;
@@ -784,14 +789,26 @@ std::size_t SegmentEngine::workingSet(const Segment& sg) const {
 void SegmentEngine::refreshBlocks(bool cornersWritten) {
   if (precond_ == PreconditionerKind::None) return;
   const cl_uint S = static_cast<cl_uint>(stride_);
-  if (!cornersWritten) launch(kCornerGradients_, Span::Elements, S, elemSeg_, segInfoBuf_, geom_, rotGrad_, elemOut_);
+  if (!cornersWritten)
+    launch(kCornerGradients_, Span::Elements, S, elemSeg_, segInfoBuf_, geom_, rotatedGradients(), elemOut_);
   launch(kBlocks_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_, blocks_);
+}
+
+void SegmentEngine::ensureRotations() {
+  if (rot_.get()) return;
+  const std::size_t S = stride_;
+  std::vector<double> rot(kRotComponents * S, 0.0);
+  for (std::size_t e = 0; e < S; ++e) rot[0 * S + e] = rot[4 * S + e] = rot[8 * S + e] = 1.0;
+  createReal(rot_, rot.size());
+  upload(rot_, rot.data(), 0, rot.size());
 }
 
 void SegmentEngine::launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR) {
   for (std::size_t s = 0; s < segs_.size(); ++s)
     if (rotate[s]) axReady_[s] = 0;  // A changes with the rotations (the positions may already be up)
+  if (writeR) ensureRotations();
   setActive(rotate);
+  // rot_ may be NULL here (not written: writeR is 0).
   launch(kRotations_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, elemNodes_, geom_, pos_, rot_,
          rotGrad_, quat_, elemOut_, cl_uint(writeCorners ? 1 : 0), cl_uint(writeR ? 1 : 0));
   for (std::size_t s = 0; s < segs_.size(); ++s)
@@ -840,7 +857,7 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
 void SegmentEngine::enqueueElementForces() {
   setAllActive();
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
-         rotGrad_, pos_, elemOut_);
+         rotatedGradients(), pos_, elemOut_);
 }
 
 void SegmentEngine::enqueueForces() {
@@ -855,7 +872,7 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   for (const BatchRequest* r : requests) active[r->body] = 1;
   setActive(active);
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
-         rotGrad_, pos_, elemOut_);
+         rotatedGradients(), pos_, elemOut_);
   launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
   for (const BatchRequest* r : requests) axReady_[r->body] = 0;  // their q_ now holds forces
   // A solve usually follows, and one warm-started from the solution the device still holds (an
@@ -903,7 +920,7 @@ void SegmentEngine::elementProduct(const ClBuffer& v) {
     launch(kProductStored_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, stiffness_, rot_, v,
            elemOut_);
   else
-    launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_, v,
+    launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), v,
            elemOut_);
 }
 
@@ -1289,7 +1306,7 @@ void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& requests) {
   std::vector<char> active(segs_.size(), 0);
   for (const BatchRequest* r : requests) active[r->body] = 1;
   setActive(active);
-  launch(kEnergy_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotGrad_,
+  launch(kEnergy_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(),
          pos_, elemOut_, partials_);
   // One read of the per-work-group partials of the active span, summed per segment in a fixed
   // order (deterministic).
@@ -1308,6 +1325,7 @@ void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& requests) {
 
 std::vector<double> SegmentEngine::readRotations(std::size_t s) {
   const Segment& sg = segs_[s];
+  ensureRotations();  // R = I for a body never rotated
   if (rStale_[s]) {
     // The last rotation pass wrote no R: run it again for this body with R (from the same positions,
     // so the same a_i, bit for bit; not the corners: the blocks were formed from the first pass).

@@ -252,6 +252,12 @@ class SegmentEngine {
   /// compute_rotations on the segments with rotate[s] (made the active ones); R itself only with
   /// writeR (rStale_ records the segments left without it).
   void launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR);
+  /// Allocates R (rot_) as I for every element, once: at set-up where a kernel reads R (rAlways_),
+  /// else at the first pass that writes it or readRotations.
+  void ensureRotations();
+  /// The a_i the element kernels read: rotGrad_, or without a co-rotational body (nothing rotates)
+  /// the gradients in geom_'s first 9 components, the same layout.
+  const ClBuffer& rotatedGradients() const { return rotGrad_.get() ? rotGrad_ : geom_; }
   void elementProduct(const ClBuffer& v);  ///< element products of v (coefficients flushed)
   /// y = A v (projected onto the free dofs when `project`); partial sums of v . y into `partials`.
   /// With `residualOf` (b): y = free b - A v instead, and the sums (0, y . y, |free b|^2).
