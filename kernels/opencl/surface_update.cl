@@ -60,11 +60,13 @@
 #endif
 
 /* nodes: 4 node indices per vertex; weights: 4 barycentric coordinates per vertex (sum 1; negative
- * ones extrapolate for vertices outside the tet mesh); x: 3 reals per tet node; pos: the scratch,
- * component a of vertex v at pos[a * S + v]. */
+ * ones extrapolate for vertices outside the tet mesh); xAll: 3 reals per tet node, the body's nodes
+ * from node firstNode on (a batch keeps many bodies in one buffer); pos: the scratch, component a
+ * of vertex v at pos[a * S + v]. */
 __kernel void surface_positions(const uint vertexCount, const uint S, __global const uint4* restrict nodes,
-                                __global const real4* restrict weights, __global const real* restrict x,
-                                __global real* restrict pos) {
+                                __global const real4* restrict weights, __global const real* restrict xAll,
+                                __global real* restrict pos, const uint firstNode) {
+  __global const real* restrict x = xAll + 3 * (size_t)firstNode;  /* the body's nodes in a shared buffer */
   const uint v0 = (uint)get_global_id(0) * SURF_VPW;
   const uint v1 = min(v0 + SURF_VPW, vertexCount);
   for (uint v = v0; v < v1; ++v) {

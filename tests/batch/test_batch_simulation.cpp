@@ -323,7 +323,7 @@ TEST(BatchSimulation, ALostDeviceMovesEveryBodyToItsNextCandidate) {
   EXPECT_TRUE(sched["batches"][0]["active_bodies"].empty()) << sched.dump(1);
 }
 
-TEST(BatchSimulation, BatchOffSurfacesAndSingleBodiesStayUnbatched) {
+TEST(BatchSimulation, BatchOffAndSingleBodiesStayUnbatchedSurfacesJoin) {
   HookScope scope(hooks());
   std::atomic<int> made{0};
   LoopBatchScope batch("", 0, &made);
@@ -344,8 +344,9 @@ TEST(BatchSimulation, BatchOffSurfacesAndSingleBodiesStayUnbatched) {
   }
   EXPECT_EQ(made.load(), 0);
   {
-    // A body with a render surface keeps its own backend (its device surface reads the backend's
-    // own position buffer); the other four still share one batch.
+    // A body with a render surface joins the batch like any other (on an OpenCL batch its surface
+    // reads its nodes in the shared position buffer; this loop batch keeps positions on the host,
+    // so the surface is computed there, and says so in the plan).
     const std::string obj = (tempDir() / "batch_surface.obj").string();
     std::ofstream(obj) << "v 0.5 0.05 0.05\nv 0.6 0.05 0.05\nv 0.5 0.06 0.05\nf 1 2 3\n";
     Scene withSurface = fiveBodies(2);
@@ -354,9 +355,15 @@ TEST(BatchSimulation, BatchOffSurfacesAndSingleBodiesStayUnbatched) {
     ASSERT_TRUE(sim) << sim.message();
     const json sched = json::parse(sim->schedulerReport());
     ASSERT_EQ(sched["batches"].size(), 1u);
-    EXPECT_EQ(sched["batches"][0]["bodies"], json({"damped", "flaky", "quiet", "linear"}));
-    EXPECT_TRUE(sched["bodies"][0]["batch"].is_null());
+    EXPECT_EQ(sched["batches"][0]["bodies"], json({"a", "damped", "flaky", "quiet", "linear"}));
+    EXPECT_FALSE(sched["bodies"][0]["batch"].is_null());
     EXPECT_EQ(made.load(), 1);
+    EXPECT_EQ(sim->surfaceDeviceBuffer(0), nullptr);
+    EXPECT_EQ(json::parse(sim->planReport())["bodies"][0]["surface"]["where"], "host");
+    ASSERT_TRUE(sim->step());
+    std::vector<double> positions;
+    EXPECT_TRUE(sim->readSurface(0, positions));
+    EXPECT_EQ(positions.size(), 9u);
   }
   {
     // Plan of a batched scene: every body says which bodies share its launches.

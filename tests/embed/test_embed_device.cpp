@@ -339,11 +339,12 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   const double c[3] = {100.25, -37.5, 64.125};
   for (std::size_t i = 0; i < x.size(); ++i) x[i] += c[i % 3];
   const std::size_t nodes = s.tets.nodeCount(), n = s.binding.vertexCount();
-  // Both inputs in the device precision, as device buffers.
-  auto upload = [&](bool relative) {
-    std::vector<unsigned char> bytes(3 * nodes * (dbl ? 8 : 4));
-    for (std::size_t i = 0; i < 3 * nodes; ++i) {
-      const double v = relative ? x[i] - c[i % 3] : x[i];
+  // Both inputs in the device precision, as device buffers; `lead` nodes of another body (far
+  // away) before the surface's own, as in a batch's shared buffer.
+  auto upload = [&](bool relative, std::size_t lead = 0) {
+    std::vector<unsigned char> bytes(3 * (lead + nodes) * (dbl ? 8 : 4));
+    for (std::size_t i = 0; i < 3 * (lead + nodes); ++i) {
+      const double v = i < 3 * lead ? 1e4 + static_cast<double>(i) : relative ? x[i - 3 * lead] - c[i % 3] : x[i - 3 * lead];
       if (dbl) std::memcpy(&bytes[8 * i], &v, 8);
       else {
         const float f = static_cast<float>(v);
@@ -367,6 +368,18 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   ASSERT_TRUE(device->updateFromDevice(relative).isOk());  // the old overload: no offset either
   std::vector<float> r1(6 * n, NAN);
   ASSERT_TRUE(device->read(r1.data()).isOk());
+  // The same nodes after 7 nodes of another body (firstNode 7): the same bits as r.
+  cl_mem shared = upload(true, 7);
+  std::vector<float> rs(6 * n, NAN);
+  ASSERT_TRUE(device->updateFromDevice(shared, c, 7).isOk());
+  ASSERT_TRUE(device->read(rs.data()).isOk());
+  EXPECT_EQ(std::memcmp(rs.data(), r.data(), r.size() * sizeof(float)), 0);
+  // Nodes past the buffer's end are refused, not read.
+  const Status tooFar = device->updateFromDevice(shared, c, 8);
+  EXPECT_EQ(tooFar.code(), ErrorCode::BadInput);
+  EXPECT_NE(tooFar.message().find("holds " + std::to_string(3 * (7 + nodes) * (dbl ? 8 : 4)) + " bytes, but its nodes 8 to 350"), std::string::npos) << "message: " << tooFar.message();
+  EXPECT_EQ(device->updateFromDevice(relative, c, 1).code(), ErrorCode::BadInput);
+  clReleaseMemObject(shared);
   clReleaseMemObject(absolute);
   clReleaseMemObject(relative);
   SurfaceOutput out;

@@ -312,6 +312,72 @@ TEST(EmbedSimulation, SeparateLayoutHoldsTheInterleavedValuesInTwoBuffers) {
   EXPECT_TRUE(found) << planOne.dump(1);
 }
 
+/// Bodies with render surfaces share a batch (one set of launches) and each surface is updated on
+/// the device from the body's own nodes in the batch's shared position buffer: the same bits as the
+/// same bodies run unbatched, one backend each. Three bodies far apart, so that reading another
+/// body's nodes (a wrong first node) would move a surface by metres; one with separate streams.
+TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
+  Scene batched = surfaceScene(BackendKind::OpenCL, Precision::Float);
+  const BodyDesc first = batched.bodies[0];
+  batched.bodies.clear();
+  for (int i = 0; i < 3; ++i) {
+    BodyDesc b = first;
+    b.name = "body" + std::to_string(i);
+    b.mesh.translate[1] += 2.0 * i;
+    b.material.youngsModulus *= 1.0 + 0.5 * i;
+    b.surfaceLayout = i == 2 ? SurfaceLayout::Separate : SurfaceLayout::Interleaved;
+    batched.bodies.push_back(b);
+  }
+  Scene alone = batched;
+  alone.backend.batch = false;
+  auto sim = Simulation::create(batched);
+  if (!sim && sim.status().code() == ErrorCode::DeviceError) GTEST_SKIP() << "no OpenCL device: " << sim.message();
+  ASSERT_TRUE(sim) << sim.message();
+  auto ref = Simulation::create(alone);
+  ASSERT_TRUE(ref) << ref.message();
+  const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
+  ASSERT_EQ(sched["batches"].size(), 1u) << sched.dump(1);
+  EXPECT_EQ(sched["batches"][0]["bodies"].size(), 3u);
+  EXPECT_TRUE(nlohmann::json::parse(ref->schedulerReport())["batches"].empty());
+  for (int k = 1; k <= 4; ++k) {
+    ASSERT_TRUE(sim->step()) << "step " << k;
+    ASSERT_TRUE(ref->step()) << "step " << k;
+  }
+  const std::size_t n = sim->restSurface(0)->vertexCount();
+  std::vector<cl_mem> buffers;
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE("body " + std::to_string(i));
+    std::vector<double> positions, refPositions;
+    std::vector<float> normals, refNormals;
+    ASSERT_TRUE(sim->readSurface(i, positions, &normals));
+    ASSERT_TRUE(ref->readSurface(i, refPositions, &refNormals));
+    ASSERT_EQ(positions.size(), 3 * n);
+    EXPECT_EQ(positions, refPositions);
+    EXPECT_EQ(normals, refNormals);
+    // Against the host's deformSurface of the body's own nodes: within the float output rounding.
+    std::vector<double> nodes, own(3 * n);
+    ASSERT_TRUE(sim->readPositions(i, nodes));
+    SurfaceOutput out;
+    out.positionsDouble = own.data();
+    const SurfaceBinding binding = *bindSurface(sim->restMesh(i), *sim->restSurface(i));
+    ASSERT_TRUE(deformSurface(binding, nodes.data(), sim->restMesh(i).nodeCount(), out));
+    EXPECT_LE(worstDifference(positions, own), 2.5e-6);
+    // What a renderer draws from the device buffer is what readSurface returned.
+    ASSERT_TRUE(sim->updateSurface(i));
+    cl_mem buffer = sim->surfaceDeviceBuffer(i);
+    ASSERT_NE(buffer, nullptr);
+    buffers.push_back(buffer);
+    const std::vector<float> drawn = drawnFloats(buffer, (i == 2 ? 3 : 6) * n);
+    for (std::size_t v = 0; v < n; ++v)
+      for (std::size_t a = 0; a < 3; ++a)
+        ASSERT_EQ(static_cast<double>(drawn[(i == 2 ? 3 : 6) * v + a]), positions[3 * v + a]) << "vertex " << v;
+    EXPECT_EQ(sim->surfaceNormalDeviceBuffer(i) != nullptr, i == 2);
+    EXPECT_EQ(nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"]["where"], "device");
+  }
+  EXPECT_NE(buffers[0], buffers[1]);
+  EXPECT_NE(buffers[1], buffers[2]);
+}
+
 // Mixed keeps float positions on the device (the float tolerances apply).
 INSTANTIATE_TEST_SUITE_P(Precisions, EmbedSimulationOpenCL,
                          ::testing::Values(Precision::Float, Precision::Double, Precision::Mixed),

@@ -170,8 +170,11 @@ class DeviceSurface {
   Status updateFromDevice(_cl_mem* tetNodePositions);
   /// As above, from node positions relative to an offset c (3 doubles; nullptr = 0), e.g. the OpenCL
   /// backend's positions relative to the body's centroid: the weights sum to 1, so the kernel writes
-  /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c.
-  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset);
+  /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c. Node n of the tet mesh is
+  /// node firstNode + n of the buffer (one buffer holding many bodies' nodes, as a batch does).
+  /// Errors: BadInput for a null buffer or one too small for those nodes (checked against its
+  /// CL_MEM_SIZE), DeviceError.
+  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode = 0);
   /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update), in either
   /// layout (separate streams are interleaved on the host).
   Status read(float* interleaved) const;

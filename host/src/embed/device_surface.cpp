@@ -326,11 +326,12 @@ struct DeviceSurface::Impl {
     }
   }
 
-  /// Enqueues the passes reading node positions from `xBuffer` (relative to `offset`, 3 doubles or
-  /// nullptr for absolute positions).
-  void run(cl_mem xBuffer, const double* offset = nullptr) {
+  /// Enqueues the passes reading node positions from `xBuffer`, the body's from node `firstNode` on
+  /// (relative to `offset`, 3 doubles or nullptr for absolute positions).
+  void run(cl_mem xBuffer, const double* offset = nullptr, std::size_t firstNode = 0) {
     setOffset(offset);
     arg(positions.get(), 4, xBuffer);
+    arg(positions.get(), 6, static_cast<cl_uint>(firstNode));
     const std::size_t per = lanes * blocksPerItem;
     enqueue(positions.get(), (vertexCount + positionsPerItem - 1) / positionsPerItem, positionsLocal,
             "surface_positions");
@@ -492,17 +493,23 @@ Status DeviceSurface::update(const double* tetNodePositions, std::size_t tetNode
   });
 }
 
-Status DeviceSurface::updateFromDevice(_cl_mem* tetNodePositions) {
-  return detail::guard([&] {
-    if (!tetNodePositions) fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the buffer is null");
-    impl_->run(tetNodePositions);
-  });
-}
+Status DeviceSurface::updateFromDevice(_cl_mem* tetNodePositions) { return updateFromDevice(tetNodePositions, nullptr); }
 
-Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset) {
+Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode) {
   return detail::guard([&] {
     if (!relativeTetNodePositions) fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the buffer is null");
-    impl_->run(relativeTetNodePositions, offset);
+    const Impl& k = *impl_;
+    // The kernels would read past the buffer: refuse (OpenCL does not check).
+    std::size_t bytes = 0;
+    checkCl(clGetMemObjectInfo(relativeTetNodePositions, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr),
+            "clGetMemObjectInfo (node positions)", k.device());
+    const std::size_t needed = 3 * (firstNode + k.nodeCount) * k.realSize;
+    if (needed > bytes)
+      fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the node positions buffer holds ", bytes,
+           " bytes, but its nodes ", firstNode, " to ", firstNode + k.nodeCount - 1, " (3 ",
+           k.doublePrecision ? "doubles" : "floats", " each) need ", needed, "; pass the buffer of the tet mesh the "
+           "surface was bound to (", k.nodeCount, " nodes) in the surface's precision, and its first node");
+    impl_->run(relativeTetNodePositions, offset, firstNode);
   });
 }
 
@@ -586,7 +593,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding&, const DeviceS
 }
 Status DeviceSurface::update(const double*, std::size_t) { return notCompiledIn(); }
 Status DeviceSurface::updateFromDevice(_cl_mem*) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notCompiledIn(); }
+Status DeviceSurface::updateFromDevice(_cl_mem*, const double*, std::size_t) { return notCompiledIn(); }
 Status DeviceSurface::read(float*) const { return notCompiledIn(); }
 Status DeviceSurface::read(float*, float*) const { return notCompiledIn(); }
 Status DeviceSurface::finish() const { return notCompiledIn(); }

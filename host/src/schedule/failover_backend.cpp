@@ -120,4 +120,8 @@ std::vector<DeviceBuffer> FailoverBackend::deviceBuffers() const {
   return current_ ? current_->deviceBuffers() : std::vector<DeviceBuffer>{};
 }
 
+bool FailoverBackend::devicePositions(DevicePositions& out) const {
+  return current_ && current_->devicePositions(out);
+}
+
 }  // namespace corofem::detail

@@ -45,6 +45,7 @@ class FaultyBackend final : public Backend {
     allocation("elasticEnergy");
     return inner_->elasticEnergy();
   }
+  bool devicePositions(DevicePositions& out) const override { return inner_->devicePositions(out); }
 
  private:
   void allocation(const char* call) {

@@ -153,6 +153,7 @@ class FailoverBackend final : public Backend {
   LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override;
   double elasticEnergy() override;
   std::vector<DeviceBuffer> deviceBuffers() const override;
+  bool devicePositions(DevicePositions& out) const override;  ///< the active backend's
 
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }

@@ -17,7 +17,27 @@
 #include <string>
 #include <vector>
 
+// OpenCL's opaque handle types, declared so that this header needs no OpenCL.
+struct _cl_context;
+struct _cl_command_queue;
+struct _cl_device_id;
+struct _cl_mem;
+
 namespace corofem::detail {
+
+/// Where a backend keeps a body's node positions on an OpenCL device (the device surface reads
+/// them there: no host round trip). 3 reals per node, double when isDouble else float, those last
+/// given to setPositions minus `centroid` (3 doubles), node n of the body at node firstNode + n of
+/// `buffer` (a batch holds many bodies in one buffer). Valid while the backend lives.
+struct DevicePositions {
+  _cl_context* context = nullptr;
+  _cl_command_queue* queue = nullptr;  ///< in-order queue that writes them
+  _cl_device_id* device = nullptr;
+  _cl_mem* buffer = nullptr;
+  std::size_t firstNode = 0;
+  bool isDouble = false;
+  const double* centroid = nullptr;
+};
 
 struct SystemCoeffs {
   double mass = 0.0;
@@ -65,6 +85,13 @@ class Backend {
   /// --plan` reports as allocated). Empty for host backends and for a body's view of a batch (the
   /// batch reports the buffers its bodies share).
   virtual std::vector<DeviceBuffer> deviceBuffers() const { return {}; }
+
+  /// Fills `out` and returns true when the body's node positions live on an OpenCL device (the
+  /// OpenCL backend, a body's view of an OpenCL batch); false for host backends.
+  virtual bool devicePositions(DevicePositions& out) const {
+    (void)out;
+    return false;
+  }
 };
 
 /// The reference backend: assembled sparse matrices, Eigen's CG (diagonal preconditioner) or

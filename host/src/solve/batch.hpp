@@ -68,6 +68,12 @@ class BatchDevice {
   virtual std::size_t allocatedBytes() const { return 0; }
   /// The device buffers its bodies share (empty for host devices).
   virtual std::vector<DeviceBuffer> deviceBuffers() const { return {}; }
+  /// Backend::devicePositions of body `body` (false for host devices).
+  virtual bool devicePositions(std::size_t body, DevicePositions& out) const {
+    (void)body;
+    (void)out;
+    return false;
+  }
 };
 
 /// The batch as a loop over one Backend per body (reference or any other): no speed-up, but

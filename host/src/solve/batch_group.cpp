@@ -220,6 +220,7 @@ class BatchView final : public Backend {
     shared_->call(body_, r);
     return r.energy;
   }
+  bool devicePositions(DevicePositions& out) const override { return shared_->device->devicePositions(body_, out); }
 
  private:
   std::shared_ptr<BatchGroup::Shared> shared_;

@@ -10,10 +10,6 @@
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
 
-#ifdef COROFEM_WITH_OPENCL
-#include "backends/opencl/opencl_backend.hpp"
-#endif
-
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
@@ -70,9 +66,9 @@ struct Simulation::Impl {
       long long sleptSteps = 0, wakes = 0;
       Eigen::VectorXd fRef, xpRef;
     } sleep;
-    // The surface on the device when the body runs on the OpenCL backend: a DeviceSurface on the
-    // backend's own context and queue, fed from the backend's position buffer (declared after the
-    // backend: destroyed first). `deviceFor` is the backend it was made for and `deviceEvents` the
+    // The surface on the device when the body's positions are on an OpenCL device (its own OpenCL
+    // backend or its batch's): a DeviceSurface on that context and queue, fed from the position
+    // buffer there (Backend::devicePositions; declared after the backend: destroyed first). `deviceFor` is the backend it was made for and `deviceEvents` the
     // failover events then (a failover replaces the backend; a new one may reuse the address);
     // `surfaceDirty`: the body stepped since the last update.
     std::unique_ptr<DeviceSurface> deviceSurface;
@@ -175,17 +171,17 @@ struct Simulation::Impl {
   }
 
   /// Groups the bodies that share a device's buffers and launches: two or more bodies whose first
-  /// candidate is the same OpenCL device, with batching on (backend.batch) and no render surface
-  /// (the device surface update reads the body's own position buffer, which a batch does not
-  /// have). Each gets a FailoverBackend that starts on its view of the group. A batch that cannot
-  /// be made leaves its bodies unbatched (recorded with the reason), exactly as without batching.
+  /// candidate is the same OpenCL device, with batching on (backend.batch). A body's render surface
+  /// is updated on the device from its nodes in the batch's shared position buffer. Each gets a
+  /// FailoverBackend that starts on its view of the group. A batch that cannot be made leaves its
+  /// bodies unbatched (recorded with the reason), exactly as without batching.
   void formBatches() {
     if (!scene.backend.batch) return;
     const bool testing = detail::batchDeviceFactoryForTesting();
     std::map<std::string, std::vector<std::size_t>> byDevice;  // candidate label -> bodies, scene order
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       const detail::Candidate& c = bodies[i].schedule.choice();
-      if ((c.kind == BackendKind::OpenCL || testing) && !bodies[i].binding) byDevice[c.label()].push_back(i);
+      if (c.kind == BackendKind::OpenCL || testing) byDevice[c.label()].push_back(i);
     }
     for (const auto& [label, members] : byDevice) {
       if (members.size() < 2) continue;
@@ -242,11 +238,7 @@ struct Simulation::Impl {
     j["vertices"] = b.binding->vertexCount();
     j["triangles"] = b.surface->triangleCount();
     // The surface made for the backend the body runs on now (after a failover it is remade lazily).
-    const DeviceSurface* d = nullptr;
-#ifdef COROFEM_WITH_OPENCL
-    if (b.deviceSurface && b.deviceFor == openclBackend(b) && b.failover->events().size() == b.deviceEvents)
-      d = b.deviceSurface.get();
-#endif
+    const DeviceSurface* d = deviceSurfaceCurrent(b) ? b.deviceSurface.get() : nullptr;
     j["where"] = d ? "device" : "host";
     if (d) {
       j["layout"] = d->separateStreams() ? "separate" : "interleaved";
@@ -294,36 +286,44 @@ struct Simulation::Impl {
     return out;
   }
 
-#ifdef COROFEM_WITH_OPENCL
-  /// The OpenCL backend the body runs on now, or nullptr.
-  static detail::OpenCLBackendInternal* openclBackend(const Body& b) {
-    return dynamic_cast<detail::OpenCLBackendInternal*>(b.failover->active());
+  /// The backend the body runs on now when its node positions live on an OpenCL device (its own
+  /// OpenCL backend or its view of an OpenCL batch), with where they are; else nullptr.
+  static const detail::Backend* deviceBackend(const Body& b, detail::DevicePositions& where) {
+    const detail::Backend* active = b.failover->active();
+    return active && active->devicePositions(where) ? active : nullptr;
   }
-#endif
 
-  /// Makes b.deviceSurface match the backend the body runs on now: created on an OpenCL backend's
-  /// context and queue (adopted) in its position precision, dropped on any other backend. Returns
-  /// it, or nullptr when the surface is computed on the host.
+  /// Whether b.deviceSurface was made for the backend the body runs on now (a failover replaces
+  /// the backend, and a new one may reuse the address: the event count tells them apart).
+  static bool deviceSurfaceCurrent(const Body& b) {
+    detail::DevicePositions where;
+    return b.deviceSurface && deviceBackend(b, where) == b.deviceFor && b.failover->events().size() == b.deviceEvents;
+  }
+
+  /// Makes b.deviceSurface match the backend the body runs on now: created on the context and queue
+  /// (adopted) that hold the body's node positions, in their precision, dropped on a host backend.
+  /// Returns it, or nullptr when the surface is computed on the host.
   static DeviceSurface* deviceSurfaceOf(Body& b) {
 #ifdef COROFEM_WITH_OPENCL
     if (!b.binding) return nullptr;
-    detail::OpenCLBackendInternal* cl = openclBackend(b);
-    if (cl != b.deviceFor || b.failover->events().size() != b.deviceEvents) {
+    detail::DevicePositions where;
+    const detail::Backend* device = deviceBackend(b, where);
+    if (device != b.deviceFor || b.failover->events().size() != b.deviceEvents) {
       b.deviceSurface.reset();
       b.deviceFor = nullptr;
       b.deviceEvents = b.failover->events().size();
       b.surfaceDirty = true;
-      if (cl) {
+      if (device) {
         DeviceSurfaceOptions o;
-        o.doublePrecision = cl->positionsAreDouble();
-        o.context = cl->context().context();
-        o.queue = cl->context().queue();
-        o.deviceId = cl->context().device();
+        o.doublePrecision = where.isDouble;
+        o.context = where.context;
+        o.queue = where.queue;
+        o.deviceId = where.device;
         o.separateStreams = b.separateStreams;
         Result<DeviceSurface> made = DeviceSurface::create(*b.binding, o);
         if (!made) detail::fail(made.status().code(), "the body's surface on the OpenCL device: ", made.message());
         b.deviceSurface = std::make_unique<DeviceSurface>(std::move(made.value()));
-        b.deviceFor = cl;
+        b.deviceFor = device;
       }
     }
     return b.deviceSurface.get();
@@ -345,8 +345,9 @@ struct Simulation::Impl {
     // A device failure inside syncBackendPositions moves the body to another backend.
     d = deviceSurfaceOf(b);
     if (!d) return nullptr;
-    detail::OpenCLBackendInternal* cl = openclBackend(b);
-    Status st = d->updateFromDevice(cl->positionBuffer(), cl->positionCentroid());
+    detail::DevicePositions where;
+    deviceBackend(b, where);
+    Status st = d->updateFromDevice(where.buffer, where.centroid, where.firstNode);
     if (!st) throw detail::Error(st.code(), st.message());
     b.surfaceDirty = false;
 #endif

@@ -57,6 +57,10 @@ class OpenCLBackend final : public OpenCLBackendInternal {
   cl_mem positionBuffer() const override { return engine_.positionBuffer(); }
   bool positionsAreDouble() const override { return engine_.positionsAreDouble(); }
   const double* positionCentroid() const override { return engine_.positionCentroid(0); }
+  bool devicePositions(DevicePositions& out) const override {
+    out = engine_.devicePositions(0);
+    return true;
+  }
   void enqueueRotations() override { engine_.enqueueRotations(); }
   void enqueueForces() override { engine_.enqueueForces(); }
   void enqueueElementForces() override { engine_.enqueueElementForces(); }

@@ -27,6 +27,11 @@ class OpenCLBatchDevice final : public BatchDevice {
   std::size_t bodyCount() const override { return engine_.segmentCount(); }
   std::size_t allocatedBytes() const override { return engine_.allocatedBytes(); }
   std::vector<DeviceBuffer> deviceBuffers() const override { return engine_.buffers(); }
+  bool devicePositions(std::size_t body, DevicePositions& out) const override {
+    if (body >= engine_.segmentCount()) return false;
+    out = engine_.devicePositions(body);
+    return true;
+  }
 
   void run(std::vector<BatchRequest*>& round) override {
     constexpr std::size_t kOps = 5;  // BatchOp values, in the order they run

@@ -143,6 +143,10 @@ class SegmentEngine {
   cl_mem positionBuffer() const { return pos_.get(); }
   bool positionsAreDouble() const { return double_; }
   const double* positionCentroid(std::size_t s) const { return segs_[s].centroid; }
+  /// Segment s's positions as Backend::devicePositions describes them (its nodes from nodeBegin).
+  DevicePositions devicePositions(std::size_t s) const {
+    return {ctx_->context(), ctx_->queue(), ctx_->device(), pos_.get(), segs_[s].nodeBegin, double_, segs_[s].centroid};
+  }
 
   // Device-only work on every segment (benchmarks), no transfers.
   void enqueueRotations();
