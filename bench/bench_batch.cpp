@@ -15,6 +15,12 @@
 // A second variant gives every body the same material (same PCG counts), which separates the
 // saving of shared launches from the cost of iterating until the slowest body has converged.
 //
+// BM_HundredBodySurfaces: the same 100 bodies (one material), batched, each driving a render
+// surface (a UV sphere of 2,002 vertices inside the body, written as OBJ to a temporary folder):
+// a frame is one step plus every body's surface brought up to date on the device (updateSurface,
+// which waits), as a renderer does before drawing. Counters: the step and the surfaces' time per
+// frame and the surfaces' share.
+//
 // One benchmark iteration = kStepsPerSample steps of the whole set with each of the three, taken
 // alternately so that all three go through the same physical states; the counters are set-steps
 // per second (one set-step = every body advanced one step) and the ratios. Each configuration is
@@ -23,6 +29,8 @@
 //   ./build/bench/bench_batch --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
 //       --benchmark_out=bench_batch.json --benchmark_out_format=json
 #include <corofem/corofem.hpp>
+
+#include "embed/embed_test_util.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -33,6 +41,7 @@
 #include <cmath>
 #include <functional>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 #include <string>
@@ -190,6 +199,52 @@ void BM_HundredBodies(benchmark::State& state) {
 }
 // Arg: 1 = varied materials (the benchmark), 0 = one material for all.
 BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+
+void BM_HundredBodySurfaces(benchmark::State& state) {
+  static std::unique_ptr<Simulation> sim;
+  if (!sim) {
+    const auto dir = std::filesystem::temp_directory_path() / "corofem_bench_batch_surfaces";
+    std::filesystem::create_directories(dir);
+    // Inside every body: the body box is [0, 1] x [0, 0.2] x [0, 0.25] before its translation.
+    const std::string obj = (dir / "sphere.obj").string();
+    if (!writeSurfaceMesh(obj, test::uvSphere({0.5, 0.1, 0.125}, 0.09, 40, 50))) std::exit(1);
+    std::vector<BodyDesc> bodies;
+    for (int i = 0; i < kBodies; ++i) {
+      bodies.push_back(body(i, false));
+      bodies.back().surface = obj;
+    }
+    sim = std::make_unique<Simulation>(make(scene(bodies, true)));
+    const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
+    if (sched["batches"].size() != 1 || sched["batches"][0]["bodies"].size() != static_cast<std::size_t>(kBodies)) {
+      std::cerr << "bench_batch: the bodies with surfaces did not form one batch: " << sched["batches"].dump() << std::endl;
+      std::exit(1);
+    }
+  }
+  double tStep = 0, tSurfaces = 0;
+  long long pcg = 0;
+  std::size_t vertices = 0;
+  for (auto _ : state) {
+    for (int k = 0; k < kStepsPerSample; ++k) {
+      tStep += secondsOf([&] { stepOrDie(*sim, pcg); });
+      tSurfaces += secondsOf([&] {
+        // Enqueue every update (surfaceDeviceBuffer), then wait once: the batch's bodies share one
+        // in-order queue, so the last body's updateSurface waits for all of them.
+        for (int b = 0; b < kBodies; ++b)
+          if (!sim->surfaceDeviceBuffer(b)) std::exit(1);
+        if (!sim->updateSurface(kBodies - 1)) std::exit(1);
+      });
+    }
+  }
+  for (int b = 0; b < kBodies; ++b) vertices += sim->restSurface(b)->vertexCount();
+  const double frames = static_cast<double>(state.iterations()) * kStepsPerSample;
+  state.counters["step_ms"] = 1e3 * tStep / frames;
+  state.counters["surfaces_ms"] = 1e3 * tSurfaces / frames;
+  state.counters["surfaces_share"] = tSurfaces / (tStep + tSurfaces);
+  state.counters["surface_vertices"] = static_cast<double>(vertices);
+  state.counters["surface_vertices_per_s"] = static_cast<double>(vertices) * frames / tSurfaces;
+  state.counters["on_device"] = sim->surfaceDeviceBuffer(0) != nullptr ? 1 : 0;
+}
+BENCHMARK(BM_HundredBodySurfaces)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 }  // namespace
 
