@@ -185,11 +185,15 @@ inline void surf_store8(__global float* d, float8 ox, float8 oy, float8 oz, floa
  * once, at the output's magnitude (half an ulp of |x|) instead of twice (c itself rounded to float,
  * then the sum). In double, clo = 0. S is a multiple of SURF_W; the scratch's padding is zero.
  * blockRuns: per block of SURF_W vertices SURF_K + 1 words: which ring slots hold SURF_W consecutive
- * vertices (bit i), then each such slot's first vertex (SURF_NEIGHBOUR); not read with SURF_W = 1. */
+ * vertices (bit i), then each such slot's first vertex (SURF_NEIGHBOUR); not read with SURF_W = 1.
+ * SURF_MULTI (many bodies' surfaces in one set of launches, each body's vertices starting at a block
+ * boundary): the offset of the block's body, blockBody[v / SURF_W], is read from bodyOffsets (chi xyz,
+ * clo xyz per body) instead of the scalar arguments; not read otherwise. */
 __kernel void surface_normals(const uint vertexCount, const uint S, __global const uint* restrict ring,
                               __global const real* restrict pos, __global float* restrict out, const real chix,
                               const real chiy, const real chiz, const real clox, const real cloy, const real cloz,
-                              __global const uint* restrict blockRuns, __global float* restrict nout) {
+                              __global const uint* restrict blockRuns, __global float* restrict nout,
+                              __global const uint* restrict blockBody, __global const real* restrict bodyOffsets) {
   __global const real* px = pos;
   __global const real* py = pos + S;
   __global const real* pz = pos + 2 * S;
@@ -219,8 +223,14 @@ __kernel void surface_normals(const uint vertexCount, const uint S, __global con
     nz += ax * fy - ay * fx;
     const realW length2 = nx * nx + ny * ny + nz * nz;
     const realW scale = SURF_INV_LENGTH(length2);
-    const floatW ox = CONVERT_FLOATW((xx + clox) + chix), oy = CONVERT_FLOATW((xy + cloy) + chiy),
-                 oz = CONVERT_FLOATW((xz + cloz) + chiz);
+#ifdef SURF_MULTI
+    __global const real* c = bodyOffsets + 6 * blockBody[v / SURF_W];
+    const real hx = c[0], hy = c[1], hz = c[2], lx = c[3], ly = c[4], lz = c[5];
+#else
+    const real hx = chix, hy = chiy, hz = chiz, lx = clox, ly = cloy, lz = cloz;
+#endif
+    const floatW ox = CONVERT_FLOATW((xx + lx) + hx), oy = CONVERT_FLOATW((xy + ly) + hy),
+                 oz = CONVERT_FLOATW((xz + lz) + hz);
     const floatW mx = CONVERT_FLOATW(nx * scale), my = CONVERT_FLOATW(ny * scale), mz = CONVERT_FLOATW(nz * scale);
     /* position and normal of vertex v at pdst and ndst; vertex v + l at + l * SURF_STRIDE */
 #ifdef SURF_SEPARATE

@@ -377,8 +377,11 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   // Nodes past the buffer's end are refused, not read.
   const Status tooFar = device->updateFromDevice(shared, c, 8);
   EXPECT_EQ(tooFar.code(), ErrorCode::BadInput);
-  EXPECT_NE(tooFar.message().find("holds " + std::to_string(3 * (7 + nodes) * (dbl ? 8 : 4)) + " bytes, but its nodes 8 to 350"), std::string::npos) << "message: " << tooFar.message();
+  EXPECT_NE(tooFar.message().find("holds " + std::to_string(3 * (7 + nodes) * (dbl ? 8 : 4)) + " bytes (350 nodes of 3 " + (dbl ? "doubles" : "floats") + "), but the surface reads 343 nodes from node 8 on"), std::string::npos) << "message: " << tooFar.message();
   EXPECT_EQ(device->updateFromDevice(relative, c, 1).code(), ErrorCode::BadInput);
+  // A first node whose byte offset would wrap around, and one past 32 bits: refused, not read.
+  EXPECT_EQ(device->updateFromDevice(shared, c, (~std::size_t{0}) / 12 - 100).code(), ErrorCode::BadInput);
+  EXPECT_EQ(device->updateFromDevice(shared, c, std::size_t{1} << 33).code(), ErrorCode::BadInput);
   clReleaseMemObject(shared);
   clReleaseMemObject(absolute);
   clReleaseMemObject(relative);
@@ -415,6 +418,76 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   EXPECT_LE(worstRelN, nRel);
   EXPECT_LE(worstShift, 2e-5f);  // two float roundings at |x| ~ 100 (ulp 7.6e-6)
   EXPECT_EQ(worstOldApi, 0.0f);
+}
+
+/// DeviceSurfaceGroup (many bodies' surfaces in one set of launches) gives every body the bits of a
+/// DeviceSurface of its own fed from the same shared buffer: three bodies (row-numbered, shuffled,
+/// row-numbered) at first nodes 0, 400 and 1000 of one position buffer, each relative to its own
+/// centroid far from the origin, at every lane width, in both output layouts. Each body's output is
+/// a sub-buffer holding exactly its vertices.
+TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
+  const ScopedSurfaceLanes restore;
+  const bool dbl = GetParam().doublePrecision;
+  auto ctx = detail::cl::Context::shared(std::to_string(GetParam().device));
+  const Scene rows = makeScene(false), shuffled = makeScene(true);
+  const Scene* scenes[3] = {&rows, &shuffled, &rows};
+  const std::size_t first[3] = {0, 400, 1000}, total = 1400, nodes = rows.tets.nodeCount();
+  ASSERT_LE(nodes, 400u);
+  const double centroid[3][3] = {{100.25, -37.5, 64.125}, {-20.0, 3.5, 0.25}, {0.0, 0.0, 0.0}};
+  std::mt19937 rng(41);
+  std::vector<unsigned char> bytes(3 * total * (dbl ? 8 : 4), 0);
+  for (int m = 0; m < 3; ++m) {
+    const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(scenes[m]->tets.nodes);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const double v = x[i] - 0.5;  // relative to the centroid (the box's middle)
+      const std::size_t at = 3 * first[m] + i;
+      if (dbl) std::memcpy(&bytes[8 * at], &v, 8);
+      else {
+        const float f = static_cast<float>(v);
+        std::memcpy(&bytes[4 * at], &f, 4);
+      }
+    }
+  }
+  cl_int status = CL_SUCCESS;
+  cl_mem shared = clCreateBuffer(ctx->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes.size(), bytes.data(),
+                                 &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  DeviceSurfaceOptions o = options();
+  o.context = ctx->context();
+  o.queue = ctx->queue();
+  o.deviceId = ctx->device();
+  // The device's lane width in both layouts, and one lane (the GPU configuration); each case builds
+  // two programs, so not every combination.
+  const std::pair<const char*, bool> cases[] = {{"", false}, {"", true}, {"1", false}};
+  for (const auto& [lanes, separate] : cases) {
+      SCOPED_TRACE(std::string(*lanes ? lanes : "default") + " lanes, " + (separate ? "separate" : "interleaved"));
+      if (*lanes) setenv("COROFEM_SURFACE_LANES", lanes, 1);
+      else unsetenv("COROFEM_SURFACE_LANES");
+      o.separateStreams = separate;
+      std::vector<detail::DeviceSurfaceGroup::Member> members;
+      for (int m = 0; m < 3; ++m) members.push_back({&scenes[m]->binding, first[m]});
+      detail::DeviceSurfaceGroup group(members, total, o);
+      ASSERT_EQ(group.size(), 3u);
+      group.update(shared, {centroid[0], centroid[1], centroid[2]});
+      for (int m = 0; m < 3; ++m) {
+        SCOPED_TRACE("body " + std::to_string(m));
+        const std::size_t n = scenes[m]->binding.vertexCount();
+        auto alone = DeviceSurface::create(scenes[m]->binding, o);
+        ASSERT_TRUE(alone.isOk()) << alone.message();
+        ASSERT_TRUE(alone->updateFromDevice(shared, centroid[m], first[m]).isOk());
+        std::vector<float> p(3 * n, NAN), q(3 * n, NAN), ap(3 * n, NAN), aq(3 * n, NAN);
+        group.read(m, p.data(), q.data());
+        ASSERT_TRUE(alone->read(ap.data(), aq.data()).isOk());
+        EXPECT_EQ(std::memcmp(p.data(), ap.data(), p.size() * sizeof(float)), 0);
+        EXPECT_EQ(std::memcmp(q.data(), aq.data(), q.size() * sizeof(float)), 0);
+        EXPECT_TRUE(std::isfinite(p[0]) && std::abs(p[0] - centroid[m][0]) < 2.0) << p[0];
+        std::size_t size = 0;
+        ASSERT_EQ(clGetMemObjectInfo(group.vertexBuffer(m), CL_MEM_SIZE, sizeof(size), &size, nullptr), CL_SUCCESS);
+        EXPECT_EQ(size, (separate ? 3 : 6) * n * sizeof(float));
+        EXPECT_EQ(group.normalBuffer(m) != nullptr, separate);
+      }
+    }
+  clReleaseMemObject(shared);
 }
 
 INSTANTIATE_TEST_SUITE_P(Devices, EmbedDevice, ::testing::ValuesIn(deviceCases()),

@@ -5,7 +5,10 @@
 #include <corofem/embed.hpp>
 #include <corofem/simulation.hpp>
 
+#include "solve/batch.hpp"
+#include "solve/batch_group.hpp"
 #include "solve/beam_helpers.hpp"
+#include "util/error.hpp"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -314,8 +317,10 @@ TEST(EmbedSimulation, SeparateLayoutHoldsTheInterleavedValuesInTwoBuffers) {
 
 /// Bodies with render surfaces share a batch (one set of launches) and each surface is updated on
 /// the device from the body's own nodes in the batch's shared position buffer: the same bits as the
-/// same bodies run unbatched, one backend each. Three bodies far apart, so that reading another
-/// body's nodes (a wrong first node) would move a surface by metres; one with separate streams.
+/// same bodies run unbatched, one backend each. Three bodies of different stiffness (so they deform
+/// differently: reading another body's nodes, a wrong first node, changes a surface; the positions
+/// are relative to each body's centroid, so the offset alone would not show it); one with separate
+/// streams.
 TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
   Scene batched = surfaceScene(BackendKind::OpenCL, Precision::Float);
   const BodyDesc first = batched.bodies[0];
@@ -372,10 +377,92 @@ TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
       for (std::size_t a = 0; a < 3; ++a)
         ASSERT_EQ(static_cast<double>(drawn[(i == 2 ? 3 : 6) * v + a]), positions[3 * v + a]) << "vertex " << v;
     EXPECT_EQ(sim->surfaceNormalDeviceBuffer(i) != nullptr, i == 2);
-    EXPECT_EQ(nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"]["where"], "device");
+    const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"];
+    EXPECT_EQ(plan["where"], "device");
+    // One set of launches per layout for the batch's surfaces.
+    EXPECT_EQ(plan["shared_by"], i == 2 ? nlohmann::json({"body2"}) : nlohmann::json({"body0", "body1"}))
+        << plan.dump(1);
   }
   EXPECT_NE(buffers[0], buffers[1]);
   EXPECT_NE(buffers[1], buffers[2]);
+}
+
+/// The OpenCL batch, with body 1's third solve failing as a device failure does.
+class FailingBodyDevice final : public detail::BatchDevice {
+ public:
+  explicit FailingBodyDevice(std::unique_ptr<detail::BatchDevice> inner) : inner_(std::move(inner)) {}
+  std::string name() const override { return inner_->name(); }
+  std::string deviceName() const override { return inner_->deviceName(); }
+  std::size_t bodyCount() const override { return inner_->bodyCount(); }
+  bool devicePositions(std::size_t body, detail::DevicePositions& out) const override {
+    return inner_->devicePositions(body, out);
+  }
+  void run(std::vector<detail::BatchRequest*>& round) override {
+    std::vector<detail::BatchRequest*> rest;
+    for (detail::BatchRequest* r : round)
+      if (r->body == 1 && r->op == detail::BatchOp::Solve && ++solves_ == 3) {
+        try {
+          detail::fail(ErrorCode::DeviceError, "injected: body 1's solve failed on the device");
+        } catch (...) {
+          r->error = std::current_exception();
+        }
+      } else {
+        rest.push_back(r);
+      }
+    inner_->run(rest);
+  }
+
+ private:
+  std::unique_ptr<detail::BatchDevice> inner_;
+  int solves_ = 0;
+};
+
+/// A batched body whose device fails moves to the reference backend and leaves the batch: its
+/// surface is then computed on the host from its own nodes, while the others' stay on the device,
+/// updated together, and keep matching their nodes.
+TEST(EmbedSimulation, ABodyThatFailsOverLeavesTheBatchSurfaces) {
+  Scene scene = surfaceScene(BackendKind::OpenCL, Precision::Float);
+  const BodyDesc first = scene.bodies[0];
+  scene.bodies.clear();
+  for (int i = 0; i < 3; ++i) {
+    BodyDesc b = first;
+    b.name = "body" + std::to_string(i);
+    b.mesh.translate[1] += 2.0 * i;
+    scene.bodies.push_back(b);
+  }
+  detail::setBatchDeviceFactoryForTesting([](const std::vector<const detail::Problem*>& problems,
+                                             const SolverDesc& s, const std::string& selector) {
+    return std::unique_ptr<detail::BatchDevice>(
+        std::make_unique<FailingBodyDevice>(detail::createOpenCLBatchDevice(problems, s, selector)));
+  });
+  struct Reset {
+    ~Reset() { detail::setBatchDeviceFactoryForTesting({}); }
+  } reset;
+  auto sim = Simulation::create(scene);
+  if (!sim && sim.status().code() == ErrorCode::DeviceError) GTEST_SKIP() << "no OpenCL device: " << sim.message();
+  ASSERT_TRUE(sim) << sim.message();
+  ASSERT_NE(sim->surfaceDeviceBuffer(1), nullptr);  // on the batch's group before the failure
+  for (int k = 1; k <= 6; ++k) ASSERT_TRUE(sim->step()) << "step " << k;
+  const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
+  ASSERT_EQ(sched["fallbacks"].size(), 1u) << sched.dump(1);
+  EXPECT_EQ(sched["bodies"][1]["current"], "reference");
+  const nlohmann::json plan = nlohmann::json::parse(sim->planReport());
+  EXPECT_EQ(plan["bodies"][1]["surface"]["where"], "host") << plan.dump(1);
+  EXPECT_EQ(sim->surfaceDeviceBuffer(1), nullptr);
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE("body " + std::to_string(i));
+    if (i != 1) EXPECT_EQ(plan["bodies"][i]["surface"]["where"], "device");
+    std::vector<double> positions, nodes, own;
+    ASSERT_TRUE(sim->readSurface(i, positions));
+    ASSERT_TRUE(sim->readPositions(i, nodes));
+    own.resize(positions.size());
+    SurfaceOutput out;
+    out.positionsDouble = own.data();
+    const SurfaceBinding binding = *bindSurface(sim->restMesh(i), *sim->restSurface(i));
+    ASSERT_TRUE(deformSurface(binding, nodes.data(), sim->restMesh(i).nodeCount(), out));
+    if (i == 1) EXPECT_EQ(positions, own);  // the host path, exactly
+    else EXPECT_LE(worstDifference(positions, own), 2.5e-6);  // the device's float output
+  }
 }
 
 // Mixed keeps float positions on the device (the float tolerances apply).

@@ -165,7 +165,8 @@ TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
   for (const auto& b : bd["device_buffers_allocated"])
     if (b["name"] == "positions") positions = b["bytes"].get<long long>();
   EXPECT_GE(positions, 3 * 189 * 4);
-  // The quaternion method adds exactly its warm-start buffer and R (from which it starts).
+  // The quaternion method adds exactly its warm-start buffer and R (which its passes always write:
+  // one cannot be run again to read R back, it advances the warm start).
   Scene quatScene = dyn;
   quatScene.solver.rotation = RotationMethod::Quaternion;
   const json pq = allocated(quatScene);
@@ -183,6 +184,11 @@ TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
   const std::set<std::string> l = names(pl["bodies"][0]["device_buffers_allocated"]);
   EXPECT_EQ(l.size(), d.size() - 1);
   EXPECT_EQ(l.count("rotated_gradients") + l.count("rotations"), 0u);
+  // Nor with the Quaternion method named: a linear body has no rotations to warm-start.
+  linearScene.solver.rotation = RotationMethod::Quaternion;
+  const json plq = allocated(linearScene);
+  ASSERT_FALSE(plq.is_null());
+  EXPECT_EQ(names(plq["bodies"][0]["device_buffers_allocated"]), l);
   // Two bodies sharing the device: their buffers are the batch's, listed once, summing to its total.
   Scene two = dynamicScene(boxBeam(), 2);
   two.bodies.push_back(boxBeam({8, 2, 2}));

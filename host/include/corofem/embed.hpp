@@ -113,6 +113,10 @@ struct SurfaceOutput {
 Status deformSurface(const SurfaceBinding& binding, const double* tetNodePositions,
                      std::size_t tetNodeCount, const SurfaceOutput& output);
 
+namespace detail {
+class DeviceSurfaceGroup;
+}
+
 /// Options of the per-frame update on an OpenCL device (DeviceSurface).
 struct DeviceSurfaceOptions {
   /// Device selector, as for the OpenCL backend: "" = the first GPU, else the first device; a number
@@ -170,11 +174,13 @@ class DeviceSurface {
   Status updateFromDevice(_cl_mem* tetNodePositions);
   /// As above, from node positions relative to an offset c (3 doubles; nullptr = 0), e.g. the OpenCL
   /// backend's positions relative to the body's centroid: the weights sum to 1, so the kernel writes
-  /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c. Node n of the tet mesh is
-  /// node firstNode + n of the buffer (one buffer holding many bodies' nodes, as a batch does).
-  /// Errors: BadInput for a null buffer or one too small for those nodes (checked against its
-  /// CL_MEM_SIZE), DeviceError.
-  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode = 0);
+  /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c.
+  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset);
+  /// As above, with node n of the tet mesh at node firstNode + n of the buffer (one buffer holding
+  /// many bodies' nodes, as a batch does).
+  /// Errors (all three overloads): BadInput for a null buffer or one too small for the nodes read
+  /// (checked against its CL_MEM_SIZE), DeviceError.
+  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode);
   /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update), in either
   /// layout (separate streams are interleaved on the host).
   Status read(float* interleaved) const;
@@ -200,8 +206,13 @@ class DeviceSurface {
   std::string deviceName() const;  ///< the device the kernels run on
 
  private:
+  friend class detail::DeviceSurfaceGroup;  // many bodies' surfaces in one set of launches (internal)
   struct Impl;
   explicit DeviceSurface(std::unique_ptr<Impl> impl);
+  /// create() without the Result: `bodies` > 0 builds the many-body kernels (blockBody: the body of
+  /// each block of the normal pass's vectors). Throws Error.
+  static DeviceSurface make(const SurfaceBinding& binding, const DeviceSurfaceOptions& options, std::size_t bodies,
+                            const std::vector<std::uint32_t>* blockBody);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -87,9 +87,9 @@ class Simulation {
   /// another backend (a device failure); ask for it again after step() rather than caching it.
   _cl_mem* surfaceDeviceBuffer(int body) const;
   /// With "surface_layout": "separate", the device buffer of the surface's unit normals, 3 float32 per
-  /// vertex, updated together with surfaceDeviceBuffer() (the same rules: lazily enqueued, valid until
-  /// step() or a device failure); nullptr for the interleaved layout and wherever surfaceDeviceBuffer()
-  /// is nullptr.
+  /// vertex, updated together with surfaceDeviceBuffer() (the same rules: the update is enqueued
+  /// lazily, the buffer stays valid until the Simulation is destroyed or the body moves to another
+  /// backend); nullptr for the interleaved layout and wherever surfaceDeviceBuffer() is nullptr.
   _cl_mem* surfaceNormalDeviceBuffer(int body) const;
   /// Brings the device surface of `body` up to date and waits for it (explicit synchronisation:
   /// step() enqueues nothing for the surface; this or surfaceDeviceBuffer() does, lazily). Ok and

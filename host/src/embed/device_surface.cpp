@@ -17,6 +17,7 @@
 #include <bitset>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <vector>
 #endif
 
@@ -256,6 +257,8 @@ struct DeviceSurface::Impl {
   // amortise PoCL's per-work-item cost; on a GPU one.
   std::size_t positionsPerItem = 1, blocksPerItem = 1, lanes = 16, positionsLocal = 64, normalsLocal = 64;
   Mem nodes, weights, ring, ringRuns, x, pos, out, normalsOut, overflowVertices, overflowOffsets, overflowSequence;
+  std::size_t bodies = 0;  ///< many bodies (DeviceSurfaceGroup): their count; 0 for one
+  Mem blockBody, bodyOffsets;
   bool separate = false;  ///< DeviceSurfaceOptions::separateStreams: out holds positions, normalsOut normals
   Kernel positions, normals, overflow;
   std::vector<unsigned char> staging;  // node positions converted to the device precision
@@ -294,9 +297,10 @@ struct DeviceSurface::Impl {
       for (int c = 0; c < 3; ++c) dst[to * v + c] = src[from * v + c];
   }
 
-  /// Blocking read of `floats` floats of `buffer` into `dst`.
-  void readBuffer(cl_mem buffer, std::size_t floats, float* dst, const char* what) const {
-    checkCl(clEnqueueReadBuffer(ctx->queue(), buffer, CL_TRUE, 0, floats * sizeof(float), dst, 0, nullptr, nullptr),
+  /// Blocking read of `floats` floats of `buffer`, from float `first` on, into `dst`.
+  void readBuffer(cl_mem buffer, std::size_t floats, float* dst, const char* what, std::size_t first = 0) const {
+    checkCl(clEnqueueReadBuffer(ctx->queue(), buffer, CL_TRUE, first * sizeof(float), floats * sizeof(float), dst, 0,
+                                nullptr, nullptr),
             (std::string("clEnqueueReadBuffer (") + what + ")").c_str(), device());
   }
 
@@ -346,7 +350,12 @@ DeviceSurface& DeviceSurface::operator=(DeviceSurface&&) noexcept = default;
 DeviceSurface::~DeviceSurface() = default;
 
 Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const DeviceSurfaceOptions& options) {
-  return detail::guardResult<DeviceSurface>([&] {
+  return detail::guardResult<DeviceSurface>([&] { return make(binding, options, 0, nullptr); });
+}
+
+DeviceSurface DeviceSurface::make(const SurfaceBinding& binding, const DeviceSurfaceOptions& options,
+                                  std::size_t bodies, const std::vector<std::uint32_t>* blockBody) {
+  {
     const std::size_t n = binding.vertexCount();
     if (binding.nodes.size() != 4 * n || binding.weights.size() != 4 * n ||
         binding.vertexTriangleOffsets.size() != n + 1 || binding.triangles.size() % 3 != 0 ||
@@ -420,6 +429,14 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.out = k.buffer(rw, (k.separate ? 3 : 6) * n * sizeof(float), nullptr,
                        k.separate ? "output positions" : "output vertex");
       k.normalsOut = k.buffer(rw, k.separate ? 3 * n * sizeof(float) : 0, nullptr, "output normals");
+      if (bodies > 0) {  // many bodies: each block's body, and every body's offset (written per frame)
+        if (!blockBody || blockBody->size() != stride / k.lanes)
+          fail(ErrorCode::Internal, "DeviceSurface: ", blockBody ? blockBody->size() : 0, " block bodies for ",
+               stride / k.lanes, " blocks");
+        k.bodies = bodies;
+        k.blockBody = k.buffer(ro, blockBody->size() * sizeof(cl_uint), blockBody->data(), "block bodies");
+        k.bodyOffsets = k.buffer(ro, 6 * bodies * k.realSize, nullptr, "body offsets");
+      }
 
       std::string buildOptions = "-cl-std=CL1.2 -DCOROFEM_SURFACE -DSURF_K=" + std::to_string(layout.slots) +
                                  " -DSURF_W=" + std::to_string(k.lanes) +
@@ -427,6 +444,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
                                  " -DSURF_BPW=" + std::to_string(k.blocksPerItem);
       if (k.doublePrecision) buildOptions += " -DCOROFEM_DOUBLE";
       if (k.separate) buildOptions += " -DSURF_SEPARATE";
+      if (k.bodies > 0) buildOptions += " -DSURF_MULTI";
       const detail::cl::ProgramBuild build =
           detail::cl::buildProgram(*k.ctx, "surface_update", surfaceProgramSource(), buildOptions);
       k.positions = k.kernel(build.program, "surface_positions");
@@ -445,6 +463,8 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
       k.arg(k.normals.get(), 4, k.out.get());
       k.arg(k.normals.get(), 11, k.ringRuns.get());
       k.arg(k.normals.get(), 12, k.normalsOut.get());
+      k.arg(k.normals.get(), 13, k.blockBody.get());  // NULL unless SURF_MULTI (not read then)
+      k.arg(k.normals.get(), 14, k.bodyOffsets.get());
       k.arg(k.overflow.get(), 0, k.overflowCount);
       k.arg(k.overflow.get(), 1, k.overflowVertices.get());
       k.arg(k.overflow.get(), 2, k.overflowOffsets.get());
@@ -465,7 +485,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
            "preparing the surface's ", n, " vertices; update the surface on the host with deformSurface instead");
     }
     return DeviceSurface(std::move(impl));
-  });
+  }
 }
 
 Status DeviceSurface::update(const double* tetNodePositions, std::size_t tetNodeCount) {
@@ -493,22 +513,29 @@ Status DeviceSurface::update(const double* tetNodePositions, std::size_t tetNode
   });
 }
 
-Status DeviceSurface::updateFromDevice(_cl_mem* tetNodePositions) { return updateFromDevice(tetNodePositions, nullptr); }
+Status DeviceSurface::updateFromDevice(_cl_mem* tetNodePositions) {
+  return updateFromDevice(tetNodePositions, nullptr, 0);
+}
+
+Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset) {
+  return updateFromDevice(relativeTetNodePositions, offset, 0);
+}
 
 Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode) {
   return detail::guard([&] {
     if (!relativeTetNodePositions) fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the buffer is null");
     const Impl& k = *impl_;
-    // The kernels would read past the buffer: refuse (OpenCL does not check).
+    // The kernels would read past the buffer: refuse (OpenCL does not check). In whole nodes, so
+    // that nothing overflows; the kernel takes the first node as a 32-bit index.
     std::size_t bytes = 0;
     checkCl(clGetMemObjectInfo(relativeTetNodePositions, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr),
             "clGetMemObjectInfo (node positions)", k.device());
-    const std::size_t needed = 3 * (firstNode + k.nodeCount) * k.realSize;
-    if (needed > bytes)
+    const std::size_t held = bytes / (3 * k.realSize);  // whole nodes in the buffer
+    if (firstNode > std::numeric_limits<cl_uint>::max() || firstNode > held || k.nodeCount > held - firstNode)
       fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the node positions buffer holds ", bytes,
-           " bytes, but its nodes ", firstNode, " to ", firstNode + k.nodeCount - 1, " (3 ",
-           k.doublePrecision ? "doubles" : "floats", " each) need ", needed, "; pass the buffer of the tet mesh the "
-           "surface was bound to (", k.nodeCount, " nodes) in the surface's precision, and its first node");
+           " bytes (", held, " nodes of 3 ", k.doublePrecision ? "doubles" : "floats", "), but the surface reads ",
+           k.nodeCount, " nodes from node ", firstNode, " on; pass the buffer of the tet mesh the surface was "
+           "bound to in the surface's precision, and that mesh's first node in it");
     impl_->run(relativeTetNodePositions, offset, firstNode);
   });
 }
@@ -555,6 +582,150 @@ Status DeviceSurface::finish() const {
   return detail::guard([&] { checkCl(clFinish(impl_->ctx->queue()), "clFinish", impl_->device()); });
 }
 
+// ------------------------------------------------------------------ many bodies
+namespace detail {
+
+struct DeviceSurfaceGroup::State {
+  std::unique_ptr<DeviceSurface> merged;
+  std::vector<std::size_t> base, count;  ///< per body: first vertex in the merged surface, vertex count
+  std::vector<Mem> vertexSubs, normalSubs;
+  std::vector<unsigned char> offsets;    ///< 6 reals per body (chi xyz, clo xyz), the last write's source
+};
+
+DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::size_t positionNodes,
+                                       const DeviceSurfaceOptions& options)
+    : s_(std::make_unique<State>()) {
+  if (members.empty()) fail(ErrorCode::Internal, "DeviceSurfaceGroup: no bodies");
+  if (!options.context || !options.queue || !options.deviceId)
+    fail(ErrorCode::Internal, "DeviceSurfaceGroup: give the position buffer's context, queue and device");
+  auto ctx = cl::Context::adopt(options.context, options.queue, options.deviceId);
+  const bool gpu = ctx->info().gpu;
+  const std::size_t lanes = surfaceLanes(gpu, options.doublePrecision), blocksPerItem = gpu ? 1 : 4;
+  // Each body starts at a work-item's first block (its blocks are its own) and at an address a
+  // sub-buffer may start at (CL_DEVICE_MEM_BASE_ADDR_ALIGN, in bits).
+  cl_uint alignBits = 0;
+  checkCl(clGetDeviceInfo(options.deviceId, CL_DEVICE_MEM_BASE_ADDR_ALIGN, sizeof(alignBits), &alignBits, nullptr),
+          "clGetDeviceInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN)", ctx->deviceName());
+  const std::size_t alignBytes = std::max<std::size_t>(alignBits / 8, 1);
+  const std::size_t streamBytes = (options.separateStreams ? 3 : 6) * sizeof(float);
+  const std::size_t byAddress = alignBytes / std::gcd(alignBytes, streamBytes);
+  const std::size_t step = std::lcm(lanes * blocksPerItem, byAddress);
+
+  SurfaceBinding all;
+  all.tetNodeCount = positionNodes;
+  all.vertexTriangleOffsets.push_back(0);
+  std::vector<std::uint32_t> vertexBody;  // per merged vertex: its body (the gaps: the next body)
+  auto addVertex = [&](std::uint32_t element, const std::uint32_t* nodes, const double* weights, std::size_t m) {
+    all.element.push_back(element);
+    all.nodes.insert(all.nodes.end(), nodes, nodes + 4);
+    all.weights.insert(all.weights.end(), weights, weights + 4);
+    vertexBody.push_back(static_cast<std::uint32_t>(m));
+  };
+  for (std::size_t m = 0; m < members.size(); ++m) {
+    const SurfaceBinding& b = *members[m].binding;
+    if (b.tetNodeCount + members[m].firstNode > positionNodes)
+      fail(ErrorCode::Internal, "DeviceSurfaceGroup: body ", m, "'s nodes ", members[m].firstNode, " + ",
+           b.tetNodeCount, " exceed the buffer's ", positionNodes);
+    const std::uint32_t zeroNodes[4] = {0, 0, 0, 0};
+    const double zeroWeights[4] = {0, 0, 0, 0};
+    while (all.vertexCount() % step != 0) {  // a gap vertex: position 0, no triangle (normal 0)
+      addVertex(0, zeroNodes, zeroWeights, m);
+      all.vertexTriangleOffsets.push_back(all.vertexTriangleOffsets.back());
+    }
+    const auto vbase = static_cast<std::uint32_t>(all.vertexCount());
+    const auto tbase = static_cast<std::uint32_t>(all.triangles.size() / 3);
+    s_->base.push_back(vbase);
+    s_->count.push_back(b.vertexCount());
+    for (std::size_t v = 0; v < b.vertexCount(); ++v) {
+      std::uint32_t nodes[4];
+      for (int k = 0; k < 4; ++k) nodes[k] = b.nodes[4 * v + k] + static_cast<std::uint32_t>(members[m].firstNode);
+      addVertex(b.element[v], nodes, &b.weights[4 * v], m);
+      all.vertexTriangleOffsets.push_back(all.vertexTriangleOffsets.back() +
+                                          (b.vertexTriangleOffsets[v + 1] - b.vertexTriangleOffsets[v]));
+    }
+    for (std::uint32_t t : b.triangles) all.triangles.push_back(t + vbase);
+    for (std::uint32_t t : b.vertexTriangles) all.vertexTriangles.push_back(t + tbase);
+  }
+  // The body of each block of the normal pass (the blocks past the last vertex: the last body).
+  const std::size_t stride = paddedVertexCount(all.vertexCount());
+  std::vector<std::uint32_t> blockBody(stride / lanes, static_cast<std::uint32_t>(members.size() - 1));
+  for (std::size_t blk = 0; blk * lanes < all.vertexCount(); ++blk) blockBody[blk] = vertexBody[blk * lanes];
+  s_->merged = std::make_unique<DeviceSurface>(DeviceSurface::make(all, options, members.size(), &blockBody));
+  DeviceSurface::Impl& k = *s_->merged->impl_;
+  if (k.lanes != lanes || k.blocksPerItem != blocksPerItem)
+    fail(ErrorCode::Internal, "DeviceSurfaceGroup: the surface chose ", k.lanes, " lanes, not ", lanes);
+  s_->offsets.assign(6 * members.size() * k.realSize, 0);
+  // Every body's output as a sub-buffer of the shared one(s).
+  auto sub = [&](cl_mem parent, std::size_t m, std::size_t floatsPerVertex, const char* what) {
+    cl_buffer_region region{s_->base[m] * floatsPerVertex * sizeof(float), s_->count[m] * floatsPerVertex * sizeof(float)};
+    cl_int status = CL_SUCCESS;
+    cl_mem mem = clCreateSubBuffer(parent, CL_MEM_READ_WRITE, CL_BUFFER_CREATE_TYPE_REGION, &region, &status);
+    checkCl(status, (std::string("clCreateSubBuffer (") + what + ")").c_str(), k.device());
+    return Mem(mem);
+  };
+  for (std::size_t m = 0; m < members.size(); ++m) {
+    s_->vertexSubs.push_back(sub(k.out.get(), m, k.separate ? 3 : 6, "a body's surface output"));
+    if (k.separate) s_->normalSubs.push_back(sub(k.normalsOut.get(), m, 3, "a body's surface normals"));
+  }
+}
+
+DeviceSurfaceGroup::~DeviceSurfaceGroup() = default;
+std::size_t DeviceSurfaceGroup::size() const { return s_->base.size(); }
+bool DeviceSurfaceGroup::separateStreams() const { return s_->merged->separateStreams(); }
+_cl_mem* DeviceSurfaceGroup::vertexBuffer(std::size_t m) const { return s_->vertexSubs.at(m).get(); }
+_cl_mem* DeviceSurfaceGroup::normalBuffer(std::size_t m) const {
+  return separateStreams() ? s_->normalSubs.at(m).get() : nullptr;
+}
+std::vector<DeviceSurfaceBuffer> DeviceSurfaceGroup::buffers() const { return s_->merged->buffers(); }
+std::size_t DeviceSurfaceGroup::allocatedBytes() const { return s_->merged->allocatedBytes(); }
+void DeviceSurfaceGroup::finish() const {
+  const Status st = s_->merged->finish();
+  if (!st) fail(st.code(), st.message());
+}
+
+void DeviceSurfaceGroup::update(_cl_mem* positions, const std::vector<const double*>& centroids) {
+  DeviceSurface::Impl& k = *s_->merged->impl_;
+  if (centroids.size() != size()) fail(ErrorCode::Internal, "DeviceSurfaceGroup::update: ", centroids.size(), " centroids for ", size(), " bodies");
+  // c = hi + lo in the device precision, as DeviceSurface::Impl::setOffset splits it.
+  for (std::size_t m = 0; m < size(); ++m)
+    for (std::size_t a = 0; a < 3; ++a) {
+      const double c = centroids[m] ? centroids[m][a] : 0.0;
+      unsigned char* hi = &s_->offsets[(6 * m + a) * k.realSize];
+      unsigned char* lo = &s_->offsets[(6 * m + 3 + a) * k.realSize];
+      if (k.doublePrecision) {
+        const double zero = 0.0;
+        std::memcpy(hi, &c, 8);
+        std::memcpy(lo, &zero, 8);
+      } else {
+        const float h = static_cast<float>(c), l = static_cast<float>(c - static_cast<double>(h));
+        std::memcpy(hi, &h, 4);
+        std::memcpy(lo, &l, 4);
+      }
+    }
+  // Blocking: the host bytes are reused by the next frame.
+  checkCl(clEnqueueWriteBuffer(k.ctx->queue(), k.bodyOffsets.get(), CL_TRUE, 0, s_->offsets.size(), s_->offsets.data(),
+                               0, nullptr, nullptr),
+          "clEnqueueWriteBuffer (surface body offsets)", k.device());
+  const Status st = s_->merged->updateFromDevice(positions, nullptr, 0);
+  if (!st) fail(st.code(), st.message());
+}
+
+void DeviceSurfaceGroup::read(std::size_t m, float* positions, float* normals) const {
+  const DeviceSurface::Impl& k = *s_->merged->impl_;
+  const std::size_t n = s_->count.at(m), b = s_->base.at(m);
+  if (k.separate) {
+    k.readBuffer(k.out.get(), 3 * n, positions, "surface positions", 3 * b);
+    k.readBuffer(k.normalsOut.get(), 3 * n, normals, "surface normals", 3 * b);
+    return;
+  }
+  std::vector<float> interleaved(6 * n);
+  k.readBuffer(k.out.get(), 6 * n, interleaved.data(), "surface vertices", 6 * b);
+  DeviceSurface::Impl::copyTriples(interleaved.data(), 6, positions, 3, n);
+  DeviceSurface::Impl::copyTriples(interleaved.data() + 3, 6, normals, 3, n);
+}
+
+}  // namespace detail
+
 std::vector<DeviceSurfaceBuffer> DeviceSurface::buffers() const { return impl_->allocated; }
 std::size_t DeviceSurface::allocatedBytes() const {
   std::size_t total = 0;
@@ -593,10 +764,31 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding&, const DeviceS
 }
 Status DeviceSurface::update(const double*, std::size_t) { return notCompiledIn(); }
 Status DeviceSurface::updateFromDevice(_cl_mem*) { return notCompiledIn(); }
+Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notCompiledIn(); }
 Status DeviceSurface::updateFromDevice(_cl_mem*, const double*, std::size_t) { return notCompiledIn(); }
 Status DeviceSurface::read(float*) const { return notCompiledIn(); }
 Status DeviceSurface::read(float*, float*) const { return notCompiledIn(); }
 Status DeviceSurface::finish() const { return notCompiledIn(); }
+DeviceSurface DeviceSurface::make(const SurfaceBinding&, const DeviceSurfaceOptions&, std::size_t,
+                                  const std::vector<std::uint32_t>*) {
+  detail::fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
+}
+namespace detail {
+struct DeviceSurfaceGroup::State {};
+DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>&, std::size_t, const DeviceSurfaceOptions&) {
+  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
+}
+DeviceSurfaceGroup::~DeviceSurfaceGroup() = default;
+std::size_t DeviceSurfaceGroup::size() const { return 0; }
+void DeviceSurfaceGroup::update(_cl_mem*, const std::vector<const double*>&) {}
+_cl_mem* DeviceSurfaceGroup::vertexBuffer(std::size_t) const { return nullptr; }
+_cl_mem* DeviceSurfaceGroup::normalBuffer(std::size_t) const { return nullptr; }
+bool DeviceSurfaceGroup::separateStreams() const { return false; }
+void DeviceSurfaceGroup::read(std::size_t, float*, float*) const {}
+void DeviceSurfaceGroup::finish() const {}
+std::vector<DeviceSurfaceBuffer> DeviceSurfaceGroup::buffers() const { return {}; }
+std::size_t DeviceSurfaceGroup::allocatedBytes() const { return 0; }
+}  // namespace detail
 std::vector<DeviceSurfaceBuffer> DeviceSurface::buffers() const { return {}; }
 std::size_t DeviceSurface::allocatedBytes() const { return 0; }
 _cl_mem* DeviceSurface::vertexBuffer() const { return nullptr; }

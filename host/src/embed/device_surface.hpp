@@ -5,6 +5,8 @@
 #include <corofem/embed.hpp>
 
 #include <cstddef>
+#include <memory>
+#include <vector>
 
 namespace corofem::detail {
 
@@ -29,5 +31,40 @@ DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding, std::size
 /// COROFEM_SURFACE_LANES (1, 8 or 16; another value throws Error(BadInput) naming the fix), else 1 on
 /// GPUs, 16 in float and 8 in double on CPUs.
 std::size_t surfaceLanes(bool gpu, bool doublePrecision);
+
+/// Many bodies' render surfaces updated in one set of launches: the bodies of a batch, whose node
+/// positions share one device buffer (body m's nodes from node firstNode on, relative to its own
+/// centroid). One DeviceSurface over the bodies' bindings laid end to end (each starting at a vector
+/// block and at an address a sub-buffer may start at, the gaps filled with vertices of no triangle),
+/// whose normal pass reads each block's body offset from a table (SURF_MULTI). Every body's output
+/// is a sub-buffer of the shared output: what a renderer draws, as DeviceSurface::vertexBuffer. The
+/// same bits as a DeviceSurface per body. Throws Error (BadInput, DeviceError, NotCompiledIn).
+class DeviceSurfaceGroup {
+ public:
+  struct Member {
+    const SurfaceBinding* binding = nullptr;
+    std::size_t firstNode = 0;  ///< the body's first node in the position buffer
+  };
+  /// `positionNodes`: the nodes the position buffer holds; options: its context, queue and device,
+  /// its precision, and the output layout.
+  DeviceSurfaceGroup(const std::vector<Member>& members, std::size_t positionNodes, const DeviceSurfaceOptions& options);
+  ~DeviceSurfaceGroup();
+  std::size_t size() const;
+  /// Enqueues every body's update from the shared position buffer, body m relative to centroids[m]
+  /// (3 doubles). Blocks only for the small write of the offsets.
+  void update(_cl_mem* positions, const std::vector<const double*>& centroids);
+  _cl_mem* vertexBuffer(std::size_t m) const;  ///< body m's output (positions alone when separate)
+  _cl_mem* normalBuffer(std::size_t m) const;  ///< body m's normals with separate streams, else nullptr
+  bool separateStreams() const;
+  /// Blocking read of body m's output as two streams of 3 floats per vertex.
+  void read(std::size_t m, float* positions, float* normals) const;
+  void finish() const;
+  std::vector<DeviceSurfaceBuffer> buffers() const;  ///< the shared buffers, as allocated
+  std::size_t allocatedBytes() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
+};
 
 }  // namespace corofem::detail

@@ -127,7 +127,8 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     buffer("element_nodes", dv, 16 * E);
     buffer("element_geometry", dv, 10 * E * r);
     if (corot) {
-      // R itself only for the Quaternion method (its warm start); the other kernels read a_i.
+      // R itself only for the Quaternion method (every pass writes it: a pass cannot be run again
+      // to read it back, it advances the warm start); the other kernels read a_i.
       if (problem.rotation == RotationMethod::Quaternion) {
         buffer("rotations", dv, 9 * E * r);
         buffer("quaternions", dv, 4 * E * r);

@@ -299,6 +299,10 @@ std::unique_ptr<Backend> BatchGroup::view(std::size_t body) {
   return std::make_unique<BatchView>(shared_, body);
 }
 
+bool BatchGroup::devicePositions(std::size_t body, DevicePositions& out) const {
+  return shared_->device->devicePositions(body, out);
+}
+
 bool BatchGroup::attached(std::size_t body) const {
   std::lock_guard<std::mutex> lk(shared_->m);
   return body < shared_->slots.size() && shared_->slots[body].attached;

@@ -59,6 +59,8 @@ class BatchGroup {
   std::unique_ptr<Backend> view(std::size_t body);
   /// True while the body's view is alive.
   bool attached(std::size_t body) const;
+  /// BatchDevice::devicePositions of `body` (whether or not it is still attached).
+  bool devicePositions(std::size_t body, DevicePositions& out) const;
 
   /// Starts step(k) for every k in `bodies` (distinct, < bodyCount()), each on its own worker
   /// thread, and returns at once. One step at a time: finishStep() before the next startStep().

@@ -5,6 +5,7 @@
 #include "model/problem.hpp"
 #include "schedule/scheduler.hpp"
 #include "scene/scene_paths.hpp"
+#include "embed/device_surface.hpp"
 #include "solve/backend.hpp"
 #include "solve/batch_group.hpp"
 #include "solve/body_solver.hpp"
@@ -76,6 +77,9 @@ struct Simulation::Impl {
     std::size_t deviceEvents = 0;
     bool surfaceDirty = true;
     bool separateStreams = false;  ///< BodyDesc::surfaceLayout == Separate: positions and normals in two buffers
+    // On an OpenCL batch the surface is its batch's: Batch::surfaces[surfaceGroup], member
+    // surfaceMember (-1: none; the body's own surface, above, once it has left the batch).
+    int surfaceGroup = -1, surfaceMember = -1;
     // Batching: the group this body's first backend is a view of (index into Impl::batches), and
     // the body's index in that group; -1 = not batched.
     int batch = -1;
@@ -85,10 +89,18 @@ struct Simulation::Impl {
   /// Bodies scheduled on one device that share its buffers and launches (solve/batch_group.hpp).
   /// Each body's FailoverBackend starts on its view of the group; a device failure moves the body
   /// off the group to its next candidate.
+  /// The render surfaces of a batch's bodies that share one output layout, updated in one set of
+  /// launches from the batch's shared position buffer (embed/device_surface.hpp).
+  struct SurfaceGroup {
+    std::unique_ptr<detail::DeviceSurfaceGroup> surfaces;
+    std::vector<std::size_t> bodies;  ///< scene body indices, in the group's member order
+    bool dirty = true;                ///< a body stepped since the last update
+  };
   struct Batch {
     std::unique_ptr<detail::BatchGroup> group;
     std::vector<std::size_t> bodies;  ///< scene body indices, in the group's order
     std::string candidate;            ///< the device's candidate label
+    std::vector<SurfaceGroup> surfaces;  ///< declared after the group: destroyed first
   };
   /// A set of bodies that could have shared a device but runs unbatched, and why.
   struct Unbatched {
@@ -214,6 +226,77 @@ struct Simulation::Impl {
     }
   }
 
+  /// Per batch whose bodies' positions are on an OpenCL device, one DeviceSurfaceGroup per output
+  /// layout for its bodies with render surfaces: their updates in one set of launches.
+  void formSurfaceGroups() {
+    for (Batch& g : batches)
+      for (bool separate : {false, true}) {
+        SurfaceGroup sg;
+        std::vector<detail::DeviceSurfaceGroup::Member> members;
+        detail::DevicePositions where;
+        std::size_t nodes = 0;
+        for (std::size_t k = 0; k < g.bodies.size(); ++k) {
+          Body& b = bodies[g.bodies[k]];
+          if (!b.binding || b.separateStreams != separate || !g.group->devicePositions(k, where)) continue;
+          sg.bodies.push_back(g.bodies[k]);
+          members.push_back({b.binding.get(), where.firstNode});
+          nodes = std::max(nodes, where.firstNode + b.binding->tetNodeCount);
+        }
+        if (members.empty()) continue;
+        DeviceSurfaceOptions o;
+        o.doublePrecision = where.isDouble;
+        o.context = where.context;
+        o.queue = where.queue;
+        o.deviceId = where.device;
+        o.separateStreams = separate;
+        try {
+          sg.surfaces = std::make_unique<detail::DeviceSurfaceGroup>(members, nodes, o);
+        } catch (const detail::Error& e) {
+          detail::fail(e.code(), "the render surfaces of the batch on ", g.candidate, ": ", e.what());
+        }
+        for (std::size_t m = 0; m < sg.bodies.size(); ++m) {
+          bodies[sg.bodies[m]].surfaceGroup = static_cast<int>(g.surfaces.size());
+          bodies[sg.bodies[m]].surfaceMember = static_cast<int>(m);
+        }
+        g.surfaces.push_back(std::move(sg));
+      }
+  }
+
+  /// The surface group that updates body b's surface now, or nullptr: b is on an OpenCL batch with
+  /// a surface and has not left it (a failover gives it a backend, and a surface, of its own).
+  const SurfaceGroup* surfaceGroupOf(const Body& b) const {
+    if (b.batch < 0 || b.surfaceGroup < 0) return nullptr;
+    const Batch& g = batches[static_cast<std::size_t>(b.batch)];
+    if (!g.group->attached(b.slot) || !b.failover->events().empty()) return nullptr;
+    return &g.surfaces[static_cast<std::size_t>(b.surfaceGroup)];
+  }
+  SurfaceGroup* surfaceGroupOf(const Body& b) {
+    return const_cast<SurfaceGroup*>(static_cast<const Impl*>(this)->surfaceGroupOf(b));
+  }
+
+  /// Brings every surface of the group up to date when a body stepped: each member still on the
+  /// batch first makes its committed positions the backend's (syncBackendPositions; a device
+  /// failure there moves that body off the batch), then one set of launches for all of them.
+  /// Returns the group of body b, or nullptr when b no longer uses one.
+  SurfaceGroup* refreshSurfaceGroup(Body& b) {
+    SurfaceGroup* sg = surfaceGroupOf(b);
+    if (!sg || !sg->dirty) return sg;
+    const Batch& g = batches[static_cast<std::size_t>(b.batch)];
+    for (std::size_t i : sg->bodies)
+      if (surfaceGroupOf(bodies[i])) bodies[i].solver->syncBackendPositions();
+    sg = surfaceGroupOf(b);
+    if (!sg) return nullptr;
+    std::vector<const double*> centroids;
+    detail::DevicePositions where;
+    for (std::size_t i : sg->bodies) {
+      if (!g.group->devicePositions(bodies[i].slot, where)) detail::fail(ErrorCode::Internal, "batch without device positions");
+      centroids.push_back(where.centroid);
+    }
+    sg->surfaces->update(where.buffer, centroids);
+    sg->dirty = false;
+    return sg;
+  }
+
   /// JSON of the body's batch: {"group", "device", "bodies": [names], "active"} (active: the body
   /// still runs on its view; false after a failover), or null when it is not batched.
   nlohmann::json batchJson(const Body& b) const {
@@ -233,23 +316,31 @@ struct Simulation::Impl {
 
   /// The render surface of a body in the plan: where it is updated, its layout, and on the device
   /// the buffers its DeviceSurface allocated (not counted in the backend's device_buffers_allocated).
-  static nlohmann::json surfacePlanJson(const Body& b) {
+  nlohmann::json surfacePlanJson(const Body& b) const {
     nlohmann::json j;
     j["vertices"] = b.binding->vertexCount();
     j["triangles"] = b.surface->triangleCount();
-    // The surface made for the backend the body runs on now (after a failover it is remade lazily).
-    const DeviceSurface* d = deviceSurfaceCurrent(b) ? b.deviceSurface.get() : nullptr;
-    j["where"] = d ? "device" : "host";
-    if (d) {
-      j["layout"] = d->separateStreams() ? "separate" : "interleaved";
-      j["output"] = d->separateStreams()
-                        ? "two buffers of 3 float32 per vertex: positions (surfaceDeviceBuffer), normals "
-                          "(surfaceNormalDeviceBuffer)"
-                        : "one buffer of 6 float32 per vertex: position, normal (surfaceDeviceBuffer)";
+    // The surface updating the body now: its batch's group, or the one made for the backend the
+    // body runs on now (after a failover it is remade lazily).
+    const SurfaceGroup* sg = surfaceGroupOf(b);
+    const DeviceSurface* d = !sg && deviceSurfaceCurrent(b) ? b.deviceSurface.get() : nullptr;
+    j["where"] = sg || d ? "device" : "host";
+    if (sg || d) {
+      const bool separate = sg ? sg->surfaces->separateStreams() : d->separateStreams();
+      j["layout"] = separate ? "separate" : "interleaved";
+      j["output"] = separate ? "two buffers of 3 float32 per vertex: positions (surfaceDeviceBuffer), normals "
+                               "(surfaceNormalDeviceBuffer)"
+                             : "one buffer of 6 float32 per vertex: position, normal (surfaceDeviceBuffer)";
       nlohmann::json buffers = nlohmann::json::array();
-      for (const DeviceSurfaceBuffer& x : d->buffers()) buffers.push_back({{"name", x.name}, {"bytes", x.bytes}});
+      for (const DeviceSurfaceBuffer& x : sg ? sg->surfaces->buffers() : d->buffers())
+        buffers.push_back({{"name", x.name}, {"bytes", x.bytes}});
       j["device_buffers_allocated"] = buffers;
-      j["device_bytes_allocated"] = d->allocatedBytes();
+      j["device_bytes_allocated"] = sg ? sg->surfaces->allocatedBytes() : d->allocatedBytes();
+      if (sg) {  // one set of buffers and launches for the batch's surfaces of this layout
+        nlohmann::json names = nlohmann::json::array();
+        for (std::size_t i : sg->bodies) names.push_back(scene.bodies[i].name);
+        j["shared_by"] = names;
+      }
     } else {
       j["output"] = "host arrays on request (readSurface; the layout applies to device buffers only)";
     }
@@ -397,6 +488,7 @@ Result<Simulation> Simulation::create(const Scene& scene) {
       impl->bodies.push_back(std::move(body));
     }
     impl->formBatches();
+    impl->formSurfaceGroups();
     for (Impl::Body& body : impl->bodies) {
       if (body.batch < 0) {
         auto failover = std::make_unique<detail::FailoverBackend>(*body.problem, scene.solver, body.schedule.order,
@@ -405,7 +497,8 @@ Result<Simulation> Simulation::create(const Scene& scene) {
         body.backend = std::move(failover);
       }
       body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis);
-      Impl::deviceSurfaceOf(body);  // on an OpenCL backend: the surface's buffers and kernels now
+      // On an OpenCL backend: the surface's buffers and kernels now (a batch's: formSurfaceGroups).
+      if (!impl->surfaceGroupOf(body)) Impl::deviceSurfaceOf(body);
     }
     return Simulation(std::move(impl));
   });
@@ -427,6 +520,8 @@ Status Simulation::step(StepReport* report) {
                    " steps taken); check finished() before step()");
     const int index = s.stepsTaken + 1;
     for (Impl::Body& b : s.bodies) b.surfaceDirty = true;  // recomputed lazily (readSurface, surfaceDeviceBuffer)
+    for (Impl::Batch& g : s.batches)
+      for (Impl::SurfaceGroup& sg : g.surfaces) sg.dirty = true;
     const std::size_t n = s.bodies.size();
     std::vector<Impl::Body::Sleep> sleepBefore;
     for (const Impl::Body& b : s.bodies) sleepBefore.push_back(b.sleep);
@@ -564,18 +659,20 @@ Status Simulation::readSurface(int body, std::vector<double>& positions, std::ve
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
     const std::size_t n = b.binding->vertexCount();
-    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
-      // Explicit read-back of the device buffer (6 floats per vertex: position, normal).
-      std::vector<float> interleaved(6 * n);
-      Status st = d->read(interleaved.data());
+    // Explicit read-back of the device buffer(s), as two streams of 3 floats per vertex.
+    std::vector<float> p(3 * n), m(3 * n);
+    bool read = false;
+    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b)) {
+      sg->surfaces->read(static_cast<std::size_t>(b.surfaceMember), p.data(), m.data());
+      read = true;
+    } else if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
+      Status st = d->read(p.data(), m.data());
       if (!st) throw detail::Error(st.code(), st.message());
-      positions.resize(3 * n);
-      if (normals) normals->resize(3 * n);
-      for (std::size_t v = 0; v < n; ++v)
-        for (std::size_t a = 0; a < 3; ++a) {
-          positions[3 * v + a] = interleaved[6 * v + a];
-          if (normals) (*normals)[3 * v + a] = interleaved[6 * v + 3 + a];
-        }
+      read = true;
+    }
+    if (read) {
+      positions.assign(p.begin(), p.end());
+      if (normals) *normals = std::move(m);
       return;
     }
     const Eigen::VectorXd& x = b.solver->positions();
@@ -597,7 +694,10 @@ _cl_mem* Simulation::surfaceDeviceBuffer(int body) const {
     if (body < 0 || body >= bodyCount()) return;
     Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
     if (!b.binding) return;
-    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) buffer = d->vertexBuffer();
+    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b))
+      buffer = sg->surfaces->vertexBuffer(static_cast<std::size_t>(b.surfaceMember));
+    else if (DeviceSurface* d = Impl::refreshDeviceSurface(b))
+      buffer = d->vertexBuffer();
   });
   return st ? buffer : nullptr;
 }
@@ -608,7 +708,10 @@ _cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
     if (body < 0 || body >= bodyCount()) return;
     Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
     if (!b.binding || !b.separateStreams) return;
-    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) buffer = d->normalBuffer();
+    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b))
+      buffer = sg->surfaces->normalBuffer(static_cast<std::size_t>(b.surfaceMember));
+    else if (DeviceSurface* d = Impl::refreshDeviceSurface(b))
+      buffer = d->normalBuffer();
   });
   return st ? buffer : nullptr;
 }
@@ -616,7 +719,9 @@ _cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
 Status Simulation::updateSurface(int body) const {
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
-    if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
+    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b)) {
+      sg->surfaces->finish();
+    } else if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
       Status st = d->finish();
       if (!st) throw detail::Error(st.code(), st.message());
     }
@@ -682,7 +787,7 @@ std::string Simulation::planReport() const {
       for (const detail::DeviceBuffer& d : allocated) total += d.bytes;
       body["device_bytes_allocated"] = total;
     }
-    if (b.binding) body["surface"] = Impl::surfacePlanJson(b);
+    if (b.binding) body["surface"] = impl_->surfacePlanJson(b);
     bodies.push_back(body);
   }
   j["bodies"] = bodies;

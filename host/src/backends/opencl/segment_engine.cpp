@@ -392,10 +392,11 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     elemNodes_.create(c, nodes.size() * sizeof(cl_uint), dev_);
     uploadRaw(elemNodes_, nodes);
   }
-  const bool quaternion = solver_.rotation == RotationMethod::Quaternion;
-  rAlways_ = storedStiffness_ || quaternion;
   bool anyCorotational = false;
   for (const Segment& sg : segs_) anyCorotational = anyCorotational || sg.corotational;
+  // The Quaternion method's state only where something rotates (linear bodies never do).
+  const bool quaternion = solver_.rotation == RotationMethod::Quaternion && anyCorotational;
+  rAlways_ = storedStiffness_ || quaternion;
   {
     std::vector<double> geom(kGeomComponents * S, 0.0), quat(quaternion ? kQuatComponents * S : 0, 0.0);
     for (const Segment& sg : segs_)
@@ -409,7 +410,8 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
       }
     createReal(geom_, geom.size());
     upload(geom_, geom.data(), 0, geom.size());
-    // R itself only where a kernel reads it (stored K_e, the Quaternion method); otherwise the first
+    // R itself only where every pass writes it (rAlways_: the stored-K_e product reads it; the
+    // Quaternion method cannot run a pass again for readRotations); otherwise the first
     // readRotations makes it (ensureRotations).
     if (rAlways_) ensureRotations();
     // At rest (and always for the linear formulation) R = I, so a_i = grad N_i. Without a

@@ -256,8 +256,8 @@ class SegmentEngine {
   /// compute_rotations on the segments with rotate[s] (made the active ones); R itself only with
   /// writeR (rStale_ records the segments left without it).
   void launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR);
-  /// Allocates R (rot_) as I for every element, once: at set-up where a kernel reads R (rAlways_),
-  /// else at the first pass that writes it or readRotations.
+  /// Allocates R (rot_) as I for every element, once: at set-up where every pass writes R
+  /// (rAlways_), else at the first pass that writes it or readRotations.
   void ensureRotations();
   /// The a_i the element kernels read: rotGrad_, or without a co-rotational body (nothing rotates)
   /// the gradients in geom_'s first 9 components, the same layout.
