@@ -321,6 +321,16 @@ TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {
   ASSERT_NE(device->vertexBuffer(), nullptr);
 }
 
+/// Stores `value` as real number `index` of a device-precision byte array (double or float).
+void storeReal(std::vector<unsigned char>& bytes, std::size_t index, double value, bool dbl) {
+  if (dbl) {
+    std::memcpy(&bytes[8 * index], &value, 8);
+  } else {
+    const float f = static_cast<float>(value);
+    std::memcpy(&bytes[4 * index], &f, 4);
+  }
+}
+
 /// updateFromDevice with node positions relative to an offset c (the OpenCL backend's centroid-relative
 /// buffer) writes the same surface as absolute positions: x_v = sum_k w_vk (x_k - c) + c.
 TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
@@ -343,14 +353,9 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   // away) before the surface's own, as in a batch's shared buffer.
   auto upload = [&](bool relative, std::size_t lead = 0) {
     std::vector<unsigned char> bytes(3 * (lead + nodes) * (dbl ? 8 : 4));
-    for (std::size_t i = 0; i < 3 * (lead + nodes); ++i) {
-      const double v = i < 3 * lead ? 1e4 + static_cast<double>(i) : relative ? x[i - 3 * lead] - c[i % 3] : x[i - 3 * lead];
-      if (dbl) std::memcpy(&bytes[8 * i], &v, 8);
-      else {
-        const float f = static_cast<float>(v);
-        std::memcpy(&bytes[4 * i], &f, 4);
-      }
-    }
+    for (std::size_t i = 0; i < 3 * (lead + nodes); ++i)
+      storeReal(bytes, i, i < 3 * lead ? 1e4 + static_cast<double>(i) : relative ? x[i - 3 * lead] - c[i % 3] : x[i - 3 * lead],
+                dbl);
     cl_int status = CL_SUCCESS;
     cl_mem m = clCreateBuffer(ctx->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes.size(), bytes.data(),
                               &status);
@@ -438,15 +443,8 @@ TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
   std::vector<unsigned char> bytes(3 * total * (dbl ? 8 : 4), 0);
   for (int m = 0; m < 3; ++m) {
     const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(scenes[m]->tets.nodes);
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      const double v = x[i] - 0.5;  // relative to the centroid (the box's middle)
-      const std::size_t at = 3 * first[m] + i;
-      if (dbl) std::memcpy(&bytes[8 * at], &v, 8);
-      else {
-        const float f = static_cast<float>(v);
-        std::memcpy(&bytes[4 * at], &f, 4);
-      }
-    }
+    for (std::size_t i = 0; i < x.size(); ++i)
+      storeReal(bytes, 3 * first[m] + i, x[i] - 0.5, dbl);  // relative to the centroid (the box's middle)
   }
   cl_int status = CL_SUCCESS;
   cl_mem shared = clCreateBuffer(ctx->context(), CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes.size(), bytes.data(),
@@ -460,33 +458,33 @@ TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
   // two programs, so not every combination.
   const std::pair<const char*, bool> cases[] = {{"", false}, {"", true}, {"1", false}};
   for (const auto& [lanes, separate] : cases) {
-      SCOPED_TRACE(std::string(*lanes ? lanes : "default") + " lanes, " + (separate ? "separate" : "interleaved"));
-      if (*lanes) setenv("COROFEM_SURFACE_LANES", lanes, 1);
-      else unsetenv("COROFEM_SURFACE_LANES");
-      o.separateStreams = separate;
-      std::vector<detail::DeviceSurfaceGroup::Member> members;
-      for (int m = 0; m < 3; ++m) members.push_back({&scenes[m]->binding, first[m]});
-      detail::DeviceSurfaceGroup group(members, total, o);
-      ASSERT_EQ(group.size(), 3u);
-      group.update(shared, {centroid[0], centroid[1], centroid[2]});
-      for (int m = 0; m < 3; ++m) {
-        SCOPED_TRACE("body " + std::to_string(m));
-        const std::size_t n = scenes[m]->binding.vertexCount();
-        auto alone = DeviceSurface::create(scenes[m]->binding, o);
-        ASSERT_TRUE(alone.isOk()) << alone.message();
-        ASSERT_TRUE(alone->updateFromDevice(shared, centroid[m], first[m]).isOk());
-        std::vector<float> p(3 * n, NAN), q(3 * n, NAN), ap(3 * n, NAN), aq(3 * n, NAN);
-        group.read(m, p.data(), q.data());
-        ASSERT_TRUE(alone->read(ap.data(), aq.data()).isOk());
-        EXPECT_EQ(std::memcmp(p.data(), ap.data(), p.size() * sizeof(float)), 0);
-        EXPECT_EQ(std::memcmp(q.data(), aq.data(), q.size() * sizeof(float)), 0);
-        EXPECT_TRUE(std::isfinite(p[0]) && std::abs(p[0] - centroid[m][0]) < 2.0) << p[0];
-        std::size_t size = 0;
-        ASSERT_EQ(clGetMemObjectInfo(group.vertexBuffer(m), CL_MEM_SIZE, sizeof(size), &size, nullptr), CL_SUCCESS);
-        EXPECT_EQ(size, (separate ? 3 : 6) * n * sizeof(float));
-        EXPECT_EQ(group.normalBuffer(m) != nullptr, separate);
-      }
+    SCOPED_TRACE(std::string(*lanes ? lanes : "default") + " lanes, " + (separate ? "separate" : "interleaved"));
+    if (*lanes) setenv("COROFEM_SURFACE_LANES", lanes, 1);
+    else unsetenv("COROFEM_SURFACE_LANES");
+    o.separateStreams = separate;
+    std::vector<detail::DeviceSurfaceGroup::Member> members;
+    for (int m = 0; m < 3; ++m) members.push_back({&scenes[m]->binding, first[m]});
+    detail::DeviceSurfaceGroup group(members, total, o);
+    ASSERT_EQ(group.size(), 3u);
+    group.update(shared, {centroid[0], centroid[1], centroid[2]});
+    for (int m = 0; m < 3; ++m) {
+      SCOPED_TRACE("body " + std::to_string(m));
+      const std::size_t n = scenes[m]->binding.vertexCount();
+      auto alone = DeviceSurface::create(scenes[m]->binding, o);
+      ASSERT_TRUE(alone.isOk()) << alone.message();
+      ASSERT_TRUE(alone->updateFromDevice(shared, centroid[m], first[m]).isOk());
+      std::vector<float> p(3 * n, NAN), q(3 * n, NAN), ap(3 * n, NAN), aq(3 * n, NAN);
+      group.read(m, p.data(), q.data());
+      ASSERT_TRUE(alone->read(ap.data(), aq.data()).isOk());
+      EXPECT_EQ(std::memcmp(p.data(), ap.data(), p.size() * sizeof(float)), 0);
+      EXPECT_EQ(std::memcmp(q.data(), aq.data(), q.size() * sizeof(float)), 0);
+      EXPECT_TRUE(std::isfinite(p[0]) && std::abs(p[0] - centroid[m][0]) < 2.0) << p[0];
+      std::size_t size = 0;
+      ASSERT_EQ(clGetMemObjectInfo(group.vertexBuffer(m), CL_MEM_SIZE, sizeof(size), &size, nullptr), CL_SUCCESS);
+      EXPECT_EQ(size, (separate ? 3 : 6) * n * sizeof(float));
+      EXPECT_EQ(group.normalBuffer(m) != nullptr, separate);
     }
+  }
   clReleaseMemObject(shared);
 }
 

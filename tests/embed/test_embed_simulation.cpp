@@ -321,18 +321,27 @@ TEST(EmbedSimulation, SeparateLayoutHoldsTheInterleavedValuesInTwoBuffers) {
 /// differently: reading another body's nodes, a wrong first node, changes a surface; the positions
 /// are relative to each body's centroid, so the offset alone would not show it); one with separate
 /// streams.
-TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
-  Scene batched = surfaceScene(BackendKind::OpenCL, Precision::Float);
-  const BodyDesc first = batched.bodies[0];
-  batched.bodies.clear();
+/// surfaceScene's body three times (body0..body2), 2 m apart; `varied`: stiffer each time, and
+/// body2's surface in separate streams.
+Scene threeSurfaceBodies(bool varied) {
+  Scene scene = surfaceScene(BackendKind::OpenCL, Precision::Float);
+  const BodyDesc first = scene.bodies[0];
+  scene.bodies.clear();
   for (int i = 0; i < 3; ++i) {
     BodyDesc b = first;
     b.name = "body" + std::to_string(i);
     b.mesh.translate[1] += 2.0 * i;
-    b.material.youngsModulus *= 1.0 + 0.5 * i;
-    b.surfaceLayout = i == 2 ? SurfaceLayout::Separate : SurfaceLayout::Interleaved;
-    batched.bodies.push_back(b);
+    if (varied) {
+      b.material.youngsModulus *= 1.0 + 0.5 * i;
+      b.surfaceLayout = i == 2 ? SurfaceLayout::Separate : SurfaceLayout::Interleaved;
+    }
+    scene.bodies.push_back(b);
   }
+  return scene;
+}
+
+TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
+  const Scene batched = threeSurfaceBodies(true);
   Scene alone = batched;
   alone.backend.batch = false;
   auto sim = Simulation::create(batched);
@@ -421,15 +430,7 @@ class FailingBodyDevice final : public detail::BatchDevice {
 /// surface is then computed on the host from its own nodes, while the others' stay on the device,
 /// updated together, and keep matching their nodes.
 TEST(EmbedSimulation, ABodyThatFailsOverLeavesTheBatchSurfaces) {
-  Scene scene = surfaceScene(BackendKind::OpenCL, Precision::Float);
-  const BodyDesc first = scene.bodies[0];
-  scene.bodies.clear();
-  for (int i = 0; i < 3; ++i) {
-    BodyDesc b = first;
-    b.name = "body" + std::to_string(i);
-    b.mesh.translate[1] += 2.0 * i;
-    scene.bodies.push_back(b);
-  }
+  const Scene scene = threeSurfaceBodies(false);
   detail::setBatchDeviceFactoryForTesting([](const std::vector<const detail::Problem*>& problems,
                                              const SolverDesc& s, const std::string& selector) {
     return std::unique_ptr<detail::BatchDevice>(
