@@ -449,6 +449,7 @@ TEST(EmbedSimulation, ABodyThatFailsOverLeavesTheBatchSurfaces) {
   EXPECT_EQ(sched["bodies"][1]["current"], "reference");
   const nlohmann::json plan = nlohmann::json::parse(sim->planReport());
   EXPECT_EQ(plan["bodies"][1]["surface"]["where"], "host") << plan.dump(1);
+  EXPECT_EQ(plan["bodies"][0]["surface"]["shared_by"], nlohmann::json({"body0", "body2"}));
   EXPECT_EQ(sim->surfaceDeviceBuffer(1), nullptr);
   for (int i = 0; i < 3; ++i) {
     SCOPED_TRACE("body " + std::to_string(i));

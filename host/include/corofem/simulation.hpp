@@ -80,7 +80,9 @@ class Simulation {
   /// interleaved (the default), per vertex 6 float32 -- position x, y, z then unit normal x, y, z --
   /// a 24-byte stride (DeviceSurface::vertexBuffer); separate, the positions only, 3 float32 per
   /// vertex (a 12-byte stride), the normals in surfaceNormalDeviceBuffer(). Vertices in the order of
-  /// restSurface(body). The call enqueues the update on the backend's in-order command queue when the
+  /// restSurface(body). On a batch (backend.batch) the surfaces of the batch's bodies with one layout
+  /// are one set of buffers and launches: each body's buffer is its region (a sub-buffer) of the
+  /// shared output, and bringing one body's surface up to date updates them all. The call enqueues the update on the backend's in-order command queue when the
   /// body stepped since the last one and does not wait: work the application enqueues on that queue
   /// afterwards sees the current surface; from another queue or API, call updateSurface() first. The
   /// buffer belongs to the Simulation and stays valid until it is destroyed or the body moves to

@@ -340,7 +340,9 @@ struct DeviceSurface::Impl {
     enqueue(positions.get(), (vertexCount + positionsPerItem - 1) / positionsPerItem, positionsLocal,
             "surface_positions");
     enqueue(normals.get(), (vertexCount + per - 1) / per, normalsLocal, "surface_normals");
-    enqueue(overflow.get(), overflowCount, 1, "surface_normals_overflow");
+    // A few vertices per body (a UV sphere's poles), many with a batch's bodies: work-groups of
+    // several (the kernel skips the padding), not of one each.
+    enqueue(overflow.get(), overflowCount, positionsLocal, "surface_normals_overflow");
   }
 };
 
@@ -590,6 +592,20 @@ struct DeviceSurfaceGroup::State {
   std::vector<std::size_t> base, count;  ///< per body: first vertex in the merged surface, vertex count
   std::vector<Mem> vertexSubs, normalSubs;
   std::vector<unsigned char> offsets;    ///< 6 reals per body (chi xyz, clo xyz), the last write's source
+  cl_event written = nullptr;            ///< that write (its host bytes must live until it completes)
+  void waitWritten() {
+    if (!written) return;
+    const cl_int status = clWaitForEvents(1, &written);
+    clReleaseEvent(written);
+    written = nullptr;
+    checkCl(status, "clWaitForEvents (surface body offsets)", "the surfaces' device");
+  }
+  ~State() {
+    if (written) {
+      clWaitForEvents(1, &written);
+      clReleaseEvent(written);
+    }
+  }
 };
 
 DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::size_t positionNodes,
@@ -687,6 +703,7 @@ void DeviceSurfaceGroup::update(_cl_mem* positions, const std::vector<const doub
   DeviceSurface::Impl& k = *s_->merged->impl_;
   if (centroids.size() != size()) fail(ErrorCode::Internal, "DeviceSurfaceGroup::update: ", centroids.size(), " centroids for ", size(), " bodies");
   // c = hi + lo in the device precision, as DeviceSurface::Impl::setOffset splits it.
+  s_->waitWritten();
   for (std::size_t m = 0; m < size(); ++m)
     for (std::size_t a = 0; a < 3; ++a) {
       const double c = centroids[m] ? centroids[m][a] : 0.0;
@@ -702,9 +719,10 @@ void DeviceSurfaceGroup::update(_cl_mem* positions, const std::vector<const doub
         std::memcpy(lo, &l, 4);
       }
     }
-  // Blocking: the host bytes are reused by the next frame.
-  checkCl(clEnqueueWriteBuffer(k.ctx->queue(), k.bodyOffsets.get(), CL_TRUE, 0, s_->offsets.size(), s_->offsets.data(),
-                               0, nullptr, nullptr),
+  // Not blocking (on an in-order queue that would wait for all the work queued before it): the
+  // next update waits for this write before it rewrites the host bytes.
+  checkCl(clEnqueueWriteBuffer(k.ctx->queue(), k.bodyOffsets.get(), CL_FALSE, 0, s_->offsets.size(), s_->offsets.data(),
+                               0, nullptr, &s_->written),
           "clEnqueueWriteBuffer (surface body offsets)", k.device());
   const Status st = s_->merged->updateFromDevice(positions, nullptr, 0);
   if (!st) fail(st.code(), st.message());
@@ -780,11 +798,15 @@ DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>&, std::size_t, 
 }
 DeviceSurfaceGroup::~DeviceSurfaceGroup() = default;
 std::size_t DeviceSurfaceGroup::size() const { return 0; }
-void DeviceSurfaceGroup::update(_cl_mem*, const std::vector<const double*>&) {}
+void DeviceSurfaceGroup::update(_cl_mem*, const std::vector<const double*>&) {
+  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
+}
 _cl_mem* DeviceSurfaceGroup::vertexBuffer(std::size_t) const { return nullptr; }
 _cl_mem* DeviceSurfaceGroup::normalBuffer(std::size_t) const { return nullptr; }
 bool DeviceSurfaceGroup::separateStreams() const { return false; }
-void DeviceSurfaceGroup::read(std::size_t, float*, float*) const {}
+void DeviceSurfaceGroup::read(std::size_t, float*, float*) const {
+  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
+}
 void DeviceSurfaceGroup::finish() const {}
 std::vector<DeviceSurfaceBuffer> DeviceSurfaceGroup::buffers() const { return {}; }
 std::size_t DeviceSurfaceGroup::allocatedBytes() const { return 0; }

@@ -51,7 +51,8 @@ class DeviceSurfaceGroup {
   ~DeviceSurfaceGroup();
   std::size_t size() const;
   /// Enqueues every body's update from the shared position buffer, body m relative to centroids[m]
-  /// (3 doubles). Blocks only for the small write of the offsets.
+  /// (3 doubles). Does not wait, except for the previous update's write of the offsets (whose host
+  /// bytes this one rewrites).
   void update(_cl_mem* positions, const std::vector<const double*>& centroids);
   _cl_mem* vertexBuffer(std::size_t m) const;  ///< body m's output (positions alone when separate)
   _cl_mem* normalBuffer(std::size_t m) const;  ///< body m's normals with separate streams, else nullptr

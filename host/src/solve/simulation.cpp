@@ -80,6 +80,7 @@ struct Simulation::Impl {
     // On an OpenCL batch the surface is its batch's: Batch::surfaces[surfaceGroup], member
     // surfaceMember (-1: none; the body's own surface, above, once it has left the batch).
     int surfaceGroup = -1, surfaceMember = -1;
+    std::string surfaceGroupError;  ///< why its batch's surfaces could not be grouped (each has its own)
     // Batching: the group this body's first backend is a view of (index into Impl::batches), and
     // the body's index in that group; -1 = not batched.
     int batch = -1;
@@ -229,6 +230,7 @@ struct Simulation::Impl {
   /// Per batch whose bodies' positions are on an OpenCL device, one DeviceSurfaceGroup per output
   /// layout for its bodies with render surfaces: their updates in one set of launches.
   void formSurfaceGroups() {
+#ifdef COROFEM_WITH_OPENCL
     for (Batch& g : batches)
       for (bool separate : {false, true}) {
         SurfaceGroup sg;
@@ -252,7 +254,11 @@ struct Simulation::Impl {
         try {
           sg.surfaces = std::make_unique<detail::DeviceSurfaceGroup>(members, nodes, o);
         } catch (const detail::Error& e) {
-          detail::fail(e.code(), "the render surfaces of the batch on ", g.candidate, ": ", e.what());
+          // The merged buffers hold every body's vertices and may exceed what the device allocates
+          // at once: each body then keeps a surface of its own (made at create(), as unbatched).
+          if (e.code() != ErrorCode::DeviceError) throw;
+          for (std::size_t i : sg.bodies) bodies[i].surfaceGroupError = e.what();
+          continue;
         }
         for (std::size_t m = 0; m < sg.bodies.size(); ++m) {
           bodies[sg.bodies[m]].surfaceGroup = static_cast<int>(g.surfaces.size());
@@ -260,6 +266,7 @@ struct Simulation::Impl {
         }
         g.surfaces.push_back(std::move(sg));
       }
+#endif
   }
 
   /// The surface group that updates body b's surface now, or nullptr: b is on an OpenCL batch with
@@ -338,8 +345,11 @@ struct Simulation::Impl {
       j["device_bytes_allocated"] = sg ? sg->surfaces->allocatedBytes() : d->allocatedBytes();
       if (sg) {  // one set of buffers and launches for the batch's surfaces of this layout
         nlohmann::json names = nlohmann::json::array();
-        for (std::size_t i : sg->bodies) names.push_back(scene.bodies[i].name);
+        for (std::size_t i : sg->bodies)
+          if (surfaceGroupOf(bodies[i])) names.push_back(scene.bodies[i].name);  // not those that left
         j["shared_by"] = names;
+      } else if (!b.surfaceGroupError.empty()) {
+        j["not_shared"] = b.surfaceGroupError;
       }
     } else {
       j["output"] = "host arrays on request (readSurface; the layout applies to device buffers only)";
