@@ -314,20 +314,42 @@ struct DeviceSurface::Impl {
             device());
   }
 
-  /// Sets the offset c added to the written positions: c = hi + lo in the device precision (in float
-  /// lo carries what float(c) drops, so the output rounds once; surface_update.cl).
+  /// c = hi + lo in the real type R of the device: in float lo carries what float(c) drops, so the
+  /// output rounds once (surface_update.cl); in double lo is 0.
+  template <class R>
+  static std::pair<R, R> splitOffset(double c) {
+    const R hi = static_cast<R>(c);
+    return {hi, static_cast<R>(c - static_cast<double>(hi))};
+  }
+
+  /// Sets the offset c added to the written positions (kernel arguments 5-7 and 8-10).
   void setOffset(const double* c) {
     for (cl_uint a = 0; a < 3; ++a) {
       const double value = c ? c[a] : 0.0;
       if (doublePrecision) {
-        arg(normals.get(), 5 + a, value);
-        arg(normals.get(), 8 + a, 0.0);
-      } else {
-        const float hi = static_cast<float>(value);
+        const auto [hi, lo] = splitOffset<double>(value);
         arg(normals.get(), 5 + a, hi);
-        arg(normals.get(), 8 + a, static_cast<float>(value - static_cast<double>(hi)));
+        arg(normals.get(), 8 + a, lo);
+      } else {
+        const auto [hi, lo] = splitOffset<float>(value);
+        arg(normals.get(), 5 + a, hi);
+        arg(normals.get(), 8 + a, lo);
       }
     }
+  }
+
+  /// Blocking read of vertices first .. first + n - 1 as two streams of 3 floats per vertex, from
+  /// either layout (an interleaved buffer is split on the host).
+  void readStreams(std::size_t first, std::size_t n, float* positions, float* normals) const {
+    if (separate) {
+      readBuffer(out.get(), 3 * n, positions, "surface positions", 3 * first);
+      readBuffer(normalsOut.get(), 3 * n, normals, "surface normals", 3 * first);
+      return;
+    }
+    std::vector<float> interleaved(6 * n);
+    readBuffer(out.get(), 6 * n, interleaved.data(), "surface vertices", 6 * first);
+    copyTriples(interleaved.data(), 6, positions, 3, n);
+    copyTriples(interleaved.data() + 3, 6, normals, 3, n);
   }
 
   /// Enqueues the passes reading node positions from `xBuffer`, the body's from node `firstNode` on
@@ -357,137 +379,135 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding& binding, const
 
 DeviceSurface DeviceSurface::make(const SurfaceBinding& binding, const DeviceSurfaceOptions& options,
                                   std::size_t bodies, const std::vector<std::uint32_t>* blockBody) {
-  {
-    const std::size_t n = binding.vertexCount();
-    if (binding.nodes.size() != 4 * n || binding.weights.size() != 4 * n ||
-        binding.vertexTriangleOffsets.size() != n + 1 || binding.triangles.size() % 3 != 0 ||
-        binding.vertexTriangles.size() != binding.triangles.size())
-      fail(ErrorCode::BadInput, "DeviceSurface::create: the SurfaceBinding is inconsistent (array sizes do not "
-           "match its ", n, " vertices); make it with bindSurface");
-    const bool some = options.context || options.queue || options.deviceId;
-    const bool all = options.context && options.queue && options.deviceId;
-    if (some && !all)
-      fail(ErrorCode::BadInput, "DeviceSurfaceOptions: give context, queue and deviceId together, or none of them");
+  const std::size_t n = binding.vertexCount();
+  if (binding.nodes.size() != 4 * n || binding.weights.size() != 4 * n ||
+      binding.vertexTriangleOffsets.size() != n + 1 || binding.triangles.size() % 3 != 0 ||
+      binding.vertexTriangles.size() != binding.triangles.size())
+    fail(ErrorCode::BadInput, "DeviceSurface::create: the SurfaceBinding is inconsistent (array sizes do not "
+         "match its ", n, " vertices); make it with bindSurface");
+  const bool some = options.context || options.queue || options.deviceId;
+  const bool all = options.context && options.queue && options.deviceId;
+  if (some && !all)
+    fail(ErrorCode::BadInput, "DeviceSurfaceOptions: give context, queue and deviceId together, or none of them");
 
-    auto impl = std::make_unique<Impl>();
-    impl->ctx = all ? detail::cl::Context::adopt(options.context, options.queue, options.deviceId)
-                    : detail::cl::Context::shared(options.device);
-    impl->doublePrecision = options.doublePrecision;
-    if (impl->doublePrecision && !impl->ctx->info().fp64)
-      fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
-           "' has no cl_khr_fp64; use float (doublePrecision = false) or another device");
-    const std::size_t lanes = detail::surfaceLanes(impl->ctx->info().gpu, impl->doublePrecision);
-    Impl& k = *impl;
-    try {
-      k.realSize = k.doublePrecision ? sizeof(double) : sizeof(float);
-      const bool cpu = !k.ctx->info().gpu;
-      k.lanes = lanes;
-      k.positionsPerItem = cpu ? 16 : 1;
-      k.blocksPerItem = cpu ? 4 : 1;
-      k.positionsLocal = cpu ? 16 : 64;
-      k.normalsLocal = cpu ? 16 : 64;
-      // The kernels index with 32-bit integers: slot i of vertex v at i * S + v, 6 v floats per vertex.
-      const std::size_t stride = paddedVertexCount(n);
-      if (6 * stride + 64 > std::numeric_limits<cl_uint>::max())
-        fail(ErrorCode::DeviceError, "the surface has ", n, " vertices, more than the device kernels' 32-bit "
-             "indices allow (", std::numeric_limits<cl_uint>::max() / 6 - 64, ")");
-      k.vertexCount = static_cast<cl_uint>(n);
-      k.stride = static_cast<cl_uint>(stride);
-      k.nodeCount = binding.tetNodeCount;
-      const RingLayout layout = ringLayout(binding, stride);
-      if (layout.slots * stride > std::numeric_limits<cl_uint>::max() ||
-          layout.overflowSequence.size() > std::numeric_limits<cl_uint>::max())
-        fail(ErrorCode::DeviceError, "the surface's one-rings (", layout.slots, " slots for ", n,
-             " vertices) exceed the device kernels' 32-bit indices");
-      k.overflowCount = static_cast<cl_uint>(layout.overflowVertices.size());
+  auto impl = std::make_unique<Impl>();
+  impl->ctx = all ? detail::cl::Context::adopt(options.context, options.queue, options.deviceId)
+                  : detail::cl::Context::shared(options.device);
+  impl->doublePrecision = options.doublePrecision;
+  if (impl->doublePrecision && !impl->ctx->info().fp64)
+    fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
+         "' has no cl_khr_fp64; use float (doublePrecision = false) or another device");
+  const std::size_t lanes = detail::surfaceLanes(impl->ctx->info().gpu, impl->doublePrecision);
+  Impl& k = *impl;
+  try {
+    k.realSize = k.doublePrecision ? sizeof(double) : sizeof(float);
+    const bool cpu = !k.ctx->info().gpu;
+    k.lanes = lanes;
+    k.positionsPerItem = cpu ? 16 : 1;
+    k.blocksPerItem = cpu ? 4 : 1;
+    k.positionsLocal = cpu ? 16 : 64;
+    k.normalsLocal = cpu ? 16 : 64;
+    // The kernels index with 32-bit integers: slot i of vertex v at i * S + v, 6 v floats per vertex.
+    const std::size_t stride = paddedVertexCount(n);
+    if (6 * stride + 64 > std::numeric_limits<cl_uint>::max())
+      fail(ErrorCode::DeviceError, "the surface has ", n, " vertices, more than the device kernels' 32-bit "
+           "indices allow (", std::numeric_limits<cl_uint>::max() / 6 - 64, ")");
+    k.vertexCount = static_cast<cl_uint>(n);
+    k.stride = static_cast<cl_uint>(stride);
+    k.nodeCount = binding.tetNodeCount;
+    const RingLayout layout = ringLayout(binding, stride);
+    if (layout.slots * stride > std::numeric_limits<cl_uint>::max() ||
+        layout.overflowSequence.size() > std::numeric_limits<cl_uint>::max())
+      fail(ErrorCode::DeviceError, "the surface's one-rings (", layout.slots, " slots for ", n,
+           " vertices) exceed the device kernels' 32-bit indices");
+    k.overflowCount = static_cast<cl_uint>(layout.overflowVertices.size());
 
-      // Weights in the device precision; node indices as uint4; the ring as uint.
-      std::vector<unsigned char> w(k.realSize * 4 * n);
-      for (std::size_t i = 0; i < 4 * n; ++i) {
-        if (k.doublePrecision) std::memcpy(&w[8 * i], &binding.weights[i], 8);
-        else {
-          const float f = static_cast<float>(binding.weights[i]);
-          std::memcpy(&w[4 * i], &f, 4);
-        }
+    // Weights in the device precision; node indices as uint4; the ring as uint.
+    std::vector<unsigned char> w(k.realSize * 4 * n);
+    for (std::size_t i = 0; i < 4 * n; ++i) {
+      if (k.doublePrecision) std::memcpy(&w[8 * i], &binding.weights[i], 8);
+      else {
+        const float f = static_cast<float>(binding.weights[i]);
+        std::memcpy(&w[4 * i], &f, 4);
       }
-      const cl_mem_flags ro = CL_MEM_READ_ONLY, rw = CL_MEM_READ_WRITE;
-      k.nodes = k.buffer(ro, 4 * n * sizeof(cl_uint), binding.nodes.data(), "vertex node indices");
-      k.weights = k.buffer(ro, w.size(), w.data(), "weights");
-      k.ring = k.buffer(ro, layout.ring.size() * sizeof(cl_uint), layout.ring.data(), "one-ring");
-      const std::vector<cl_uint> runs = blockRuns(layout, stride, k.lanes);
-      k.ringRuns = k.buffer(ro, runs.size() * sizeof(cl_uint), runs.data(), "one-ring runs");
-      k.overflowVertices = k.buffer(ro, layout.overflowVertices.size() * sizeof(cl_uint),
-                                    layout.overflowVertices.data(), "long one-ring vertices");
-      k.overflowOffsets = k.buffer(ro, layout.overflowOffsets.size() * sizeof(cl_uint), layout.overflowOffsets.data(),
-                                   "long one-ring offsets");
-      k.overflowSequence = k.buffer(ro, layout.overflowSequence.size() * sizeof(cl_uint),
-                                    layout.overflowSequence.data(), "long one-rings");
-      // k.x, the upload buffer of update()'s host positions, is made by the first update(): a
-      // Simulation feeds the backend's own buffer (updateFromDevice) and never needs it.
-      // The scratch's padding (vertices n..S-1) is read by the last vector block: zero, once.
-      const std::vector<unsigned char> zeros(3 * stride * k.realSize, 0);
-      k.pos = k.buffer(rw, zeros.size(), zeros.data(), "vertex positions");
-      k.separate = options.separateStreams;
-      k.out = k.buffer(rw, (k.separate ? 3 : 6) * n * sizeof(float), nullptr,
-                       k.separate ? "output positions" : "output vertex");
-      k.normalsOut = k.buffer(rw, k.separate ? 3 * n * sizeof(float) : 0, nullptr, "output normals");
-      if (bodies > 0) {  // many bodies: each block's body, and every body's offset (written per frame)
-        if (!blockBody || blockBody->size() != stride / k.lanes)
-          fail(ErrorCode::Internal, "DeviceSurface: ", blockBody ? blockBody->size() : 0, " block bodies for ",
-               stride / k.lanes, " blocks");
-        k.bodies = bodies;
-        k.blockBody = k.buffer(ro, blockBody->size() * sizeof(cl_uint), blockBody->data(), "block bodies");
-        k.bodyOffsets = k.buffer(ro, 6 * bodies * k.realSize, nullptr, "body offsets");
-      }
-
-      std::string buildOptions = "-cl-std=CL1.2 -DCOROFEM_SURFACE -DSURF_K=" + std::to_string(layout.slots) +
-                                 " -DSURF_W=" + std::to_string(k.lanes) +
-                                 " -DSURF_VPW=" + std::to_string(k.positionsPerItem) +
-                                 " -DSURF_BPW=" + std::to_string(k.blocksPerItem);
-      if (k.doublePrecision) buildOptions += " -DCOROFEM_DOUBLE";
-      if (k.separate) buildOptions += " -DSURF_SEPARATE";
-      if (k.bodies > 0) buildOptions += " -DSURF_MULTI";
-      const detail::cl::ProgramBuild build =
-          detail::cl::buildProgram(*k.ctx, "surface_update", surfaceProgramSource(), buildOptions);
-      k.positions = k.kernel(build.program, "surface_positions");
-      k.normals = k.kernel(build.program, "surface_normals");
-      k.overflow = k.kernel(build.program, "surface_normals_overflow");
-
-      k.arg(k.positions.get(), 0, k.vertexCount);
-      k.arg(k.positions.get(), 1, k.stride);
-      k.arg(k.positions.get(), 2, k.nodes.get());
-      k.arg(k.positions.get(), 3, k.weights.get());
-      k.arg(k.positions.get(), 5, k.pos.get());
-      k.arg(k.normals.get(), 0, k.vertexCount);
-      k.arg(k.normals.get(), 1, k.stride);
-      k.arg(k.normals.get(), 2, k.ring.get());
-      k.arg(k.normals.get(), 3, k.pos.get());
-      k.arg(k.normals.get(), 4, k.out.get());
-      k.arg(k.normals.get(), 11, k.ringRuns.get());
-      k.arg(k.normals.get(), 12, k.normalsOut.get());
-      k.arg(k.normals.get(), 13, k.blockBody.get());  // NULL unless SURF_MULTI (not read then)
-      k.arg(k.normals.get(), 14, k.bodyOffsets.get());
-      k.arg(k.overflow.get(), 0, k.overflowCount);
-      k.arg(k.overflow.get(), 1, k.overflowVertices.get());
-      k.arg(k.overflow.get(), 2, k.overflowOffsets.get());
-      k.arg(k.overflow.get(), 3, k.overflowSequence.get());
-      k.arg(k.overflow.get(), 4, k.stride);
-      k.arg(k.overflow.get(), 5, k.pos.get());
-      k.arg(k.overflow.get(), 6, k.out.get());
-      k.arg(k.overflow.get(), 7, k.normalsOut.get());
-      k.setOffset(nullptr);
-    } catch (const detail::Error& e) {
-      // Anything that fails from here on is the device's (memory, build, limits): one code, so that
-      // a caller can fall back to deformSurface on the host.
-      if (e.code() == ErrorCode::DeviceError) throw;
-      fail(ErrorCode::DeviceError, "DeviceSurface::create on device '", k.device(), "': ", e.what(),
-           "; update the surface on the host with deformSurface instead");
-    } catch (const std::bad_alloc&) {
-      fail(ErrorCode::DeviceError, "DeviceSurface::create on device '", k.device(), "': out of host memory while "
-           "preparing the surface's ", n, " vertices; update the surface on the host with deformSurface instead");
     }
-    return DeviceSurface(std::move(impl));
+    const cl_mem_flags ro = CL_MEM_READ_ONLY, rw = CL_MEM_READ_WRITE;
+    k.nodes = k.buffer(ro, 4 * n * sizeof(cl_uint), binding.nodes.data(), "vertex node indices");
+    k.weights = k.buffer(ro, w.size(), w.data(), "weights");
+    k.ring = k.buffer(ro, layout.ring.size() * sizeof(cl_uint), layout.ring.data(), "one-ring");
+    const std::vector<cl_uint> runs = blockRuns(layout, stride, k.lanes);
+    k.ringRuns = k.buffer(ro, runs.size() * sizeof(cl_uint), runs.data(), "one-ring runs");
+    k.overflowVertices = k.buffer(ro, layout.overflowVertices.size() * sizeof(cl_uint),
+                                  layout.overflowVertices.data(), "long one-ring vertices");
+    k.overflowOffsets = k.buffer(ro, layout.overflowOffsets.size() * sizeof(cl_uint), layout.overflowOffsets.data(),
+                                 "long one-ring offsets");
+    k.overflowSequence = k.buffer(ro, layout.overflowSequence.size() * sizeof(cl_uint),
+                                  layout.overflowSequence.data(), "long one-rings");
+    // k.x, the upload buffer of update()'s host positions, is made by the first update(): a
+    // Simulation feeds the backend's own buffer (updateFromDevice) and never needs it.
+    // The scratch's padding (vertices n..S-1) is read by the last vector block: zero, once.
+    const std::vector<unsigned char> zeros(3 * stride * k.realSize, 0);
+    k.pos = k.buffer(rw, zeros.size(), zeros.data(), "vertex positions");
+    k.separate = options.separateStreams;
+    k.out = k.buffer(rw, (k.separate ? 3 : 6) * n * sizeof(float), nullptr,
+                     k.separate ? "output positions" : "output vertex");
+    k.normalsOut = k.buffer(rw, k.separate ? 3 * n * sizeof(float) : 0, nullptr, "output normals");
+    if (bodies > 0) {  // many bodies: each block's body, and every body's offset (written per frame)
+      if (!blockBody || blockBody->size() != stride / k.lanes)
+        fail(ErrorCode::Internal, "DeviceSurface: ", blockBody ? blockBody->size() : 0, " block bodies for ",
+             stride / k.lanes, " blocks");
+      k.bodies = bodies;
+      k.blockBody = k.buffer(ro, blockBody->size() * sizeof(cl_uint), blockBody->data(), "block bodies");
+      k.bodyOffsets = k.buffer(ro, 6 * bodies * k.realSize, nullptr, "body offsets");
+    }
+
+    std::string buildOptions = "-cl-std=CL1.2 -DCOROFEM_SURFACE -DSURF_K=" + std::to_string(layout.slots) +
+                               " -DSURF_W=" + std::to_string(k.lanes) +
+                               " -DSURF_VPW=" + std::to_string(k.positionsPerItem) +
+                               " -DSURF_BPW=" + std::to_string(k.blocksPerItem);
+    if (k.doublePrecision) buildOptions += " -DCOROFEM_DOUBLE";
+    if (k.separate) buildOptions += " -DSURF_SEPARATE";
+    if (k.bodies > 0) buildOptions += " -DSURF_MULTI";
+    const detail::cl::ProgramBuild build =
+        detail::cl::buildProgram(*k.ctx, "surface_update", surfaceProgramSource(), buildOptions);
+    k.positions = k.kernel(build.program, "surface_positions");
+    k.normals = k.kernel(build.program, "surface_normals");
+    k.overflow = k.kernel(build.program, "surface_normals_overflow");
+
+    k.arg(k.positions.get(), 0, k.vertexCount);
+    k.arg(k.positions.get(), 1, k.stride);
+    k.arg(k.positions.get(), 2, k.nodes.get());
+    k.arg(k.positions.get(), 3, k.weights.get());
+    k.arg(k.positions.get(), 5, k.pos.get());
+    k.arg(k.normals.get(), 0, k.vertexCount);
+    k.arg(k.normals.get(), 1, k.stride);
+    k.arg(k.normals.get(), 2, k.ring.get());
+    k.arg(k.normals.get(), 3, k.pos.get());
+    k.arg(k.normals.get(), 4, k.out.get());
+    k.arg(k.normals.get(), 11, k.ringRuns.get());
+    k.arg(k.normals.get(), 12, k.normalsOut.get());
+    k.arg(k.normals.get(), 13, k.blockBody.get());  // NULL unless SURF_MULTI (not read then)
+    k.arg(k.normals.get(), 14, k.bodyOffsets.get());
+    k.arg(k.overflow.get(), 0, k.overflowCount);
+    k.arg(k.overflow.get(), 1, k.overflowVertices.get());
+    k.arg(k.overflow.get(), 2, k.overflowOffsets.get());
+    k.arg(k.overflow.get(), 3, k.overflowSequence.get());
+    k.arg(k.overflow.get(), 4, k.stride);
+    k.arg(k.overflow.get(), 5, k.pos.get());
+    k.arg(k.overflow.get(), 6, k.out.get());
+    k.arg(k.overflow.get(), 7, k.normalsOut.get());
+    k.setOffset(nullptr);
+  } catch (const detail::Error& e) {
+    // Anything that fails from here on is the device's (memory, build, limits): one code, so that
+    // a caller can fall back to deformSurface on the host.
+    if (e.code() == ErrorCode::DeviceError) throw;
+    fail(ErrorCode::DeviceError, "DeviceSurface::create on device '", k.device(), "': ", e.what(),
+         "; update the surface on the host with deformSurface instead");
+  } catch (const std::bad_alloc&) {
+    fail(ErrorCode::DeviceError, "DeviceSurface::create on device '", k.device(), "': out of host memory while "
+         "preparing the surface's ", n, " vertices; update the surface on the host with deformSurface instead");
   }
+  return DeviceSurface(std::move(impl));
 }
 
 Status DeviceSurface::update(const double* tetNodePositions, std::size_t tetNodeCount) {
@@ -565,18 +585,7 @@ Status DeviceSurface::read(float* positions, float* normals) const {
     if (!positions || !normals)
       fail(ErrorCode::BadInput, "DeviceSurface::read: the ", !positions ? "positions" : "normals",
            " pointer is null; give two arrays of 3 floats per vertex");
-    const Impl& k = *impl_;
-    if (k.vertexCount == 0) return;
-    const std::size_t n = k.vertexCount;
-    if (k.separate) {
-      k.readBuffer(k.out.get(), 3 * n, positions, "surface positions");
-      k.readBuffer(k.normalsOut.get(), 3 * n, normals, "surface normals");
-      return;
-    }
-    std::vector<float> interleaved(6 * n);
-    k.readBuffer(k.out.get(), 6 * n, interleaved.data(), "surface vertices");
-    Impl::copyTriples(interleaved.data(), 6, positions, 3, n);
-    Impl::copyTriples(interleaved.data() + 3, 6, normals, 3, n);
+    if (impl_->vertexCount > 0) impl_->readStreams(0, impl_->vertexCount, positions, normals);
   });
 }
 
@@ -701,23 +710,19 @@ void DeviceSurfaceGroup::finish() const {
 
 void DeviceSurfaceGroup::update(_cl_mem* positions, const std::vector<const double*>& centroids) {
   DeviceSurface::Impl& k = *s_->merged->impl_;
-  if (centroids.size() != size()) fail(ErrorCode::Internal, "DeviceSurfaceGroup::update: ", centroids.size(), " centroids for ", size(), " bodies");
-  // c = hi + lo in the device precision, as DeviceSurface::Impl::setOffset splits it.
+  if (centroids.size() != size())
+    fail(ErrorCode::Internal, "DeviceSurfaceGroup::update: ", centroids.size(), " centroids for ", size(), " bodies");
   s_->waitWritten();
+  // Per body chi xyz then clo xyz, split as DeviceSurface::Impl::setOffset splits its offset.
+  auto put = [&](std::size_t m, std::size_t a, const auto& parts) {
+    std::memcpy(&s_->offsets[(6 * m + a) * k.realSize], &parts.first, k.realSize);
+    std::memcpy(&s_->offsets[(6 * m + 3 + a) * k.realSize], &parts.second, k.realSize);
+  };
   for (std::size_t m = 0; m < size(); ++m)
     for (std::size_t a = 0; a < 3; ++a) {
       const double c = centroids[m] ? centroids[m][a] : 0.0;
-      unsigned char* hi = &s_->offsets[(6 * m + a) * k.realSize];
-      unsigned char* lo = &s_->offsets[(6 * m + 3 + a) * k.realSize];
-      if (k.doublePrecision) {
-        const double zero = 0.0;
-        std::memcpy(hi, &c, 8);
-        std::memcpy(lo, &zero, 8);
-      } else {
-        const float h = static_cast<float>(c), l = static_cast<float>(c - static_cast<double>(h));
-        std::memcpy(hi, &h, 4);
-        std::memcpy(lo, &l, 4);
-      }
+      if (k.doublePrecision) put(m, a, DeviceSurface::Impl::splitOffset<double>(c));
+      else put(m, a, DeviceSurface::Impl::splitOffset<float>(c));
     }
   // Not blocking (on an in-order queue that would wait for all the work queued before it): the
   // next update waits for this write before it rewrites the host bytes.
@@ -729,17 +734,7 @@ void DeviceSurfaceGroup::update(_cl_mem* positions, const std::vector<const doub
 }
 
 void DeviceSurfaceGroup::read(std::size_t m, float* positions, float* normals) const {
-  const DeviceSurface::Impl& k = *s_->merged->impl_;
-  const std::size_t n = s_->count.at(m), b = s_->base.at(m);
-  if (k.separate) {
-    k.readBuffer(k.out.get(), 3 * n, positions, "surface positions", 3 * b);
-    k.readBuffer(k.normalsOut.get(), 3 * n, normals, "surface normals", 3 * b);
-    return;
-  }
-  std::vector<float> interleaved(6 * n);
-  k.readBuffer(k.out.get(), 6 * n, interleaved.data(), "surface vertices", 6 * b);
-  DeviceSurface::Impl::copyTriples(interleaved.data(), 6, positions, 3, n);
-  DeviceSurface::Impl::copyTriples(interleaved.data() + 3, 6, normals, 3, n);
+  s_->merged->impl_->readStreams(s_->base.at(m), s_->count.at(m), positions, normals);
 }
 
 }  // namespace detail

@@ -2,10 +2,10 @@
 // advances them together. Every public member converts exceptions to Status (util/error.hpp).
 #include <corofem/simulation.hpp>
 
+#include "embed/device_surface.hpp"
 #include "model/problem.hpp"
 #include "schedule/scheduler.hpp"
 #include "scene/scene_paths.hpp"
-#include "embed/device_surface.hpp"
 #include "solve/backend.hpp"
 #include "solve/batch_group.hpp"
 #include "solve/body_solver.hpp"
@@ -69,9 +69,10 @@ struct Simulation::Impl {
     } sleep;
     // The surface on the device when the body's positions are on an OpenCL device (its own OpenCL
     // backend or its batch's): a DeviceSurface on that context and queue, fed from the position
-    // buffer there (Backend::devicePositions; declared after the backend: destroyed first). `deviceFor` is the backend it was made for and `deviceEvents` the
-    // failover events then (a failover replaces the backend; a new one may reuse the address);
-    // `surfaceDirty`: the body stepped since the last update.
+    // buffer there (Backend::devicePositions; declared after the backend: destroyed first).
+    // `deviceFor` is the backend it was made for and `deviceEvents` the failover events then (a
+    // failover replaces the backend; a new one may reuse the address); `surfaceDirty`: the body
+    // stepped since the last update.
     std::unique_ptr<DeviceSurface> deviceSurface;
     const detail::Backend* deviceFor = nullptr;
     std::size_t deviceEvents = 0;
@@ -455,6 +456,34 @@ struct Simulation::Impl {
     return d;
   }
 
+  /// Body b's surface on the device, up to date (enqueued): its member of the batch's group, or its
+  /// own DeviceSurface; neither on the host path (false).
+  struct OnDevice {
+    SurfaceGroup* group = nullptr;
+    std::size_t member = 0;
+    DeviceSurface* own = nullptr;
+    explicit operator bool() const { return group || own; }
+    _cl_mem* vertexBuffer() const { return group ? group->surfaces->vertexBuffer(member) : own->vertexBuffer(); }
+    _cl_mem* normalBuffer() const { return group ? group->surfaces->normalBuffer(member) : own->normalBuffer(); }
+    /// Blocking read as two streams of 3 floats per vertex.
+    void read(float* positions, float* normals) const {
+      if (group) return group->surfaces->read(member, positions, normals);
+      const Status st = own->read(positions, normals);
+      if (!st) throw detail::Error(st.code(), st.message());
+    }
+    void finish() const {
+      if (group) return group->surfaces->finish();
+      const Status st = own->finish();
+      if (!st) throw detail::Error(st.code(), st.message());
+    }
+  };
+  OnDevice refreshOnDevice(Body& b) {
+    OnDevice d;
+    if ((d.group = refreshSurfaceGroup(b))) d.member = static_cast<std::size_t>(b.surfaceMember);
+    else d.own = refreshDeviceSurface(b);
+    return d;
+  }
+
   Body& bodyForSurface(int index) {
     if (index < 0 || index >= static_cast<int>(bodies.size()))
       detail::fail(ErrorCode::BadInput, "body index ", index, " is out of range: the scene has ", bodies.size(),
@@ -669,18 +698,10 @@ Status Simulation::readSurface(int body, std::vector<double>& positions, std::ve
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
     const std::size_t n = b.binding->vertexCount();
-    // Explicit read-back of the device buffer(s), as two streams of 3 floats per vertex.
-    std::vector<float> p(3 * n), m(3 * n);
-    bool read = false;
-    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b)) {
-      sg->surfaces->read(static_cast<std::size_t>(b.surfaceMember), p.data(), m.data());
-      read = true;
-    } else if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
-      Status st = d->read(p.data(), m.data());
-      if (!st) throw detail::Error(st.code(), st.message());
-      read = true;
-    }
-    if (read) {
+    if (const Impl::OnDevice d = impl_->refreshOnDevice(b)) {
+      // Explicit read-back of the device buffer(s), as two streams of 3 floats per vertex.
+      std::vector<float> p(3 * n), m(3 * n);
+      d.read(p.data(), m.data());
       positions.assign(p.begin(), p.end());
       if (normals) *normals = std::move(m);
       return;
@@ -704,10 +725,7 @@ _cl_mem* Simulation::surfaceDeviceBuffer(int body) const {
     if (body < 0 || body >= bodyCount()) return;
     Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
     if (!b.binding) return;
-    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b))
-      buffer = sg->surfaces->vertexBuffer(static_cast<std::size_t>(b.surfaceMember));
-    else if (DeviceSurface* d = Impl::refreshDeviceSurface(b))
-      buffer = d->vertexBuffer();
+    if (const Impl::OnDevice d = impl_->refreshOnDevice(b)) buffer = d.vertexBuffer();
   });
   return st ? buffer : nullptr;
 }
@@ -718,10 +736,7 @@ _cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
     if (body < 0 || body >= bodyCount()) return;
     Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
     if (!b.binding || !b.separateStreams) return;
-    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b))
-      buffer = sg->surfaces->normalBuffer(static_cast<std::size_t>(b.surfaceMember));
-    else if (DeviceSurface* d = Impl::refreshDeviceSurface(b))
-      buffer = d->normalBuffer();
+    if (const Impl::OnDevice d = impl_->refreshOnDevice(b)) buffer = d.normalBuffer();
   });
   return st ? buffer : nullptr;
 }
@@ -729,12 +744,7 @@ _cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
 Status Simulation::updateSurface(int body) const {
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
-    if (Impl::SurfaceGroup* sg = impl_->refreshSurfaceGroup(b)) {
-      sg->surfaces->finish();
-    } else if (DeviceSurface* d = Impl::refreshDeviceSurface(b)) {
-      Status st = d->finish();
-      if (!st) throw detail::Error(st.code(), st.message());
-    }
+    if (const Impl::OnDevice d = impl_->refreshOnDevice(b)) d.finish();
   });
 }
 
