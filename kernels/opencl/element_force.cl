@@ -139,6 +139,18 @@ void element_energy(const uint S, __global const uint* restrict elemSeg, __globa
   if (lid == 0) partials[get_global_id(0) / COROFEM_WG] = sum[0]; /* the element work-group */
 }
 
+/* The product's 12-vectors of the VEC elements e0 .. e0 + VEC - 1 (element_product, and the
+ * element phase of pcg_iterate_group: the same code, so the same bits). */
+COROFEM_FN void element_product_items(uint e0, uint S, real lambda, real mu, __global const uint* nodes,
+                                      __global const real* geom, __global const real* rotGrad,
+                                      __global const real* p, __global real* out) {
+  ElemBlock b;
+  load_element_block(e0, S, nodes, geom, rotGrad, &b);
+  realv P[9];
+  corner_outer_sum(&b, p, P);
+  write_stress_times_gradients(e0, S, P, (real)0, &b, lambda, mu, out);
+}
+
 /* y_e = k R K R^T p_e (Eq. 11) from the gradients; the segment's lambda, mu already multiplied by k. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void element_product(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
@@ -147,12 +159,8 @@ void element_product(const uint S, __global const uint* restrict elemSeg, __glob
                      __global const real* restrict p, __global real* restrict out) {
   uint e0, s;
   if (!element_items(elemSeg, segInfo, &e0, &s)) return;
-  const real lambda = seg_coef(segCoef, s, kCoefProdLambda), mu = seg_coef(segCoef, s, kCoefProdMu);
-  ElemBlock b;
-  load_element_block(e0, S, nodes, geom, rotGrad, &b);
-  realv P[9];
-  corner_outer_sum(&b, p, P);
-  write_stress_times_gradients(e0, S, P, (real)0, &b, lambda, mu, out);
+  element_product_items(e0, S, seg_coef(segCoef, s, kCoefProdLambda), seg_coef(segCoef, s, kCoefProdMu), nodes, geom,
+                        rotGrad, p, out);
 }
 
 /* Stored-K_e variant: y_e = k R (K_e (R^T p_e)) with the upper triangle of K_e (78 reals, row by

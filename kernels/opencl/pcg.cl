@@ -108,17 +108,12 @@ void pcg_init(__global const uint* restrict nodeSeg, __global const uint* restri
   COROFEM_PARTIAL_STORE(ru, rr, bb, partials);
 }
 
-/* p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; partials (r . u, r . r, 0). */
-__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_update(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
-                __global const sum_real* restrict scalars, __global const real* restrict w,
-                __global const real* restrict minv, __global real* restrict p, __global real* restrict sv,
-                __global real* restrict x, __global real* restrict r, __global real* restrict u,
-                __global sum_real* restrict partials) {
-  COROFEM_PARTIAL_LOCALS
-  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
-  const real alpha = (real)scalars[kScalarCount * s + kScalarAlpha];
-  const real beta = (real)scalars[kScalarCount * s + kScalarBeta];
+/* The update of pcg_update for the nodes [first, last): p = u + beta p, s = w + beta s,
+ * x += alpha p, r -= alpha s, u = M^-1 r; the work-item's sums r . u, r . r into sums[0], sums[1]
+ * (pcg_update, and the update phase of pcg_iterate_group: the same code, so the same bits). */
+COROFEM_FN void pcg_update_nodes(uint first, uint last, real alpha, real beta, __global const real* w,
+                                 __global const real* minv, __global real* p, __global real* sv, __global real* x,
+                                 __global real* r, __global real* u, sum_real* sums) {
   sum_real ru = 0, rr = 0;
 #if COROFEM_CHUNK == 4 && !defined(COROFEM_PRECOND_BLOCK) && !defined(COROFEM_TREE_REDUCE)
   /* A whole chunk (CPUs): its 12 dofs as three real4, so that the update compiles to vector code
@@ -143,9 +138,8 @@ void pcg_update(__global const uint* restrict nodeSeg, __global const uint* rest
       ru4 += TO_SUM4(rd) * TO_SUM4(ud);
       rr4 += TO_SUM4(rd) * TO_SUM4(rd);
     }
-    ru = (ru4.x + ru4.y) + (ru4.z + ru4.w);
-    rr = (rr4.x + rr4.y) + (rr4.z + rr4.w);
-    COROFEM_PARTIAL_STORE(ru, rr, (sum_real)0, partials);
+    sums[0] = (ru4.x + ru4.y) + (ru4.z + ru4.w);
+    sums[1] = (rr4.x + rr4.y) + (rr4.z + rr4.w);
     return;
   }
 #endif
@@ -169,7 +163,24 @@ void pcg_update(__global const uint* restrict nodeSeg, __global const uint* rest
       rr += (sum_real)rn[k] * (sum_real)rn[k];
     }
   }
-  COROFEM_PARTIAL_STORE(ru, rr, (sum_real)0, partials);
+  sums[0] = ru;
+  sums[1] = rr;
+}
+
+/* p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; partials (r . u, r . r, 0). */
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void pcg_update(__global const uint* restrict nodeSeg, __global const uint* restrict segInfo,
+                __global const sum_real* restrict scalars, __global const real* restrict w,
+                __global const real* restrict minv, __global real* restrict p, __global real* restrict sv,
+                __global real* restrict x, __global real* restrict r, __global real* restrict u,
+                __global sum_real* restrict partials) {
+  COROFEM_PARTIAL_LOCALS
+  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
+  const real alpha = (real)scalars[kScalarCount * s + kScalarAlpha];
+  const real beta = (real)scalars[kScalarCount * s + kScalarBeta];
+  sum_real sums[2];
+  pcg_update_nodes(first, last, alpha, beta, w, minv, p, sv, x, r, u, sums);
+  COROFEM_PARTIAL_STORE(sums[0], sums[1], (sum_real)0, partials);
 }
 
 /* The scalars of one segment from its sums (work-item 0 of reduce_finish). One exit only: PoCL 3.1

@@ -131,6 +131,9 @@ COROFEM_CONSTANT(unsigned, kSegElemEnd, 1);      /* one past its last real eleme
 COROFEM_CONSTANT(unsigned, kSegNodeEnd, 2);      /* one past its last real node (global)          */
 COROFEM_CONSTANT(unsigned, kSegPartialBegin, 3); /* its first PCG partial triple                  */
 COROFEM_CONSTANT(unsigned, kSegPartialCount, 4); /* its number of PCG partial triples             */
+COROFEM_CONSTANT(unsigned, kSegElemBegin, 5);    /* its first element (global)                    */
+COROFEM_CONSTANT(unsigned, kSegElemSpan, 6);     /* its elements, padding included                */
+COROFEM_CONSTANT(unsigned, kSegNodeBegin, 7);    /* its first node (global)                       */
 COROFEM_CONSTANT(unsigned, kSegInfoCount, 8);
 /* Per segment (real) at segCoef[kSegCoefCount * s + k]: the material and the coefficients of the
  * current system A = m M + c C + k K^R with Rayleigh C = alpha M + beta K^R folded in.           */

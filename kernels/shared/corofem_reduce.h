@@ -44,11 +44,15 @@ COROFEM_FN void group_sum3(__local sum_real* s0, __local sum_real* s1, __local s
 #define COROFEM_PARTIAL_LOCALS __local sum_real s0_[COROFEM_WG], s1_[COROFEM_WG], s2_[COROFEM_WG];
 #define COROFEM_PARTIAL_STORE(a, b, c, partials) group_sum3(s0_, s1_, s2_, (a), (b), (c), (partials))
 #else
-COROFEM_FN void item_store3(sum_real a, sum_real b, sum_real c, __global sum_real* partials) {
-  const uint i = get_global_id(0);
+/* The partial triple i (a work-item's own: i is its global id; pcg_iterate_group stores those of the
+ * work-items it stands in for). */
+COROFEM_FN void store3_at(uint i, sum_real a, sum_real b, sum_real c, __global sum_real* partials) {
   partials[kPartialComponents * i] = a;
   partials[kPartialComponents * i + 1] = b;
   partials[kPartialComponents * i + 2] = c;
+}
+COROFEM_FN void item_store3(sum_real a, sum_real b, sum_real c, __global sum_real* partials) {
+  store3_at(get_global_id(0), a, b, c, partials);
 }
 #define COROFEM_PARTIAL_LOCALS
 #define COROFEM_PARTIAL_STORE(a, b, c, partials) item_store3((a), (b), (c), (partials))

@@ -286,6 +286,15 @@ TEST_P(OpenCLBatch, TilesOfOneBodyMatchToo) {
   everyRequestMatches(o);
 }
 
+TEST_P(OpenCLBatch, LaunchedIterationsMatchToo) {
+  // CPUs run the PCG iterations of rounds of small bodies in one launch (pcg_iterate_group); the
+  // launched iterations, which larger bodies and GPUs take, give the same answers.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  detail::OpenCLOptions o;
+  o.groupPcg = 0;
+  everyRequestMatches(o);
+}
+
 // The CPU tile budget (segment_engine.cpp: measured on 8 and 32 MiB L3s): 8 MiB where the cache
 // holds it, the whole cache below that, a quarter of it above 32 MiB.
 TEST(OpenCLBatchTiles, DefaultTileBytesFollowsTheCache) {
@@ -345,6 +354,54 @@ TEST_P(OpenCLBatch, WarmAndColdStartsInOneRoundMatchEachBodyAlone) {
         EXPECT_EQ(solves[i].stats.relativeResidual, st.relativeResidual) << ps[i].name << ", frame " << frame;
       }
     }
+  }
+}
+
+TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
+  // pcg_iterate_group (a work-group per body, every iteration in one launch; CPU devices) against
+  // the launched iterations (4 kernels per iteration) on the same bodies: the same x, iteration
+  // counts and residuals, bit for bit, whether the bodies converge (each at its own iteration),
+  // stop at a cap of 1, 2 or 7 iterations, start cold or warm.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t K = ps.size();
+  detail::OpenCLOptions grouped, launched;
+  grouped.groupPcg = 1;
+  grouped.groupPcgMinBodies = 1;
+  launched.groupPcg = 0;
+  const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
+  for (int cap : {1, 2, 7, 2000}) {
+    SolverDesc s = solver();
+    s.maxIterations = cap;
+    if (context()->info().gpu) GTEST_SKIP() << "GPUs run no one-launch iterations (work-group trees: pcg_group.cl)";
+    auto a = batchOf(ps, s, grouped), b = batchOf(ps, s, launched);
+    std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
+    std::vector<BatchRequest> setA, setB, solveA, solveB;
+    for (std::size_t i = 0; i < K; ++i) {
+      x[i] = deformed(ps[i], 0.2 + 0.3 * static_cast<double>(i));
+      rhs[i] = randomVector(ps[i].dofCount(), 300 + static_cast<unsigned>(i));
+      xa[i] = xb[i] = i % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
+      setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
+      setB.push_back(request(BatchOp::SetPositions, i, &x[i]));
+    }
+    runOk(*a, setA);
+    runOk(*b, setB);
+    for (std::size_t i = 0; i < K; ++i) {
+      solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[i % 2]));
+      solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[i % 2]));
+    }
+    runOk(*a, solveA);
+    runOk(*b, solveB);
+    for (std::size_t i = 0; i < K; ++i) {
+      SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap));
+      EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);
+      EXPECT_EQ(solveA[i].stats.converged, solveB[i].stats.converged);
+      EXPECT_EQ(solveA[i].stats.relativeResidual, solveB[i].stats.relativeResidual);
+      EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+      if (cap < 2000) EXPECT_LE(solveA[i].stats.iterations, cap);
+      else EXPECT_TRUE(solveA[i].stats.converged);
+    }
+    if (cap < 2000) EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
   }
 }
 

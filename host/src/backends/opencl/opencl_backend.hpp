@@ -29,6 +29,18 @@ struct OpenCLOptions {
   int quaternionIterations = 0;  ///< Quaternion rotation method: iterations per update, 0 = default (6)
   bool assumeNoFp64 = false;     ///< tests: treat the device as lacking cl_khr_fp64 (the error path of double/mixed)
   long long tileBytes = -1;      ///< batches: bodies run together up to this working set; -1 = by device (CPUs: defaultTileBytes of the cache, GPUs: all), 0 = all
+  /// PCG iterations of a solve round in one launch, a work-group per body (pcg_iterate_group, CPU
+  /// devices): the same bits as the launched iterations. 1: for a round of at least
+  /// `groupPcgMinBodies` bodies, or of bodies of at most `groupPcgSmallElements` elements each;
+  /// 0: never; -1 (default): 1 on CPU devices, 0 on GPUs (whose partial sums are work-group trees).
+  int groupPcg = -1;
+  /// The fewest bodies in a solve round for the one-launch iterations; 0 = the default (the
+  /// device's compute units: one work-group per body cannot use more cores than bodies).
+  std::size_t groupPcgMinBodies = 0;
+  /// Rounds of fewer bodies still run in one launch when no body has more elements than this; 0 =
+  /// the default (4,096: on the 2-core PoCL machine one core without launches took a 1k-element
+  /// body's 20 iterations in 0.41 ms against 0.72 ms launched, and a 10k one's in 2.2 against 2.1).
+  std::size_t groupPcgSmallElements = 0;
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.

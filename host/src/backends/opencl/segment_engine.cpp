@@ -223,6 +223,18 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
     tileBytes_ = defaultTileBytes(static_cast<std::size_t>(cache));
   }
   if (options.tileBytes >= 0) tileBytes_ = static_cast<std::size_t>(options.tileBytes);
+  // The one-launch PCG iterations (pcg.cl's per-work-item partials only; the gradient product only).
+  groupPcg_ = options.groupPcg >= 0 ? options.groupPcg != 0 : !ctx_->info().gpu;
+  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG"); env && *env && options.groupPcg < 0)
+    groupPcg_ = std::string(env) != "0";  // tuning experiments
+  if (treeReduce_ || options.storedStiffness) groupPcg_ = false;
+  groupPcgMinBodies_ = options.groupPcgMinBodies ? options.groupPcgMinBodies
+                                                 : std::max<std::size_t>(1, ctx_->info().computeUnits);
+  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_MIN"); env && *env && !options.groupPcgMinBodies)
+    groupPcgMinBodies_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
+  groupPcgSmallElems_ = options.groupPcgSmallElements ? options.groupPcgSmallElements : 4096;
+  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_SMALL"); env && *env && !options.groupPcgSmallElements)
+    groupPcgSmallElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments (0: bodies never count as small)
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
     tileBytes_ = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));  // tuning experiments (0: one tile)
 
@@ -342,6 +354,7 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
   if (fusedReduce_) kGatherProductFinish_.create(build_.program, "gather_product_finish", dev_);
+  if (groupPcg_) kPcgIterateGroup_.create(build_.program, "pcg_iterate_group", dev_);
 }
 
 void SegmentEngine::allocate(const OpenCLOptions& options) {
@@ -360,6 +373,9 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     info[kSegNodeEnd] = static_cast<cl_uint>(sg.nodeBegin + sg.nodes);
     info[kSegPartialBegin] = static_cast<cl_uint>(sg.partialBegin);
     info[kSegPartialCount] = static_cast<cl_uint>(sg.partialCount);
+    info[kSegElemBegin] = static_cast<cl_uint>(sg.elemBegin);
+    info[kSegElemSpan] = static_cast<cl_uint>(sg.elemSpan);
+    info[kSegNodeBegin] = static_cast<cl_uint>(sg.nodeBegin);
     segCoef_[kSegCoefCount * s + kCoefLambda] = sg.problem->lame.lambda;
     segCoef_[kSegCoefCount * s + kCoefMu] = sg.problem->lame.mu;
     for (std::size_t g = sg.elemBegin / (wg_ * vec_); g < (sg.elemBegin + sg.elemSpan) / (wg_ * vec_); ++g)
@@ -772,13 +788,24 @@ void SegmentEngine::run(BatchOp op, const std::vector<BatchRequest*>& requests) 
     tile.clear();
     bytes = 0;
   };
+  // A solve round whose iterations run one work-group per body (groupRound) needs no tiles: each
+  // group's body stays in its core's cache, and one launch for all balances the cores best.
+  const std::size_t tileBytes = op == BatchOp::Solve && groupRound(ok) ? 0 : tileBytes_;
   for (BatchRequest* r : ok) {
     const std::size_t w = workingSet(segs_[r->body]);
-    if (!tile.empty() && tileBytes_ > 0 && bytes + w > tileBytes_) runTile();
+    if (!tile.empty() && tileBytes > 0 && bytes + w > tileBytes) runTile();
     tile.push_back(r);
     bytes += w;
   }
   if (!tile.empty()) runTile();
+}
+
+bool SegmentEngine::groupRound(const std::vector<BatchRequest*>& requests) const {
+  if (!groupPcg_ || requests.empty()) return false;
+  if (requests.size() >= groupPcgMinBodies_) return true;
+  for (const BatchRequest* r : requests)
+    if (segs_[r->body].elems > groupPcgSmallElems_) return false;
+  return true;
 }
 
 std::size_t SegmentEngine::workingSet(const Segment& sg) const {
@@ -1182,7 +1209,19 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       }
   };
   int enqueued = 0;
+  const bool group = groupRound(running);
   auto enqueueChunk = [&]() {
+    if (group) {  // every iteration but the cap's last in one launch, a work-group per body; then the last
+      if (maxIterations - enqueued > 1)
+        launch(kPcgIterateGroup_, Span::Segments, cl_uint(stride_), segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
+               rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_,
+               partials_, partialsW_, scalars_, cl_uint(maxIterations - enqueued - 1),
+               SumReal{solver_.tolerance * solver_.tolerance});
+      pcgIteration(true);
+      enqueued = maxIterations;
+      issueRead();
+      return;
+    }
     const int n = std::min(checkEvery, maxIterations - enqueued);
     for (int i = 0; i < n; ++i) pcgIteration(enqueued + i + 1 == maxIterations);
     enqueued += n;

@@ -321,6 +321,13 @@ class SegmentEngine {
   bool treeReduce_ = false;              ///< partial sums per work-group (GPUs) or per work-item
   bool fusedReduce_ = false;             ///< PCG sums finished in gather_product_finish (needs treeReduce_)
   std::size_t tileBytes_ = 0;            ///< working set of the bodies run together (0: all at once)
+  bool groupPcg_ = false;                ///< PCG iterations of a round in pcg_iterate_group (one launch)
+  std::size_t groupPcgMinBodies_ = 1;    ///< ... when the round has at least this many bodies,
+  std::size_t groupPcgSmallElems_ = 0;   ///< ... or when none has more elements than this
+  /// Whether a solve round of these bodies runs its iterations in pcg_iterate_group: a work-group
+  /// per body runs on one core, so either the bodies fill the cores, or each is small enough that
+  /// one core without launches beats all cores with them.
+  bool groupRound(const std::vector<BatchRequest*>& requests) const;
   std::vector<Segment> segs_;
   std::size_t stride_ = 0;               ///< S: all segments' padded elements
   std::size_t nodeTotal_ = 0;            ///< all segments' padded nodes
@@ -352,7 +359,7 @@ class SegmentEngine {
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
-      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_;
+      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_, kPcgIterateGroup_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
   ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
