@@ -152,7 +152,9 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
                               : "element_product (K_t) + gather_product");
     kernels.push_back(std::string("pcg_init") +
                       (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
-                      ", pcg_update, reduce_finish (single-reduction PCG)");
+                      ", pcg_update, reduce_finish (single-reduction PCG; on a CPU device the iterations "
+                      "of a round of small bodies, or of as many bodies as cores, run in one launch: "
+                      "pcg_iterate_group)");
     if (batched)
       for (auto& k : kernels)
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";

@@ -38,8 +38,9 @@ struct OpenCLOptions {
   /// device's compute units: one work-group per body cannot use more cores than bodies).
   std::size_t groupPcgMinBodies = 0;
   /// Rounds of fewer bodies still run in one launch when no body has more elements than this; 0 =
-  /// the default (4,096: on the 2-core PoCL machine one core without launches took a 1k-element
-  /// body's 20 iterations in 0.41 ms against 0.72 ms launched, and a 10k one's in 2.2 against 2.1).
+  /// the default, 8,192 / compute units (4,096 on 2 cores, where one core without launches took a
+  /// 1k-element box's step with 20 iterations in 0.41 ms against 0.72 ms launched on both, and a
+  /// 10k one's in 2.1-2.2 ms against 2.0; more cores favour the launched iterations).
   std::size_t groupPcgSmallElements = 0;
 };
 

@@ -232,7 +232,11 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
                                                  : std::max<std::size_t>(1, ctx_->info().computeUnits);
   if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_MIN"); env && *env && !options.groupPcgMinBodies)
     groupPcgMinBodies_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
-  groupPcgSmallElems_ = options.groupPcgSmallElements ? options.groupPcgSmallElements : 4096;
+  // One core without launches against all cores with them: measured at 2 cores (crossover between
+  // 1k and 10k elements); with more cores the launched iterations gain, so the bound shrinks.
+  groupPcgSmallElems_ = options.groupPcgSmallElements
+                            ? options.groupPcgSmallElements
+                            : 8192 / std::max<std::size_t>(1, ctx_->info().computeUnits);
   if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_SMALL"); env && *env && !options.groupPcgSmallElements)
     groupPcgSmallElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments (0: bodies never count as small)
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
