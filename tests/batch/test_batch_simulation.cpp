@@ -8,6 +8,10 @@
 
 #include "output/run_outputs.hpp"
 #include "solve/batch_group.hpp"
+#ifdef COROFEM_WITH_OPENCL
+#include "backends/opencl/cl_context.hpp"
+#include "backends/opencl/segment_engine.hpp"
+#endif
 #include "util/error.hpp"
 
 #include <nlohmann/json.hpp>
@@ -537,6 +541,60 @@ TEST(BatchSimulation, OpenCLBatchAgreesWithUnbatchedBodies) {
     const json after = json::parse(batched->schedulerReport());
     EXPECT_EQ(after["batches"][0]["largest_round"], 4);
     EXPECT_TRUE(after["fallbacks"].empty()) << after.dump(1);
+  }
+#endif
+}
+
+/// Sets an environment variable for its lifetime (read when a backend or batch is made).
+struct ScopedEnv {
+  std::string name;
+  const char* was;
+  std::string value;
+  ScopedEnv(const char* n, const char* v) : name(n), was(std::getenv(n)), value(was ? was : "") {
+    setenv(n, v, 1);
+  }
+  ~ScopedEnv() {
+    if (was) setenv(name.c_str(), value.c_str(), 1);
+    else unsetenv(name.c_str());
+  }
+};
+
+TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
+#ifndef COROFEM_WITH_OPENCL
+  GTEST_SKIP() << "built without COROFEM_WITH_OPENCL";
+#else
+  if (!haveOpenCLDevice()) GTEST_SKIP() << "no OpenCL device on this machine";
+  // The four bodies batched (on a CPU device each solve round's PCG iterations run in one launch,
+  // pcg_iterate_group) and each alone (small bodies: one launch too), against the same runs with
+  // every PCG iteration launched (COROFEM_OPENCL_GROUP_PCG=0): the same statuses, reports,
+  // positions, velocities and energies, bit for bit. On a GPU both runs launch every iteration.
+  for (Precision precision : {Precision::Float, Precision::Double}) {
+    SCOPED_TRACE(toString(precision));
+    Scene scene = openclScene(precision, 6);
+    if (!Simulation::create(scene)) {
+      std::cout << "[ note ] " << toString(precision) << ": the device cannot run this precision\n";
+      continue;
+    }
+    for (bool batch : {true, false}) {
+      SCOPED_TRACE(batch ? "batched" : "each body alone");
+      scene.backend.batch = batch;
+      Trace grouped, launched;
+      const unsigned long long before = detail::groupPcgLaunchCount();
+      {
+        const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
+        grouped = run(scene);
+      }
+      const unsigned long long between = detail::groupPcgLaunchCount();
+      {
+        const ScopedEnv off("COROFEM_OPENCL_GROUP_PCG", "0");
+        launched = run(scene);
+      }
+      EXPECT_EQ(detail::groupPcgLaunchCount(), between) << "COROFEM_OPENCL_GROUP_PCG=0 launched no group";
+      if (!detail::cl::Context::shared("")->info().gpu)
+        EXPECT_GT(between, before) << "a CPU device runs these small bodies' iterations in one launch";
+      ASSERT_EQ(grouped.states.size(), 6u);
+      expectSameRun(grouped, launched);
+    }
   }
 #endif
 }

@@ -390,8 +390,11 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
       solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[i % 2]));
       solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[i % 2]));
     }
+    const unsigned long long before = detail::groupPcgLaunchCount();
     runOk(*a, solveA);
+    if (cap > 1) EXPECT_EQ(detail::groupPcgLaunchCount(), before + 1) << "one launch for the round's iterations";
     runOk(*b, solveB);
+    EXPECT_EQ(detail::groupPcgLaunchCount(), before + (cap > 1 ? 1 : 0)) << "the launched path took it";
     for (std::size_t i = 0; i < K; ++i) {
       SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap));
       EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);

@@ -18,6 +18,7 @@
 #include "util/error.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -147,6 +148,12 @@ void ClKernel::create(cl_program program, const char* name, const std::string& d
 }
 
 // ---------------------------------------------------------------------------- set-up
+
+namespace {
+std::atomic<unsigned long long> groupPcgLaunches{0};
+}  // namespace
+
+unsigned long long groupPcgLaunchCount() { return groupPcgLaunches.load(); }
 
 std::size_t defaultTileBytes(std::size_t cacheBytes) {
   // Measured with bench_batch (100 bodies of 2,000 elements, float, PoCL on 2 cores):
@@ -1221,6 +1228,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_,
                partials_, partialsW_, scalars_, cl_uint(maxIterations - enqueued - 1),
                SumReal{solver_.tolerance * solver_.tolerance});
+      if (maxIterations - enqueued > 1) ++groupPcgLaunches;
       pcgIteration(true);
       enqueued = maxIterations;
       issueRead();

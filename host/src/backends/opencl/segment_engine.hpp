@@ -108,6 +108,10 @@ class ClKernel {
 /// the device reports no cache.
 std::size_t defaultTileBytes(std::size_t cacheBytes);
 
+/// Launches of pcg_iterate_group (one-launch PCG iterations) by every engine of the process so
+/// far: tests check with it that the path they compare was taken.
+unsigned long long groupPcgLaunchCount();
+
 class SegmentEngine {
  public:
   /// All problems share the program (precision, rotation method, preconditioner, options of
