@@ -361,7 +361,8 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
   // pcg_iterate_group (a work-group per body, every iteration in one launch; CPU devices) against
   // the launched iterations (4 kernels per iteration) on the same bodies: the same x, iteration
   // counts and residuals, bit for bit, whether the bodies converge (each at its own iteration),
-  // stop at a cap of 1, 2 or 7 iterations, start cold or warm.
+  // stop at a cap of 1, 2 or 7 iterations, start cold or warm; with no, diagonal (on CPUs the
+  // update's 4-wide vector branch) and block preconditioners, and in mixed precision too.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t K = ps.size();
@@ -370,8 +371,15 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
   grouped.groupPcgMinBodies = 1;
   launched.groupPcg = 0;
   const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
+  std::vector<Precision> precisions = {GetParam().precision};
+  if (isDouble()) precisions.push_back(Precision::Mixed);  // float vectors, double sums
+  for (Precision precision : precisions)
+  for (PreconditionerKind preconditioner :
+       {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
   for (int cap : {1, 2, 7, 2000}) {
     SolverDesc s = solver();
+    s.precision = precision;
+    s.preconditioner = preconditioner;
     s.maxIterations = cap;
     if (context()->info().gpu) GTEST_SKIP() << "GPUs run no one-launch iterations (work-group trees: pcg_group.cl)";
     auto a = batchOf(ps, s, grouped), b = batchOf(ps, s, launched);
@@ -396,7 +404,8 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
     runOk(*b, solveB);
     EXPECT_EQ(detail::groupPcgLaunchCount(), before + (cap > 1 ? 1 : 0)) << "the launched path took it";
     for (std::size_t i = 0; i < K; ++i) {
-      SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap));
+      SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap) + ", " + toString(precision) + ", preconditioner " +
+                   std::to_string(static_cast<int>(preconditioner)));
       EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);
       EXPECT_EQ(solveA[i].stats.converged, solveB[i].stats.converged);
       EXPECT_EQ(solveA[i].stats.relativeResidual, solveB[i].stats.relativeResidual);
@@ -406,6 +415,51 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
     }
     if (cap < 2000) EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
   }
+}
+
+TEST_P(OpenCLBatch, OneLaunchRuleLeavesLargeAndUnevenRoundsLaunched) {
+  // Which solve rounds take pcg_iterate_group (segment_engine.cpp, groupRound), with the rule's
+  // bounds set small enough for these bodies (beam 192 elements, slab 180, soup 37, bar 600):
+  // every body small; or at least two bodies, none over the maximum and none over twice its share
+  // of the round on the device's cores. A work-group per body runs on one core, so a large or
+  // lopsided round is launched.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (context()->info().gpu) GTEST_SKIP() << "GPUs run no one-launch iterations (work-group trees: pcg_group.cl)";
+  const std::vector<detail::Problem> ps = bodies();
+  detail::OpenCLOptions o;
+  o.groupPcgSmallElements = 100;
+  o.groupPcgMinBodies = 2;
+  o.groupPcgMaxElements = 500;
+  auto batch = batchOf(ps, solver(), o);
+  std::vector<Eigen::VectorXd> x(ps.size()), rhs(ps.size()), sol(ps.size());
+  std::vector<BatchRequest> set;
+  for (std::size_t i = 0; i < ps.size(); ++i) {
+    x[i] = deformed(ps[i], 0.4);
+    rhs[i] = randomVector(ps[i].dofCount(), 400 + static_cast<unsigned>(i));
+    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+  }
+  runOk(*batch, set);
+  auto oneLaunch = [&](const std::vector<std::size_t>& who) {
+    std::vector<BatchRequest> round;
+    for (std::size_t i : who) {
+      sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
+      round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
+    }
+    const unsigned long long before = detail::groupPcgLaunchCount();
+    runOk(*batch, round);
+    return detail::groupPcgLaunchCount() > before;
+  };
+  const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
+  EXPECT_TRUE(oneLaunch({2})) << "the soup (37 elements) is small";
+  EXPECT_FALSE(oneLaunch({0})) << "the beam alone is neither small nor a round of two";
+  EXPECT_EQ(oneLaunch({0, 1}), 192 * cores <= 2 * (192 + 180)) << "beam and slab: two even bodies";
+  EXPECT_FALSE(oneLaunch({0, 4})) << "the bar (600 elements) is over the maximum";
+  o.groupPcgMaxElements = 1000;
+  auto wide = batchOf(ps, solver(), o);
+  batch = std::move(wide);
+  runOk(*batch, set);
+  EXPECT_EQ(oneLaunch({2, 4}), 600 * cores <= 2 * (600 + 37)) << "bar and soup: lopsided on more than 2 cores";
+  EXPECT_EQ(oneLaunch({0, 1, 4}), 600 * cores <= 2 * (192 + 180 + 600));
 }
 
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {

@@ -30,8 +30,9 @@ struct OpenCLOptions {
   bool assumeNoFp64 = false;     ///< tests: treat the device as lacking cl_khr_fp64 (the error path of double/mixed)
   long long tileBytes = -1;      ///< batches: bodies run together up to this working set; -1 = by device (CPUs: defaultTileBytes of the cache, GPUs: all), 0 = all
   /// PCG iterations of a solve round in one launch, a work-group per body (pcg_iterate_group, CPU
-  /// devices): the same bits as the launched iterations. 1: for a round of at least
-  /// `groupPcgMinBodies` bodies, or of bodies of at most `groupPcgSmallElements` elements each;
+  /// devices): the same bits as the launched iterations. 1: for a round of bodies of at most
+  /// `groupPcgSmallElements` elements each, or of at least `groupPcgMinBodies` bodies (see
+  /// groupPcgMaxElements);
   /// 0: never; -1 (default): 1 on CPU devices, 0 on GPUs (whose partial sums are work-group trees).
   int groupPcg = -1;
   /// The fewest bodies in a solve round for the one-launch iterations; 0 = the default (the
@@ -42,6 +43,11 @@ struct OpenCLOptions {
   /// 1k-element box's step with 20 iterations in 0.41 ms against 0.72 ms launched on both, and a
   /// 10k one's in 2.1-2.2 ms against 2.0; more cores favour the launched iterations).
   std::size_t groupPcgSmallElements = 0;
+  /// A round of at least `groupPcgMinBodies` bodies runs in one launch only when none has more
+  /// elements than this, nor more than twice its share (total / compute units); 0 = the default,
+  /// 32,768 / compute units (16,384 on 2 cores, where 10k + 10k elements ran 1.5x faster in one
+  /// launch and 35k + 35k 1.1x slower).
+  std::size_t groupPcgMaxElements = 0;
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.

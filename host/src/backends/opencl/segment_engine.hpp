@@ -328,9 +328,11 @@ class SegmentEngine {
   bool groupPcg_ = false;                ///< PCG iterations of a round in pcg_iterate_group (one launch)
   std::size_t groupPcgMinBodies_ = 1;    ///< ... when the round has at least this many bodies,
   std::size_t groupPcgSmallElems_ = 0;   ///< ... or when none has more elements than this
+  std::size_t groupPcgMaxElems_ = 0;     ///< ... and (for the count rule) none has more than this
   /// Whether a solve round of these bodies runs its iterations in pcg_iterate_group: a work-group
-  /// per body runs on one core, so either the bodies fill the cores, or each is small enough that
-  /// one core without launches beats all cores with them.
+  /// per body runs on one core, so either each body is small enough that one core without launches
+  /// beats all cores with them, or the bodies fill the cores and none is too large for one core
+  /// (groupPcgMaxElems_) or much larger than a core's share of the round.
   bool groupRound(const std::vector<BatchRequest*>& requests) const;
   std::vector<Segment> segs_;
   std::size_t stride_ = 0;               ///< S: all segments' padded elements
