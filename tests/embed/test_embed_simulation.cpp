@@ -5,6 +5,7 @@
 #include <corofem/embed.hpp>
 #include <corofem/simulation.hpp>
 
+#include "embed/device_surface.hpp"
 #include "solve/batch.hpp"
 #include "solve/batch_group.hpp"
 #include "solve/beam_helpers.hpp"
@@ -390,6 +391,62 @@ TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
     EXPECT_EQ(plan["where"], "device");
     // One set of launches per layout for the batch's surfaces.
     EXPECT_EQ(plan["shared_by"], i == 2 ? nlohmann::json({"body2"}) : nlohmann::json({"body0", "body1"}))
+        << plan.dump(1);
+  }
+  EXPECT_NE(buffers[0], buffers[1]);
+  EXPECT_NE(buffers[1], buffers[2]);
+}
+
+/// A batch whose merged surfaces the device cannot allocate (injected: the allocation fails as on a
+/// device whose largest buffer is too small) still runs batched, and each body gets a surface of its
+/// own that reads its nodes from the batch's shared position buffer (DeviceSurface from a first
+/// node): the same bits as the bodies run unbatched, drawn from buffers of their own, and the plan
+/// says why the surfaces are not shared.
+TEST(EmbedSimulation, SurfacesTheDeviceCannotGroupAreEachBodysOwn) {
+  const Scene batched = threeSurfaceBodies(true);
+  Scene alone = batched;
+  alone.backend.batch = false;
+  struct Reset {
+    ~Reset() { detail::failSurfaceGroupsForTesting(false); }
+  } reset;
+  detail::failSurfaceGroupsForTesting(true);
+  auto sim = Simulation::create(batched);
+  detail::failSurfaceGroupsForTesting(false);
+  if (!sim && sim.status().code() == ErrorCode::DeviceError) GTEST_SKIP() << "no OpenCL device: " << sim.message();
+  ASSERT_TRUE(sim) << sim.message();
+  auto ref = Simulation::create(alone);
+  ASSERT_TRUE(ref) << ref.message();
+  const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
+  ASSERT_EQ(sched["batches"].size(), 1u) << sched.dump(1);
+  EXPECT_EQ(sched["batches"][0]["bodies"].size(), 3u) << "the bodies stay batched";
+  for (int k = 1; k <= 4; ++k) {
+    ASSERT_TRUE(sim->step()) << "step " << k;
+    ASSERT_TRUE(ref->step()) << "step " << k;
+  }
+  const std::size_t n = sim->restSurface(0)->vertexCount();
+  std::vector<cl_mem> buffers;
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE("body " + std::to_string(i));
+    std::vector<double> positions, refPositions;
+    std::vector<float> normals, refNormals;
+    ASSERT_TRUE(sim->readSurface(i, positions, &normals));
+    ASSERT_TRUE(ref->readSurface(i, refPositions, &refNormals));
+    EXPECT_EQ(positions, refPositions);
+    EXPECT_EQ(normals, refNormals);
+    ASSERT_TRUE(sim->updateSurface(i));
+    cl_mem buffer = sim->surfaceDeviceBuffer(i);
+    ASSERT_NE(buffer, nullptr);
+    buffers.push_back(buffer);
+    const std::size_t stride = i == 2 ? 3 : 6;
+    const std::vector<float> drawn = drawnFloats(buffer, stride * n);
+    for (std::size_t v = 0; v < n; ++v)
+      for (std::size_t a = 0; a < 3; ++a)
+        ASSERT_EQ(static_cast<double>(drawn[stride * v + a]), positions[3 * v + a]) << "vertex " << v;
+    const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"];
+    EXPECT_EQ(plan["where"], "device");
+    EXPECT_FALSE(plan.contains("shared_by")) << plan.dump(1);
+    ASSERT_TRUE(plan.contains("not_shared")) << plan.dump(1);
+    EXPECT_NE(plan["not_shared"].get<std::string>().find("CL_MEM_OBJECT_ALLOCATION_FAILURE"), std::string::npos)
         << plan.dump(1);
   }
   EXPECT_NE(buffers[0], buffers[1]);

@@ -21,6 +21,7 @@
 #include <vector>
 #endif
 
+#include <atomic>
 #include <cstdlib>
 #include <string>
 #include <utility>
@@ -41,6 +42,12 @@ std::size_t surfaceLanes(bool gpu, bool doublePrecision) {
   // vectors per work-item cost registers and leave 16x fewer work-items.
   return gpu ? 1 : doublePrecision ? 8 : 16;
 }
+
+namespace {
+std::atomic<bool> failSurfaceGroups{false};
+}  // namespace
+
+void failSurfaceGroupsForTesting(bool fail) { failSurfaceGroups = fail; }
 }  // namespace detail
 
 #ifdef COROFEM_WITH_OPENCL
@@ -671,6 +678,10 @@ DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::
     for (std::uint32_t t : b.triangles) all.triangles.push_back(t + vbase);
     for (std::uint32_t t : b.vertexTriangles) all.vertexTriangles.push_back(t + tbase);
   }
+  if (failSurfaceGroups)
+    fail(ErrorCode::DeviceError, "OpenCL: clCreateBuffer for the merged surfaces of ", members.size(), " bodies (",
+         all.vertexCount(), " vertices) failed on device '", ctx->deviceName(),
+         "': CL_MEM_OBJECT_ALLOCATION_FAILURE (injected by a test)");
   // The body of each block of the normal pass (the blocks past the last vertex: the last body).
   const std::size_t stride = paddedVertexCount(all.vertexCount());
   std::vector<std::uint32_t> blockBody(stride / lanes, static_cast<std::uint32_t>(members.size() - 1));
