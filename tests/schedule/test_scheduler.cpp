@@ -164,6 +164,7 @@ TEST(Scheduler, CachedNumbersDecide) {
   nlohmann::json cache;
   const std::string tail = "|test|dynamic|double|pcg|log2e=8";
   cache["version"] = 1;
+  cache["build"] = detail::calibrationBuild();
   cache["entries"]["opencl|fake-gpu" + tail] = {{"ms_per_step", 0.5}};
   cache["entries"]["reference|host (Eigen, double)" + tail] = {{"ms_per_step", 7.0}};
   std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
@@ -188,6 +189,34 @@ TEST(Scheduler, CachedNumbersDecide) {
   EXPECT_EQ(created, 3);
   std::ifstream in(scope.cacheDir() + "/scheduler.json");
   EXPECT_NO_THROW(nlohmann::json::parse(in));
+}
+
+TEST(Scheduler, ACacheOfAnotherBuildIsMeasuredAgain) {
+  // Times measured by another corofem build (an older release, other kernels) may rank the
+  // candidates wrongly now: they are ignored, the candidates calibrated again and the file
+  // rewritten for this build; the next run then decides from it.
+  int created = 0;
+  HookScope scope(fakeDevices("", &created));
+  nlohmann::json cache;
+  const std::string tail = "|test|dynamic|double|pcg|log2e=8";
+  cache["version"] = 1;
+  cache["build"] = "corofem 0.0.1, kernels 0";
+  cache["entries"]["opencl|fake-gpu" + tail] = {{"ms_per_step", 0.5}};
+  cache["entries"]["reference|host (Eigen, double)" + tail] = {{"ms_per_step", 7.0}};
+  std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
+  auto sim = Simulation::create(dynamicScene(boxBeam(), 2));
+  ASSERT_TRUE(sim) << sim.message();
+  EXPECT_EQ(nlohmann::json::parse(sim->schedulerReport())["from_cache"], false);
+  EXPECT_EQ(created, 3) << "both candidates calibrated again";
+  std::ifstream in(scope.cacheDir() + "/scheduler.json");
+  const auto rewritten = nlohmann::json::parse(in);
+  EXPECT_EQ(rewritten["build"], detail::calibrationBuild());
+  EXPECT_NE(detail::calibrationBuild().find("corofem "), std::string::npos);
+  created = 0;
+  auto again = Simulation::create(dynamicScene(boxBeam(), 2));
+  ASSERT_TRUE(again) << again.message();
+  EXPECT_EQ(nlohmann::json::parse(again->schedulerReport())["from_cache"], true);
+  EXPECT_EQ(created, 1);
 }
 
 TEST(Scheduler, HyperelasticAndCholeskyGoToTheReferenceWithoutCalibration) {

@@ -6,6 +6,7 @@
 
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
+#include "backends/opencl/program_cache.hpp"
 #endif
 
 #include <nlohmann/json.hpp>
@@ -140,6 +141,16 @@ std::string formatMs(double ms) {
 }
 
 }  // namespace
+
+std::string calibrationBuild() {
+  std::string build = std::string("corofem ") + COROFEM_VERSION;
+#ifdef COROFEM_WITH_OPENCL
+  std::ostringstream hex;
+  hex << std::hex << cl::fnv1a64(cl::corofemProgramSource());
+  build += ", kernels " + hex.str();
+#endif
+  return build;
+}
 
 std::string Candidate::label() const {
   if (kind == BackendKind::Reference)
@@ -313,7 +324,10 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
 
   const std::string path = schedulerCachePath();
   json cache = readCache(path);
-  if (!cache.contains("entries")) cache = json{{"version", 1}, {"entries", json::object()}};
+  // Times measured by another build of corofem (another release or kernel) are measured again.
+  const std::string build = calibrationBuild();
+  if (!cache.contains("entries") || !cache.contains("build") || cache["build"] != build)
+    cache = json{{"version", 1}, {"build", build}, {"entries", json::object()}};
   bool allCached = true, wroteAny = false;
   for (const Candidate& c : candidates) {
     CandidateTiming t;

@@ -124,6 +124,11 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
 /// ~/.cache/corofem/scheduler.json ("" when none of them is set).
 std::string schedulerCachePath();
 
+/// What the calibration cache's times were measured with: corofem's version and, in OpenCL builds,
+/// a hash of the kernel program's source. A cache written by another build is measured again: a
+/// new release or kernel may change which candidate is faster.
+std::string calibrationBuild();
+
 /// log2 of the element count, rounded down (the cache's size bucket).
 int sizeBucket(std::size_t elements);
 
