@@ -93,20 +93,28 @@ COROFEM_FN realv write_stress_times_gradients(uint e0, uint S, const realv* P, r
   return sxx * exx + syy * eyy + szz * ezz + (real)2 * (sxy * exy + sxz * exz + syz * eyz);
 }
 
-/* Internal forces, Eq. 9: P = F R^T, E = sym(F R^T) - I. */
+/* Internal forces, Eq. 9: P = F R^T, E = sym(F R^T) - I. With `energy` (not NULL; CPU devices):
+ * also the strain energy of the work-item's VEC elements, V/2 S_w : E summed over its lanes in a
+ * fixed order, at energy[global id] (0 for work-items past the segment's last element), which the
+ * host sums per segment: the energy of the forces' own positions at no extra pass. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void element_forces(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
                     __global const real* restrict segCoef, __global const uint* restrict nodes,
                     __global const real* restrict geom, __global const real* restrict rotGrad,
-                    __global const real* restrict pos, __global real* restrict out) {
+                    __global const real* restrict pos, __global real* restrict out,
+                    __global real* restrict energy) {
   uint e0, s;
-  if (!element_items(elemSeg, segInfo, &e0, &s)) return;
+  if (!element_items(elemSeg, segInfo, &e0, &s)) {
+    if (energy) energy[get_global_id(0)] = (real)0;
+    return;
+  }
   const real lambda = seg_coef(segCoef, s, kCoefLambda), mu = seg_coef(segCoef, s, kCoefMu);
   ElemBlock b;
   load_element_block(e0, S, nodes, geom, rotGrad, &b);
   realv P[9];
   corner_outer_sum(&b, pos, P);
-  write_stress_times_gradients(e0, S, P, (real)1, &b, lambda, mu, out);
+  const realv twice = write_stress_times_gradients(e0, S, P, (real)1, &b, lambda, mu, out);
+  if (energy) energy[get_global_id(0)] = (real)0.5 * lane_sum(twice);
 }
 
 /* Strain energy V/2 S_w : E = 1/2 (R^T x - X)^T K (R^T x - X) per element, summed per work-group

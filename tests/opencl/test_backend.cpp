@@ -104,6 +104,43 @@ TEST_P(OpenCLBackendVsReference, ForcesProductAndEnergyMatch) {
   }
 }
 
+TEST_P(OpenCLBackendVsReference, EnergyKnownFromTheForcesIsTheEnergyOfThosePositions) {
+  // On CPU devices the forces' pass also sums the strain energy, which elasticEnergy then returns
+  // without a pass of its own while the positions stay those of the forces. It must be the same
+  // bits as the energy computed afresh at those positions, and never the energy of positions set
+  // before the current ones.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const SolverDesc s = solver();
+  auto ocl = openclBackend(p, s), fresh = openclBackend(p, s);
+  auto ref = detail::createReferenceBackend(p, s);
+  const Eigen::VectorXd x1 = bent(p), x2 = p.restPositions + 0.5 * (x1 - p.restPositions);
+  Eigen::VectorXd f;
+  ocl->setPositions(x1);
+  ocl->internalForces(f);
+  const double known = ocl->elasticEnergy();
+  fresh->setPositions(x1);
+  EXPECT_EQ(known, fresh->elasticEnergy()) << "the forces' energy is the energy pass's, bit for bit";
+  ref->setPositions(x1);
+  const double tol = isDouble() ? 1e-10 : 1e-4;
+  EXPECT_NEAR(known, ref->elasticEnergy(), tol * ref->elasticEnergy());
+  EXPECT_EQ(ocl->elasticEnergy(), known) << "asked again";
+  // New positions after the forces: their own energy, not the one the forces left.
+  ocl->setPositions(x2);
+  const double second = ocl->elasticEnergy();
+  fresh->setPositions(x2);
+  EXPECT_EQ(second, fresh->elasticEnergy());
+  ref->setPositions(x2);
+  EXPECT_NEAR(second, ref->elasticEnergy(), tol * ref->elasticEnergy());
+  EXPECT_GT(std::abs(second - known), 0.1 * known) << "the two states store different energies";
+  // A product and a solve in between change neither.
+  Eigen::VectorXd y, sol = Eigen::VectorXd::Zero(p.dofCount());
+  ocl->internalForces(f);
+  ocl->apply({14400.0, 120.0, 1.0}, randomVector(p.dofCount(), 5), y);
+  ocl->solve({14400.0, 120.0, 1.0}, freeOnly(p, randomVector(p.dofCount(), 6)), sol);
+  EXPECT_EQ(ocl->elasticEnergy(), second);
+}
+
 TEST_P(OpenCLBackendVsReference, SolveMatchesDirectSolveForEveryPreconditioner) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const detail::Problem p = beam();

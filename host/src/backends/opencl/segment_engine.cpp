@@ -216,6 +216,9 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
   if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
     treeReduce_ = std::string(env) != "0";  // tuning experiments
+  energyWithForces_ = !treeReduce_;  // GPUs: element_energy's work-group trees (no per-item reads)
+  if (const char* env = std::getenv("COROFEM_OPENCL_ENERGY_WITH_FORCES"); env && *env && !treeReduce_)
+    energyWithForces_ = std::string(env) != "0";  // tuning experiments
   // Off unless asked for: OpenCL 1.2 orders memory between work-groups only through atomics, and
   // NVIDIA's compiler turns mem_fence(CLK_GLOBAL_MEM_FENCE) into a block-scope fence (membar.cta),
   // so the last group's view of the other groups' partials is not guaranteed (kernels/opencl/README.md).
@@ -501,6 +504,8 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     stage->create(c, ctx_->queue(), dofTotal * realSize_, dev_);
   xKnown_.assign(K, 0);
   warmLast_.assign(K, 0);
+  energy_.assign(K, 0.0);
+  energyKnown_.assign(K, 0);
   axReady_.assign(K, 0);
   axCoef_.assign(kSegCoefCount * K, 0.0);
   rStale_.assign(K, 0);  // R = I (ensureRotations uploads it) until a rotation pass runs
@@ -529,8 +534,12 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   }
   for (ClBuffer* v : {&x_, &b_, &r_, &z_, &p_, &q_, &s_}) createReal(*v, dofTotal);
   // Partials: the PCG node kernels write sum_real triples; element_energy writes one real per
-  // element work-group into the first buffer (at most sumSize_ bytes each).
-  partials_.create(c, kPartialComponents * std::max(S / (wg_ * vec_), partialTotal_) * sumSize_, dev_);
+  // element work-group into the first buffer (at most sumSize_ bytes each), element_forces one per
+  // element work-item (energyWithForces_).
+  // With energyWithForces_, element_forces writes one real per element work-item there too.
+  partials_.create(c, std::max(kPartialComponents * std::max(S / (wg_ * vec_), partialTotal_) * sumSize_,
+                               energyWithForces_ ? S / vec_ * realSize_ : std::size_t(0)),
+                   dev_);
   partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
   if (fusedReduce_) {
@@ -898,6 +907,7 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
              [&](std::size_t d) { return x[static_cast<Eigen::Index>(d)] - centroid[static_cast<Eigen::Index>(d % 3)]; });
     for (int a = 0; a < 3; ++a) sg.centroid[a] = centroid[a];
     rotate[r->body] = sg.corotational;
+    energyKnown_[r->body] = 0;  // the energy of the new positions is not known yet
   }
   // One write of the packed range; the segments in between get their own unchanged positions.
   const auto [lo, hi] = dofRange(requests);
@@ -908,8 +918,9 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
 
 void SegmentEngine::enqueueElementForces() {
   setAllActive();
+  static const ClBuffer none;  // no energies
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
-         rotatedGradients(), pos_, elemOut_);
+         rotatedGradients(), pos_, elemOut_, none);
 }
 
 void SegmentEngine::enqueueForces() {
@@ -923,10 +934,23 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   std::vector<char> active(segs_.size(), 0);
   for (const BatchRequest* r : requests) active[r->body] = 1;
   setActive(active);
+  static const ClBuffer none;
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
-         rotatedGradients(), pos_, elemOut_);
+         rotatedGradients(), pos_, elemOut_, energyWithForces_ ? partials_ : none);
   launch(kGatherSum_, Span::Nodes, nodeSeg_, segInfoBuf_, nodeStart_, nodeEntries_, elemOut_, q_);
   for (const BatchRequest* r : requests) axReady_[r->body] = 0;  // their q_ now holds forces
+  // The energies of these positions (CPUs): the element work-items' partials of the active span,
+  // read before the forces (the same wait), for an elasticEnergy at the same positions.
+  const std::size_t itemLo = segs_[activeLo_].elemBegin / vec_;
+  const std::size_t itemHi = (segs_[activeHi_ - 1].elemBegin + segs_[activeHi_ - 1].elemSpan) / vec_;
+  std::vector<unsigned char> energyItems;
+  cl_event energies = nullptr;
+  if (energyWithForces_) {
+    energyItems.resize((itemHi - itemLo) * realSize_);
+    checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_FALSE, itemLo * realSize_, energyItems.size(),
+                                energyItems.data(), 0, nullptr, &energies),
+            "clEnqueueReadBuffer (energies)", dev_);
+  }
   // A solve usually follows, and one warm-started from the solution the device still holds (an
   // application's frame, warm-started from the previous velocities) begins with A x. Queued behind
   // the read of the forces, that product runs while the host takes them and forms b; the solve uses
@@ -939,11 +963,14 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
     if (warmLast_[r->body] && xKnown_[r->body]) speculate[r->body] = any = true;
   const auto [lo, hi] = dofRange(requests);
   cl_event forces = readStage_.readLater(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
-  auto waitForForces = [&]() {  // also on an error below: the read writes into the stage until done
-    const cl_int status = forces ? clWaitForEvents(1, &forces) : CL_SUCCESS;
+  auto waitForForces = [&]() {  // also on an error below: the reads write into host memory until done
+    cl_int status = forces ? clWaitForEvents(1, &forces) : CL_SUCCESS;
     if (forces) clReleaseEvent(forces);
     forces = nullptr;
-    return status;
+    const cl_int energyStatus = energies ? clWaitForEvents(1, &energies) : CL_SUCCESS;
+    if (energies) clReleaseEvent(energies);
+    energies = nullptr;
+    return status != CL_SUCCESS ? status : energyStatus;
   };
   if (any) {
     try {
@@ -962,7 +989,21 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
       axReady_[s] = 1;
       std::copy_n(&segCoef_[kSegCoefCount * s], kSegCoefCount, &axCoef_[kSegCoefCount * s]);
     }
-  for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
+  for (BatchRequest* r : requests) {
+    getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
+    if (energyWithForces_) {
+      energy_[r->body] = energyOf(r->body, energyItems.data(), itemLo);
+      energyKnown_[r->body] = 1;
+    }
+  }
+}
+
+double SegmentEngine::energyOf(std::size_t s, const unsigned char* items, std::size_t lo) const {
+  const Segment& sg = segs_[s];
+  double sum = 0.0;
+  for (std::size_t i = sg.elemBegin / vec_; i < (sg.elemBegin + sg.elemSpan) / vec_; ++i)
+    sum += double_ ? reinterpret_cast<const double*>(items)[i - lo] : reinterpret_cast<const float*>(items)[i - lo];
+  return sum;
 }
 
 void SegmentEngine::elementProduct(const ClBuffer& v) {
@@ -1366,11 +1407,33 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   }
 }
 
-void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& requests) {
+void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& all) {
+  // Known from the forces at these positions (CPUs): no pass, no read.
+  std::vector<BatchRequest*> requests;
+  for (BatchRequest* r : all)
+    if (energyWithForces_ && energyKnown_[r->body]) r->energy = energy_[r->body];
+    else requests.push_back(r);
   if (requests.empty()) return;
   std::vector<char> active(segs_.size(), 0);
   for (const BatchRequest* r : requests) active[r->body] = 1;
   setActive(active);
+  if (energyWithForces_) {  // the forces' pass (into scratch) and its energies: the same bits as with the forces
+    launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
+           rotatedGradients(), pos_, elemOut_, partials_);
+    const std::size_t lo = segs_[activeLo_].elemBegin / vec_;
+    const std::size_t hi = (segs_[activeHi_ - 1].elemBegin + segs_[activeHi_ - 1].elemSpan) / vec_;
+    std::vector<unsigned char> items((hi - lo) * realSize_);
+    checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_TRUE, lo * realSize_, items.size(), items.data(),
+                                0, nullptr, nullptr),
+            "clEnqueueReadBuffer (energies)", dev_);
+    writesDone();
+    for (BatchRequest* r : requests) {
+      r->energy = energyOf(r->body, items.data(), lo);
+      energy_[r->body] = r->energy;
+      energyKnown_[r->body] = 1;
+    }
+    return;
+  }
   launch(kEnergy_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(),
          pos_, elemOut_, partials_);
   // One read of the per-work-group partials of the active span, summed per segment in a fixed

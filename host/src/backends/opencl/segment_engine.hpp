@@ -357,6 +357,15 @@ class SegmentEngine {
   std::vector<char> xKnown_;
   /// Per segment: its last solve started from a nonzero x (so the next one likely does too).
   std::vector<char> warmLast_;
+  /// CPU configuration (no work-group trees): element_forces also writes each work-item's strain
+  /// energy into partials_, read with the forces; energy_[s] is then segment s's energy at its
+  /// current positions until setPositions changes them (energyKnown_[s]).
+  bool energyWithForces_ = false;
+  std::vector<double> energy_;
+  std::vector<char> energyKnown_;
+  /// Segment s's energy from the element work-items' partials of the read span [lo, lo + n) (host
+  /// copy `items`, device precision), summed in order: the same bits however the partials were made.
+  double energyOf(std::size_t s, const unsigned char* items, std::size_t lo) const;
   /// Per segment: q_ holds free(A x_) formed by internalForces with the coefficients axCoef_ (and
   /// the rotations and x of now); cleared by anything that writes q_.
   std::vector<char> axReady_;
