@@ -16,11 +16,14 @@
 //   Apply           one write of p; element_product + gather_product; one read
 //   Solve           writes of b and x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); PCG iterations
 //                   for all active segments (4 launches each, 3 with fusedReduce_ on GPUs;
-//                   kernels/opencl/pcg.cl), the device
+//                   kernels/opencl/pcg.cl; on CPUs all but the cap's last in one launch,
+//                   pcg_iterate_group, for rounds of small bodies or of many: groupRound), the device
 //                   stopping each segment at convergence, breakdown or a non-finite residual;
 //                   after every checkEvery iterations a non-blocking read of all segments'
 //                   scalars, waited for one chunk later; the true residual per segment; one read of x
-//   ElasticEnergy   element_energy; one read of the per-work-group partials, summed per segment
+//   ElasticEnergy   CPUs: the energy the last InternalForces read with the forces, while the positions
+//                   are unchanged, else element_forces' energy partials (one per work-item); GPUs:
+//                   element_energy; one read of the partials, summed per segment in order
 #pragma once
 
 #include "backends/opencl/opencl_backend.hpp"
