@@ -620,6 +620,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   o.treeReduce = 0;
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t r = isDouble() ? 8 : 4;  // real; sum_real is the same outside mixed precision
+  const char* ewf = std::getenv("COROFEM_OPENCL_ENERGY_WITH_FORCES");
+  const bool energyPerItem = !(ewf && std::string(ewf) == "0");  // per-item partials (no trees): on
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
                       bool stored, bool quaternion) {
     std::size_t S = 0, N = 0, E = 0;
@@ -640,7 +642,10 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     if (mass) bytes += r * 3 * N;
     if (pc != PreconditionerKind::None)  // node blocks and inverse: 6 + 9 per node, or diagonals 3 + 3
       bytes += r * (pc == PreconditionerKind::BlockDiagonal ? 6 + 9 : 3 + 3) * N;
-    bytes += r * 3 * std::max(S / 512, N / 4) + r * 3 * (N / 4) + r * 12 * K;  // two partial buffers, scalars
+    // Two partial buffers (the first also holds element_forces' energy per element work-item:
+    // S / 8 reals on CPUs), scalars.
+    bytes += std::max(r * 3 * std::max(S / 512, N / 4), energyPerItem ? r * (S / 8) : 0) + r * 3 * (N / 4) +
+             r * 12 * K;
     return bytes;
   };
   SolverDesc s = solver();

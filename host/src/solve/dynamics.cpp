@@ -269,7 +269,7 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
   double elastic = 0.0;
   try {
     if (!evaluated) setBackendPositions(x, false);
-    elastic = backend_.elasticEnergy();  // one element pass per step: the price of the guard
+    elastic = backend_.elasticEnergy();  // an element pass per step, unless the backend has it from the forces
   } catch (const Error& e) {
     failHere(std::string("failed: ") + e.what(), stepFix);
   }

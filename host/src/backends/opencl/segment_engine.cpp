@@ -301,7 +301,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
 }
 
 SegmentEngine::~SegmentEngine() {
-  if (!writes_.empty()) clFinish(ctx_->queue());  // the pending writes read their host bytes until done
+  clFinish(ctx_->queue());  // pending writes read, and reads (energyItems_) write, this engine's host bytes
   writesDone();
   if (profile_) {
     clFinish(ctx_->queue());
@@ -536,7 +536,6 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   // Partials: the PCG node kernels write sum_real triples; element_energy writes one real per
   // element work-group into the first buffer (at most sumSize_ bytes each), element_forces one per
   // element work-item (energyWithForces_).
-  // With energyWithForces_, element_forces writes one real per element work-item there too.
   partials_.create(c, std::max(kPartialComponents * std::max(S / (wg_ * vec_), partialTotal_) * sumSize_,
                                energyWithForces_ ? S / vec_ * realSize_ : std::size_t(0)),
                    dev_);
@@ -943,12 +942,13 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   // read before the forces (the same wait), for an elasticEnergy at the same positions.
   const std::size_t itemLo = segs_[activeLo_].elemBegin / vec_;
   const std::size_t itemHi = (segs_[activeHi_ - 1].elemBegin + segs_[activeHi_ - 1].elemSpan) / vec_;
-  std::vector<unsigned char> energyItems;
+  // Into a member: an error below unwinds before the read is waited for, and the engine's
+  // destructor drains the queue; a buffer of this call's would be freed under the device's write.
   cl_event energies = nullptr;
   if (energyWithForces_) {
-    energyItems.resize((itemHi - itemLo) * realSize_);
-    checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_FALSE, itemLo * realSize_, energyItems.size(),
-                                energyItems.data(), 0, nullptr, &energies),
+    if (energyItems_.size() < stride_ / vec_ * realSize_) energyItems_.resize(stride_ / vec_ * realSize_);
+    checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_FALSE, itemLo * realSize_,
+                                (itemHi - itemLo) * realSize_, energyItems_.data(), 0, nullptr, &energies),
             "clEnqueueReadBuffer (energies)", dev_);
   }
   // A solve usually follows, and one warm-started from the solution the device still holds (an
@@ -992,7 +992,7 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   for (BatchRequest* r : requests) {
     getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
     if (energyWithForces_) {
-      energy_[r->body] = energyOf(r->body, energyItems.data(), itemLo);
+      energy_[r->body] = energyOf(r->body, energyItems_.data(), itemLo);
       energyKnown_[r->body] = 1;
     }
   }

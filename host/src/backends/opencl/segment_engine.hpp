@@ -366,6 +366,7 @@ class SegmentEngine {
   bool energyWithForces_ = false;
   std::vector<double> energy_;
   std::vector<char> energyKnown_;
+  std::vector<unsigned char> energyItems_;  ///< host copy of the energy partials (the engine outlives its reads)
   /// Segment s's energy from the element work-items' partials of the read span [lo, lo + n) (host
   /// copy `items`, device precision), summed in order: the same bits however the partials were made.
   double energyOf(std::size_t s, const unsigned char* items, std::size_t lo) const;
