@@ -578,21 +578,28 @@ std::size_t SegmentEngine::allocatedBytes() const {
 
 // ---------------------------------------------------------------------------- launching, tables
 
-void SegmentEngine::setArg(cl_kernel k, cl_uint i, cl_mem m) {
+void ClKernel::setArg(cl_uint i, const void* value, std::size_t bytes, const std::string& device) const {
+  if (args_.size() <= i) args_.resize(i + 1);
+  std::vector<unsigned char>& last = args_[i];
+  if (last.size() == bytes && std::memcmp(last.data(), value, bytes) == 0) return;
+  last.clear();  // unknown until set: a failed call below leaves it to be set again
+  checkCl(clSetKernelArg(k_, i, bytes, value), "clSetKernelArg", device);
+  last.assign(static_cast<const unsigned char*>(value), static_cast<const unsigned char*>(value) + bytes);
+}
+
+void SegmentEngine::setArg(const ClKernel& k, cl_uint i, cl_mem m) {
   // m may be NULL (an absent optional buffer): the kernel sees a NULL pointer (OpenCL 1.2, 5.7.2).
-  checkCl(clSetKernelArg(k, i, sizeof(cl_mem), &m), "clSetKernelArg", dev_);
+  k.setArg(i, &m, sizeof(cl_mem), dev_);
 }
 
-void SegmentEngine::setArg(cl_kernel k, cl_uint i, cl_uint v) {
-  checkCl(clSetKernelArg(k, i, sizeof(cl_uint), &v), "clSetKernelArg", dev_);
-}
+void SegmentEngine::setArg(const ClKernel& k, cl_uint i, cl_uint v) { k.setArg(i, &v, sizeof(cl_uint), dev_); }
 
-void SegmentEngine::setArg(cl_kernel k, cl_uint i, SumReal v) {
+void SegmentEngine::setArg(const ClKernel& k, cl_uint i, SumReal v) {
   if (sumSize_ == sizeof(double)) {
-    checkCl(clSetKernelArg(k, i, sizeof(double), &v.value), "clSetKernelArg", dev_);
+    k.setArg(i, &v.value, sizeof(double), dev_);
   } else {
     const float f = static_cast<float>(v.value);
-    checkCl(clSetKernelArg(k, i, sizeof(float), &f), "clSetKernelArg", dev_);
+    k.setArg(i, &f, sizeof(float), dev_);
   }
 }
 

@@ -99,10 +99,15 @@ class ClKernel {
   void create(cl_program program, const char* name, const std::string& device);
   cl_kernel get() const { return k_; }
   const char* name() const { return name_; }
+  /// clSetKernelArg(i, bytes) unless argument i already holds these bytes (a launch sequence sets
+  /// the same buffers every time: the host's enqueue, not the device, bounds small bodies' PCG on
+  /// GPUs). The engine's buffers live as long as its kernels, so a handle's bytes name one buffer.
+  void setArg(cl_uint i, const void* value, std::size_t bytes, const std::string& device) const;
 
  private:
   cl_kernel k_ = nullptr;
   const char* name_ = "";
+  mutable std::vector<std::vector<unsigned char>> args_;  ///< the bytes last set, per argument
 };
 
 /// The working set of the bodies a batch runs together on a CPU device whose last-level cache holds
@@ -183,19 +188,19 @@ class SegmentEngine {
   enum class Span { Elements, Nodes, NodeChunks, Segments };
 
   // -- launching
-  void setArg(cl_kernel k, cl_uint i, cl_mem m);
-  void setArg(cl_kernel k, cl_uint i, const ClBuffer& b) { setArg(k, i, b.get()); }
-  void setArg(cl_kernel k, cl_uint i, cl_uint v);
+  void setArg(const ClKernel& k, cl_uint i, cl_mem m);
+  void setArg(const ClKernel& k, cl_uint i, const ClBuffer& b) { setArg(k, i, b.get()); }
+  void setArg(const ClKernel& k, cl_uint i, cl_uint v);
   /// A kernel argument of type sum_real (corofem_layout.h: float, or double in double/mixed precision).
   struct SumReal {
     double value;
   };
-  void setArg(cl_kernel k, cl_uint i, SumReal v);
+  void setArg(const ClKernel& k, cl_uint i, SumReal v);
   template <class... Args>
   void launch(const ClKernel& kernel, Span span, const Args&... args) {
     if (activeLo_ >= activeHi_) return;  // no active segment
     cl_uint index = 0;
-    (setArg(kernel.get(), index++, args), ...);
+    (setArg(kernel, index++, args), ...);
     enqueue(kernel, span);
   }
   void enqueue(const ClKernel& kernel, Span span);
