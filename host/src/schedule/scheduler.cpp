@@ -70,7 +70,7 @@ std::string cacheKey(const Candidate& c, const Scene& scene, std::size_t element
      << (scene.analysis.kind == AnalysisDesc::Kind::Static ? "static" : "dynamic") << '|'
      << (scene.solver.precision == Precision::Float ? "float" : "double") << '|'
      << (scene.solver.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg") << "|log2e="
-     << sizeBucket(elements);
+     << sizeBucket(elements) << "|build=" << calibrationBuild();
   return os.str();
 }
 
@@ -324,10 +324,7 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
 
   const std::string path = schedulerCachePath();
   json cache = readCache(path);
-  // Times measured by another build of corofem (another release or kernel) are measured again.
-  const std::string build = calibrationBuild();
-  if (!cache.contains("entries") || !cache.contains("build") || cache["build"] != build)
-    cache = json{{"version", 1}, {"build", build}, {"entries", json::object()}};
+  if (!cache.contains("entries")) cache = json{{"version", 1}, {"entries", json::object()}};
   bool allCached = true, wroteAny = false;
   for (const Candidate& c : candidates) {
     CandidateTiming t;

@@ -125,8 +125,9 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
 std::string schedulerCachePath();
 
 /// What the calibration cache's times were measured with: corofem's version and, in OpenCL builds,
-/// a hash of the kernel program's source. A cache written by another build is measured again: a
-/// new release or kernel may change which candidate is faster.
+/// a hash of the kernel program's source; part of every cache key, so that another build (a new
+/// release or kernel may change which candidate is faster) measures again, while the entries of
+/// builds sharing the file stay.
 std::string calibrationBuild();
 
 /// log2 of the element count, rounded down (the cache's size bucket).

@@ -924,9 +924,9 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
 
 void SegmentEngine::enqueueElementForces() {
   setAllActive();
-  static const ClBuffer none;  // no energies
+  static const ClBuffer none;  // the energies as internalForces has them stored (CPUs), for the benchmark
   launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
-         rotatedGradients(), pos_, elemOut_, none);
+         rotatedGradients(), pos_, elemOut_, energyWithForces_ ? partials_ : none);
 }
 
 void SegmentEngine::enqueueForces() {
