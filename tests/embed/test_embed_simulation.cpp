@@ -341,6 +341,48 @@ Scene threeSurfaceBodies(bool varied) {
   return scene;
 }
 
+/// Steps the batched `sim` and its unbatched `ref` (threeSurfaceBodies(true)) 4 times, then for each
+/// body: its surface equals ref's bit for bit, positions and normals, and the device buffer a
+/// renderer draws (3 floats per vertex for body2's separate streams, else 6) holds those positions.
+/// Returns each body's positions; `buffers` gets each body's drawn buffer.
+std::vector<std::vector<double>> expectTheUnbatchedSurfaces(Simulation& sim, Simulation& ref,
+                                                            std::vector<cl_mem>& buffers) {
+  for (int k = 1; k <= 4; ++k) {
+    EXPECT_TRUE(sim.step()) << "step " << k;
+    EXPECT_TRUE(ref.step()) << "step " << k;
+  }
+  const std::size_t n = sim.restSurface(0)->vertexCount();
+  std::vector<std::vector<double>> all(3);
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE("body " + std::to_string(i));
+    std::vector<double>& positions = all[static_cast<std::size_t>(i)];
+    std::vector<double> refPositions;
+    std::vector<float> normals, refNormals;
+    EXPECT_TRUE(sim.readSurface(i, positions, &normals));
+    EXPECT_TRUE(ref.readSurface(i, refPositions, &refNormals));
+    EXPECT_EQ(positions.size(), 3 * n);
+    EXPECT_EQ(positions, refPositions);
+    EXPECT_EQ(normals, refNormals);
+    EXPECT_TRUE(sim.updateSurface(i));
+    cl_mem buffer = sim.surfaceDeviceBuffer(i);
+    buffers.push_back(buffer);
+    if (!buffer || positions.size() != 3 * n) {
+      ADD_FAILURE() << "no device buffer, or a surface of the wrong size";
+      continue;
+    }
+    const std::size_t stride = i == 2 ? 3 : 6;
+    const std::vector<float> drawn = drawnFloats(buffer, stride * n);
+    for (std::size_t v = 0; v < n; ++v)
+      for (std::size_t a = 0; a < 3; ++a)
+        if (static_cast<double>(drawn[stride * v + a]) != positions[3 * v + a]) {
+          ADD_FAILURE() << "vertex " << v << ": drawn " << drawn[stride * v + a] << ", read " << positions[3 * v + a];
+          v = n;
+          break;
+        }
+  }
+  return all;
+}
+
 TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
   const Scene batched = threeSurfaceBodies(true);
   Scene alone = batched;
@@ -354,21 +396,13 @@ TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
   ASSERT_EQ(sched["batches"].size(), 1u) << sched.dump(1);
   EXPECT_EQ(sched["batches"][0]["bodies"].size(), 3u);
   EXPECT_TRUE(nlohmann::json::parse(ref->schedulerReport())["batches"].empty());
-  for (int k = 1; k <= 4; ++k) {
-    ASSERT_TRUE(sim->step()) << "step " << k;
-    ASSERT_TRUE(ref->step()) << "step " << k;
-  }
-  const std::size_t n = sim->restSurface(0)->vertexCount();
   std::vector<cl_mem> buffers;
+  const std::vector<std::vector<double>> surfaces = expectTheUnbatchedSurfaces(sim.value(), ref.value(), buffers);
+  ASSERT_FALSE(::testing::Test::HasFailure());
+  const std::size_t n = sim->restSurface(0)->vertexCount();
   for (int i = 0; i < 3; ++i) {
     SCOPED_TRACE("body " + std::to_string(i));
-    std::vector<double> positions, refPositions;
-    std::vector<float> normals, refNormals;
-    ASSERT_TRUE(sim->readSurface(i, positions, &normals));
-    ASSERT_TRUE(ref->readSurface(i, refPositions, &refNormals));
-    ASSERT_EQ(positions.size(), 3 * n);
-    EXPECT_EQ(positions, refPositions);
-    EXPECT_EQ(normals, refNormals);
+    const std::vector<double>& positions = surfaces[static_cast<std::size_t>(i)];
     // Against the host's deformSurface of the body's own nodes: within the float output rounding.
     std::vector<double> nodes, own(3 * n);
     ASSERT_TRUE(sim->readPositions(i, nodes));
@@ -377,15 +411,6 @@ TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
     const SurfaceBinding binding = *bindSurface(sim->restMesh(i), *sim->restSurface(i));
     ASSERT_TRUE(deformSurface(binding, nodes.data(), sim->restMesh(i).nodeCount(), out));
     EXPECT_LE(worstDifference(positions, own), 2.5e-6);
-    // What a renderer draws from the device buffer is what readSurface returned.
-    ASSERT_TRUE(sim->updateSurface(i));
-    cl_mem buffer = sim->surfaceDeviceBuffer(i);
-    ASSERT_NE(buffer, nullptr);
-    buffers.push_back(buffer);
-    const std::vector<float> drawn = drawnFloats(buffer, (i == 2 ? 3 : 6) * n);
-    for (std::size_t v = 0; v < n; ++v)
-      for (std::size_t a = 0; a < 3; ++a)
-        ASSERT_EQ(static_cast<double>(drawn[(i == 2 ? 3 : 6) * v + a]), positions[3 * v + a]) << "vertex " << v;
     EXPECT_EQ(sim->surfaceNormalDeviceBuffer(i) != nullptr, i == 2);
     const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"];
     EXPECT_EQ(plan["where"], "device");
@@ -419,29 +444,11 @@ TEST(EmbedSimulation, SurfacesTheDeviceCannotGroupAreEachBodysOwn) {
   const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
   ASSERT_EQ(sched["batches"].size(), 1u) << sched.dump(1);
   EXPECT_EQ(sched["batches"][0]["bodies"].size(), 3u) << "the bodies stay batched";
-  for (int k = 1; k <= 4; ++k) {
-    ASSERT_TRUE(sim->step()) << "step " << k;
-    ASSERT_TRUE(ref->step()) << "step " << k;
-  }
-  const std::size_t n = sim->restSurface(0)->vertexCount();
   std::vector<cl_mem> buffers;
+  expectTheUnbatchedSurfaces(sim.value(), ref.value(), buffers);
+  ASSERT_FALSE(::testing::Test::HasFailure());
   for (int i = 0; i < 3; ++i) {
     SCOPED_TRACE("body " + std::to_string(i));
-    std::vector<double> positions, refPositions;
-    std::vector<float> normals, refNormals;
-    ASSERT_TRUE(sim->readSurface(i, positions, &normals));
-    ASSERT_TRUE(ref->readSurface(i, refPositions, &refNormals));
-    EXPECT_EQ(positions, refPositions);
-    EXPECT_EQ(normals, refNormals);
-    ASSERT_TRUE(sim->updateSurface(i));
-    cl_mem buffer = sim->surfaceDeviceBuffer(i);
-    ASSERT_NE(buffer, nullptr);
-    buffers.push_back(buffer);
-    const std::size_t stride = i == 2 ? 3 : 6;
-    const std::vector<float> drawn = drawnFloats(buffer, stride * n);
-    for (std::size_t v = 0; v < n; ++v)
-      for (std::size_t a = 0; a < 3; ++a)
-        ASSERT_EQ(static_cast<double>(drawn[stride * v + a]), positions[3 * v + a]) << "vertex " << v;
     const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"];
     EXPECT_EQ(plan["where"], "device");
     EXPECT_FALSE(plan.contains("shared_by")) << plan.dump(1);

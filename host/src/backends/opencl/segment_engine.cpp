@@ -947,17 +947,8 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
   for (const BatchRequest* r : requests) axReady_[r->body] = 0;  // their q_ now holds forces
   // The energies of these positions (CPUs): the element work-items' partials of the active span,
   // read before the forces (the same wait), for an elasticEnergy at the same positions.
-  const std::size_t itemLo = segs_[activeLo_].elemBegin / vec_;
-  const std::size_t itemHi = (segs_[activeHi_ - 1].elemBegin + segs_[activeHi_ - 1].elemSpan) / vec_;
-  // Into a member: an error below unwinds before the read is waited for, and the engine's
-  // destructor drains the queue; a buffer of this call's would be freed under the device's write.
   cl_event energies = nullptr;
-  if (energyWithForces_) {
-    if (energyItems_.size() < stride_ / vec_ * realSize_) energyItems_.resize(stride_ / vec_ * realSize_);
-    checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_FALSE, itemLo * realSize_,
-                                (itemHi - itemLo) * realSize_, energyItems_.data(), 0, nullptr, &energies),
-            "clEnqueueReadBuffer (energies)", dev_);
-  }
+  const std::size_t itemLo = energyWithForces_ ? readEnergyItems(&energies) : 0;
   // A solve usually follows, and one warm-started from the solution the device still holds (an
   // application's frame, warm-started from the previous velocities) begins with A x. Queued behind
   // the read of the forces, that product runs while the host takes them and forms b; the solve uses
@@ -1003,6 +994,17 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
       energyKnown_[r->body] = 1;
     }
   }
+}
+
+std::size_t SegmentEngine::readEnergyItems(cl_event* done) {
+  // Into a member: an error in the caller can unwind before a non-blocking read is waited for, and
+  // the engine's destructor drains the queue; a buffer of the call's would be freed under the write.
+  const auto [lo, count] = spanItems(Span::Elements, activeLo_, activeHi_);
+  if (energyItems_.size() < stride_ / vec_ * realSize_) energyItems_.resize(stride_ / vec_ * realSize_);
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), done ? CL_FALSE : CL_TRUE, lo * realSize_,
+                              count * realSize_, energyItems_.data(), 0, nullptr, done),
+          "clEnqueueReadBuffer (energies)", dev_);
+  return lo;
 }
 
 double SegmentEngine::energyOf(std::size_t s, const unsigned char* items, std::size_t lo) const {
@@ -1427,15 +1429,10 @@ void SegmentEngine::elasticEnergy(const std::vector<BatchRequest*>& all) {
   if (energyWithForces_) {  // the forces' pass (into scratch) and its energies: the same bits as with the forces
     launch(kForces_, Span::Elements, cl_uint(stride_), elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
            rotatedGradients(), pos_, elemOut_, partials_);
-    const std::size_t lo = segs_[activeLo_].elemBegin / vec_;
-    const std::size_t hi = (segs_[activeHi_ - 1].elemBegin + segs_[activeHi_ - 1].elemSpan) / vec_;
-    std::vector<unsigned char> items((hi - lo) * realSize_);
-    checkCl(clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_TRUE, lo * realSize_, items.size(), items.data(),
-                                0, nullptr, nullptr),
-            "clEnqueueReadBuffer (energies)", dev_);
+    const std::size_t lo = readEnergyItems(nullptr);
     writesDone();
     for (BatchRequest* r : requests) {
-      r->energy = energyOf(r->body, items.data(), lo);
+      r->energy = energyOf(r->body, energyItems_.data(), lo);
       energy_[r->body] = r->energy;
       energyKnown_[r->body] = 1;
     }

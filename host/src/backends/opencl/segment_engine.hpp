@@ -375,6 +375,9 @@ class SegmentEngine {
   /// Segment s's energy from the element work-items' partials of the read span [lo, lo + n) (host
   /// copy `items`, device precision), summed in order: the same bits however the partials were made.
   double energyOf(std::size_t s, const unsigned char* items, std::size_t lo) const;
+  /// Reads the energy partials of the active segments' element work-items into energyItems_:
+  /// blocking when `done` is null, else not, with the event in *done. Returns the span's first item.
+  std::size_t readEnergyItems(cl_event* done);
   /// Per segment: q_ holds free(A x_) formed by internalForces with the coefficients axCoef_ (and
   /// the rotations and x of now); cleared by anything that writes q_.
   std::vector<char> axReady_;
