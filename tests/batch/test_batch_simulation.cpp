@@ -564,10 +564,13 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
   GTEST_SKIP() << "built without COROFEM_WITH_OPENCL";
 #else
   if (!haveOpenCLDevice()) GTEST_SKIP() << "no OpenCL device on this machine";
-  // The four bodies batched (on a CPU device each solve round's PCG iterations run in one launch,
-  // pcg_iterate_group) and each alone (small bodies: one launch too), against the same runs with
-  // every PCG iteration launched (COROFEM_OPENCL_GROUP_PCG=0): the same statuses, reports,
-  // positions, velocities and energies, bit for bit. On a GPU both runs launch every iteration.
+  // The bodies batched (on a CPU device each solve round's PCG iterations run in one launch,
+  // pcg_iterate_group) and each alone (one launch too: a team of work-groups, pcg_iterate_team,
+  // where a body is large enough for one), against the same runs without teams
+  // (COROFEM_OPENCL_TEAM_PCG=0) and with every PCG iteration launched (COROFEM_OPENCL_GROUP_PCG=0):
+  // the same statuses, reports, positions, velocities and energies, bit for bit. On a GPU all three
+  // launch every iteration.
+  const auto oneLaunches = [] { return detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount(); };
   for (Precision precision : {Precision::Float, Precision::Double}) {
     SCOPED_TRACE(toString(precision));
     Scene scene = openclScene(precision, 6);
@@ -578,20 +581,29 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
     for (bool batch : {true, false}) {
       SCOPED_TRACE(batch ? "batched" : "each body alone");
       scene.backend.batch = batch;
-      Trace grouped, launched;
-      const unsigned long long before = detail::groupPcgLaunchCount();
+      Trace grouped, noTeams, launched;
+      const unsigned long long before = oneLaunches();
       {
         const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
         grouped = run(scene);
       }
-      const unsigned long long between = detail::groupPcgLaunchCount();
+      const unsigned long long between = oneLaunches(), teamsBetween = detail::teamPcgLaunchCount();
+      {
+        const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
+        const ScopedEnv noTeam("COROFEM_OPENCL_TEAM_PCG", "0");
+        noTeams = run(scene);
+      }
+      EXPECT_EQ(detail::teamPcgLaunchCount(), teamsBetween) << "COROFEM_OPENCL_TEAM_PCG=0 launched no team";
+      const unsigned long long after = oneLaunches();
       {
         const ScopedEnv off("COROFEM_OPENCL_GROUP_PCG", "0");
         launched = run(scene);
       }
-      EXPECT_EQ(detail::groupPcgLaunchCount(), between) << "COROFEM_OPENCL_GROUP_PCG=0 launched no group";
+      EXPECT_EQ(oneLaunches(), after) << "COROFEM_OPENCL_GROUP_PCG=0 launched no group";
       if (!detail::cl::Context::shared("")->info().gpu)
         EXPECT_GT(between, before) << "a CPU device runs these small bodies' iterations in one launch";
+      ASSERT_EQ(noTeams.states.size(), 6u);
+      expectSameRun(noTeams, launched);
       ASSERT_EQ(grouped.states.size(), 6u);
       expectSameRun(grouped, launched);
     }

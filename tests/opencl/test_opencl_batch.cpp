@@ -358,21 +358,39 @@ TEST_P(OpenCLBatch, WarmAndColdStartsInOneRoundMatchEachBodyAlone) {
 }
 
 TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
-  // pcg_iterate_group (a work-group per body, every iteration in one launch; CPU devices) against
-  // the launched iterations (4 kernels per iteration) on the same bodies: the same x, iteration
-  // counts and residuals, bit for bit, whether the bodies converge (each at its own iteration),
-  // stop at a cap of 1, 2 or 7 iterations, start cold or warm; with no, diagonal (on CPUs the
-  // update's 4-wide vector branch) and block preconditioners, and in mixed precision too.
+  // pcg_iterate_group (a work-group per body, every iteration in one launch; CPU devices) and
+  // pcg_iterate_team (a team of work-groups per body, handing out the phases' chunks by atomic
+  // tickets; CPU devices) against the launched iterations (4 kernels per iteration) on the same
+  // bodies: the same x, iteration counts and residuals, bit for bit, whether the bodies converge
+  // (each at its own iteration), stop at a cap of 1, 2 or 7 iterations, start cold or warm; with
+  // no, diagonal (on CPUs the update's 4-wide vector branch) and block preconditioners, and in
+  // mixed precision too. Teams of 2, 3 and 8 work-groups: 8 is more than this machine's cores, so
+  // some groups start only after others have done the work (the late group's path).
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t K = ps.size();
-  // Per-item partials (the CPU configuration) on every device: on a GPU this checks the kernel's
-  // barriers and fences on real hardware (PoCL runs each barrier as a full split, whatever its flags).
+  // Per-item partials (the CPU configuration) on every device: on a GPU this checks the group
+  // kernel's barriers and fences on real hardware (PoCL runs each barrier as a full split,
+  // whatever its flags). Teams are for CPU devices only (their hand-offs need coherent caches).
   detail::OpenCLOptions grouped, launched;
   grouped.treeReduce = launched.treeReduce = 0;
   grouped.groupPcg = 1;
+  grouped.teamPcg = 0;
   grouped.groupPcgSmallElements = 1 << 20;  // every round takes it, whatever the device's cores
   launched.groupPcg = 0;
+  struct Way {
+    std::string name;
+    detail::OpenCLOptions options;
+    unsigned long long (*launches)();
+  };
+  std::vector<Way> ways = {{"one work-group per body", grouped, &detail::groupPcgLaunchCount}};
+  if (!context()->info().gpu)
+    for (std::size_t team : {2, 3, 8}) {
+      detail::OpenCLOptions t = grouped;
+      t.teamPcg = 1;
+      t.teamPcgSize = team;
+      ways.push_back({"teams of " + std::to_string(team), t, &detail::teamPcgLaunchCount});
+    }
   const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
   std::vector<Precision> precisions = {GetParam().precision};
   if (isDouble()) precisions.push_back(Precision::Mixed);  // float vectors, double sums
@@ -384,38 +402,103 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
     s.precision = precision;
     s.preconditioner = preconditioner;
     s.maxIterations = cap;
-    auto a = batchOf(ps, s, grouped), b = batchOf(ps, s, launched);
-    std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
-    std::vector<BatchRequest> setA, setB, solveA, solveB;
+    auto b = batchOf(ps, s, launched);
+    std::vector<Eigen::VectorXd> x(K), rhs(K), xb(K);
+    std::vector<BatchRequest> setB, solveB;
     for (std::size_t i = 0; i < K; ++i) {
       x[i] = deformed(ps[i], 0.2 + 0.3 * static_cast<double>(i));
       rhs[i] = randomVector(ps[i].dofCount(), 300 + static_cast<unsigned>(i));
-      xa[i] = xb[i] = i % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
-      setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
+      xb[i] = i % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
       setB.push_back(request(BatchOp::SetPositions, i, &x[i]));
     }
-    runOk(*a, setA);
     runOk(*b, setB);
-    for (std::size_t i = 0; i < K; ++i) {
-      solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[i % 2]));
-      solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[i % 2]));
-    }
-    const unsigned long long before = detail::groupPcgLaunchCount();
-    runOk(*a, solveA);
-    if (cap > 1) EXPECT_EQ(detail::groupPcgLaunchCount(), before + 1) << "one launch for the round's iterations";
+    for (std::size_t i = 0; i < K; ++i) solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[i % 2]));
+    const unsigned long long launchedBefore = detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount();
     runOk(*b, solveB);
-    EXPECT_EQ(detail::groupPcgLaunchCount(), before + (cap > 1 ? 1 : 0)) << "the launched path took it";
-    for (std::size_t i = 0; i < K; ++i) {
-      SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap) + ", " + toString(precision) + ", preconditioner " +
-                   std::to_string(static_cast<int>(preconditioner)));
-      EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);
-      EXPECT_EQ(solveA[i].stats.converged, solveB[i].stats.converged);
-      EXPECT_EQ(solveA[i].stats.relativeResidual, solveB[i].stats.relativeResidual);
-      EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
-      if (cap < 2000) EXPECT_LE(solveA[i].stats.iterations, cap);
-      else EXPECT_TRUE(solveA[i].stats.converged);
+    EXPECT_EQ(detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount(), launchedBefore)
+        << "the launched path took it";
+    for (const Way& way : ways) {
+      auto a = batchOf(ps, s, way.options);
+      std::vector<Eigen::VectorXd> xa(K);
+      std::vector<BatchRequest> setA, solveA;
+      for (std::size_t i = 0; i < K; ++i) {
+        xa[i] = i % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
+        setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
+      }
+      runOk(*a, setA);
+      for (std::size_t i = 0; i < K; ++i) solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[i % 2]));
+      const unsigned long long before = way.launches();
+      runOk(*a, solveA);
+      if (cap > 1) EXPECT_EQ(way.launches(), before + 1) << way.name << ": one launch for the round's iterations";
+      for (std::size_t i = 0; i < K; ++i) {
+        SCOPED_TRACE(way.name + ", " + ps[i].name + ", cap " + std::to_string(cap) + ", " + toString(precision) +
+                     ", preconditioner " + std::to_string(static_cast<int>(preconditioner)));
+        EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);
+        EXPECT_EQ(solveA[i].stats.converged, solveB[i].stats.converged);
+        EXPECT_EQ(solveA[i].stats.relativeResidual, solveB[i].stats.relativeResidual);
+        EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+        if (cap < 2000) EXPECT_LE(solveA[i].stats.iterations, cap);
+        else EXPECT_TRUE(solveA[i].stats.converged);
+      }
+      if (cap < 2000) EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
     }
-    if (cap < 2000) EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
+  }
+}
+
+TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
+  // pcg_iterate_team's counters are zeroed by the last group to leave: round after round on one
+  // batch (and bodies that converge at different iterations, which ends the launch's loop early for
+  // them, and a static frame whose harder systems some bodies end at the cap), each round must give
+  // the launched iterations' bits. A counter left over would shift a
+  // later round's tickets, skip chunks and change the answer (or hang). Bodies alone and together,
+  // teams of 2 and 5.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (context()->info().gpu) GTEST_SKIP() << "teams run on CPU devices only";
+  const std::vector<detail::Problem> ps = bodies();
+  const std::size_t K = ps.size();
+  detail::OpenCLOptions launched;
+  launched.groupPcg = 0;
+  for (std::size_t team : {2, 5}) {
+    detail::OpenCLOptions teamed;
+    teamed.groupPcg = 1;
+    teamed.teamPcg = 1;
+    teamed.teamPcgSize = team;
+    auto a = batchOf(ps, solver(), teamed), b = batchOf(ps, solver(), launched);
+    const unsigned long long before = detail::teamPcgLaunchCount();
+    int rounds = 0;
+    for (int frame = 0; frame < 3; ++frame) {
+      for (const std::vector<std::size_t>& who : std::vector<std::vector<std::size_t>>{{0}, {1, 3}, {0, 1, 2, 3, 4}}) {
+        std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
+        std::vector<BatchRequest> setA, setB, solveA, solveB;
+        for (std::size_t i : who) {
+          x[i] = deformed(ps[i], 0.1 * frame + 0.2 * static_cast<double>(i));
+          rhs[i] = randomVector(ps[i].dofCount(), 700 + 10 * static_cast<unsigned>(frame) + static_cast<unsigned>(i));
+          xa[i] = xb[i] = Eigen::VectorXd::Zero(rhs[i].size());
+          setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
+          setB.push_back(request(BatchOp::SetPositions, i, &x[i]));
+        }
+        runOk(*a, setA);
+        runOk(*b, setB);
+        const detail::SystemCoeffs c{frame == 1 ? 0.0 : 3600.0, frame == 1 ? 0.0 : 60.0, 1.0};  // frame 1: static
+        for (std::size_t i : who) {
+          solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], c));
+          solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], c));
+        }
+        runOk(*a, solveA);
+        runOk(*b, solveB);
+        ++rounds;
+        for (std::size_t j = 0; j < who.size(); ++j) {
+          const std::size_t i = who[j];
+          SCOPED_TRACE("team " + std::to_string(team) + ", frame " + std::to_string(frame) + ", " + ps[i].name);
+          EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
+          EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
+          EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
+          EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+        }
+      }
+    }
+    EXPECT_EQ(detail::teamPcgLaunchCount(), before + static_cast<unsigned long long>(rounds))
+        << "every round's iterations ran in one team launch";
   }
 }
 
@@ -430,6 +513,7 @@ TEST_P(OpenCLBatch, OneLaunchRuleLeavesLargeAndUnevenRoundsLaunched) {
   detail::OpenCLOptions o;
   o.treeReduce = 0;  // per-item partials, as on CPUs: on a GPU too
   o.groupPcg = 1;
+  o.teamPcg = 0;  // the team rule: TeamRuleTakesRoundsOfFewerBodiesThanCores
   o.groupPcgSmallElements = 100;
   o.groupPcgMinBodies = 2;
   o.groupPcgMaxElements = 500;
@@ -463,6 +547,48 @@ TEST_P(OpenCLBatch, OneLaunchRuleLeavesLargeAndUnevenRoundsLaunched) {
   runOk(*batch, set);
   EXPECT_EQ(oneLaunch({2, 4}), 600 * cores <= 2 * (600 + 37)) << "bar and soup: lopsided on more than 2 cores";
   EXPECT_EQ(oneLaunch({0, 1, 4}), 600 * cores <= 2 * (192 + 180 + 600));
+}
+
+TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
+  // Which solve rounds take pcg_iterate_team (segment_engine.cpp, groupTeam) with the bounds set
+  // for these bodies (beam 192 elements, slab 180, soup 37, bar 600): fewer bodies than cores, none
+  // over the maximum, and a team of at least 2 with at least the minimum of the largest body per
+  // work-group; otherwise the one-group rule (small: 100) or the launched iterations.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (context()->info().gpu) GTEST_SKIP() << "teams run on CPU devices only";
+  const std::vector<detail::Problem> ps = bodies();
+  detail::OpenCLOptions o;
+  o.groupPcg = 1;
+  o.teamPcg = 1;
+  o.groupPcgSmallElements = 100;
+  o.groupPcgMaxElements = 100;
+  o.teamPcgMinElements = 90;
+  o.teamPcgMaxElements = 500;
+  auto batch = batchOf(ps, solver(), o);
+  std::vector<Eigen::VectorXd> x(ps.size()), rhs(ps.size()), sol(ps.size());
+  std::vector<BatchRequest> set;
+  for (std::size_t i = 0; i < ps.size(); ++i) {
+    x[i] = deformed(ps[i], 0.4);
+    rhs[i] = randomVector(ps[i].dofCount(), 500 + static_cast<unsigned>(i));
+    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+  }
+  runOk(*batch, set);
+  // Which path the round took: 2 team, 1 one group per body, 0 launched.
+  auto path = [&](const std::vector<std::size_t>& who) {
+    std::vector<BatchRequest> round;
+    for (std::size_t i : who) {
+      sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
+      round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
+    }
+    const unsigned long long team = detail::teamPcgLaunchCount(), group = detail::groupPcgLaunchCount();
+    runOk(*batch, round);
+    return detail::teamPcgLaunchCount() > team ? 2 : detail::groupPcgLaunchCount() > group ? 1 : 0;
+  };
+  const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
+  EXPECT_EQ(path({0}), cores >= 2 ? 2 : 0) << "the beam alone (192 = 2 x 96 elements)";
+  EXPECT_EQ(path({2}), 1) << "the soup (37 elements) is small: one group";
+  EXPECT_EQ(path({4}), 0) << "the bar (600 elements) is over the team's maximum and not small";
+  EXPECT_EQ(path({0, 1}), cores >= 4 ? 2 : 0) << "beam and slab: a team each only with 4 cores or more";
 }
 
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {
@@ -625,6 +751,10 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   const std::size_t r = isDouble() ? 8 : 4;  // real; sum_real is the same outside mixed precision
   const char* ewf = std::getenv("COROFEM_OPENCL_ENERGY_WITH_FORCES");
   const bool energyPerItem = !(ewf && std::string(ewf) == "0");  // per-item partials (no trees): on
+  const char* tp = std::getenv("COROFEM_OPENCL_TEAM_PCG");
+  const char* gp = std::getenv("COROFEM_OPENCL_GROUP_PCG");
+  const bool teams = !context()->info().gpu && context()->info().computeUnits > 1 &&
+                     !(tp && std::string(tp) == "0") && !(gp && std::string(gp) == "0");
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
                       bool stored, bool quaternion) {
     std::size_t S = 0, N = 0, E = 0;
@@ -649,6 +779,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     // S / 8 reals on CPUs), scalars.
     bytes += std::max(r * 3 * std::max(S / 512, N / 4), energyPerItem ? r * (S / 8) : 0) + r * 3 * (N / 4) +
              r * 12 * K;
+    if (teams && !stored) bytes += 4 * 16 * K;  // pcg_iterate_team's counters: a line per body (stored K_e: none)
     return bytes;
   };
   SolverDesc s = solver();

@@ -154,6 +154,8 @@ std::atomic<unsigned long long> groupPcgLaunches{0};
 }  // namespace
 
 unsigned long long groupPcgLaunchCount() { return groupPcgLaunches.load(); }
+std::atomic<unsigned long long> teamPcgLaunches{0};
+unsigned long long teamPcgLaunchCount() { return teamPcgLaunches.load(); }
 
 std::size_t defaultTileBytes(std::size_t cacheBytes) {
   // Measured with bench_batch (100 bodies of 2,000 elements, float, PoCL on 2 cores):
@@ -253,6 +255,18 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
                                                   : 32768 / std::max<std::size_t>(1, ctx_->info().computeUnits);
   if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_MAX"); env && *env && !options.groupPcgMaxElements)
     groupPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
+  // Teams of work-groups per body for rounds of fewer bodies than cores (pcg_iterate_team).
+  // CPU devices only: the team's hand-offs rely on coherent caches (pcg_group.cl).
+  teamPcg_ = options.teamPcg >= 0 ? options.teamPcg != 0 : ctx_->info().computeUnits > 1;
+  if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG"); env && *env && options.teamPcg < 0)
+    teamPcg_ = std::string(env) != "0";  // tuning experiments
+  teamPcg_ = teamPcg_ && groupPcg_ && !ctx_->info().gpu;
+  teamPcgSize_ = options.teamPcgSize;
+  teamPcgMinElems_ = options.teamPcgMinElements ? options.teamPcgMinElements : kTeamPcgMinElements;
+  teamPcgMaxElems_ = options.teamPcgMaxElements ? options.teamPcgMaxElements
+                                                : kTeamPcgMaxElementsPerCore * ctx_->info().computeUnits;
+  if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MAX"); env && *env && !options.teamPcgMaxElements)
+    teamPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
     tileBytes_ = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));  // tuning experiments (0: one tile)
 
@@ -373,6 +387,7 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
   if (fusedReduce_) kGatherProductFinish_.create(build_.program, "gather_product_finish", dev_);
   if (groupPcg_) kPcgIterateGroup_.create(build_.program, "pcg_iterate_group", dev_);
+  if (teamPcg_) kPcgIterateTeam_.create(build_.program, "pcg_iterate_team", dev_);
 }
 
 void SegmentEngine::allocate(const OpenCLOptions& options) {
@@ -541,6 +556,10 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
                    dev_);
   partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
+  if (teamPcg_) {
+    teamState_.create(c, kTeamStride * K * sizeof(cl_uint), dev_);
+    uploadRaw(teamState_, std::vector<cl_uint>(kTeamStride * K, 0u));
+  }
   if (fusedReduce_) {
     counters_.create(c, K * sizeof(cl_uint), dev_);
     uploadRaw(counters_, std::vector<cl_uint>(K, 0u));
@@ -563,7 +582,7 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"pcg_p", &p_},                       {"pcg_w", &q_},
       {"pcg_s", &s_},                       {"partial_sums", &partials_},
       {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_},
-      {"reduce_counters", &counters_}};
+      {"reduce_counters", &counters_},      {"pcg_team_counters", &teamState_}};
   std::vector<DeviceBuffer> out;
   for (const auto& [name, buffer] : all)
     if (buffer->get()) out.push_back({name, buffer->bytes()});
@@ -612,6 +631,7 @@ std::pair<std::size_t, std::size_t> SegmentEngine::spanItems(Span span, std::siz
     case Span::Nodes: return {a.nodeBegin, nodes};
     case Span::NodeChunks: return {a.nodeBegin / chunk_, nodes / chunk_};
     case Span::Segments: break;
+    case Span::Teams: return {lo * wg_ * teamSize_, (hi - lo) * wg_ * teamSize_};
   }
   return {lo * wg_, (hi - lo) * wg_};
 }
@@ -830,20 +850,28 @@ void SegmentEngine::run(BatchOp op, const std::vector<BatchRequest*>& requests) 
   if (!tile.empty()) runTile();
 }
 
-bool SegmentEngine::groupRound(const std::vector<BatchRequest*>& requests) const {
-  if (!groupPcg_ || requests.empty()) return false;
+std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests) const {
+  if (!groupPcg_ || requests.empty()) return 0;
+  if (teamPcg_ && teamPcgSize_ > 0) return teamPcgSize_;  // tests
   std::size_t largest = 0, total = 0;
   for (const BatchRequest* r : requests) {
     largest = std::max(largest, segs_[r->body].elems);
     total += segs_[r->body].elems;
   }
-  if (largest <= groupPcgSmallElems_) return true;  // one core without launches wins for each
+  const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
+  // Fewer bodies than cores: a team of up to cores / bodies work-groups per body, each with at
+  // least teamPcgMinElems_ elements of the largest (below that, one core without the team's
+  // hand-offs is as fast) and at most teamPcgMaxElems_ in all (above that, the launched kernels).
+  if (teamPcg_ && requests.size() < cores && largest <= teamPcgMaxElems_) {
+    const std::size_t team = std::min(cores / requests.size(), largest / teamPcgMinElems_);
+    if (team >= 2) return team;
+  }
+  if (largest <= groupPcgSmallElems_) return 1;  // one core without launches wins for each
   // Enough bodies for the cores, none too large for one core's cache, and none much larger than a
   // core's share (the one-launch round lasts as long as its largest body on one core). A review
   // measured on 2 cores: 10k + 10k elements 4.8 ms one-launch against 7.0 launched, 35k + 35k 20.6
   // against 18.7, 94k + 384 72 against 25.
-  const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
-  return requests.size() >= groupPcgMinBodies_ && largest <= groupPcgMaxElems_ && largest * cores <= 2 * total;
+  return requests.size() >= groupPcgMinBodies_ && largest <= groupPcgMaxElems_ && largest * cores <= 2 * total ? 1 : 0;
 }
 
 std::size_t SegmentEngine::workingSet(const Segment& sg) const {
@@ -1282,15 +1310,23 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       }
   };
   int enqueued = 0;
-  const bool group = groupRound(running);
+  const std::size_t team = groupTeam(running);
   auto enqueueChunk = [&]() {
-    if (group) {  // every iteration but the cap's last in one launch, a work-group per body; then the last
-      if (maxIterations - enqueued > 1)
+    if (team > 0) {  // every iteration but the cap's last in one launch, a work-group (team) per body; then the last
+      const cl_uint iterations = cl_uint(maxIterations - enqueued - 1);
+      const SumReal tol2{solver_.tolerance * solver_.tolerance};
+      if (iterations > 0 && team == 1) {
         launch(kPcgIterateGroup_, Span::Segments, cl_uint(stride_), segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
                rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_,
-               partials_, partialsW_, scalars_, cl_uint(maxIterations - enqueued - 1),
-               SumReal{solver_.tolerance * solver_.tolerance});
-      if (maxIterations - enqueued > 1) ++groupPcgLaunches;
+               partials_, partialsW_, scalars_, iterations, tol2);
+        ++groupPcgLaunches;
+      } else if (iterations > 0) {
+        teamSize_ = team;
+        launch(kPcgIterateTeam_, Span::Teams, cl_uint(stride_), cl_uint(team), teamState_, segInfoBuf_, segCoefBuf_,
+               elemNodes_, geom_, rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_,
+               x_, r_, z_, q_, partials_, partialsW_, scalars_, iterations, tol2);
+        ++teamPcgLaunches;
+      }
       pcgIteration(true);
       enqueued = maxIterations;
       issueRead();

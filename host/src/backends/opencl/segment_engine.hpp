@@ -119,6 +119,8 @@ std::size_t defaultTileBytes(std::size_t cacheBytes);
 /// Launches of pcg_iterate_group (one-launch PCG iterations) by every engine of the process so
 /// far: tests check with it that the path they compare was taken.
 unsigned long long groupPcgLaunchCount();
+/// Launches of pcg_iterate_team (one-launch PCG iterations, several work-groups per body) so far.
+unsigned long long teamPcgLaunchCount();
 
 class SegmentEngine {
  public:
@@ -185,7 +187,8 @@ class SegmentEngine {
   };
   /// What a kernel's work-items cover: elements (VEC per item), nodes, node chunks (CHUNK per
   /// item), or segments (one work-group each, reduce_finish).
-  enum class Span { Elements, Nodes, NodeChunks, Segments };
+  /// Teams: teamSize_ work-groups per segment (pcg_iterate_team).
+  enum class Span { Elements, Nodes, NodeChunks, Segments, Teams };
 
   // -- launching
   void setArg(const ClKernel& k, cl_uint i, cl_mem m);
@@ -244,6 +247,14 @@ class SegmentEngine {
   /// body's 3N = 525k entries make 9 chunks; a body of up to 21,845 nodes is one chunk, run inline
   /// (on an H200's host, 100k elements in two chunks ran 7 % slower than inline).
   static constexpr std::size_t kHostChunk = std::size_t{1} << 16;
+  /// pcg_iterate_team's bounds, measured with one body on 2 cores (bench_opencl's dynamic step, 20
+  /// iterations, against pcg_iterate_group on one core and against the launched iterations): the
+  /// team of 2 broke even at 2.3k elements and won from 2.9k (4%), 4k (10%) and 10k (20%); it
+  /// beat the launched iterations by 20% at 10k and 9% at 20k, tied at 40k and lost 15-20% at 100k.
+  /// Per work-group of the team: at least kTeamPcgMinElements of the body; the default of
+  /// OpenCLOptions::teamPcgMaxElements is kTeamPcgMaxElementsPerCore times the compute units.
+  static constexpr std::size_t kTeamPcgMinElements = 1280;
+  static constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
   std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
@@ -337,11 +348,19 @@ class SegmentEngine {
   std::size_t groupPcgMinBodies_ = 1;    ///< ... when the round has at least this many bodies,
   std::size_t groupPcgSmallElems_ = 0;   ///< ... or when none has more elements than this
   std::size_t groupPcgMaxElems_ = 0;     ///< ... and (for the count rule) none has more than this
-  /// Whether a solve round of these bodies runs its iterations in pcg_iterate_group: a work-group
-  /// per body runs on one core, so either each body is small enough that one core without launches
-  /// beats all cores with them, or the bodies fill the cores and none is too large for one core
-  /// (groupPcgMaxElems_) or much larger than a core's share of the round.
-  bool groupRound(const std::vector<BatchRequest*>& requests) const;
+  bool teamPcg_ = false;                 ///< ... and rounds of fewer bodies than cores in pcg_iterate_team
+  std::size_t teamPcgMaxElems_ = 0;      ///< ... when none has more elements than this
+  std::size_t teamPcgMinElems_ = 0;      ///< ... and each work-group of the team has this many
+  std::size_t teamPcgSize_ = 0;          ///< OpenCLOptions::teamPcgSize (tests: every round in teams of this size)
+  std::size_t teamSize_ = 1;             ///< work-groups per segment of Span::Teams (the round's)
+  /// How a solve round of these bodies runs its PCG iterations: 0 launched (4 launches per
+  /// iteration); 1 in pcg_iterate_group, a work-group per body on one core, when each body is small
+  /// enough that one core without launches beats all cores with them, or when the bodies fill the
+  /// cores and none is too large for one core (groupPcgMaxElems_) or much larger than a core's share
+  /// of the round; T >= 2 in pcg_iterate_team, T work-groups per body, when fewer bodies than cores
+  /// would leave cores idle (teamPcg_, none larger than teamPcgMaxElems_).
+  std::size_t groupTeam(const std::vector<BatchRequest*>& requests) const;
+  bool groupRound(const std::vector<BatchRequest*>& requests) const { return groupTeam(requests) > 0; }
   std::vector<Segment> segs_;
   std::size_t stride_ = 0;               ///< S: all segments' padded elements
   std::size_t nodeTotal_ = 0;            ///< all segments' padded nodes
@@ -386,12 +405,14 @@ class SegmentEngine {
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
-      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_, kPcgIterateGroup_;
+      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_, kPcgIterateGroup_,
+      kPcgIterateTeam_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
   ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
   // partials_ takes pcg_init/pcg_update's and element_energy's sums, partialsW_ gather_product's.
   ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
+  ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's counters, kTeamStride per segment (0 between launches)
   ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
 };
 
