@@ -123,36 +123,88 @@ void pcg_iterate_group(const uint S, __global uint* segInfo, __global const real
   }
 }
 
-/* pcg_iterate_group with a team of `team` work-groups per segment (CPU devices, a round of fewer
- * bodies than cores): the same iterations, the same items, the same bits, on several cores
+/* pcg_iterate_group with a team of `teamSize` work-groups per segment (CPU devices, a round of
+ * fewer bodies than cores): the same iterations, the same items, the same bits, on several cores
  * without a launch between the phases.
  *
- * The work of each phase (update, product, gather: one chunk per COROFEM_WG work-items of the
- * launched grid; the scalars: one chunk) is handed out by tickets, numbered through the whole
- * launch, from the segment's counter team[0]; team[1] counts the chunks done. A group takes a
- * ticket, does its chunk and counts it, until it holds a ticket of a later phase, then waits
- * until every chunk of the current phase is done (team[1] reaches the phase's last ticket) and
- * goes on with the ticket it holds. A group waits only for chunks that a running group has taken,
- * so no group ever waits on one that has not started: a single core running the groups one after
- * the other does all the work in the first (no deadlock whatever the device's scheduling), two
- * cores share it. The scalars are updated by the group holding that phase's ticket; every group
- * then reads the stop from segInfo. The last group to leave (team[2]) zeroes the counters for the
- * next launch.
+ * Each phase (update, product, gather: one chunk per COROFEM_WG work-items of the launched grid;
+ * the scalars: one chunk) is split into chunks, and chunk c has a claim word in the segment's
+ * flags; the phases are numbered by epochs that grow through the launch and from one launch to
+ * the next (epochBase, from the host). Member m of the team (its work-group's place in the team)
+ * claims the chunks of its own share of the phase first (atomic_max of the epoch: the old value
+ * below the epoch means the chunk is its own), then any still unclaimed in the others' shares, from
+ * their ends; it does each chunk it claims, adds its count to the segment's `done`, and waits
+ * until `done` holds the whole phase. So a member's share stays in its core's cache from phase to
+ * phase (its elements' outputs, its nodes' vectors), and a member that starts late or runs slow
+ * loses its share to the others instead of holding them up: a member waits only for chunks that a
+ * running member has claimed, so no scheduling of the groups can deadlock (one core running them
+ * in turns: the first does everything, the others find every chunk taken). The scalars are
+ * updated by whoever claims that phase's chunk; every member then reads the stop from segInfo. The
+ * last member to leave zeroes `done` and its own count for the next launch.
  *
- * Between groups, what one group stored is read by another after it has seen the count: the
- * counts are atomic read-modify-writes (full barriers on the x86 and ARM CPUs PoCL runs on), the
- * waiting group spins on a volatile load and then does an atomic read of its own. OpenCL 1.2 has
- * no memory-scope fence to promise this on a GPU, which is why GPUs keep the launched iterations. */
+ * Between groups, what one stored is read by another after it has seen the count: the counts are
+ * atomic read-modify-writes (PoCL: sequentially consistent, full barriers on the x86 and ARM CPUs
+ * it runs on); the waiting group spins on a volatile load and then does an atomic read of its own.
+ * OpenCL 1.2 has no memory-scope fence to promise this on a GPU (whose L1 caches are not coherent),
+ * which is why GPUs keep the launched iterations. */
 COROFEM_FN void team_wait(__global volatile uint* done, uint target) {
   while (done[0] < target) {
   }
   atomic_or(done, 0u); /* an atomic read: nothing after it is read before it */
 }
 
+/* The chunk that member m of a team of T tries k-th in a phase of C chunks: its own share
+ * [m C / T, (m + 1) C / T) in order, then the other members' shares from their ends. */
+COROFEM_FN uint team_chunk(uint k, uint m, uint T, uint C) {
+  const uint lo = m * C / T, own = (m + 1) * C / T - lo;
+  if (k < own) return lo + k;
+  k -= own;
+  for (uint j = 1; j < T; ++j) {
+    const uint h = (m + j) % T, hlo = h * C / T, hn = (h + 1) * C / T - hlo;
+    if (k < hn) return hlo + hn - 1 - k;
+    k -= hn;
+  }
+  return 0u; /* not reached: k < C */
+}
+
+/* Member `member`'s claim of the k-th chunk it tries in a phase of C chunks (lid 0; `claimed`:
+ * the chunk + 1, or 0), and the end of a phase: its count added, the wait for the whole phase. */
+#define TEAM_CLAIM(k, C)                                                                         \
+  if (lid == 0) {                                                                                \
+    const uint c = team_chunk((k), member, teamSize, (C));                                       \
+    claimed = flags[c] < epoch && atomic_max(flags + c, epoch) < epoch ? c + 1u : 0u;            \
+    count += claimed != 0u ? 1u : 0u;                                                            \
+  }                                                                                              \
+  barrier(CLK_LOCAL_MEM_FENCE);
+#define TEAM_DONE()                                                                              \
+  if (lid == 0) {                                                                                \
+    if (count != 0u) atomic_add(done, count);                                                    \
+    team_wait(done, end);                                                                        \
+  }                                                                                              \
+  barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+/* A phase over items: `kind` 0 update, 1 product, 2 gather. */
+#define TEAM_PHASE(kind, C, ITEMS)                                                               \
+  epoch += 1u;                                                                                   \
+  end += (C);                                                                                    \
+  if (lid == 0) count = 0u;                                                                      \
+  for (uint k = 0; k < (C); ++k) {                                                               \
+    TEAM_CLAIM(k, (C))                                                                           \
+    const uint v = (claimed - 1u) * COROFEM_WG + lid;                                            \
+    if (claimed != 0u && v < (ITEMS)) {                                                          \
+      if ((kind) == 0u) group_update_item(&g, v, alpha, beta, w, minv, p, sv, x, r, u, partials); \
+      else if ((kind) == 1u) group_product_item(&g, v, S, nodes, geom, rotGrad, u, elemOut);      \
+      else group_gather_item(&g, v, start, entries, elemOut, mass, free, u, w, partialsW);         \
+    }                                                                                            \
+    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);                                         \
+  }                                                                                              \
+  TEAM_DONE()
+
+/* teamState per segment (kTeamStride uints): [kTeamDone] chunks done in this launch,
+ * [kTeamLeft] members gone, [kTeamFlags] where its claim words start in teamState (host). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_iterate_team(const uint S, const uint teamSize, __global uint* teamState, __global uint* segInfo,
-                      __global const real* segCoef, __global const uint* nodes, __global const real* geom,
-                      __global const real* rotGrad, __global const uint* start,
+void pcg_iterate_team(const uint S, const uint teamSize, const uint epochBase, __global uint* teamState,
+                      __global uint* segInfo, __global const real* segCoef, __global const uint* nodes,
+                      __global const real* geom, __global const real* rotGrad, __global const uint* start,
                       __global const uint* entries, __global real* elemOut,
                       __global const real* mass, __global const real* free,
                       __global const real* minv, __global real* p, __global real* sv,
@@ -161,85 +213,44 @@ void pcg_iterate_team(const uint S, const uint teamSize, __global uint* teamStat
                       __global sum_real* partialsW, __global sum_real* allScalars,
                       const uint iterations, const sum_real tol2) {
   __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
-  __local uint running, ticket;
-  const uint lid = get_local_id(0), seg = get_global_id(0) / (COROFEM_WG * teamSize);
+  __local uint running, claimed, count;
+  const uint lid = get_local_id(0), team = get_global_id(0) / COROFEM_WG;
+  const uint seg = team / teamSize, member = team % teamSize;
   const GroupSegment g = group_segment(segInfo, segCoef, seg);
   __global volatile sum_real* scalars = allScalars + kScalarCount * seg;
-  __global volatile uint* team = teamState + kTeamStride * seg;
+  __global volatile uint* state = teamState + kTeamStride * seg;
+  __global volatile uint* done = state + kTeamDone;
+  __global volatile uint* flags = teamState + state[kTeamFlags];
   __global volatile uint* active = segInfo + kSegInfoCount * seg + kSegActive;
   const uint nodeChunks = (g.nodeItems + COROFEM_WG - 1) / COROFEM_WG;
   const uint elemChunks = (g.elemItems + COROFEM_WG - 1) / COROFEM_WG;
-  if (lid == 0) {
-    running = *active;
-    ticket = running != 0u ? atomic_inc(team) : 0xffffffffu;
-  }
+  if (lid == 0) running = *active;
   barrier(CLK_LOCAL_MEM_FENCE);
-  uint end = 0; /* one past the current phase's last ticket */
+  uint end = 0, epoch = epochBase; /* the chunks done when the current phase is; its epoch */
   for (uint it = 0; it < iterations && running != 0u; ++it) {
     const real alpha = (real)scalars[kScalarAlpha], beta = (real)scalars[kScalarBeta];
-    /* pcg_update */
-    end += nodeChunks;
-    while (ticket < end) {
-      const uint v = (ticket - (end - nodeChunks)) * COROFEM_WG + lid;
-      if (v < g.nodeItems) group_update_item(&g, v, alpha, beta, w, minv, p, sv, x, r, u, partials);
-      barrier(CLK_GLOBAL_MEM_FENCE);
-      if (lid == 0) {
-        atomic_inc(team + 1);
-        ticket = atomic_inc(team);
-      }
-      barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0) team_wait(team + 1, end);
-    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
-    /* element_product of u */
-    end += elemChunks;
-    while (ticket < end) {
-      const uint v = (ticket - (end - elemChunks)) * COROFEM_WG + lid;
-      if (v < g.elemItems) group_product_item(&g, v, S, nodes, geom, rotGrad, u, elemOut);
-      barrier(CLK_GLOBAL_MEM_FENCE);
-      if (lid == 0) {
-        atomic_inc(team + 1);
-        ticket = atomic_inc(team);
-      }
-      barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0) team_wait(team + 1, end);
-    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
-    /* gather_product */
-    end += nodeChunks;
-    while (ticket < end) {
-      const uint v = (ticket - (end - nodeChunks)) * COROFEM_WG + lid;
-      if (v < g.nodeItems) group_gather_item(&g, v, start, entries, elemOut, mass, free, u, w, partialsW);
-      barrier(CLK_GLOBAL_MEM_FENCE);
-      if (lid == 0) {
-        atomic_inc(team + 1);
-        ticket = atomic_inc(team);
-      }
-      barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0) team_wait(team + 1, end);
-    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
-    /* reduce_finish(kReduceStep): one chunk */
-    end += 1;
-    while (ticket < end) {
-      segment_sums(segInfo, seg, g.nodeItems, partials, partialsW, s0, s1, s2, s3);
-      if (lid == 0) {
-        update_scalars(segInfo, seg, (__global sum_real*)scalars, kReduceStep, tol2, s0[0], s1[0], s2[0], s3[0]);
-        atomic_inc(team + 1);
-        ticket = atomic_inc(team);
-      }
-      barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
-    }
-    if (lid == 0) {
-      team_wait(team + 1, end);
-      running = *active;
-    }
-    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
+    TEAM_PHASE(0u, nodeChunks, g.nodeItems)  /* pcg_update */
+    TEAM_PHASE(1u, elemChunks, g.elemItems)  /* element_product of u */
+    TEAM_PHASE(2u, nodeChunks, g.nodeItems)  /* gather_product: w = A u */
+    /* reduce_finish(kReduceStep): one chunk; every member runs the sums' barriers (none inside a
+     * branch, for PoCL's sake), only the claimant over the partials. */
+    epoch += 1u;
+    end += 1u;
+    if (lid == 0) count = 0u;
+    TEAM_CLAIM(0u, 1u)
+    segment_sums(segInfo, seg, claimed != 0u ? g.nodeItems : 0u, partials, partialsW, s0, s1, s2, s3);
+    if (lid == 0 && claimed != 0u)
+      update_scalars(segInfo, seg, (__global sum_real*)scalars, kReduceStep, tol2, s0[0], s1[0], s2[0], s3[0]);
+    TEAM_DONE()
+    if (lid == 0) running = *active;
+    barrier(CLK_LOCAL_MEM_FENCE);
   }
-  if (lid == 0 && atomic_inc(team + 2) + 1u == teamSize) {
-    team[0] = 0u;
-    team[1] = 0u;
-    team[2] = 0u;
+  if (lid == 0 && atomic_inc(state + kTeamLeft) + 1u == teamSize) {
+    state[kTeamDone] = 0u;
+    state[kTeamLeft] = 0u;
   }
 }
+#undef TEAM_PHASE
+#undef TEAM_DONE
+#undef TEAM_CLAIM
 #endif

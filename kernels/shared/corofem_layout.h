@@ -106,9 +106,12 @@ COROFEM_CONSTANT(unsigned, kReduceStep, 1);     /* (r.u, r.r), u.w -> beta, alph
 COROFEM_CONSTANT(unsigned, kReduceResidual, 2); /* (r.u, r.r, b.b) -> rr, bb (the true residual)          */
 COROFEM_CONSTANT(unsigned, kReduceLast, 3);     /* (r.u, r.r) -> gamma, rr: the cap's last iteration     */
 COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-group: 3 sum_reals    */
-/* pcg_iterate_team's counters per segment (uint): next ticket, chunks done, groups left; one cache
- * line each, zero between launches. */
+/* pcg_iterate_team's state per segment (uint, one cache line each): chunks done and members gone
+ * (zero between launches), where the segment's chunk claim words start in the same buffer. */
 COROFEM_CONSTANT(unsigned, kTeamStride, 16);
+COROFEM_CONSTANT(unsigned, kTeamDone, 0);
+COROFEM_CONSTANT(unsigned, kTeamLeft, 1);
+COROFEM_CONSTANT(unsigned, kTeamFlags, 2);
 
 /* Default work-group size (overridden by -DCOROFEM_WG). Reductions need a power of two. */
 #ifndef COROFEM_WG

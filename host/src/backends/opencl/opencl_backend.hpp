@@ -49,16 +49,17 @@ struct OpenCLOptions {
   /// launch and 35k + 35k 1.1x slower).
   std::size_t groupPcgMaxElements = 0;
   /// A solve round of fewer bodies than the device's compute units runs its iterations in one
-  /// launch with a team of (compute units / bodies) work-groups per body (pcg_iterate_team: the
-  /// phases' chunks handed out by atomic tickets, the same bits as the launched iterations), when
-  /// groupPcg is on and no body has more than `teamPcgMaxElements` elements. 1: on; 0: never; -1
-  /// (default): on with groupPcg on a device of several compute units.
+  /// launch with a team of up to (compute units / bodies) work-groups per body (pcg_iterate_team:
+  /// each member claims its share of every phase's chunks first and the unclaimed rest after, the
+  /// same bits as the launched iterations), when groupPcg is on and each member has at least
+  /// `teamPcgMinElements` of the largest body's elements. 1: on; 0: never; -1 (default): on with
+  /// groupPcg on a CPU device of several compute units (never on GPUs).
   int teamPcg = -1;
-  /// The largest body for pcg_iterate_team; 0 = the default, 16,384 per compute unit (on 2 cores the
-  /// team tied with the launched iterations at 40k elements and lost at 100k).
+  /// The largest body for pcg_iterate_team; 0 = the default, no bound (on 2 cores the team beat
+  /// the launched iterations at 10k and 100k elements and tied at 1M).
   std::size_t teamPcgMaxElements = 0;
   /// The fewest elements of the largest body per work-group of a team; 0 = the default, 1,280 (on
-  /// 2 cores a team of 2 broke even with one work-group at 2.3k elements and won from 2.9k).
+  /// 2 cores a team of 2 lost to one work-group at 1k elements, tied at 2.3k and won from 2.9k).
   std::size_t teamPcgMinElements = 0;
   /// Tests: with teamPcg on, every solve round's iterations in teams of this many work-groups per
   /// body, whatever the rule says (more than the device's cores, too: the groups then run in turns

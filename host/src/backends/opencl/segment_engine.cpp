@@ -18,6 +18,7 @@
 #include "util/error.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -263,8 +264,9 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   teamPcg_ = teamPcg_ && groupPcg_ && !ctx_->info().gpu;
   teamPcgSize_ = options.teamPcgSize;
   teamPcgMinElems_ = options.teamPcgMinElements ? options.teamPcgMinElements : kTeamPcgMinElements;
-  teamPcgMaxElems_ = options.teamPcgMaxElements ? options.teamPcgMaxElements
-                                                : kTeamPcgMaxElementsPerCore * ctx_->info().computeUnits;
+  if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MIN"); env && *env && !options.teamPcgMinElements)
+    teamPcgMinElems_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
+  teamPcgMaxElems_ = options.teamPcgMaxElements ? options.teamPcgMaxElements : std::numeric_limits<std::size_t>::max();
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MAX"); env && *env && !options.teamPcgMaxElements)
     teamPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
@@ -557,8 +559,9 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
   if (teamPcg_) {
-    teamState_.create(c, kTeamStride * K * sizeof(cl_uint), dev_);
-    uploadRaw(teamState_, std::vector<cl_uint>(kTeamStride * K, 0u));
+    const std::vector<cl_uint> state = teamStateAtRest();
+    teamState_.create(c, state.size() * sizeof(cl_uint), dev_);
+    uploadRaw(teamState_, state);
   }
   if (fusedReduce_) {
     counters_.create(c, K * sizeof(cl_uint), dev_);
@@ -861,7 +864,7 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
   // Fewer bodies than cores: a team of up to cores / bodies work-groups per body, each with at
   // least teamPcgMinElems_ elements of the largest (below that, one core without the team's
-  // hand-offs is as fast) and at most teamPcgMaxElems_ in all (above that, the launched kernels).
+  // hand-offs is as fast).
   if (teamPcg_ && requests.size() < cores && largest <= teamPcgMaxElems_) {
     const std::size_t team = std::min(cores / requests.size(), largest / teamPcgMinElems_);
     if (team >= 2) return team;
@@ -872,6 +875,20 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   // measured on 2 cores: 10k + 10k elements 4.8 ms one-launch against 7.0 launched, 35k + 35k 20.6
   // against 18.7, 94k + 384 72 against 25.
   return requests.size() >= groupPcgMinBodies_ && largest <= groupPcgMaxElems_ && largest * cores <= 2 * total ? 1 : 0;
+}
+
+std::vector<cl_uint> SegmentEngine::teamStateAtRest() const {
+  // Per segment kTeamStride words (counts at zero, kTeamFlags: where its claim words start), then
+  // each segment's claim words, one per chunk of its larger phase (pcg_group.cl), at epoch 0.
+  std::vector<cl_uint> state(kTeamStride * segs_.size(), 0u);
+  for (std::size_t s = 0; s < segs_.size(); ++s) {
+    const Segment& sg = segs_[s];
+    const std::size_t chunks = std::max<std::size_t>(
+        {1, (sg.partialCount + wg_ - 1) / wg_, (sg.elemSpan / vec_ + wg_ - 1) / wg_});
+    state[kTeamStride * s + kTeamFlags] = static_cast<cl_uint>(state.size());
+    state.resize(state.size() + chunks, 0u);
+  }
+  return state;
 }
 
 std::size_t SegmentEngine::workingSet(const Segment& sg) const {
@@ -1321,10 +1338,18 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                partials_, partialsW_, scalars_, iterations, tol2);
         ++groupPcgLaunches;
       } else if (iterations > 0) {
+        // The launch's phases take the epochs teamEpoch_ + 1 .. + 4 iterations; before they could
+        // wrap, the claim words go back to 0 (about every 10^9 phases).
+        if (teamEpoch_ > std::numeric_limits<cl_uint>::max() - 4 * iterations - 1) {
+          uploadRaw(teamState_, teamStateAtRest());
+          teamEpoch_ = 0;
+        }
         teamSize_ = team;
-        launch(kPcgIterateTeam_, Span::Teams, cl_uint(stride_), cl_uint(team), teamState_, segInfoBuf_, segCoefBuf_,
+        launch(kPcgIterateTeam_, Span::Teams, cl_uint(stride_), cl_uint(team), teamEpoch_, teamState_, segInfoBuf_,
+               segCoefBuf_,
                elemNodes_, geom_, rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_,
                x_, r_, z_, q_, partials_, partialsW_, scalars_, iterations, tol2);
+        teamEpoch_ += 4 * iterations;
         ++teamPcgLaunches;
       }
       pcgIteration(true);

@@ -247,14 +247,12 @@ class SegmentEngine {
   /// body's 3N = 525k entries make 9 chunks; a body of up to 21,845 nodes is one chunk, run inline
   /// (on an H200's host, 100k elements in two chunks ran 7 % slower than inline).
   static constexpr std::size_t kHostChunk = std::size_t{1} << 16;
-  /// pcg_iterate_team's bounds, measured with one body on 2 cores (bench_opencl's dynamic step, 20
-  /// iterations, against pcg_iterate_group on one core and against the launched iterations): the
-  /// team of 2 broke even at 2.3k elements and won from 2.9k (4%), 4k (10%) and 10k (20%); it
-  /// beat the launched iterations by 20% at 10k and 9% at 20k, tied at 40k and lost 15-20% at 100k.
-  /// Per work-group of the team: at least kTeamPcgMinElements of the body; the default of
-  /// OpenCLOptions::teamPcgMaxElements is kTeamPcgMaxElementsPerCore times the compute units.
+  /// pcg_iterate_team's least elements of the largest body per work-group of the team, measured
+  /// with one body on 2 cores (bench_opencl's dynamic step, 20 iterations, against
+  /// pcg_iterate_group on one core): a team of 2 lost at 1k elements (0.46 ms against 0.42), tied
+  /// at 2.3k and won from 2.9k on (1.6 ms against 2.2 at 10k). Against the launched iterations it
+  /// won at 10k (1.6 ms against 2.1) and 100k (12.5 against 14.1) and tied at 1M: no upper bound.
   static constexpr std::size_t kTeamPcgMinElements = 1280;
-  static constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
   std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
@@ -353,6 +351,9 @@ class SegmentEngine {
   std::size_t teamPcgMinElems_ = 0;      ///< ... and each work-group of the team has this many
   std::size_t teamPcgSize_ = 0;          ///< OpenCLOptions::teamPcgSize (tests: every round in teams of this size)
   std::size_t teamSize_ = 1;             ///< work-groups per segment of Span::Teams (the round's)
+  cl_uint teamEpoch_ = 0;                ///< the last epoch pcg_iterate_team's claim words may hold
+  /// teamState_ between launches: the counts at zero, the claim words at epoch 0.
+  std::vector<cl_uint> teamStateAtRest() const;
   /// How a solve round of these bodies runs its PCG iterations: 0 launched (4 launches per
   /// iteration); 1 in pcg_iterate_group, a work-group per body on one core, when each body is small
   /// enough that one core without launches beats all cores with them, or when the bodies fill the
@@ -412,7 +413,7 @@ class SegmentEngine {
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
   // partials_ takes pcg_init/pcg_update's and element_energy's sums, partialsW_ gather_product's.
   ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
-  ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's counters, kTeamStride per segment (0 between launches)
+  ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's state, kTeamStride per segment, then claim words
   ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
 };
 
