@@ -450,8 +450,8 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
   // batch (and bodies that converge at different iterations, which ends the launch's loop early for
   // them, and a static frame whose harder systems some bodies end at the cap), each round must give
   // the launched iterations' bits. A counter left over would shift a
-  // later round's tickets, skip chunks and change the answer (or hang). Bodies alone and together,
-  // teams of 2 and 5.
+  // later round's phases, skip chunks and change the answer (or hang). Bodies alone and together,
+  // teams of 2 and 5, with the claims' epochs wrapping on the way.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   if (context()->info().gpu) GTEST_SKIP() << "teams run on CPU devices only";
   const std::vector<detail::Problem> ps = bodies();
@@ -463,6 +463,9 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
     teamed.groupPcg = 1;
     teamed.teamPcg = 1;
     teamed.teamPcgSize = team;
+    // The claims' 32-bit epochs wrap within the first rounds (the host resets the claim words):
+    // without the reset, every chunk would look claimed and the iterations would do nothing.
+    teamed.teamEpochStart = 0xffffffffu - 20000u;  // each round advances 4 x (cap - 1) = 7,996
     auto a = batchOf(ps, solver(), teamed), b = batchOf(ps, solver(), launched);
     const unsigned long long before = detail::teamPcgLaunchCount();
     int rounds = 0;

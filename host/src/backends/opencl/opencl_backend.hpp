@@ -65,6 +65,9 @@ struct OpenCLOptions {
   /// body, whatever the rule says (more than the device's cores, too: the groups then run in turns
   /// and the first does the work); 0 = by the rule.
   std::size_t teamPcgSize = 0;
+  /// Tests: the epoch pcg_iterate_team's claims start from (the wrap of the 32-bit epochs, which
+  /// otherwise comes after about 10^9 phases); 0 = the default.
+  unsigned teamEpochStart = 0;
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.

@@ -263,6 +263,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
     teamPcg_ = std::string(env) != "0";  // tuning experiments
   teamPcg_ = teamPcg_ && groupPcg_ && !ctx_->info().gpu;
   teamPcgSize_ = options.teamPcgSize;
+  teamEpoch_ = options.teamEpochStart;
   teamPcgMinElems_ = options.teamPcgMinElements ? options.teamPcgMinElements : kTeamPcgMinElements;
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MIN"); env && *env && !options.teamPcgMinElements)
     teamPcgMinElems_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
