@@ -144,13 +144,18 @@ void pcg_iterate_group(const uint S, __global uint* segInfo, __global const real
  *
  * Between groups, what one stored is read by another after it has seen the count: the counts are
  * atomic read-modify-writes (PoCL: sequentially consistent, full barriers on the x86 and ARM CPUs
- * it runs on); the waiting group spins on a volatile load and then does an atomic read of its own.
+ * it runs on); the waiting group spins on a volatile load and then reads the count once more with
+ * an atomic read-modify-write whose value it uses (team_wait).
  * OpenCL 1.2 has no memory-scope fence to promise this on a GPU (whose L1 caches are not coherent),
  * which is why GPUs keep the launched iterations. */
 COROFEM_FN void team_wait(__global volatile uint* done, uint target) {
   while (done[0] < target) {
   }
-  atomic_or(done, 0u); /* an atomic read: nothing after it is read before it */
+  /* The acquire: an atomic read-modify-write whose value decides the loop, so the compiler keeps
+   * it (an atomic_or whose result went unused was compiled to nothing), and nothing after it is
+   * read before it. It runs once: the spin above has seen the count. */
+  while (atomic_add(done, 0u) < target) {
+  }
 }
 
 /* The chunk that member m of a team of T tries k-th in a phase of C chunks: its own share

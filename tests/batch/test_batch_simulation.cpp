@@ -565,11 +565,11 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
 #else
   if (!haveOpenCLDevice()) GTEST_SKIP() << "no OpenCL device on this machine";
   // The bodies batched (on a CPU device each solve round's PCG iterations run in one launch,
-  // pcg_iterate_group) and each alone (one launch too: a team of work-groups, pcg_iterate_team,
-  // where a body is large enough for one), against the same runs without teams
-  // (COROFEM_OPENCL_TEAM_PCG=0) and with every PCG iteration launched (COROFEM_OPENCL_GROUP_PCG=0):
-  // the same statuses, reports, positions, velocities and energies, bit for bit. On a GPU all three
-  // launch every iteration.
+  // pcg_iterate_group) and each alone (one launch too: with COROFEM_OPENCL_TEAM_PCG_MIN=1 every
+  // body alone gets a team of work-groups, pcg_iterate_team, small as these bodies are), against the
+  // same runs without teams (COROFEM_OPENCL_TEAM_PCG=0) and with every PCG iteration launched
+  // (COROFEM_OPENCL_GROUP_PCG=0): the same statuses, reports, positions, velocities and energies,
+  // bit for bit. On a GPU all three launch every iteration.
   const auto oneLaunches = [] { return detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount(); };
   for (Precision precision : {Precision::Float, Precision::Double}) {
     SCOPED_TRACE(toString(precision));
@@ -583,11 +583,17 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
       scene.backend.batch = batch;
       Trace grouped, noTeams, launched;
       const unsigned long long before = oneLaunches();
+      const unsigned long long teamsBefore = detail::teamPcgLaunchCount();
       {
         const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
+        const ScopedEnv teams("COROFEM_OPENCL_TEAM_PCG", "1");
+        const ScopedEnv small("COROFEM_OPENCL_TEAM_PCG_MIN", "1");
         grouped = run(scene);
       }
       const unsigned long long between = oneLaunches(), teamsBetween = detail::teamPcgLaunchCount();
+      const detail::cl::DeviceInfo& info = detail::cl::Context::shared("")->info();
+      if (!batch && info.cpu && info.computeUnits > 1)
+        EXPECT_GT(teamsBetween, teamsBefore) << "each body alone took teams on this CPU device";
       {
         const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
         const ScopedEnv noTeam("COROFEM_OPENCL_TEAM_PCG", "0");

@@ -15,12 +15,14 @@
 #include "opencl/opencl_test_support.hpp"
 #include "solve/batch.hpp"
 #include "util/error.hpp"
+#include "util/parallel.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <thread>
 
 namespace corofem {
 namespace {
@@ -76,6 +78,21 @@ std::vector<detail::Problem> bodies() {
     clampBelow(p, 0, 1e-9, 3);
     out.push_back(std::move(p));
   }
+  return out;
+}
+
+/// bodies() and, first, a block of 3,600 elements and 1,029 nodes clamped at x = 0: the only one
+/// whose node phases span several chunks of 64 work-items (5), for the teams' chunk arithmetic and
+/// hand-offs within a phase.
+std::vector<detail::Problem> bodiesWithABlock() {
+  std::vector<detail::Problem> out;
+  detail::Problem p = test::makeProblem(test::boxMesh(20, 6, 6, 0.1, 0.1, 0.1), 1e5, 0.45, 1000.0);
+  p.name = "block";
+  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
+    if (p.mesh.nodes[3 * n] < 1e-9)
+      for (int k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;
+  out.push_back(std::move(p));
+  for (detail::Problem& b : bodies()) out.push_back(std::move(b));
   return out;
 }
 
@@ -384,7 +401,7 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
     unsigned long long (*launches)();
   };
   std::vector<Way> ways = {{"one work-group per body", grouped, &detail::groupPcgLaunchCount}};
-  if (!context()->info().gpu)
+  if (context()->info().cpu)
     for (std::size_t team : {2, 3, 8}) {
       detail::OpenCLOptions t = grouped;
       t.teamPcg = 1;
@@ -449,12 +466,12 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
   // pcg_iterate_team's counters are zeroed by the last group to leave: round after round on one
   // batch (and bodies that converge at different iterations, which ends the launch's loop early for
   // them, and a static frame whose harder systems some bodies end at the cap), each round must give
-  // the launched iterations' bits. A counter left over would shift a
-  // later round's phases, skip chunks and change the answer (or hang). Bodies alone and together,
-  // teams of 2 and 5, with the claims' epochs wrapping on the way.
+  // the launched iterations' bits. A counter left over would shift a later round's phases, skip
+  // chunks and change the answer (or hang). Bodies alone and together (the block's node phases
+  // span 5 chunks), teams of 2 and 5, with the claims' epochs wrapping on the way.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  if (context()->info().gpu) GTEST_SKIP() << "teams run on CPU devices only";
-  const std::vector<detail::Problem> ps = bodies();
+  if (!context()->info().cpu) GTEST_SKIP() << "teams run on CPU devices only";
+  const std::vector<detail::Problem> ps = bodiesWithABlock();
   const std::size_t K = ps.size();
   detail::OpenCLOptions launched;
   launched.groupPcg = 0;
@@ -470,7 +487,7 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
     const unsigned long long before = detail::teamPcgLaunchCount();
     int rounds = 0;
     for (int frame = 0; frame < 3; ++frame) {
-      for (const std::vector<std::size_t>& who : std::vector<std::vector<std::size_t>>{{0}, {1, 3}, {0, 1, 2, 3, 4}}) {
+      for (const std::vector<std::size_t>& who : std::vector<std::vector<std::size_t>>{{0}, {1}, {2, 4}, {0, 1, 2, 3, 4, 5}}) {
         std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
         std::vector<BatchRequest> setA, setB, solveA, solveB;
         for (std::size_t i : who) {
@@ -558,7 +575,7 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   // over the maximum, and a team of at least 2 with at least the minimum of the largest body per
   // work-group; otherwise the one-group rule (small: 100) or the launched iterations.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  if (context()->info().gpu) GTEST_SKIP() << "teams run on CPU devices only";
+  if (!context()->info().cpu) GTEST_SKIP() << "teams run on CPU devices only";
   const std::vector<detail::Problem> ps = bodies();
   detail::OpenCLOptions o;
   o.groupPcg = 1;
@@ -592,6 +609,91 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   EXPECT_EQ(path({2}), 1) << "the soup (37 elements) is small: one group";
   EXPECT_EQ(path({4}), 0) << "the bar (600 elements) is over the team's maximum and not small";
   EXPECT_EQ(path({0, 1}), cores >= 4 ? 2 : 0) << "beam and slab: a team each only with 4 cores or more";
+}
+
+TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
+  // Two batches solving at the same time from two host threads, both in teams (2 and 8 work-groups
+  // per body), each with a context and queue of its own, so that their team kernels run on the
+  // device at once and their work-groups compete for PoCL's workers: no hang, and every round the
+  // launched iterations' bits and iteration counts.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (!context()->info().cpu) GTEST_SKIP() << "teams run on CPU devices only";
+  const std::vector<detail::Problem> ps = bodiesWithABlock();
+  const std::size_t K = ps.size();
+  std::vector<const detail::Problem*> all;
+  for (const detail::Problem& p : ps) all.push_back(&p);
+  const SolverDesc s = solver();
+  const detail::SystemCoeffs c{900.0, 30.0, 1.0};
+  const std::vector<std::vector<std::size_t>> rounds = {{0}, {0, 1}, {1, 3}, {0, 5}};
+  std::vector<Eigen::VectorXd> x(K), rhs(K);
+  for (std::size_t i = 0; i < K; ++i) {
+    x[i] = deformed(ps[i], 0.2 + 0.3 * static_cast<double>(i));
+    rhs[i] = randomVector(ps[i].dofCount(), 900 + static_cast<unsigned>(i));
+  }
+  // Solves the rounds on `batch`; the solutions and iteration counts per round and body.
+  struct Answers {
+    std::vector<std::vector<Eigen::VectorXd>> x;
+    std::vector<std::vector<int>> iterations;
+    std::string error;
+  };
+  auto solveRounds = [&](detail::BatchDevice& batch) {
+    Answers a{std::vector<std::vector<Eigen::VectorXd>>(rounds.size(), std::vector<Eigen::VectorXd>(K)),
+              std::vector<std::vector<int>>(rounds.size(), std::vector<int>(K, -1)), ""};
+    for (std::size_t r = 0; r < rounds.size(); ++r) {
+      std::vector<BatchRequest> set, solve;
+      for (std::size_t i : rounds[r]) {
+        set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+        a.x[r][i] = Eigen::VectorXd::Zero(rhs[i].size());
+      }
+      for (std::size_t i : rounds[r]) solve.push_back(request(BatchOp::Solve, i, &rhs[i], &a.x[r][i], c));
+      for (std::vector<BatchRequest>* list : {&set, &solve}) {
+        std::vector<BatchRequest*> round;
+        for (BatchRequest& q : *list) round.push_back(&q);
+        batch.run(round);
+        for (const BatchRequest& q : *list)
+          if (q.error && a.error.empty()) try {
+              std::rethrow_exception(q.error);
+            } catch (const std::exception& e) {
+              a.error = e.what();
+            }
+      }
+      for (std::size_t j = 0; j < rounds[r].size(); ++j) a.iterations[r][rounds[r][j]] = solve[j].stats.iterations;
+    }
+    return a;
+  };
+  detail::OpenCLOptions launched;
+  launched.groupPcg = 0;
+  const Answers expected = solveRounds(*detail::createOpenCLBatchDeviceOn(all, s, context(), launched));
+  ASSERT_TRUE(expected.error.empty()) << expected.error;
+  const unsigned long long before = detail::teamPcgLaunchCount();
+  constexpr int kRepeats = 3;
+  Answers got[2];
+  auto worker = [&](int t) {
+    detail::OpenCLOptions o;
+    o.groupPcg = 1;
+    o.teamPcg = 1;
+    o.teamPcgSize = t == 0 ? 2 : 8;
+    try {
+      auto ctx = detail::cl::Context::create(std::to_string(GetParam().device));
+      auto batch = detail::createOpenCLBatchDeviceOn(all, s, ctx, o);
+      for (int k = 0; k < kRepeats; ++k) got[t] = solveRounds(*batch);
+    } catch (const std::exception& e) {
+      got[t].error = e.what();
+    }
+  };
+  std::thread a(worker, 0), b(worker, 1);
+  a.join();
+  b.join();
+  for (int t = 0; t < 2; ++t) {
+    SCOPED_TRACE(t == 0 ? "teams of 2" : "teams of 8");
+    ASSERT_TRUE(got[t].error.empty()) << got[t].error;
+    for (std::size_t r = 0; r < rounds.size(); ++r)
+      for (std::size_t i : rounds[r]) {
+        EXPECT_EQ(got[t].iterations[r][i], expected.iterations[r][i]) << "round " << r << ", " << ps[i].name;
+        EXPECT_TRUE(sameBits(got[t].x[r][i], expected.x[r][i])) << "round " << r << ", " << ps[i].name;
+      }
+  }
+  EXPECT_EQ(detail::teamPcgLaunchCount() - before, 2ull * kRepeats * rounds.size()) << "every round in teams";
 }
 
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {
@@ -756,8 +858,9 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   const bool energyPerItem = !(ewf && std::string(ewf) == "0");  // per-item partials (no trees): on
   const char* tp = std::getenv("COROFEM_OPENCL_TEAM_PCG");
   const char* gp = std::getenv("COROFEM_OPENCL_GROUP_PCG");
-  const bool teams = !context()->info().gpu && context()->info().computeUnits > 1 &&
-                     !(tp && std::string(tp) == "0") && !(gp && std::string(gp) == "0");
+  const bool teams = context()->info().cpu && !context()->info().gpu && context()->info().computeUnits > 1 &&
+                     detail::usableCpus() >= context()->info().computeUnits && !(tp && std::string(tp) == "0") &&
+                     !(gp && std::string(gp) == "0");
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
                       bool stored, bool quaternion) {
     std::size_t S = 0, N = 0, E = 0, claims = 0;

@@ -2,13 +2,19 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <system_error>
 #include <mutex>
 #include <thread>
 #include <vector>
+
+#ifdef __linux__
+#include <sched.h>
+#endif
 
 namespace corofem::detail {
 
@@ -106,6 +112,42 @@ Pool& pool() {
 }
 
 }  // namespace
+
+namespace {
+/// The CPUs a cgroup quota grants (quota / period, rounded up), 0 where there is none or none can
+/// be read.
+std::size_t cgroupCpus() {
+  double quota = -1, period = -1;
+  if (std::FILE* f = std::fopen("/sys/fs/cgroup/cpu.max", "r")) {  // v2: "max 100000" or "200000 100000"
+    char q[32] = {0};
+    if (std::fscanf(f, "%31s %lf", q, &period) == 2 && std::string(q) != "max") quota = std::atof(q);
+    std::fclose(f);
+  } else if (std::FILE* fq = std::fopen("/sys/fs/cgroup/cpu/cpu.cfs_quota_us", "r")) {  // v1
+    if (std::fscanf(fq, "%lf", &quota) != 1) quota = -1;
+    std::fclose(fq);
+    if (std::FILE* fp = std::fopen("/sys/fs/cgroup/cpu/cpu.cfs_period_us", "r")) {
+      if (std::fscanf(fp, "%lf", &period) != 1) period = -1;
+      std::fclose(fp);
+    }
+  }
+  if (quota <= 0 || period <= 0) return 0;
+  return static_cast<std::size_t>(std::ceil(quota / period));
+}
+}  // namespace
+
+std::size_t usableCpus() {
+  static const std::size_t n = [] {
+    std::size_t cpus = std::max(1u, std::thread::hardware_concurrency());
+#ifdef __linux__
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    if (sched_getaffinity(0, sizeof(set), &set) == 0) cpus = std::max(1, CPU_COUNT(&set));
+#endif
+    if (const std::size_t quota = cgroupCpus(); quota > 0) cpus = std::min(cpus, std::max<std::size_t>(1, quota));
+    return cpus;
+  }();
+  return n;
+}
 
 std::size_t hostThreads() {
   static const std::size_t n = [] {

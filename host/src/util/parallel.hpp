@@ -20,6 +20,11 @@ void parallelChunks(std::size_t n, std::size_t chunkSize,
 /// Number of chunks parallelChunks makes of n.
 inline std::size_t chunkCount(std::size_t n, std::size_t chunkSize) { return (n + chunkSize - 1) / chunkSize; }
 
+/// CPUs this process may run on at once: the CPUs of its affinity mask, fewer where a cgroup's CPU
+/// quota (v2 cpu.max, v1 cpu.cfs_quota_us) allows less (rounded up); the hardware's count where
+/// neither can be read. Read once.
+std::size_t usableCpus();
+
 /// Threads the pool asks for: $COROFEM_HOST_THREADS if set (1 to 64; anything else is reported on
 /// stderr and ignored), else the hardware's, at most 8. The system may grant fewer.
 std::size_t hostThreads();

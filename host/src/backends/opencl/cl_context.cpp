@@ -55,6 +55,7 @@ DeviceInfo queryDevice(cl_device_id device) {
   cl_device_type type = 0;
   clGetDeviceInfo(device, CL_DEVICE_TYPE, sizeof(type), &type, nullptr);
   info.gpu = (type & CL_DEVICE_TYPE_GPU) != 0;
+  info.cpu = (type & CL_DEVICE_TYPE_CPU) != 0;
   const std::string extensions = deviceString(device, CL_DEVICE_EXTENSIONS);
   info.fp64 = extensions.find("cl_khr_fp64") != std::string::npos;
   clGetDeviceInfo(device, CL_DEVICE_GLOBAL_MEM_SIZE, sizeof(info.globalMemoryBytes),

@@ -22,6 +22,7 @@ struct DeviceInfo {
   std::string driverVersion;  ///< CL_DRIVER_VERSION
   std::string deviceVersion;  ///< CL_DEVICE_VERSION
   bool gpu = false;
+  bool cpu = false;           ///< CL_DEVICE_TYPE_CPU (the host's own cores, e.g. PoCL)
   bool fp64 = false;          ///< cl_khr_fp64 (double precision kernels)
   cl_ulong globalMemoryBytes = 0;
   cl_uint computeUnits = 0;

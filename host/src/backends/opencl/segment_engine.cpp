@@ -16,6 +16,7 @@
 #include "backends/opencl/segment_engine.hpp"
 
 #include "util/error.hpp"
+#include "util/parallel.hpp"
 
 #include <algorithm>
 #include <limits>
@@ -257,11 +258,16 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_MAX"); env && *env && !options.groupPcgMaxElements)
     groupPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
   // Teams of work-groups per body for rounds of fewer bodies than cores (pcg_iterate_team).
-  // CPU devices only: the team's hand-offs rely on coherent caches (pcg_group.cl).
-  teamPcg_ = options.teamPcg >= 0 ? options.teamPcg != 0 : ctx_->info().computeUnits > 1;
+  // CPU devices only: the team's hand-offs rely on coherent caches (pcg_group.cl). By default only
+  // where the process may run on as many CPUs as the device has compute units: PoCL starts a
+  // worker per compute unit whatever the affinity mask or cgroup quota allows, and a team member
+  // waiting for a descheduled one spins out its time slice (a review measured a process pinned to
+  // one of 2 CPUs 60x slower with teams than launched).
+  teamPcg_ = options.teamPcg >= 0 ? options.teamPcg != 0
+                                  : ctx_->info().computeUnits > 1 && usableCpus() >= ctx_->info().computeUnits;
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG"); env && *env && options.teamPcg < 0)
     teamPcg_ = std::string(env) != "0";  // tuning experiments
-  teamPcg_ = teamPcg_ && groupPcg_ && !ctx_->info().gpu;
+  teamPcg_ = teamPcg_ && groupPcg_ && ctx_->info().cpu && !ctx_->info().gpu;
   teamPcgSize_ = options.teamPcgSize;
   teamEpoch_ = options.teamEpochStart;
   teamPcgMinElems_ = options.teamPcgMinElements ? options.teamPcgMinElements : kTeamPcgMinElements;
