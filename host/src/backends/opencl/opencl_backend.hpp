@@ -55,8 +55,9 @@ struct OpenCLOptions {
   /// `teamPcgMinElements` of the largest body's elements. 1: on; 0: never; -1 (default): on with
   /// groupPcg on a CPU device of several compute units (never on GPUs).
   int teamPcg = -1;
-  /// The largest body for pcg_iterate_team; 0 = the default, no bound (on 2 cores the team beat
-  /// the launched iterations at 10k and 100k elements and tied at 1M).
+  /// The largest body for pcg_iterate_team; 0 = the default, 16,384 elements per compute unit (on
+  /// 2 cores the team beat the launched iterations at 10k and 100k elements on an idle machine, but
+  /// lost at 100k with another busy process on the cores).
   std::size_t teamPcgMaxElements = 0;
   /// The fewest elements of the largest body per work-group of a team; 0 = the default, 1,280 (on
   /// 2 cores a team of 2 lost to one work-group at 1k elements, tied at 2.3k and won from 2.9k).

@@ -273,7 +273,8 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   teamPcgMinElems_ = options.teamPcgMinElements ? options.teamPcgMinElements : kTeamPcgMinElements;
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MIN"); env && *env && !options.teamPcgMinElements)
     teamPcgMinElems_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
-  teamPcgMaxElems_ = options.teamPcgMaxElements ? options.teamPcgMaxElements : std::numeric_limits<std::size_t>::max();
+  teamPcgMaxElems_ = options.teamPcgMaxElements ? options.teamPcgMaxElements
+                                                : kTeamPcgMaxElementsPerCore * ctx_->info().computeUnits;
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MAX"); env && *env && !options.teamPcgMaxElements)
     teamPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
@@ -871,7 +872,8 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
   // Fewer bodies than cores: a team of up to cores / bodies work-groups per body, each with at
   // least teamPcgMinElems_ elements of the largest (below that, one core without the team's
-  // hand-offs is as fast).
+  // hand-offs is as fast), none larger than teamPcgMaxElems_ (above that, the launched iterations,
+  // which keep their pace when other processes take cores).
   if (teamPcg_ && requests.size() < cores && largest <= teamPcgMaxElems_) {
     const std::size_t team = std::min(cores / requests.size(), largest / teamPcgMinElems_);
     if (team >= 2) return team;

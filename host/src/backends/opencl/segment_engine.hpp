@@ -247,12 +247,17 @@ class SegmentEngine {
   /// body's 3N = 525k entries make 9 chunks; a body of up to 21,845 nodes is one chunk, run inline
   /// (on an H200's host, 100k elements in two chunks ran 7 % slower than inline).
   static constexpr std::size_t kHostChunk = std::size_t{1} << 16;
-  /// pcg_iterate_team's least elements of the largest body per work-group of the team, measured
-  /// with one body on 2 cores (bench_opencl's dynamic step, 20 iterations, against
-  /// pcg_iterate_group on one core): a team of 2 lost at 1k elements (0.46 ms against 0.42), tied
-  /// at 2.3k and won from 2.9k on (1.6 ms against 2.2 at 10k). Against the launched iterations it
-  /// won at 10k (1.6 ms against 2.1) and 100k (12.5 against 14.1) and tied at 1M: no upper bound.
+  /// pcg_iterate_team's bounds, measured with one body on 2 cores (bench_opencl's dynamic step, 20
+  /// iterations). At least kTeamPcgMinElements of the largest body per work-group of the team:
+  /// against pcg_iterate_group on one core a team of 2 lost at 1k elements (0.46 ms against 0.42),
+  /// tied at 2.3k and won from 2.9k on (1.6 ms against 2.2 at 10k). At most
+  /// kTeamPcgMaxElementsPerCore per compute unit (the default of OpenCLOptions::teamPcgMaxElements):
+  /// against the launched iterations the team won at 10k (1.6 ms against 2.1) and 100k (12.5
+  /// against 14.1) and tied at 1M on an idle machine, but with one other busy process on the 2
+  /// cores it lost at 100k (25.4-27.8 ms against 20.8-21.0: a member waiting for a descheduled one
+  /// spins) while still winning at 10k (2.43 against 2.49-2.67).
   static constexpr std::size_t kTeamPcgMinElements = 1280;
+  static constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
   std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
