@@ -609,6 +609,22 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   EXPECT_EQ(path({2}), 1) << "the soup (37 elements) is small: one group";
   EXPECT_EQ(path({4}), 0) << "the bar (600 elements) is over the team's maximum and not small";
   EXPECT_EQ(path({0, 1}), cores >= 4 ? 2 : 0) << "beam and slab: a team each only with 4 cores or more";
+  // An iteration cap whose 4 epochs per iteration would overflow the claims' 32 bits (a review hung
+  // the second round of a team with 2^30 + 1): such rounds take the other paths, even when a team
+  // size is forced, and converge.
+  SolverDesc huge = solver();
+  huge.maxIterations = (1 << 30) + 1;
+  o.teamPcgSize = 2;
+  auto capped = batchOf(ps, huge, o);
+  runOk(*capped, set);
+  for (int round = 0; round < 2; ++round) {
+    sol[0] = Eigen::VectorXd::Zero(rhs[0].size());
+    std::vector<BatchRequest> solve = {request(BatchOp::Solve, 0, &rhs[0], &sol[0], {900.0, 30.0, 1.0})};
+    const unsigned long long team = detail::teamPcgLaunchCount();
+    runOk(*capped, solve);
+    EXPECT_EQ(detail::teamPcgLaunchCount(), team) << "round " << round << ": no team with a cap of 2^30 + 1";
+    EXPECT_TRUE(solve[0].stats.converged) << "round " << round;
+  }
 }
 
 TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {

@@ -19,6 +19,7 @@
 #include "util/parallel.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <limits>
 #include <atomic>
 #include <cmath>
@@ -863,7 +864,10 @@ void SegmentEngine::run(BatchOp op, const std::vector<BatchRequest*>& requests) 
 
 std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests) const {
   if (!groupPcg_ || requests.empty()) return 0;
-  if (teamPcg_ && teamPcgSize_ > 0) return teamPcgSize_;  // tests
+  // The claims' 32-bit epochs advance by 4 per iteration of a launch: caps beyond kTeamMaxIterations
+  // (never needed: PCG converges in at most the system's size) take the other paths.
+  const bool teams = teamPcg_ && solver_.maxIterations <= kTeamMaxIterations;
+  if (teams && teamPcgSize_ > 0) return teamPcgSize_;  // tests
   std::size_t largest = 0, total = 0;
   for (const BatchRequest* r : requests) {
     largest = std::max(largest, segs_[r->body].elems);
@@ -874,7 +878,7 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   // least teamPcgMinElems_ elements of the largest (below that, one core without the team's
   // hand-offs is as fast), none larger than teamPcgMaxElems_ (above that, the launched iterations,
   // which keep their pace when other processes take cores).
-  if (teamPcg_ && requests.size() < cores && largest <= teamPcgMaxElems_) {
+  if (teams && requests.size() < cores && largest <= teamPcgMaxElems_) {
     const std::size_t team = std::min(cores / requests.size(), largest / teamPcgMinElems_);
     if (team >= 2) return team;
   }
@@ -1349,7 +1353,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       } else if (iterations > 0) {
         // The launch's phases take the epochs teamEpoch_ + 1 .. + 4 iterations; before they could
         // wrap, the claim words go back to 0 (about every 10^9 phases).
-        if (teamEpoch_ > std::numeric_limits<cl_uint>::max() - 4 * iterations - 1) {
+        if (std::uint64_t{teamEpoch_} + 4 * std::uint64_t{iterations} + 1 > std::numeric_limits<cl_uint>::max()) {
           uploadRaw(teamState_, teamStateAtRest());
           teamEpoch_ = 0;
         }
