@@ -82,21 +82,24 @@ COROFEM_FN void group_gather_item(const GroupSegment* g, uint v, __global const 
   store3_at(g->partialBegin + v, sums[0], sums[1], sums[2], partialsW);
 }
 
+/* The arguments of both one-launch kernels, in the host's one order (segment_engine.cpp): the
+ * team's size, epoch base and state (pcg_iterate_team; pcg_iterate_group, a team of one, reads
+ * none of them), then what pcg_update, element_product and gather_product take (w is
+ * gather_product's y), the iterations and the squared tolerance. */
+#define COROFEM_GROUP_PCG_PARAMS                                                                      \
+  const uint S, const uint teamSize, const uint epochBase, __global uint *teamState, __global uint *segInfo, \
+      __global const real *segCoef, __global const uint *nodes, __global const real *geom,              \
+      __global const real *rotGrad, __global const uint *start, __global const uint *entries,           \
+      __global real *elemOut, __global const real *mass, __global const real *free,                     \
+      __global const real *minv, __global real *p, __global real *sv, __global real *x, __global real *r, \
+      __global real *u, __global real *w, __global sum_real *partials, __global sum_real *partialsW,    \
+      __global sum_real *allScalars, const uint iterations, const sum_real tol2
+
 /* `iterations` iterations of kReduceStep (p, s, x, r, u updated; w = A u; alpha, beta), for the
- * segment of each work-group (launched over Span::Segments), the set-up (pcg_init, reduce_finish
- * kReduceInit) done before. Arguments as pcg_update, element_product and gather_product take them
- * (w is gather_product's y). */
+ * segment of each work-group (launched over Span::Teams with teams of one), the set-up (pcg_init,
+ * reduce_finish kReduceInit) done before. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_iterate_group(const uint S, __global uint* segInfo, __global const real* segCoef,
-                       __global const uint* nodes, __global const real* geom,
-                       __global const real* rotGrad, __global const uint* start,
-                       __global const uint* entries, __global real* elemOut,
-                       __global const real* mass, __global const real* free,
-                       __global const real* minv, __global real* p, __global real* sv,
-                       __global real* x, __global real* r, __global real* u,
-                       __global real* w, __global sum_real* partials,
-                       __global sum_real* partialsW, __global sum_real* allScalars,
-                       const uint iterations, const sum_real tol2) {
+void pcg_iterate_group(COROFEM_GROUP_PCG_PARAMS) {
   __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
   __local uint running;
   const uint lid = get_local_id(0), seg = get_global_id(0) / COROFEM_WG;
@@ -207,16 +210,7 @@ COROFEM_FN uint team_chunk(uint k, uint m, uint T, uint C) {
 /* teamState per segment (kTeamStride uints): [kTeamDone] chunks done in this launch,
  * [kTeamLeft] members gone, [kTeamFlags] where its claim words start in teamState (host). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void pcg_iterate_team(const uint S, const uint teamSize, const uint epochBase, __global uint* teamState,
-                      __global uint* segInfo, __global const real* segCoef, __global const uint* nodes,
-                      __global const real* geom, __global const real* rotGrad, __global const uint* start,
-                      __global const uint* entries, __global real* elemOut,
-                      __global const real* mass, __global const real* free,
-                      __global const real* minv, __global real* p, __global real* sv,
-                      __global real* x, __global real* r, __global real* u,
-                      __global real* w, __global sum_real* partials,
-                      __global sum_real* partialsW, __global sum_real* allScalars,
-                      const uint iterations, const sum_real tol2) {
+void pcg_iterate_team(COROFEM_GROUP_PCG_PARAMS) {
   __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
   __local uint running, claimed, count;
   const uint lid = get_local_id(0), team = get_global_id(0) / COROFEM_WG;
@@ -258,4 +252,5 @@ void pcg_iterate_team(const uint S, const uint teamSize, const uint epochBase, _
 #undef TEAM_PHASE
 #undef TEAM_DONE
 #undef TEAM_CLAIM
+#undef COROFEM_GROUP_PCG_PARAMS
 #endif

@@ -159,6 +159,31 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
                               Eigen::VectorXd* out = nullptr, detail::SystemCoeffs c = {}) {
     return BatchRequest{op, body, c, in, out, {}, 0.0, nullptr};
   }
+  /// For the rules' tests: bent positions (`set`) and random right-hand sides (seeds seed + i) of
+  /// the bodies, and which path a solve round takes.
+  struct RoundPaths {
+    std::vector<Eigen::VectorXd> x, rhs, sol;
+    std::vector<BatchRequest> set;
+    RoundPaths(const std::vector<detail::Problem>& ps, unsigned seed) : x(ps.size()), rhs(ps.size()), sol(ps.size()) {
+      for (std::size_t i = 0; i < ps.size(); ++i) {
+        x[i] = deformed(ps[i], 0.4);
+        rhs[i] = randomVector(ps[i].dofCount(), seed + static_cast<unsigned>(i));
+        set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+      }
+    }
+    /// Solves the bodies `who` from zero on `batch` (positions set): 2 when their iterations ran
+    /// in teams (pcg_iterate_team), 1 in one work-group per body (pcg_iterate_group), 0 launched.
+    int path(detail::BatchDevice& batch, const std::vector<std::size_t>& who) {
+      std::vector<BatchRequest> round;
+      for (std::size_t i : who) {
+        sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
+        round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
+      }
+      const unsigned long long team = detail::teamPcgLaunchCount(), group = detail::groupPcgLaunchCount();
+      runOk(batch, round);
+      return detail::teamPcgLaunchCount() > team ? 2 : detail::groupPcgLaunchCount() > group ? 1 : 0;
+    }
+  };
 };
 
 /// Every request type for every body (one round per type, then one round of mixed types),
@@ -538,24 +563,10 @@ TEST_P(OpenCLBatch, OneLaunchRuleLeavesLargeAndUnevenRoundsLaunched) {
   o.groupPcgMinBodies = 2;
   o.groupPcgMaxElements = 500;
   auto batch = batchOf(ps, solver(), o);
-  std::vector<Eigen::VectorXd> x(ps.size()), rhs(ps.size()), sol(ps.size());
-  std::vector<BatchRequest> set;
-  for (std::size_t i = 0; i < ps.size(); ++i) {
-    x[i] = deformed(ps[i], 0.4);
-    rhs[i] = randomVector(ps[i].dofCount(), 400 + static_cast<unsigned>(i));
-    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
-  }
+  RoundPaths rounds(ps, 400);
+  std::vector<BatchRequest>& set = rounds.set;
   runOk(*batch, set);
-  auto oneLaunch = [&](const std::vector<std::size_t>& who) {
-    std::vector<BatchRequest> round;
-    for (std::size_t i : who) {
-      sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
-      round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
-    }
-    const unsigned long long before = detail::groupPcgLaunchCount();
-    runOk(*batch, round);
-    return detail::groupPcgLaunchCount() > before;
-  };
+  auto oneLaunch = [&](const std::vector<std::size_t>& who) { return rounds.path(*batch, who) == 1; };
   const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
   EXPECT_TRUE(oneLaunch({2})) << "the soup (37 elements) is small";
   EXPECT_FALSE(oneLaunch({0})) << "the beam alone is neither small nor a round of two";
@@ -585,25 +596,9 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   o.teamPcgMinElements = 90;
   o.teamPcgMaxElements = 500;
   auto batch = batchOf(ps, solver(), o);
-  std::vector<Eigen::VectorXd> x(ps.size()), rhs(ps.size()), sol(ps.size());
-  std::vector<BatchRequest> set;
-  for (std::size_t i = 0; i < ps.size(); ++i) {
-    x[i] = deformed(ps[i], 0.4);
-    rhs[i] = randomVector(ps[i].dofCount(), 500 + static_cast<unsigned>(i));
-    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
-  }
-  runOk(*batch, set);
-  // Which path the round took: 2 team, 1 one group per body, 0 launched.
-  auto path = [&](const std::vector<std::size_t>& who) {
-    std::vector<BatchRequest> round;
-    for (std::size_t i : who) {
-      sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
-      round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
-    }
-    const unsigned long long team = detail::teamPcgLaunchCount(), group = detail::groupPcgLaunchCount();
-    runOk(*batch, round);
-    return detail::teamPcgLaunchCount() > team ? 2 : detail::groupPcgLaunchCount() > group ? 1 : 0;
-  };
+  RoundPaths rounds(ps, 500);
+  runOk(*batch, rounds.set);
+  auto path = [&](const std::vector<std::size_t>& who) { return rounds.path(*batch, who); };
   const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
   EXPECT_EQ(path({0}), cores >= 2 ? 2 : 0) << "the beam alone (192 = 2 x 96 elements)";
   EXPECT_EQ(path({2}), 1) << "the soup (37 elements) is small: one group";
@@ -616,10 +611,11 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   huge.maxIterations = (1 << 30) + 1;
   o.teamPcgSize = 2;
   auto capped = batchOf(ps, huge, o);
-  runOk(*capped, set);
+  runOk(*capped, rounds.set);
   for (int round = 0; round < 2; ++round) {
-    sol[0] = Eigen::VectorXd::Zero(rhs[0].size());
-    std::vector<BatchRequest> solve = {request(BatchOp::Solve, 0, &rhs[0], &sol[0], {900.0, 30.0, 1.0})};
+    rounds.sol[0] = Eigen::VectorXd::Zero(rounds.rhs[0].size());
+    std::vector<BatchRequest> solve = {
+        request(BatchOp::Solve, 0, &rounds.rhs[0], &rounds.sol[0], {900.0, 30.0, 1.0})};
     const unsigned long long team = detail::teamPcgLaunchCount();
     runOk(*capped, solve);
     EXPECT_EQ(detail::teamPcgLaunchCount(), team) << "round " << round << ": no team with a cap of 2^30 + 1";

@@ -19,15 +19,15 @@
 #include "util/parallel.hpp"
 
 #include <algorithm>
-#include <cstdint>
-#include <limits>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <exception>
+#include <limits>
 
 namespace corofem::detail {
 
@@ -154,10 +154,10 @@ void ClKernel::create(cl_program program, const char* name, const std::string& d
 
 namespace {
 std::atomic<unsigned long long> groupPcgLaunches{0};
+std::atomic<unsigned long long> teamPcgLaunches{0};
 }  // namespace
 
 unsigned long long groupPcgLaunchCount() { return groupPcgLaunches.load(); }
-std::atomic<unsigned long long> teamPcgLaunches{0};
 unsigned long long teamPcgLaunchCount() { return teamPcgLaunches.load(); }
 
 std::size_t defaultTileBytes(std::size_t cacheBytes) {
@@ -1345,25 +1345,25 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     if (team > 0) {  // every iteration but the cap's last in one launch, a work-group (team) per body; then the last
       const cl_uint iterations = cl_uint(maxIterations - enqueued - 1);
       const SumReal tol2{solver_.tolerance * solver_.tolerance};
-      if (iterations > 0 && team == 1) {
-        launch(kPcgIterateGroup_, Span::Segments, cl_uint(stride_), segInfoBuf_, segCoefBuf_, elemNodes_, geom_,
-               rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_,
-               partials_, partialsW_, scalars_, iterations, tol2);
-        ++groupPcgLaunches;
-      } else if (iterations > 0) {
-        // The launch's phases take the epochs teamEpoch_ + 1 .. + 4 iterations; before they could
+      if (iterations > 0) {
+        const bool teamed = team > 1;
+        // A team's phases take the epochs teamEpoch_ + 1 .. + 4 iterations; before they could
         // wrap, the claim words go back to 0 (about every 10^9 phases).
-        if (std::uint64_t{teamEpoch_} + 4 * std::uint64_t{iterations} + 1 > std::numeric_limits<cl_uint>::max()) {
+        if (teamed && std::uint64_t{teamEpoch_} + 4 * std::uint64_t{iterations} + 1 > std::numeric_limits<cl_uint>::max()) {
           uploadRaw(teamState_, teamStateAtRest());
           teamEpoch_ = 0;
         }
         teamSize_ = team;
-        launch(kPcgIterateTeam_, Span::Teams, cl_uint(stride_), cl_uint(team), teamEpoch_, teamState_, segInfoBuf_,
-               segCoefBuf_,
-               elemNodes_, geom_, rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_,
-               x_, r_, z_, q_, partials_, partialsW_, scalars_, iterations, tol2);
-        teamEpoch_ += 4 * iterations;
-        ++teamPcgLaunches;
+        launch(teamed ? kPcgIterateTeam_ : kPcgIterateGroup_, Span::Teams, cl_uint(stride_), cl_uint(team), teamEpoch_,
+               teamState_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), nodeStart_, nodeEntries_,
+               elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_, partials_, partialsW_, scalars_, iterations,
+               tol2);
+        if (teamed) {
+          teamEpoch_ += 4 * iterations;
+          ++teamPcgLaunches;
+        } else {
+          ++groupPcgLaunches;
+        }
       }
       pcgIteration(true);
       enqueued = maxIterations;

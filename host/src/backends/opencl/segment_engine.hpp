@@ -187,7 +187,7 @@ class SegmentEngine {
   };
   /// What a kernel's work-items cover: elements (VEC per item), nodes, node chunks (CHUNK per
   /// item), or segments (one work-group each, reduce_finish).
-  /// Teams: teamSize_ work-groups per segment (pcg_iterate_team).
+  /// Teams: teamSize_ work-groups per segment (pcg_iterate_team; pcg_iterate_group: teams of one).
   enum class Span { Elements, Nodes, NodeChunks, Segments, Teams };
 
   // -- launching
@@ -257,10 +257,10 @@ class SegmentEngine {
   /// cores it lost at 100k (25.4-27.8 ms against 20.8-21.0: a member waiting for a descheduled one
   /// spins) while still winning at 10k (2.43 against 2.49-2.67).
   static constexpr std::size_t kTeamPcgMinElements = 1280;
+  static constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
   /// The largest iteration cap for pcg_iterate_team (4 epochs per iteration must fit a launch into
   /// the claims' 32 bits with room to spare; a review hung a team with a cap of 2^30 + 1).
   static constexpr int kTeamMaxIterations = 1 << 24;
-  static constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
   std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
