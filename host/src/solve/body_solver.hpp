@@ -232,6 +232,12 @@ class DynamicSolver final : public BodySolver {
   /// copied (a step of a 10k-element body copied 5 vectors of 3N doubles here).
   void keepForRollback(State&& s);
 
+  /// The damping force C v, C = alpha M + beta K^R (Rayleigh). Mass damping alone (beta = 0, the
+  /// common "air drag") is a scaling of the lumped mass: formed here in double, the same expression
+  /// and bits as the reference backend's apply, with no backend call. On the OpenCL backend that
+  /// call was an upload, an element product, a gather and a blocking read, twice per step; in a
+  /// batch, two rendezvous rounds of every body per step. beta > 0 needs K^R: the backend applies it.
+  void dampingForce(const Eigen::VectorXd& v, Eigen::VectorXd& cv);
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs (0 on constrained ones).
   void initialAcceleration();
   /// One step of the scheme from the committed state to t1 = t_ + h, committed in place (no

@@ -43,8 +43,7 @@ void DynamicSolver::initialAcceleration() {
   Eigen::VectorXd fint(n), cv = Eigen::VectorXd::Zero(n);
   setBackendPositions(x_, true);
   backend_.internalForces(fint);
-  if (problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0)
-    backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v_, cv);
+  if (problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0) dampingForce(v_, cv);
   fextPrev_ = problem_.externalForce(0.0, /*dynamic=*/true);
   a_ = Eigen::VectorXd::Zero(n);
   for (Eigen::Index d = 0; d < n; ++d) {
@@ -57,6 +56,14 @@ void DynamicSolver::initialAcceleration() {
   if (!allFinite(a_))
     fail(ErrorCode::SolveFailed, "body '", problem_.name,
          "': the initial acceleration is not finite; check the material, the loads and the initial velocity");
+}
+
+void DynamicSolver::dampingForce(const Eigen::VectorXd& v, Eigen::VectorXd& cv) {
+  if (problem_.rayleighStiffness == 0.0 && problem_.lumpedMass.size() == v.size()) {
+    cv = problem_.rayleighMass * problem_.lumpedMass.cwiseProduct(v);  // the reference's apply, to the bit
+    return;
+  }
+  backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v, cv);
 }
 
 void DynamicSolver::keepForRollback(State&& s) {
@@ -208,7 +215,7 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
     try {
       setBackendPositions(x, false);
       backend_.internalForces(fint);
-      if (damped) backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v, cv);
+      if (damped) dampingForce(v, cv);
     } catch (const Error& e) {
       failHere(std::string("failed: ") + e.what(), stepFix);
     }
