@@ -37,6 +37,9 @@ struct DevicePositions {
   std::size_t firstNode = 0;
   bool isDouble = false;
   const double* centroid = nullptr;
+  /// The device's index (from firstNode) of each of the body's nodes, where the device numbers them
+  /// in an order of its own (the OpenCL backend's locality order); nullptr: node i is at i.
+  const std::uint32_t* deviceNode = nullptr;
 };
 
 struct SystemCoeffs {

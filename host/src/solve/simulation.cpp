@@ -59,6 +59,7 @@ struct Simulation::Impl {
     // Render surface bound to the tet mesh (paper Sec. 5), when the body names one.
     std::unique_ptr<SurfaceMesh> surface;
     std::unique_ptr<SurfaceBinding> binding;
+    std::unique_ptr<SurfaceBinding> deviceBinding;  ///< binding in the device's node order (bindingOn)
     // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and
     // prescribed positions it fell asleep under (the reference a change is measured against).
     struct Sleep {
@@ -242,7 +243,7 @@ struct Simulation::Impl {
           Body& b = bodies[g.bodies[k]];
           if (!b.binding || b.separateStreams != separate || !g.group->devicePositions(k, where)) continue;
           sg.bodies.push_back(g.bodies[k]);
-          members.push_back({b.binding.get(), where.firstNode});
+          members.push_back({&bindingOn(b, where), where.firstNode});
           nodes = std::max(nodes, where.firstNode + b.binding->tetNodeCount);
         }
         if (members.empty()) continue;
@@ -395,6 +396,17 @@ struct Simulation::Impl {
     return active && active->devicePositions(where) ? active : nullptr;
   }
 
+  /// The binding the device surface reads the body's positions with: b.binding, or where the device
+  /// numbers the nodes in an order of its own (the OpenCL backend's locality order), a copy in that
+  /// numbering, kept in b.deviceBinding (remade with every device surface).
+  static const SurfaceBinding& bindingOn(Body& b, const detail::DevicePositions& where) {
+    if (!where.deviceNode) return *b.binding;
+    auto copy = std::make_unique<SurfaceBinding>(*b.binding);
+    for (std::uint32_t& n : copy->nodes) n = where.deviceNode[n];
+    b.deviceBinding = std::move(copy);
+    return *b.deviceBinding;
+  }
+
   /// Whether b.deviceSurface was made for the backend the body runs on now (a failover replaces
   /// the backend, and a new one may reuse the address: the event count tells them apart).
   static bool deviceSurfaceCurrent(const Body& b) {
@@ -422,7 +434,7 @@ struct Simulation::Impl {
         o.queue = where.queue;
         o.deviceId = where.device;
         o.separateStreams = b.separateStreams;
-        Result<DeviceSurface> made = DeviceSurface::create(*b.binding, o);
+        Result<DeviceSurface> made = DeviceSurface::create(bindingOn(b, where), o);
         if (!made) detail::fail(made.status().code(), "the body's surface on the OpenCL device: ", made.message());
         b.deviceSurface = std::make_unique<DeviceSurface>(std::move(made.value()));
         b.deviceFor = device;

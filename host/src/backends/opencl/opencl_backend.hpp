@@ -69,6 +69,11 @@ struct OpenCLOptions {
   /// Tests: the epoch pcg_iterate_team's claims start from (the wrap of the 32-bit epochs, which
   /// otherwise comes after about 10^9 phases); 0 = the default.
   unsigned teamEpochStart = 0;
+  /// The device's numbering of elements and nodes: -1 (default) a Morton order where it is more
+  /// local than the mesh's own (mesh/locality_order.hpp; the box generator's numbering stays), 0 the
+  /// mesh's own, 1 the Morton order always (tests). Host vectors keep the mesh's numbering either way.
+  /// COROFEM_OPENCL_REORDER=0/1 sets it when this is -1.
+  int localityOrder = -1;
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.

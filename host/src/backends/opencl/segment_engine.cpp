@@ -15,6 +15,7 @@
 
 #include "backends/opencl/segment_engine.hpp"
 
+#include "mesh/locality_order.hpp"
 #include "util/error.hpp"
 #include "util/parallel.hpp"
 
@@ -53,6 +54,44 @@ std::exception_ptr errorOf(ErrorCode code, const Parts&... parts) {
   } catch (...) {
     return std::current_exception();
   }
+}
+
+/// What the engine reads of `p` (mesh, element rest states, rest positions, lumped mass,
+/// constraints, material) in the numbering `order`; loads, prescribed displacements and initial
+/// velocities stay with the solver and are not copied.
+Problem reorderedProblem(const Problem& p, const LocalityOrder& order) {
+  Problem q;
+  q.name = p.name;
+  q.lame = p.lame;
+  q.density = p.density;
+  q.rayleighMass = p.rayleighMass;
+  q.rayleighStiffness = p.rayleighStiffness;
+  q.formulation = p.formulation;
+  q.rotation = p.rotation;
+  const std::size_t nodes = order.nodes.size(), elements = order.elements.size();
+  q.mesh.nodes.resize(3 * nodes);
+  q.restPositions.resize(static_cast<Eigen::Index>(3 * nodes));
+  const bool mass = static_cast<std::size_t>(p.lumpedMass.size()) == 3 * nodes;
+  const bool constrained = p.constrained.size() == 3 * nodes;
+  if (mass) q.lumpedMass.resize(static_cast<Eigen::Index>(3 * nodes));
+  if (constrained) q.constrained.resize(3 * nodes);
+  for (std::size_t i = 0; i < nodes; ++i)
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::size_t from = 3 * std::size_t{order.nodes[i]} + k, to = 3 * i + k;
+      q.mesh.nodes[to] = p.mesh.nodes[from];
+      q.restPositions[static_cast<Eigen::Index>(to)] = p.restPositions[static_cast<Eigen::Index>(from)];
+      if (mass) q.lumpedMass[static_cast<Eigen::Index>(to)] = p.lumpedMass[static_cast<Eigen::Index>(from)];
+      if (constrained) q.constrained[to] = p.constrained[from];
+    }
+  q.mesh.tets.resize(4 * elements);
+  q.elements.reserve(elements);
+  for (std::size_t i = 0; i < elements; ++i) {
+    const std::uint32_t e = order.elements[i];
+    for (std::size_t k = 0; k < 4; ++k) q.mesh.tets[4 * i + k] = order.nodeOf[p.mesh.tets[4 * std::size_t{e} + k]];
+    q.elements.push_back(p.elements[e]);
+    if (!p.mesh.regions.empty()) q.mesh.regions.push_back(p.mesh.regions[e]);
+  }
+  return q;
 }
 
 bool hasNonzeroMass(const Problem& p) {
@@ -281,12 +320,36 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
     tileBytes_ = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));  // tuning experiments (0: one tile)
 
+  // -- the device's numbering per body: a Morton order where the mesh's own scatters the kernels'
+  // loads (mesh/locality_order.hpp). The buffers below are made from a copy of the problem in that
+  // order, released at the end of the constructor; host vectors are permuted at every transfer.
+  int reorder = options.localityOrder;
+  if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); env && *env && reorder < 0)
+    reorder = std::string(env) != "0" ? 1 : 0;
+  std::vector<std::unique_ptr<Problem>> ordered(problems.size());
+  std::vector<LocalityOrder> orders(problems.size());
+  if (reorder != 0)
+    for (std::size_t s = 0; s < problems.size(); ++s) {
+      const Problem& p = *problems[s];
+      if (p.elements.size() != p.mesh.tetCount() || p.dofCount() != 3 * p.mesh.nodeCount()) continue;  // reported below
+      std::optional<LocalityOrder> order = reorder == 1 && p.mesh.tetCount() > 0 ? mortonOrder(p.mesh) : localityOrder(p.mesh);
+      if (!order) continue;
+      orders[s] = std::move(*order);
+      ordered[s] = std::make_unique<Problem>(reorderedProblem(p, orders[s]));
+    }
+
   // -- segments: every body padded to whole work-groups of every kernel (corofem_layout.h)
   const std::size_t elemAlign = std::max<std::size_t>(wg_ * vec_, kStrideAlign);
   const std::size_t nodeAlign = wg_ * chunk_;
-  for (const Problem* problem : problems) {
+  for (std::size_t index = 0; index < problems.size(); ++index) {
+    const Problem* problem = ordered[index] ? ordered[index].get() : problems[index];
     Segment sg;
     sg.problem = problem;
+    if (ordered[index]) {
+      sg.hostNode = std::move(orders[index].nodes);
+      sg.deviceNode = std::move(orders[index].nodeOf);
+      sg.hostElem = std::move(orders[index].elements);
+    }
     sg.nodes = problem->mesh.nodeCount();
     sg.elems = problem->mesh.tetCount();
     if (problem->elements.size() != sg.elems || problem->dofCount() != 3 * sg.nodes)
@@ -323,6 +386,8 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   setAllActive();
   refreshBlocks(false);
   finish();
+  // Past the uploads only the name is read: the reordered copies go.
+  for (std::size_t s = 0; s < segs_.size(); ++s) segs_[s].problem = problems[s];
 }
 
 SegmentEngine::~SegmentEngine() {
@@ -770,12 +835,14 @@ void SegmentEngine::downloadSums(const ClBuffer& buf, double* dst, std::size_t c
   writesDone();
 }
 
-void SegmentEngine::getReals(const unsigned char* base, std::size_t begin, std::size_t count,
-                             Eigen::VectorXd& out) const {
-  out.resize(static_cast<Eigen::Index>(count));
-  parallelChunks(count, hostChunk_, [&](std::size_t, std::size_t lo, std::size_t hi) {
-    withReals(base, begin, [&](const auto* in) {
-      for (std::size_t d = lo; d < hi; ++d) out[static_cast<Eigen::Index>(d)] = static_cast<double>(in[d]);
+void SegmentEngine::getReals(const unsigned char* base, const Segment& sg, Eigen::VectorXd& out) const {
+  out.resize(static_cast<Eigen::Index>(sg.dofs()));
+  parallelChunks(sg.dofs(), hostChunk_, [&](std::size_t, std::size_t lo, std::size_t hi) {
+    withReals(base, sg.dofBegin(), [&](const auto* in) {
+      if (sg.hostNode.empty())
+        for (std::size_t d = lo; d < hi; ++d) out[static_cast<Eigen::Index>(d)] = static_cast<double>(in[d]);
+      else
+        for (std::size_t d = lo; d < hi; ++d) out[static_cast<Eigen::Index>(sg.hostDof(d))] = static_cast<double>(in[d]);
     });
   });
 }
@@ -968,7 +1035,7 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
     for (const Eigen::Vector3d& part : parts) centroid += part;
     centroid /= static_cast<double>(std::max<std::size_t>(sg.nodes, 1));
     putReals(stage, sg.dofBegin(), sg.dofs(),
-             [&](std::size_t d) { return x[static_cast<Eigen::Index>(d)] - centroid[static_cast<Eigen::Index>(d % 3)]; });
+             [&](std::size_t d) { return x[static_cast<Eigen::Index>(sg.hostDof(d))] - centroid[static_cast<Eigen::Index>(d % 3)]; });
     for (int a = 0; a < 3; ++a) sg.centroid[a] = centroid[a];
     rotate[r->body] = sg.corotational;
     energyKnown_[r->body] = 0;  // the energy of the new positions is not known yet
@@ -1046,7 +1113,7 @@ void SegmentEngine::internalForces(const std::vector<BatchRequest*>& requests) {
       std::copy_n(&segCoef_[kSegCoefCount * s], kSegCoefCount, &axCoef_[kSegCoefCount * s]);
     }
   for (BatchRequest* r : requests) {
-    getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
+    getReals(readStage_.data(), segs_[r->body], *r->out);
     if (energyWithForces_) {
       energy_[r->body] = energyOf(r->body, energyItems_.data(), itemLo);
       energyKnown_[r->body] = 1;
@@ -1112,7 +1179,7 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   for (const BatchRequest* r : requests) {
     const Segment& sg = segs_[r->body];
     const Eigen::VectorXd& v = *r->in;
-    putReals(stage, sg.dofBegin(), sg.dofs(), [&](std::size_t d) { return v[static_cast<Eigen::Index>(d)]; });
+    putReals(stage, sg.dofBegin(), sg.dofs(), [&](std::size_t d) { return v[static_cast<Eigen::Index>(sg.hostDof(d))]; });
     setCoefficients(r->body, r->coeffs);
     active[r->body] = 1;
   }
@@ -1124,7 +1191,7 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   product(p_, q_, false, partialsW_);
   readStage_.read(q_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   writesDone();
-  for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body].dofBegin(), segs_[r->body].dofs(), *r->out);
+  for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body], *r->out);
 }
 
 void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx) {
@@ -1195,7 +1262,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
         using T = std::remove_pointer_t<decltype(out)>;
         double sum = 0.0;
         for (std::size_t d = lo; d < hi; ++d) {
-          const T v = static_cast<T>(sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(d)]);
+          const T v = static_cast<T>(sg.constrained[d] ? 0.0 : b[static_cast<Eigen::Index>(sg.hostDof(d))]);
           sum += static_cast<double>(v) * static_cast<double>(v);  // of what the device gets: b below
           out[d] = v;                                                // float's range is 0 there too
         }
@@ -1245,7 +1312,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
         using T = std::remove_pointer_t<decltype(out)>;
         bool same = known, zero = true;
         for (std::size_t d = lo; d < hi; ++d) {
-          const double v = x[static_cast<Eigen::Index>(d)];
+          const double v = x[static_cast<Eigen::Index>(sg.hostDof(d))];
           const double packed = sg.constrained[d] || !std::isfinite(v) ? 0.0 : v;
           const T t = static_cast<T>(packed);
           same = same && std::memcmp(&t, &out[d], sizeof(T)) == 0;
@@ -1486,7 +1553,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                          "': OpenCL PCG produced a non-finite solution on device '", dev_, "'");
       continue;
     }
-    getReals(xStage_.data(), sg.dofBegin(), sg.dofs(), *r->out);
+    getReals(xStage_.data(), sg, *r->out);
   }
 }
 
@@ -1542,8 +1609,10 @@ std::vector<double> SegmentEngine::readRotations(std::size_t s) {
   std::vector<double> soa(kRotComponents * stride_);
   download(rot_, soa.data(), 0, soa.size());
   std::vector<double> out(9 * sg.elems);
-  for (std::size_t e = 0; e < sg.elems; ++e)
-    for (std::size_t k = 0; k < 9; ++k) out[9 * e + k] = soa[k * stride_ + sg.elemBegin + e];
+  for (std::size_t e = 0; e < sg.elems; ++e) {
+    const std::size_t to = sg.hostElem.empty() ? e : sg.hostElem[e];  // in the problem's element order
+    for (std::size_t k = 0; k < 9; ++k) out[9 * to + k] = soa[k * stride_ + sg.elemBegin + e];
+  }
   return out;
 }
 

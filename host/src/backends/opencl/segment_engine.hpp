@@ -159,7 +159,8 @@ class SegmentEngine {
   const double* positionCentroid(std::size_t s) const { return segs_[s].centroid; }
   /// Segment s's positions as Backend::devicePositions describes them (its nodes from nodeBegin).
   DevicePositions devicePositions(std::size_t s) const {
-    return {ctx_->context(), ctx_->queue(), ctx_->device(), pos_.get(), segs_[s].nodeBegin, double_, segs_[s].centroid};
+    return {ctx_->context(), ctx_->queue(), ctx_->device(), pos_.get(), segs_[s].nodeBegin, double_, segs_[s].centroid,
+            segs_[s].deviceNode.empty() ? nullptr : segs_[s].deviceNode.data()};
   }
 
   // Device-only work on every segment (benchmarks), no transfers.
@@ -180,10 +181,16 @@ class SegmentEngine {
     std::size_t partialBegin = 0, partialCount = 0;
     bool corotational = true;
     double rayleighMass = 0, rayleighStiffness = 0;
-    std::vector<std::uint8_t> constrained;    ///< 3 * nodes
+    std::vector<std::uint8_t> constrained;    ///< 3 * nodes, in the device's node order
     double centroid[3] = {0, 0, 0};           ///< subtracted from the last positions set
+    /// The device's numbering when it is not the problem's (localityOrder): device node i is the
+    /// problem's node hostNode[i], device element i its element hostElem[i]; deviceNode inverts
+    /// hostNode. Empty: the problem's own numbering.
+    std::vector<std::uint32_t> hostNode, deviceNode, hostElem;
     std::size_t dofBegin() const { return 3 * nodeBegin; }
     std::size_t dofs() const { return 3 * nodes; }
+    /// The problem's dof of the segment's device dof d (0 <= d < dofs()).
+    std::size_t hostDof(std::size_t d) const { return hostNode.empty() ? d : 3 * std::size_t{hostNode[d / 3]} + d % 3; }
   };
   /// What a kernel's work-items cover: elements (VEC per item), nodes, node chunks (CHUNK per
   /// item), or segments (one work-group each, reduce_finish).
@@ -272,8 +279,9 @@ class SegmentEngine {
       });
     });
   }
-  /// out = reals [begin, begin + count) of `base`, in double (resized only if its size differs).
-  void getReals(const unsigned char* base, std::size_t begin, std::size_t count, Eigen::VectorXd& out) const;
+  /// out = the segment's reals of `base` in double, in the problem's dof order (resized only if its
+  /// size differs).
+  void getReals(const unsigned char* base, const Segment& sg, Eigen::VectorXd& out) const;
   void createReal(ClBuffer& buf, std::size_t count) { buf.create(ctx_->context(), count * realSize_, dev_); }
   /// The packed dof range [begin, end) covering the given segments.
   std::pair<std::size_t, std::size_t> dofRange(const std::vector<BatchRequest*>& requests) const;

@@ -1,0 +1,104 @@
+// Morton numbering of a tet mesh for the device's memory locality (see locality_order.hpp).
+#include "mesh/locality_order.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <numeric>
+
+namespace corofem::detail {
+
+namespace {
+
+/// The 21 low bits of v spread to every third bit.
+std::uint64_t spreadBits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+
+}  // namespace
+
+double meanNodeJump(const std::vector<std::uint32_t>& tets, const std::vector<std::uint32_t>* elementOrder,
+                    const std::vector<std::uint32_t>* nodeOf) {
+  const std::size_t count = tets.size() / 4;
+  if (count < 2) return 0.0;
+  auto lowest = [&](std::size_t i) {
+    const std::size_t e = elementOrder ? (*elementOrder)[i] : i;
+    std::uint32_t low = UINT32_MAX;
+    for (int k = 0; k < 4; ++k) {
+      const std::uint32_t n = tets[4 * e + k];
+      low = std::min(low, nodeOf ? (*nodeOf)[n] : n);
+    }
+    return static_cast<double>(low);
+  };
+  double sum = 0.0, previous = lowest(0);
+  for (std::size_t i = 1; i < count; ++i) {
+    const double low = lowest(i);
+    sum += std::abs(low - previous);
+    previous = low;
+  }
+  return sum / static_cast<double>(count - 1);
+}
+
+LocalityOrder mortonOrder(const TetMesh& mesh) {
+  const std::size_t nodes = mesh.nodeCount(), elements = mesh.tetCount();
+  double lo[3], hi[3];
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = nodes ? mesh.nodes[k] : 0.0;
+    hi[k] = lo[k];
+  }
+  for (std::size_t n = 0; n < nodes; ++n)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], mesh.nodes[3 * n + k]);
+      hi[k] = std::max(hi[k], mesh.nodes[3 * n + k]);
+    }
+  // One scale for all axes (the cube around the box): a cell of the curve is a cube in space.
+  const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  const double scale = extent > 0.0 && std::isfinite(extent) ? 2097151.0 / extent : 0.0;
+  std::vector<std::uint64_t> key(elements);
+  for (std::size_t e = 0; e < elements; ++e) {
+    std::uint64_t code = 0;
+    for (int k = 0; k < 3; ++k) {
+      double c = 0.0;
+      for (int j = 0; j < 4; ++j) c += mesh.nodes[3 * mesh.tets[4 * e + j] + k];
+      const double q = std::clamp((0.25 * c - lo[k]) * scale, 0.0, 2097151.0);
+      code |= spreadBits(static_cast<std::uint64_t>(q)) << k;
+    }
+    key[e] = code;
+  }
+  LocalityOrder order;
+  order.elements.resize(elements);
+  std::iota(order.elements.begin(), order.elements.end(), 0u);
+  std::stable_sort(order.elements.begin(), order.elements.end(),
+                   [&](std::uint32_t a, std::uint32_t b) { return key[a] < key[b]; });
+  order.nodeOf.assign(nodes, UINT32_MAX);
+  order.nodes.reserve(nodes);
+  for (std::uint32_t e : order.elements)
+    for (int j = 0; j < 4; ++j) {
+      const std::uint32_t n = mesh.tets[4 * e + j];
+      if (order.nodeOf[n] == UINT32_MAX) {
+        order.nodeOf[n] = static_cast<std::uint32_t>(order.nodes.size());
+        order.nodes.push_back(n);
+      }
+    }
+  for (std::uint32_t n = 0; n < nodes; ++n)  // nodes no element uses keep their relative order, last
+    if (order.nodeOf[n] == UINT32_MAX) {
+      order.nodeOf[n] = static_cast<std::uint32_t>(order.nodes.size());
+      order.nodes.push_back(n);
+    }
+  return order;
+}
+
+std::optional<LocalityOrder> localityOrder(const TetMesh& mesh) {
+  if (mesh.tetCount() < 2) return std::nullopt;
+  LocalityOrder order = mortonOrder(mesh);
+  if (meanNodeJump(mesh.tets, &order.elements, &order.nodeOf) >= meanNodeJump(mesh.tets)) return std::nullopt;
+  return order;
+}
+
+}  // namespace corofem::detail
