@@ -5,7 +5,11 @@
 //   step/<mesh>/<order>      a dynamic step as bench_opencl's dynamic_step: positions up, rotations,
 //                            forces down, PCG with 20 iterations (diagonal), the solution down.
 // And the box generator's 100k-element box, whose layered numbering the rule keeps, with the Morton
-// order forced (localityOrder = 1), for what that order costs where it is not taken.
+// order forced (localityOrder = 1), for what that order costs where it is not taken; and on the
+// Armadillo, denormal floats flushed (the default on CPUs) against kept (OpenCLOptions::
+// flushDenormals = 0): the step as above, and the product of a vector of 1e-39, a denormal float
+// (the velocities of a body that came to rest under damping long ago, in a scene without
+// analysis.sleep, decay to such values).
 //   ./build/bench/bench_mesh_order --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
 // Skips a mesh whose file is absent (run from the repository root, beside ../shared).
 #include <benchmark/benchmark.h>
@@ -22,6 +26,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace corofem {
 namespace {
@@ -75,7 +80,7 @@ Eigen::VectorXd deformed(const detail::Problem& p, double turn) {
   return x;
 }
 
-void run(benchmark::State& state, std::string name, int order, bool step) {
+void run(benchmark::State& state, std::string name, int order, bool step, int flush, double pValue) {
   const detail::Problem* p = problemOf(name);
   if (!p) {
     state.SkipWithError(("../shared/data/meshes/" + name + " is absent").c_str());
@@ -89,6 +94,7 @@ void run(benchmark::State& state, std::string name, int order, bool step) {
   s.checkEvery = 4;
   detail::OpenCLOptions o;
   o.localityOrder = order;
+  o.flushDenormals = flush;
   std::unique_ptr<detail::OpenCLBackendInternal> b;
   try {
     b = detail::createOpenCLBackendOn(*p, s, detail::cl::Context::shared("0"), o);
@@ -103,15 +109,16 @@ void run(benchmark::State& state, std::string name, int order, bool step) {
   const detail::SystemCoeffs coeffs{1.0, 0.5 * dt, 0.25 * dt * dt};
   Eigen::VectorXd f, rhs, v = Eigen::VectorXd::Zero(x[0].size()), y;
   b->setPositions(x[0]);
-  b->apply(coeffs, Eigen::VectorXd::Constant(x[0].size(), 1e-3), y);  // p on the device
+  b->apply(coeffs, Eigen::VectorXd::Constant(x[0].size(), pValue), y);  // p on the device
   b->finish();
   long k = 0;
+  int iterations = 0;
   for (auto _ : state) {
     if (step) {
       b->setPositions(x[k++ % 2]);
       b->internalForces(f);
       rhs = -dt * f;
-      b->solve(coeffs, rhs, v);
+      iterations = b->solve(coeffs, rhs, v).iterations;
     } else {
       b->enqueueProduct(coeffs);
       b->finish();
@@ -122,20 +129,33 @@ void run(benchmark::State& state, std::string name, int order, bool step) {
       benchmark::Counter(static_cast<double>(p->mesh.tetCount()) * static_cast<double>(state.iterations()),
                          benchmark::Counter::kIsRate);
   state.counters["device_reordered"] = where.deviceNode ? 1 : 0;
+  if (step) state.counters["pcg_iterations"] = iterations;  // 20 unless the residual underflowed to 0
   state.SetLabel(b->deviceName());
 }
 
 int registerAll() {
   for (bool step : {false, true})
     for (const char* mesh : kMeshes) {
-      const bool box = std::string(mesh) == "box100k";
-      for (int order : {0, box ? 1 : -1}) {
-        const std::string label = order == 0 ? "file_order" : box ? "morton_forced" : "morton";
-        benchmark::RegisterBenchmark((std::string(step ? "step/" : "product/") + mesh + "/" + label).c_str(), run,
-                                     std::string(mesh), order, step)
+      const std::string name = mesh;
+      const bool box = name == "box100k";
+      struct Variant {
+        int order, flush;
+        const char* label;
+        double p = 1e-3;
+      };
+      std::vector<Variant> variants = {{0, -1, "file_order"}, {box ? 1 : -1, -1, box ? "morton_forced" : "morton"}};
+      if (name == "ipc/Armadillo13K.msh") {
+        variants.push_back({-1, 0, "morton_denormals_kept"});
+        if (!step) {
+          variants.push_back({-1, -1, "morton_p_1e-39", 1e-39});
+          variants.push_back({-1, 0, "morton_p_1e-39_denormals_kept", 1e-39});
+        }
+      }
+      for (const Variant& v : variants)
+        benchmark::RegisterBenchmark((std::string(step ? "step/" : "product/") + name + "/" + v.label).c_str(), run,
+                                     name, v.order, step, v.flush, v.p)
             ->Unit(benchmark::kMicrosecond)
             ->UseRealTime();
-      }
     }
   return 0;
 }

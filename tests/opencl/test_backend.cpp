@@ -582,6 +582,35 @@ TEST_P(OpenCLBackendVsReference, LocalityOrderChangesNothingTheHostSees) {
   }
 }
 
+TEST_P(OpenCLBackendVsReference, DenormalsAreFlushedOnCpuDevicesAndChangeNoAnswer) {
+  // -cl-denorms-are-zero by default on CPU devices only (OpenCLOptions::flushDenormals): a denormal
+  // float costs an x86 core a microcode assist per operation (bench_mesh_order: the Armadillo in
+  // other units). Forced either way, the beam's forces, product and solve agree to the precision.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const detail::Problem p = beam();
+  const Eigen::VectorXd x = bent(p), v = randomVector(p.dofCount(), 71), b = randomVector(p.dofCount(), 72);
+  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
+  const bool cpu = detail::cl::Context::shared(std::to_string(GetParam().device))->info().cpu;
+  Eigen::VectorXd f[2], y[2], sol[2];
+  for (int flush : {-1, 0, 1}) {
+    detail::OpenCLOptions o;
+    o.flushDenormals = flush;
+    auto ocl = openclBackend(p, solver(), o);
+    const bool flushed = ocl->buildOptions().find("-cl-denorms-are-zero") != std::string::npos;
+    EXPECT_EQ(flushed, flush == 1 || (flush == -1 && cpu && !std::getenv("COROFEM_OPENCL_FTZ"))) << "flush " << flush;
+    if (flush < 0) continue;
+    ocl->setPositions(x);
+    ocl->internalForces(f[flush]);
+    ocl->apply(c, v, y[flush]);
+    sol[flush] = Eigen::VectorXd::Zero(b.size());
+    EXPECT_TRUE(ocl->solve(c, b, sol[flush]).converged);
+  }
+  const double tol = isDouble() ? 1e-12 : 1e-5;
+  EXPECT_LE(relErr(f[1], f[0]), tol);
+  EXPECT_LE(relErr(y[1], y[0]), tol);
+  EXPECT_LE(relErr(sol[1], sol[0]), isDouble() ? 1e-8 : 1e-3);
+}
+
 TEST_P(OpenCLBackendVsReference, BodyFarFromTheOriginKeepsItsAccuracy) {
   // The beam translated by ~2e4 m: float positions there have a resolution of ~1e-3 m, larger
   // than the strains' displacements; the backend uploads positions relative to their centroid, so

@@ -74,6 +74,9 @@ struct OpenCLOptions {
   /// mesh's own, 1 the Morton order always (tests). Host vectors keep the mesh's numbering either way.
   /// COROFEM_OPENCL_REORDER=0/1 sets it when this is -1.
   int localityOrder = -1;
+  /// -cl-denorms-are-zero: -1 (default) on CPU devices (a denormal float costs an x86 core a
+  /// microcode assist per operation), 0 never, 1 always. COROFEM_OPENCL_FTZ=0/1 sets it when -1.
+  int flushDenormals = -1;
 };
 
 /// Backend plus what the conformance tests and the benchmark need to see.
