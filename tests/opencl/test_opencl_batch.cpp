@@ -12,6 +12,7 @@
 // forces, the float operator times cond(A) ~1e3 gives 1e-3 on solutions).
 #include "backends/opencl/opencl_backend.hpp"
 #include "backends/opencl/segment_engine.hpp"
+#include "common/shuffled_mesh.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "solve/batch.hpp"
 #include "util/error.hpp"
@@ -21,6 +22,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <cstdlib>
 #include <random>
 #include <thread>
 
@@ -140,7 +142,7 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
     for (const auto& p : ps) out.push_back(detail::createOpenCLBackendOn(p, s, context(), o));
     return out;
   }
-  void everyRequestMatches(const detail::OpenCLOptions& o);
+  void everyRequestMatches(const detail::OpenCLOptions& o, const std::vector<detail::Problem>& ps = bodies());
   /// Runs a round and expects no request to fail.
   static void runOk(detail::BatchDevice& device, std::vector<BatchRequest>& requests) {
     std::vector<BatchRequest*> round;
@@ -188,8 +190,7 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
 
 /// Every request type for every body (one round per type, then one round of mixed types),
 /// batch vs one single backend per body (same options) vs the reference.
-void OpenCLBatch::everyRequestMatches(const detail::OpenCLOptions& o) {
-  const std::vector<detail::Problem> ps = bodies();
+void OpenCLBatch::everyRequestMatches(const detail::OpenCLOptions& o, const std::vector<detail::Problem>& ps) {
   const std::size_t K = ps.size();
   const SolverDesc s = solver();
   auto batch = batchOf(ps, s, o);
@@ -303,6 +304,32 @@ void OpenCLBatch::everyRequestMatches(const detail::OpenCLOptions& o) {
 TEST_P(OpenCLBatch, EveryRequestMatchesOneBackendPerBodyAndTheReference) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   everyRequestMatches({});  // the device's default configuration (CPUs: 8 elements per item, chunks of 4 nodes)
+}
+
+TEST_P(OpenCLBatch, BodiesInTheMeshsNumberingAndInTheDevicesOwnMatchToo) {
+  // By default the device numbers a body in a Morton order of its own only where the mesh's
+  // numbering is less local (mesh/locality_order.hpp): here the five bodies keep theirs and a
+  // shuffled copy of the first is reordered, in one batch (segments in both numberings side by side).
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  std::vector<detail::Problem> ps = bodies();
+  detail::Problem shuffled = test::makeProblem(test::shuffledMesh(ps[0].mesh, 17), 1e5, 0.45, 1000.0);
+  shuffled.name = "shuffled-beam";
+  shuffled.rayleighMass = 0.2;
+  for (std::size_t n = 0; n < shuffled.mesh.nodeCount(); ++n)
+    if (shuffled.mesh.nodes[3 * n] < 1e-9)
+      for (int k = 0; k < 3; ++k) shuffled.constrained[3 * n + k] = 1;
+  ps.insert(ps.begin() + 2, std::move(shuffled));
+  std::vector<const detail::Problem*> ptrs;
+  for (const detail::Problem& p : ps) ptrs.push_back(&p);
+  auto batch = detail::createOpenCLBatchDeviceOn(ptrs, solver(), context(), {});
+  std::size_t reordered = 0;
+  for (std::size_t i = 0; i < ps.size(); ++i) {
+    detail::DevicePositions where;
+    ASSERT_TRUE(batch->devicePositions(i, where));
+    reordered += where.deviceNode != nullptr;
+  }
+  if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); !env || !*env) EXPECT_EQ(reordered, 1u);
+  everyRequestMatches({}, ps);
 }
 
 TEST_P(OpenCLBatch, GpuKernelConfigurationMatchesToo) {

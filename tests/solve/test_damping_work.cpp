@@ -1,8 +1,9 @@
 // Issue 5, "a damping-free scene builds no damping code": what damping costs, measured by counting
 // the Backend calls a dynamic step makes. Rayleigh damping C = alpha M + beta K_t has no kernel of
 // its own on any backend (the OpenCL backend folds it into the two coefficients of M and K^R of
-// the system matrix), so its only work is the residual's C v, one Backend::apply per Newton
-// evaluation, and a damping-free problem must never ask for it.
+// the system matrix), so its only work is the residual's C v: one Backend::apply per Newton
+// evaluation with stiffness damping (beta > 0), none with mass damping alone (alpha M v, formed by
+// the solver), and a damping-free problem must never ask for it.
 #include "mock_backend.hpp"
 
 #include "solve/body_solver.hpp"

@@ -47,16 +47,17 @@ double meanNodeJump(const std::vector<std::uint32_t>& tets, const std::vector<st
 
 LocalityOrder mortonOrder(const TetMesh& mesh) {
   const std::size_t nodes = mesh.nodeCount(), elements = mesh.tetCount();
-  double lo[3], hi[3];
-  for (int k = 0; k < 3; ++k) {
-    lo[k] = nodes ? mesh.nodes[k] : 0.0;
-    hi[k] = lo[k];
-  }
+  // The box of the finite coordinates (buildProblem rejects others; a Problem made directly may
+  // hold them, and their elements then take key 0).
+  double lo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, hi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
   for (std::size_t n = 0; n < nodes; ++n)
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], mesh.nodes[3 * n + k]);
-      hi[k] = std::max(hi[k], mesh.nodes[3 * n + k]);
-    }
+    for (int k = 0; k < 3; ++k)
+      if (std::isfinite(mesh.nodes[3 * n + k])) {
+        lo[k] = std::min(lo[k], mesh.nodes[3 * n + k]);
+        hi[k] = std::max(hi[k], mesh.nodes[3 * n + k]);
+      }
+  for (int k = 0; k < 3; ++k)
+    if (!(lo[k] <= hi[k])) lo[k] = hi[k] = 0.0;
   // One scale for all axes (the cube around the box): a cell of the curve is a cube in space.
   const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
   const double scale = extent > 0.0 && std::isfinite(extent) ? 2097151.0 / extent : 0.0;
@@ -66,8 +67,12 @@ LocalityOrder mortonOrder(const TetMesh& mesh) {
     for (int k = 0; k < 3; ++k) {
       double c = 0.0;
       for (int j = 0; j < 4; ++j) c += mesh.nodes[3 * mesh.tets[4 * e + j] + k];
-      const double q = std::clamp((0.25 * c - lo[k]) * scale, 0.0, 2097151.0);
-      code |= spreadBits(static_cast<std::uint64_t>(q)) << k;
+      const double q = (0.25 * c - lo[k]) * scale;
+      if (!std::isfinite(q)) {  // a non-finite corner: key 0
+        code = 0;
+        break;
+      }
+      code |= spreadBits(static_cast<std::uint64_t>(std::clamp(q, 0.0, 2097151.0))) << k;
     }
     key[e] = code;
   }

@@ -28,7 +28,8 @@ namespace corofem::detail {
 /// Where a backend keeps a body's node positions on an OpenCL device (the device surface reads
 /// them there: no host round trip). 3 reals per node, double when isDouble else float, those last
 /// given to setPositions minus `centroid` (3 doubles), node n of the body at node firstNode + n of
-/// `buffer` (a batch holds many bodies in one buffer). Valid while the backend lives.
+/// `buffer`, or firstNode + deviceNode[n] where deviceNode is set (a batch holds many bodies in one
+/// buffer). Valid while the backend lives.
 struct DevicePositions {
   _cl_context* context = nullptr;
   _cl_command_queue* queue = nullptr;  ///< in-order queue that writes them

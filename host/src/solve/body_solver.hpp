@@ -235,8 +235,9 @@ class DynamicSolver final : public BodySolver {
   /// The damping force C v, C = alpha M + beta K^R (Rayleigh). Mass damping alone (beta = 0, the
   /// common "air drag") is a scaling of the lumped mass: formed here in double, the same expression
   /// and bits as the reference backend's apply, with no backend call. On the OpenCL backend that
-  /// call was an upload, an element product, a gather and a blocking read, twice per step; in a
-  /// batch, two rendezvous rounds of every body per step. beta > 0 needs K^R: the backend applies it.
+  /// call was an upload, an element product, a gather and a blocking read per force evaluation
+  /// (twice per step with one Newton iteration); in a batch, a rendezvous round of every body each
+  /// time. beta > 0 needs K^R: the backend applies it.
   void dampingForce(const Eigen::VectorXd& v, Eigen::VectorXd& cv);
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs (0 on constrained ones).
   void initialAcceleration();

@@ -59,7 +59,6 @@ struct Simulation::Impl {
     // Render surface bound to the tet mesh (paper Sec. 5), when the body names one.
     std::unique_ptr<SurfaceMesh> surface;
     std::unique_ptr<SurfaceBinding> binding;
-    std::unique_ptr<SurfaceBinding> deviceBinding;  ///< binding in the device's node order (bindingOn)
     // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and
     // prescribed positions it fell asleep under (the reference a change is measured against).
     struct Sleep {
@@ -237,13 +236,15 @@ struct Simulation::Impl {
       for (bool separate : {false, true}) {
         SurfaceGroup sg;
         std::vector<detail::DeviceSurfaceGroup::Member> members;
+        std::vector<std::unique_ptr<SurfaceBinding>> remapped;  // bindings in the device's numbering
         detail::DevicePositions where;
         std::size_t nodes = 0;
         for (std::size_t k = 0; k < g.bodies.size(); ++k) {
           Body& b = bodies[g.bodies[k]];
           if (!b.binding || b.separateStreams != separate || !g.group->devicePositions(k, where)) continue;
           sg.bodies.push_back(g.bodies[k]);
-          members.push_back({&bindingOn(b, where), where.firstNode});
+          remapped.emplace_back();
+          members.push_back({&bindingOn(b, where, remapped.back()), where.firstNode});
           nodes = std::max(nodes, where.firstNode + b.binding->tetNodeCount);
         }
         if (members.empty()) continue;
@@ -398,13 +399,13 @@ struct Simulation::Impl {
 
   /// The binding the device surface reads the body's positions with: b.binding, or where the device
   /// numbers the nodes in an order of its own (the OpenCL backend's locality order), a copy in that
-  /// numbering, kept in b.deviceBinding (remade with every device surface).
-  static const SurfaceBinding& bindingOn(Body& b, const detail::DevicePositions& where) {
+  /// numbering made in `holder` (the device surfaces copy what they need at creation).
+  static const SurfaceBinding& bindingOn(const Body& b, const detail::DevicePositions& where,
+                                         std::unique_ptr<SurfaceBinding>& holder) {
     if (!where.deviceNode) return *b.binding;
-    auto copy = std::make_unique<SurfaceBinding>(*b.binding);
-    for (std::uint32_t& n : copy->nodes) n = where.deviceNode[n];
-    b.deviceBinding = std::move(copy);
-    return *b.deviceBinding;
+    holder = std::make_unique<SurfaceBinding>(*b.binding);
+    for (std::uint32_t& n : holder->nodes) n = where.deviceNode[n];
+    return *holder;
   }
 
   /// Whether b.deviceSurface was made for the backend the body runs on now (a failover replaces
@@ -434,7 +435,8 @@ struct Simulation::Impl {
         o.queue = where.queue;
         o.deviceId = where.device;
         o.separateStreams = b.separateStreams;
-        Result<DeviceSurface> made = DeviceSurface::create(bindingOn(b, where), o);
+        std::unique_ptr<SurfaceBinding> remapped;
+        Result<DeviceSurface> made = DeviceSurface::create(bindingOn(b, where, remapped), o);
         if (!made) detail::fail(made.status().code(), "the body's surface on the OpenCL device: ", made.message());
         b.deviceSurface = std::make_unique<DeviceSurface>(std::move(made.value()));
         b.deviceFor = device;

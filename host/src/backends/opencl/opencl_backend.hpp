@@ -99,7 +99,9 @@ class OpenCLBackendInternal : public Backend {
   // The node positions on the device (e.g. for DeviceSurface::updateFromDevice, no host round trip):
   // 3 reals per node (double when positionsAreDouble(), else float, also in mixed precision), those
   // last given to setPositions, minus positionCentroid() (the mean of those positions, subtracted in
-  // double so that float keeps its resolution far from the origin): x_n = pos[n] + centroid.
+  // double so that float keeps its resolution far from the origin): x_n = pos[m] + centroid, with m
+  // = n, or m = DevicePositions::deviceNode[n] where the device numbers the nodes in its locality
+  // order (OpenCLOptions::localityOrder).
   /// The buffer of 3 * nodeCount relative positions; owned by the backend, valid for its lifetime.
   virtual cl_mem positionBuffer() const = 0;
   virtual bool positionsAreDouble() const = 0;
