@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -203,6 +204,33 @@ TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
 }
 
 // `corofem run --plan` prints the plan and runs nothing (no output folder).
+TEST(Plan, DeviceNumberingIsTheMeshsForABoxAndMortonForAMeshFile) {
+  // The OpenCL backend lays a body out in a Morton order of its own where the mesh's numbering is
+  // less local (mesh/locality_order.hpp): a Gmsh file's is, the box generator's is not.
+  bool opencl = false;
+  for (const detail::Candidate& c : detail::listCandidates()) opencl = opencl || c.kind == BackendKind::OpenCL;
+  if (!opencl) GTEST_SKIP() << "no OpenCL device (or built without COROFEM_WITH_OPENCL)";
+  if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); env && *env) GTEST_SKIP() << "COROFEM_OPENCL_REORDER decides";
+  COROFEM_REQUIRE_DATA("meshes/ipc/bar-2523.msh");
+  HookScope scope;
+  Scene box = dynamicScene(boxBeam({20, 4, 4}), 1), file = box;
+  file.bodies[0].mesh.box.reset();
+  file.bodies[0].mesh.file = dataPath("meshes/ipc/bar-2523.msh");  // 10 x 0.5 x 1: the clamp at x = 0 holds
+  file.bodies[0].loads[1].nodes.planePoint = {10, 0, 0};             // the tip load at its end
+  for (Scene* sc : {&box, &file}) sc->backend.kind = BackendKind::OpenCL;
+  for (auto [scene, numbering] : {std::pair{&box, std::string("mesh")}, std::pair{&file, std::string("morton")}}) {
+    auto sim = Simulation::create(*scene);
+    ASSERT_TRUE(sim) << sim.message();
+    const json plan = json::parse(sim->planReport());
+    EXPECT_EQ(plan["bodies"][0].value("device_numbering", std::string()), numbering) << plan["bodies"][0].dump(1);
+  }
+  Scene ref = box;
+  ref.backend.kind = BackendKind::Reference;
+  auto sim = Simulation::create(ref);
+  ASSERT_TRUE(sim) << sim.message();
+  EXPECT_FALSE(json::parse(sim->planReport())["bodies"][0].contains("device_numbering")) << "host backends have none";
+}
+
 TEST(Plan, CommandPrintsThePlanWithoutRunning) {
   const std::string cli = COROFEM_CLI_PATH;
   if (cli.empty()) GTEST_SKIP() << "the corofem command is not built";

@@ -821,6 +821,10 @@ std::string Simulation::planReport() const {
       for (const detail::DeviceBuffer& d : allocated) total += d.bytes;
       body["device_bytes_allocated"] = total;
     }
+    // Where the body's node positions live on an OpenCL device: in the mesh's numbering, or in the
+    // device's own locality order (mesh/locality_order.hpp; the host's vectors keep the mesh's).
+    detail::DevicePositions where;
+    if (Impl::deviceBackend(b, where)) body["device_numbering"] = where.deviceNode ? "morton" : "mesh";
     if (b.binding) body["surface"] = impl_->surfacePlanJson(b);
     bodies.push_back(body);
   }
