@@ -1,4 +1,4 @@
-// The documented examples (docs/examples/*.json) parse, and where their meshes are available every
+// The documented examples (docs/examples/*.json) and the benchmark scenes (bench/scenes) parse, and where their meshes are available every
 // node set in them selects nodes: a typo in a documented coordinate fails here, not in a user's run.
 #include "common/test_data.hpp"
 
@@ -17,18 +17,27 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::vector<fs::path> examples() {
+std::vector<fs::path> jsonFilesIn(const char* folder) {
   std::vector<fs::path> files;
-  for (const auto& entry : fs::directory_iterator(fs::path(COROFEM_SOURCE_DIR) / "docs" / "examples"))
+  for (const auto& entry : fs::directory_iterator(fs::path(COROFEM_SOURCE_DIR) / folder))
     if (entry.path().extension() == ".json") files.push_back(entry.path());
   std::sort(files.begin(), files.end());
   return files;
 }
 
+std::vector<fs::path> examples() { return jsonFilesIn("docs/examples"); }
+
+/// The documented examples and the benchmark scenes.
+std::vector<fs::path> allScenes() {
+  std::vector<fs::path> files = examples(), bench = jsonFilesIn("bench/scenes");
+  files.insert(files.end(), bench.begin(), bench.end());
+  return files;
+}
+
 TEST(SceneExamples, EveryExampleParses) {
-  const auto files = examples();
+  const auto files = allScenes();
   // The brief asks for at least: static cantilever, Fig-8 beam, dragged handle, mesh file + .bou.
-  ASSERT_GE(files.size(), 4u);
+  ASSERT_GE(examples().size(), 4u);
   for (const fs::path& file : files) {
     const Result<Scene> scene = loadScene(file.string());
     EXPECT_TRUE(scene.isOk()) << file << ": " << scene.message();
@@ -38,7 +47,7 @@ TEST(SceneExamples, EveryExampleParses) {
 
 TEST(SceneExamples, EveryNodeSetSelectsNodesWhereTheMeshIsAvailable) {
   int checkedBodies = 0;
-  for (const fs::path& file : examples()) {
+  for (const fs::path& file : allScenes()) {
     const Result<Scene> scene = loadScene(file.string());
     ASSERT_TRUE(scene.isOk()) << file << ": " << scene.message();
     for (const BodyDesc& body : scene->bodies) {
