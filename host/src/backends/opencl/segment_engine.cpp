@@ -438,9 +438,9 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   // Denormals flushed to zero on CPUs (PoCL then runs the kernels with the FTZ and DAZ bits of
   // MXCSR set). An x86 core takes a microcode assist of ~100 cycles per operation on a denormal
   // float: bench_mesh_order's product of a vector of 1e-39 (velocities decayed at rest) on the
-  // Armadillo took 1,015-1,020 us with them kept against 380-388 flushed; with normal values the
-  // flush changes nothing (the 20-iteration step 11.2 against 10.8-10.9 ms). Nothing physical
-  // lives below float's 1.2e-38.
+  // Armadillo took 1,015-1,029 us with them kept against 380-390 flushed (four runs); with normal
+  // values the flush changes little (the 20-iteration step 11.2-11.3 against 10.8-10.9 ms).
+  // Nothing physical lives below float's 1.2e-38.
   // GPUs handle denormals at full speed and keep the default (not measured there).
   int flush = options.flushDenormals;
   if (const char* env = std::getenv("COROFEM_OPENCL_FTZ"); env && *env && flush < 0) flush = std::string(env) != "0";
