@@ -6,7 +6,9 @@
 # narrows it), profile (COROFEM_OPENCL_PROFILE on the 10k and 1M steps), ab (the dynamic steps of
 # the bench_opencl binaries named in AB, in turns), envab (bench_opencl under each environment
 # setting in ENVAB, in turns), sweep (work-group sizes), more (bench_backends,
-# bench_embed, bench_batch).
+# bench_embed, bench_batch), meshorder (bench_mesh_order: real meshes in their files' numbering and
+# in the device's Morton order). The tests stage also runs five suites again with the Morton order
+# forced on every body (COROFEM_OPENCL_REORDER=1), as CTest does.
 set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
@@ -42,9 +44,14 @@ if has tests; then
     pids+=($!)
   done
   wait "${pids[@]}"
+  for n in test_batch test_embed test_opencl test_solve test_schedule; do
+    [[ -x $g/bin/$n ]] || continue
+    (cd "$root" && COROFEM_OPENCL_REORDER=1 timeout 400 "$g/bin/$n" --gtest_brief=1 > "/tmp/logs/morton_$n.log" 2>&1
+     echo "morton_$n exit $?" >> /tmp/logs/exits)
+  done
   sort /tmp/logs/exits
-  for f in /tmp/logs/test_*.log; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
-  grep -h -E '^\[  FAILED  \]' /tmp/logs/test_*.log | head -40
+  for f in /tmp/logs/test_*.log /tmp/logs/morton_*.log; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
+  grep -h -E '^\[  FAILED  \]' /tmp/logs/test_*.log /tmp/logs/morton_*.log | head -40
 fi
 
 B=$g/bin
@@ -100,5 +107,11 @@ if has more; then
     --benchmark_out="$OUT/bench_batch.json" --benchmark_out_format=json > /tmp/logs/bench_batch.txt 2>&1
   echo "bench_batch exit $?"
   grep -h median /tmp/logs/bench_backends.txt /tmp/logs/bench_embed.txt /tmp/logs/bench_batch.txt | cut -c1-150
+fi
+if has meshorder; then
+  (cd "$root" && timeout 300 "$B/bench_mesh_order" --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
+    --benchmark_out="$OUT/bench_mesh_order.json" --benchmark_out_format=json > /tmp/logs/bench_mesh_order.txt 2>&1)
+  echo "bench_mesh_order exit $?"
+  grep -h median /tmp/logs/bench_mesh_order.txt | cut -c1-150
 fi
 tar -C /tmp -czf "$OUT/logs.tar.gz" logs
