@@ -7,6 +7,7 @@
 //
 // Exit status: 0 success, 2 bad input (message on stderr), 3 a solve failed (outputs written so
 // far stay readable), 1 anything else (device error, i/o error, internal error).
+#include "mesh/locality_order.hpp"
 #include "output/run_outputs.hpp"
 #include "util/error.hpp"
 
@@ -263,6 +264,13 @@ int cmdInfo(const std::vector<std::string>& args) {
          {"negatively_oriented_in_file", rep.reorientedElements},
          {"skipped_elements", rep.skippedElements}, {"skipped_by_type", rep.skippedByType},
          {"has_regions", !mesh->regions.empty()}};
+    // How local the numbering is for the OpenCL kernels (mesh/locality_order.hpp): the mean jump of
+    // consecutive elements' lowest node, in the file's numbering and along a Morton curve, and the
+    // numbering the OpenCL backend's device takes ("device_numbering", as in the plan).
+    const detail::LocalityOrder morton = detail::mortonOrder(mesh.value());
+    j["node_jump"] = detail::meanNodeJump(mesh->tets);
+    j["node_jump_morton"] = detail::meanNodeJump(mesh->tets, &morton.elements, &morton.nodeOf);
+    j["device_numbering"] = detail::localityOrder(mesh.value()) ? "morton" : "mesh";
   }
   if (asJson) {
     std::cout << j.dump(2) << '\n';
