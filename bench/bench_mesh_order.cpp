@@ -11,7 +11,8 @@
 // (the velocities of a body that came to rest under damping long ago, in a scene without
 // analysis.sleep, decay to such values).
 //   ./build/bench/bench_mesh_order --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
-// Skips a mesh whose file is absent (run from the repository root, beside ../shared).
+// Reads the meshes from $COROFEM_DATA_DIR/meshes, else ../shared/data/meshes beside the sources;
+// skips a mesh whose file is absent.
 #include <benchmark/benchmark.h>
 
 #ifdef COROFEM_WITH_OPENCL
@@ -22,6 +23,7 @@
 
 #include <corofem/mesh.hpp>
 
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -42,7 +44,9 @@ const detail::Problem* problemOf(const std::string& name) {
     if (name == "box100k") {
       mesh = test::boxMesh(40, 20, 21, 0.1, 0.1, 0.1);
     } else {
-      const std::string path = "../shared/data/meshes/" + name;
+      const char* env = std::getenv("COROFEM_DATA_DIR");  // as the tests: else ../shared beside the sources
+      const std::string path = (env && *env ? std::string(env) : std::string(COROFEM_SOURCE_DIR) + "/../shared/data") +
+                               "/meshes/" + name;
       if (!std::filesystem::exists(path)) return nullptr;
       auto read = readTetMesh(path);
       if (!read) return nullptr;
@@ -83,7 +87,7 @@ Eigen::VectorXd deformed(const detail::Problem& p, double turn) {
 void run(benchmark::State& state, std::string name, int order, bool step, int flush, double pValue) {
   const detail::Problem* p = problemOf(name);
   if (!p) {
-    state.SkipWithError(("../shared/data/meshes/" + name + " is absent").c_str());
+    state.SkipWithError(("the mesh " + name + " is absent (../shared/data/meshes beside the sources, or COROFEM_DATA_DIR)").c_str());
     return;
   }
   SolverDesc s;

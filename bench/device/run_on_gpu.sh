@@ -44,11 +44,14 @@ if has tests; then
     pids+=($!)
   done
   wait "${pids[@]}"
-  for n in test_batch test_embed test_opencl test_solve test_schedule; do
+  pids=()
+  for n in test_batch test_embed test_opencl test_solve test_schedule; do  # in parallel, as above
     [[ -x $g/bin/$n ]] || continue
-    (cd "$root" && COROFEM_OPENCL_REORDER=1 timeout 400 "$g/bin/$n" --gtest_brief=1 > "/tmp/logs/morton_$n.log" 2>&1
-     echo "morton_$n exit $?" >> /tmp/logs/exits)
+    (cd "$root" && COROFEM_OPENCL_REORDER=1 timeout 150 "$g/bin/$n" --gtest_brief=1 > "/tmp/logs/morton_$n.log" 2>&1
+     echo "morton_$n exit $?" >> /tmp/logs/exits) &
+    pids+=($!)
   done
+  (( ${#pids[@]} )) && wait "${pids[@]}"
   sort /tmp/logs/exits
   for f in /tmp/logs/test_*.log /tmp/logs/morton_*.log; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
   grep -h -E '^\[  FAILED  \]' /tmp/logs/test_*.log /tmp/logs/morton_*.log | head -40

@@ -28,9 +28,10 @@ typedef float4 real4;
 #endif
 /* sum_real: the type of the PCG dot products (per-item partials, their reduction) and of the PCG
  * scalars (rho, alpha, beta, norms). It is `real` except in mixed precision (COROFEM_MIXED, real =
- * float): there every term of a dot product is formed exactly (a float times a float fits a double)
- * and summed in double, so the rounding of the sum, ~ n eps_float |x||y| in float for n terms in
- * the worst case, drops to the float rounding of the vectors themselves. */
+ * float): there every term of a dot product is formed exactly (a float times a float fits a double;
+ * on CPU devices, which flush denormals, a denormal float entry counts as 0) and summed in double,
+ * so the rounding of the sum, ~ n eps_float |x||y| in float for n terms in the worst case, drops to
+ * the float rounding of the vectors themselves. */
 #if defined(COROFEM_MIXED) && !defined(COROFEM_DOUBLE)
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double sum_real;

@@ -203,7 +203,6 @@ TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
   EXPECT_FALSE(p2["bodies"][0].contains("device_buffers_allocated"));
 }
 
-// `corofem run --plan` prints the plan and runs nothing (no output folder).
 TEST(Plan, DeviceNumberingIsTheMeshsForABoxAndMortonForAMeshFile) {
   // The OpenCL backend lays a body out in a Morton order of its own where the mesh's numbering is
   // less local (mesh/locality_order.hpp): a Gmsh file's is, the box generator's is not.
@@ -231,6 +230,7 @@ TEST(Plan, DeviceNumberingIsTheMeshsForABoxAndMortonForAMeshFile) {
   EXPECT_FALSE(json::parse(sim->planReport())["bodies"][0].contains("device_numbering")) << "host backends have none";
 }
 
+// `corofem run --plan` prints the plan and runs nothing (no output folder).
 TEST(Plan, CommandPrintsThePlanWithoutRunning) {
   const std::string cli = COROFEM_CLI_PATH;
   if (cli.empty()) GTEST_SKIP() << "the corofem command is not built";
