@@ -80,7 +80,7 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, CliInfo, ::testing::ValuesIn(kMeshes),
                          });
 
 TEST(CliInfo, TheLargeGmshMeshesGetTheDevicesMortonNumbering) {
-  // Measured (bench_mesh_order): their steps 1.4-1.6x faster in it on PoCL.
+  // Measured (bench_mesh_order): their steps 1.45-1.55x faster in it on PoCL.
   for (const char* file : {"meshes/ipc/Armadillo13K.msh", "meshes/ipc/dolphin5K.msh", "meshes/ipc/rod300x33.msh"}) {
     COROFEM_REQUIRE_DATA(file);
     const auto r = corofem::test::runCli("info --json '" + corofem::test::dataPath(file) + "'");
