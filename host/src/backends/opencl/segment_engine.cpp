@@ -332,6 +332,9 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
     for (std::size_t s = 0; s < problems.size(); ++s) {
       const Problem& p = *problems[s];
       if (p.elements.size() != p.mesh.tetCount() || p.dofCount() != 3 * p.mesh.nodeCount()) continue;  // reported below
+      const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
+      if (p.mesh.tetCount() * widest >= (std::size_t(1) << 32) / 2 || 9 * p.mesh.nodeCount() >= (std::size_t(1) << 32) / 2)
+        continue;  // over the 32-bit indexing on its own: refused below, not sorted first
       std::optional<LocalityOrder> order = reorder == 1 && p.mesh.tetCount() > 0 ? mortonOrder(p.mesh) : localityOrder(p.mesh);
       if (!order) continue;
       orders[s] = std::move(*order);
