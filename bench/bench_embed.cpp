@@ -11,6 +11,7 @@
 #include <corofem/mesh.hpp>
 
 #include "embed/embed_test_util.hpp"
+#include "mesh/locality_order.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -68,21 +69,12 @@ const SurfaceMesh& sphere1MMorton() {
   static const SurfaceMesh surface = [] {
     const SurfaceMesh& s = sphere1M();
     const std::size_t n = s.vertexCount();
-    auto spread = [](std::uint64_t v) {  // 21 bits -> every third bit
-      v &= 0x1fffff;
-      v = (v | v << 32) & 0x1f00000000ffffULL;
-      v = (v | v << 16) & 0x1f0000ff0000ffULL;
-      v = (v | v << 8) & 0x100f00f00f00f00fULL;
-      v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-      v = (v | v << 2) & 0x1249249249249249ULL;
-      return v;
-    };
     std::vector<std::pair<std::uint64_t, std::uint32_t>> keys(n);
     for (std::size_t v = 0; v < n; ++v) {
       std::uint64_t key = 0;
       for (int a = 0; a < 3; ++a) {  // the sphere lies in [0.05, 0.95] x [0.05, 0.95] x [0.8, 1.7]
         const double lo = a < 2 ? 0.05 : 0.8, t = (s.vertices[3 * v + a] - lo) / 0.9;
-        key |= spread(static_cast<std::uint64_t>(std::clamp(t, 0.0, 1.0) * 2097151.0)) << a;
+        key |= detail::mortonSpreadBits(static_cast<std::uint64_t>(std::clamp(t, 0.0, 1.0) * 2097151.0)) << a;
       }
       keys[v] = {key, static_cast<std::uint32_t>(v)};
     }

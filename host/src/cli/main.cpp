@@ -268,9 +268,11 @@ int cmdInfo(const std::vector<std::string>& args) {
     // consecutive elements' lowest node, in the file's numbering and along a Morton curve, and the
     // numbering the OpenCL backend's device takes ("device_numbering", as in the plan).
     const detail::LocalityOrder morton = detail::mortonOrder(mesh.value());
-    j["node_jump"] = detail::meanNodeJump(mesh->tets);
-    j["node_jump_morton"] = detail::meanNodeJump(mesh->tets, &morton.elements, &morton.nodeOf);
-    j["device_numbering"] = detail::localityOrder(mesh.value()) ? "morton" : "mesh";
+    const double own = detail::meanNodeJump(mesh->tets);
+    const double along = detail::meanNodeJump(mesh->tets, &morton.elements, &morton.nodeOf);
+    j["node_jump"] = own;
+    j["node_jump_morton"] = along;
+    j["device_numbering"] = mesh->tetCount() >= 2 && detail::mortonIsMoreLocal(own, along) ? "morton" : "mesh";
   }
   if (asJson) {
     std::cout << j.dump(2) << '\n';

@@ -26,6 +26,13 @@ struct LocalityOrder {
 double meanNodeJump(const std::vector<std::uint32_t>& tets, const std::vector<std::uint32_t>* elementOrder = nullptr,
                     const std::vector<std::uint32_t>* nodeOf = nullptr);
 
+/// The 21 low bits of v spread to every third bit: one axis of a 63-bit Morton code.
+std::uint64_t mortonSpreadBits(std::uint64_t v);
+
+/// Whether a numbering with mean node jump `mortonJump` is worth taking over one with `ownJump`
+/// (localityOrder's rule: at most half).
+bool mortonIsMoreLocal(double ownJump, double mortonJump);
+
 /// Elements sorted along a Morton (Z-order) curve of their centroids (ties: old index), nodes
 /// numbered in the order those elements first use them. Deterministic: depends on the mesh only.
 LocalityOrder mortonOrder(const TetMesh& mesh);
