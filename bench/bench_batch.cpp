@@ -113,7 +113,10 @@ Simulation make(const Scene& s) {
     std::exit(1);
   }
   Simulation out = std::move(sim.value());
-  if (!out.step()) std::exit(1);  // warm-up: first launches, lazy set-up
+  if (const Status st = out.step(); !st) {  // warm-up: first launches, lazy set-up
+    std::cerr << "bench_batch: warm-up step failed: " << st.message() << std::endl;
+    std::exit(1);
+  }
   return out;
 }
 

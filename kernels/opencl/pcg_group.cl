@@ -105,7 +105,8 @@ void pcg_iterate_group(COROFEM_GROUP_PCG_PARAMS) {
   const uint lid = get_local_id(0), seg = get_global_id(0) / COROFEM_WG;
   const GroupSegment g = group_segment(segInfo, segCoef, seg);
   __global sum_real* scalars = allScalars + kScalarCount * seg;
-  if (lid == 0) running = seg_info(segInfo, seg, kSegActive);
+  /* kSegRunningPacked: pcg_iterate_pack's body */
+  if (lid == 0) running = seg_info(segInfo, seg, kSegActive) == kSegRunning ? 1u : 0u;
   barrier(CLK_LOCAL_MEM_FENCE);
   for (uint it = 0; it < iterations && running != 0u; ++it) {
     const real alpha = (real)scalars[kScalarAlpha], beta = (real)scalars[kScalarBeta];
@@ -223,7 +224,7 @@ void pcg_iterate_team(COROFEM_GROUP_PCG_PARAMS) {
   __global volatile uint* active = segInfo + kSegInfoCount * seg + kSegActive;
   const uint nodeChunks = (g.nodeItems + COROFEM_WG - 1) / COROFEM_WG;
   const uint elemChunks = (g.elemItems + COROFEM_WG - 1) / COROFEM_WG;
-  if (lid == 0) running = *active;
+  if (lid == 0) running = *active == kSegRunning ? 1u : 0u; /* kSegRunningPacked: pcg_iterate_pack's body */
   barrier(CLK_LOCAL_MEM_FENCE);
   uint end = 0, epoch = epochBase; /* the chunks done when the current phase is; its epoch */
   for (uint it = 0; it < iterations && running != 0u; ++it) {

@@ -98,6 +98,44 @@ std::vector<detail::Problem> bodiesWithABlock() {
   return out;
 }
 
+/// Copies of one mesh (a beam of 7 x 3 x 2 cells, 252 tets, 96 nodes: more than one node chunk per
+/// 64 work-items of neither phase, a last node chunk of its own), `count` of them, each its own: a
+/// rest shape rotated and stretched differently (so other gradients and volumes), material,
+/// density, Rayleigh coefficients and constraints (clamped at x = 0, every third on one component
+/// only, one free body held by its mass); every fourth linear. Then one body of another mesh (not
+/// packed) between them, so that the packs' bodies are not consecutive segments.
+std::vector<detail::Problem> instances(std::size_t count) {
+  std::vector<detail::Problem> out;
+  const TetMesh base = test::boxMesh(7, 3, 2, 0.1, 0.08, 0.06);
+  for (std::size_t i = 0; i < count; ++i) {
+    TetMesh mesh = base;
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.4 * static_cast<double>(i), Eigen::Vector3d(1, -1, 2).normalized()).toRotationMatrix();
+    const double stretch = 1.0 + 0.07 * static_cast<double>(i % 5);
+    for (std::size_t n = 0; n < mesh.nodeCount(); ++n) {
+      Eigen::Vector3d X(mesh.nodes[3 * n] * stretch, mesh.nodes[3 * n + 1], mesh.nodes[3 * n + 2]);
+      X = R * X + Eigen::Vector3d(0.5 * static_cast<double>(i), 0.0, 0.0);
+      for (int k = 0; k < 3; ++k) mesh.nodes[3 * n + k] = X[k];
+    }
+    detail::Problem p = test::makeProblem(mesh, 1e5 * (1.0 + static_cast<double>(i)), 0.2 + 0.02 * static_cast<double>(i % 11),
+                                          800.0 + 50.0 * static_cast<double>(i),
+                                          i % 4 == 3 ? Formulation::Linear : Formulation::Corotational);
+    p.name = "copy" + std::to_string(i);
+    p.rayleighMass = i % 3 == 0 ? 0.1 * static_cast<double>(i) : 0.0;
+    p.rayleighStiffness = i % 5 == 1 ? 0.01 : 0.0;
+    if (i != 2)
+      for (std::size_t n = 0; n < base.nodeCount(); ++n)
+        if (base.nodes[3 * n] < 1e-9)
+          for (int k = 0; k < (i % 3 == 1 ? 1 : 3); ++k) p.constrained[3 * n + k] = 1;
+    out.push_back(std::move(p));
+    if (i == 4) {
+      detail::Problem other = test::makeProblem(test::boxMesh(5, 3, 2, 0.2, 0.3, 0.1), 3e6, 0.3, 500.0);
+      other.name = "slab";
+      out.push_back(std::move(other));
+    }
+  }
+  return out;
+}
+
 /// Rotated, bent positions (a different rotation per body).
 Eigen::VectorXd deformed(const detail::Problem& p, double angle) {
   Eigen::VectorXd x = p.restPositions;
@@ -510,6 +548,76 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
         else EXPECT_TRUE(solveA[i].stats.converged);
       }
       if (cap < 2000) EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
+    }
+  }
+}
+
+TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
+  // pcg_iterate_pack (bodies of one mesh in the vector lanes of one work-item) against
+  // pcg_iterate_group (a work-group per body) on 11 copies of one mesh and a body of another: a
+  // full pack of 8 and one of 3, the other body in its own work-group. The same x, iteration
+  // counts and residuals, bit for bit, whether the bodies converge (each at its own iteration:
+  // their lanes then stand still while the others go on), stop at a cap of 1, 2 or 7 iterations,
+  // start cold or warm; with no, diagonal and block preconditioners, in mixed precision too; in two
+  // rounds on one batch (the second packs the bodies by their first round's iterations), the second
+  // with some bodies only.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
+  const std::vector<detail::Problem> ps = instances(11);
+  const std::size_t K = ps.size();
+  detail::OpenCLOptions packed, grouped;
+  packed.groupPcg = grouped.groupPcg = 1;
+  packed.teamPcg = grouped.teamPcg = 0;
+  packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;  // every round one-launch
+  packed.packPcg = 1;
+  grouped.packPcg = 0;
+  const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
+  std::vector<Precision> precisions = {GetParam().precision};
+  if (isDouble()) precisions.push_back(Precision::Mixed);
+  for (Precision precision : precisions)
+  for (PreconditionerKind preconditioner :
+       {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
+  for (int cap : {1, 2, 7, 2000}) {
+    SolverDesc s = solver();
+    s.precision = precision;
+    s.preconditioner = preconditioner;
+    s.maxIterations = cap;
+    auto a = batchOf(ps, s, packed), b = batchOf(ps, s, grouped);
+    for (int round = 0; round < 2; ++round) {
+      std::vector<std::size_t> who;
+      for (std::size_t i = 0; i < K; ++i)
+        if (round == 0 || i % 4 != 1) who.push_back(i);
+      std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
+      std::vector<BatchRequest> setA, setB, solveA, solveB;
+      for (std::size_t i : who) {
+        x[i] = deformed(ps[i], 0.2 + 0.3 * static_cast<double>(i) + 0.1 * round);
+        rhs[i] = randomVector(ps[i].dofCount(), 900 + 20 * static_cast<unsigned>(round) + static_cast<unsigned>(i));
+        xa[i] = xb[i] = (i + round) % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
+        setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
+        setB.push_back(request(BatchOp::SetPositions, i, &x[i]));
+      }
+      runOk(*a, setA);
+      runOk(*b, setB);
+      for (std::size_t i : who) {
+        solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[(i + round) % 2]));
+        solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[(i + round) % 2]));
+      }
+      const unsigned long long packsBefore = detail::packPcgLaunchCount();
+      runOk(*a, solveA);
+      if (cap > 1) EXPECT_EQ(detail::packPcgLaunchCount(), packsBefore + 1) << "the packs' iterations in one launch";
+      const unsigned long long noPacks = detail::packPcgLaunchCount();
+      runOk(*b, solveB);
+      EXPECT_EQ(detail::packPcgLaunchCount(), noPacks) << "packPcg = 0 took the packs";
+      for (std::size_t j = 0; j < who.size(); ++j) {
+        const std::size_t i = who[j];
+        SCOPED_TRACE(ps[i].name + ", round " + std::to_string(round) + ", cap " + std::to_string(cap) + ", " +
+                     toString(precision) + ", preconditioner " + std::to_string(static_cast<int>(preconditioner)));
+        EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
+        EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
+        EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
+        EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+        if (cap == 2000) EXPECT_TRUE(solveA[j].stats.converged);
+      }
     }
   }
 }

@@ -66,6 +66,16 @@ struct OpenCLOptions {
   /// body, whatever the rule says (more than the device's cores, too: the groups then run in turns
   /// and the first does the work); 0 = by the rule.
   std::size_t teamPcgSize = 0;
+  /// In a solve round that runs pcg_iterate_group, the iterations of bodies that share one mesh
+  /// (the same element corners and node count; material, rest shape, mass, constraints and solve
+  /// each their own) in packs of 8, a body per vector lane of one work-item (pcg_iterate_pack: the
+  /// same bits as pcg_iterate_group, every load a whole vector instead of a gather). 1: on; 0:
+  /// never; -1 (default): on where pcg_iterate_group runs (CPU devices).
+  /// COROFEM_OPENCL_PACK_PCG=0/1 sets it when -1.
+  int packPcg = -1;
+  /// The fewest bodies of a pack (a pack costs its 8 lanes whatever it holds); 0 = the default, 3.
+  /// COROFEM_OPENCL_PACK_PCG_MIN sets it when 0.
+  std::size_t packPcgMinLanes = 0;
   /// Tests: the epoch pcg_iterate_team's claims start from (the wrap of the 32-bit epochs, which
   /// otherwise comes after about 10^9 phases); 0 = the default.
   unsigned teamEpochStart = 0;

@@ -43,6 +43,7 @@ using cl::checkCl;
 using namespace layout;
 
 constexpr std::size_t kDefaultWorkGroup = 64;
+static_assert(kPackLanes == 8, "pcg_pack.cl's PACK_L and its vector types are 8 lanes");
 
 std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
 
@@ -194,10 +195,12 @@ void ClKernel::create(cl_program program, const char* name, const std::string& d
 namespace {
 std::atomic<unsigned long long> groupPcgLaunches{0};
 std::atomic<unsigned long long> teamPcgLaunches{0};
+std::atomic<unsigned long long> packPcgLaunches{0};
 }  // namespace
 
 unsigned long long groupPcgLaunchCount() { return groupPcgLaunches.load(); }
 unsigned long long teamPcgLaunchCount() { return teamPcgLaunches.load(); }
+unsigned long long packPcgLaunchCount() { return packPcgLaunches.load(); }
 
 std::size_t defaultTileBytes(std::size_t cacheBytes) {
   // Measured with bench_batch (100 bodies of 2,000 elements, float, PoCL on 2 cores):
@@ -317,6 +320,15 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
                                                 : kTeamPcgMaxElementsPerCore * ctx_->info().computeUnits;
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MAX"); env && *env && !options.teamPcgMaxElements)
     teamPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
+  // Packs of bodies with one mesh (pcg_pack.cl): wherever pcg_iterate_group runs.
+  packs_ = options.packPcg >= 0 ? options.packPcg != 0 : true;
+  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env && options.packPcg < 0)
+    packs_ = std::string(env) != "0";  // tuning experiments
+  packs_ = packs_ && groupPcg_ && !treeReduce_;
+  packMinLanes_ = options.packPcgMinLanes ? options.packPcgMinLanes : kPackMinLanes;
+  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG_MIN"); env && *env && !options.packPcgMinLanes)
+    packMinLanes_ = std::strtoul(env, nullptr, 10);  // tuning experiments
+  packMinLanes_ = std::clamp<std::size_t>(packMinLanes_, 1, kPackLanes);
   if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
     tileBytes_ = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));  // tuning experiments (0: one tile)
 
@@ -384,6 +396,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
          ": ", stride_, " (padded) elements exceed the OpenCL backend's 32-bit element indexing; split the "
          "body or batch fewer bodies per device");
 
+  findPackMeshes();
   build(solver, options);
   allocate(options);
   setAllActive();
@@ -478,6 +491,11 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   if (fusedReduce_) kGatherProductFinish_.create(build_.program, "gather_product_finish", dev_);
   if (groupPcg_) kPcgIterateGroup_.create(build_.program, "pcg_iterate_group", dev_);
   if (teamPcg_) kPcgIterateTeam_.create(build_.program, "pcg_iterate_team", dev_);
+  if (packs_) {
+    kPcgIteratePack_.create(build_.program, "pcg_iterate_pack", dev_);
+    kPackIn_.create(build_.program, "pack_in", dev_);
+    kPackOut_.create(build_.program, "pack_out", dev_);
+  }
 }
 
 void SegmentEngine::allocate(const OpenCLOptions& options) {
@@ -655,6 +673,87 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     counters_.create(c, K * sizeof(cl_uint), dev_);
     uploadRaw(counters_, std::vector<cl_uint>(K, 0u));
   }
+  lastIterations_.assign(K, 0);
+  if (packs_) {
+    // The pack meshes' corners (the pack's own node numbers) and gather lists (start absolute into
+    // the entries, an entry = 12 e + 3 c), built as the bodies' own above: the same order.
+    std::vector<cl_uint> corners, start, entries;
+    for (PackMesh& m : packMeshes_) {
+      const Problem& p = *segs_[m.bodies.front()].problem;
+      const std::size_t E = p.mesh.tetCount(), N = p.mesh.nodeCount();
+      m.corners = corners.size();
+      m.start = start.size();
+      for (std::size_t e = 0; e < 4 * E; ++e) corners.push_back(static_cast<cl_uint>(p.mesh.tets[e]));
+      std::vector<cl_uint> count(N + 1, 0);
+      for (std::size_t e = 0; e < 4 * E; ++e) ++count[p.mesh.tets[e] + 1];
+      for (std::size_t n = 0; n < N; ++n) count[n + 1] += count[n];
+      const std::size_t entryBase = entries.size();
+      for (std::size_t n = 0; n <= N; ++n) start.push_back(static_cast<cl_uint>(entryBase + count[n]));
+      entries.resize(entryBase + 4 * E);
+      for (std::size_t e = 0; e < E; ++e)
+        for (std::size_t k = 0; k < 4; ++k) entries[entryBase + count[p.mesh.tets[4 * e + k]]++] = static_cast<cl_uint>(12 * e + 3 * k);
+    }
+    std::size_t elemRows = 0, partialRows = 0;
+    for (const PackSlotPlace& slot : packSlots_) {
+      const PackMesh& m = packMeshes_[slot.mesh];
+      elemRows = std::max(elemRows, slot.elemBase + segs_[m.bodies.front()].elems);
+      partialRows = std::max(partialRows, slot.partialBase + segs_[m.bodies.front()].partialCount);
+    }
+    const std::size_t L = kPackLanes, inverse = precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3;
+    packInfo_.create(c, kPackInfoCount * packSlots_.size() * sizeof(cl_uint), dev_);
+    packCorners_.create(c, corners.size() * sizeof(cl_uint), dev_);
+    uploadRaw(packCorners_, corners);
+    packStart_.create(c, start.size() * sizeof(cl_uint), dev_);
+    uploadRaw(packStart_, start);
+    packEntries_.create(c, entries.size() * sizeof(cl_uint), dev_);
+    uploadRaw(packEntries_, entries);
+    createReal(packElem_, elemRows * kPackElemRows * L);
+    createReal(packOut_, elemRows * kElemOutComponents * L);
+    createReal(packVec_, kPackVectors * 3 * packNodeRows_ * L);
+    createReal(packFree_, 3 * packNodeRows_ * L);
+    if (hasMass_) createReal(packMass_, 3 * packNodeRows_ * L);
+    if (precond_ != PreconditionerKind::None) createReal(packMinv_, inverse * packNodeRows_ * L);
+    packPartials_.create(c, kPartialComponents * partialRows * L * sumSize_, dev_);
+  }
+}
+
+void SegmentEngine::findPackMeshes() {
+  packMeshes_.clear();
+  packSlots_.clear();
+  packNodeRows_ = 0;
+  if (!packs_) return;
+  // Bodies with the same corners and node count (in the device's numbering, which a mesh and its
+  // copies share), each mesh's bodies in segment order.
+  std::map<std::pair<std::size_t, std::size_t>, std::vector<std::size_t>> bySize;
+  for (std::size_t s = 0; s < segs_.size(); ++s) bySize[{segs_[s].nodes, segs_[s].elems}].push_back(s);
+  for (const auto& [size, bodies] : bySize) {
+    std::vector<std::vector<std::size_t>> meshes;
+    for (std::size_t s : bodies) {
+      auto same = std::find_if(meshes.begin(), meshes.end(), [&](const std::vector<std::size_t>& m) {
+        return segs_[m.front()].problem->mesh.tets == segs_[s].problem->mesh.tets;
+      });
+      if (same == meshes.end()) meshes.push_back({s});
+      else same->push_back(s);
+    }
+    for (std::vector<std::size_t>& m : meshes)
+      if (m.size() >= packMinLanes_) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0, 0});
+  }
+  std::sort(packMeshes_.begin(), packMeshes_.end(),
+            [](const PackMesh& a, const PackMesh& b) { return a.bodies.front() < b.bodies.front(); });
+  std::size_t elemRows = 0, partialRows = 0;
+  for (std::size_t i = 0; i < packMeshes_.size(); ++i) {
+    PackMesh& m = packMeshes_[i];
+    const Segment& first = segs_[m.bodies.front()];
+    m.firstSlot = packSlots_.size();
+    m.slots = (m.bodies.size() + kPackLanes - 1) / kPackLanes;
+    for (std::size_t k = 0; k < m.slots; ++k) {
+      packSlots_.push_back({i, elemRows, packNodeRows_, partialRows});
+      elemRows += first.elems;
+      packNodeRows_ += first.nodes;
+      partialRows += first.partialCount;
+    }
+  }
+  if (packSlots_.empty()) packs_ = false;
 }
 
 std::vector<DeviceBuffer> SegmentEngine::buffers() const {
@@ -673,7 +772,13 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"pcg_p", &p_},                       {"pcg_w", &q_},
       {"pcg_s", &s_},                       {"partial_sums", &partials_},
       {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_},
-      {"reduce_counters", &counters_},      {"pcg_team_counters", &teamState_}};
+      {"reduce_counters", &counters_},      {"pcg_team_counters", &teamState_},
+      {"pack_table", &packInfo_},           {"pack_corners", &packCorners_},
+      {"pack_gather_starts", &packStart_},  {"pack_gather_entries", &packEntries_},
+      {"pack_element_rows", &packElem_},    {"pack_element_output", &packOut_},
+      {"pack_pcg_vectors", &packVec_},      {"pack_free_mask", &packFree_},
+      {"pack_lumped_mass", &packMass_},     {"pack_preconditioner_inverse", &packMinv_},
+      {"pack_partial_sums", &packPartials_}};
   std::vector<DeviceBuffer> out;
   for (const auto& [name, buffer] : all)
     if (buffer->get()) out.push_back({name, buffer->bytes()});
@@ -732,8 +837,12 @@ void SegmentEngine::enqueue(const ClKernel& kernel, Span span) {
   // kernels derive their work-group from the global id); inactive segments inside the span
   // return at once.
   const auto [offset, global] = spanItems(span, activeLo_, activeHi_);
+  enqueueRange(kernel, offset, global, wg_);
+}
+
+void SegmentEngine::enqueueRange(const ClKernel& kernel, std::size_t offset, std::size_t global, std::size_t local) {
   cl_event event = nullptr;
-  const cl_int status = clEnqueueNDRangeKernel(ctx_->queue(), kernel.get(), 1, &offset, &global, &wg_, 0,
+  const cl_int status = clEnqueueNDRangeKernel(ctx_->queue(), kernel.get(), 1, &offset, &global, &local, 0,
                                                nullptr, profile_ ? &event : nullptr);
   if (event) {
     profileEvents_.emplace_back(kernel.name(), event);
@@ -749,15 +858,15 @@ void SegmentEngine::setActive(const std::vector<char>& active) {
   activeLo_ = segs_.size();
   activeHi_ = 0;
   for (std::size_t s = 0; s < segs_.size(); ++s) {
-    const bool on = active[s] != 0;
-    if (on) {
+    const char flag = active[s] == 0 ? 0 : active[s] == char(kSegRunningPacked) ? char(kSegRunningPacked) : char(kSegRunning);
+    if (flag != 0) {
       activeLo_ = std::min(activeLo_, s);
       activeHi_ = s + 1;
     }
-    if (on != (active_[s] != 0)) {
+    if (flag != active_[s]) {
       changed = true;
-      active_[s] = on;
-      segInfo_[kSegInfoCount * s + kSegActive] = on ? 1 : 0;
+      active_[s] = flag;
+      segInfo_[kSegInfoCount * s + kSegActive] = static_cast<cl_uint>(flag);
     }
   }
   if (changed || segInfoStale_) uploadRaw(segInfoBuf_, segInfo_);
@@ -969,6 +1078,55 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   // measured on 2 cores: 10k + 10k elements 4.8 ms one-launch against 7.0 launched, 35k + 35k 20.6
   // against 18.7, 94k + 384 72 against 25.
   return requests.size() >= groupPcgMinBodies_ && largest <= groupPcgMaxElems_ && largest * cores <= 2 * total ? 1 : 0;
+}
+
+std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& requests, std::vector<char>& packed) const {
+  std::vector<char> in(segs_.size(), 0);
+  for (const BatchRequest* r : requests) in[r->body] = 1;
+  struct Pack {
+    std::size_t slot, cost;
+    std::vector<std::size_t> lanes;
+  };
+  std::vector<Pack> packs;
+  for (const PackMesh& m : packMeshes_) {
+    std::vector<std::size_t> bodies;
+    for (std::size_t s : m.bodies)
+      if (in[s]) bodies.push_back(s);
+    // Bodies that took as many iterations last time share a pack: a pack iterates until its
+    // last lane stops.
+    std::stable_sort(bodies.begin(), bodies.end(),
+                     [&](std::size_t a, std::size_t b) { return lastIterations_[a] > lastIterations_[b]; });
+    for (std::size_t k = 0; k < m.slots && k * kPackLanes < bodies.size(); ++k) {
+      const std::size_t n = std::min<std::size_t>(kPackLanes, bodies.size() - k * kPackLanes);
+      if (n < packMinLanes_) break;
+      const std::size_t first = bodies[k * kPackLanes];
+      packs.push_back({m.firstSlot + k, segs_[first].elems * static_cast<std::size_t>(std::max(1, lastIterations_[first])),
+                       std::vector<std::size_t>(bodies.begin() + k * kPackLanes, bodies.begin() + k * kPackLanes + n)});
+    }
+  }
+  // The costliest first: the device's threads take the work-groups in order.
+  std::stable_sort(packs.begin(), packs.end(), [](const Pack& a, const Pack& b) { return a.cost > b.cost; });
+  std::vector<cl_uint> table;
+  for (const Pack& pack : packs) {
+    const PackSlotPlace& place = packSlots_[pack.slot];
+    const PackMesh& m = packMeshes_[place.mesh];
+    const Segment& sg = segs_[m.bodies.front()];
+    cl_uint row[kPackInfoCount] = {};
+    row[kPackElems] = static_cast<cl_uint>(sg.elems);
+    row[kPackNodes] = static_cast<cl_uint>(sg.nodes);
+    row[kPackPartialCount] = static_cast<cl_uint>(sg.partialCount);
+    row[kPackCorners] = static_cast<cl_uint>(m.corners);
+    row[kPackStart] = static_cast<cl_uint>(m.start);
+    row[kPackElemBase] = static_cast<cl_uint>(place.elemBase);
+    row[kPackNodeBase] = static_cast<cl_uint>(place.nodeBase);
+    row[kPackPartialBase] = static_cast<cl_uint>(place.partialBase);
+    for (std::size_t l = 0; l < pack.lanes.size(); ++l) {
+      row[kPackLane0 + l] = static_cast<cl_uint>(pack.lanes[l] + 1);
+      packed[pack.lanes[l]] = 1;
+    }
+    table.insert(table.end(), row, row + kPackInfoCount);
+  }
+  return table;
 }
 
 std::vector<cl_uint> SegmentEngine::teamStateAtRest() const {
@@ -1305,6 +1463,16 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   const auto [lo, hi] = dofRange(running);
   std::vector<char> active(segs_.size(), 0);
   for (const Running& run : runs) active[run.request->body] = 1;
+  // How the iterations run (groupTeam); in a round of one work-group per body, the bodies of packs
+  // (packRound) are flagged for pcg_iterate_pack, which pcg_iterate_group leaves alone.
+  const std::size_t team = groupTeam(running);
+  std::vector<char> packed(segs_.size(), 0);
+  const std::vector<cl_uint> packTable = team == 1 && packs_ ? packRound(running, packed) : std::vector<cl_uint>{};
+  bool unpacked = false;
+  for (const Running& run : runs) {
+    if (packed[run.request->body]) active[run.request->body] = char(kSegRunningPacked);
+    else unpacked = true;
+  }
   setActive(active);
   bStage_.write(b_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
   // x in one pass: packed (constrained and non-finite entries zero) into its stage, compared bit
@@ -1421,7 +1589,6 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
       }
   };
   int enqueued = 0;
-  const std::size_t team = groupTeam(running);
   auto enqueueChunk = [&]() {
     if (team > 0) {  // every iteration but the cap's last in one launch, a work-group (team) per body; then the last
       const cl_uint iterations = cl_uint(maxIterations - enqueued - 1);
@@ -1435,15 +1602,30 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           teamEpoch_ = 0;
         }
         teamSize_ = team;
-        launch(teamed ? kPcgIterateTeam_ : kPcgIterateGroup_, Span::Teams, cl_uint(stride_), cl_uint(team), teamEpoch_,
-               teamState_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), nodeStart_, nodeEntries_,
-               elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_, partials_, partialsW_, scalars_, iterations,
-               tol2);
-        if (teamed) {
-          teamEpoch_ += 4 * iterations;
-          ++teamPcgLaunches;
-        } else {
-          ++groupPcgLaunches;
+        if (unpacked) {
+          launch(teamed ? kPcgIterateTeam_ : kPcgIterateGroup_, Span::Teams, cl_uint(stride_), cl_uint(team),
+                 teamEpoch_, teamState_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), nodeStart_,
+                 nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_, partials_, partialsW_, scalars_,
+                 iterations, tol2);
+          if (teamed) {
+            teamEpoch_ += 4 * iterations;
+            ++teamPcgLaunches;
+          } else {
+            ++groupPcgLaunches;
+          }
+        }
+        if (!packTable.empty()) {  // the packs' bodies: their vectors in, the iterations, the vectors out
+          uploadRaw(packInfo_, packTable);
+          const std::size_t slots = packTable.size() / kPackInfoCount;
+          const cl_uint rows = cl_uint(3 * packNodeRows_);  // dof rows of each of packVec_'s vectors
+          launchGroups(kPackIn_, slots, wg_, packInfo_, segInfoBuf_, cl_uint(stride_), rotatedGradients(), geom_, x_,
+                       r_, z_, p_, s_, q_, minv_, mass_, free_, packElem_, packVec_, packMinv_, packMass_, packFree_,
+                       rows);
+          launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packStart_,
+                       packEntries_, packElem_, packOut_, packVec_, packFree_, packMass_, packMinv_, packPartials_,
+                       scalars_, rows, iterations, tol2);
+          launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);
+          ++packPcgLaunches;
         }
       }
       pcgIteration(true);
@@ -1507,8 +1689,10 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   // bytes stay alive until the blocking read of x below has drained the queue.
   std::deque<Read> dropped = std::move(reads);
   reads.clear();
-  for (Running& run : runs)
+  for (Running& run : runs) {
     if (run.iterating) run.request->stats.iterations = maxIterations;  // capped
+    lastIterations_[run.request->body] = run.request->stats.iterations;
+  }
 
   // The true residual (queued above when the iteration cap was reached, else now). The convergence
   // decision above stays the recurrence's (the standard PCG stop test).

@@ -17,7 +17,9 @@
 //   Solve           writes of b and x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); PCG iterations
 //                   for all active segments (4 launches each, 3 with fusedReduce_ on GPUs;
 //                   kernels/opencl/pcg.cl; on CPUs all but the cap's last in one launch,
-//                   pcg_iterate_group, for rounds of small bodies or of many: groupRound), the device
+//                   pcg_iterate_group, for rounds of small bodies or of many: groupRound; bodies
+//                   with the same mesh in packs of kPackLanes, a body per vector lane:
+//                   pcg_iterate_pack between pack_in and pack_out), the device
 //                   stopping each segment at convergence, breakdown or a non-finite residual;
 //                   after every checkEvery iterations a non-blocking read of all segments'
 //                   scalars, waited for one chunk later; the true residual per segment; one read of x
@@ -121,6 +123,8 @@ std::size_t defaultTileBytes(std::size_t cacheBytes);
 unsigned long long groupPcgLaunchCount();
 /// Launches of pcg_iterate_team (one-launch PCG iterations, several work-groups per body) so far.
 unsigned long long teamPcgLaunchCount();
+/// Launches of pcg_iterate_pack (one-launch PCG iterations, bodies of one mesh in vector lanes) so far.
+unsigned long long packPcgLaunchCount();
 
 class SegmentEngine {
  public:
@@ -214,11 +218,21 @@ class SegmentEngine {
     enqueue(kernel, span);
   }
   void enqueue(const ClKernel& kernel, Span span);
+  /// `groups` work-groups of `local` work-items from global id 0 (the pack kernels: a work-group per
+  /// pack slot in use).
+  template <class... Args>
+  void launchGroups(const ClKernel& kernel, std::size_t groups, std::size_t local, const Args&... args) {
+    cl_uint index = 0;
+    (setArg(kernel, index++, args), ...);
+    enqueueRange(kernel, 0, groups * local, local);
+  }
+  void enqueueRange(const ClKernel& kernel, std::size_t offset, std::size_t global, std::size_t local);
   /// First work-item and count of `span` over the segments [lo, hi).
   std::pair<std::size_t, std::size_t> spanItems(Span span, std::size_t lo, std::size_t hi) const;
 
   // -- segment state
-  /// Marks exactly the segments with active[s] != 0 active (one small write when it changed).
+  /// Marks exactly the segments with active[s] != 0 active (one small write when it changed), with
+  /// the flag active[s] (kSegRunning, or kSegRunningPacked for the bodies of pcg_iterate_pack).
   void setActive(const std::vector<char>& active);
   void setAllActive() { setActive(std::vector<char>(segs_.size(), 1)); }
   /// The coefficients of A = m M + c C + k K^R for segment s, Rayleigh terms folded in.
@@ -268,6 +282,9 @@ class SegmentEngine {
   /// The largest iteration cap for pcg_iterate_team (4 epochs per iteration must fit a launch into
   /// the claims' 32 bits with room to spare; a review hung a team with a cap of 2^30 + 1).
   static constexpr int kTeamMaxIterations = 1 << 24;
+  /// The fewest bodies of a pack (OpenCLOptions::packPcgMinLanes' default): a pack costs its
+  /// kPackLanes lanes whatever it holds (segment_engine.cpp, findPackMeshes, says what was measured).
+  static constexpr std::size_t kPackMinLanes = 3;
   std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
@@ -378,6 +395,34 @@ class SegmentEngine {
   /// would leave cores idle (teamPcg_, none larger than teamPcgMaxElems_).
   std::size_t groupTeam(const std::vector<BatchRequest*>& requests) const;
   bool groupRound(const std::vector<BatchRequest*>& requests) const { return groupTeam(requests) > 0; }
+
+  // -- packs (pcg_pack.cl): the iterations of up to kPackLanes bodies with the same mesh (corners
+  // and node count) in one work-item, a body per vector lane, on CPU devices in rounds that take
+  // pcg_iterate_group. Each mesh shared by at least packMinLanes_ bodies (a *pack mesh*) gets its
+  // corners and gather lists once and ceil(bodies / kPackLanes) slots of lane-interleaved rows.
+  struct PackMesh {
+    std::vector<std::size_t> bodies;      ///< its segments
+    std::size_t corners = 0, start = 0;   ///< its first entries in packCorners_ and packStart_
+    std::size_t firstSlot = 0;            ///< its slots: [firstSlot, firstSlot + slots)
+    std::size_t slots = 0;
+  };
+  struct PackSlotPlace {
+    std::size_t mesh = 0;                 ///< the pack mesh whose bodies it takes
+    std::size_t elemBase = 0, nodeBase = 0, partialBase = 0;
+  };
+  /// Finds the pack meshes (segs_ made); sets packs_ = false where there are none.
+  void findPackMeshes();
+  /// The packs of a solve round that takes pcg_iterate_group: the rows of packInfo_ (kPackInfoCount
+  /// each, the costliest first), with packed[s] = 1 for the bodies they take. Bodies of a pack mesh
+  /// are packed in the order of their last solve's iterations (bodies that stop together share a
+  /// pack), kPackLanes at a time; a remainder of fewer than packMinLanes_ bodies is not packed.
+  std::vector<cl_uint> packRound(const std::vector<BatchRequest*>& requests, std::vector<char>& packed) const;
+  bool packs_ = false;                   ///< pcg_iterate_pack for the pack meshes' bodies
+  std::size_t packMinLanes_ = 0;         ///< the fewest bodies of a pack
+  std::vector<PackMesh> packMeshes_;
+  std::vector<PackSlotPlace> packSlots_;
+  std::size_t packNodeRows_ = 0;         ///< node rows of all slots (each vector of packVec_)
+  std::vector<int> lastIterations_;      ///< per segment: iterations of its last solve
   std::vector<Segment> segs_;
   std::size_t stride_ = 0;               ///< S: all segments' padded elements
   std::size_t nodeTotal_ = 0;            ///< all segments' padded nodes
@@ -423,7 +468,7 @@ class SegmentEngine {
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
       kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_, kPcgIterateGroup_,
-      kPcgIterateTeam_;
+      kPcgIterateTeam_, kPcgIteratePack_, kPackIn_, kPackOut_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
   ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
@@ -431,6 +476,11 @@ class SegmentEngine {
   ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
   ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's state, kTeamStride per segment, then claim words
   ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
+  // packs_ (corofem_layout.h, "packs of bodies"): the slots' table of the round, the pack meshes'
+  // corners and gather lists, the slots' element rows (a_i, volume), element outputs, PCG vectors
+  // (x r u p s w), free masks, masses, M^-1 and partial sums.
+  ClBuffer packInfo_, packCorners_, packStart_, packEntries_, packElem_, packOut_, packVec_, packFree_, packMass_,
+      packMinv_, packPartials_;
 };
 
 }  // namespace corofem::detail

@@ -1,0 +1,389 @@
+/* The PCG iterations of pcg_iterate_group for packs of bodies with the same mesh, body l of a pack
+ * in vector lane l (CPU devices: per-work-item partial sums, no COROFEM_TREE_REDUCE).
+ *
+ * pcg_iterate_group runs a body's element product on COROFEM_VEC elements per vector: every corner
+ * of every element is a gather of VEC node values, and the gather to the nodes adds scalars. Where
+ * several bodies share a mesh (a scene's copies of one object, each with its own material, rest
+ * shape, mass, constraints and solve), element e of kPackLanes of them sits in one vector instead:
+ * its corner nodes are one scalar index for all lanes, every load and store is a contiguous vector
+ * (corofem_layout.h, "packs of bodies"), and the gather to the nodes adds whole vectors. One
+ * work-item runs a pack's iterations until every lane has stopped or the launch's iterations are
+ * done; the host copies the bodies' vectors in (pack_in) and out (pack_out) around it.
+ *
+ * Same bits as pcg_iterate_group, lane by lane: each lane does the arithmetic of its body's work-
+ * items in their order, written as the same expressions of element_force.cl, gather.cl and pcg.cl
+ * (so that the compiler contracts the same products into fused multiply-adds), with the update's
+ * partial sums in the order of pcg_update_nodes (the 4-wide vector branch's order for a whole chunk
+ * where pcg_update_nodes takes it), the partials summed as segment_sums sums them (strided, then a
+ * tree of COROFEM_WG), and the scalars by update_scalars itself. A lane that has stopped keeps its
+ * vectors (the stores select the old value), as a stopped body's work-group does nothing.
+ * tests/opencl/test_opencl_batch.cpp compares the two bit for bit.
+ *
+ * No `restrict`, as in pcg_group.cl. */
+#ifndef COROFEM_EMBEDDED
+#include "../shared/corofem_layout.h"
+#include "../shared/corofem_reduce.h"
+#include "../shared/corofem_vector.h"
+#include "element_force.cl"
+#include "gather.cl"
+#include "pcg.cl"
+#endif
+
+#ifndef COROFEM_TREE_REDUCE
+#define PACK_L 8 /* kPackLanes (the host checks that they agree) */
+#ifdef COROFEM_DOUBLE
+typedef double8 realp;
+typedef long8 maskp;
+#else
+typedef float8 realp;
+typedef int8 maskp;
+#endif
+#if defined(COROFEM_MIXED) && !defined(COROFEM_DOUBLE)
+typedef double8 sump;
+typedef long8 summaskp;
+#define TO_SUMP(v) convert_double8(v)
+#define TO_SUMMASK(m) convert_long8(m)
+#else
+typedef realp sump;
+typedef maskp summaskp;
+#define TO_SUMP(v) (v)
+#define TO_SUMMASK(m) (m)
+#endif
+#define LDP(ptr) vload8(0, (ptr))
+#define STP(value, ptr) vstore8((value), 0, (ptr))
+/* Row r of a lane-interleaved array. */
+#define ROW(base, r) ((base) + (size_t)(r) * PACK_L)
+
+/* A pack slot's extent (packInfo) and its lanes' segments (-1: no body). */
+typedef struct {
+  uint elems, nodes, partialCount, corners, start, elemBase, nodeBase, partialBase;
+  int seg[PACK_L];
+} PackSlot;
+
+COROFEM_FN PackSlot pack_slot(__global const uint* packInfo, uint slot) {
+  __global const uint* info = packInfo + kPackInfoCount * slot;
+  PackSlot p;
+  p.elems = info[kPackElems];
+  p.nodes = info[kPackNodes];
+  p.partialCount = info[kPackPartialCount];
+  p.corners = info[kPackCorners];
+  p.start = info[kPackStart];
+  p.elemBase = info[kPackElemBase];
+  p.nodeBase = info[kPackNodeBase];
+  p.partialBase = info[kPackPartialBase];
+  for (int l = 0; l < PACK_L; ++l) p.seg[l] = (int)info[kPackLane0 + l] - 1;
+  return p;
+}
+
+/* Lane l = segment coefficient k of lane l's body (0 for an empty lane). */
+COROFEM_FN realp lane_coef(const PackSlot* p, __global const real* segCoef, uint k) {
+  real v[PACK_L];
+  for (int l = 0; l < PACK_L; ++l) v[l] = p->seg[l] >= 0 ? seg_coef(segCoef, (uint)p->seg[l], k) : (real)0;
+  return LDP(v);
+}
+
+/* Lane l = (real) scalar k of lane l's body. */
+COROFEM_FN realp lane_scalar(const PackSlot* p, __global const sum_real* allScalars, uint k) {
+  real v[PACK_L];
+  for (int l = 0; l < PACK_L; ++l)
+    v[l] = p->seg[l] >= 0 ? (real)allScalars[kScalarCount * (uint)p->seg[l] + k] : (real)0;
+  return LDP(v);
+}
+
+/* -1 in the lanes whose body is still iterating (segInfo's flag, which update_scalars clears). */
+COROFEM_FN maskp lane_running(const PackSlot* p, __global const uint* segInfo, int* any) {
+  int v[PACK_L]; /* the mask's lane type: int, or long in double */
+  *any = 0;
+  for (int l = 0; l < PACK_L; ++l) {
+    v[l] = p->seg[l] >= 0 && seg_info(segInfo, (uint)p->seg[l], kSegActive) != 0u ? -1 : 0;
+    *any |= v[l];
+  }
+#ifdef COROFEM_DOUBLE
+  return convert_long8(vload8(0, v));
+#else
+  return vload8(0, v);
+#endif
+}
+
+/* The update of pcg_update_nodes for the nodes [first, last) of a pack, lane by lane; the sums of
+ * r . u and r . r in its order (the 4-wide branch's for a whole chunk where it takes that branch). */
+COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dofRows, realp alpha, realp beta,
+                                  maskp run, __global real* vec, __global const real* minv, sump* sums) {
+  __global real* X = vec;
+  __global real* R = vec + (size_t)dofRows * PACK_L;
+  __global real* U = vec + (size_t)2 * dofRows * PACK_L;
+  __global real* P = vec + (size_t)3 * dofRows * PACK_L;
+  __global real* S = vec + (size_t)4 * dofRows * PACK_L;
+  __global const real* W = vec + (size_t)5 * dofRows * PACK_L;
+  sump acc[4] = {(sump)0, (sump)0, (sump)0, (sump)0}, accR[4] = {(sump)0, (sump)0, (sump)0, (sump)0};
+#if COROFEM_CHUNK == 4 && !defined(COROFEM_PRECOND_BLOCK)
+  const bool four = last == first + 4;
+#else
+  const bool four = false;
+#endif
+  uint t = 0; /* the dof's place in the chunk: the 4-wide branch's lane t % 4 */
+  for (uint n = first; n < last; ++n) {
+    const uint row = 3 * (nodeBase + n);
+    realp rn[3], un[3];
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) {
+      const realp uo = LDP(ROW(U, row + k)), po = LDP(ROW(P, row + k)), wo = LDP(ROW(W, row + k)),
+                  so = LDP(ROW(S, row + k)), xo = LDP(ROW(X, row + k)), ro = LDP(ROW(R, row + k));
+      const realp pd = uo + beta * po, sd = wo + beta * so;
+      STP(select(po, pd, run), ROW(P, row + k));
+      STP(select(so, sd, run), ROW(S, row + k));
+      STP(select(xo, xo + alpha * pd, run), ROW(X, row + k));
+      rn[k] = ro - alpha * sd;
+      STP(select(ro, rn[k], run), ROW(R, row + k));
+    }
+#if defined(COROFEM_PRECOND_BLOCK)
+    realp m[9];
+    #pragma unroll
+    for (int k = 0; k < 9; ++k) m[k] = LDP(ROW(minv, 9 * (nodeBase + n) + k));
+    un[0] = m[0] * rn[0] + m[1] * rn[1] + m[2] * rn[2];
+    un[1] = m[3] * rn[0] + m[4] * rn[1] + m[5] * rn[2];
+    un[2] = m[6] * rn[0] + m[7] * rn[1] + m[8] * rn[2];
+#elif defined(COROFEM_PRECOND_DIAG)
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) un[k] = LDP(ROW(minv, row + k)) * rn[k];
+#else
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) un[k] = rn[k];
+#endif
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) {
+      STP(select(LDP(ROW(U, row + k)), un[k], run), ROW(U, row + k));
+      const uint a = four ? t % 4 : 0;
+      acc[a] += TO_SUMP(rn[k]) * TO_SUMP(un[k]);
+      accR[a] += TO_SUMP(rn[k]) * TO_SUMP(rn[k]);
+      ++t;
+    }
+  }
+  if (four) {
+    sums[0] = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    sums[1] = (accR[0] + accR[1]) + (accR[2] + accR[3]);
+  } else {
+    sums[0] = acc[0];
+    sums[1] = accR[0];
+  }
+}
+
+/* element_product_items for element e of a pack: the same expressions on lanes of bodies. */
+COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, realp mu, uint dofRows,
+                                     __global const uint* corners, __global const real* elem,
+                                     __global const real* vec, __global real* out) {
+  __global const real* U = vec + (size_t)2 * dofRows * PACK_L;
+  __global const uint* c = corners + p->corners + 4 * e;
+  const uint n0 = 3 * (p->nodeBase + c[0]);
+  __global const real* g = ROW(elem, (size_t)(p->elemBase + e) * kPackElemRows);
+  realp a[9];
+  #pragma unroll
+  for (int k = 0; k < 9; ++k) a[k] = LDP(g + k * PACK_L);
+  const realp V = LDP(g + 9 * PACK_L);
+  /* corner_outer_sum */
+  realp v0[3], P[9];
+  #pragma unroll
+  for (int j = 0; j < 3; ++j) v0[j] = LDP(ROW(U, n0 + j));
+  #pragma unroll
+  for (int k = 0; k < 9; ++k) P[k] = (realp)0;
+  #pragma unroll
+  for (int i = 1; i < 4; ++i) {
+    const uint ni = 3 * (p->nodeBase + c[i]);
+    #pragma unroll
+    for (int j = 0; j < 3; ++j) {
+      const realp d = LDP(ROW(U, ni + j)) - v0[j];
+      #pragma unroll
+      for (int k = 0; k < 3; ++k) P[3 * j + k] += d * a[3 * (i - 1) + k];
+    }
+  }
+  /* write_stress_times_gradients with shift 0 */
+  const real shift = (real)0;
+  const realp exx = P[0] - shift, eyy = P[4] - shift, ezz = P[8] - shift;
+  const realp exy = (real)0.5 * (P[1] + P[3]);
+  const realp exz = (real)0.5 * (P[2] + P[6]);
+  const realp eyz = (real)0.5 * (P[5] + P[7]);
+  const realp lt = lambda * (exx + eyy + ezz);
+  const realp m2 = 2 * mu;
+  const realp sxx = V * (lt + m2 * exx), syy = V * (lt + m2 * eyy), szz = V * (lt + m2 * ezz);
+  const realp sxy = V * (m2 * exy), sxz = V * (m2 * exz), syz = V * (m2 * eyz);
+  realp y0x = (realp)0, y0y = (realp)0, y0z = (realp)0;
+  __global real* o = ROW(out, (size_t)(p->elemBase + e) * 12);
+  #pragma unroll
+  for (int i = 0; i < 3; ++i) {
+    const realp ax = a[3 * i], ay = a[3 * i + 1], az = a[3 * i + 2];
+    const realp yx = sxx * ax + sxy * ay + sxz * az;
+    const realp yy = sxy * ax + syy * ay + syz * az;
+    const realp yz = sxz * ax + syz * ay + szz * az;
+    STP(yx, o + (3 * (i + 1)) * PACK_L);
+    STP(yy, o + (3 * (i + 1) + 1) * PACK_L);
+    STP(yz, o + (3 * (i + 1) + 2) * PACK_L);
+    y0x -= yx;
+    y0y -= yy;
+    y0z -= yz;
+  }
+  STP(y0x, o);
+  STP(y0y, o + PACK_L);
+  STP(y0z, o + 2 * PACK_L);
+}
+
+/* gather_product_nodes (projected, no right-hand side) for the nodes [first, last) of a pack:
+ * w = A u and the sum of u . w, lane by lane. */
+COROFEM_FN sump pack_gather_nodes(uint first, uint last, const PackSlot* p, realp massCoef, maskp run, uint dofRows,
+                                  __global const uint* start, __global const uint* entries,
+                                  __global const real* out, __global const real* mass, __global const real* free,
+                                  __global real* vec) {
+  __global const real* U = vec + (size_t)2 * dofRows * PACK_L;
+  __global real* W = vec + (size_t)5 * dofRows * PACK_L;
+  __global const real* o = ROW(out, (size_t)p->elemBase * 12);
+  __global const uint* st = start + p->start;
+  sump dot = (sump)0;
+  for (uint n = first; n < last; ++n) {
+    realp sx = (realp)0, sy = (realp)0, sz = (realp)0;
+    const uint end = st[n + 1];
+    for (uint j = st[n]; j < end; ++j) {
+      __global const real* q = ROW(o, entries[j]);
+      sx += LDP(q);
+      sy += LDP(q + PACK_L);
+      sz += LDP(q + 2 * PACK_L);
+    }
+    const realp acc[3] = {sx, sy, sz};
+    const uint row = 3 * (p->nodeBase + n);
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) {
+      const realp pd = LDP(ROW(U, row + k));
+      /* product_entry with project = 1 */
+      const realp yd0 = (mass ? massCoef * LDP(ROW(mass, row + k)) * pd : (realp)0) + acc[k];
+      const realp yd = yd0 * LDP(ROW(free, row + k));
+      STP(select(LDP(ROW(W, row + k)), yd, run), ROW(W, row + k));
+      dot += TO_SUMP(pd) * TO_SUMP(yd);
+    }
+  }
+  return dot;
+}
+
+/* segment_sums of the pack's partial triples (r . u, r . r, u . w) in place: strided over
+ * COROFEM_WG lanes, then the tree; the sums end in row 0. */
+COROFEM_FN void pack_segment_sums(__global sump* rows, uint count) {
+  /* rows[3 g + c]: component c of partial g */
+  for (uint g0 = 0; g0 < COROFEM_WG; ++g0) {
+    sump a = (sump)0, b = (sump)0, d = (sump)0;
+    for (uint g = g0; g < count; g += COROFEM_WG) {
+      a += rows[3 * g];
+      b += rows[3 * g + 1];
+      d += rows[3 * g + 2];
+    }
+    rows[3 * g0] = a;
+    rows[3 * g0 + 1] = b;
+    rows[3 * g0 + 2] = d;
+  }
+  for (uint s = COROFEM_WG / 2; s > 0; s >>= 1)
+    for (uint i = 0; i < s; ++i) {
+      rows[3 * i] += rows[3 * (i + s)];
+      rows[3 * i + 1] += rows[3 * (i + s) + 1];
+      rows[3 * i + 2] += rows[3 * (i + s) + 2];
+    }
+}
+
+/* `iterations` iterations of kReduceStep for the bodies of each pack slot (one work-item per slot),
+ * the set-up (pcg_init, reduce_finish kReduceInit) done before on the bodies' own vectors and
+ * copied in by pack_in. */
+__kernel __attribute__((reqd_work_group_size(1, 1, 1)))
+void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __global const real* segCoef,
+                      __global const uint* corners, __global const uint* start, __global const uint* entries,
+                      __global const real* elem, __global real* out, __global real* vec, __global const real* free,
+                      __global const real* mass, __global const real* minv, __global sump* partials,
+                      __global sum_real* allScalars, const uint dofRows, const uint iterations,
+                      const sum_real tol2) {
+  const PackSlot p = pack_slot(packInfo, get_global_id(0));
+  const realp lambda = lane_coef(&p, segCoef, kCoefProdLambda), mu = lane_coef(&p, segCoef, kCoefProdMu);
+  const realp massCoef = lane_coef(&p, segCoef, kCoefMass);
+  __global sump* rows = partials + (size_t)3 * p.partialBase;
+  int any = 0;
+  maskp run = lane_running(&p, segInfo, &any);
+  for (uint it = 0; it < iterations && any != 0; ++it) {
+    const realp alpha = lane_scalar(&p, allScalars, kScalarAlpha), beta = lane_scalar(&p, allScalars, kScalarBeta);
+    for (uint v = 0; v < p.partialCount; ++v) {
+      const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p.nodes);
+      sump sums[2];
+      pack_update_nodes(first, max(first, last), p.nodeBase, dofRows, alpha, beta, run, vec, minv, sums);
+      rows[3 * v] = sums[0];
+      rows[3 * v + 1] = sums[1];
+    }
+    for (uint e = 0; e < p.elems; ++e) pack_product_element(e, &p, lambda, mu, dofRows, corners, elem, vec, out);
+    for (uint v = 0; v < p.partialCount; ++v) {
+      const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p.nodes);
+      rows[3 * v + 2] = pack_gather_nodes(first, max(first, last), &p, massCoef, run, dofRows, start, entries, out,
+                                          mass, free, vec);
+    }
+    pack_segment_sums(rows, p.partialCount);
+    sum_real ru[PACK_L], rr[PACK_L], uw[PACK_L];
+    STP(rows[0], ru);
+    STP(rows[1], rr);
+    STP(rows[2], uw);
+    for (int l = 0; l < PACK_L; ++l)
+      if (p.seg[l] >= 0 && seg_info(segInfo, (uint)p.seg[l], kSegActive) != 0u)
+        update_scalars(segInfo, (uint)p.seg[l], allScalars + kScalarCount * (uint)p.seg[l], kReduceStep, tol2, ru[l],
+                       rr[l], (sum_real)0, uw[l]);
+    run = lane_running(&p, segInfo, &any);
+  }
+}
+
+/* The bodies' data into their pack slots (one work-group per slot): a_i and volumes, the PCG
+ * vectors x r u p s w, M^-1, the mass and the free mask; zeros in the lanes of no body. */
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void pack_in(__global const uint* packInfo, __global const uint* segInfo, const uint S,
+             __global const real* rotGrad, __global const real* geom, __global const real* x,
+             __global const real* r, __global const real* u, __global const real* pv, __global const real* s,
+             __global const real* w, __global const real* minv, __global const real* mass,
+             __global const real* free, __global real* elem, __global real* vec, __global real* packMinv,
+             __global real* packMass, __global real* packFree, const uint dofRows) {
+  const PackSlot p = pack_slot(packInfo, get_group_id(0));
+  const uint lid = get_local_id(0);
+  for (uint e = lid; e < p.elems; e += COROFEM_WG) {
+    __global real* g = ROW(elem, (size_t)(p.elemBase + e) * kPackElemRows);
+    for (int l = 0; l < PACK_L; ++l) {
+      const int seg = p.seg[l];
+      const uint ge = seg >= 0 ? seg_info(segInfo, (uint)seg, kSegElemBegin) + e : 0u;
+      for (int k = 0; k < 9; ++k) g[k * PACK_L + l] = seg >= 0 ? rotGrad[k * S + ge] : (real)0;
+      g[9 * PACK_L + l] = seg >= 0 ? geom[kGeomVolume * S + ge] : (real)0;
+    }
+  }
+  __global const real* from[6] = {x, r, u, pv, s, w};
+  for (uint n = lid; n < p.nodes; n += COROFEM_WG)
+    for (int l = 0; l < PACK_L; ++l) {
+      const int seg = p.seg[l];
+      const uint gn = seg >= 0 ? seg_info(segInfo, (uint)seg, kSegNodeBegin) + n : 0u;
+      for (int k = 0; k < 3; ++k) {
+        const size_t at = ((size_t)3 * (p.nodeBase + n) + k) * PACK_L + l;
+        for (int v = 0; v < 6; ++v) vec[(size_t)v * dofRows * PACK_L + at] = seg >= 0 ? from[v][3 * gn + k] : (real)0;
+        packFree[at] = seg >= 0 ? free[3 * gn + k] : (real)0;
+        if (mass) packMass[at] = seg >= 0 ? mass[3 * gn + k] : (real)0;
+      }
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+      for (int k = 0; k < COROFEM_NODE_INVERSE; ++k)
+        packMinv[((size_t)COROFEM_NODE_INVERSE * (p.nodeBase + n) + k) * PACK_L + l] =
+            seg >= 0 ? minv[COROFEM_NODE_INVERSE * gn + k] : (real)0;
+#endif
+    }
+}
+
+/* The PCG vectors x r u p s w of the bodies back from their pack slots. */
+__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
+void pack_out(__global const uint* packInfo, __global const uint* segInfo, __global real* x, __global real* r,
+              __global real* u, __global real* pv, __global real* s, __global real* w, __global const real* vec,
+              const uint dofRows) {
+  const PackSlot p = pack_slot(packInfo, get_group_id(0));
+  const uint lid = get_local_id(0);
+  __global real* to[6] = {x, r, u, pv, s, w};
+  for (uint n = lid; n < p.nodes; n += COROFEM_WG)
+    for (int l = 0; l < PACK_L; ++l) {
+      const int seg = p.seg[l];
+      if (seg < 0) continue;
+      const uint gn = seg_info(segInfo, (uint)seg, kSegNodeBegin) + n;
+      for (int k = 0; k < 3; ++k) {
+        const size_t at = ((size_t)3 * (p.nodeBase + n) + k) * PACK_L + l;
+        for (int v = 0; v < 6; ++v) to[v][3 * gn + k] = vec[(size_t)v * dofRows * PACK_L + at];
+      }
+    }
+}
+#endif /* !COROFEM_TREE_REDUCE */
