@@ -328,8 +328,34 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   }
 }
 
-/* The bodies' data into their pack slots (one work-group per slot): a_i and volumes, the PCG
- * vectors x r u p s w, M^-1, the mass and the free mask; zeros in the lanes of no body. */
+/* The 8 x 8 transpose: lane j of row i to lane i of row j. */
+#define PACK_TR(a, j) \
+  ((realp)((a)[0].s##j, (a)[1].s##j, (a)[2].s##j, (a)[3].s##j, (a)[4].s##j, (a)[5].s##j, (a)[6].s##j, (a)[7].s##j))
+COROFEM_FN void pack_transpose(const realp* a, realp* t) {
+  t[0] = PACK_TR(a, 0);
+  t[1] = PACK_TR(a, 1);
+  t[2] = PACK_TR(a, 2);
+  t[3] = PACK_TR(a, 3);
+  t[4] = PACK_TR(a, 4);
+  t[5] = PACK_TR(a, 5);
+  t[6] = PACK_TR(a, 6);
+  t[7] = PACK_TR(a, 7);
+}
+
+/* Rows row + j * stride (j < 8) of a pack array from 8 consecutive reals of each lane's body: lane
+ * l's at from + first[l] (no body: zeros). */
+COROFEM_FN void pack_rows_in(__global const real* from, const long* first, __global real* to, size_t row,
+                             uint stride) {
+  realp a[PACK_L], t[PACK_L];
+  for (int l = 0; l < PACK_L; ++l) a[l] = first[l] >= 0 ? LDP(from + first[l]) : (realp)0;
+  pack_transpose(a, t);
+  for (int j = 0; j < PACK_L; ++j) STP(t[j], ROW(to, row + (size_t)j * stride));
+}
+
+/* The bodies' data into their pack slots (one work-group per slot, 8 elements or 8 node rows per
+ * step, an 8 x 8 transpose each): a_i and volumes, the PCG vectors x r u p s w, M^-1, the mass and
+ * the free mask; zeros in the lanes of no body. The slots' rows are padded to 8 elements and 8
+ * nodes, which the bodies' padded segments cover (their padding is never read by pcg_iterate_pack). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pack_in(__global const uint* packInfo, __global const uint* segInfo, const uint S,
              __global const real* rotGrad, __global const real* geom, __global const real* x,
@@ -339,51 +365,56 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
              __global real* packMass, __global real* packFree, const uint dofRows) {
   const PackSlot p = pack_slot(packInfo, get_group_id(0));
   const uint lid = get_local_id(0);
-  for (uint e = lid; e < p.elems; e += COROFEM_WG) {
-    __global real* g = ROW(elem, (size_t)(p.elemBase + e) * kPackElemRows);
-    for (int l = 0; l < PACK_L; ++l) {
-      const int seg = p.seg[l];
-      const uint ge = seg >= 0 ? seg_info(segInfo, (uint)seg, kSegElemBegin) + e : 0u;
-      for (int k = 0; k < 9; ++k) g[k * PACK_L + l] = seg >= 0 ? rotGrad[k * S + ge] : (real)0;
-      g[9 * PACK_L + l] = seg >= 0 ? geom[kGeomVolume * S + ge] : (real)0;
-    }
+  long elemBegin[PACK_L], dofBegin[PACK_L], at[PACK_L];
+  for (int l = 0; l < PACK_L; ++l) {
+    elemBegin[l] = p.seg[l] >= 0 ? (long)seg_info(segInfo, (uint)p.seg[l], kSegElemBegin) : -1;
+    dofBegin[l] = p.seg[l] >= 0 ? 3 * (long)seg_info(segInfo, (uint)p.seg[l], kSegNodeBegin) : -1;
   }
-  __global const real* from[6] = {x, r, u, pv, s, w};
-  for (uint n = lid; n < p.nodes; n += COROFEM_WG)
-    for (int l = 0; l < PACK_L; ++l) {
-      const int seg = p.seg[l];
-      const uint gn = seg >= 0 ? seg_info(segInfo, (uint)seg, kSegNodeBegin) + n : 0u;
-      for (int k = 0; k < 3; ++k) {
-        const size_t at = ((size_t)3 * (p.nodeBase + n) + k) * PACK_L + l;
-        for (int v = 0; v < 6; ++v) vec[(size_t)v * dofRows * PACK_L + at] = seg >= 0 ? from[v][3 * gn + k] : (real)0;
-        packFree[at] = seg >= 0 ? free[3 * gn + k] : (real)0;
-        if (mass) packMass[at] = seg >= 0 ? mass[3 * gn + k] : (real)0;
-      }
-#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
-      for (int k = 0; k < COROFEM_NODE_INVERSE; ++k)
-        packMinv[((size_t)COROFEM_NODE_INVERSE * (p.nodeBase + n) + k) * PACK_L + l] =
-            seg >= 0 ? minv[COROFEM_NODE_INVERSE * gn + k] : (real)0;
-#endif
+  for (uint b = lid; b < (p.elems + 7) / 8; b += COROFEM_WG)
+    for (int k = 0; k < (int)kPackElemRows; ++k) {
+      for (int l = 0; l < PACK_L; ++l) at[l] = elemBegin[l] < 0 ? -1 : (long)k * S + elemBegin[l] + 8 * b;
+      /* a_i components 0..8 of rotGrad, the volume (9) of geom */
+      pack_rows_in(k < 9 ? rotGrad : geom, at, elem, (size_t)(p.elemBase + 8 * b) * kPackElemRows + k,
+                   kPackElemRows);
     }
+  __global const real* from[6] = {x, r, u, pv, s, w};
+  const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
+  for (uint b = lid; b < dofBlocks; b += COROFEM_WG) {
+    for (int l = 0; l < PACK_L; ++l) at[l] = dofBegin[l] < 0 ? -1 : dofBegin[l] + 8 * b;
+    const size_t row = (size_t)3 * p.nodeBase + 8 * b;
+    for (int v = 0; v < 6; ++v) pack_rows_in(from[v], at, vec + (size_t)v * dofRows * PACK_L, row, 1);
+    pack_rows_in(free, at, packFree, row, 1);
+    if (mass) pack_rows_in(mass, at, packMass, row, 1);
+  }
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+  const uint invBlocks = COROFEM_NODE_INVERSE * ((p.nodes + 7) / 8);
+  for (uint b = lid; b < invBlocks; b += COROFEM_WG) {
+    for (int l = 0; l < PACK_L; ++l) at[l] = dofBegin[l] < 0 ? -1 : dofBegin[l] / 3 * COROFEM_NODE_INVERSE + 8 * b;
+    pack_rows_in(minv, at, packMinv, (size_t)COROFEM_NODE_INVERSE * p.nodeBase + 8 * b, 1);
+  }
+#endif
 }
 
-/* The PCG vectors x r u p s w of the bodies back from their pack slots. */
+/* The PCG vectors x r u p s w of the bodies back from their pack slots (the inverse transposes). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pack_out(__global const uint* packInfo, __global const uint* segInfo, __global real* x, __global real* r,
               __global real* u, __global real* pv, __global real* s, __global real* w, __global const real* vec,
               const uint dofRows) {
   const PackSlot p = pack_slot(packInfo, get_group_id(0));
   const uint lid = get_local_id(0);
+  long dofBegin[PACK_L];
+  for (int l = 0; l < PACK_L; ++l)
+    dofBegin[l] = p.seg[l] >= 0 ? 3 * (long)seg_info(segInfo, (uint)p.seg[l], kSegNodeBegin) : -1;
   __global real* to[6] = {x, r, u, pv, s, w};
-  for (uint n = lid; n < p.nodes; n += COROFEM_WG)
-    for (int l = 0; l < PACK_L; ++l) {
-      const int seg = p.seg[l];
-      if (seg < 0) continue;
-      const uint gn = seg_info(segInfo, (uint)seg, kSegNodeBegin) + n;
-      for (int k = 0; k < 3; ++k) {
-        const size_t at = ((size_t)3 * (p.nodeBase + n) + k) * PACK_L + l;
-        for (int v = 0; v < 6; ++v) to[v][3 * gn + k] = vec[(size_t)v * dofRows * PACK_L + at];
-      }
+  const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
+  for (uint b = lid; b < dofBlocks; b += COROFEM_WG)
+    for (int v = 0; v < 6; ++v) {
+      realp a[PACK_L], t[PACK_L];
+      const size_t row = (size_t)3 * p.nodeBase + 8 * b;
+      for (int j = 0; j < PACK_L; ++j) a[j] = LDP(ROW(vec + (size_t)v * dofRows * PACK_L, row + j));
+      pack_transpose(a, t);
+      for (int l = 0; l < PACK_L; ++l)
+        if (dofBegin[l] >= 0) STP(t[l], to[v] + dofBegin[l] + 8 * b);
     }
 }
 #endif /* !COROFEM_TREE_REDUCE */

@@ -696,7 +696,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     std::size_t elemRows = 0, partialRows = 0;
     for (const PackSlotPlace& slot : packSlots_) {
       const PackMesh& m = packMeshes_[slot.mesh];
-      elemRows = std::max(elemRows, slot.elemBase + segs_[m.bodies.front()].elems);
+      elemRows = std::max(elemRows, slot.elemBase + roundUp(segs_[m.bodies.front()].elems, kPackLanes));
       partialRows = std::max(partialRows, slot.partialBase + segs_[m.bodies.front()].partialCount);
     }
     const std::size_t L = kPackLanes, inverse = precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3;
@@ -735,8 +735,12 @@ void SegmentEngine::findPackMeshes() {
       if (same == meshes.end()) meshes.push_back({s});
       else same->push_back(s);
     }
+    // pack_in and pack_out move blocks of 8 elements and 8 nodes: the segments' padding covers them
+    // (always but with tiny work-groups).
+    const bool padded = segs_[bodies.front()].elemSpan >= roundUp(size.second, kPackLanes) &&
+                        segs_[bodies.front()].nodeSpan >= roundUp(size.first, kPackLanes);
     for (std::vector<std::size_t>& m : meshes)
-      if (m.size() >= packMinLanes_) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0, 0});
+      if (m.size() >= packMinLanes_ && padded) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0, 0});
   }
   std::sort(packMeshes_.begin(), packMeshes_.end(),
             [](const PackMesh& a, const PackMesh& b) { return a.bodies.front() < b.bodies.front(); });
@@ -746,10 +750,10 @@ void SegmentEngine::findPackMeshes() {
     const Segment& first = segs_[m.bodies.front()];
     m.firstSlot = packSlots_.size();
     m.slots = (m.bodies.size() + kPackLanes - 1) / kPackLanes;
-    for (std::size_t k = 0; k < m.slots; ++k) {
+    for (std::size_t k = 0; k < m.slots; ++k) {  // rows padded to 8 elements and nodes (pack_in's blocks)
       packSlots_.push_back({i, elemRows, packNodeRows_, partialRows});
-      elemRows += first.elems;
-      packNodeRows_ += first.nodes;
+      elemRows += roundUp(first.elems, kPackLanes);
+      packNodeRows_ += roundUp(first.nodes, kPackLanes);
       partialRows += first.partialCount;
     }
   }
@@ -1326,6 +1330,7 @@ void SegmentEngine::elementProduct(const ClBuffer& v) {
 void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials,
                             const ClBuffer* residualOf) {
   static const ClBuffer none;  // a NULL argument: y = A v
+  if (residualOf && !project) fail(ErrorCode::Internal, "OpenCL backend: the residual is always projected");  // gather.cl
   elementProduct(v);
   launch(kGatherProduct_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_,
          mass_, free_, cl_uint(project ? 1 : 0), v, y, partials, residualOf ? *residualOf : none);
