@@ -328,18 +328,40 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   }
 }
 
-/* The 8 x 8 transpose: lane j of row i to lane i of row j. */
-#define PACK_TR(a, j) \
-  ((realp)((a)[0].s##j, (a)[1].s##j, (a)[2].s##j, (a)[3].s##j, (a)[4].s##j, (a)[5].s##j, (a)[6].s##j, (a)[7].s##j))
+/* The 8 x 8 transpose, t[j] lane i = a[i] lane j, in three stages of shuffle2 with constant masks
+ * (lane pairs, pairs of pairs, halves), which compile to a few permutes each (an 8-lane vector
+ * literal of extracted lanes compiled to 64 inserts). */
+#ifdef COROFEM_DOUBLE
+typedef ulong8 shufmaskp;
+#else
+typedef uint8 shufmaskp;
+#endif
 COROFEM_FN void pack_transpose(const realp* a, realp* t) {
-  t[0] = PACK_TR(a, 0);
-  t[1] = PACK_TR(a, 1);
-  t[2] = PACK_TR(a, 2);
-  t[3] = PACK_TR(a, 3);
-  t[4] = PACK_TR(a, 4);
-  t[5] = PACK_TR(a, 5);
-  t[6] = PACK_TR(a, 6);
-  t[7] = PACK_TR(a, 7);
+  const shufmaskp even = (shufmaskp)(0, 8, 2, 10, 4, 12, 6, 14), odd = (shufmaskp)(1, 9, 3, 11, 5, 13, 7, 15);
+  const shufmaskp pairLo = (shufmaskp)(0, 1, 8, 9, 4, 5, 12, 13), pairHi = (shufmaskp)(2, 3, 10, 11, 6, 7, 14, 15);
+  const shufmaskp halfLo = (shufmaskp)(0, 1, 2, 3, 8, 9, 10, 11), halfHi = (shufmaskp)(4, 5, 6, 7, 12, 13, 14, 15);
+  realp b[8], c[8];
+  for (int i = 0; i < 8; i += 2) {
+    b[i] = shuffle2(a[i], a[i + 1], even);
+    b[i + 1] = shuffle2(a[i], a[i + 1], odd);
+  }
+  for (int i = 0; i < 8; i += 4)
+    for (int k = 0; k < 2; ++k) {
+      c[i + k] = shuffle2(b[i + k], b[i + k + 2], pairLo);
+      c[i + k + 2] = shuffle2(b[i + k], b[i + k + 2], pairHi);
+    }
+  for (int j = 0; j < 4; ++j) {
+    t[j] = shuffle2(c[j], c[j + 4], halfLo);
+    t[j + 4] = shuffle2(c[j], c[j + 4], halfHi);
+  }
+}
+
+/* Work-item lid's share [*lo, *hi) of n blocks: consecutive blocks (PoCL runs a work-group's items
+ * one after the other: blocks strided over the items read each cache line twice, far apart). */
+COROFEM_FN void pack_share(uint n, uint lid, uint* lo, uint* hi) {
+  const uint per = (n + COROFEM_WG - 1) / COROFEM_WG;
+  *lo = min(n, lid * per);
+  *hi = min(n, *lo + per);
 }
 
 /* Rows row + j * stride (j < 8) of a pack array from 8 consecutive reals of each lane's body: lane
@@ -370,7 +392,9 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     elemBegin[l] = p.seg[l] >= 0 ? (long)seg_info(segInfo, (uint)p.seg[l], kSegElemBegin) : -1;
     dofBegin[l] = p.seg[l] >= 0 ? 3 * (long)seg_info(segInfo, (uint)p.seg[l], kSegNodeBegin) : -1;
   }
-  for (uint b = lid; b < (p.elems + 7) / 8; b += COROFEM_WG)
+  uint lo, hi;
+  pack_share((p.elems + 7) / 8, lid, &lo, &hi);
+  for (uint b = lo; b < hi; ++b)
     for (int k = 0; k < (int)kPackElemRows; ++k) {
       for (int l = 0; l < PACK_L; ++l) at[l] = elemBegin[l] < 0 ? -1 : (long)k * S + elemBegin[l] + 8 * b;
       /* a_i components 0..8 of rotGrad, the volume (9) of geom */
@@ -379,7 +403,8 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     }
   __global const real* from[6] = {x, r, u, pv, s, w};
   const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
-  for (uint b = lid; b < dofBlocks; b += COROFEM_WG) {
+  pack_share(dofBlocks, lid, &lo, &hi);
+  for (uint b = lo; b < hi; ++b) {
     for (int l = 0; l < PACK_L; ++l) at[l] = dofBegin[l] < 0 ? -1 : dofBegin[l] + 8 * b;
     const size_t row = (size_t)3 * p.nodeBase + 8 * b;
     for (int v = 0; v < 6; ++v) pack_rows_in(from[v], at, vec + (size_t)v * dofRows * PACK_L, row, 1);
@@ -388,7 +413,8 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
   }
 #if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
   const uint invBlocks = COROFEM_NODE_INVERSE * ((p.nodes + 7) / 8);
-  for (uint b = lid; b < invBlocks; b += COROFEM_WG) {
+  pack_share(invBlocks, lid, &lo, &hi);
+  for (uint b = lo; b < hi; ++b) {
     for (int l = 0; l < PACK_L; ++l) at[l] = dofBegin[l] < 0 ? -1 : dofBegin[l] / 3 * COROFEM_NODE_INVERSE + 8 * b;
     pack_rows_in(minv, at, packMinv, (size_t)COROFEM_NODE_INVERSE * p.nodeBase + 8 * b, 1);
   }
@@ -407,7 +433,9 @@ void pack_out(__global const uint* packInfo, __global const uint* segInfo, __glo
     dofBegin[l] = p.seg[l] >= 0 ? 3 * (long)seg_info(segInfo, (uint)p.seg[l], kSegNodeBegin) : -1;
   __global real* to[6] = {x, r, u, pv, s, w};
   const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
-  for (uint b = lid; b < dofBlocks; b += COROFEM_WG)
+  uint lo, hi;
+  pack_share(dofBlocks, lid, &lo, &hi);
+  for (uint b = lo; b < hi; ++b)
     for (int v = 0; v < 6; ++v) {
       realp a[PACK_L], t[PACK_L];
       const size_t row = (size_t)3 * p.nodeBase + 8 * b;

@@ -617,5 +617,65 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
 #endif
 }
 
+TEST(BatchSimulation, PacksOfOneMeshGiveTheOneWorkGroupRunBitForBit) {
+#ifndef COROFEM_WITH_OPENCL
+  GTEST_SKIP() << "built without COROFEM_WITH_OPENCL";
+#else
+  if (!haveOpenCLDevice()) GTEST_SKIP() << "no OpenCL device on this machine";
+  // Ten copies of one beam (each its own material, density and damping; one linear, one unloaded
+  // that falls asleep, one of another cross-section) and a body of another mesh, batched: on a
+  // CPU device the copies' PCG iterations run in packs, a body per vector lane (pcg_iterate_pack),
+  // and must give the run of one work-group per body (COROFEM_OPENCL_PACK_PCG=0) bit for bit:
+  // statuses, reports, positions, velocities and energies. A GPU runs neither (it launches every
+  // iteration) and both runs agree trivially.
+  for (Precision precision : {Precision::Float, Precision::Double}) {
+    SCOPED_TRACE(toString(precision));
+    Scene scene = dynamicScene(boxBeam({8, 2, 2}), 5);
+    scene.bodies.clear();
+    for (int i = 0; i < 10; ++i) {
+      BodyDesc b = boxBeam({8, 2, 2});
+      b.name = "copy" + std::to_string(i);
+      b.mesh.translate = {0.0, 0.0, 0.3 * i};
+      b.material.youngsModulus = 5e5 * (1 + i);
+      b.material.poissonRatio = 0.25 + 0.02 * i;
+      b.material.density = 900 + 40 * i;
+      b.material.rayleighMass = i % 3 == 0 ? 0.5 : 0.0;
+      if (i == 4) b.formulation = Formulation::Linear;
+      if (i == 7) b.loads.clear();  // falls asleep
+      if (i == 8) b.mesh.box->max = {1.0, 0.15, 0.12};  // the same corners, another rest shape
+      scene.bodies.push_back(b);
+    }
+    BodyDesc other = boxBeam({5, 3, 2});
+    other.name = "other";
+    scene.bodies.push_back(other);
+    scene.backend.kind = BackendKind::OpenCL;
+    scene.solver.precision = precision;
+    scene.solver.tolerance = precision == Precision::Float ? 1e-5 : 1e-10;
+    scene.analysis.dynamics.sleep.enabled = true;
+    scene.analysis.dynamics.sleep.steps = 2;
+    if (!Simulation::create(scene)) {
+      std::cout << "[ note ] " << toString(precision) << ": the device cannot run this precision\n";
+      continue;
+    }
+    Trace packed, grouped;
+    const unsigned long long before = detail::packPcgLaunchCount();
+    {
+      const ScopedEnv on("COROFEM_OPENCL_PACK_PCG", "1");
+      packed = run(scene);
+    }
+    const unsigned long long between = detail::packPcgLaunchCount();
+    {
+      const ScopedEnv off("COROFEM_OPENCL_PACK_PCG", "0");
+      grouped = run(scene);
+    }
+    EXPECT_EQ(detail::packPcgLaunchCount(), between) << "COROFEM_OPENCL_PACK_PCG=0 ran no pack";
+    if (!detail::cl::Context::shared("")->info().gpu)
+      EXPECT_GT(between, before) << "a CPU device runs the copies' iterations in packs";
+    ASSERT_EQ(packed.states.size(), 5u);
+    expectSameRun(packed, grouped);
+  }
+#endif
+}
+
 }  // namespace
 }  // namespace corofem::test

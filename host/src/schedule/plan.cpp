@@ -154,7 +154,8 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
                       (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
                       ", pcg_update, reduce_finish (single-reduction PCG; on a CPU device the iterations "
                       "of a round of small bodies, or of as many bodies as cores, run in one launch: "
-                      "pcg_iterate_group; those of a round of fewer bodies than cores in one launch by a team "
+                      "pcg_iterate_group, where bodies of one mesh take a vector lane each of a pack of 8: "
+                      "pcg_iterate_pack; those of a round of fewer bodies than cores in one launch by a team "
                       "of work-groups per body: pcg_iterate_team)");
     if (batched)
       for (auto& k : kernels)

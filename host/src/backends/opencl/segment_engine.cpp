@@ -320,8 +320,9 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
                                                 : kTeamPcgMaxElementsPerCore * ctx_->info().computeUnits;
   if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MAX"); env && *env && !options.teamPcgMaxElements)
     teamPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
-  // Packs of bodies with one mesh (pcg_pack.cl): wherever pcg_iterate_group runs.
-  packs_ = options.packPcg >= 0 ? options.packPcg != 0 : true;
+  // Packs of bodies with one mesh (pcg_pack.cl): by default where pcg_iterate_group runs on a CPU
+  // device (one work-item per pack: a GPU would run a pack on one of its thousands of lanes).
+  packs_ = options.packPcg >= 0 ? options.packPcg != 0 : ctx_->info().cpu && !ctx_->info().gpu;
   if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env && options.packPcg < 0)
     packs_ = std::string(env) != "0";  // tuning experiments
   packs_ = packs_ && groupPcg_ && !treeReduce_;
@@ -347,9 +348,21 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
       const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
       if (p.mesh.tetCount() * widest >= (std::size_t(1) << 32) / 2 || 9 * p.mesh.nodeCount() >= (std::size_t(1) << 32) / 2)
         continue;  // over the 32-bit indexing on its own: refused below, not sorted first
-      std::optional<LocalityOrder> order = reorder == 1 && p.mesh.tetCount() > 0 ? mortonOrder(p.mesh) : localityOrder(p.mesh);
-      if (!order) continue;
-      orders[s] = std::move(*order);
+      // Copies of one mesh (the same corners and node count, however placed) take the first copy's
+      // order, so that they keep one numbering on the device (and share packs: pcg_pack.cl).
+      std::size_t first = 0;
+      while (first < s && !(problems[first]->mesh.nodeCount() == p.mesh.nodeCount() &&
+                            problems[first]->mesh.tets == p.mesh.tets))
+        ++first;
+      if (first < s) {
+        if (!ordered[first]) continue;
+        orders[s] = orders[first];
+      } else {
+        std::optional<LocalityOrder> order =
+            reorder == 1 && p.mesh.tetCount() > 0 ? mortonOrder(p.mesh) : localityOrder(p.mesh);
+        if (!order) continue;
+        orders[s] = std::move(*order);
+      }
       ordered[s] = std::make_unique<Problem>(reorderedProblem(p, orders[s]));
     }
 
