@@ -20,6 +20,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <cstdlib>
@@ -212,16 +213,20 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
       }
     }
     /// Solves the bodies `who` from zero on `batch` (positions set): 2 when their iterations ran
-    /// in teams (pcg_iterate_team), 1 in one work-group per body (pcg_iterate_group), 0 launched.
+    /// in teams (pcg_iterate_team), 1 in one work-group per body (pcg_iterate_group) or in packs
+    /// (pcg_iterate_pack, which such rounds take for bodies of one mesh), 0 launched.
     int path(detail::BatchDevice& batch, const std::vector<std::size_t>& who) {
       std::vector<BatchRequest> round;
       for (std::size_t i : who) {
         sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
         round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
       }
-      const unsigned long long team = detail::teamPcgLaunchCount(), group = detail::groupPcgLaunchCount();
+      const unsigned long long team = detail::teamPcgLaunchCount(), group = detail::groupPcgLaunchCount(),
+                               pack = detail::packPcgLaunchCount();
       runOk(batch, round);
-      return detail::teamPcgLaunchCount() > team ? 2 : detail::groupPcgLaunchCount() > group ? 1 : 0;
+      return detail::teamPcgLaunchCount() > team                                                   ? 2
+             : detail::groupPcgLaunchCount() > group || detail::packPcgLaunchCount() > pack ? 1
+                                                                                             : 0;
     }
   };
 };
@@ -619,6 +624,31 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
         if (cap == 2000) EXPECT_TRUE(solveA[j].stats.converged);
       }
     }
+  }
+}
+
+TEST_P(OpenCLBatch, PackRuleTakesPacksWhereTheyShortenTheRound) {
+  // By default (OpenCLOptions::packPcg = -1) a round packs a mesh's bodies only where
+  // ceil(bodies / cores) exceeds 2.5 x ceil(packs / cores) (SegmentEngine::kPackCost): cores + 1
+  // copies stay in one work-group each (2 per core at most against a pack on one core), 8 x cores
+  // copies take packs; COROFEM_OPENCL_PACK_PCG=0 never packs.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (!context()->info().cpu || context()->info().gpu) GTEST_SKIP() << "packs run on CPU devices only";
+  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env)
+    GTEST_SKIP() << "COROFEM_OPENCL_PACK_PCG is set: the default rule is not in force";
+  const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
+  for (const auto& [count, packs] : {std::pair<std::size_t, bool>{cores + 1, false}, {8 * cores, true}}) {
+    SCOPED_TRACE(std::to_string(count) + " copies on " + std::to_string(cores) + " compute units");
+    std::vector<detail::Problem> ps = instances(count);
+    ps.erase(std::remove_if(ps.begin(), ps.end(), [](const detail::Problem& p) { return p.name == "slab"; }), ps.end());
+    auto batch = batchOf(ps, solver());
+    RoundPaths round(ps, 40);
+    runOk(*batch, round.set);
+    std::vector<std::size_t> all(ps.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
+    const unsigned long long before = detail::packPcgLaunchCount();
+    EXPECT_EQ(round.path(*batch, all), 1) << "one launch for the round";
+    EXPECT_EQ(detail::packPcgLaunchCount() > before, packs);
   }
 }
 

@@ -69,8 +69,9 @@ struct OpenCLOptions {
   /// In a solve round that runs pcg_iterate_group, the iterations of bodies that share one mesh
   /// (the same element corners and node count; material, rest shape, mass, constraints and solve
   /// each their own) in packs of 8, a body per vector lane of one work-item (pcg_iterate_pack: the
-  /// same bits as pcg_iterate_group, every load a whole vector instead of a gather). 1: on; 0:
-  /// never; -1 (default): on where pcg_iterate_group runs (CPU devices).
+  /// same bits as pcg_iterate_group, every load a whole vector instead of a gather). 1: in every
+  /// such round; 0: never; -1 (default): on CPU devices, in the rounds where packs shorten the
+  /// round (a pack costs a core about 2.5 bodies' iterations: SegmentEngine::kPackCost).
   /// COROFEM_OPENCL_PACK_PCG=0/1 sets it when -1.
   int packPcg = -1;
   /// The fewest bodies of a pack (a pack costs its 8 lanes whatever it holds); 0 = the default, 3.

@@ -323,8 +323,11 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   // Packs of bodies with one mesh (pcg_pack.cl): by default where pcg_iterate_group runs on a CPU
   // device (one work-item per pack: a GPU would run a pack on one of its thousands of lanes).
   packs_ = options.packPcg >= 0 ? options.packPcg != 0 : ctx_->info().cpu && !ctx_->info().gpu;
-  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env && options.packPcg < 0)
+  packAlways_ = options.packPcg > 0;
+  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env && options.packPcg < 0) {
     packs_ = std::string(env) != "0";  // tuning experiments
+    packAlways_ = packs_;
+  }
   packs_ = packs_ && groupPcg_ && !treeReduce_;
   packMinLanes_ = options.packPcgMinLanes ? options.packPcgMinLanes : kPackMinLanes;
   if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG_MIN"); env && *env && !options.packPcgMinLanes)
@@ -1109,6 +1112,13 @@ std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& 
     std::vector<std::size_t> bodies;
     for (std::size_t s : m.bodies)
       if (in[s]) bodies.push_back(s);
+    // A pack takes a core for about what kPackCost bodies take alone (pcg_iterate_group): packed
+    // only where that shortens the round, unless packs were asked for (packAlways_).
+    const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
+    const std::size_t slotsNeeded = (bodies.size() + kPackLanes - 1) / kPackLanes;
+    if (!packAlways_ && static_cast<double>((bodies.size() + cores - 1) / cores) <=
+                            kPackCost * static_cast<double>((slotsNeeded + cores - 1) / cores))
+      continue;
     // Bodies that took as many iterations last time share a pack: a pack iterates until its
     // last lane stops.
     std::stable_sort(bodies.begin(), bodies.end(),

@@ -283,8 +283,15 @@ class SegmentEngine {
   /// the claims' 32 bits with room to spare; a review hung a team with a cap of 2^30 + 1).
   static constexpr int kTeamMaxIterations = 1 << 24;
   /// The fewest bodies of a pack (OpenCLOptions::packPcgMinLanes' default): a pack costs its
-  /// kPackLanes lanes whatever it holds (segment_engine.cpp, findPackMeshes, says what was measured).
+  /// kPackLanes lanes whatever it holds, about kPackCost bodies' worth, so a remainder of fewer
+  /// than 3 runs as bodies of its own.
   static constexpr std::size_t kPackMinLanes = 3;
+  /// What a pack's iteration costs a core, in iterations of one body of the same mesh alone
+  /// (pcg_iterate_group): 2.2-2.75 measured on a 2-core Zen 4 with 2,000-element bodies (6 bodies:
+  /// one pack 4.3 ms a step against 5.5 in three work-groups per core; 3 and 4 bodies: 4.0 against
+  /// 3.7-3.8; 100 bodies in 13 packs against 50 per core). A round packs a mesh's bodies only where
+  /// ceil(bodies / cores) exceeds kPackCost * ceil(packs / cores) (OpenCLOptions::packPcg = 1: always).
+  static constexpr double kPackCost = 2.5;
   std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
@@ -418,6 +425,7 @@ class SegmentEngine {
   /// pack), kPackLanes at a time; a remainder of fewer than packMinLanes_ bodies is not packed.
   std::vector<cl_uint> packRound(const std::vector<BatchRequest*>& requests, std::vector<char>& packed) const;
   bool packs_ = false;                   ///< pcg_iterate_pack for the pack meshes' bodies
+  bool packAlways_ = false;              ///< ... in every round (tests), not only where kPackCost says so
   std::size_t packMinLanes_ = 0;         ///< the fewest bodies of a pack
   std::vector<PackMesh> packMeshes_;
   std::vector<PackSlotPlace> packSlots_;
