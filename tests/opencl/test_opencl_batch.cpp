@@ -165,6 +165,28 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
     s.checkEvery = 4;
     return s;
   }
+  /// The solver with each precision of the device (and mixed where it has double), each
+  /// preconditioner and iteration caps of 1, 2, 7 and 2,000: the one-launch paths' comparisons.
+  std::vector<SolverDesc> pcgSettings() const {
+    std::vector<Precision> precisions = {GetParam().precision};
+    if (isDouble()) precisions.push_back(Precision::Mixed);  // float vectors, double sums
+    std::vector<SolverDesc> out;
+    for (Precision precision : precisions)
+      for (PreconditionerKind preconditioner :
+           {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
+        for (int cap : {1, 2, 7, 2000}) {
+          SolverDesc s = solver();
+          s.precision = precision;
+          s.preconditioner = preconditioner;
+          s.maxIterations = cap;
+          out.push_back(s);
+        }
+    return out;
+  }
+  static std::string describe(const SolverDesc& s) {
+    return "cap " + std::to_string(s.maxIterations) + ", " + toString(s.precision) + ", preconditioner " +
+           std::to_string(static_cast<int>(s.preconditioner));
+  }
   std::shared_ptr<detail::cl::Context> context() const {
     return detail::cl::Context::shared(std::to_string(GetParam().device));
   }
@@ -504,16 +526,8 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
       ways.push_back({"teams of " + std::to_string(team), t, &detail::teamPcgLaunchCount});
     }
   const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
-  std::vector<Precision> precisions = {GetParam().precision};
-  if (isDouble()) precisions.push_back(Precision::Mixed);  // float vectors, double sums
-  for (Precision precision : precisions)
-  for (PreconditionerKind preconditioner :
-       {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
-  for (int cap : {1, 2, 7, 2000}) {
-    SolverDesc s = solver();
-    s.precision = precision;
-    s.preconditioner = preconditioner;
-    s.maxIterations = cap;
+  for (const SolverDesc& s : pcgSettings()) {
+    const int cap = s.maxIterations;
     auto b = batchOf(ps, s, launched);
     std::vector<Eigen::VectorXd> x(K), rhs(K), xb(K);
     std::vector<BatchRequest> setB, solveB;
@@ -543,8 +557,7 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
       runOk(*a, solveA);
       if (cap > 1) EXPECT_EQ(way.launches(), before + 1) << way.name << ": one launch for the round's iterations";
       for (std::size_t i = 0; i < K; ++i) {
-        SCOPED_TRACE(way.name + ", " + ps[i].name + ", cap " + std::to_string(cap) + ", " + toString(precision) +
-                     ", preconditioner " + std::to_string(static_cast<int>(preconditioner)));
+        SCOPED_TRACE(way.name + ", " + ps[i].name + ", " + describe(s));
         EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);
         EXPECT_EQ(solveA[i].stats.converged, solveB[i].stats.converged);
         EXPECT_EQ(solveA[i].stats.relativeResidual, solveB[i].stats.relativeResidual);
@@ -577,16 +590,8 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
   packed.packPcg = 1;
   grouped.packPcg = 0;
   const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
-  std::vector<Precision> precisions = {GetParam().precision};
-  if (isDouble()) precisions.push_back(Precision::Mixed);
-  for (Precision precision : precisions)
-  for (PreconditionerKind preconditioner :
-       {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
-  for (int cap : {1, 2, 7, 2000}) {
-    SolverDesc s = solver();
-    s.precision = precision;
-    s.preconditioner = preconditioner;
-    s.maxIterations = cap;
+  for (const SolverDesc& s : pcgSettings()) {
+    const int cap = s.maxIterations;
     auto a = batchOf(ps, s, packed), b = batchOf(ps, s, grouped);
     for (int round = 0; round < 2; ++round) {
       std::vector<std::size_t> who;
@@ -615,8 +620,7 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
       EXPECT_EQ(detail::packPcgLaunchCount(), noPacks) << "packPcg = 0 took the packs";
       for (std::size_t j = 0; j < who.size(); ++j) {
         const std::size_t i = who[j];
-        SCOPED_TRACE(ps[i].name + ", round " + std::to_string(round) + ", cap " + std::to_string(cap) + ", " +
-                     toString(precision) + ", preconditioner " + std::to_string(static_cast<int>(preconditioner)));
+        SCOPED_TRACE(ps[i].name + ", round " + std::to_string(round) + ", " + describe(s));
         EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
         EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
         EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
