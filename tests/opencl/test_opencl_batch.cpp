@@ -99,19 +99,22 @@ std::vector<detail::Problem> bodiesWithABlock() {
   return out;
 }
 
-/// Copies of one mesh (a beam of 7 x 3 x 2 cells, 252 tets, 96 nodes: more than one node chunk per
-/// 64 work-items of neither phase, a last node chunk of its own), `count` of them, each its own: a
-/// rest shape rotated and stretched differently (so other gradients and volumes), material,
-/// density, Rayleigh coefficients and constraints (clamped at x = 0, every third on one component
-/// only, one free body held by its mass); every fourth linear. Then one body of another mesh (not
-/// packed) between them, so that the packs' bodies are not consecutive segments.
-std::vector<detail::Problem> instances(std::size_t count) {
+/// Copies of one mesh (a plate of 5 x 5 x 2 cells, 300 tets and 108 nodes: counts that are not
+/// multiples of 8, so the packs' rows are padded; a last node chunk of its own), `count` of them,
+/// each its own: a rest shape rotated and stretched differently (`rotated`; else only moved, so
+/// that the Morton order of every copy is the same), material, density, Rayleigh coefficients and
+/// constraints (clamped at x = 0, every third on one component only, one free body held by its
+/// mass); every fourth linear. Then one body of another mesh (not packed) between them, so that the
+/// packs' bodies are not consecutive segments.
+std::vector<detail::Problem> instances(std::size_t count, bool rotated = true) {
   std::vector<detail::Problem> out;
-  const TetMesh base = test::boxMesh(7, 3, 2, 0.1, 0.08, 0.06);
+  const TetMesh base = test::boxMesh(5, 5, 2, 0.1, 0.08, 0.06);
   for (std::size_t i = 0; i < count; ++i) {
     TetMesh mesh = base;
-    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.4 * static_cast<double>(i), Eigen::Vector3d(1, -1, 2).normalized()).toRotationMatrix();
-    const double stretch = 1.0 + 0.07 * static_cast<double>(i % 5);
+    const Eigen::Matrix3d R = rotated ? Eigen::AngleAxisd(0.4 * static_cast<double>(i), Eigen::Vector3d(1, -1, 2).normalized())
+                                            .toRotationMatrix()
+                                      : Eigen::Matrix3d::Identity();
+    const double stretch = rotated ? 1.0 + 0.07 * static_cast<double>(i % 5) : 1.0;
     for (std::size_t n = 0; n < mesh.nodeCount(); ++n) {
       Eigen::Vector3d X(mesh.nodes[3 * n] * stretch, mesh.nodes[3 * n + 1], mesh.nodes[3 * n + 2]);
       X = R * X + Eigen::Vector3d(0.5 * static_cast<double>(i), 0.0, 0.0);
@@ -136,6 +139,10 @@ std::vector<detail::Problem> instances(std::size_t count) {
   }
   return out;
 }
+
+/// How many of `copies` bodies of one mesh a round packs when packs are forced: 8 to a pack, a
+/// remainder of fewer than 3 (OpenCLOptions::packPcgMinLanes' default) in work-groups of their own.
+std::size_t packedLanes(std::size_t copies) { return copies / 8 * 8 + (copies % 8 >= 3 ? copies % 8 : 0); }
 
 /// Rotated, bent positions (a different rotation per body).
 Eigen::VectorXd deformed(const detail::Problem& p, double angle) {
@@ -573,60 +580,126 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
 TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
   // pcg_iterate_pack (bodies of one mesh in the vector lanes of one work-item) against
   // pcg_iterate_group (a work-group per body) on 11 copies of one mesh and a body of another: a
-  // full pack of 8 and one of 3, the other body in its own work-group. The same x, iteration
-  // counts and residuals, bit for bit, whether the bodies converge (each at its own iteration:
-  // their lanes then stand still while the others go on), stop at a cap of 1, 2 or 7 iterations,
-  // start cold or warm; with no, diagonal and block preconditioners, in mixed precision too; in two
-  // rounds on one batch (the second packs the bodies by their first round's iterations), the second
-  // with some bodies only.
+  // full pack of 8 and one of 3 (5 empty lanes), the other body in its own work-group. The same x,
+  // iteration counts and residuals, bit for bit, whether the bodies converge (each at its own
+  // iteration: their lanes then stand still while the others go on), stop at a cap of 1, 2 or 7
+  // iterations, start cold or warm; with no, diagonal and block preconditioners, in mixed precision
+  // too; in two rounds on one batch (the second packs the bodies by their first round's
+  // iterations), the second with 9 copies only (a pack of 8, the ninth in a work-group). Four
+  // variants: rotated and stretched copies in their own numbering; the same with node chunks of 3
+  // (the update's partial sums in the scalar order); static bodies (no mass buffer); copies only
+  // moved, in the Morton order (every copy the same order, so they pack). The packed lanes are
+  // counted, so a round that quietly left its bodies to pcg_iterate_group fails too.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
-  const std::vector<detail::Problem> ps = instances(11);
-  const std::size_t K = ps.size();
-  detail::OpenCLOptions packed, grouped;
-  packed.groupPcg = grouped.groupPcg = 1;
-  packed.teamPcg = grouped.teamPcg = 0;
-  packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;  // every round one-launch
-  packed.packPcg = 1;
-  grouped.packPcg = 0;
-  const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
-  for (const SolverDesc& s : pcgSettings()) {
-    const int cap = s.maxIterations;
-    auto a = batchOf(ps, s, packed), b = batchOf(ps, s, grouped);
-    for (int round = 0; round < 2; ++round) {
-      std::vector<std::size_t> who;
-      for (std::size_t i = 0; i < K; ++i)
-        if (round == 0 || i % 4 != 1) who.push_back(i);
-      std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
-      std::vector<BatchRequest> setA, setB, solveA, solveB;
-      for (std::size_t i : who) {
-        x[i] = deformed(ps[i], 0.2 + 0.3 * static_cast<double>(i) + 0.1 * round);
-        rhs[i] = randomVector(ps[i].dofCount(), 900 + 20 * static_cast<unsigned>(round) + static_cast<unsigned>(i));
-        xa[i] = xb[i] = (i + round) % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
-        setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
-        setB.push_back(request(BatchOp::SetPositions, i, &x[i]));
+  struct Variant {
+    std::string name;
+    std::vector<detail::Problem> bodies;
+    std::size_t chunk;
+    int order;
+    bool dynamic;
+  };
+  std::vector<detail::Problem> still = instances(11);
+  for (detail::Problem& p : still) p.lumpedMass.setZero();  // how a static problem looks to the engine
+  const std::vector<Variant> variants = {{"rotated copies", instances(11), 0, 0, true},
+                                         {"node chunks of 3", instances(11), 3, 0, true},
+                                         {"static", still, 0, 0, false},
+                                         {"moved copies, Morton order", instances(11, false), 0, 1, true}};
+  for (const Variant& variant : variants) {
+    const std::vector<detail::Problem>& ps = variant.bodies;
+    const std::size_t K = ps.size();
+    detail::OpenCLOptions packed, grouped;
+    packed.groupPcg = grouped.groupPcg = 1;
+    packed.teamPcg = grouped.teamPcg = 0;
+    packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;  // every round one-launch
+    packed.nodeChunk = grouped.nodeChunk = variant.chunk;
+    packed.localityOrder = grouped.localityOrder = variant.order;
+    packed.packPcg = 1;
+    grouped.packPcg = 0;
+    const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
+    const detail::SystemCoeffs stat{0.0, 0.0, 1.0};
+    for (const SolverDesc& s : pcgSettings()) {
+      const int cap = s.maxIterations;
+      auto a = batchOf(ps, s, packed), b = batchOf(ps, s, grouped);
+      for (int round = 0; round < 2; ++round) {
+        std::vector<std::size_t> who;
+        std::size_t copies = 0;
+        for (std::size_t i = 0; i < K; ++i)
+          if (round == 0 || i % 4 != 1) {
+            who.push_back(i);
+            copies += ps[i].name != "slab" ? 1 : 0;
+          }
+        std::vector<Eigen::VectorXd> x(K), rhs(K), xa(K), xb(K);
+        std::vector<BatchRequest> setA, setB, solveA, solveB;
+        for (std::size_t i : who) {
+          x[i] = deformed(ps[i], 0.2 + 0.3 * static_cast<double>(i) + 0.1 * round);
+          rhs[i] = randomVector(ps[i].dofCount(), 900 + 20 * static_cast<unsigned>(round) + static_cast<unsigned>(i));
+          xa[i] = xb[i] = (i + round) % 2 ? Eigen::VectorXd::Constant(rhs[i].size(), 1e-3) : Eigen::VectorXd::Zero(rhs[i].size());
+          setA.push_back(request(BatchOp::SetPositions, i, &x[i]));
+          setB.push_back(request(BatchOp::SetPositions, i, &x[i]));
+        }
+        runOk(*a, setA);
+        runOk(*b, setB);
+        for (std::size_t i : who) {
+          const detail::SystemCoeffs c = variant.dynamic ? dyn[(i + round) % 2] : stat;
+          solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], c));
+          solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], c));
+        }
+        const unsigned long long packsBefore = detail::packPcgLaunchCount(), lanesBefore = detail::packPcgLaneCount();
+        runOk(*a, solveA);
+        if (cap > 1) {
+          EXPECT_EQ(detail::packPcgLaunchCount(), packsBefore + 1) << variant.name << ": the packs' iterations in one launch";
+          EXPECT_EQ(detail::packPcgLaneCount(), lanesBefore + packedLanes(copies)) << variant.name << ", round " << round;
+        }
+        const unsigned long long noPacks = detail::packPcgLaunchCount();
+        runOk(*b, solveB);
+        EXPECT_EQ(detail::packPcgLaunchCount(), noPacks) << "packPcg = 0 took the packs";
+        for (std::size_t j = 0; j < who.size(); ++j) {
+          const std::size_t i = who[j];
+          SCOPED_TRACE(variant.name + ", " + ps[i].name + ", round " + std::to_string(round) + ", " + describe(s));
+          EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
+          EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
+          EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
+          EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+          // Static: the bodies held on one component, or not at all, are singular without mass
+          // (they end at the cap or break down, in both ways alike).
+          if (cap == 2000 && variant.dynamic) EXPECT_TRUE(solveA[j].stats.converged);
+        }
       }
-      runOk(*a, setA);
-      runOk(*b, setB);
-      for (std::size_t i : who) {
-        solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[(i + round) % 2]));
-        solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[(i + round) % 2]));
-      }
-      const unsigned long long packsBefore = detail::packPcgLaunchCount();
-      runOk(*a, solveA);
-      if (cap > 1) EXPECT_EQ(detail::packPcgLaunchCount(), packsBefore + 1) << "the packs' iterations in one launch";
-      const unsigned long long noPacks = detail::packPcgLaunchCount();
-      runOk(*b, solveB);
-      EXPECT_EQ(detail::packPcgLaunchCount(), noPacks) << "packPcg = 0 took the packs";
-      for (std::size_t j = 0; j < who.size(); ++j) {
-        const std::size_t i = who[j];
-        SCOPED_TRACE(ps[i].name + ", round " + std::to_string(round) + ", " + describe(s));
-        EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
-        EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
-        EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
-        EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
-        if (cap == 2000) EXPECT_TRUE(solveA[j].stats.converged);
-      }
+    }
+  }
+}
+
+TEST_P(OpenCLBatch, CopiesOfOneMeshBatchedGiveEachAlonesBits) {
+  // Copies of one mesh placed differently (rotated: their Morton orders differ) keep the device
+  // numbering each gets alone, in every numbering, so a batched copy's solve is its own run's bit
+  // for bit. (A review caught a version that gave every copy the first copy's order, to pack them.)
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::vector<detail::Problem> ps = instances(3);
+  SolverDesc s = solver();
+  s.maxIterations = 10;
+  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
+  for (int order : {1, -1, 0}) {
+    detail::OpenCLOptions o;
+    o.localityOrder = order;
+    auto batch = batchOf(ps, s, o);
+    auto singles = singlesOf(ps, s, o);
+    std::vector<Eigen::VectorXd> x(ps.size()), b(ps.size()), sol(ps.size()), alone(ps.size());
+    std::vector<BatchRequest> set, solves;
+    for (std::size_t i = 0; i < ps.size(); ++i) {
+      x[i] = deformed(ps[i], 0.3 * static_cast<double>(i));
+      b[i] = randomVector(ps[i].dofCount(), 300 + static_cast<unsigned>(i));
+      sol[i] = alone[i] = Eigen::VectorXd::Zero(ps[i].dofCount());
+      set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+    }
+    for (std::size_t i = 0; i < ps.size(); ++i) solves.push_back(request(BatchOp::Solve, i, &b[i], &sol[i], c));
+    runOk(*batch, set);
+    runOk(*batch, solves);
+    for (std::size_t i = 0; i < ps.size(); ++i) {
+      singles[i]->setPositions(x[i]);
+      singles[i]->solve(c, b[i], alone[i]);
+      EXPECT_TRUE(sameBits(sol[i], alone[i])) << "order " << order << ", " << ps[i].name << ": max rel. difference "
+                                              << maxRel(sol[i], alone[i]);
     }
   }
 }
@@ -643,7 +716,8 @@ TEST_P(OpenCLBatch, PackRuleTakesPacksWhereTheyShortenTheRound) {
   const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
   for (const auto& [count, packs] : {std::pair<std::size_t, bool>{cores + 1, false}, {8 * cores, true}}) {
     SCOPED_TRACE(std::to_string(count) + " copies on " + std::to_string(cores) + " compute units");
-    std::vector<detail::Problem> ps = instances(count);
+    // Copies only moved: one device numbering for all, the mesh's own or the Morton order alike.
+    std::vector<detail::Problem> ps = instances(count, false);
     ps.erase(std::remove_if(ps.begin(), ps.end(), [](const detail::Problem& p) { return p.name == "slab"; }), ps.end());
     auto batch = batchOf(ps, solver());
     RoundPaths round(ps, 40);
@@ -1121,8 +1195,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   for (const auto& p : ps) all.push_back(&p);
   EXPECT_EQ(batchOf(ps, s, o)->allocatedBytes(), expected(all, true, s.preconditioner, false, false));
   {
-    // Packs (pcg_iterate_pack): 11 copies of one mesh of 252 tets and 96 nodes take 2 slots of 8
-    // lanes, each with rows for 256 elements and 96 nodes (padded to 8), and the mesh's corners and
+    // Packs (pcg_iterate_pack): 11 copies of one mesh of 300 tets and 108 nodes take 2 slots of 8
+    // lanes, each with rows for 304 elements and 112 nodes (padded to 8), and the mesh's corners and
     // gather lists once: the slots' table, corners, starts and entries, a_i and volumes (10 rows per
     // element), outputs (12), the PCG vectors x r u p s w, free mask, mass and block inverse (6 x 3,
     // 3, 3 and 9 rows per node) and 64 partial triples per slot (the bodies' own count).
@@ -1131,9 +1205,9 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     packed.groupPcg = plain.groupPcg = 1;
     packed.packPcg = 1;
     plain.packPcg = 0;
-    const std::size_t slots = 2, L = 8, E = 252, Ep = 256, N = 96;
+    const std::size_t slots = 2, L = 8, E = 300, Ep = 304, N = 108, Np = 112;
     const std::size_t packBytes = 4 * 16 * slots + 4 * 4 * E + 4 * (N + 1) + 4 * 4 * E +
-                                  r * L * slots * (Ep * (10 + 12) + N * (6 * 3 + 3 + 3 + 9)) + r * 3 * L * 64 * slots;
+                                  r * L * slots * (Ep * (10 + 12) + Np * (6 * 3 + 3 + 3 + 9)) + r * 3 * L * 64 * slots;
     EXPECT_EQ(batchOf(copies, s, packed)->allocatedBytes(), batchOf(copies, s, plain)->allocatedBytes() + packBytes);
   }
   // The static problem still solves (a mass coefficient meets no mass) like one with zero mass.

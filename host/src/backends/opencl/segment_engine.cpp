@@ -196,11 +196,13 @@ namespace {
 std::atomic<unsigned long long> groupPcgLaunches{0};
 std::atomic<unsigned long long> teamPcgLaunches{0};
 std::atomic<unsigned long long> packPcgLaunches{0};
+std::atomic<unsigned long long> packPcgLanes{0};
 }  // namespace
 
 unsigned long long groupPcgLaunchCount() { return groupPcgLaunches.load(); }
 unsigned long long teamPcgLaunchCount() { return teamPcgLaunches.load(); }
 unsigned long long packPcgLaunchCount() { return packPcgLaunches.load(); }
+unsigned long long packPcgLaneCount() { return packPcgLanes.load(); }
 
 std::size_t defaultTileBytes(std::size_t cacheBytes) {
   // Measured with bench_batch (100 bodies of 2,000 elements, float, PoCL on 2 cores):
@@ -351,21 +353,12 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
       const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
       if (p.mesh.tetCount() * widest >= (std::size_t(1) << 32) / 2 || 9 * p.mesh.nodeCount() >= (std::size_t(1) << 32) / 2)
         continue;  // over the 32-bit indexing on its own: refused below, not sorted first
-      // Copies of one mesh (the same corners and node count, however placed) take the first copy's
-      // order, so that they keep one numbering on the device (and share packs: pcg_pack.cl).
-      std::size_t first = 0;
-      while (first < s && !(problems[first]->mesh.nodeCount() == p.mesh.nodeCount() &&
-                            problems[first]->mesh.tets == p.mesh.tets))
-        ++first;
-      if (first < s) {
-        if (!ordered[first]) continue;
-        orders[s] = orders[first];
-      } else {
-        std::optional<LocalityOrder> order =
-            reorder == 1 && p.mesh.tetCount() > 0 ? mortonOrder(p.mesh) : localityOrder(p.mesh);
-        if (!order) continue;
-        orders[s] = std::move(*order);
-      }
+      // Each body its own order, as alone (a batched body's bits are its own run's): copies of one
+      // mesh that are only moved get the same order and share packs (pcg_pack.cl); copies whose
+      // order differs (rotated, in the Morton order) are not packed together.
+      std::optional<LocalityOrder> order = reorder == 1 && p.mesh.tetCount() > 0 ? mortonOrder(p.mesh) : localityOrder(p.mesh);
+      if (!order) continue;
+      orders[s] = std::move(*order);
       ordered[s] = std::make_unique<Problem>(reorderedProblem(p, orders[s]));
     }
 
@@ -1115,7 +1108,7 @@ std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& 
     // A pack takes a core for about what kPackCost bodies take alone (pcg_iterate_group): packed
     // only where that shortens the round, unless packs were asked for (packAlways_).
     const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
-    const std::size_t slotsNeeded = (bodies.size() + kPackLanes - 1) / kPackLanes;
+    const std::size_t slotsNeeded = bodies.size() / kPackLanes + (bodies.size() % kPackLanes >= packMinLanes_ ? 1 : 0);
     if (!packAlways_ && static_cast<double>((bodies.size() + cores - 1) / cores) <=
                             kPackCost * static_cast<double>((slotsNeeded + cores - 1) / cores))
       continue;
@@ -1654,6 +1647,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                        scalars_, rows, iterations, tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);
           ++packPcgLaunches;
+          packPcgLanes += static_cast<unsigned long long>(std::count(packed.begin(), packed.end(), char(1)));
         }
       }
       pcgIteration(true);

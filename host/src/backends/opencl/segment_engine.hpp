@@ -125,6 +125,8 @@ unsigned long long groupPcgLaunchCount();
 unsigned long long teamPcgLaunchCount();
 /// Launches of pcg_iterate_pack (one-launch PCG iterations, bodies of one mesh in vector lanes) so far.
 unsigned long long packPcgLaunchCount();
+/// Bodies iterated in those packs so far (one per lane of a launch).
+unsigned long long packPcgLaneCount();
 
 class SegmentEngine {
  public:
