@@ -1200,7 +1200,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     // gather lists once: the slots' table, corners, starts and entries, a_i and volumes (10 rows per
     // element), outputs (12), the PCG vectors x r u p s w, free mask, mass and block inverse (6 x 3,
     // 3, 3 and 9 rows per node) and 64 partial triples per slot (the bodies' own count).
-    const std::vector<detail::Problem> copies = instances(11);
+    const std::vector<detail::Problem> copies = instances(11, false);  // one numbering, Morton or not
     detail::OpenCLOptions packed = o, plain = o;
     packed.groupPcg = plain.groupPcg = 1;
     packed.packPcg = 1;
