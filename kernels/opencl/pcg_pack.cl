@@ -40,14 +40,10 @@ typedef int8 maskp;
 #endif
 #if defined(COROFEM_MIXED) && !defined(COROFEM_DOUBLE)
 typedef double8 sump;
-typedef long8 summaskp;
 #define TO_SUMP(v) convert_double8(v)
-#define TO_SUMMASK(m) convert_long8(m)
 #else
 typedef realp sump;
-typedef maskp summaskp;
 #define TO_SUMP(v) (v)
-#define TO_SUMMASK(m) (m)
 #endif
 #define LDP(ptr) vload8(0, (ptr))
 #define STP(value, ptr) vstore8((value), 0, (ptr))
@@ -124,12 +120,13 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
   uint t = 0; /* the dof's place in the chunk: the 4-wide branch's lane t % 4 */
   for (uint n = first; n < last; ++n) {
     const uint row = 3 * (nodeBase + n);
-    realp rn[3], un[3];
+    realp rn[3], un[3], uo[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
-      const realp uo = LDP(ROW(U, row + k)), po = LDP(ROW(P, row + k)), wo = LDP(ROW(W, row + k)),
-                  so = LDP(ROW(S, row + k)), xo = LDP(ROW(X, row + k)), ro = LDP(ROW(R, row + k));
-      const realp pd = uo + beta * po, sd = wo + beta * so;
+      uo[k] = LDP(ROW(U, row + k));
+      const realp po = LDP(ROW(P, row + k)), wo = LDP(ROW(W, row + k)), so = LDP(ROW(S, row + k)),
+                  xo = LDP(ROW(X, row + k)), ro = LDP(ROW(R, row + k));
+      const realp pd = uo[k] + beta * po, sd = wo + beta * so;
       STP(select(po, pd, run), ROW(P, row + k));
       STP(select(so, sd, run), ROW(S, row + k));
       STP(select(xo, xo + alpha * pd, run), ROW(X, row + k));
@@ -152,7 +149,7 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
 #endif
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
-      STP(select(LDP(ROW(U, row + k)), un[k], run), ROW(U, row + k));
+      STP(select(uo[k], un[k], run), ROW(U, row + k));
       const uint a = four ? t % 4 : 0;
       acc[a] += TO_SUMP(rn[k]) * TO_SUMP(un[k]);
       accR[a] += TO_SUMP(rn[k]) * TO_SUMP(rn[k]);

@@ -731,8 +731,9 @@ void SegmentEngine::findPackMeshes() {
   packSlots_.clear();
   packNodeRows_ = 0;
   if (!packs_) return;
-  // Bodies with the same corners and node count (in the device's numbering, which a mesh and its
-  // copies share), each mesh's bodies in segment order.
+  // Bodies with the same corners and node count in the device's numbering (copies of a mesh that
+  // are only moved; each body has the numbering it would have alone), each mesh's bodies in
+  // segment order.
   std::map<std::pair<std::size_t, std::size_t>, std::vector<std::size_t>> bySize;
   for (std::size_t s = 0; s < segs_.size(); ++s) bySize[{segs_[s].nodes, segs_[s].elems}].push_back(s);
   for (const auto& [size, bodies] : bySize) {
