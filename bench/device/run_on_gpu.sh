@@ -5,10 +5,11 @@
 # "probe tests bench") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
 # narrows it), profile (COROFEM_OPENCL_PROFILE on the 10k and 1M steps), ab (the dynamic steps of
 # the bench_opencl binaries named in AB, in turns), envab (bench_opencl under each environment
-# setting in ENVAB, in turns), sweep (work-group sizes), more (bench_backends,
-# bench_embed, bench_batch), meshorder (bench_mesh_order: real meshes in their files' numbering and
+# setting in ENVAB, in turns; a comma joins several variables into one setting), sweep (work-group sizes), more (bench_backends,
+# bench_embed, bench_batch), batch (bench_batch alone; BATCH_FILTER), meshorder (bench_mesh_order: real meshes in their files' numbering and
 # in the device's Morton order). The tests stage also runs five suites again with the Morton order
-# forced on every body (COROFEM_OPENCL_REORDER=1), as CTest does.
+# forced on every body (COROFEM_OPENCL_REORDER=1), as CTest does, at the same time; TEST_TIMEOUT and
+# MORTON_TIMEOUT (seconds, 400 and 150) bound each binary.
 set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
@@ -36,22 +37,21 @@ if has probe; then
   } 2>&1 | tee "$OUT/probe.log"
 fi
 
-if has tests; then
+if has tests; then  # every suite and the Morton reruns at once (16 cores; the GPU is shared by all)
   pids=()
   for t in "$g"/bin/test_*; do
     n=$(basename "$t")
-    (cd "$root" && timeout 400 "$t" --gtest_brief=1 > "/tmp/logs/$n.log" 2>&1; echo "$n exit $?" >> /tmp/logs/exits) &
+    (cd "$root" && timeout "${TEST_TIMEOUT:-400}" "$t" --gtest_brief=1 > "/tmp/logs/$n.log" 2>&1; echo "$n exit $?" >> /tmp/logs/exits) &
     pids+=($!)
   done
-  wait "${pids[@]}"
-  pids=()
-  for n in test_batch test_embed test_opencl test_solve test_schedule; do  # in parallel, as above
+  for n in test_batch test_embed test_opencl test_solve test_schedule; do
     [[ -x $g/bin/$n ]] || continue
-    (cd "$root" && COROFEM_OPENCL_REORDER=1 timeout 150 "$g/bin/$n" --gtest_brief=1 > "/tmp/logs/morton_$n.log" 2>&1
+    (cd "$root" && COROFEM_OPENCL_REORDER=1 timeout "${MORTON_TIMEOUT:-150}" "$g/bin/$n" --gtest_brief=1 > "/tmp/logs/morton_$n.log" 2>&1
      echo "morton_$n exit $?" >> /tmp/logs/exits) &
     pids+=($!)
   done
-  (( ${#pids[@]} )) && wait "${pids[@]}"
+  wait "${pids[@]}"
+  echo "tests took $SECONDS s since the script began"
   sort /tmp/logs/exits
   for f in /tmp/logs/test_*.log /tmp/logs/morton_*.log; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
   grep -h -E '^\[  FAILED  \]' /tmp/logs/test_*.log /tmp/logs/morton_*.log | head -40
@@ -82,10 +82,10 @@ if has ab; then  # A/B: the binaries named in AB (in .gpu/bin), in turns, twice
   done | tee /tmp/logs/ab.txt
 fi
 
-if has envab; then  # A/B of environment settings (ENVAB, e.g. "COROFEM_OPENCL_FUSED=0 COROFEM_OPENCL_FUSED=1"), in turns, twice
-  for round in 1 2; do
+if has envab; then  # A/B of environment settings (ENVAB, e.g. "COROFEM_OPENCL_FUSED=0 COROFEM_OPENCL_FUSED=1"), in turns
+  for round in $(seq "${ENVAB_ROUNDS:-2}"); do
     for v in ${ENVAB:-X=0}; do
-      env "$v" timeout 150 "$B/bench_opencl" --benchmark_filter="${ENVAB_FILTER:-dynamic_step|pcg_iteration/dev0/(1k|10k|1M)}" \
+      env ${v//,/ } timeout 150 "$B/bench_opencl" --benchmark_filter="${ENVAB_FILTER:-dynamic_step|pcg_iteration/dev0/(1k|10k|1M)}" \
         --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v b=$v '{print b, $1, $2, $3}'
     done
   done | tee /tmp/logs/envab.txt
@@ -110,6 +110,13 @@ if has more; then
     --benchmark_out="$OUT/bench_batch.json" --benchmark_out_format=json > /tmp/logs/bench_batch.txt 2>&1
   echo "bench_batch exit $?"
   grep -h median /tmp/logs/bench_backends.txt /tmp/logs/bench_embed.txt /tmp/logs/bench_batch.txt | cut -c1-150
+fi
+if has batch; then  # bench_batch alone (the 100 bodies batched and separate)
+  timeout 200 "$B/bench_batch" --benchmark_filter="${BATCH_FILTER:-HundredBodies/}" --benchmark_repetitions=3 \
+    --benchmark_report_aggregates_only=true --benchmark_out="$OUT/bench_batch.json" --benchmark_out_format=json \
+    > /tmp/logs/bench_batch.txt 2>&1
+  echo "bench_batch exit $?"
+  grep -h -E 'median|ratio' /tmp/logs/bench_batch.txt | cut -c1-200
 fi
 if has meshorder; then
   (cd "$root" && timeout 300 "$B/bench_mesh_order" --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \

@@ -3,6 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <cstdlib>
 #include <filesystem>
 #include <string>
 
@@ -17,13 +20,25 @@ inline std::filesystem::path dataRoot() {
 /// Full path of a shared data file, e.g. dataPath("meshes/ipc/bar-186.msh").
 inline std::string dataPath(const std::string& relative) { return (dataRoot() / relative).string(); }
 
-/// Temporary directory unique to the running test (created, emptied first).
+/// Temporary directory unique to the running test and process (created, emptied first):
+/// <build>/test-tmp/<pid>/<suite.test>. Per process because CTest runs some suites twice (the
+/// Morton-forced ones, tests/CMakeLists.txt) and may run a test and its twin at once. The process's
+/// folder is removed when it exits normally, unless COROFEM_KEEP_TEST_TMP is set.
 inline std::filesystem::path tempDir() {
+  struct ProcessDir {
+    std::filesystem::path path =
+        std::filesystem::path(COROFEM_BINARY_DIR) / "test-tmp" / std::to_string(static_cast<long>(::getpid()));
+    ~ProcessDir() {
+      std::error_code ignored;
+      if (!std::getenv("COROFEM_KEEP_TEST_TMP")) std::filesystem::remove_all(path, ignored);
+    }
+  };
+  static const ProcessDir process;
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
   std::string name = std::string(info->test_suite_name()) + "." + info->name();
   for (char& c : name)
     if (c == '/') c = '_';
-  auto dir = std::filesystem::path(COROFEM_BINARY_DIR) / "test-tmp" / name;
+  auto dir = process.path / name;
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
