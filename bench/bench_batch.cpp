@@ -23,7 +23,9 @@
 //
 // One benchmark iteration = kStepsPerSample steps of the whole set with each of the three, taken
 // alternately so that all three go through the same physical states; the counters are set-steps
-// per second (one set-step = every body advanced one step) and the ratios. Each configuration is
+// per second (one set-step = every body advanced one step) and the ratios, and per batched
+// set-step and call (set_positions, internal_forces, solve, ...): the rounds, their device time and
+// the wait before them (the bodies' host work and the rendezvous, while the device idles). Each configuration is
 // created and warmed up (one step) once, outside the timing.
 //
 //   ./build/bench/bench_batch --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
@@ -169,7 +171,13 @@ void BM_HundredBodies(benchmark::State& state) {
   const auto deviceSeconds = [&] {
     return nlohmann::json::parse(s.batched.schedulerReport())["batches"][0]["device_seconds"].get<double>();
   };
+  // Per call of the bodies inside the batched steps: rounds, device seconds, and the wait before
+  // the rounds (the bodies' host work and the rendezvous), summed from the scheduler's report.
+  const auto byCall = [&] {
+    return nlohmann::json::parse(s.batched.schedulerReport())["batches"][0]["rounds_by_call"];
+  };
   const double device0 = deviceSeconds();
+  const nlohmann::json calls0 = byCall();
   double tBatched = 0, tSeparate = 0, tUnbatched = 0;
   long long pcgBatched = 0, pcgSeparate = 0, pcgUnbatched = 0, pcgSlowest = 0;
   for (auto _ : state) {
@@ -199,6 +207,22 @@ void BM_HundredBodies(benchmark::State& state) {
   state.counters["body_steps_per_s_batched"] = steps * kBodies / tBatched;
   // Share of the batched step spent in the device's rounds (the rest: host driver work, rendezvous).
   state.counters["batched_device_fraction"] = (deviceSeconds() - device0) / tBatched;
+  // Per set-step of the batched runs, by call: rounds, device ms and wait ms before them.
+  const nlohmann::json calls1 = byCall();
+  double waitSeconds = 0.0;
+  for (const auto& c : calls1.items()) {
+    const auto before = [&](const char* key) {
+      return calls0.contains(c.key()) ? calls0[c.key()][key].get<double>() : 0.0;
+    };
+    const double rounds = c.value()["rounds"].get<double>() - before("rounds");
+    const double device = c.value()["device_seconds"].get<double>() - before("device_seconds");
+    const double wait = c.value()["wait_seconds"].get<double>() - before("wait_seconds");
+    waitSeconds += wait;
+    state.counters["batched_" + c.key() + "_rounds"] = rounds / steps;
+    state.counters["batched_" + c.key() + "_device_ms"] = 1e3 * device / steps;
+    state.counters["batched_" + c.key() + "_wait_ms"] = 1e3 * wait / steps;
+  }
+  state.counters["batched_wait_fraction"] = waitSeconds / tBatched;
 }
 // Arg: 1 = varied materials (the benchmark), 0 = one material for all.
 BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();

@@ -135,6 +135,53 @@ TEST(BatchGroup, EveryRoundHoldsEveryBodysNextCall) {
     EXPECT_EQ(energy[i], (1.0 + static_cast<double>(i)) * 3.0 * static_cast<double>(i * i)) << "body " << i;
 }
 
+TEST(BatchGroup, RoundsByCallCountEachCallAndTheWaitBeforeIt) {
+  // Inside a step: a round of set_positions, then (after 40 ms of every body's "host work") a
+  // round of internal_forces, then a round where body 0 asks for its energy while the others
+  // solve (mixed). Each round counts under its call with its requests; the wait before the second
+  // round holds the 40 ms. Calls outside a step count in the totals only.
+  Watchdog dog(60);
+  const std::size_t n = 4;
+  auto group = fakeGroup(n);
+  std::vector<std::unique_ptr<Backend>> views;
+  for (std::size_t i = 0; i < n; ++i) views.push_back(group->view(i));
+  Eigen::VectorXd outside = Eigen::VectorXd::Ones(3);
+  views[1]->setPositions(outside);
+  const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+    Eigen::VectorXd x = Eigen::VectorXd::Constant(3, 1.0 + static_cast<double>(i)), f, y = Eigen::VectorXd::Zero(3);
+    views[i]->setPositions(x);
+    std::this_thread::sleep_for(std::chrono::milliseconds(40));
+    views[i]->internalForces(f);
+    if (i == 0)
+      views[i]->elasticEnergy();
+    else
+      views[i]->solve({1.0, 0.0, 1.0}, f, y);
+  });
+  for (const auto& e : errors) EXPECT_FALSE(e);
+  const detail::BatchGroupStats st = group->stats();
+  EXPECT_EQ(st.rounds, 4);
+  const auto& set = st.byCall[static_cast<std::size_t>(detail::BatchOp::SetPositions)];
+  const auto& forces = st.byCall[static_cast<std::size_t>(detail::BatchOp::InternalForces)];
+  const auto& mixed = st.byCall[detail::BatchGroupStats::kMixedCalls];
+  EXPECT_EQ(set.rounds, 1);
+  EXPECT_EQ(set.requests, static_cast<long long>(n));
+  EXPECT_EQ(forces.rounds, 1);
+  EXPECT_EQ(forces.requests, static_cast<long long>(n));
+  EXPECT_GE(forces.waitSeconds, 0.040) << "the bodies' host work between the two calls";
+  EXPECT_EQ(mixed.rounds, 1);
+  EXPECT_EQ(mixed.requests, static_cast<long long>(n));
+  for (detail::BatchOp op : {detail::BatchOp::Apply, detail::BatchOp::Solve, detail::BatchOp::ElasticEnergy}) {
+    const auto c = static_cast<std::size_t>(op);
+    EXPECT_EQ(st.byCall[c].rounds, 0) << detail::batchCallName(c);
+  }
+  for (const auto& c : st.byCall) {
+    EXPECT_GE(c.deviceSeconds, 0.0);
+    EXPECT_GE(c.waitSeconds, 0.0);
+  }
+  EXPECT_STREQ(detail::batchCallName(detail::BatchGroupStats::kMixedCalls), "mixed");
+  EXPECT_STREQ(detail::batchCallName(static_cast<std::size_t>(detail::BatchOp::Solve)), "solve");
+}
+
 TEST(BatchGroup, OutsideAStepACallIsARoundOfOne) {
   auto group = fakeGroup(3);
   auto view = group->view(1);

@@ -16,6 +16,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -401,6 +402,21 @@ TEST(BatchSimulation, SummaryJsonListsTheBatch) {
   const json summary = json::parse(in);
   ASSERT_EQ(summary["scheduler"]["batches"].size(), 1u) << summary["scheduler"].dump(1);
   EXPECT_EQ(summary["scheduler"]["batches"][0]["bodies"].size(), 5u);
+  // The rounds inside the steps by call (bodies at different points of their steps, such as the
+  // linear body without a Newton update, make mixed rounds here).
+  const json& byCall = summary["scheduler"]["batches"][0]["rounds_by_call"];
+  ASSERT_FALSE(byCall.empty()) << summary["scheduler"].dump(1);
+  const std::vector<std::string> names{"set_positions", "internal_forces", "apply", "solve", "elastic_energy", "mixed"};
+  for (const auto& c : byCall.items()) {
+    EXPECT_NE(std::find(names.begin(), names.end(), c.key()), names.end()) << c.key();
+    EXPECT_GT(c.value()["rounds"].get<long long>(), 0) << c.key();
+    EXPECT_GE(c.value()["requests"].get<long long>(), c.value()["rounds"].get<long long>()) << c.key();
+    EXPECT_GE(c.value()["wait_seconds"].get<double>(), 0.0) << c.key();
+    EXPECT_GE(c.value()["device_seconds"].get<double>(), 0.0) << c.key();
+  }
+  long long inSteps = 0;
+  for (const auto& c : byCall.items()) inSteps += c.value()["rounds"].get<long long>();
+  EXPECT_LE(inSteps, summary["scheduler"]["batches"][0]["rounds"].get<long long>());
 }
 
 TEST(BatchSimulation, SceneKeyBackendBatch) {

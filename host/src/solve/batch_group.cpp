@@ -64,6 +64,13 @@ std::unique_ptr<BatchDevice> createLoopBatchDevice(std::vector<std::unique_ptr<B
   return std::make_unique<LoopBatchDevice>(std::move(backends));
 }
 
+const char* batchCallName(std::size_t i) {
+  static const char* const names[] = {"set_positions", "internal_forces", "apply", "solve", "elastic_energy", "mixed"};
+  static_assert(static_cast<std::size_t>(BatchOp::ElasticEnergy) + 1 == BatchGroupStats::kMixedCalls,
+                "one name per BatchOp, then mixed");
+  return i <= BatchGroupStats::kMixedCalls ? names[i] : "unknown";
+}
+
 // ------------------------------------------------------------------ rendezvous
 struct BatchGroup::Shared {
   enum class Phase { Out, Running, Waiting };
@@ -82,6 +89,8 @@ struct BatchGroup::Shared {
   std::size_t waiting = 0;  ///< Waiting bodies whose request no round has taken yet
   bool roundBusy = false;   ///< a round is on the device
   BatchGroupStats stats;
+  /// The end of the last round inside the step (the step's start before its first round).
+  std::chrono::steady_clock::time_point lastRoundEnd;
 
   /// The device work of one round, outside the lock. A throw from run() fails every request.
   /// Returns the seconds spent in it.
@@ -94,6 +103,14 @@ struct BatchGroup::Shared {
       for (BatchRequest* r : round) r->error = e;
     }
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  /// The byCall index of a round: its requests' call, or kMixedCalls.
+  static std::size_t callIndex(const std::vector<BatchRequest*>& round) {
+    const BatchOp op = round.front()->op;
+    for (const BatchRequest* r : round)
+      if (r->op != op) return BatchGroupStats::kMixedCalls;
+    return static_cast<std::size_t>(op);
   }
 
   void count(std::size_t requests, double seconds) {
@@ -148,9 +165,16 @@ struct BatchGroup::Shared {
           waiting -= taken.size();
           roundBusy = true;
           lk.unlock();
+          const auto start = std::chrono::steady_clock::now();
           const double seconds = execute(round);
           lk.lock();
           count(round.size(), seconds);
+          BatchCallStats& call = stats.byCall[callIndex(round)];
+          ++call.rounds;
+          call.requests += static_cast<long long>(round.size());
+          call.deviceSeconds += seconds;
+          call.waitSeconds += std::chrono::duration<double>(start - lastRoundEnd).count();
+          lastRoundEnd = std::chrono::steady_clock::now();
           // Answered bodies are Running again before anyone can start the next round, so that
           // round waits for their next calls.
           for (std::size_t i : taken) {
@@ -327,6 +351,7 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
   {
     // Every body enters before any runs: no round may start while one has yet to enter.
     std::lock_guard<std::mutex> g(shared_->m);
+    shared_->lastRoundEnd = std::chrono::steady_clock::now();
     for (std::size_t b : bodies) {
       Shared::Slot& s = shared_->slots[b];
       if (s.attached && s.phase == Shared::Phase::Out) {

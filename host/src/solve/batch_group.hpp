@@ -30,13 +30,31 @@
 
 namespace corofem::detail {
 
+/// The rounds of one kind of call inside steps (BatchGroupStats::byCall).
+struct BatchCallStats {
+  long long rounds = 0;        ///< rounds inside a step whose requests were all this call
+  long long requests = 0;      ///< their requests
+  double deviceSeconds = 0.0;  ///< wall time inside BatchDevice::run
+  /// Wall time before each of them since the end of the group's previous round (or the start of
+  /// the step): the bodies' host work between their calls and the rendezvous, when the device is idle.
+  double waitSeconds = 0.0;
+};
+
 /// What a group's device has done so far.
 struct BatchGroupStats {
   long long rounds = 0;         ///< rounds run (batched rounds and rounds of one)
   long long requests = 0;       ///< requests answered
   std::size_t largestRound = 0; ///< most requests in one round
   double deviceSeconds = 0.0;   ///< wall time inside BatchDevice::run (the rest of a step is the drivers' host work and the rendezvous)
+  /// The rounds inside steps by call, indexed by BatchOp; a round of several kinds of call (bodies
+  /// at different points of their step) counts under kMixedCalls.
+  static constexpr std::size_t kMixedCalls = 5;
+  BatchCallStats byCall[kMixedCalls + 1];
 };
+
+/// The name of BatchGroupStats::byCall[i] in reports: "set_positions", "internal_forces", "apply",
+/// "solve", "elastic_energy", "mixed".
+const char* batchCallName(std::size_t i);
 
 class BatchGroup {
  public:

@@ -361,7 +361,7 @@ struct Simulation::Impl {
   }
 
   /// The groups: [{"device", "bodies", "active_bodies", "rounds", "requests", "largest_round",
-  /// "device_seconds", "allocated_bytes", "buffers"}], and [{"device", "bodies", "reason"}] for bodies
+  /// "device_seconds", "rounds_by_call", "allocated_bytes", "buffers"}], and [{"device", "bodies", "reason"}] for bodies
   /// left unbatched.
   nlohmann::json batchesJson() const {
     nlohmann::json out = nlohmann::json::array();
@@ -372,9 +372,15 @@ struct Simulation::Impl {
         if (g.group->attached(k)) active.push_back(scene.bodies[g.bodies[k]].name);
       }
       const detail::BatchGroupStats st = g.group->stats();
+      nlohmann::json byCall = nlohmann::json::object();
+      for (std::size_t i = 0; i <= detail::BatchGroupStats::kMixedCalls; ++i)
+        if (const detail::BatchCallStats& c = st.byCall[i]; c.rounds > 0)
+          byCall[detail::batchCallName(i)] = {{"rounds", c.rounds}, {"requests", c.requests},
+                                              {"device_seconds", c.deviceSeconds}, {"wait_seconds", c.waitSeconds}};
       out.push_back({{"device", g.candidate}, {"backend", g.group->name()}, {"bodies", names},
                      {"active_bodies", active}, {"rounds", st.rounds}, {"requests", st.requests},
                      {"largest_round", st.largestRound}, {"device_seconds", st.deviceSeconds},
+                     {"rounds_by_call", byCall},
                      {"allocated_bytes", g.group->allocatedBytes()},
                      {"buffers", buffersJson(g.group->deviceBuffers())}});
     }
