@@ -109,14 +109,20 @@ std::vector<std::size_t> allBodies(std::size_t n) {
   return v;
 }
 
+/// A view of every body of the group.
+std::vector<std::unique_ptr<Backend>> allViews(BatchGroup& group) {
+  std::vector<std::unique_ptr<Backend>> views;
+  for (std::size_t i = 0; i < group.bodyCount(); ++i) views.push_back(group.view(i));
+  return views;
+}
+
 TEST(BatchGroup, EveryRoundHoldsEveryBodysNextCall) {
   // Body i makes i + 1 calls in the step: round r holds the bodies with more than r - 1 calls, so
   // there are exactly max(i + 1) rounds, the first with every body, and sum(i + 1) requests.
   Watchdog dog(60);
   const std::size_t n = 12;
   auto group = fakeGroup(n);
-  std::vector<std::unique_ptr<Backend>> views;
-  for (std::size_t i = 0; i < n; ++i) views.push_back(group->view(i));
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
   std::vector<double> energy(n, 0.0);
   const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
     Eigen::VectorXd x = Eigen::VectorXd::Constant(3, static_cast<double>(i));
@@ -143,8 +149,7 @@ TEST(BatchGroup, RoundsByCallCountEachCallAndTheWaitBeforeIt) {
   Watchdog dog(60);
   const std::size_t n = 4;
   auto group = fakeGroup(n);
-  std::vector<std::unique_ptr<Backend>> views;
-  for (std::size_t i = 0; i < n; ++i) views.push_back(group->view(i));
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
   Eigen::VectorXd outside = Eigen::VectorXd::Ones(3);
   views[1]->setPositions(outside);
   const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
@@ -204,8 +209,7 @@ TEST(BatchGroup, ThrowingAndFinishedBodiesLeaveTheRendezvous) {
   Watchdog dog(60);
   const std::size_t n = 6;
   auto group = fakeGroup(n);
-  std::vector<std::unique_ptr<Backend>> views;
-  for (std::size_t i = 0; i < n; ++i) views.push_back(group->view(i));
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
   // Body 0 returns at once, body 1 throws after one call, body 2 throws before any, the others
   // make 4 calls: they must not wait for the first three.
   const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
@@ -278,8 +282,7 @@ TEST(BatchGroup, ADeviceThatThrowsFailsEveryRequestOfTheRound) {
   };
   Watchdog dog(60);
   BatchGroup group(std::make_unique<Broken>());
-  std::vector<std::unique_ptr<Backend>> views;
-  for (std::size_t i = 0; i < 3; ++i) views.push_back(group.view(i));
+  std::vector<std::unique_ptr<Backend>> views = allViews(group);
   const auto errors = group.runStep(allBodies(3), [&](std::size_t i) {
     Eigen::VectorXd f;
     views[i]->internalForces(f);

