@@ -15,6 +15,9 @@
 // A second variant gives every body the same material (same PCG counts), which separates the
 // saving of shared launches from the cost of iterating until the slowest body has converged.
 //
+// BM_Rendezvous: the host side of a batched step alone (the pool's threads and the rendezvous of
+// each round), 100 bodies on a device that answers at once, 1 or 6 calls per body and step.
+//
 // BM_HundredBodySurfaces: the same 100 bodies (one material), batched, each driving a render
 // surface (a UV sphere of 2,002 vertices inside the body, written as OBJ to a temporary folder):
 // a frame is one step plus every body's surface brought up to date on the device (updateSurface,
@@ -33,6 +36,7 @@
 #include <corofem/corofem.hpp>
 
 #include "embed/embed_test_util.hpp"
+#include "solve/batch_group.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -226,6 +230,44 @@ void BM_HundredBodies(benchmark::State& state) {
 }
 // Arg: 1 = varied materials (the benchmark), 0 = one material for all.
 BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+
+/// A batch device that answers every request at once without work.
+class IdleBatchDevice final : public detail::BatchDevice {
+ public:
+  explicit IdleBatchDevice(std::size_t bodies) : bodies_(bodies) {}
+  std::string name() const override { return "idle"; }
+  std::string deviceName() const override { return "idle"; }
+  std::size_t bodyCount() const override { return bodies_; }
+  void run(std::vector<detail::BatchRequest*>&) override {}
+
+ private:
+  std::size_t bodies_;
+};
+
+/// The host side of a batched step alone: kBodies bodies on a device that does nothing, each step
+/// the given number of calls per body (a dynamic step with one Newton iteration makes 6). What it
+/// measures is the start of the step on the pool's threads and the rendezvous of each round, i.e.
+/// the part of batched_<call>_wait_ms above that is not the drivers' own arithmetic.
+void BM_Rendezvous(benchmark::State& state) {
+  const int calls = static_cast<int>(state.range(0));
+  detail::BatchGroup group(std::make_unique<IdleBatchDevice>(kBodies));
+  std::vector<std::unique_ptr<detail::Backend>> views;
+  std::vector<std::size_t> all;
+  for (int i = 0; i < kBodies; ++i) {
+    views.push_back(group.view(static_cast<std::size_t>(i)));
+    all.push_back(static_cast<std::size_t>(i));
+  }
+  for (auto _ : state) {
+    const auto errors = group.runStep(all, [&](std::size_t i) {
+      Eigen::VectorXd f;
+      for (int c = 0; c < calls; ++c) views[i]->internalForces(f);
+    });
+    for (const auto& e : errors)
+      if (e) std::exit(1);
+  }
+  state.counters["rounds_per_step"] = static_cast<double>(group.stats().rounds) / static_cast<double>(state.iterations());
+}
+BENCHMARK(BM_Rendezvous)->ArgName("calls")->Arg(1)->Arg(6)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 void BM_HundredBodySurfaces(benchmark::State& state) {
   static std::unique_ptr<Simulation> sim;
