@@ -1,6 +1,7 @@
 // Shared part of the per-body drivers: free-dof norms, scales, energies, the driver factory.
 #include "solve/body_solver.hpp"
 #include "util/error.hpp"
+#include "util/finite.hpp"
 
 #include <cmath>
 
@@ -64,7 +65,7 @@ void BodySolver::syncBackendPositions() {
 
 double BodySolver::freeNorm(const Eigen::VectorXd& v) const { return (v.array() * freeMask_).matrix().norm(); }
 
-bool BodySolver::allFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
+bool BodySolver::allFinite(const Eigen::VectorXd& v) { return allFiniteEntries(v); }
 
 void BodySolver::setBackendPositions(const Eigen::VectorXd& x, bool committed) {
   backend_.setPositions(x);

@@ -17,6 +17,7 @@
 
 #include "mesh/locality_order.hpp"
 #include "util/error.hpp"
+#include "util/finite.hpp"
 #include "util/parallel.hpp"
 
 #include <algorithm>
@@ -1763,9 +1764,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     std::vector<char> finiteParts(chunkCount(sg.dofs(), hostChunk_), 1);
     parallelChunks(sg.dofs(), hostChunk_, [&](std::size_t c, std::size_t lo, std::size_t hi) {
       withReals(xStage_.data(), sg.dofBegin() + lo, [&](const auto* out) {
-        finiteParts[c] = Eigen::Map<const Eigen::Matrix<std::remove_cv_t<std::remove_pointer_t<decltype(out)>>,
-                                                        Eigen::Dynamic, 1>>(out, static_cast<Eigen::Index>(hi - lo))
-                             .allFinite();
+        finiteParts[c] = allFiniteEntries(Eigen::Map<const Eigen::Matrix<std::remove_cv_t<std::remove_pointer_t<decltype(out)>>,
+                                                                         Eigen::Dynamic, 1>>(out, static_cast<Eigen::Index>(hi - lo)));
       });
     });
     const bool finite = std::all_of(finiteParts.begin(), finiteParts.end(), [](char f) { return f != 0; });
