@@ -9,7 +9,7 @@
 # bench_embed, bench_batch), batch (bench_batch alone; BATCH_FILTER), meshorder (bench_mesh_order: real meshes in their files' numbering and
 # in the device's Morton order). The tests stage also runs five suites again with the Morton order
 # forced on every body (COROFEM_OPENCL_REORDER=1), as CTest does, at the same time; TEST_TIMEOUT and
-# MORTON_TIMEOUT (seconds, 400 and 150) bound each binary, and test_opencl runs in OPENCL_SHARDS
+# MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, and test_opencl runs in OPENCL_SHARDS
 # (6) gtest shards in each numbering.
 set -uo pipefail
 root=$(pwd)
@@ -20,7 +20,7 @@ has() { [[ " $stages " == *" $1 "* ]]; }
 export LD_LIBRARY_PATH=$g/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 export COROFEM_DATA_DIR=$g/data COROFEM_KERNEL_CACHE=/tmp/corofem-kernels
 # The test binaries know the project as /work/main and the data as ../shared/data beside it.
-if [[ $root != /work/main && ! -e /work/main ]]; then mkdir -p /work; ln -sfn "$root" /work/main; fi
+if [[ $root != /work/main ]] && { [[ ! -e /work/main ]] || [[ -L /work/main ]]; }; then mkdir -p /work; ln -sfn "$root" /work/main; fi
 [[ -e /work/shared ]] || ln -sfn "$g" /work/shared
 # The CLI tests run the command where the build put it.
 [[ -x $root/build/corofem ]] || { mkdir -p "$root/build" && cp "$g/bin/corofem" "$root/build/corofem"; }
@@ -42,10 +42,11 @@ if has tests; then  # every suite and the Morton reruns at once (16 cores; the G
   # test_opencl, the longest (over 230 s on an H200 machine with the others beside it, 2026-11-26),
   # runs in OPENCL_SHARDS gtest shards in each numbering (tests' temporary folders are per process).
   shards=${OPENCL_SHARDS:-6}
+  rm -rf /tmp/logs && mkdir -p /tmp/logs  # a warm machine's earlier run must not mix in
   pids=()
   run_one() {  # log name, environment setting (or X=0), timeout, binary, shard index or ""
     local log=$1 envset=$2 limit=$3 bin=$4 shard=$5
-    (cd "$root" && if [[ -n $shard ]]; then export GTEST_TOTAL_SHARDS=$shards GTEST_SHARD_INDEX=$shard; fi
+    (cd "$root" || exit 1; if [[ -n $shard ]]; then export GTEST_TOTAL_SHARDS=$shards GTEST_SHARD_INDEX=$shard; fi
      env "$envset" timeout "$limit" "$bin" --gtest_brief=1 > "/tmp/logs/$log.log" 2>&1; echo "$log exit $?" >> /tmp/logs/exits) &
     pids+=($!)
   }
@@ -60,9 +61,9 @@ if has tests; then  # every suite and the Morton reruns at once (16 cores; the G
   for n in test_batch test_embed test_opencl test_solve test_schedule; do
     [[ -x $g/bin/$n ]] || continue
     if [[ $n == test_opencl ]]; then
-      for ((k = 0; k < shards; ++k)); do run_one "morton_${n}_$k" COROFEM_OPENCL_REORDER=1 "${MORTON_TIMEOUT:-150}" "$g/bin/$n" $k; done
+      for ((k = 0; k < shards; ++k)); do run_one "morton_${n}_$k" COROFEM_OPENCL_REORDER=1 "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" $k; done
     else
-      run_one "morton_$n" COROFEM_OPENCL_REORDER=1 "${MORTON_TIMEOUT:-150}" "$g/bin/$n" ""
+      run_one "morton_$n" COROFEM_OPENCL_REORDER=1 "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" ""
     fi
   done
   wait "${pids[@]}"

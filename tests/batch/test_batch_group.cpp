@@ -187,6 +187,26 @@ TEST(BatchGroup, RoundsByCallCountEachCallAndTheWaitBeforeIt) {
   EXPECT_STREQ(detail::batchCallName(static_cast<std::size_t>(detail::BatchOp::Solve)), "solve");
 }
 
+TEST(BatchGroup, TheWaitBeforeAStepsFirstRoundStartsWithTheStep) {
+  // 60 ms pass between two steps of one call each: the second step's round counts only its own
+  // wait (from its startStep), not the time since the first step's round.
+  Watchdog dog(60);
+  const std::size_t n = 3;
+  auto group = fakeGroup(n);
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
+  const auto step = [&](std::size_t i) {
+    Eigen::VectorXd f;
+    views[i]->internalForces(f);
+  };
+  for (const auto& e : group->runStep(allBodies(n), step)) EXPECT_FALSE(e);
+  const double first = group->stats().byCall[static_cast<std::size_t>(detail::BatchOp::InternalForces)].waitSeconds;
+  std::this_thread::sleep_for(std::chrono::milliseconds(60));
+  for (const auto& e : group->runStep(allBodies(n), step)) EXPECT_FALSE(e);
+  const auto& forces = group->stats().byCall[static_cast<std::size_t>(detail::BatchOp::InternalForces)];
+  EXPECT_EQ(forces.rounds, 2);
+  EXPECT_LT(forces.waitSeconds - first, 0.060) << "the pause between the steps is no wait inside a step";
+}
+
 TEST(BatchGroup, OutsideAStepACallIsARoundOfOne) {
   auto group = fakeGroup(3);
   auto view = group->view(1);

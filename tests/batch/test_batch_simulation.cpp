@@ -404,7 +404,7 @@ TEST(BatchSimulation, SummaryJsonListsTheBatch) {
   EXPECT_EQ(summary["scheduler"]["batches"][0]["bodies"].size(), 5u);
   // The rounds inside the steps by call (bodies at different points of their steps, such as the
   // linear body without a Newton update, make mixed rounds here).
-  const json& byCall = summary["scheduler"]["batches"][0]["rounds_by_call"];
+  const json& byCall = summary.at("scheduler").at("batches").at(0).at("rounds_by_call");
   ASSERT_FALSE(byCall.empty()) << summary["scheduler"].dump(1);
   const std::vector<std::string> names{"set_positions", "internal_forces", "apply", "solve", "elastic_energy", "mixed"};
   for (const auto& c : byCall.items()) {

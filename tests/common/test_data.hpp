@@ -23,14 +23,17 @@ inline std::string dataPath(const std::string& relative) { return (dataRoot() / 
 /// Temporary directory unique to the running test and process (created, emptied first):
 /// <build>/test-tmp/<pid>/<suite.test>. Per process because CTest runs some suites twice (the
 /// Morton-forced ones, tests/CMakeLists.txt) and may run a test and its twin at once. The process's
-/// folder is removed when it exits normally, unless COROFEM_KEEP_TEST_TMP is set.
+/// folder is removed when it exits normally, unless COROFEM_KEEP_TEST_TMP is set (a process killed
+/// by a timeout leaves its folder behind).
 inline std::filesystem::path tempDir() {
   struct ProcessDir {
-    std::filesystem::path path =
-        std::filesystem::path(COROFEM_BINARY_DIR) / "test-tmp" / std::to_string(static_cast<long>(::getpid()));
+    long pid = static_cast<long>(::getpid());
+    std::filesystem::path path = std::filesystem::path(COROFEM_BINARY_DIR) / "test-tmp" / std::to_string(pid);
     ~ProcessDir() {
+      // Not in a forked child that exits normally (its parent's folder stays the parent's).
       std::error_code ignored;
-      if (!std::getenv("COROFEM_KEEP_TEST_TMP")) std::filesystem::remove_all(path, ignored);
+      if (pid == static_cast<long>(::getpid()) && !std::getenv("COROFEM_KEEP_TEST_TMP"))
+        std::filesystem::remove_all(path, ignored);
     }
   };
   static const ProcessDir process;

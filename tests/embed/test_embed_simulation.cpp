@@ -5,6 +5,7 @@
 #include <corofem/embed.hpp>
 #include <corofem/simulation.hpp>
 
+#include "common/test_data.hpp"
 #include "embed/device_surface.hpp"
 #include "solve/batch.hpp"
 #include "solve/batch_group.hpp"
@@ -68,13 +69,9 @@ SurfaceMesh boxSurface(const std::array<double, 3>& lo, const std::array<double,
 /// to a temporary folder. 20 Newmark steps.
 Scene surfaceScene(BackendKind backend, Precision precision) {
   const std::array<double, 3> offset{50.0, 20.0, -30.0};
-  // One folder per test (ctest -j runs the tests as concurrent processes that would rewrite one file).
-  std::string name = "corofem_embed_simulation_";
-  if (const auto* info = ::testing::UnitTest::GetInstance()->current_test_info())
-    for (char c : std::string(info->test_suite_name()) + "_" + info->name())
-      name += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
-  const auto dir = std::filesystem::temp_directory_path() / name;
-  std::filesystem::create_directories(dir);
+  // The test's own folder (per process: ctest -j runs the tests, and the Morton-forced suite the
+  // same tests, as concurrent processes that would rewrite one file).
+  const std::filesystem::path dir = test::tempDir();
   const std::string obj = (dir / "inner_box.obj").string();
   const Status written = writeSurfaceMesh(obj, boxSurface({0.02, 0.01, 0.01}, {0.78, 0.09, 0.09}, 8));
   EXPECT_TRUE(written) << written.message();

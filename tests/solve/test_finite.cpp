@@ -7,6 +7,7 @@
 
 #include <limits>
 #include <random>
+#include <vector>
 
 namespace corofem {
 namespace {
@@ -35,6 +36,19 @@ void agreesWithEigen() {
   // Huge finite entries whose plain sum overflows are still finite.
   const Vector huge = Vector::Constant(33, L::max());
   EXPECT_TRUE(detail::allFiniteEntries(huge));
+  // Maps of unaligned storage, as the OpenCL backend passes its staging buffers.
+  std::vector<Scalar> storage(48);
+  for (Scalar& x : storage) x = static_cast<Scalar>(u(rng));
+  for (int offset = 0; offset < 5; ++offset)
+    for (int n : {0, 1, 3, 9, 17, 40}) {
+      Eigen::Map<Vector> m(storage.data() + offset, n);
+      EXPECT_TRUE(detail::allFiniteEntries(m));
+      if (n == 0) continue;
+      const Scalar keep = m[n - 1];
+      m[n - 1] = L::quiet_NaN();
+      EXPECT_FALSE(detail::allFiniteEntries(Eigen::Map<const Vector>(storage.data() + offset, n)));
+      m[n - 1] = keep;
+    }
   // An expression, not only a vector.
   const Vector a = Vector::Ones(9);
   EXPECT_TRUE(detail::allFiniteEntries(a * Scalar(2)));

@@ -35,8 +35,9 @@ struct BatchCallStats {
   long long rounds = 0;        ///< rounds inside a step whose requests were all this call
   long long requests = 0;      ///< their requests
   double deviceSeconds = 0.0;  ///< wall time inside BatchDevice::run
-  /// Wall time before each of them since the end of the group's previous round (or the start of
-  /// the step): the bodies' host work between their calls and the rendezvous, when the device is idle.
+  /// Wall time before each of them since the end of the group's previous round inside the step (or
+  /// the step's start): the bodies' host work between their calls and the rendezvous, when the
+  /// device is idle (or busy with a round of one for a body outside the step, which is counted here).
   double waitSeconds = 0.0;
 };
 
