@@ -375,7 +375,7 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
   p.next = 0;
   p.remaining = bodies.size();
   // Woken after the unlock, the workers do not all queue on the pool's mutex at once: with 100
-  // bodies on 2 cores a step of one call took 1.55-1.71 ms against 0.49-0.52 ms after
+  // bodies on 2 cores a step of one call took 1.55-1.71 ms against 0.49-0.50 ms after
   // (bench_batch's BM_Rendezvous, a device that answers at once).
   lk.unlock();
   p.work.notify_all();
