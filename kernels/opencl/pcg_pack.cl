@@ -389,24 +389,29 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     elemBegin[l] = p.seg[l] >= 0 ? (long)seg_info(segInfo, (uint)p.seg[l], kSegElemBegin) : -1;
     dofBegin[l] = p.seg[l] >= 0 ? 3 * (long)seg_info(segInfo, (uint)p.seg[l], kSegNodeBegin) : -1;
   }
+  /* Row-major order over (row k, block b): the work-group's items run one after the other on a CPU,
+   * so each lane's row is read as one long stream (8 at a time, which the prefetchers follow) where
+   * a block's 10 rows of 8 lanes made 80 short ones. */
   uint lo, hi;
-  pack_share((p.elems + 7) / 8, lid, &lo, &hi);
-  for (uint b = lo; b < hi; ++b)
-    for (int k = 0; k < (int)kPackElemRows; ++k) {
-      for (int l = 0; l < PACK_L; ++l) at[l] = elemBegin[l] < 0 ? -1 : (long)k * S + elemBegin[l] + 8 * b;
-      /* a_i components 0..8 of rotGrad, the volume (9) of geom */
-      pack_rows_in(k < 9 ? rotGrad : geom, at, elem, (size_t)(p.elemBase + 8 * b) * kPackElemRows + k,
-                   kPackElemRows);
-    }
-  __global const real* from[6] = {x, r, u, pv, s, w};
-  const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
-  pack_share(dofBlocks, lid, &lo, &hi);
-  for (uint b = lo; b < hi; ++b) {
+  const uint elemBlocks = (p.elems + 7) / 8;
+  pack_share(kPackElemRows * elemBlocks, lid, &lo, &hi);
+  for (uint i = lo; i < hi; ++i) {
+    const uint k = i / elemBlocks, b = i % elemBlocks;
+    for (int l = 0; l < PACK_L; ++l) at[l] = elemBegin[l] < 0 ? -1 : (long)k * S + elemBegin[l] + 8 * b;
+    /* a_i components 0..8 of rotGrad, the volume (9) of geom */
+    pack_rows_in(k < 9 ? rotGrad : geom, at, elem, (size_t)(p.elemBase + 8 * b) * kPackElemRows + k, kPackElemRows);
+  }
+  /* The same over (array v, block b): x r u p s w, the free mask, the mass. */
+  __global const real* from[8] = {x, r, u, pv, s, w, free, mass};
+  __global real* to[8] = {vec, vec + (size_t)dofRows * PACK_L, vec + (size_t)2 * dofRows * PACK_L,
+                          vec + (size_t)3 * dofRows * PACK_L, vec + (size_t)4 * dofRows * PACK_L,
+                          vec + (size_t)5 * dofRows * PACK_L, packFree, packMass};
+  const uint dofBlocks = 3 * ((p.nodes + 7) / 8), arrays = mass ? 8u : 7u;
+  pack_share(arrays * dofBlocks, lid, &lo, &hi);
+  for (uint i = lo; i < hi; ++i) {
+    const uint v = i / dofBlocks, b = i % dofBlocks;
     for (int l = 0; l < PACK_L; ++l) at[l] = dofBegin[l] < 0 ? -1 : dofBegin[l] + 8 * b;
-    const size_t row = (size_t)3 * p.nodeBase + 8 * b;
-    for (int v = 0; v < 6; ++v) pack_rows_in(from[v], at, vec + (size_t)v * dofRows * PACK_L, row, 1);
-    pack_rows_in(free, at, packFree, row, 1);
-    if (mass) pack_rows_in(mass, at, packMass, row, 1);
+    pack_rows_in(from[v], at, to[v], (size_t)3 * p.nodeBase + 8 * b, 1);
   }
 #if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
   const uint invBlocks = COROFEM_NODE_INVERSE * ((p.nodes + 7) / 8);
@@ -431,15 +436,15 @@ void pack_out(__global const uint* packInfo, __global const uint* segInfo, __glo
   __global real* to[6] = {x, r, u, pv, s, w};
   const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
   uint lo, hi;
-  pack_share(dofBlocks, lid, &lo, &hi);
-  for (uint b = lo; b < hi; ++b)
-    for (int v = 0; v < 6; ++v) {
-      realp a[PACK_L], t[PACK_L];
-      const size_t row = (size_t)3 * p.nodeBase + 8 * b;
-      for (int j = 0; j < PACK_L; ++j) a[j] = LDP(ROW(vec + (size_t)v * dofRows * PACK_L, row + j));
-      pack_transpose(a, t);
-      for (int l = 0; l < PACK_L; ++l)
-        if (dofBegin[l] >= 0) STP(t[l], to[v] + dofBegin[l] + 8 * b);
-    }
+  pack_share(6 * dofBlocks, lid, &lo, &hi);  /* vector-major, as pack_in: each lane's vector one long stream */
+  for (uint i = lo; i < hi; ++i) {
+    const uint v = i / dofBlocks, b = i % dofBlocks;
+    realp a[PACK_L], t[PACK_L];
+    const size_t row = (size_t)3 * p.nodeBase + 8 * b;
+    for (int j = 0; j < PACK_L; ++j) a[j] = LDP(ROW(vec + (size_t)v * dofRows * PACK_L, row + j));
+    pack_transpose(a, t);
+    for (int l = 0; l < PACK_L; ++l)
+      if (dofBegin[l] >= 0) STP(t[l], to[v] + dofBegin[l] + 8 * b);
+  }
 }
 #endif /* !COROFEM_TREE_REDUCE */

@@ -672,6 +672,73 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
   }
 }
 
+TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
+  // The cap's last iteration runs launched, on the vectors pack_out copied back: its update reads
+  // p, u, s and w, and only its recurrence residual r (from s and w) decides whether a body that
+  // reaches the cap converged there. With the cap at the iteration where one body converges
+  // (found by an uncapped solve), that body must be reported converged at the cap, with the other
+  // bodies' stops, x and residuals the work-groups' bit for bit (a pack_out that left a block of w
+  // stale passed PacksGiveTheOneWorkGroupIterationsBits, whose caps never met a convergence).
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
+  const std::vector<detail::Problem> ps = instances(11);
+  const std::size_t K = ps.size();
+  detail::OpenCLOptions packed, grouped;
+  packed.groupPcg = grouped.groupPcg = 1;
+  packed.teamPcg = grouped.teamPcg = 0;
+  packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;
+  packed.packPcg = 1;
+  grouped.packPcg = 0;
+  const detail::SystemCoeffs c{900.0, 30.0, 1.0};
+  std::vector<Eigen::VectorXd> x(K), rhs(K);
+  for (std::size_t i = 0; i < K; ++i) {
+    x[i] = deformed(ps[i], 0.25 + 0.3 * static_cast<double>(i));
+    rhs[i] = randomVector(ps[i].dofCount(), 1700 + static_cast<unsigned>(i));
+  }
+  // Solves every body on a batch with the given options and cap: the requests (stats) and the x.
+  auto solveAll = [&](const detail::OpenCLOptions& o, int cap, std::vector<Eigen::VectorXd>& sol) {
+    SolverDesc s = solver();
+    s.preconditioner = PreconditionerKind::Diagonal;
+    s.maxIterations = cap;
+    auto batch = batchOf(ps, s, o);
+    std::vector<BatchRequest> set, solves;
+    sol.assign(K, Eigen::VectorXd());
+    for (std::size_t i = 0; i < K; ++i) {
+      sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
+      set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+    }
+    runOk(*batch, set);
+    for (std::size_t i = 0; i < K; ++i) solves.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], c));
+    runOk(*batch, solves);
+    return solves;
+  };
+  std::vector<Eigen::VectorXd> free;
+  const std::vector<BatchRequest> uncapped = solveAll(grouped, 2000, free);
+  std::vector<int> counts;
+  for (const BatchRequest& r : uncapped) {
+    ASSERT_TRUE(r.stats.converged);
+    counts.push_back(r.stats.iterations);
+  }
+  std::sort(counts.begin(), counts.end());
+  const int cap = counts[counts.size() / 2];  // some copies converge before, at or after it
+  ASSERT_GE(cap, 3) << "the pack must run iterations before the cap's last";
+  std::vector<Eigen::VectorXd> xa, xb;
+  const unsigned long long lanesBefore = detail::packPcgLaneCount();
+  const std::vector<BatchRequest> a = solveAll(packed, cap, xa);
+  EXPECT_GT(detail::packPcgLaneCount(), lanesBefore) << "the copies ran in packs";
+  const std::vector<BatchRequest> b = solveAll(grouped, cap, xb);
+  int atCap = 0;
+  for (std::size_t i = 0; i < K; ++i) {
+    SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap));
+    EXPECT_EQ(a[i].stats.iterations, b[i].stats.iterations);
+    EXPECT_EQ(a[i].stats.converged, b[i].stats.converged);
+    EXPECT_EQ(a[i].stats.relativeResidual, b[i].stats.relativeResidual);
+    EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+    atCap += uncapped[i].stats.iterations == cap && b[i].stats.converged ? 1 : 0;
+  }
+  EXPECT_GE(atCap, 1) << "a body converges at the cap's last iteration";
+}
+
 TEST_P(OpenCLBatch, CopiesOfOneMeshBatchedGiveEachAlonesBits) {
   // Copies of one mesh placed differently (rotated: their Morton orders differ) keep the device
   // numbering each gets alone, in every numbering, so a batched copy's solve is its own run's bit
