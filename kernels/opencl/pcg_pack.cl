@@ -49,6 +49,8 @@ typedef realp sump;
 #define STP(value, ptr) vstore8((value), 0, (ptr))
 /* Row r of a lane-interleaved array. */
 #define ROW(base, r) ((base) + (size_t)(r) * PACK_L)
+/* PCG vector v of a pack array of dofRows rows per vector: 0..5 = x r u p s w. */
+#define PACK_VEC(vec, dofRows, v) ((vec) + (size_t)(v) * (dofRows) * PACK_L)
 
 /* A pack slot's extent (packInfo) and its lanes' segments (-1: no body). */
 typedef struct {
@@ -106,11 +108,11 @@ COROFEM_FN maskp lane_running(const PackSlot* p, __global const uint* segInfo, i
 COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dofRows, realp alpha, realp beta,
                                   maskp run, __global real* vec, __global const real* minv, sump* sums) {
   __global real* X = vec;
-  __global real* R = vec + (size_t)dofRows * PACK_L;
-  __global real* U = vec + (size_t)2 * dofRows * PACK_L;
-  __global real* P = vec + (size_t)3 * dofRows * PACK_L;
-  __global real* S = vec + (size_t)4 * dofRows * PACK_L;
-  __global const real* W = vec + (size_t)5 * dofRows * PACK_L;
+  __global real* R = PACK_VEC(vec, dofRows, 1);
+  __global real* U = PACK_VEC(vec, dofRows, 2);
+  __global real* P = PACK_VEC(vec, dofRows, 3);
+  __global real* S = PACK_VEC(vec, dofRows, 4);
+  __global const real* W = PACK_VEC(vec, dofRows, 5);
   sump acc[4] = {(sump)0, (sump)0, (sump)0, (sump)0}, accR[4] = {(sump)0, (sump)0, (sump)0, (sump)0};
 #if COROFEM_CHUNK == 4 && !defined(COROFEM_PRECOND_BLOCK)
   const bool four = last == first + 4;
@@ -169,7 +171,7 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
 COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, realp mu, uint dofRows,
                                      __global const uint* corners, __global const real* elem,
                                      __global const real* vec, __global real* out) {
-  __global const real* U = vec + (size_t)2 * dofRows * PACK_L;
+  __global const real* U = PACK_VEC(vec, dofRows, 2);
   __global const uint* c = corners + p->corners + 4 * e;
   const uint n0 = 3 * (p->nodeBase + c[0]);
   __global const real* g = ROW(elem, (size_t)(p->elemBase + e) * kPackElemRows);
@@ -229,8 +231,8 @@ COROFEM_FN sump pack_gather_nodes(uint first, uint last, const PackSlot* p, real
                                   __global const uint* start, __global const uint* entries,
                                   __global const real* out, __global const real* mass, __global const real* free,
                                   __global real* vec) {
-  __global const real* U = vec + (size_t)2 * dofRows * PACK_L;
-  __global real* W = vec + (size_t)5 * dofRows * PACK_L;
+  __global const real* U = PACK_VEC(vec, dofRows, 2);
+  __global real* W = PACK_VEC(vec, dofRows, 5);
   __global const real* o = ROW(out, (size_t)p->elemBase * 12);
   __global const uint* st = start + p->start;
   sump dot = (sump)0;
@@ -403,9 +405,9 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
   }
   /* The same over (array v, block b): x r u p s w, the free mask, the mass. */
   __global const real* from[8] = {x, r, u, pv, s, w, free, mass};
-  __global real* to[8] = {vec, vec + (size_t)dofRows * PACK_L, vec + (size_t)2 * dofRows * PACK_L,
-                          vec + (size_t)3 * dofRows * PACK_L, vec + (size_t)4 * dofRows * PACK_L,
-                          vec + (size_t)5 * dofRows * PACK_L, packFree, packMass};
+  __global real* to[8] = {PACK_VEC(vec, dofRows, 0), PACK_VEC(vec, dofRows, 1), PACK_VEC(vec, dofRows, 2),
+                          PACK_VEC(vec, dofRows, 3), PACK_VEC(vec, dofRows, 4), PACK_VEC(vec, dofRows, 5),
+                          packFree, packMass};
   const uint dofBlocks = 3 * ((p.nodes + 7) / 8), arrays = mass ? 8u : 7u;
   pack_share(arrays * dofBlocks, lid, &lo, &hi);
   for (uint i = lo; i < hi; ++i) {
@@ -441,7 +443,7 @@ void pack_out(__global const uint* packInfo, __global const uint* segInfo, __glo
     const uint v = i / dofBlocks, b = i % dofBlocks;
     realp a[PACK_L], t[PACK_L];
     const size_t row = (size_t)3 * p.nodeBase + 8 * b;
-    for (int j = 0; j < PACK_L; ++j) a[j] = LDP(ROW(vec + (size_t)v * dofRows * PACK_L, row + j));
+    for (int j = 0; j < PACK_L; ++j) a[j] = LDP(ROW(PACK_VEC(vec, dofRows, v), row + j));
     pack_transpose(a, t);
     for (int l = 0; l < PACK_L; ++l)
       if (dofBegin[l] >= 0) STP(t[l], to[v] + dofBegin[l] + 8 * b);
