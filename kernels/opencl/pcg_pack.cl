@@ -6,7 +6,7 @@
  * several bodies share a mesh (a scene's copies of one object, each with its own material, rest
  * shape, mass, constraints and solve), element e of kPackLanes of them sits in one vector instead:
  * its corner nodes are one scalar index for all lanes, every load and store is a contiguous vector
- * (corofem_layout.h, "packs of bodies"), and the gather to the nodes adds whole vectors. One
+ * (corofem_layout.h, "packs of bodies"), and the sums at the nodes add whole vectors. One
  * work-item runs a pack's iterations until every lane has stopped or the launch's iterations are
  * done; the host copies the bodies' vectors in (pack_in) and out (pack_out) around it.
  *
@@ -54,7 +54,7 @@ typedef realp sump;
 
 /* A pack slot's extent (packInfo) and its lanes' segments (-1: no body). */
 typedef struct {
-  uint elems, nodes, partialCount, corners, start, elemBase, nodeBase, partialBase;
+  uint elems, nodes, partialCount, corners, elemBase, nodeBase, partialBase;
   int seg[PACK_L];
 } PackSlot;
 
@@ -65,7 +65,6 @@ COROFEM_FN PackSlot pack_slot(__global const uint* packInfo, uint slot) {
   p.nodes = info[kPackNodes];
   p.partialCount = info[kPackPartialCount];
   p.corners = info[kPackCorners];
-  p.start = info[kPackStart];
   p.elemBase = info[kPackElemBase];
   p.nodeBase = info[kPackNodeBase];
   p.partialBase = info[kPackPartialBase];
@@ -167,10 +166,24 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
   }
 }
 
-/* element_product_items for element e of a pack: the same expressions on lanes of bodies. */
+/* Adds element e's 12-vector y to its corners' rows of the node sums (one row of 8 lanes each).
+ * The elements come in order, which is the order of the gather lists (gather.cl): each node's sum
+ * is then the gather's, 0 + y(first element) + y(next) ..., bit for bit. One work-item owns a
+ * pack, so the adds do not race. */
+COROFEM_FN void pack_add_corner(__global real* sums, uint row, realp yx, realp yy, realp yz) {
+  __global real* q = ROW(sums, row);
+  STP(LDP(q) + yx, q);
+  STP(LDP(q + PACK_L) + yy, q + PACK_L);
+  STP(LDP(q + 2 * PACK_L) + yz, q + 2 * PACK_L);
+}
+
+/* element_product_items for element e of a pack: the same expressions on lanes of bodies, each
+ * corner's part added to the node sums instead of stored for a gather (the element outputs of 8
+ * lanes are 384 bytes an element, streamed out and back each iteration; the node sums stay in the
+ * core's cache). */
 COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, realp mu, uint dofRows,
                                      __global const uint* corners, __global const real* elem,
-                                     __global const real* vec, __global real* out) {
+                                     __global const real* vec, __global real* sums) {
   __global const real* U = PACK_VEC(vec, dofRows, 2);
   __global const uint* c = corners + p->corners + 4 * e;
   const uint n0 = 3 * (p->nodeBase + c[0]);
@@ -206,47 +219,37 @@ COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, re
   const realp sxx = V * (lt + m2 * exx), syy = V * (lt + m2 * eyy), szz = V * (lt + m2 * ezz);
   const realp sxy = V * (m2 * exy), sxz = V * (m2 * exz), syz = V * (m2 * eyz);
   realp y0x = (realp)0, y0y = (realp)0, y0z = (realp)0;
-  __global real* o = ROW(out, (size_t)(p->elemBase + e) * 12);
   #pragma unroll
   for (int i = 0; i < 3; ++i) {
     const realp ax = a[3 * i], ay = a[3 * i + 1], az = a[3 * i + 2];
     const realp yx = sxx * ax + sxy * ay + sxz * az;
     const realp yy = sxy * ax + syy * ay + syz * az;
     const realp yz = sxz * ax + syz * ay + szz * az;
-    STP(yx, o + (3 * (i + 1)) * PACK_L);
-    STP(yy, o + (3 * (i + 1) + 1) * PACK_L);
-    STP(yz, o + (3 * (i + 1) + 2) * PACK_L);
+    pack_add_corner(sums, 3 * (p->nodeBase + c[i + 1]), yx, yy, yz);
     y0x -= yx;
     y0y -= yy;
     y0z -= yz;
   }
-  STP(y0x, o);
-  STP(y0y, o + PACK_L);
-  STP(y0z, o + 2 * PACK_L);
+  pack_add_corner(sums, n0, y0x, y0y, y0z);
 }
 
-/* gather_product_nodes (projected, no right-hand side) for the nodes [first, last) of a pack:
- * w = A u and the sum of u . w, lane by lane. */
-COROFEM_FN sump pack_gather_nodes(uint first, uint last, const PackSlot* p, realp massCoef, maskp run, uint dofRows,
-                                  __global const uint* start, __global const uint* entries,
-                                  __global const real* out, __global const real* mass, __global const real* free,
+/* gather_product_nodes (projected, no right-hand side) for the nodes [first, last) of a pack, on
+ * the node sums the element products made (left at zero for the next product): w = A u and the
+ * sum of u . w, lane by lane. */
+COROFEM_FN sump pack_finish_nodes(uint first, uint last, const PackSlot* p, realp massCoef, maskp run, uint dofRows,
+                                  __global real* sums, __global const real* mass, __global const real* free,
                                   __global real* vec) {
   __global const real* U = PACK_VEC(vec, dofRows, 2);
   __global real* W = PACK_VEC(vec, dofRows, 5);
-  __global const real* o = ROW(out, (size_t)p->elemBase * 12);
-  __global const uint* st = start + p->start;
   sump dot = (sump)0;
   for (uint n = first; n < last; ++n) {
-    realp sx = (realp)0, sy = (realp)0, sz = (realp)0;
-    const uint end = st[n + 1];
-    for (uint j = st[n]; j < end; ++j) {
-      __global const real* q = ROW(o, entries[j]);
-      sx += LDP(q);
-      sy += LDP(q + PACK_L);
-      sz += LDP(q + 2 * PACK_L);
-    }
-    const realp acc[3] = {sx, sy, sz};
     const uint row = 3 * (p->nodeBase + n);
+    realp acc[3];
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) {
+      acc[k] = LDP(ROW(sums, row + k));
+      STP((realp)0, ROW(sums, row + k));
+    }
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const realp pd = LDP(ROW(U, row + k));
@@ -288,8 +291,8 @@ COROFEM_FN void pack_segment_sums(__global sump* rows, uint count) {
  * copied in by pack_in. */
 __kernel __attribute__((reqd_work_group_size(1, 1, 1)))
 void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __global const real* segCoef,
-                      __global const uint* corners, __global const uint* start, __global const uint* entries,
-                      __global const real* elem, __global real* out, __global real* vec, __global const real* free,
+                      __global const uint* corners, __global const real* elem, __global real* sums,
+                      __global real* vec, __global const real* free,
                       __global const real* mass, __global const real* minv, __global sump* partials,
                       __global sum_real* allScalars, const uint dofRows, const uint iterations,
                       const sum_real tol2) {
@@ -299,6 +302,8 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   __global sump* rows = partials + (size_t)3 * p.partialBase;
   int any = 0;
   maskp run = lane_running(&p, segInfo, &any);
+  if (any != 0)
+    for (uint k = 0; k < 3 * p.nodes; ++k) STP((realp)0, ROW(sums, 3 * p.nodeBase + k));
   for (uint it = 0; it < iterations && any != 0; ++it) {
     const realp alpha = lane_scalar(&p, allScalars, kScalarAlpha), beta = lane_scalar(&p, allScalars, kScalarBeta);
     for (uint v = 0; v < p.partialCount; ++v) {
@@ -308,11 +313,10 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
       rows[3 * v] = sums[0];
       rows[3 * v + 1] = sums[1];
     }
-    for (uint e = 0; e < p.elems; ++e) pack_product_element(e, &p, lambda, mu, dofRows, corners, elem, vec, out);
+    for (uint e = 0; e < p.elems; ++e) pack_product_element(e, &p, lambda, mu, dofRows, corners, elem, vec, sums);
     for (uint v = 0; v < p.partialCount; ++v) {
       const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p.nodes);
-      rows[3 * v + 2] = pack_gather_nodes(first, max(first, last), &p, massCoef, run, dofRows, start, entries, out,
-                                          mass, free, vec);
+      rows[3 * v + 2] = pack_finish_nodes(first, max(first, last), &p, massCoef, run, dofRows, sums, mass, free, vec);
     }
     pack_segment_sums(rows, p.partialCount);
     sum_real ru[PACK_L], rr[PACK_L], uw[PACK_L];

@@ -161,12 +161,12 @@ COROFEM_CONSTANT(unsigned, kSegCoefCount, 8);
  * and node count alike, each with its own material, rest shape, mass, constraints and PCG scalars)
  * run in one work-item, body l of the pack in vector lane l. A pack slot holds, in lane-interleaved
  * rows of kPackLanes reals (row r at r * kPackLanes): element rows (elemBase + e) * kPackElemRows
- * + k (a_i components 0..8, the volume at 9), element output rows (elemBase + e) * 12 + 3 c + k, and
- * node rows (nodeBase + n) * 3 + k of each node vector (x r u p s w: vector v at v * 3 * packNodes
- * rows; free, mass and M^-1 in buffers of their own, M^-1 with COROFEM_NODE_INVERSE rows per node).
- * The element corners (4 per element, the pack's own node numbers) and the gather lists (CSR over
- * the nodes: start[] absolute into entries[], an entry = 12 e + 3 c) are shared by all packs of
- * one mesh. Per pack slot (uint) at packInfo[kPackInfoCount * p + k]:                            */
+ * + k (a_i components 0..8, the volume at 9) and node rows (nodeBase + n) * 3 + k of each node
+ * vector (x r u p s w: vector v at v * 3 * packNodes rows; free, mass and M^-1 in buffers of their
+ * own, M^-1 with COROFEM_NODE_INVERSE rows per node), and of the node sums, which the element
+ * products add to element by element (the order of the bodies' gather lists, so the same sums).
+ * The element corners (4 per element, the pack's own node numbers) are shared by all packs of one
+ * mesh. Per pack slot (uint) at packInfo[kPackInfoCount * p + k]:                                 */
 COROFEM_CONSTANT(unsigned, kPackLanes, 8);
 COROFEM_CONSTANT(unsigned, kPackElemRows, 10);
 COROFEM_CONSTANT(unsigned, kPackVectors, 6);       /* x r u p s w                                 */
@@ -174,12 +174,11 @@ COROFEM_CONSTANT(unsigned, kPackElems, 0);         /* E: elements of the mesh   
 COROFEM_CONSTANT(unsigned, kPackNodes, 1);         /* N: nodes of the mesh                         */
 COROFEM_CONSTANT(unsigned, kPackPartialCount, 2);  /* the bodies' PCG partial triples (alike)      */
 COROFEM_CONSTANT(unsigned, kPackCorners, 3);       /* the mesh's first corner entry (4 per element) */
-COROFEM_CONSTANT(unsigned, kPackStart, 4);         /* the mesh's first CSR start (N + 1)           */
-COROFEM_CONSTANT(unsigned, kPackElemBase, 5);      /* the slot's first element row group           */
-COROFEM_CONSTANT(unsigned, kPackNodeBase, 6);      /* the slot's first node                        */
-COROFEM_CONSTANT(unsigned, kPackPartialBase, 7);   /* the slot's first partial triple              */
-COROFEM_CONSTANT(unsigned, kPackLane0, 8);         /* lane l's segment + 1 at kPackLane0 + l (0: no body) */
-COROFEM_CONSTANT(unsigned, kPackInfoCount, 16);
+COROFEM_CONSTANT(unsigned, kPackElemBase, 4);      /* the slot's first element row group           */
+COROFEM_CONSTANT(unsigned, kPackNodeBase, 5);      /* the slot's first node                        */
+COROFEM_CONSTANT(unsigned, kPackPartialBase, 6);   /* the slot's first partial triple              */
+COROFEM_CONSTANT(unsigned, kPackLane0, 7);         /* lane l's segment + 1 at kPackLane0 + l (0: no body) */
+COROFEM_CONSTANT(unsigned, kPackInfoCount, 15);
 
 #ifdef __OPENCL_C_VERSION__
 /* Segment lookups. Work-group indices are taken as global id / WG (not get_group_id) so that the

@@ -685,23 +685,14 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   }
   lastIterations_.assign(K, 0);
   if (packs_) {
-    // The pack meshes' corners (the pack's own node numbers) and gather lists (start absolute into
-    // the entries, an entry = 12 e + 3 c), built as the bodies' own above: the same order.
-    std::vector<cl_uint> corners, start, entries;
+    // The pack meshes' corners (the pack's own node numbers). pcg_iterate_pack adds the element
+    // products to the node sums element by element: the order of the gather lists above (by
+    // element, then corner), so its sums are the gather's.
+    std::vector<cl_uint> corners;
     for (PackMesh& m : packMeshes_) {
       const Problem& p = *segs_[m.bodies.front()].problem;
-      const std::size_t E = p.mesh.tetCount(), N = p.mesh.nodeCount();
       m.corners = corners.size();
-      m.start = start.size();
-      for (std::size_t e = 0; e < 4 * E; ++e) corners.push_back(static_cast<cl_uint>(p.mesh.tets[e]));
-      std::vector<cl_uint> count(N + 1, 0);
-      for (std::size_t e = 0; e < 4 * E; ++e) ++count[p.mesh.tets[e] + 1];
-      for (std::size_t n = 0; n < N; ++n) count[n + 1] += count[n];
-      const std::size_t entryBase = entries.size();
-      for (std::size_t n = 0; n <= N; ++n) start.push_back(static_cast<cl_uint>(entryBase + count[n]));
-      entries.resize(entryBase + 4 * E);
-      for (std::size_t e = 0; e < E; ++e)
-        for (std::size_t k = 0; k < 4; ++k) entries[entryBase + count[p.mesh.tets[4 * e + k]]++] = static_cast<cl_uint>(12 * e + 3 * k);
+      for (std::size_t e = 0; e < 4 * p.mesh.tetCount(); ++e) corners.push_back(static_cast<cl_uint>(p.mesh.tets[e]));
     }
     std::size_t elemRows = 0, partialRows = 0;
     for (const PackSlotPlace& slot : packSlots_) {
@@ -713,12 +704,8 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     packInfo_.create(c, kPackInfoCount * packSlots_.size() * sizeof(cl_uint), dev_);
     packCorners_.create(c, corners.size() * sizeof(cl_uint), dev_);
     uploadRaw(packCorners_, corners);
-    packStart_.create(c, start.size() * sizeof(cl_uint), dev_);
-    uploadRaw(packStart_, start);
-    packEntries_.create(c, entries.size() * sizeof(cl_uint), dev_);
-    uploadRaw(packEntries_, entries);
     createReal(packElem_, elemRows * kPackElemRows * L);
-    createReal(packOut_, elemRows * kElemOutComponents * L);
+    createReal(packSums_, 3 * packNodeRows_ * L);
     createReal(packVec_, kPackVectors * 3 * packNodeRows_ * L);
     createReal(packFree_, 3 * packNodeRows_ * L);
     if (hasMass_) createReal(packMass_, 3 * packNodeRows_ * L);
@@ -751,7 +738,7 @@ void SegmentEngine::findPackMeshes() {
     const bool padded = segs_[bodies.front()].elemSpan >= roundUp(size.second, kPackLanes) &&
                         segs_[bodies.front()].nodeSpan >= roundUp(size.first, kPackLanes);
     for (std::vector<std::size_t>& m : meshes)
-      if (m.size() >= packMinLanes_ && padded) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0, 0});
+      if (m.size() >= packMinLanes_ && padded) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0});
   }
   std::sort(packMeshes_.begin(), packMeshes_.end(),
             [](const PackMesh& a, const PackMesh& b) { return a.bodies.front() < b.bodies.front(); });
@@ -789,8 +776,7 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_},
       {"reduce_counters", &counters_},      {"pcg_team_counters", &teamState_},
       {"pack_table", &packInfo_},           {"pack_corners", &packCorners_},
-      {"pack_gather_starts", &packStart_},  {"pack_gather_entries", &packEntries_},
-      {"pack_element_rows", &packElem_},    {"pack_element_output", &packOut_},
+      {"pack_element_rows", &packElem_},    {"pack_node_sums", &packSums_},
       {"pack_pcg_vectors", &packVec_},      {"pack_free_mask", &packFree_},
       {"pack_lumped_mass", &packMass_},     {"pack_preconditioner_inverse", &packMinv_},
       {"pack_partial_sums", &packPartials_}};
@@ -1138,7 +1124,6 @@ std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& 
     row[kPackNodes] = static_cast<cl_uint>(sg.nodes);
     row[kPackPartialCount] = static_cast<cl_uint>(sg.partialCount);
     row[kPackCorners] = static_cast<cl_uint>(m.corners);
-    row[kPackStart] = static_cast<cl_uint>(m.start);
     row[kPackElemBase] = static_cast<cl_uint>(place.elemBase);
     row[kPackNodeBase] = static_cast<cl_uint>(place.nodeBase);
     row[kPackPartialBase] = static_cast<cl_uint>(place.partialBase);
@@ -1644,8 +1629,8 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           launchGroups(kPackIn_, slots, wg_, packInfo_, segInfoBuf_, cl_uint(stride_), rotatedGradients(), geom_, x_,
                        r_, z_, p_, s_, q_, minv_, mass_, free_, packElem_, packVec_, packMinv_, packMass_, packFree_,
                        rows);
-          launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packStart_,
-                       packEntries_, packElem_, packOut_, packVec_, packFree_, packMass_, packMinv_, packPartials_,
+          launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
+                       packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_,
                        scalars_, rows, iterations, tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);
           ++packPcgLaunches;

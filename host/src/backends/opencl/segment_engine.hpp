@@ -411,7 +411,7 @@ class SegmentEngine {
   // corners and gather lists once and ceil(bodies / kPackLanes) slots of lane-interleaved rows.
   struct PackMesh {
     std::vector<std::size_t> bodies;      ///< its segments
-    std::size_t corners = 0, start = 0;   ///< its first entries in packCorners_ and packStart_
+    std::size_t corners = 0;              ///< its first entry in packCorners_
     std::size_t firstSlot = 0;            ///< its slots: [firstSlot, firstSlot + slots)
     std::size_t slots = 0;
   };
@@ -489,7 +489,7 @@ class SegmentEngine {
   // packs_ (corofem_layout.h, "packs of bodies"): the slots' table of the round, the pack meshes'
   // corners and gather lists, the slots' element rows (a_i, volume), element outputs, PCG vectors
   // (x r u p s w), free masks, masses, M^-1 and partial sums.
-  ClBuffer packInfo_, packCorners_, packStart_, packEntries_, packElem_, packOut_, packVec_, packFree_, packMass_,
+  ClBuffer packInfo_, packCorners_, packElem_, packSums_, packVec_, packFree_, packMass_,
       packMinv_, packPartials_;
 };
 
