@@ -3,9 +3,10 @@
  * form: for corner i with gradient g_i and rotated gradient a_i = R g_i,
  *   R K_e,ii R^T = V ((lambda + mu) a_i a_i^T + mu |a_i|^2 I)
  * (from sigma = lambda tr(eps) I + 2 mu eps with eps = sym(u g_i^T)), so no 12x12 is needed.
- * corner_gradients + node_stiffness_blocks run after every rotation update (the blocks rotate with
- * the elements); node_preconditioner mixes in the coefficients of the solve and inverts, inside
- * pcg_init (pcg.cl). Each takes its segment's (body's) material and coefficients (corofem_layout.h).
+ * corner_gradients + node_stiffness_blocks run before a solve whose rotations changed since its
+ * blocks were formed (the blocks rotate with the elements; a step's last evaluation, which no solve
+ * follows, forms none); node_preconditioner mixes in the coefficients of the solve and inverts,
+ * inside pcg_init (pcg.cl). Each takes its segment's (body's) material and coefficients (corofem_layout.h).
  */
 #ifndef COROFEM_EMBEDDED
 #include "../shared/corofem_layout.h"
@@ -27,8 +28,8 @@
 #endif
 
 /* Element pass: a_c of every corner into the element output buffer (store_corner), for
- * node_stiffness_blocks to gather; used where compute_rotations does not run (linear formulation,
- * rest state). */
+ * node_stiffness_blocks to gather, from the a_i compute_rotations wrote (the same values as its own
+ * writeCorners stores: the forces overwrite those before a solve needs them). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void corner_gradients(const uint S, __global const uint* restrict elemSeg, __global const uint* restrict segInfo,
                       __global const real* restrict geom, __global const real* restrict rotGrad,

@@ -11,9 +11,10 @@
  *   COROFEM_ROT_QR     Gram-Schmidt of F's columns (cheap edge frame; equals the polar factor only
  *                      for pure rotations: the error grows with the shear).
  * The kernel writes the rotated gradients a_i = R grad N_i (i = 1..3) that the force, product and
- * preconditioner kernels use instead of R (see element_force.cl), and, when a preconditioner is
- * used, the per-corner a_c that node_stiffness_blocks gathers (saving the separate
- * corner_gradients pass). R itself only with writeR: the stored-K_e product reads it, the other
+ * preconditioner kernels use instead of R (see element_force.cl), and, with writeCorners, the
+ * per-corner a_c that node_stiffness_blocks gathers (the device-only benchmark pass; the host's
+ * setPositions leaves the blocks to the solve, by corner_gradients, since the forces overwrite the
+ * corners first). R itself only with writeR: the stored-K_e product reads it, the other
  * kernels do not (the host asks for it when it reads the rotations back; 9 of the 30 reals an
  * element writes). Only the work-groups of active segments (bodies) run.
  * quat is NULL unless the method is COROFEM_ROT_QUAT.

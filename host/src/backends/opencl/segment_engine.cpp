@@ -642,6 +642,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   axReady_.assign(K, 0);
   axCoef_.assign(kSegCoefCount * K, 0.0);
   rStale_.assign(K, 0);  // R = I (ensureRotations uploads it) until a rotation pass runs
+  blocksStale_.assign(K, 0);  // the constructor forms the rest state's blocks
   std::vector<double> mass(hasMass_ ? dofTotal : 0, 0.0), freeMask(dofTotal, 0.0);
   for (const Segment& sg : segs_) {
     const Eigen::VectorXd& rest = sg.problem->restPositions;
@@ -1165,6 +1166,22 @@ void SegmentEngine::refreshBlocks(bool cornersWritten) {
   launch(kBlocks_, Span::Nodes, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_, elemOut_, blocks_);
 }
 
+void SegmentEngine::refreshStaleBlocks(const std::vector<char>& running) {
+  std::vector<char> stale(segs_.size(), 0);
+  bool any = false;
+  for (std::size_t s = 0; s < segs_.size(); ++s)
+    if (running[s] && blocksStale_[s]) stale[s] = any = true;
+  if (!any) return;
+  // One pass for all of them: in tiles of the device cache (as SegmentEngine::run tiles a round)
+  // the two passes took as long (100 bodies of 2,000 elements on 2 cores). corner_gradients reads
+  // the a_i the rotations wrote: the same corners (store_corner_gradients of the same values), so
+  // the same blocks as compute_rotations' corners gave.
+  setActive(stale);
+  refreshBlocks(false);
+  for (std::size_t s = 0; s < segs_.size(); ++s)
+    if (stale[s]) blocksStale_[s] = 0;
+}
+
 void SegmentEngine::ensureRotations() {
   if (rot_.get()) return;
   const std::size_t S = stride_;
@@ -1222,8 +1239,12 @@ void SegmentEngine::setPositions(const std::vector<BatchRequest*>& requests) {
   // One write of the packed range; the segments in between get their own unchanged positions.
   const auto [lo, hi] = dofRange(requests);
   posStage_.write(pos_.get(), lo * realSize_, (hi - lo) * realSize_, dev_);
-  launchRotations(rotate, precond_ != PreconditionerKind::None, rAlways_);
-  refreshBlocks(true);  // the blocks rotate with R (linear bodies: constant, not refreshed)
+  // The blocks rotate with R (linear bodies: constant, never stale); formed by the solve that needs
+  // them (refreshStaleBlocks), not here: the corner gradients would be overwritten by the forces.
+  launchRotations(rotate, false, rAlways_);
+  if (precond_ != PreconditionerKind::None)
+    for (std::size_t s = 0; s < segs_.size(); ++s)
+      if (rotate[s]) blocksStale_[s] = 1;
 }
 
 void SegmentEngine::enqueueElementForces() {
@@ -1476,6 +1497,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   const std::size_t team = groupTeam(running);
   std::vector<char> packed(segs_.size(), 0);
   const std::vector<cl_uint> packTable = team == 1 && packs_ ? packRound(running, packed) : std::vector<cl_uint>{};
+  refreshStaleBlocks(active);  // pcg_init forms M^-1 from them
   bool unpacked = false;
   for (const Running& run : runs) {
     if (packed[run.request->body]) active[run.request->body] = char(kSegRunningPacked);

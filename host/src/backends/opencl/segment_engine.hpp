@@ -316,6 +316,11 @@ class SegmentEngine {
   void build(const SolverDesc& solver, const OpenCLOptions& options);
   void allocate(const OpenCLOptions& options);
   void refreshBlocks(bool cornersWritten);
+  /// The preconditioner's node blocks of the running segments whose rotations changed since their
+  /// blocks were formed (blocksStale_), before a solve: the last evaluation of a step (a dynamic
+  /// step's end, a Newton loop's convergence check) is followed by no solve, so setPositions leaves
+  /// them to the solve that needs them.
+  void refreshStaleBlocks(const std::vector<char>& running);
   /// compute_rotations on the segments with rotate[s] (made the active ones); R itself only with
   /// writeR (rStale_ records the segments left without it).
   void launchRotations(const std::vector<char>& rotate, bool writeCorners, bool writeR);
@@ -372,6 +377,7 @@ class SegmentEngine {
   /// only when read back.
   bool rAlways_ = false;
   std::vector<char> rStale_;             ///< per segment: rotated since R was last written
+  std::vector<char> blocksStale_;        ///< per segment: rotated since its node blocks were formed
   std::string options_;
   cl::ProgramBuild build_;
   bool double_ = false;
