@@ -19,9 +19,14 @@ double loadScale(double loadFactorOrTime, bool dynamic, double rampTime) {
 }  // namespace
 
 Eigen::VectorXd Problem::externalForce(double loadFactorOrTime, bool dynamic) const {
-  Eigen::VectorXd f = Eigen::VectorXd::Zero(restPositions.size());
-  for (const ExternalForce& load : forces) f += loadScale(loadFactorOrTime, dynamic, load.rampTime) * load.f;
+  Eigen::VectorXd f;
+  externalForce(loadFactorOrTime, dynamic, f);
   return f;
+}
+
+void Problem::externalForce(double loadFactorOrTime, bool dynamic, Eigen::VectorXd& f) const {
+  f.setZero(restPositions.size());
+  for (const ExternalForce& load : forces) f += loadScale(loadFactorOrTime, dynamic, load.rampTime) * load.f;
 }
 
 void Problem::applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const {

@@ -48,6 +48,8 @@ struct Problem {
 
   /// f_ext at load factor (statics) or time (dynamics: each force scaled by min(1, t / ramp)).
   Eigen::VectorXd externalForce(double loadFactorOrTime, bool dynamic) const;
+  /// The same into f (resized to 3N; no allocation when it has that size already).
+  void externalForce(double loadFactorOrTime, bool dynamic, Eigen::VectorXd& f) const;
   /// Writes the prescribed displacements (scaled likewise) into the positions x (3N): x = X + s u
   /// on prescribed dofs, and x = X on the other constrained (fixed) dofs; free dofs are untouched.
   void applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const;

@@ -105,9 +105,9 @@ void FailoverBackend::apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eig
 }
 
 LinearSolveStats FailoverBackend::solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
-  const Eigen::VectorXd start = x;  // the warm start, restored before a repeat
+  solveStart_ = x;  // the warm start, restored before a repeat (a member: no allocation per solve)
   return guarded("solve", [&](Backend& be) {
-    x = start;
+    x = solveStart_;
     return be.solve(c, b, x);
   });
 }

@@ -181,6 +181,7 @@ class FailoverBackend final : public Backend {
   std::size_t index_ = 0;
   std::unique_ptr<Backend> current_;
   Eigen::VectorXd lastX_;
+  Eigen::VectorXd solveStart_;  ///< solve()'s copy of the warm start
   bool havePositions_ = false;
   std::string when_ = "create";
   std::vector<FallbackEvent> events_;

@@ -66,19 +66,18 @@ void DynamicSolver::dampingForce(const Eigen::VectorXd& v, Eigen::VectorXd& cv) 
   backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v, cv);
 }
 
-void DynamicSolver::keepForRollback(State&& s) {
-  xPrev_ = std::move(s.x);
-  vPrev_ = std::move(s.v);
-  aPrev_ = std::move(s.a);
+void DynamicSolver::keepForRollback(State& s) {
+  xPrev_.swap(s.x);
+  vPrev_.swap(s.v);
+  aPrev_.swap(s.a);
   workPrev_ = s.work;
   tPrev_ = s.t;
-  fextPrevSaved_ = std::move(s.fextPrev);
+  fextPrevSaved_.swap(s.fextPrev);
   supportWorkSaved_ = s.supportWork;
-  reactionPrevSaved_ = std::move(s.reactionPrev);
+  reactionPrevSaved_.swap(s.reactionPrev);
 }
 
-DynamicSolver::State DynamicSolver::capture() const {
-  State s;
+void DynamicSolver::capture(State& s) const {
   s.x = x_;
   s.v = v_;
   s.a = a_;
@@ -87,7 +86,6 @@ DynamicSolver::State DynamicSolver::capture() const {
   s.work = work_;
   s.t = t_;
   s.supportWork = supportWork_;
-  return s;
 }
 
 void DynamicSolver::restore(const State& s) {
@@ -107,7 +105,8 @@ BodyStepStats DynamicSolver::step(int index, int count) {
     initialAcceleration();
     started_ = true;
   }
-  State start = capture();
+  State& start = start_;
+  capture(start);
   const double h = desc_.timeStep;
   const int maxSubsteps = std::max(1, desc_.maxSubsteps);
   const std::string where = "time step " + std::to_string(index) + "/" + std::to_string(count);
@@ -153,7 +152,7 @@ BodyStepStats DynamicSolver::step(int index, int count) {
     std::fprintf(stderr, "dynamic step %d/%d: retried, succeeded with %d substeps\n", index, count, total.substeps);
 
   // The rollback copy is the state before the whole step, whatever the substeps.
-  keepForRollback(std::move(start));
+  keepForRollback(start);
   return total;
 }
 
@@ -161,9 +160,10 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
   const Eigen::Index n = x_.size();
   const double t1 = t_ + h;
 
-  // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme.
+  // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme. The vectors are the
+  // solver's scratch (sized by the first step, then assigned in place: no allocation per step).
   double ka = 0.0, kx = 0.0;
-  Eigen::VectorXd vb, xb;
+  Eigen::VectorXd &vb = w_.vb, &xb = w_.xb;
   if (desc_.integrator == Integrator::Newmark) {
     const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
     ka = 1.0 / (h * gamma);
@@ -192,18 +192,27 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
       "(or more solver.max_iterations)" + retryFix;
 
   // Targets of the constrained dofs at t_{n+1}: rest position (fixed) or X + ramp * value (prescribed).
-  Eigen::VectorXd target = problem_.restPositions;
+  Eigen::VectorXd& target = w_.target;
+  target = problem_.restPositions;
   problem_.applyPrescribed(target, t1, /*dynamic=*/true);
-  const Eigen::VectorXd fext = problem_.externalForce(t1, /*dynamic=*/true);
+  Eigen::VectorXd& fext = w_.fext;
+  problem_.externalForce(t1, /*dynamic=*/true, fext);
   const double fextNorm = freeNorm(fext);
 
   // Newton's starting point: v = v_n on the free dofs; constrained dofs hit their targets.
-  Eigen::VectorXd v = v_;
+  Eigen::VectorXd& v = w_.v;
+  v = v_;
   for (Eigen::Index d = 0; d < n; ++d)
     if (freeMask_[d] == 0.0) v[d] = (target[d] - xb[d]) / kx;
 
   const Eigen::VectorXd& mass = problem_.lumpedMass;
-  Eigen::VectorXd x(n), a(n), fint(n), cv = Eigen::VectorXd::Zero(n), r(n), dv(n);
+  Eigen::VectorXd &x = w_.x, &a = w_.a, &fint = w_.fint, &cv = w_.cv, &r = w_.r, &dv = w_.dv, &ma = w_.ma;
+  x.resize(n);
+  a.resize(n);
+  fint.resize(n);
+  cv.setZero(n);
+  r.resize(n);
+  dv.resize(n);
   BodyStepStats stats;
   double initialRelative = 0.0, initialNorm = 0.0, residualNorm = 0.0;
   bool allLinearConverged = true;
@@ -219,7 +228,7 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
     } catch (const Error& e) {
       failHere(std::string("failed: ") + e.what(), stepFix);
     }
-    const Eigen::VectorXd ma = mass.cwiseProduct(a);
+    ma = mass.cwiseProduct(a);
     r = ma + cv + fint - fext;
     const double scale = std::max({freeNorm(ma), freeNorm(cv), freeNorm(fint), fextNorm, forceFloor_});
     residualNorm = freeNorm(r);
@@ -239,7 +248,8 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
     dv.setZero();
     LinearSolveStats ls;
     try {
-      ls = backend_.solve(system, -r / ka, dv);
+      w_.rhs = -r / ka;
+      ls = backend_.solve(system, w_.rhs, dv);
     } catch (const Error& e) {
       failHere(std::string("failed in the linear solve: ") + e.what(), stepFix);
     }
@@ -269,7 +279,8 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
 
   // Runaway guard (see the class comment). The reactions are the constrained rows of the last
   // residual, evaluated at the final v (or at the predictor when Newton stopped there).
-  const Eigen::VectorXd reaction = (r.array() * (1.0 - freeMask_)).matrix();
+  Eigen::VectorXd& reaction = w_.reaction;
+  reaction = (r.array() * (1.0 - freeMask_)).matrix();
   const double supportWork = supportWork_ + 0.5 * (reactionPrev_ + reaction).dot(x - x_);
   const double loadWork = work_ + 0.5 * (fextPrev_ + fext).dot(x - x_);
   const double kinetic = 0.5 * (mass.array() * v.array().square()).sum();
@@ -290,14 +301,15 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
              "a dissipative scheme (analysis.integrator \"backward_euler\", or analysis.newmark_gamma 0.6 with "
              "newmark_beta 0.3025), or a tighter solver.tolerance / more solver.max_iterations" + retryFix);
 
-  // Commit (step() keeps the rollback copy).
+  // Commit (step() keeps the rollback copy): swapped with the scratch, whose old contents the next
+  // step overwrites.
   work_ = loadWork;  // trapezoidal rule in time
-  fextPrev_ = fext;
+  fextPrev_.swap(fext);
   supportWork_ = supportWork;
-  reactionPrev_ = reaction;
-  x_ = x;
-  v_ = v;
-  a_ = a;
+  reactionPrev_.swap(reaction);
+  x_.swap(x);
+  v_.swap(v);
+  a_.swap(a);
   t_ = t1;
   backendAtCommitted_ = evaluated;  // the backend's positions are x only when evaluated at the final v
   return stats;
@@ -308,12 +320,13 @@ BodyStepStats DynamicSolver::idleStep(int, int) {
     initialAcceleration();
     started_ = true;
   }
-  State start = capture();
+  State& start = start_;
+  capture(start);
   t_ = start.t + desc_.timeStep;
   v_.setZero();
   a_.setZero();
   fextPrev_ = problem_.externalForce(t_, /*dynamic=*/true);
-  keepForRollback(std::move(start));
+  keepForRollback(start);
   BodyStepStats stats;
   stats.newtonIterations = 0;
   stats.converged = true;
