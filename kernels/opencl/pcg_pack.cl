@@ -49,7 +49,7 @@ typedef realp sump;
 #define STP(value, ptr) vstore8((value), 0, (ptr))
 /* Row r of a lane-interleaved array. */
 #define ROW(base, r) ((base) + (size_t)(r) * PACK_L)
-/* PCG vector v of a pack array of dofRows rows per vector: 0..5 = x r u p s w. */
+/* PCG vector v of a pack array of dofRows rows per vector: 0..6 = x r u p s w b. */
 #define PACK_VEC(vec, dofRows, v) ((vec) + (size_t)(v) * (dofRows) * PACK_L)
 
 /* A pack slot's extent (packInfo) and its lanes' segments (-1: no body). */
@@ -183,8 +183,8 @@ COROFEM_FN void pack_add_corner(__global real* sums, uint row, realp yx, realp y
  * core's cache). */
 COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, realp mu, uint dofRows,
                                      __global const uint* corners, __global const real* elem,
-                                     __global const real* vec, __global real* sums) {
-  __global const real* U = PACK_VEC(vec, dofRows, 2);
+                                     __global const real* vec, uint in, __global real* sums) {
+  __global const real* U = PACK_VEC(vec, dofRows, in); /* u, or x for the residual */
   __global const uint* c = corners + p->corners + 4 * e;
   const uint n0 = 3 * (p->nodeBase + c[0]);
   __global const real* g = ROW(elem, (size_t)(p->elemBase + e) * kPackElemRows);
@@ -286,16 +286,159 @@ COROFEM_FN void pack_segment_sums(__global sump* rows, uint count) {
     }
 }
 
+/* The product w = A u (pack_product_element, pack_finish_nodes) with the sums of u . w by chunk v
+ * in rows[3 v + c] (the triples' other two components left as they are). */
+COROFEM_FN void pack_product(const PackSlot* p, realp lambda, realp mu, realp massCoef, maskp run, uint dofRows,
+                             __global const uint* corners, __global const real* elem, __global real* sums,
+                             __global real* vec, __global const real* mass, __global const real* free,
+                             __global sump* rows, uint c) {
+  for (uint e = 0; e < p->elems; ++e) pack_product_element(e, p, lambda, mu, dofRows, corners, elem, vec, 2, sums);
+  for (uint v = 0; v < p->partialCount; ++v) {
+    const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p->nodes);
+    rows[3 * v + c] = pack_finish_nodes(first, max(first, last), p, massCoef, run, dofRows, sums, mass, free, vec);
+  }
+}
+
+/* The true residual after the solve, for the nodes [first, last) of a pack on the node sums of
+ * A x (left at zero): r = free b - A x as gather_product_nodes forms it with a right-hand side, in
+ * the lanes of `present`, and the sums r . r, |free b|^2 into sums[0], sums[1]. */
+COROFEM_FN void pack_residual_nodes(uint first, uint last, const PackSlot* p, realp massCoef, maskp present,
+                                    uint dofRows, __global real* nodeSums, __global const real* mass,
+                                    __global const real* free, __global real* vec, sump* sums) {
+  __global const real* X = vec;
+  __global real* R = PACK_VEC(vec, dofRows, 1);
+  __global const real* B = PACK_VEC(vec, dofRows, 6);
+  sump rr = (sump)0, bb = (sump)0;
+  for (uint n = first; n < last; ++n) {
+    const uint row = 3 * (p->nodeBase + n);
+    realp acc[3];
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) {
+      acc[k] = LDP(ROW(nodeSums, row + k));
+      STP((realp)0, ROW(nodeSums, row + k));
+    }
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) {
+      const realp fd = LDP(ROW(free, row + k));
+      /* product_entry with project = 1 on p = x, then the right-hand side's branch */
+      const realp yd0 = (mass ? massCoef * LDP(ROW(mass, row + k)) * LDP(ROW(X, row + k)) : (realp)0) + acc[k];
+      const realp yd = yd0 * fd;
+      const realp bd = fd * LDP(ROW(B, row + k)), rd = bd - yd;
+      STP(select(LDP(ROW(R, row + k)), rd, present), ROW(R, row + k));
+      bb += TO_SUMP(bd) * TO_SUMP(bd);
+      rr += TO_SUMP(rd) * TO_SUMP(rd);
+    }
+  }
+  sums[0] = rr;
+  sums[1] = bb;
+}
+
+/* The end of the PCG set-up for the bodies of a pack, after pcg_init ran on their own vectors (and
+ * pack_in copied them): w = A u, then reduce_finish(kReduceInit)'s sums and scalars, lane by lane:
+ * r . u, r . r and b . b from pcg_init's partials (`initPartials`, each lane's segment's, in the
+ * layout of the bodies' partials), u . w from the product, each summed as segment_sums sums it.
+ * The same bits as product + reduce_finish launched for the bodies (productAndFinish). */
+COROFEM_FN void pack_setup(const PackSlot* p, realp lambda, realp mu, realp massCoef, maskp run, uint dofRows,
+                           __global uint* segInfo, __global const uint* corners, __global const real* elem,
+                           __global real* sums, __global real* vec, __global const real* mass,
+                           __global const real* free, __global sump* rows, __global const sum_real* initPartials,
+                           __global sum_real* allScalars, sum_real tol2) {
+  for (uint v = 0; v < p->partialCount; ++v)
+    for (uint c = 0; c < 3; ++c) {
+      sum_real t[PACK_L];
+      for (int l = 0; l < PACK_L; ++l)
+        t[l] = p->seg[l] >= 0
+                   ? initPartials[kPartialComponents * (seg_info(segInfo, (uint)p->seg[l], kSegPartialBegin) + v) + c]
+                   : (sum_real)0;
+      rows[3 * v + c] = vload8(0, t);
+    }
+  pack_segment_sums(rows, p->partialCount);
+  sum_real ru[PACK_L], rr[PACK_L], bb[PACK_L], uw[PACK_L];
+  STP(rows[0], ru);
+  STP(rows[1], rr);
+  STP(rows[2], bb);
+  pack_product(p, lambda, mu, massCoef, run, dofRows, corners, elem, sums, vec, mass, free, rows, 0);
+  pack_segment_sums(rows, p->partialCount);
+  STP(rows[0], uw);
+  for (int l = 0; l < PACK_L; ++l)
+    if (p->seg[l] >= 0 && seg_info(segInfo, (uint)p->seg[l], kSegActive) != 0u)
+      update_scalars(segInfo, (uint)p->seg[l], allScalars + kScalarCount * (uint)p->seg[l], kReduceInit, tol2, ru[l],
+                     rr[l], bb[l], uw[l]);
+}
+
+/* The lanes of the pack's bodies (-1), present or not. */
+COROFEM_FN maskp lane_present(const PackSlot* p) {
+  int v[PACK_L];
+  for (int l = 0; l < PACK_L; ++l) v[l] = p->seg[l] >= 0 ? -1 : 0;
+#ifdef COROFEM_DOUBLE
+  return convert_long8(vload8(0, v));
+#else
+  return vload8(0, v);
+#endif
+}
+
+/* The end of a solve for the bodies of a pack, after its iterations: the iteration cap's last for
+ * the lanes still running (pcgIteration(last): the update and reduce_finish(kReduceLast), no
+ * product), then the true residual of every lane (queueResidual: the product of x with the
+ * right-hand side and reduce_finish(kReduceResidual)), lane by lane with the same bits; the lanes'
+ * segments are then made inactive, so that the launched last iteration and residual leave them. */
+COROFEM_FN void pack_finish(const PackSlot* p, realp lambda, realp mu, realp massCoef, maskp run, int any,
+                            uint dofRows, __global uint* segInfo, __global const uint* corners,
+                            __global const real* elem, __global real* nodeSums, __global real* vec,
+                            __global const real* mass, __global const real* free, __global const real* minv,
+                            __global sump* rows, __global sum_real* allScalars, sum_real tol2) {
+  sum_real a[PACK_L], b[PACK_L];
+  if (any != 0) {
+    const realp alpha = lane_scalar(p, allScalars, kScalarAlpha), beta = lane_scalar(p, allScalars, kScalarBeta);
+    for (uint v = 0; v < p->partialCount; ++v) {
+      const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p->nodes);
+      sump sums[2];
+      pack_update_nodes(first, max(first, last), p->nodeBase, dofRows, alpha, beta, run, vec, minv, sums);
+      rows[3 * v] = sums[0];
+      rows[3 * v + 1] = sums[1];
+      rows[3 * v + 2] = (sump)0;
+    }
+    pack_segment_sums(rows, p->partialCount);
+    STP(rows[0], a);
+    STP(rows[1], b);
+    for (int l = 0; l < PACK_L; ++l)
+      if (p->seg[l] >= 0 && seg_info(segInfo, (uint)p->seg[l], kSegActive) != 0u)
+        update_scalars(segInfo, (uint)p->seg[l], allScalars + kScalarCount * (uint)p->seg[l], kReduceLast, tol2, a[l],
+                       b[l], (sum_real)0, (sum_real)0);
+  }
+  const maskp present = lane_present(p);
+  for (uint e = 0; e < p->elems; ++e) pack_product_element(e, p, lambda, mu, dofRows, corners, elem, vec, 0, nodeSums);
+  for (uint v = 0; v < p->partialCount; ++v) {
+    const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p->nodes);
+    sump sums[2];
+    pack_residual_nodes(first, max(first, last), p, massCoef, present, dofRows, nodeSums, mass, free, vec, sums);
+    rows[3 * v] = (sump)0;
+    rows[3 * v + 1] = sums[0];
+    rows[3 * v + 2] = sums[1];
+  }
+  pack_segment_sums(rows, p->partialCount);
+  STP(rows[1], a);
+  STP(rows[2], b);
+  for (int l = 0; l < PACK_L; ++l)
+    if (p->seg[l] >= 0) {
+      update_scalars(segInfo, (uint)p->seg[l], allScalars + kScalarCount * (uint)p->seg[l], kReduceResidual, tol2,
+                     (sum_real)0, a[l], b[l], (sum_real)0);
+      segInfo[kSegInfoCount * (uint)p->seg[l] + kSegActive] = 0u;
+    }
+}
+
 /* `iterations` iterations of kReduceStep for the bodies of each pack slot (one work-item per slot),
- * the set-up (pcg_init, reduce_finish kReduceInit) done before on the bodies' own vectors and
- * copied in by pack_in. */
+ * after pcg_init on the bodies' own vectors, which pack_in copied in. With `whole` the pack runs
+ * the rest of its bodies' solves too: the set-up's end first (pack_setup), the cap's last iteration
+ * and the true residual after (pack_finish); else the set-up's product and scalars were launched
+ * before and the last iteration and the residual are launched after. */
 __kernel __attribute__((reqd_work_group_size(1, 1, 1)))
 void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __global const real* segCoef,
                       __global const uint* corners, __global const real* elem, __global real* sums,
                       __global real* vec, __global const real* free,
                       __global const real* mass, __global const real* minv, __global sump* partials,
-                      __global sum_real* allScalars, const uint dofRows, const uint iterations,
-                      const sum_real tol2) {
+                      __global const sum_real* initPartials, __global sum_real* allScalars, const uint dofRows,
+                      const uint iterations, const uint whole, const sum_real tol2) {
   const PackSlot p = pack_slot(packInfo, get_global_id(0));
   const realp lambda = lane_coef(&p, segCoef, kCoefProdLambda), mu = lane_coef(&p, segCoef, kCoefProdMu);
   const realp massCoef = lane_coef(&p, segCoef, kCoefMass);
@@ -304,6 +447,11 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   maskp run = lane_running(&p, segInfo, &any);
   if (any != 0)
     for (uint k = 0; k < 3 * p.nodes; ++k) STP((realp)0, ROW(sums, 3 * p.nodeBase + k));
+  if (whole != 0u && any != 0) {
+    pack_setup(&p, lambda, mu, massCoef, run, dofRows, segInfo, corners, elem, sums, vec, mass, free, rows,
+               initPartials, allScalars, tol2);
+    run = lane_running(&p, segInfo, &any);
+  }
   for (uint it = 0; it < iterations && any != 0; ++it) {
     const realp alpha = lane_scalar(&p, allScalars, kScalarAlpha), beta = lane_scalar(&p, allScalars, kScalarBeta);
     for (uint v = 0; v < p.partialCount; ++v) {
@@ -313,11 +461,7 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
       rows[3 * v] = sums[0];
       rows[3 * v + 1] = sums[1];
     }
-    for (uint e = 0; e < p.elems; ++e) pack_product_element(e, &p, lambda, mu, dofRows, corners, elem, vec, sums);
-    for (uint v = 0; v < p.partialCount; ++v) {
-      const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p.nodes);
-      rows[3 * v + 2] = pack_finish_nodes(first, max(first, last), &p, massCoef, run, dofRows, sums, mass, free, vec);
-    }
+    pack_product(&p, lambda, mu, massCoef, run, dofRows, corners, elem, sums, vec, mass, free, rows, 2);
     pack_segment_sums(rows, p.partialCount);
     sum_real ru[PACK_L], rr[PACK_L], uw[PACK_L];
     STP(rows[0], ru);
@@ -329,6 +473,9 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
                        rr[l], (sum_real)0, uw[l]);
     run = lane_running(&p, segInfo, &any);
   }
+  if (whole != 0u)
+    pack_finish(&p, lambda, mu, massCoef, run, any, dofRows, segInfo, corners, elem, sums, vec, mass, free, minv, rows,
+                allScalars, tol2);
 }
 
 /* The 8 x 8 transpose, t[j] lane i = a[i] lane j, in three stages of shuffle2 with constant masks
@@ -378,14 +525,14 @@ COROFEM_FN void pack_rows_in(__global const real* from, const long* first, __glo
 }
 
 /* The bodies' data into their pack slots (one work-group per slot, 8 elements or 8 node rows per
- * step, an 8 x 8 transpose each): a_i and volumes, the PCG vectors x r u p s w, M^-1, the mass and
- * the free mask; zeros in the lanes of no body. The slots' rows are padded to 8 elements and 8
+ * step, an 8 x 8 transpose each): a_i and volumes, the PCG vectors x r u p s w, b (rhs, unless
+ * NULL), M^-1, the mass and the free mask; zeros in the lanes of no body. The slots' rows are padded to 8 elements and 8
  * nodes, which the bodies' padded segments cover (their padding is never read by pcg_iterate_pack). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pack_in(__global const uint* packInfo, __global const uint* segInfo, const uint S,
              __global const real* rotGrad, __global const real* geom, __global const real* x,
              __global const real* r, __global const real* u, __global const real* pv, __global const real* s,
-             __global const real* w, __global const real* minv, __global const real* mass,
+             __global const real* w, __global const real* rhs, __global const real* minv, __global const real* mass,
              __global const real* free, __global real* elem, __global real* vec, __global real* packMinv,
              __global real* packMass, __global real* packFree, const uint dofRows) {
   const PackSlot p = pack_slot(packInfo, get_group_id(0));
@@ -407,12 +554,21 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     /* a_i components 0..8 of rotGrad, the volume (9) of geom */
     pack_rows_in(k < 9 ? rotGrad : geom, at, elem, (size_t)(p.elemBase + 8 * b) * kPackElemRows + k, kPackElemRows);
   }
-  /* The same over (array v, block b): x r u p s w, the free mask, the mass. */
-  __global const real* from[8] = {x, r, u, pv, s, w, free, mass};
-  __global real* to[8] = {PACK_VEC(vec, dofRows, 0), PACK_VEC(vec, dofRows, 1), PACK_VEC(vec, dofRows, 2),
-                          PACK_VEC(vec, dofRows, 3), PACK_VEC(vec, dofRows, 4), PACK_VEC(vec, dofRows, 5),
-                          packFree, packMass};
-  const uint dofBlocks = 3 * ((p.nodes + 7) / 8), arrays = mass ? 8u : 7u;
+  /* The same over (array v, block b): x r u p s w, the free mask, the right-hand side where given
+   * (NULL: the pack does not finish the solves, pcg_iterate_pack's `whole`), the mass. */
+  __global const real* from[9] = {x, r, u, pv, s, w, free};
+  __global real* to[9] = {PACK_VEC(vec, dofRows, 0), PACK_VEC(vec, dofRows, 1), PACK_VEC(vec, dofRows, 2),
+                          PACK_VEC(vec, dofRows, 3), PACK_VEC(vec, dofRows, 4), PACK_VEC(vec, dofRows, 5), packFree};
+  uint arrays = 7;
+  if (rhs) {
+    from[arrays] = rhs;
+    to[arrays++] = PACK_VEC(vec, dofRows, 6);
+  }
+  if (mass) {
+    from[arrays] = mass;
+    to[arrays++] = packMass;
+  }
+  const uint dofBlocks = 3 * ((p.nodes + 7) / 8);
   pack_share(arrays * dofBlocks, lid, &lo, &hi);
   for (uint i = lo; i < hi; ++i) {
     const uint v = i / dofBlocks, b = i % dofBlocks;

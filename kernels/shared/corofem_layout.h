@@ -162,14 +162,14 @@ COROFEM_CONSTANT(unsigned, kSegCoefCount, 8);
  * run in one work-item, body l of the pack in vector lane l. A pack slot holds, in lane-interleaved
  * rows of kPackLanes reals (row r at r * kPackLanes): element rows (elemBase + e) * kPackElemRows
  * + k (a_i components 0..8, the volume at 9) and node rows (nodeBase + n) * 3 + k of each node
- * vector (x r u p s w: vector v at v * 3 * packNodes rows; free, mass and M^-1 in buffers of their
+ * vector (x r u p s w b: vector v at v * 3 * packNodes rows; free, mass and M^-1 in buffers of their
  * own, M^-1 with COROFEM_NODE_INVERSE rows per node), and of the node sums, which the element
  * products add to element by element (the order of the bodies' gather lists, so the same sums).
  * The element corners (4 per element, the pack's own node numbers) are shared by all packs of one
  * mesh. Per pack slot (uint) at packInfo[kPackInfoCount * p + k]:                                 */
 COROFEM_CONSTANT(unsigned, kPackLanes, 8);
 COROFEM_CONSTANT(unsigned, kPackElemRows, 10);
-COROFEM_CONSTANT(unsigned, kPackVectors, 6);       /* x r u p s w                                 */
+COROFEM_CONSTANT(unsigned, kPackVectors, 7);       /* x r u p s w b                               */
 COROFEM_CONSTANT(unsigned, kPackElems, 0);         /* E: elements of the mesh                      */
 COROFEM_CONSTANT(unsigned, kPackNodes, 1);         /* N: nodes of the mesh                         */
 COROFEM_CONSTANT(unsigned, kPackPartialCount, 2);  /* the bodies' PCG partial triples (alike)      */

@@ -1270,15 +1270,15 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     // Packs (pcg_iterate_pack): 11 copies of one mesh of 300 tets and 108 nodes take 2 slots of 8
     // lanes, each with rows for 304 elements and 112 nodes (padded to 8), and the mesh's corners
     // once: the slots' table (15 words a slot), corners, a_i and volumes (10 rows per element), the
-    // PCG vectors x r u p s w, the node sums, free mask, mass and block inverse (6 x 3, 3, 3, 3 and
-    // 9 rows per node) and 64 partial triples per slot (the bodies' own count).
+    // PCG vectors x r u p s w and b, the node sums, free mask, mass and block inverse (7 x 3, 3, 3, 3
+    // and 9 rows per node) and 64 partial triples per slot (the bodies' own count).
     const std::vector<detail::Problem> copies = instances(11, false);  // one numbering, Morton or not
     detail::OpenCLOptions packed = o, plain = o;
     packed.groupPcg = plain.groupPcg = 1;
     packed.packPcg = 1;
     plain.packPcg = 0;
     const std::size_t slots = 2, L = 8, E = 300, Ep = 304, Np = 112;
-    const std::size_t packBytes = 4 * 15 * slots + 4 * 4 * E + r * L * slots * (Ep * 10 + Np * (6 * 3 + 3 + 3 + 3 + 9)) +
+    const std::size_t packBytes = 4 * 15 * slots + 4 * 4 * E + r * L * slots * (Ep * 10 + Np * (7 * 3 + 3 + 3 + 3 + 9)) +
                                   r * 3 * L * 64 * slots;
     EXPECT_EQ(batchOf(copies, s, packed)->allocatedBytes(), batchOf(copies, s, plain)->allocatedBytes() + packBytes);
   }

@@ -1395,7 +1395,7 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body], *r->out);
 }
 
-void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx) {
+void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor) {
   // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
   // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
   flushCoefficients();
@@ -1403,6 +1403,10 @@ void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx) {
   // M^-1 of the coefficients is formed here too (pcg_init), stored for the iterations.
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
          b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+  if (productFor) {  // the packs' bodies take w = A u and the first scalars in pcg_iterate_pack
+    if (std::none_of(productFor->begin(), productFor->end(), [](char c) { return c != 0; })) return;
+    setActive(*productFor);
+  }
   productAndFinish(kReduceInit);
 }
 
@@ -1557,7 +1561,21 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   }
   for (const Running& run : runs) axReady_[run.request->body] = 0;  // their q_ is the iterations' from here
   // From here the iterations change x on the device: unknown until the read below.
-  pcgSetup(zeroStart, haveAx);
+  // The packs' bodies run their whole solve in pcg_iterate_pack (packWhole): the set-up's w = A u
+  // and first scalars, the iterations, the cap's last iteration and the true residual. A product
+  // there costs what an iteration does in a pack, about a quarter of the launched product's per
+  // body (the launched product and gather of 100 bodies of 2,000 elements took 1.8 ms on 2 cores,
+  // twice a solve). Not where the cap leaves the pack no iteration (it is not launched then).
+  const bool packWhole = !packTable.empty() && solver_.maxIterations > 1;
+  if (packWhole) {
+    std::vector<char> unpackedOnly = active;
+    for (std::size_t s = 0; s < segs_.size(); ++s)
+      if (packed[s]) unpackedOnly[s] = 0;
+    pcgSetup(zeroStart, haveAx, &unpackedOnly);
+    setActive(active);
+  } else {
+    pcgSetup(zeroStart, haveAx);
+  }
 
   // The device tests convergence after every iteration (reduce_finish) and makes a stopped segment
   // inactive on its own, so the host enqueues checkEvery iterations ahead of what it has read: each
@@ -1648,12 +1666,13 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           uploadRaw(packInfo_, packTable);
           const std::size_t slots = packTable.size() / kPackInfoCount;
           const cl_uint rows = cl_uint(3 * packNodeRows_);  // dof rows of each of packVec_'s vectors
+          static const ClBuffer none;  // pack_in's rhs where the pack does not finish the solves
           launchGroups(kPackIn_, slots, wg_, packInfo_, segInfoBuf_, cl_uint(stride_), rotatedGradients(), geom_, x_,
-                       r_, z_, p_, s_, q_, minv_, mass_, free_, packElem_, packVec_, packMinv_, packMass_, packFree_,
-                       rows);
+                       r_, z_, p_, s_, q_, packWhole ? b_ : none, minv_, mass_, free_, packElem_, packVec_, packMinv_,
+                       packMass_, packFree_, rows);
           launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
-                       packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_,
-                       scalars_, rows, iterations, tol2);
+                       packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_, partials_,
+                       scalars_, rows, iterations, cl_uint(packWhole ? 1 : 0), tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);
           ++packPcgLaunches;
           packPcgLanes += static_cast<unsigned long long>(std::count(packed.begin(), packed.end(), char(1)));
@@ -1685,6 +1704,14 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     residualQueued = true;
     if (!any) return;
     residualFor = on;
+    if (packWhole) {  // pcg_iterate_pack formed the packed bodies' residuals (and made them inactive)
+      any = false;
+      for (std::size_t s = 0; s < segs_.size(); ++s) {
+        if (packed[s]) on[s] = 0;
+        any = any || on[s];
+      }
+      if (!any) return;
+    }
     setActive(on);  // after every queued iteration: no segment the device stopped can be revived
     // r = free b - A x and its sums from the gather itself (what pcg_init would form: the same bits)
     product(x_, r_, true, partials_, &b_);
@@ -1698,7 +1725,9 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
     }
     list.clear();
   };
-  issueRead();  // the set-up's scalars (a warm start may already have converged)
+  // The set-up's scalars (a warm start may already have converged), unless the packs' bodies have
+  // theirs only after pcg_iterate_pack: the read after the iterations has everyone's.
+  if (!packWhole) issueRead();
   try {
     if (enqueued < maxIterations) enqueueChunk();  // runs while that read travels
     for (;;) {

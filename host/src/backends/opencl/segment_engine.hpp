@@ -341,8 +341,10 @@ class SegmentEngine {
   /// M^-1 from the blocks and the coefficients (nothing without a preconditioner), r = b - A x,
   /// u = M^-1 r, w = A u and the first scalars; `haveAx`: q_ holds A x already (internalForces);
   /// `zeroStart`:
-  /// x = 0 on every active segment, so r = b without a product.
-  void pcgSetup(bool zeroStart, bool haveAx);
+  /// x = 0 on every active segment, so r = b without a product. `productFor` (the packs' set-up):
+  /// w = A u and the scalars only for these segments (made the active ones), the others' pcg_init
+  /// partials left for pcg_iterate_pack.
+  void pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor = nullptr);
   /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
   void pcgIteration(bool last = false);
   void setPositions(const std::vector<BatchRequest*>& requests);
