@@ -49,6 +49,13 @@ typedef realp sump;
 #define STP(value, ptr) vstore8((value), 0, (ptr))
 /* Row r of a lane-interleaved array. */
 #define ROW(base, r) ((base) + (size_t)(r) * PACK_L)
+/* Node sum rows per node: the products' 3, or the node blocks' 6 of the block preconditioner when
+ * a pack forms them (pack_fresh_setup); node n of a slot at PACK_SUMS (nodeBase + n). */
+#ifdef COROFEM_PRECOND_BLOCK
+#define PACK_SUMS 6
+#else
+#define PACK_SUMS 3
+#endif
 /* PCG vector v of a pack array of dofRows rows per vector: 0..6 = x r u p s w b. */
 #define PACK_VEC(vec, dofRows, v) ((vec) + (size_t)(v) * (dofRows) * PACK_L)
 
@@ -225,12 +232,12 @@ COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, re
     const realp yx = sxx * ax + sxy * ay + sxz * az;
     const realp yy = sxy * ax + syy * ay + syz * az;
     const realp yz = sxz * ax + syz * ay + szz * az;
-    pack_add_corner(sums, 3 * (p->nodeBase + c[i + 1]), yx, yy, yz);
+    pack_add_corner(sums, PACK_SUMS * (p->nodeBase + c[i + 1]), yx, yy, yz);
     y0x -= yx;
     y0y -= yy;
     y0z -= yz;
   }
-  pack_add_corner(sums, n0, y0x, y0y, y0z);
+  pack_add_corner(sums, PACK_SUMS * (p->nodeBase + c[0]), y0x, y0y, y0z);
 }
 
 /* gather_product_nodes (projected, no right-hand side) for the nodes [first, last) of a pack, on
@@ -243,12 +250,12 @@ COROFEM_FN sump pack_finish_nodes(uint first, uint last, const PackSlot* p, real
   __global real* W = PACK_VEC(vec, dofRows, 5);
   sump dot = (sump)0;
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (p->nodeBase + n);
+    const uint row = 3 * (p->nodeBase + n), sumRow = PACK_SUMS * (p->nodeBase + n);
     realp acc[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
-      acc[k] = LDP(ROW(sums, row + k));
-      STP((realp)0, ROW(sums, row + k));
+      acc[k] = LDP(ROW(sums, sumRow + k));
+      STP((realp)0, ROW(sums, sumRow + k));
     }
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
@@ -310,12 +317,12 @@ COROFEM_FN void pack_residual_nodes(uint first, uint last, const PackSlot* p, re
   __global const real* B = PACK_VEC(vec, dofRows, 6);
   sump rr = (sump)0, bb = (sump)0;
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (p->nodeBase + n);
+    const uint row = 3 * (p->nodeBase + n), sumRow = PACK_SUMS * (p->nodeBase + n);
     realp acc[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
-      acc[k] = LDP(ROW(nodeSums, row + k));
-      STP((realp)0, ROW(nodeSums, row + k));
+      acc[k] = LDP(ROW(nodeSums, sumRow + k));
+      STP((realp)0, ROW(nodeSums, sumRow + k));
     }
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
@@ -333,25 +340,183 @@ COROFEM_FN void pack_residual_nodes(uint first, uint last, const PackSlot* p, re
   sums[1] = bb;
 }
 
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+/* node_stiffness_blocks on a pack, element e's part: the corners sqrt(V) a_c as
+ * store_corner_gradients forms them from the a_i, and V ((lambda + mu) a_c a_c^T + mu |a_c|^2 I) of
+ * each added to its node's block rows of the node sums. The elements come in order, the order of
+ * the gather lists that node_stiffness_blocks sums in: the same blocks, bit for bit. */
+COROFEM_FN void pack_block_element(uint e, const PackSlot* p, realp lm, realp mu, __global const uint* corners,
+                                   __global const real* elem, __global real* sums) {
+  __global const uint* c = corners + p->corners + 4 * e;
+  __global const real* g = ROW(elem, (size_t)(p->elemBase + e) * kPackElemRows);
+  realp a[9];
+  #pragma unroll
+  for (int k = 0; k < 9; ++k) a[k] = LDP(g + k * PACK_L);
+  const realp w = sqrt(LDP(g + 9 * PACK_L));
+  realp corner[4][3];
+  #pragma unroll
+  for (int k = 0; k < 3; ++k) corner[0][k] = -w * (a[k] + a[3 + k] + a[6 + k]);
+  #pragma unroll
+  for (int i = 1; i < 4; ++i)
+    #pragma unroll
+    for (int k = 0; k < 3; ++k) corner[i][k] = w * a[3 * (i - 1) + k];
+  #pragma unroll
+  for (int i = 0; i < 4; ++i) {
+    __global real* q = ROW(sums, PACK_SUMS * (p->nodeBase + c[i]));
+    const realp ax = corner[i][0], ay = corner[i][1], az = corner[i][2];
+    const realp iso = mu * (ax * ax + ay * ay + az * az);
+    STP(LDP(q) + (lm * ax * ax + iso), q);
+    STP(LDP(q + PACK_L) + (lm * ay * ay + iso), q + PACK_L);
+    STP(LDP(q + 2 * PACK_L) + (lm * az * az + iso), q + 2 * PACK_L);
+#ifdef COROFEM_PRECOND_BLOCK
+    STP(LDP(q + 3 * PACK_L) + lm * ax * ay, q + 3 * PACK_L);
+    STP(LDP(q + 4 * PACK_L) + lm * ax * az, q + 4 * PACK_L);
+    STP(LDP(q + 5 * PACK_L) + lm * ay * az, q + 5 * PACK_L);
+#endif
+  }
+}
+
+/* node_preconditioner (precond.cl) on lanes: the node's block b (PACK_SUMS rows) with the solve's
+ * coefficients, inverted into m, its branches as selects (the same arithmetic in every lane). */
+COROFEM_FN void pack_node_preconditioner(const realp* b, realp massCoef, realp stiffCoef, const realp* mv,
+                                         const realp* f, realp* m) {
+  const realp one = (realp)1, zero = (realp)0;
+  realp d0 = stiffCoef * b[0] + massCoef * mv[0];
+  realp d1 = stiffCoef * b[1] + massCoef * mv[1];
+  realp d2 = stiffCoef * b[2] + massCoef * mv[2];
+#ifdef COROFEM_PRECOND_BLOCK
+  const realp f0 = f[0], f1 = f[1], f2 = f[2];
+  const realp b01 = stiffCoef * b[3] * f0 * f1;
+  const realp b02 = stiffCoef * b[4] * f0 * f2;
+  const realp b12 = stiffCoef * b[5] * f1 * f2;
+  d0 = select(d0, one, f0 == zero);
+  d1 = select(d1, one, f1 == zero);
+  d2 = select(d2, one, f2 == zero);
+  const realp c00 = d1 * d2 - b12 * b12, c01 = b02 * b12 - b01 * d2, c02 = b01 * b12 - b02 * d1;
+  const realp c11 = d0 * d2 - b02 * b02, c12 = b01 * b02 - d0 * b12, c22 = d0 * d1 - b01 * b01;
+  const realp det = d0 * c00 + b01 * c01 + b02 * c02;
+  const maskp good = det > zero && d0 > zero && d1 > zero && d2 > zero;
+  const realp inv = one / det;
+  const realp e0 = f0 * select(one, one / d0, d0 > zero), e1 = f1 * select(one, one / d1, d1 > zero),
+              e2 = f2 * select(one, one / d2, d2 > zero);
+  m[0] = select(e0, c00 * inv * f0, good);
+  m[1] = select(zero, c01 * inv * f0 * f1, good);
+  m[2] = select(zero, c02 * inv * f0 * f2, good);
+  m[3] = select(zero, c01 * inv * f0 * f1, good);
+  m[4] = select(e1, c11 * inv * f1, good);
+  m[5] = select(zero, c12 * inv * f1 * f2, good);
+  m[6] = select(zero, c02 * inv * f0 * f2, good);
+  m[7] = select(zero, c12 * inv * f1 * f2, good);
+  m[8] = select(e2, c22 * inv * f2, good);
+#else
+  m[0] = f[0] * select(one, one / d0, d0 > zero);
+  m[1] = f[1] * select(one, one / d1, d1 > zero);
+  m[2] = f[2] * select(one, one / d2, d2 > zero);
+#endif
+}
+#endif
+
+/* The PCG set-up of the bodies of a pack from their right-hand sides with x = 0 (the host's zero
+ * start), as the launched set-up forms it: the node blocks (node_stiffness_blocks, for a
+ * preconditioner), then pcg_init by chunk: M^-1 (node_preconditioner, into minv), r = free b,
+ * u = M^-1 r, p = s = 0, and the partials r . u, r . r, |free b|^2 into rows. The lanes of no body
+ * compute on zeros. */
+COROFEM_FN void pack_fresh_setup(const PackSlot* p, realp lm, realp muMat, realp massCoef, realp stiffCoef,
+                                 uint dofRows, __global const uint* corners, __global const real* elem,
+                                 __global real* sums, __global real* vec, __global const real* mass,
+                                 __global const real* free, __global real* minv, __global sump* rows) {
+  __global real* R = PACK_VEC(vec, dofRows, 1);
+  __global real* U = PACK_VEC(vec, dofRows, 2);
+  __global real* P = PACK_VEC(vec, dofRows, 3);
+  __global real* S = PACK_VEC(vec, dofRows, 4);
+  __global const real* B = PACK_VEC(vec, dofRows, 6);
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+  for (uint e = 0; e < p->elems; ++e) pack_block_element(e, p, lm, muMat, corners, elem, sums);
+#endif
+  for (uint v = 0; v < p->partialCount; ++v) {
+    const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p->nodes);
+    sump ru = (sump)0, rr = (sump)0, bb = (sump)0;
+    for (uint n = first; n < last; ++n) {
+      const uint row = 3 * (p->nodeBase + n);
+      realp rn[3], un[3], f[3];
+      #pragma unroll
+      for (int k = 0; k < 3; ++k) f[k] = LDP(ROW(free, row + k));
+#if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
+      const uint sumRow = PACK_SUMS * (p->nodeBase + n);
+      realp b[PACK_SUMS], mv[3], m[COROFEM_NODE_INVERSE];
+      #pragma unroll
+      for (int k = 0; k < PACK_SUMS; ++k) {
+        b[k] = LDP(ROW(sums, sumRow + k));
+        STP((realp)0, ROW(sums, sumRow + k));
+      }
+      #pragma unroll
+      for (int k = 0; k < 3; ++k) mv[k] = mass ? LDP(ROW(mass, row + k)) : (realp)0;
+      pack_node_preconditioner(b, massCoef, stiffCoef, mv, f, m);
+      #pragma unroll
+      for (int k = 0; k < COROFEM_NODE_INVERSE; ++k) STP(m[k], ROW(minv, COROFEM_NODE_INVERSE * (p->nodeBase + n) + k));
+#endif
+      #pragma unroll
+      for (int k = 0; k < 3; ++k) {
+        const realp bd = f[k] * LDP(ROW(B, row + k));
+        rn[k] = bd;
+        bb += TO_SUMP(bd) * TO_SUMP(bd);
+      }
+      /* apply_node_inverse */
+#if defined(COROFEM_PRECOND_BLOCK)
+      un[0] = m[0] * rn[0] + m[1] * rn[1] + m[2] * rn[2];
+      un[1] = m[3] * rn[0] + m[4] * rn[1] + m[5] * rn[2];
+      un[2] = m[6] * rn[0] + m[7] * rn[1] + m[8] * rn[2];
+#elif defined(COROFEM_PRECOND_DIAG)
+      un[0] = m[0] * rn[0];
+      un[1] = m[1] * rn[1];
+      un[2] = m[2] * rn[2];
+#else
+      un[0] = rn[0];
+      un[1] = rn[1];
+      un[2] = rn[2];
+#endif
+      #pragma unroll
+      for (int k = 0; k < 3; ++k) {
+        STP(rn[k], ROW(R, row + k));
+        STP(un[k], ROW(U, row + k));
+        STP((realp)0, ROW(P, row + k));
+        STP((realp)0, ROW(S, row + k));
+        ru += TO_SUMP(rn[k]) * TO_SUMP(un[k]);
+        rr += TO_SUMP(rn[k]) * TO_SUMP(rn[k]);
+      }
+    }
+    rows[3 * v] = ru;
+    rows[3 * v + 1] = rr;
+    rows[3 * v + 2] = bb;
+  }
+}
+
 /* The end of the PCG set-up for the bodies of a pack, after pcg_init ran on their own vectors (and
  * pack_in copied them): w = A u, then reduce_finish(kReduceInit)'s sums and scalars, lane by lane:
  * r . u, r . r and b . b from pcg_init's partials (`initPartials`, each lane's segment's, in the
  * layout of the bodies' partials), u . w from the product, each summed as segment_sums sums it.
  * The same bits as product + reduce_finish launched for the bodies (productAndFinish). */
 COROFEM_FN void pack_setup(const PackSlot* p, realp lambda, realp mu, realp massCoef, maskp run, uint dofRows,
-                           __global uint* segInfo, __global const uint* corners, __global const real* elem,
-                           __global real* sums, __global real* vec, __global const real* mass,
-                           __global const real* free, __global sump* rows, __global const sum_real* initPartials,
-                           __global sum_real* allScalars, sum_real tol2) {
-  for (uint v = 0; v < p->partialCount; ++v)
-    for (uint c = 0; c < 3; ++c) {
-      sum_real t[PACK_L];
-      for (int l = 0; l < PACK_L; ++l)
-        t[l] = p->seg[l] >= 0
-                   ? initPartials[kPartialComponents * (seg_info(segInfo, (uint)p->seg[l], kSegPartialBegin) + v) + c]
-                   : (sum_real)0;
-      rows[3 * v + c] = vload8(0, t);
-    }
+                           __global uint* segInfo, __global const real* segCoef, __global const uint* corners,
+                           __global const real* elem, __global real* sums, __global real* vec,
+                           __global const real* mass, __global const real* free, __global real* minv,
+                           __global sump* rows, __global const sum_real* initPartials, __global sum_real* allScalars,
+                           uint fresh, sum_real tol2) {
+  if (fresh != 0u) {
+    pack_fresh_setup(p, lane_coef(p, segCoef, kCoefLambda) + lane_coef(p, segCoef, kCoefMu),
+                     lane_coef(p, segCoef, kCoefMu), massCoef, lane_coef(p, segCoef, kCoefStiff), dofRows, corners,
+                     elem, sums, vec, mass, free, minv, rows);
+  } else {
+    for (uint v = 0; v < p->partialCount; ++v)
+      for (uint c = 0; c < 3; ++c) {
+        sum_real t[PACK_L];
+        for (int l = 0; l < PACK_L; ++l)
+          t[l] = p->seg[l] >= 0
+                     ? initPartials[kPartialComponents * (seg_info(segInfo, (uint)p->seg[l], kSegPartialBegin) + v) + c]
+                     : (sum_real)0;
+        rows[3 * v + c] = vload8(0, t);
+      }
+  }
   pack_segment_sums(rows, p->partialCount);
   sum_real ru[PACK_L], rr[PACK_L], bb[PACK_L], uw[PACK_L];
   STP(rows[0], ru);
@@ -427,16 +592,20 @@ COROFEM_FN void pack_finish(const PackSlot* p, realp lambda, realp mu, realp mas
     }
 }
 
-/* `iterations` iterations of kReduceStep for the bodies of each pack slot (one work-item per slot),
- * after pcg_init on the bodies' own vectors, which pack_in copied in. With `whole` the pack runs
- * the rest of its bodies' solves too: the set-up's end first (pack_setup), the cap's last iteration
- * and the true residual after (pack_finish); else the set-up's product and scalars were launched
- * before and the last iteration and the residual are launched after. */
+/* `iterations` iterations of kReduceStep for the bodies of each pack slot (one work-item per slot).
+ * `whole` (corofem_layout.h):
+ *   kPackWholeNone   after the launched set-up (pcg_init, product, reduce_finish) on the bodies' own
+ *                    vectors, which pack_in copied in; the cap's last iteration and the residual
+ *                    are launched after;
+ *   kPackWholeAfterInit  after pcg_init alone: the set-up's end first (pack_setup), and the cap's
+ *                    last iteration and the true residual after (pack_finish);
+ *   kPackWholeFresh  the same from the right-hand side with x = 0 (the zero start): the set-up from
+ *                    the node blocks on (pack_fresh_setup), with nothing launched for the bodies. */
 __kernel __attribute__((reqd_work_group_size(1, 1, 1)))
 void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __global const real* segCoef,
                       __global const uint* corners, __global const real* elem, __global real* sums,
                       __global real* vec, __global const real* free,
-                      __global const real* mass, __global const real* minv, __global sump* partials,
+                      __global const real* mass, __global real* minv, __global sump* partials,
                       __global const sum_real* initPartials, __global sum_real* allScalars, const uint dofRows,
                       const uint iterations, const uint whole, const sum_real tol2) {
   const PackSlot p = pack_slot(packInfo, get_global_id(0));
@@ -446,10 +615,10 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   int any = 0;
   maskp run = lane_running(&p, segInfo, &any);
   if (any != 0)
-    for (uint k = 0; k < 3 * p.nodes; ++k) STP((realp)0, ROW(sums, 3 * p.nodeBase + k));
+    for (uint k = 0; k < PACK_SUMS * p.nodes; ++k) STP((realp)0, ROW(sums, PACK_SUMS * p.nodeBase + k));
   if (whole != 0u && any != 0) {
-    pack_setup(&p, lambda, mu, massCoef, run, dofRows, segInfo, corners, elem, sums, vec, mass, free, rows,
-               initPartials, allScalars, tol2);
+    pack_setup(&p, lambda, mu, massCoef, run, dofRows, segInfo, segCoef, corners, elem, sums, vec, mass, free, minv,
+               rows, initPartials, allScalars, whole == kPackWholeFresh ? 1u : 0u, tol2);
     run = lane_running(&p, segInfo, &any);
   }
   for (uint it = 0; it < iterations && any != 0; ++it) {
@@ -534,7 +703,7 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
              __global const real* r, __global const real* u, __global const real* pv, __global const real* s,
              __global const real* w, __global const real* rhs, __global const real* minv, __global const real* mass,
              __global const real* free, __global real* elem, __global real* vec, __global real* packMinv,
-             __global real* packMass, __global real* packFree, const uint dofRows) {
+             __global real* packMass, __global real* packFree, const uint dofRows, const uint fresh) {
   const PackSlot p = pack_slot(packInfo, get_group_id(0));
   const uint lid = get_local_id(0);
   long elemBegin[PACK_L], dofBegin[PACK_L], at[PACK_L];
@@ -554,12 +723,15 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     /* a_i components 0..8 of rotGrad, the volume (9) of geom */
     pack_rows_in(k < 9 ? rotGrad : geom, at, elem, (size_t)(p.elemBase + 8 * b) * kPackElemRows + k, kPackElemRows);
   }
-  /* The same over (array v, block b): x r u p s w, the free mask, the right-hand side where given
-   * (NULL: the pack does not finish the solves, pcg_iterate_pack's `whole`), the mass. */
-  __global const real* from[9] = {x, r, u, pv, s, w, free};
+  /* The same over (array v, block b): x, r u p s w (not with `fresh`: pcg_iterate_pack forms them,
+   * and M^-1), the free mask, the right-hand side where given (NULL: the pack does not finish the
+   * solves, pcg_iterate_pack's `whole`), the mass. */
+  __global const real* from[9] = {x, r, u, pv, s, w};
   __global real* to[9] = {PACK_VEC(vec, dofRows, 0), PACK_VEC(vec, dofRows, 1), PACK_VEC(vec, dofRows, 2),
-                          PACK_VEC(vec, dofRows, 3), PACK_VEC(vec, dofRows, 4), PACK_VEC(vec, dofRows, 5), packFree};
-  uint arrays = 7;
+                          PACK_VEC(vec, dofRows, 3), PACK_VEC(vec, dofRows, 4), PACK_VEC(vec, dofRows, 5)};
+  uint arrays = fresh ? 1u : 6u;
+  from[arrays] = free;
+  to[arrays++] = packFree;
   if (rhs) {
     from[arrays] = rhs;
     to[arrays++] = PACK_VEC(vec, dofRows, 6);
@@ -576,7 +748,7 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     pack_rows_in(from[v], at, to[v], (size_t)3 * p.nodeBase + 8 * b, 1);
   }
 #if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
-  const uint invBlocks = COROFEM_NODE_INVERSE * ((p.nodes + 7) / 8);
+  const uint invBlocks = fresh ? 0u : COROFEM_NODE_INVERSE * ((p.nodes + 7) / 8);
   pack_share(invBlocks, lid, &lo, &hi);
   for (uint b = lo; b < hi; ++b) {
     for (int l = 0; l < PACK_L; ++l) at[l] = dofBegin[l] < 0 ? -1 : dofBegin[l] / 3 * COROFEM_NODE_INVERSE + 8 * b;

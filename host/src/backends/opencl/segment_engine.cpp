@@ -706,7 +706,9 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     packCorners_.create(c, corners.size() * sizeof(cl_uint), dev_);
     uploadRaw(packCorners_, corners);
     createReal(packElem_, elemRows * kPackElemRows * L);
-    createReal(packSums_, 3 * packNodeRows_ * L);
+    // The node sums: 3 rows per node for the products, 6 for the blocks of the block preconditioner
+    // (pcg_pack.cl's PACK_SUMS).
+    createReal(packSums_, (precond_ == PreconditionerKind::BlockDiagonal ? 6 : 3) * packNodeRows_ * L);
     createReal(packVec_, kPackVectors * 3 * packNodeRows_ * L);
     createReal(packFree_, 3 * packNodeRows_ * L);
     if (hasMass_) createReal(packMass_, 3 * packNodeRows_ * L);
@@ -1395,16 +1397,22 @@ void SegmentEngine::apply(const std::vector<BatchRequest*>& requests) {
   for (BatchRequest* r : requests) getReals(readStage_.data(), segs_[r->body], *r->out);
 }
 
-void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor) {
+void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor, bool onlyFor) {
   // r = b - A x (projected), u = M^-1 r, p = s = 0, w = A u; gamma = r.u, rr = r.r, bb = b.b,
   // alpha = gamma / u.w, beta = 0 (kernels/opencl/pcg.cl)
   flushCoefficients();
+  const bool anyFor =
+      productFor && std::any_of(productFor->begin(), productFor->end(), [](char c) { return c != 0; });
+  if (onlyFor) {  // the packs' bodies take the whole set-up in pcg_iterate_pack
+    if (!anyFor) return;
+    setActive(*productFor);
+  }
   if (!zeroStart && !haveAx) product(x_, q_, true, partialsW_);  // a zero start needs no A x
   // M^-1 of the coefficients is formed here too (pcg_init), stored for the iterations.
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
          b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
   if (productFor) {  // the packs' bodies take w = A u and the first scalars in pcg_iterate_pack
-    if (std::none_of(productFor->begin(), productFor->end(), [](char c) { return c != 0; })) return;
+    if (!anyFor) return;
     setActive(*productFor);
   }
   productAndFinish(kReduceInit);
@@ -1501,7 +1509,6 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   const std::size_t team = groupTeam(running);
   std::vector<char> packed(segs_.size(), 0);
   const std::vector<cl_uint> packTable = team == 1 && packs_ ? packRound(running, packed) : std::vector<cl_uint>{};
-  refreshStaleBlocks(active);  // pcg_init forms M^-1 from them
   bool unpacked = false;
   for (const Running& run : runs) {
     if (packed[run.request->body]) active[run.request->body] = char(kSegRunningPacked);
@@ -1566,12 +1573,20 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   // there costs what an iteration does in a pack, about a quarter of the launched product's per
   // body (the launched product and gather of 100 bodies of 2,000 elements took 1.8 ms on 2 cores,
   // twice a solve). Not where the cap leaves the pack no iteration (it is not launched then).
-  const bool packWhole = !packTable.empty() && solver_.maxIterations > 1;
+  // From a zero start (Newton's corrections) the packs form the whole set-up themselves (packFresh):
+  // their bodies' node blocks, M^-1 and pcg_init too, from a_i, b and the mass, with nothing
+  // launched for them (corner_gradients, node_stiffness_blocks and pcg_init took 2.8 ms a step for
+  // 100 bodies of 2,000 elements on 2 cores), and pack_in copies neither the PCG vectors nor M^-1.
+  const bool packWhole = !packTable.empty() && solver_.maxIterations > 1, packFresh = packWhole && zeroStart;
+  std::vector<char> unpackedOnly = active;
+  for (std::size_t s = 0; s < segs_.size(); ++s)
+    if (packed[s]) unpackedOnly[s] = 0;
+  // The node blocks of the bodies rotated since they were formed, for pcg_init's M^-1 (the packs'
+  // own with packFresh: theirs stay stale for a later solve outside a pack).
+  refreshStaleBlocks(packFresh ? unpackedOnly : active);
+  setActive(active);
   if (packWhole) {
-    std::vector<char> unpackedOnly = active;
-    for (std::size_t s = 0; s < segs_.size(); ++s)
-      if (packed[s]) unpackedOnly[s] = 0;
-    pcgSetup(zeroStart, haveAx, &unpackedOnly);
+    pcgSetup(zeroStart, haveAx, &unpackedOnly, packFresh);
     setActive(active);
   } else {
     pcgSetup(zeroStart, haveAx);
@@ -1669,10 +1684,11 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           static const ClBuffer none;  // pack_in's rhs where the pack does not finish the solves
           launchGroups(kPackIn_, slots, wg_, packInfo_, segInfoBuf_, cl_uint(stride_), rotatedGradients(), geom_, x_,
                        r_, z_, p_, s_, q_, packWhole ? b_ : none, minv_, mass_, free_, packElem_, packVec_, packMinv_,
-                       packMass_, packFree_, rows);
+                       packMass_, packFree_, rows, cl_uint(packFresh ? 1 : 0));
           launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
                        packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_, partials_,
-                       scalars_, rows, iterations, cl_uint(packWhole ? 1 : 0), tol2);
+                       scalars_, rows, iterations,
+                       packFresh ? kPackWholeFresh : packWhole ? kPackWholeAfterInit : kPackWholeNone, tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);
           ++packPcgLaunches;
           packPcgLanes += static_cast<unsigned long long>(std::count(packed.begin(), packed.end(), char(1)));

@@ -343,8 +343,9 @@ class SegmentEngine {
   /// `zeroStart`:
   /// x = 0 on every active segment, so r = b without a product. `productFor` (the packs' set-up):
   /// w = A u and the scalars only for these segments (made the active ones), the others' pcg_init
-  /// partials left for pcg_iterate_pack.
-  void pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor = nullptr);
+  /// partials left for pcg_iterate_pack; with `onlyFor` everything only for them (the others take
+  /// their whole set-up in pcg_iterate_pack).
+  void pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor = nullptr, bool onlyFor = false);
   /// One PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
   void pcgIteration(bool last = false);
   void setPositions(const std::vector<BatchRequest*>& requests);
