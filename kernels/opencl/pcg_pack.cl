@@ -240,6 +240,14 @@ COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, re
   pack_add_corner(sums, PACK_SUMS * (p->nodeBase + c[0]), y0x, y0y, y0z);
 }
 
+/* Rows [row, row + count) of the node sums into acc, left at zero for the next sums. */
+COROFEM_FN void pack_take_sums(__global real* sums, uint row, int count, realp* acc) {
+  for (int k = 0; k < count; ++k) {
+    acc[k] = LDP(ROW(sums, row + k));
+    STP((realp)0, ROW(sums, row + k));
+  }
+}
+
 /* gather_product_nodes (projected, no right-hand side) for the nodes [first, last) of a pack, on
  * the node sums the element products made (left at zero for the next product): w = A u and the
  * sum of u . w, lane by lane. */
@@ -250,13 +258,9 @@ COROFEM_FN sump pack_finish_nodes(uint first, uint last, const PackSlot* p, real
   __global real* W = PACK_VEC(vec, dofRows, 5);
   sump dot = (sump)0;
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (p->nodeBase + n), sumRow = PACK_SUMS * (p->nodeBase + n);
+    const uint row = 3 * (p->nodeBase + n);
     realp acc[3];
-    #pragma unroll
-    for (int k = 0; k < 3; ++k) {
-      acc[k] = LDP(ROW(sums, sumRow + k));
-      STP((realp)0, ROW(sums, sumRow + k));
-    }
+    pack_take_sums(sums, PACK_SUMS * (p->nodeBase + n), 3, acc);
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const realp pd = LDP(ROW(U, row + k));
@@ -317,13 +321,9 @@ COROFEM_FN void pack_residual_nodes(uint first, uint last, const PackSlot* p, re
   __global const real* B = PACK_VEC(vec, dofRows, 6);
   sump rr = (sump)0, bb = (sump)0;
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (p->nodeBase + n), sumRow = PACK_SUMS * (p->nodeBase + n);
+    const uint row = 3 * (p->nodeBase + n);
     realp acc[3];
-    #pragma unroll
-    for (int k = 0; k < 3; ++k) {
-      acc[k] = LDP(ROW(nodeSums, sumRow + k));
-      STP((realp)0, ROW(nodeSums, sumRow + k));
-    }
+    pack_take_sums(nodeSums, PACK_SUMS * (p->nodeBase + n), 3, acc);
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const realp fd = LDP(ROW(free, row + k));
@@ -442,13 +442,8 @@ COROFEM_FN void pack_fresh_setup(const PackSlot* p, realp lm, realp muMat, realp
       #pragma unroll
       for (int k = 0; k < 3; ++k) f[k] = LDP(ROW(free, row + k));
 #if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
-      const uint sumRow = PACK_SUMS * (p->nodeBase + n);
       realp b[PACK_SUMS], mv[3], m[COROFEM_NODE_INVERSE];
-      #pragma unroll
-      for (int k = 0; k < PACK_SUMS; ++k) {
-        b[k] = LDP(ROW(sums, sumRow + k));
-        STP((realp)0, ROW(sums, sumRow + k));
-      }
+      pack_take_sums(sums, PACK_SUMS * (p->nodeBase + n), PACK_SUMS, b);
       #pragma unroll
       for (int k = 0; k < 3; ++k) mv[k] = mass ? LDP(ROW(mass, row + k)) : (realp)0;
       pack_node_preconditioner(b, massCoef, stiffCoef, mv, f, m);
