@@ -587,23 +587,25 @@ COROFEM_FN void pack_finish(const PackSlot* p, realp lambda, realp mu, realp mas
     }
 }
 
-/* `iterations` iterations of kReduceStep for the bodies of each pack slot (one work-item per slot).
- * `whole` (corofem_layout.h):
- *   kPackWholeNone   after the launched set-up (pcg_init, product, reduce_finish) on the bodies' own
- *                    vectors, which pack_in copied in; the cap's last iteration and the residual
- *                    are launched after;
- *   kPackWholeAfterInit  after pcg_init alone: the set-up's end first (pack_setup), and the cap's
- *                    last iteration and the true residual after (pack_finish);
- *   kPackWholeFresh  the same from the right-hand side with x = 0 (the zero start): the set-up from
- *                    the node blocks on (pack_fresh_setup), with nothing launched for the bodies. */
+/* The whole PCG solve of the bodies of each pack slot (one work-item per slot), after pcg_init on
+ * their own vectors (which pack_in copied in) or, with `fresh` (the zero start), from their
+ * right-hand sides: the set-up's end (pack_setup; from the node blocks on with `fresh`),
+ * `iterations` iterations of kReduceStep, then the cap's last iteration and the true residual
+ * (pack_finish). Every body of a slot is in the solve: the pack marks its lanes' segments running
+ * itself (the host leaves them inactive while it launches the other bodies' set-up, whose
+ * reduce_finish may stop a body that a later upload of the table would revive), update_scalars
+ * clears them at a stop and pack_finish at the end, so that the launched last iteration and
+ * residual pass them by. */
 __kernel __attribute__((reqd_work_group_size(1, 1, 1)))
 void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __global const real* segCoef,
                       __global const uint* corners, __global const real* elem, __global real* sums,
                       __global real* vec, __global const real* free,
                       __global const real* mass, __global real* minv, __global sump* partials,
                       __global const sum_real* initPartials, __global sum_real* allScalars, const uint dofRows,
-                      const uint iterations, const uint whole, const sum_real tol2) {
+                      const uint iterations, const uint fresh, const sum_real tol2) {
   const PackSlot p = pack_slot(packInfo, get_global_id(0));
+  for (int l = 0; l < PACK_L; ++l)
+    if (p.seg[l] >= 0) segInfo[kSegInfoCount * (uint)p.seg[l] + kSegActive] = kSegRunningPacked;
   const realp lambda = lane_coef(&p, segCoef, kCoefProdLambda), mu = lane_coef(&p, segCoef, kCoefProdMu);
   const realp massCoef = lane_coef(&p, segCoef, kCoefMass);
   __global sump* rows = partials + (size_t)3 * p.partialBase;
@@ -611,9 +613,9 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   maskp run = lane_running(&p, segInfo, &any);
   if (any != 0)
     for (uint k = 0; k < PACK_SUMS * p.nodes; ++k) STP((realp)0, ROW(sums, PACK_SUMS * p.nodeBase + k));
-  if (whole != 0u && any != 0) {
+  if (any != 0) {
     pack_setup(&p, lambda, mu, massCoef, run, dofRows, segInfo, segCoef, corners, elem, sums, vec, mass, free, minv,
-               rows, initPartials, allScalars, whole == kPackWholeFresh ? 1u : 0u, tol2);
+               rows, initPartials, allScalars, fresh, tol2);
     run = lane_running(&p, segInfo, &any);
   }
   for (uint it = 0; it < iterations && any != 0; ++it) {
@@ -637,9 +639,8 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
                        rr[l], (sum_real)0, uw[l]);
     run = lane_running(&p, segInfo, &any);
   }
-  if (whole != 0u)
-    pack_finish(&p, lambda, mu, massCoef, run, any, dofRows, segInfo, corners, elem, sums, vec, mass, free, minv, rows,
-                allScalars, tol2);
+  pack_finish(&p, lambda, mu, massCoef, run, any, dofRows, segInfo, corners, elem, sums, vec, mass, free, minv, rows,
+              allScalars, tol2);
 }
 
 /* The 8 x 8 transpose, t[j] lane i = a[i] lane j, in three stages of shuffle2 with constant masks
@@ -689,8 +690,8 @@ COROFEM_FN void pack_rows_in(__global const real* from, const long* first, __glo
 }
 
 /* The bodies' data into their pack slots (one work-group per slot, 8 elements or 8 node rows per
- * step, an 8 x 8 transpose each): a_i and volumes, the PCG vectors x r u p s w, b (rhs, unless
- * NULL), M^-1, the mass and the free mask; zeros in the lanes of no body. The slots' rows are padded to 8 elements and 8
+ * step, an 8 x 8 transpose each): a_i and volumes, the PCG vectors x r u p s w and b (rhs), M^-1,
+ * the mass and the free mask; zeros in the lanes of no body. The slots' rows are padded to 8 elements and 8
  * nodes, which the bodies' padded segments cover (their padding is never read by pcg_iterate_pack). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pack_in(__global const uint* packInfo, __global const uint* segInfo, const uint S,
@@ -719,18 +720,15 @@ void pack_in(__global const uint* packInfo, __global const uint* segInfo, const 
     pack_rows_in(k < 9 ? rotGrad : geom, at, elem, (size_t)(p.elemBase + 8 * b) * kPackElemRows + k, kPackElemRows);
   }
   /* The same over (array v, block b): x, r u p s w (not with `fresh`: pcg_iterate_pack forms them,
-   * and M^-1), the free mask, the right-hand side where given (NULL: the pack does not finish the
-   * solves, pcg_iterate_pack's `whole`), the mass. */
+   * and M^-1), the free mask, the right-hand side, the mass. */
   __global const real* from[9] = {x, r, u, pv, s, w};
   __global real* to[9] = {PACK_VEC(vec, dofRows, 0), PACK_VEC(vec, dofRows, 1), PACK_VEC(vec, dofRows, 2),
                           PACK_VEC(vec, dofRows, 3), PACK_VEC(vec, dofRows, 4), PACK_VEC(vec, dofRows, 5)};
   uint arrays = fresh ? 1u : 6u;
   from[arrays] = free;
   to[arrays++] = packFree;
-  if (rhs) {
-    from[arrays] = rhs;
-    to[arrays++] = PACK_VEC(vec, dofRows, 6);
-  }
+  from[arrays] = rhs;
+  to[arrays++] = PACK_VEC(vec, dofRows, 6);
   if (mass) {
     from[arrays] = mass;
     to[arrays++] = packMass;

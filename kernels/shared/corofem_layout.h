@@ -179,10 +179,6 @@ COROFEM_CONSTANT(unsigned, kPackNodeBase, 5);      /* the slot's first node     
 COROFEM_CONSTANT(unsigned, kPackPartialBase, 6);   /* the slot's first partial triple              */
 COROFEM_CONSTANT(unsigned, kPackLane0, 7);         /* lane l's segment + 1 at kPackLane0 + l (0: no body) */
 COROFEM_CONSTANT(unsigned, kPackInfoCount, 15);
-/* How much of its bodies' solves pcg_iterate_pack runs (its `whole`; pcg_pack.cl).               */
-COROFEM_CONSTANT(unsigned, kPackWholeNone, 0);
-COROFEM_CONSTANT(unsigned, kPackWholeAfterInit, 1);
-COROFEM_CONSTANT(unsigned, kPackWholeFresh, 2);
 
 #ifdef __OPENCL_C_VERSION__
 /* Segment lookups. Work-group indices are taken as global id / WG (not get_group_id) so that the

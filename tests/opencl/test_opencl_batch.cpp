@@ -624,7 +624,7 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
       const int cap = s.maxIterations;
       auto a = batchOf(ps, s, packed), b = batchOf(ps, s, grouped);
       // Rounds 0 and 1 mix zero and nonzero starts; round 2 starts every body at x = 0, where the
-      // packs form the whole set-up themselves (node blocks, M^-1, pcg_init: kPackWholeFresh).
+      // packs form the whole set-up themselves (node blocks, M^-1, pcg_init: pcg_iterate_pack's `fresh`).
       for (int round = 0; round < 3; ++round) {
         std::vector<std::size_t> who;
         std::size_t copies = 0;
@@ -743,6 +743,69 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
     atCap += uncapped[i].stats.iterations == cap && b[i].stats.converged ? 1 : 0;
   }
   EXPECT_GE(atCap, 1) << "a body converges at the cap's last iteration";
+}
+
+TEST_P(OpenCLBatch, UnpackedBodyStoppedAtTheSetUpStaysStoppedBesidePacks) {
+  // In a round with packs the host launches the set-up (product, reduce_finish) for the unpacked
+  // bodies only, and pcg_iterate_pack marks its own lanes running. A body that reduce_finish stops
+  // at the set-up (here the slab, warm-started at x0 with b = A x0, so r = 0) must stay stopped: a
+  // first version uploaded the segment table after that set-up to restore the packed bodies' flags,
+  // which revived the slab for an iteration (a review caught it). Every body as with packPcg = 0,
+  // bit for bit.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
+  const std::vector<detail::Problem> ps = instances(11);
+  const std::size_t K = ps.size();
+  detail::OpenCLOptions packed, grouped;
+  packed.groupPcg = grouped.groupPcg = 1;
+  packed.teamPcg = grouped.teamPcg = 0;
+  packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;
+  packed.localityOrder = grouped.localityOrder = 0;  // the copies pack under COROFEM_OPENCL_REORDER=1 too
+  packed.packPcg = 1;
+  grouped.packPcg = 0;
+  const detail::SystemCoeffs c{900.0, 30.0, 1.0};
+  for (PreconditionerKind pc : {PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
+    SolverDesc s = solver();
+    s.preconditioner = pc;
+    auto run = [&](const detail::OpenCLOptions& o, std::vector<Eigen::VectorXd>& sol) {
+      auto batch = batchOf(ps, s, o);
+      std::vector<Eigen::VectorXd> x(K), rhs(K), x0(K);
+      std::vector<BatchRequest> set, apply, solves;
+      std::size_t slab = K;
+      for (std::size_t i = 0; i < K; ++i) {
+        x[i] = deformed(ps[i], 0.25 + 0.3 * static_cast<double>(i));
+        set.push_back(request(BatchOp::SetPositions, i, &x[i]));
+        if (ps[i].name == "slab") slab = i;
+      }
+      runOk(*batch, set);
+      EXPECT_LT(slab, K);
+      for (std::size_t i = 0; i < K; ++i) {
+        x0[i] = Eigen::VectorXd::Zero(ps[i].dofCount());
+        rhs[i] = randomVector(ps[i].dofCount(), 2100 + static_cast<unsigned>(i));
+      }
+      for (std::size_t d = 0; d < ps[slab].dofCount(); ++d) x0[slab][d] = ps[slab].constrained[d] ? 0.0 : 1e-3;
+      apply.push_back(request(BatchOp::Apply, slab, &x0[slab], &rhs[slab], c));
+      runOk(*batch, apply);
+      sol = x0;
+      for (std::size_t i = 0; i < K; ++i) solves.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], c));
+      runOk(*batch, solves);
+      EXPECT_EQ(solves[slab].stats.iterations, 0) << "r = 0 at the set-up";
+      EXPECT_TRUE(solves[slab].stats.converged);
+      return solves;
+    };
+    std::vector<Eigen::VectorXd> xa, xb;
+    const unsigned long long lanesBefore = detail::packPcgLaneCount();
+    const std::vector<BatchRequest> a = run(packed, xa);
+    EXPECT_GT(detail::packPcgLaneCount(), lanesBefore) << "the copies ran in packs";
+    const std::vector<BatchRequest> b = run(grouped, xb);
+    for (std::size_t i = 0; i < K; ++i) {
+      SCOPED_TRACE(ps[i].name + ", preconditioner " + std::to_string(static_cast<int>(pc)));
+      EXPECT_EQ(a[i].stats.iterations, b[i].stats.iterations);
+      EXPECT_EQ(a[i].stats.converged, b[i].stats.converged);
+      EXPECT_EQ(a[i].stats.relativeResidual, b[i].stats.relativeResidual);
+      EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+    }
+  }
 }
 
 TEST_P(OpenCLBatch, CopiesOfOneMeshBatchedGiveEachAlonesBits) {

@@ -4,12 +4,13 @@
 // PCG whose scalars stay on the device (kernels/opencl/).
 //
 // Per call:
-//   setPositions   upload x; compute_rotations (a_i = R grad N_i; R when read); corner_gradients +
-//                  node_stiffness_blocks (preconditioner blocks, rotated with the elements)
+//   setPositions   upload x; compute_rotations (a_i = R grad N_i; R when read); the preconditioner
+//                  blocks, which rotate with the elements, are left to the next solve
 //   internalForces element_forces + gather_sum; download f (a warm-started body's A x is queued
 //                  behind it for the next solve)
 //   apply          upload p; element_product + gather_product; download y
-//   solve          upload b, x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); single-reduction PCG
+//   solve          upload b, x; corner_gradients + node_stiffness_blocks if the rotations changed
+//                  since they were formed; M^-1, r = b - A x, w = A M^-1 r (pcg_init); single-reduction PCG
 //                  iterations (4 launches each, no host read), stopped on the device at convergence;
 //                  non-blocking reads of the scalars every checkEvery iterations; true residual;
 //                  download x

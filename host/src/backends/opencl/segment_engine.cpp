@@ -1443,6 +1443,7 @@ void SegmentEngine::pcgIteration(bool last) {
 
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
+  refreshStaleBlocks(std::vector<char>(segs_.size(), 1));  // as solve() does: the blocks of these rotations
   setAllActive();
   std::fill(xKnown_.begin(), xKnown_.end(), 0);  // the iterations change x
   std::fill(axReady_.begin(), axReady_.end(), 0);
@@ -1586,8 +1587,10 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
   refreshStaleBlocks(packFresh ? unpackedOnly : active);
   setActive(active);
   if (packWhole) {
+    // The packed bodies' segments stay inactive from here (pcgSetup made the unpacked ones the
+    // active ones): pcg_iterate_pack marks its lanes running itself. Uploading the table again would
+    // revive an unpacked body that reduce_finish stopped at the set-up.
     pcgSetup(zeroStart, haveAx, &unpackedOnly, packFresh);
-    setActive(active);
   } else {
     pcgSetup(zeroStart, haveAx);
   }
@@ -1681,14 +1684,12 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           uploadRaw(packInfo_, packTable);
           const std::size_t slots = packTable.size() / kPackInfoCount;
           const cl_uint rows = cl_uint(3 * packNodeRows_);  // dof rows of each of packVec_'s vectors
-          static const ClBuffer none;  // pack_in's rhs where the pack does not finish the solves
           launchGroups(kPackIn_, slots, wg_, packInfo_, segInfoBuf_, cl_uint(stride_), rotatedGradients(), geom_, x_,
-                       r_, z_, p_, s_, q_, packWhole ? b_ : none, minv_, mass_, free_, packElem_, packVec_, packMinv_,
-                       packMass_, packFree_, rows, cl_uint(packFresh ? 1 : 0));
+                       r_, z_, p_, s_, q_, b_, minv_, mass_, free_, packElem_, packVec_, packMinv_, packMass_,
+                       packFree_, rows, cl_uint(packFresh ? 1 : 0));
           launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
                        packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_, partials_,
-                       scalars_, rows, iterations,
-                       packFresh ? kPackWholeFresh : packWhole ? kPackWholeAfterInit : kPackWholeNone, tol2);
+                       scalars_, rows, iterations, cl_uint(packFresh ? 1 : 0), tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);
           ++packPcgLaunches;
           packPcgLanes += static_cast<unsigned long long>(std::count(packed.begin(), packed.end(), char(1)));

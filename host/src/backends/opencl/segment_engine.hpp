@@ -414,10 +414,10 @@ class SegmentEngine {
   std::size_t groupTeam(const std::vector<BatchRequest*>& requests) const;
   bool groupRound(const std::vector<BatchRequest*>& requests) const { return groupTeam(requests) > 0; }
 
-  // -- packs (pcg_pack.cl): the iterations of up to kPackLanes bodies with the same mesh (corners
+  // -- packs (pcg_pack.cl): the PCG solves of up to kPackLanes bodies with the same mesh (corners
   // and node count) in one work-item, a body per vector lane, on CPU devices in rounds that take
   // pcg_iterate_group. Each mesh shared by at least packMinLanes_ bodies (a *pack mesh*) gets its
-  // corners and gather lists once and ceil(bodies / kPackLanes) slots of lane-interleaved rows.
+  // corners once and ceil(bodies / kPackLanes) slots of lane-interleaved rows.
   struct PackMesh {
     std::vector<std::size_t> bodies;      ///< its segments
     std::size_t corners = 0;              ///< its first entry in packCorners_
@@ -496,8 +496,8 @@ class SegmentEngine {
   ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's state, kTeamStride per segment, then claim words
   ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
   // packs_ (corofem_layout.h, "packs of bodies"): the slots' table of the round, the pack meshes'
-  // corners and gather lists, the slots' element rows (a_i, volume), element outputs, PCG vectors
-  // (x r u p s w), free masks, masses, M^-1 and partial sums.
+  // corners, the slots' element rows (a_i, volume), node sums, PCG vectors (x r u p s w b), free
+  // masks, masses, M^-1 and partial sums.
   ClBuffer packInfo_, packCorners_, packElem_, packSums_, packVec_, packFree_, packMass_,
       packMinv_, packPartials_;
 };
