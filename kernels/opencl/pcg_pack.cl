@@ -1,5 +1,7 @@
-/* The PCG iterations of pcg_iterate_group for packs of bodies with the same mesh, body l of a pack
- * in vector lane l (CPU devices: per-work-item partial sums, no COROFEM_TREE_REDUCE).
+/* The PCG solves of packs of bodies with the same mesh, body l of a pack in vector lane l (CPU
+ * devices: per-work-item partial sums, no COROFEM_TREE_REDUCE): the set-up's end (or, from a zero
+ * start, the whole set-up from the node blocks on), pcg_iterate_group's iterations, the iteration
+ * cap's last iteration and the true residual, each with the launched kernels' bits.
  *
  * pcg_iterate_group runs a body's element product on COROFEM_VEC elements per vector: every corner
  * of every element is a gather of VEC node values, and the gather to the nodes adds scalars. Where
@@ -7,15 +9,17 @@
  * shape, mass, constraints and solve), element e of kPackLanes of them sits in one vector instead:
  * its corner nodes are one scalar index for all lanes, every load and store is a contiguous vector
  * (corofem_layout.h, "packs of bodies"), and the sums at the nodes add whole vectors. One
- * work-item runs a pack's iterations until every lane has stopped or the launch's iterations are
- * done; the host copies the bodies' vectors in (pack_in) and out (pack_out) around it.
+ * work-item runs a pack's solves until every lane has stopped or the launch's iterations are done
+ * (then the cap's last and the residuals); the host copies the bodies' data in (pack_in) and their
+ * vectors out (pack_out) around it.
  *
  * Same bits as pcg_iterate_group, lane by lane: each lane does the arithmetic of its body's work-
  * items in their order, written as the same expressions of element_force.cl, gather.cl and pcg.cl
  * (so that the compiler contracts the same products into fused multiply-adds), with the update's
  * partial sums in the order of pcg_update_nodes (the 4-wide vector branch's order for a whole chunk
  * where pcg_update_nodes takes it), the partials summed as segment_sums sums them (strided, then a
- * tree of COROFEM_WG), and the scalars by update_scalars itself. A lane that has stopped keeps its
+ * tree of COROFEM_WG), and the scalars by update_scalars itself; the set-up and the residual as
+ * pcg_init, node_stiffness_blocks, node_preconditioner and gather_product_nodes form them. A lane that has stopped keeps its
  * vectors (the stores select the old value), as a stopped body's work-group does nothing.
  * tests/opencl/test_opencl_batch.cpp compares the two bit for bit.
  *
