@@ -229,6 +229,27 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
                               Eigen::VectorXd* out = nullptr, detail::SystemCoeffs c = {}) {
     return BatchRequest{op, body, c, in, out, {}, 0.0, nullptr};
   }
+  /// Options whose every solve round runs one work-group per body (pcg_iterate_group; no teams),
+  /// in the given numbering and node chunk, with packs (packPcg = 1) or without (0): the packs'
+  /// tests compare the two.
+  static detail::OpenCLOptions oneLaunchRounds(int packPcg, int localityOrder, std::size_t nodeChunk = 0) {
+    detail::OpenCLOptions o;
+    o.groupPcg = 1;
+    o.teamPcg = 0;
+    o.groupPcgSmallElements = 1 << 20;
+    o.nodeChunk = nodeChunk;
+    o.localityOrder = localityOrder;
+    o.packPcg = packPcg;
+    return o;
+  }
+  /// The same solve, bit for bit: stops, iteration counts, residuals and x.
+  static void expectSameSolve(const BatchRequest& a, const BatchRequest& b, const Eigen::VectorXd& xa,
+                              const Eigen::VectorXd& xb) {
+    EXPECT_EQ(a.stats.iterations, b.stats.iterations);
+    EXPECT_EQ(a.stats.converged, b.stats.converged);
+    EXPECT_EQ(a.stats.relativeResidual, b.stats.relativeResidual);
+    EXPECT_TRUE(sameBits(xa, xb)) << "max rel. difference " << maxRel(xa, xb);
+  }
   /// For the rules' tests: bent positions (`set`) and random right-hand sides (seeds seed + i) of
   /// the bodies, and which path a solve round takes.
   struct RoundPaths {
@@ -565,10 +586,7 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
       if (cap > 1) EXPECT_EQ(way.launches(), before + 1) << way.name << ": one launch for the round's iterations";
       for (std::size_t i = 0; i < K; ++i) {
         SCOPED_TRACE(way.name + ", " + ps[i].name + ", " + describe(s));
-        EXPECT_EQ(solveA[i].stats.iterations, solveB[i].stats.iterations);
-        EXPECT_EQ(solveA[i].stats.converged, solveB[i].stats.converged);
-        EXPECT_EQ(solveA[i].stats.relativeResidual, solveB[i].stats.relativeResidual);
-        EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+        expectSameSolve(solveA[i], solveB[i], xa[i], xb[i]);
         if (cap < 2000) EXPECT_LE(solveA[i].stats.iterations, cap);
         else EXPECT_TRUE(solveA[i].stats.converged);
       }
@@ -609,14 +627,8 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
   for (const Variant& variant : variants) {
     const std::vector<detail::Problem>& ps = variant.bodies;
     const std::size_t K = ps.size();
-    detail::OpenCLOptions packed, grouped;
-    packed.groupPcg = grouped.groupPcg = 1;
-    packed.teamPcg = grouped.teamPcg = 0;
-    packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;  // every round one-launch
-    packed.nodeChunk = grouped.nodeChunk = variant.chunk;
-    packed.localityOrder = grouped.localityOrder = variant.order;
-    packed.packPcg = 1;
-    grouped.packPcg = 0;
+    const detail::OpenCLOptions packed = oneLaunchRounds(1, variant.order, variant.chunk),
+                                grouped = oneLaunchRounds(0, variant.order, variant.chunk);
     const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
     const detail::SystemCoeffs stat{0.0, 0.0, 1.0};
     for (const SolverDesc& s : pcgSettings()) {
@@ -662,10 +674,7 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
         for (std::size_t j = 0; j < who.size(); ++j) {
           const std::size_t i = who[j];
           SCOPED_TRACE(variant.name + ", " + ps[i].name + ", round " + std::to_string(round) + ", " + describe(s));
-          EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
-          EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
-          EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
-          EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+          expectSameSolve(solveA[j], solveB[j], xa[i], xb[i]);
           // Static: the bodies held on one component, or not at all, are singular without mass
           // (they end at the cap or break down, in both ways alike).
           if (cap == 2000 && variant.dynamic) EXPECT_TRUE(solveA[j].stats.converged);
@@ -686,15 +695,9 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
   if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
   const std::vector<detail::Problem> ps = instances(11);
   const std::size_t K = ps.size();
-  detail::OpenCLOptions packed, grouped;
-  packed.groupPcg = grouped.groupPcg = 1;
-  packed.teamPcg = grouped.teamPcg = 0;
-  packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;
   // The mesh's own numbering, so that the rotated copies pack under COROFEM_OPENCL_REORDER=1 too
   // (their Morton orders differ).
-  packed.localityOrder = grouped.localityOrder = 0;
-  packed.packPcg = 1;
-  grouped.packPcg = 0;
+  const detail::OpenCLOptions packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
   const detail::SystemCoeffs c{900.0, 30.0, 1.0};
   std::vector<Eigen::VectorXd> x(K), rhs(K);
   for (std::size_t i = 0; i < K; ++i) {
@@ -736,10 +739,7 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
   int atCap = 0;
   for (std::size_t i = 0; i < K; ++i) {
     SCOPED_TRACE(ps[i].name + ", cap " + std::to_string(cap));
-    EXPECT_EQ(a[i].stats.iterations, b[i].stats.iterations);
-    EXPECT_EQ(a[i].stats.converged, b[i].stats.converged);
-    EXPECT_EQ(a[i].stats.relativeResidual, b[i].stats.relativeResidual);
-    EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+    expectSameSolve(a[i], b[i], xa[i], xb[i]);
     atCap += uncapped[i].stats.iterations == cap && b[i].stats.converged ? 1 : 0;
   }
   EXPECT_GE(atCap, 1) << "a body converges at the cap's last iteration";
@@ -756,13 +756,8 @@ TEST_P(OpenCLBatch, UnpackedBodyStoppedAtTheSetUpStaysStoppedBesidePacks) {
   if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
   const std::vector<detail::Problem> ps = instances(11);
   const std::size_t K = ps.size();
-  detail::OpenCLOptions packed, grouped;
-  packed.groupPcg = grouped.groupPcg = 1;
-  packed.teamPcg = grouped.teamPcg = 0;
-  packed.groupPcgSmallElements = grouped.groupPcgSmallElements = 1 << 20;
-  packed.localityOrder = grouped.localityOrder = 0;  // the copies pack under COROFEM_OPENCL_REORDER=1 too
-  packed.packPcg = 1;
-  grouped.packPcg = 0;
+  // The mesh's own numbering: the copies pack under COROFEM_OPENCL_REORDER=1 too.
+  const detail::OpenCLOptions packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
   const detail::SystemCoeffs c{900.0, 30.0, 1.0};
   for (PreconditionerKind pc : {PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
     SolverDesc s = solver();
@@ -800,10 +795,7 @@ TEST_P(OpenCLBatch, UnpackedBodyStoppedAtTheSetUpStaysStoppedBesidePacks) {
     const std::vector<BatchRequest> b = run(grouped, xb);
     for (std::size_t i = 0; i < K; ++i) {
       SCOPED_TRACE(ps[i].name + ", preconditioner " + std::to_string(static_cast<int>(pc)));
-      EXPECT_EQ(a[i].stats.iterations, b[i].stats.iterations);
-      EXPECT_EQ(a[i].stats.converged, b[i].stats.converged);
-      EXPECT_EQ(a[i].stats.relativeResidual, b[i].stats.relativeResidual);
-      EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+      expectSameSolve(a[i], b[i], xa[i], xb[i]);
     }
   }
 }
@@ -916,10 +908,7 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
         for (std::size_t j = 0; j < who.size(); ++j) {
           const std::size_t i = who[j];
           SCOPED_TRACE("team " + std::to_string(team) + ", frame " + std::to_string(frame) + ", " + ps[i].name);
-          EXPECT_EQ(solveA[j].stats.iterations, solveB[j].stats.iterations);
-          EXPECT_EQ(solveA[j].stats.converged, solveB[j].stats.converged);
-          EXPECT_EQ(solveA[j].stats.relativeResidual, solveB[j].stats.relativeResidual);
-          EXPECT_TRUE(sameBits(xa[i], xb[i])) << "max rel. difference " << maxRel(xa[i], xb[i]);
+          expectSameSolve(solveA[j], solveB[j], xa[i], xb[i]);
         }
       }
     }
