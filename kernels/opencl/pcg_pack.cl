@@ -49,8 +49,15 @@ typedef double8 sump;
 typedef realp sump;
 #define TO_SUMP(v) (v)
 #endif
-#define LDP(ptr) vload8(0, (ptr))
-#define STP(value, ptr) vstore8((value), 0, (ptr))
+/* A row of a pack array (global, at a multiple of PACK_L reals from the buffer's start, which
+ * OpenCL aligns to at least the largest vector type): one aligned vector access. vload8/vstore8
+ * compile to split stores there (PoCL: two 16-byte halves), and a 32-byte load of a node sum
+ * just stored in halves waits for both instead of taking the stored value (store forwarding). */
+#define LDP(ptr) (*(__global const realp*)(ptr))
+#define STP(value, ptr) (*(__global realp*)(ptr) = (value))
+/* 8 reals anywhere (private arrays, the bodies' own arrays). */
+#define LDU(ptr) vload8(0, (ptr))
+#define STU(value, ptr) vstore8((value), 0, (ptr))
 /* Row r of a lane-interleaved array. */
 #define ROW(base, r) ((base) + (size_t)(r) * PACK_L)
 /* Node sum rows per node: the products' 3, or the node blocks' 6 of the block preconditioner when
@@ -87,7 +94,7 @@ COROFEM_FN PackSlot pack_slot(__global const uint* packInfo, uint slot) {
 COROFEM_FN realp lane_coef(const PackSlot* p, __global const real* segCoef, uint k) {
   real v[PACK_L];
   for (int l = 0; l < PACK_L; ++l) v[l] = p->seg[l] >= 0 ? seg_coef(segCoef, (uint)p->seg[l], k) : (real)0;
-  return LDP(v);
+  return LDU(v);
 }
 
 /* Lane l = (real) scalar k of lane l's body. */
@@ -95,7 +102,7 @@ COROFEM_FN realp lane_scalar(const PackSlot* p, __global const sum_real* allScal
   real v[PACK_L];
   for (int l = 0; l < PACK_L; ++l)
     v[l] = p->seg[l] >= 0 ? (real)allScalars[kScalarCount * (uint)p->seg[l] + k] : (real)0;
-  return LDP(v);
+  return LDU(v);
 }
 
 /* -1 in the lanes whose body is still iterating (segInfo's flag, which update_scalars clears). */
@@ -131,7 +138,7 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
 #endif
   uint t = 0; /* the dof's place in the chunk: the 4-wide branch's lane t % 4 */
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (nodeBase + n);
+    const size_t row = (size_t)3 * (nodeBase + n);
     realp rn[3], un[3], uo[3];
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
@@ -148,7 +155,7 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
 #if defined(COROFEM_PRECOND_BLOCK)
     realp m[9];
     #pragma unroll
-    for (int k = 0; k < 9; ++k) m[k] = LDP(ROW(minv, 9 * (nodeBase + n) + k));
+    for (int k = 0; k < 9; ++k) m[k] = LDP(ROW(minv, (size_t)9 * (nodeBase + n) + k));
     un[0] = m[0] * rn[0] + m[1] * rn[1] + m[2] * rn[2];
     un[1] = m[3] * rn[0] + m[4] * rn[1] + m[5] * rn[2];
     un[2] = m[6] * rn[0] + m[7] * rn[1] + m[8] * rn[2];
@@ -181,7 +188,7 @@ COROFEM_FN void pack_update_nodes(uint first, uint last, uint nodeBase, uint dof
  * The elements come in order, which is the order of the gather lists (gather.cl): each node's sum
  * is then the gather's, 0 + y(first element) + y(next) ..., bit for bit. One work-item owns a
  * pack, so the adds do not race. */
-COROFEM_FN void pack_add_corner(__global real* sums, uint row, realp yx, realp yy, realp yz) {
+COROFEM_FN void pack_add_corner(__global real* sums, size_t row, realp yx, realp yy, realp yz) {
   __global real* q = ROW(sums, row);
   STP(LDP(q) + yx, q);
   STP(LDP(q + PACK_L) + yy, q + PACK_L);
@@ -192,12 +199,12 @@ COROFEM_FN void pack_add_corner(__global real* sums, uint row, realp yx, realp y
  * corner's part added to the node sums instead of stored for a gather (the element outputs of 8
  * lanes are 384 bytes an element, streamed out and back each iteration; the node sums stay in the
  * core's cache). */
-COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, realp mu, uint dofRows,
+COROFEM_FN __attribute__((always_inline)) void pack_product_element(uint e, const PackSlot* p, realp lambda, realp mu, uint dofRows,
                                      __global const uint* corners, __global const real* elem,
                                      __global const real* vec, uint in, __global real* sums) {
   __global const real* U = PACK_VEC(vec, dofRows, in); /* u, or x for the residual */
   __global const uint* c = corners + p->corners + 4 * e;
-  const uint n0 = 3 * (p->nodeBase + c[0]);
+  const size_t n0 = (size_t)3 * (p->nodeBase + c[0]);
   __global const real* g = ROW(elem, (size_t)(p->elemBase + e) * kPackElemRows);
   realp a[9];
   #pragma unroll
@@ -211,7 +218,7 @@ COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, re
   for (int k = 0; k < 9; ++k) P[k] = (realp)0;
   #pragma unroll
   for (int i = 1; i < 4; ++i) {
-    const uint ni = 3 * (p->nodeBase + c[i]);
+    const size_t ni = (size_t)3 * (p->nodeBase + c[i]);
     #pragma unroll
     for (int j = 0; j < 3; ++j) {
       const realp d = LDP(ROW(U, ni + j)) - v0[j];
@@ -236,16 +243,16 @@ COROFEM_FN void pack_product_element(uint e, const PackSlot* p, realp lambda, re
     const realp yx = sxx * ax + sxy * ay + sxz * az;
     const realp yy = sxy * ax + syy * ay + syz * az;
     const realp yz = sxz * ax + syz * ay + szz * az;
-    pack_add_corner(sums, PACK_SUMS * (p->nodeBase + c[i + 1]), yx, yy, yz);
+    pack_add_corner(sums, PACK_SUMS * (size_t)(p->nodeBase + c[i + 1]), yx, yy, yz);
     y0x -= yx;
     y0y -= yy;
     y0z -= yz;
   }
-  pack_add_corner(sums, PACK_SUMS * (p->nodeBase + c[0]), y0x, y0y, y0z);
+  pack_add_corner(sums, PACK_SUMS * (size_t)(p->nodeBase + c[0]), y0x, y0y, y0z);
 }
 
 /* Rows [row, row + count) of the node sums into acc, left at zero for the next sums. */
-COROFEM_FN void pack_take_sums(__global real* sums, uint row, int count, realp* acc) {
+COROFEM_FN void pack_take_sums(__global real* sums, size_t row, int count, realp* acc) {
   for (int k = 0; k < count; ++k) {
     acc[k] = LDP(ROW(sums, row + k));
     STP((realp)0, ROW(sums, row + k));
@@ -262,9 +269,9 @@ COROFEM_FN sump pack_finish_nodes(uint first, uint last, const PackSlot* p, real
   __global real* W = PACK_VEC(vec, dofRows, 5);
   sump dot = (sump)0;
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (p->nodeBase + n);
+    const size_t row = (size_t)3 * (p->nodeBase + n);
     realp acc[3];
-    pack_take_sums(sums, PACK_SUMS * (p->nodeBase + n), 3, acc);
+    pack_take_sums(sums, PACK_SUMS * (size_t)(p->nodeBase + n), 3, acc);
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const realp pd = LDP(ROW(U, row + k));
@@ -325,9 +332,9 @@ COROFEM_FN void pack_residual_nodes(uint first, uint last, const PackSlot* p, re
   __global const real* B = PACK_VEC(vec, dofRows, 6);
   sump rr = (sump)0, bb = (sump)0;
   for (uint n = first; n < last; ++n) {
-    const uint row = 3 * (p->nodeBase + n);
+    const size_t row = (size_t)3 * (p->nodeBase + n);
     realp acc[3];
-    pack_take_sums(nodeSums, PACK_SUMS * (p->nodeBase + n), 3, acc);
+    pack_take_sums(nodeSums, PACK_SUMS * (size_t)(p->nodeBase + n), 3, acc);
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       const realp fd = LDP(ROW(free, row + k));
@@ -366,7 +373,7 @@ COROFEM_FN void pack_block_element(uint e, const PackSlot* p, realp lm, realp mu
     for (int k = 0; k < 3; ++k) corner[i][k] = w * a[3 * (i - 1) + k];
   #pragma unroll
   for (int i = 0; i < 4; ++i) {
-    __global real* q = ROW(sums, PACK_SUMS * (p->nodeBase + c[i]));
+    __global real* q = ROW(sums, PACK_SUMS * (size_t)(p->nodeBase + c[i]));
     const realp ax = corner[i][0], ay = corner[i][1], az = corner[i][2];
     const realp iso = mu * (ax * ax + ay * ay + az * az);
     STP(LDP(q) + (lm * ax * ax + iso), q);
@@ -441,18 +448,18 @@ COROFEM_FN void pack_fresh_setup(const PackSlot* p, realp lm, realp muMat, realp
     const uint first = v * COROFEM_CHUNK, last = min(first + (uint)COROFEM_CHUNK, p->nodes);
     sump ru = (sump)0, rr = (sump)0, bb = (sump)0;
     for (uint n = first; n < last; ++n) {
-      const uint row = 3 * (p->nodeBase + n);
+      const size_t row = (size_t)3 * (p->nodeBase + n);
       realp rn[3], un[3], f[3];
       #pragma unroll
       for (int k = 0; k < 3; ++k) f[k] = LDP(ROW(free, row + k));
 #if defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_PRECOND_DIAG)
       realp b[PACK_SUMS], mv[3], m[COROFEM_NODE_INVERSE];
-      pack_take_sums(sums, PACK_SUMS * (p->nodeBase + n), PACK_SUMS, b);
+      pack_take_sums(sums, PACK_SUMS * (size_t)(p->nodeBase + n), PACK_SUMS, b);
       #pragma unroll
       for (int k = 0; k < 3; ++k) mv[k] = mass ? LDP(ROW(mass, row + k)) : (realp)0;
       pack_node_preconditioner(b, massCoef, stiffCoef, mv, f, m);
       #pragma unroll
-      for (int k = 0; k < COROFEM_NODE_INVERSE; ++k) STP(m[k], ROW(minv, COROFEM_NODE_INVERSE * (p->nodeBase + n) + k));
+      for (int k = 0; k < COROFEM_NODE_INVERSE; ++k) STP(m[k], ROW(minv, (size_t)COROFEM_NODE_INVERSE * (p->nodeBase + n) + k));
 #endif
       #pragma unroll
       for (int k = 0; k < 3; ++k) {
@@ -518,12 +525,12 @@ COROFEM_FN void pack_setup(const PackSlot* p, realp lambda, realp mu, realp mass
   }
   pack_segment_sums(rows, p->partialCount);
   sum_real ru[PACK_L], rr[PACK_L], bb[PACK_L], uw[PACK_L];
-  STP(rows[0], ru);
-  STP(rows[1], rr);
-  STP(rows[2], bb);
+  STU(rows[0], ru);
+  STU(rows[1], rr);
+  STU(rows[2], bb);
   pack_product(p, lambda, mu, massCoef, run, dofRows, corners, elem, sums, vec, mass, free, rows, 0);
   pack_segment_sums(rows, p->partialCount);
-  STP(rows[0], uw);
+  STU(rows[0], uw);
   for (int l = 0; l < PACK_L; ++l)
     if (p->seg[l] >= 0 && seg_info(segInfo, (uint)p->seg[l], kSegActive) != 0u)
       update_scalars(segInfo, (uint)p->seg[l], allScalars + kScalarCount * (uint)p->seg[l], kReduceInit, tol2, ru[l],
@@ -563,8 +570,8 @@ COROFEM_FN void pack_finish(const PackSlot* p, realp lambda, realp mu, realp mas
       rows[3 * v + 2] = (sump)0;
     }
     pack_segment_sums(rows, p->partialCount);
-    STP(rows[0], a);
-    STP(rows[1], b);
+    STU(rows[0], a);
+    STU(rows[1], b);
     for (int l = 0; l < PACK_L; ++l)
       if (p->seg[l] >= 0 && seg_info(segInfo, (uint)p->seg[l], kSegActive) != 0u)
         update_scalars(segInfo, (uint)p->seg[l], allScalars + kScalarCount * (uint)p->seg[l], kReduceLast, tol2, a[l],
@@ -581,8 +588,8 @@ COROFEM_FN void pack_finish(const PackSlot* p, realp lambda, realp mu, realp mas
     rows[3 * v + 2] = sums[1];
   }
   pack_segment_sums(rows, p->partialCount);
-  STP(rows[1], a);
-  STP(rows[2], b);
+  STU(rows[1], a);
+  STU(rows[2], b);
   for (int l = 0; l < PACK_L; ++l)
     if (p->seg[l] >= 0) {
       update_scalars(segInfo, (uint)p->seg[l], allScalars + kScalarCount * (uint)p->seg[l], kReduceResidual, tol2,
@@ -634,9 +641,9 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
     pack_product(&p, lambda, mu, massCoef, run, dofRows, corners, elem, sums, vec, mass, free, rows, 2);
     pack_segment_sums(rows, p.partialCount);
     sum_real ru[PACK_L], rr[PACK_L], uw[PACK_L];
-    STP(rows[0], ru);
-    STP(rows[1], rr);
-    STP(rows[2], uw);
+    STU(rows[0], ru);
+    STU(rows[1], rr);
+    STU(rows[2], uw);
     for (int l = 0; l < PACK_L; ++l)
       if (p.seg[l] >= 0 && seg_info(segInfo, (uint)p.seg[l], kSegActive) != 0u)
         update_scalars(segInfo, (uint)p.seg[l], allScalars + kScalarCount * (uint)p.seg[l], kReduceStep, tol2, ru[l],
@@ -688,7 +695,7 @@ COROFEM_FN void pack_share(uint n, uint lid, uint* lo, uint* hi) {
 COROFEM_FN void pack_rows_in(__global const real* from, const long* first, __global real* to, size_t row,
                              uint stride) {
   realp a[PACK_L], t[PACK_L];
-  for (int l = 0; l < PACK_L; ++l) a[l] = first[l] >= 0 ? LDP(from + first[l]) : (realp)0;
+  for (int l = 0; l < PACK_L; ++l) a[l] = first[l] >= 0 ? LDU(from + first[l]) : (realp)0;
   pack_transpose(a, t);
   for (int j = 0; j < PACK_L; ++j) STP(t[j], ROW(to, row + (size_t)j * stride));
 }
@@ -775,7 +782,7 @@ void pack_out(__global const uint* packInfo, __global const uint* segInfo, __glo
     for (int j = 0; j < PACK_L; ++j) a[j] = LDP(ROW(PACK_VEC(vec, dofRows, v), row + j));
     pack_transpose(a, t);
     for (int l = 0; l < PACK_L; ++l)
-      if (dofBegin[l] >= 0) STP(t[l], to[v] + dofBegin[l] + 8 * b);
+      if (dofBegin[l] >= 0) STU(t[l], to[v] + dofBegin[l] + 8 * b);
   }
 }
 #endif /* !COROFEM_TREE_REDUCE */
