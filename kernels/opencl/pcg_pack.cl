@@ -607,14 +607,13 @@ COROFEM_FN void pack_finish(const PackSlot* p, realp lambda, realp mu, realp mas
  * reduce_finish may stop a body that a later upload of the table would revive), update_scalars
  * clears them at a stop and pack_finish at the end, so that the launched last iteration and
  * residual pass them by. */
-__kernel __attribute__((reqd_work_group_size(1, 1, 1)))
-void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __global const real* segCoef,
-                      __global const uint* corners, __global const real* elem, __global real* sums,
-                      __global real* vec, __global const real* free,
-                      __global const real* mass, __global real* minv, __global sump* partials,
-                      __global const sum_real* initPartials, __global sum_real* allScalars, const uint dofRows,
-                      const uint iterations, const uint fresh, const sum_real tol2) {
-  const PackSlot p = pack_slot(packInfo, get_global_id(0));
+COROFEM_FN void pack_solve(uint slot, __global const uint* packInfo, __global uint* segInfo,
+                           __global const real* segCoef, __global const uint* corners, __global const real* elem,
+                           __global real* sums, __global real* vec, __global const real* free,
+                           __global const real* mass, __global real* minv, __global sump* partials,
+                           __global const sum_real* initPartials, __global sum_real* allScalars, const uint dofRows,
+                           const uint iterations, const uint fresh, const sum_real tol2) {
+  const PackSlot p = pack_slot(packInfo, slot);
   for (int l = 0; l < PACK_L; ++l)
     if (p.seg[l] >= 0) segInfo[kSegInfoCount * (uint)p.seg[l] + kSegActive] = kSegRunningPacked;
   const realp lambda = lane_coef(&p, segCoef, kCoefProdLambda), mu = lane_coef(&p, segCoef, kCoefProdMu);
@@ -652,6 +651,27 @@ void pcg_iterate_pack(__global const uint* packInfo, __global uint* segInfo, __g
   }
   pack_finish(&p, lambda, mu, massCoef, run, any, dofRows, segInfo, corners, elem, sums, vec, mass, free, minv, rows,
               allScalars, tol2);
+}
+
+/* pack_solve for each of the round's `packs` slots: a work-group (of one work-item) per compute
+ * unit, each taking the next slot from the claim word until none is left. The host orders the
+ * slots the costliest first, so this is the longest-first list schedule whatever the runtime does
+ * with work-groups: PoCL hands a thread ceil(remaining / threads) work-groups at a time, which gave
+ * one of 2 threads the 7 costliest of 13 packs (iterations 132 96 89 83 76 70 66 of a step of
+ * bench_batch's varied set: 612 against 286 for the other thread). */
+__kernel __attribute__((reqd_work_group_size(1, 1, 1)))
+void pcg_iterate_pack(__global uint* packInfo, const uint packs, __global uint* segInfo,
+                      __global const real* segCoef, __global const uint* corners, __global const real* elem,
+                      __global real* sums, __global real* vec, __global const real* free,
+                      __global const real* mass, __global real* minv, __global sump* partials,
+                      __global const sum_real* initPartials, __global sum_real* allScalars, const uint dofRows,
+                      const uint iterations, const uint fresh, const sum_real tol2) {
+  for (;;) {
+    const uint slot = atomic_inc(packInfo + kPackInfoCount * packs);
+    if (slot >= packs) return;
+    pack_solve(slot, packInfo, segInfo, segCoef, corners, elem, sums, vec, free, mass, minv, partials, initPartials,
+               allScalars, dofRows, iterations, fresh, tol2);
+  }
 }
 
 /* The 8 x 8 transpose, t[j] lane i = a[i] lane j, in three stages of shuffle2 with constant masks

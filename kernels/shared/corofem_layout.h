@@ -166,7 +166,9 @@ COROFEM_CONSTANT(unsigned, kSegCoefCount, 8);
  * own, M^-1 with COROFEM_NODE_INVERSE rows per node), and of the node sums, which the element
  * products add to element by element (the order of the bodies' gather lists, so the same sums).
  * The element corners (4 per element, the pack's own node numbers) are shared by all packs of one
- * mesh. Per pack slot (uint) at packInfo[kPackInfoCount * p + k]:                                 */
+ * mesh. Per pack slot (uint) at packInfo[kPackInfoCount * p + k], and after the round's P slots
+ * the claim word packInfo[kPackInfoCount * P] (0 when uploaded; pcg_iterate_pack's work-groups
+ * take the slots in order from it):                                                              */
 COROFEM_CONSTANT(unsigned, kPackLanes, 8);
 COROFEM_CONSTANT(unsigned, kPackElemRows, 10);
 COROFEM_CONSTANT(unsigned, kPackVectors, 7);       /* x r u p s w b                               */

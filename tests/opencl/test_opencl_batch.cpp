@@ -607,7 +607,8 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
   // variants: rotated and stretched copies in their own numbering; the same with node chunks of 3
   // (the update's partial sums in the scalar order); static bodies (no mass buffer); copies only
   // moved, in the Morton order (every copy the same order, so they pack). The packed lanes are
-  // counted, so a round that quietly left its bodies to pcg_iterate_group fails too.
+  // counted, so a round that quietly left its bodies to pcg_iterate_group fails too. Two variants
+  // launch the packs in one work-group, which then takes both slots in turn from the claim word.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
   struct Variant {
@@ -617,18 +618,20 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
                         ///< update's branch; another build of the program per precision)
     int order;
     bool dynamic;
+    std::size_t takers;  ///< pcg_iterate_pack's work-groups (1: one takes both slots in turn)
   };
   std::vector<detail::Problem> still = instances(11);
   for (detail::Problem& p : still) p.lumpedMass.setZero();  // how a static problem looks to the engine
-  const std::vector<Variant> variants = {{"rotated copies", instances(11), 0, 0, true},
-                                         {"node chunks of 3", instances(11), 3, 0, true},
-                                         {"static", still, 0, 0, false},
-                                         {"moved copies, Morton order", instances(11, false), 0, 1, true}};
+  const std::vector<Variant> variants = {{"rotated copies", instances(11), 0, 0, true, 0},
+                                         {"node chunks of 3", instances(11), 3, 0, true, 1},
+                                         {"static", still, 0, 0, false, 1},
+                                         {"moved copies, Morton order", instances(11, false), 0, 1, true, 0}};
   for (const Variant& variant : variants) {
     const std::vector<detail::Problem>& ps = variant.bodies;
     const std::size_t K = ps.size();
-    const detail::OpenCLOptions packed = oneLaunchRounds(1, variant.order, variant.chunk),
-                                grouped = oneLaunchRounds(0, variant.order, variant.chunk);
+    detail::OpenCLOptions packed = oneLaunchRounds(1, variant.order, variant.chunk);
+    const detail::OpenCLOptions grouped = oneLaunchRounds(0, variant.order, variant.chunk);
+    packed.packPcgTakers = variant.takers;
     const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
     const detail::SystemCoeffs stat{0.0, 0.0, 1.0};
     for (const SolverDesc& s : pcgSettings()) {
@@ -1324,7 +1327,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   {
     // Packs (pcg_iterate_pack): 11 copies of one mesh of 300 tets and 108 nodes take 2 slots of 8
     // lanes, each with rows for 304 elements and 112 nodes (padded to 8), and the mesh's corners
-    // once: the slots' table (15 words a slot), corners, a_i and volumes (10 rows per element), the
+    // once: the slots' table (15 words a slot and the claim word), corners, a_i and volumes (10 rows per element), the
     // PCG vectors x r u p s w and b, the node sums (6 rows: the block preconditioner's blocks), free
     // mask, mass and block inverse (7 x 3, 6, 3, 3 and 9 rows per node) and 64 partial triples per
     // slot (the bodies' own count).
@@ -1334,7 +1337,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     packed.packPcg = 1;
     plain.packPcg = 0;
     const std::size_t slots = 2, L = 8, E = 300, Ep = 304, Np = 112;
-    const std::size_t packBytes = 4 * 15 * slots + 4 * 4 * E + r * L * slots * (Ep * 10 + Np * (7 * 3 + 6 + 3 + 3 + 9)) +
+    const std::size_t packBytes = 4 * (15 * slots + 1) + 4 * 4 * E + r * L * slots * (Ep * 10 + Np * (7 * 3 + 6 + 3 + 3 + 9)) +
                                   r * 3 * L * 64 * slots;
     EXPECT_EQ(batchOf(copies, s, packed)->allocatedBytes(), batchOf(copies, s, plain)->allocatedBytes() + packBytes);
   }

@@ -77,6 +77,9 @@ struct OpenCLOptions {
   /// The fewest bodies of a pack (a pack costs its 8 lanes whatever it holds); 0 = the default, 3.
   /// COROFEM_OPENCL_PACK_PCG_MIN sets it when 0.
   std::size_t packPcgMinLanes = 0;
+  /// Tests: the work-groups that take a round's packs (pcg_iterate_pack: each takes the next slot,
+  /// the costliest first, until none is left); 0 = the device's compute units.
+  std::size_t packPcgTakers = 0;
   /// Tests: the epoch pcg_iterate_team's claims start from (the wrap of the 32-bit epochs, which
   /// otherwise comes after about 10^9 phases); 0 = the default.
   unsigned teamEpochStart = 0;

@@ -332,6 +332,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
     packAlways_ = packs_;
   }
   packs_ = packs_ && groupPcg_ && !treeReduce_;
+  packTakers_ = options.packPcgTakers ? options.packPcgTakers : std::max<std::size_t>(1, ctx_->info().computeUnits);
   packMinLanes_ = options.packPcgMinLanes ? options.packPcgMinLanes : kPackMinLanes;
   if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG_MIN"); env && *env && !options.packPcgMinLanes)
     packMinLanes_ = std::strtoul(env, nullptr, 10);  // tuning experiments
@@ -702,7 +703,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
       partialRows = std::max(partialRows, slot.partialBase + segs_[m.bodies.front()].partialCount);
     }
     const std::size_t L = kPackLanes, inverse = precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3;
-    packInfo_.create(c, kPackInfoCount * packSlots_.size() * sizeof(cl_uint), dev_);
+    packInfo_.create(c, (kPackInfoCount * packSlots_.size() + 1) * sizeof(cl_uint), dev_);  // + the claim word
     packCorners_.create(c, corners.size() * sizeof(cl_uint), dev_);
     uploadRaw(packCorners_, corners);
     createReal(packElem_, elemRows * kPackElemRows * L);
@@ -1136,6 +1137,7 @@ std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& 
     }
     table.insert(table.end(), row, row + kPackInfoCount);
   }
+  if (!table.empty()) table.push_back(0);  // the claim word, at 0 (pcg_iterate_pack)
   return table;
 }
 
@@ -1681,13 +1683,14 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           }
         }
         if (!packTable.empty()) {  // the packs' bodies: their vectors in, the iterations, the vectors out
+          const std::size_t slots = (packTable.size() - 1) / kPackInfoCount;  // and the claim word
           uploadRaw(packInfo_, packTable);
-          const std::size_t slots = packTable.size() / kPackInfoCount;
           const cl_uint rows = cl_uint(3 * packNodeRows_);  // dof rows of each of packVec_'s vectors
           launchGroups(kPackIn_, slots, wg_, packInfo_, segInfoBuf_, cl_uint(stride_), rotatedGradients(), geom_, x_,
                        r_, z_, p_, s_, q_, b_, minv_, mass_, free_, packElem_, packVec_, packMinv_, packMass_,
                        packFree_, rows, cl_uint(packFresh ? 1 : 0));
-          launchGroups(kPcgIteratePack_, slots, 1, packInfo_, segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
+          // A work-group per compute unit, each taking slots from the claim word (costliest first).
+          launchGroups(kPcgIteratePack_, std::min(slots, packTakers_), 1, packInfo_, cl_uint(slots), segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
                        packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_, partials_,
                        scalars_, rows, iterations, cl_uint(packFresh ? 1 : 0), tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);

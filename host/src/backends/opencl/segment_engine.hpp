@@ -431,13 +431,15 @@ class SegmentEngine {
   /// Finds the pack meshes (segs_ made); sets packs_ = false where there are none.
   void findPackMeshes();
   /// The packs of a solve round that takes pcg_iterate_group: the rows of packInfo_ (kPackInfoCount
-  /// each, the costliest first), with packed[s] = 1 for the bodies they take. Bodies of a pack mesh
+  /// each, the costliest first, then the claim word at 0; empty without packs), with packed[s] = 1
+  /// for the bodies they take. Bodies of a pack mesh
   /// are packed in the order of their last solve's iterations (bodies that stop together share a
   /// pack), kPackLanes at a time; a remainder of fewer than packMinLanes_ bodies is not packed.
   std::vector<cl_uint> packRound(const std::vector<BatchRequest*>& requests, std::vector<char>& packed) const;
   bool packs_ = false;                   ///< pcg_iterate_pack for the pack meshes' bodies
   bool packAlways_ = false;              ///< ... in every round (tests), not only where kPackCost says so
   std::size_t packMinLanes_ = 0;         ///< the fewest bodies of a pack
+  std::size_t packTakers_ = 1;           ///< pcg_iterate_pack's work-groups (each takes slots in turn)
   std::vector<PackMesh> packMeshes_;
   std::vector<PackSlotPlace> packSlots_;
   std::size_t packNodeRows_ = 0;         ///< node rows of all slots (each vector of packVec_)
