@@ -2,6 +2,7 @@
 // bodies that finish, throw or fail over leave the count, and nothing deadlocks. The backends are
 // small fakes whose answers are functions of their inputs, so every answer can be checked exactly.
 #include "solve/batch_group.hpp"
+#include "util/fiber.hpp"
 
 #include "util/error.hpp"
 
@@ -69,11 +70,14 @@ class FakeBackend final : public Backend {
   Eigen::VectorXd x_ = Eigen::VectorXd::Zero(3);
 };
 
-std::unique_ptr<BatchGroup> fakeGroup(std::size_t bodies, const std::vector<int>& failAt = {}) {
+/// `fiberWorkers` < 0: the group's default (fibers on a thread per usable CPU where available).
+std::unique_ptr<BatchGroup> fakeGroup(std::size_t bodies, const std::vector<int>& failAt = {}, int fiberWorkers = -1) {
   std::vector<std::unique_ptr<Backend>> backends;
   for (std::size_t i = 0; i < bodies; ++i)
     backends.push_back(std::make_unique<FakeBackend>(1.0 + static_cast<double>(i), i < failAt.size() ? failAt[i] : 0));
-  return std::make_unique<BatchGroup>(detail::createLoopBatchDevice(std::move(backends)));
+  auto group = std::make_unique<BatchGroup>(detail::createLoopBatchDevice(std::move(backends)));
+  if (fiberWorkers >= 0) group->setFiberWorkers(static_cast<std::size_t>(fiberWorkers));
+  return group;
 }
 
 /// Aborts the test binary when a scope takes longer than `seconds`: a deadlock must fail, not hang
@@ -319,18 +323,19 @@ TEST(BatchGroup, ADeviceThatThrowsFailsEveryRequestOfTheRound) {
   EXPECT_EQ(group.stats().rounds, 1);
 }
 
-TEST(BatchGroup, StressManyBodiesRandomExitsThrowsAndFailovers) {
-  // 100 bodies, 40 steps: each body in each step makes a random number of random calls, may return
-  // early, throw, or meet an injected device failure and fail over (its view replaced by a plain
-  // backend, as FailoverBackend does). Every answer is checked; the watchdog turns a deadlock into
-  // a failure. Random participation: some steps leave bodies out.
+/// 100 bodies, 40 steps: each body in each step makes a random number of random calls, may return
+/// early, throw, or meet an injected device failure and fail over (its view replaced by a plain
+/// backend, as FailoverBackend does). Every answer is checked; the watchdog turns a deadlock into a
+/// failure. Random participation: some steps leave bodies out. The bodies run as fibers on
+/// `fiberWorkers` threads (0: a thread each).
+void stressManyBodies(int fiberWorkers) {
   Watchdog dog(120);
   const std::size_t n = 100;
   std::mt19937 rng(12345);
   std::vector<int> failAt(n, 0);
   for (std::size_t i = 0; i < n; ++i)
     if (i % 7 == 3) failAt[i] = 5 + static_cast<int>(rng() % 200);
-  auto group = fakeGroup(n, failAt);
+  auto group = fakeGroup(n, failAt, fiberWorkers);
   std::vector<std::unique_ptr<Backend>> backends;
   for (std::size_t i = 0; i < n; ++i) backends.push_back(group->view(i));
   std::vector<Eigen::VectorXd> lastX(n, Eigen::VectorXd::Zero(3));  // what a new backend is given
@@ -403,7 +408,61 @@ TEST(BatchGroup, StressManyBodiesRandomExitsThrowsAndFailovers) {
   EXPECT_GT(st.largestRound, 50u);  // the rounds really batch
   EXPECT_LT(st.rounds, calls.load() / 10);
   std::cout << "[ info ] " << calls.load() << " calls, " << st.rounds << " rounds, " << st.requests
-            << " batched requests, " << failovers.load() << " failovers, " << thrown << " thrown steps\n";
+            << " batched requests, " << failovers.load() << " failovers, " << thrown << " thrown steps ("
+            << group->fiberWorkers() << " fiber workers)\n";
+}
+
+TEST(BatchGroup, StressManyBodiesRandomExitsThrowsAndFailovers) {
+  stressManyBodies(-1);  // the default: fibers where available
+}
+
+TEST(BatchGroup, StressWithAThreadPerBody) { stressManyBodies(0); }
+
+TEST(BatchGroup, StressWithFibersOnOneAndOnThreeThreads) {
+  if (!detail::fibersAvailable()) GTEST_SKIP() << "no fibers in this build (AddressSanitizer or no ucontext)";
+  stressManyBodies(1);
+  stressManyBodies(3);
+}
+
+TEST(BatchGroup, FibersKeepTheirOwnCaughtExceptions) {
+  // Eight bodies as fibers on one thread. Each throws its own exception and, inside the catch
+  // block, calls its view (the fiber suspends there and the others run, throwing and catching
+  // theirs), then rethrows with `throw;`: each must get its own exception back, and no exception
+  // may count as uncaught. Each context keeps its own C++ exception globals (util/fiber.cpp); with
+  // one set per thread, the rethrows take the wrong exceptions or terminate.
+  if (!detail::fibersAvailable()) GTEST_SKIP() << "no fibers in this build (AddressSanitizer or no ucontext)";
+  Watchdog dog(60);
+  const std::size_t n = 8;
+  auto group = fakeGroup(n, {}, 1);
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
+  std::vector<int> rethrown(n, -1), uncaught(n, -1), rounds(n, 0);
+  const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+    try {
+      throw static_cast<int>(i);
+    } catch (int) {
+      for (std::size_t c = 0; c <= i % 3; ++c) {  // suspends, while the others throw and catch
+        Eigen::VectorXd x = Eigen::VectorXd::Constant(3, static_cast<double>(i)), f;
+        views[i]->setPositions(x);
+        views[i]->internalForces(f);
+        ++rounds[i];
+      }
+      uncaught[i] = std::uncaught_exceptions();
+      try {
+        throw;
+      } catch (int k) {
+        rethrown[i] = k;
+      }
+    }
+    if (i % 2 == 1) throw std::runtime_error("body " + std::to_string(i));  // after the catch: a normal throw
+  });
+  ASSERT_EQ(errors.size(), n);
+  for (std::size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(rethrown[i], static_cast<int>(i)) << "body " << i;
+    EXPECT_EQ(uncaught[i], 0) << "body " << i;
+    EXPECT_EQ(rounds[i], static_cast<int>(i % 3) + 1);
+    EXPECT_EQ(static_cast<bool>(errors[i]), i % 2 == 1) << "body " << i;
+  }
+  EXPECT_EQ(std::uncaught_exceptions(), 0);
 }
 
 }  // namespace

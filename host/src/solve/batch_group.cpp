@@ -2,10 +2,13 @@
 #include "solve/batch_group.hpp"
 
 #include "util/error.hpp"
+#include "util/fiber.hpp"
+#include "util/parallel.hpp"
 
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <cstdlib>
 #include <mutex>
 #include <thread>
 #include <utility>
@@ -84,6 +87,9 @@ struct BatchGroup::Shared {
   std::unique_ptr<BatchDevice> device;
   mutable std::mutex m;
   std::condition_variable cv;
+  /// The fiber workers (Pool) wait here for one of their fibers to be able to go on: notified with
+  /// cv wherever a round ends or the running count drops to 0.
+  std::condition_variable workers;
   std::vector<Slot> slots;
   std::size_t running = 0;  ///< Running bodies
   std::size_t waiting = 0;  ///< Waiting bodies whose request no round has taken yet
@@ -125,7 +131,17 @@ struct BatchGroup::Shared {
     if (s.phase != Phase::Running) return;
     s.phase = Phase::Out;
     --running;
-    if (running == 0 && waiting > 0) cv.notify_all();
+    if (running == 0 && waiting > 0) {
+      cv.notify_all();
+      workers.notify_all();
+    }
+  }
+
+  /// Whether the body of `slot`, driven by a fiber that is not running, can go on (under m): it is
+  /// not waiting for a round, or it is and may run that round (every body inside the step waits).
+  bool canGoOn(std::size_t slot) const {
+    const Slot& s = slots[slot];
+    return s.phase != Phase::Waiting || s.answered || (running == 0 && !roundBusy && s.request);
   }
 
   /// One Backend call of body `body`. Rethrows the request's error in the caller's thread.
@@ -144,6 +160,7 @@ struct BatchGroup::Shared {
       count(1, seconds);
       roundBusy = false;
       cv.notify_all();
+      workers.notify_all();
     } else {
       // Inside the step: post, then wait for the round that answers it, or run it.
       s.request = &req;
@@ -187,6 +204,12 @@ struct BatchGroup::Shared {
           // batch of 100 bodies on 2 cores spent 4 % of its samples in that contention).
           lk.unlock();
           cv.notify_all();
+          workers.notify_all();
+          lk.lock();
+        } else if (Fiber::inFiber()) {
+          // Its worker thread runs its other bodies meanwhile (Pool::runFibers).
+          lk.unlock();
+          Fiber::suspend();
           lk.lock();
         } else {
           cv.wait(lk);
@@ -258,10 +281,19 @@ class BatchView final : public Backend {
 }  // namespace
 
 // ------------------------------------------------------------------ worker pool
-/// Persistent threads; a step hands out one task per body, each claimed by a different idle
-/// thread. The pool grows to the largest step first seen, so every task of a step gets its own
-/// thread (the tasks wait for each other in the rendezvous: two on one thread would deadlock).
+/// Persistent threads. With fibers (fiberWorkers > 0, the default where they are available) a step
+/// hands each of up to fiberWorkers threads a share of the bodies, each body's step a fiber that
+/// the thread resumes whenever it can go on (runFibers): a body waiting for a round gives the
+/// thread to the next instead of sleeping in the kernel. Without, a step hands out one task per
+/// body, each claimed by a different idle thread; the pool grows to the largest step first seen, so
+/// every task of a step gets its own thread (the tasks wait for each other in the rendezvous: two
+/// on one thread would deadlock).
 struct BatchGroup::Pool {
+  /// A fiber's stack: reserved, and committed only as far as it is used (a thread's default).
+  static constexpr std::size_t kFiberStack = std::size_t{8} << 20;
+  std::size_t fiberWorkers = 0;                ///< threads of a step's fibers; 0: a thread per body
+  std::vector<std::unique_ptr<Fiber>> fibers;  ///< fibers[k] drives the step's body k (kept between steps)
+
   std::mutex m;
   std::condition_variable work, done;
   std::vector<std::thread> threads;
@@ -295,6 +327,37 @@ struct BatchGroup::Pool {
       if (--remaining == 0) done.notify_all();
     }
   }
+
+  /// Worker w of `workers`: the fibers of the step's bodies k = w, w + workers, ..., each resumed
+  /// in turn whenever it can go on (Shared::canGoOn), until all have finished; the thread waits on
+  /// shared.workers while none can.
+  void runFibers(Shared& shared, std::size_t w, std::size_t workers, const std::vector<std::size_t>& bodies,
+                 const std::function<void(std::size_t)>& bodyTask) {
+    std::vector<std::size_t> mine;
+    for (std::size_t k = w; k < bodies.size(); k += workers) {
+      fibers[k]->start([&bodyTask, k] { bodyTask(k); });
+      mine.push_back(k);
+    }
+    std::size_t left = mine.size(), at = 0;
+    std::unique_lock<std::mutex> lk(shared.m);
+    while (left > 0) {
+      std::size_t pick = mine.size();
+      for (std::size_t i = 0; i < mine.size() && pick == mine.size(); ++i) {
+        const std::size_t j = (at + i) % mine.size();
+        if (!fibers[mine[j]]->finished() && shared.canGoOn(bodies[mine[j]])) pick = j;
+      }
+      if (pick == mine.size()) {
+        shared.workers.wait(lk);
+        continue;
+      }
+      at = pick + 1;  // the others first next time: every body gets its turn
+      Fiber& f = *fibers[mine[pick]];
+      lk.unlock();
+      f.resume();
+      lk.lock();
+      if (f.finished()) --left;
+    }
+  }
 };
 
 BatchGroup::BatchGroup(std::unique_ptr<BatchDevice> device)
@@ -302,7 +365,18 @@ BatchGroup::BatchGroup(std::unique_ptr<BatchDevice> device)
   if (!device) fail(ErrorCode::Internal, "BatchGroup: no device");
   shared_->slots.resize(device->bodyCount());
   shared_->device = std::move(device);
+  // A fiber worker per usable CPU; COROFEM_BATCH_FIBERS=0 gives each body a thread, =N N workers.
+  std::size_t workers = usableCpus();
+  if (const char* env = std::getenv("COROFEM_BATCH_FIBERS"); env && *env) workers = std::strtoul(env, nullptr, 10);
+  setFiberWorkers(workers);
 }
+
+void BatchGroup::setFiberWorkers(std::size_t workers) {
+  if (pool_->inStep) fail(ErrorCode::Internal, "BatchGroup::setFiberWorkers: inside a step");
+  pool_->fiberWorkers = fibersAvailable() ? workers : 0;
+}
+
+std::size_t BatchGroup::fiberWorkers() const { return pool_->fiberWorkers; }
 
 BatchGroup::~BatchGroup() {
   if (pool_->inStep) finishStep();
@@ -345,9 +419,12 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
       fail(ErrorCode::Internal, "BatchGroup::startStep: body ", b, " is out of range or listed twice");
     seen[b] = 1;
   }
+  const std::size_t workers = std::min(p.fiberWorkers, bodies.size());
   std::unique_lock<std::mutex> lk(p.m);
-  // Threads first: a failure to create one leaves no body marked as inside the step.
-  while (p.threads.size() < bodies.size()) p.threads.emplace_back([&p] { p.loop(); });
+  // Threads and fiber stacks first: a failure to create one leaves no body marked as inside the step.
+  while (p.threads.size() < (workers > 0 ? workers : bodies.size())) p.threads.emplace_back([&p] { p.loop(); });
+  if (workers > 0)
+    while (p.fibers.size() < bodies.size()) p.fibers.push_back(std::make_unique<Fiber>(Pool::kFiberStack));
   {
     // Every body enters before any runs: no round may start while one has yet to enter.
     std::lock_guard<std::mutex> g(shared_->m);
@@ -362,7 +439,7 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
   }
   p.inStep = true;
   p.errors.assign(bodies.size(), nullptr);
-  p.task = [&p, shared = shared_, bodies, step = std::move(step)](std::size_t k) {
+  std::function<void(std::size_t)> bodyTask = [&p, shared = shared_, bodies, step = std::move(step)](std::size_t k) {
     try {
       step(bodies[k]);
     } catch (...) {
@@ -371,9 +448,17 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
     std::lock_guard<std::mutex> g(shared->m);
     shared->leave(shared->slots[bodies[k]]);
   };
-  p.tasks = bodies.size();
+  if (workers > 0) {
+    p.task = [&p, shared = shared_, bodies, workers, bodyTask = std::move(bodyTask)](std::size_t w) {
+      p.runFibers(*shared, w, workers, bodies, bodyTask);
+    };
+    p.tasks = workers;
+  } else {
+    p.task = std::move(bodyTask);
+    p.tasks = bodies.size();
+  }
   p.next = 0;
-  p.remaining = bodies.size();
+  p.remaining = p.tasks;
   // Woken after the unlock, the workers do not all queue on the pool's mutex at once: with 100
   // bodies on 2 cores a step of one call took 1.55-1.71 ms against 0.49-0.50 ms after
   // (bench_batch's BM_Rendezvous, a device that answers at once).

@@ -3,8 +3,11 @@
 //
 // Rendezvous (all under one mutex; a body is Out, Running or Waiting):
 //   startStep(bodies, step)  every listed body whose view is alive becomes Running, and step(k) runs
-//                            for each on its own worker thread (a persistent pool: no thread is
-//                            created per step once the pool has grown to the largest step).
+//                            for each as a fiber (util/fiber.hpp) on one of a few worker threads
+//                            (a thread per usable CPU), which resumes each of its fibers whenever
+//                            it can go on; or, without fibers, on a worker thread of its own. The
+//                            pool is persistent: no thread or fiber stack is created per step once
+//                            it has grown to the largest step.
 //   a view call              Running -> Waiting with its request posted. When no body is Running
 //                            any more (every body still inside the step is Waiting) and no round is
 //                            in progress, one Waiting thread takes every posted request, runs the
@@ -89,6 +92,12 @@ class BatchGroup {
   std::vector<std::exception_ptr> finishStep();
   /// startStep + finishStep.
   std::vector<std::exception_ptr> runStep(const std::vector<std::size_t>& bodies, std::function<void(std::size_t)> step);
+
+  /// The threads that run a step's bodies as fibers (0: a thread per body, as where fibers are not
+  /// available, which makes this 0 whatever is asked). Default: COROFEM_BATCH_FIBERS if set, else
+  /// the usable CPUs. Between steps only.
+  void setFiberWorkers(std::size_t workers);
+  std::size_t fiberWorkers() const;
 
   struct Shared;  ///< rendezvous state, shared with the views (batch_group.cpp)
   struct Pool;    ///< the worker threads
