@@ -45,9 +45,10 @@ void FailoverBackend::advance(const std::string& call, const std::string& error)
     try {
       std::unique_ptr<Backend> next;
       {
-        // Bodies of a batch fail over together, each on its own thread (solve/batch_group.hpp):
+        // Bodies of a batch fail over together, on the batch's threads (solve/batch_group.hpp):
         // one backend is created at a time (device and program set-up is not known to be
-        // re-entrant in every driver).
+        // re-entrant in every driver). Nothing here waits for a round, so a fiber never suspends
+        // while it holds the lock.
         static std::mutex creating;
         std::lock_guard<std::mutex> lock(creating);
         next = createBackendFor(problem_, solver_, order_[index_]);

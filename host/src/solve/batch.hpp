@@ -10,7 +10,8 @@
 //                 per kind of call; each body keeps its own material, coefficients and PCG
 //                 convergence (a converged body's work-groups return at once while others iterate).
 //   BatchGroup    turns the BatchDevice into one Backend *view* per body. While the group runs a
-//                 batched step (beginStep .. endStep), each body's driver runs on its own thread;
+//                 batched step (startStep .. finishStep), each body's driver runs as a fiber of one of
+//                 the group's few threads (or on a thread of its own: COROFEM_BATCH_FIBERS=0);
 //                 a view call waits until every body still inside the step has made its call (or
 //                 finished its step), then one of them runs the round for all. Outside a batched
 //                 step a view call is a round of one. So the drivers' logic (Newton, substeps,

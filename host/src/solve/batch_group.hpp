@@ -84,8 +84,9 @@ class BatchGroup {
   /// BatchDevice::devicePositions of `body` (whether or not it is still attached).
   bool devicePositions(std::size_t body, DevicePositions& out) const;
 
-  /// Starts step(k) for every k in `bodies` (distinct, < bodyCount()), each on its own worker
-  /// thread, and returns at once. One step at a time: finishStep() before the next startStep().
+  /// Starts step(k) for every k in `bodies` (distinct, < bodyCount()), each as a fiber of one of
+  /// fiberWorkers() threads (or on a thread of its own), and returns at once. A step(k) must not
+  /// hold a lock across a view call: as a fiber it suspends there and its thread runs others. One step at a time: finishStep() before the next startStep().
   void startStep(const std::vector<std::size_t>& bodies, std::function<void(std::size_t)> step);
   /// Waits for every step(k) of the step started last; returns what each threw (null = returned
   /// normally), in the order of `bodies`.

@@ -264,10 +264,9 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
   if (std::getenv("COROFEM_DEBUG_NEWTON"))
     std::fprintf(stderr, "dynamic %s: %d Newton iterations, relative residual %.3e -> %.3e\n", where.c_str(),
                  stats.newtonIterations, initialRelative, stats.residual);
-  x = xb + kx * v;
-  a = ka * (v - vb);
-  if (!allFinite(x) || !allFinite(v) || !allFinite(a))
-    failHere("produced non-finite velocities or positions", stepFix);
+  // The loop ends only right after evaluating its v: x and a are that evaluation's, and x and v
+  // were checked there.
+  if (!allFinite(a)) failHere("produced non-finite velocities or positions", stepFix);
   // Growth is judged on the absolute residual: the relative one is bounded by the number of terms
   // when f_int dominates, exactly as it does in a blow-up.
   if (!allLinearConverged && evaluated && residualNorm > initialNorm && stats.residual > kBlowUpResidual)

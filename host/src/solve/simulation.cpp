@@ -586,8 +586,8 @@ Status Simulation::step(StepReport* report) {
     for (const Impl::Body& b : s.bodies) sleepBefore.push_back(b.sleep);
     for (Impl::Body& b : s.bodies) b.failover->setWhen("step " + std::to_string(index));
     // Each body's step is independent of the others', so their order does not change any answer:
-    // the batched bodies run concurrently, each on its group's worker thread (their Backend calls
-    // meet in the group's rounds), while the others step in scene order on this thread.
+    // the batched bodies run concurrently, each as a fiber of its group's worker threads (their
+    // Backend calls meet in the group's rounds), while the others step in scene order on this thread.
     std::vector<detail::BodyStepStats> stats(n);
     std::vector<char> completed(n, 0);
     std::vector<std::exception_ptr> errors(n);
