@@ -85,7 +85,8 @@ COROFEM_FN void group_gather_item(const GroupSegment* g, uint v, __global const 
 /* The arguments of both one-launch kernels, in the host's one order (segment_engine.cpp): the
  * team's size, epoch base and state (pcg_iterate_team; pcg_iterate_group, a team of one, reads
  * none of them), then what pcg_update, element_product and gather_product take (w is
- * gather_product's y), the iterations and the squared tolerance. */
+ * gather_product's y), the iterations and the squared tolerance, and pcg_iterate_group's list of
+ * segments with its claim word after them (groupOrder[groupCount]; pcg_iterate_team reads none). */
 #define COROFEM_GROUP_PCG_PARAMS                                                                      \
   const uint S, const uint teamSize, const uint epochBase, __global uint *teamState, __global uint *segInfo, \
       __global const real *segCoef, __global const uint *nodes, __global const real *geom,              \
@@ -93,37 +94,51 @@ COROFEM_FN void group_gather_item(const GroupSegment* g, uint v, __global const 
       __global real *elemOut, __global const real *mass, __global const real *free,                     \
       __global const real *minv, __global real *p, __global real *sv, __global real *x, __global real *r, \
       __global real *u, __global real *w, __global sum_real *partials, __global sum_real *partialsW,    \
-      __global sum_real *allScalars, const uint iterations, const sum_real tol2
+      __global sum_real *allScalars, const uint iterations, const sum_real tol2, __global uint *groupOrder, \
+      const uint groupCount
 
-/* `iterations` iterations of kReduceStep (p, s, x, r, u updated; w = A u; alpha, beta), for the
- * segment of each work-group (launched over Span::Teams with teams of one), the set-up (pcg_init,
- * reduce_finish kReduceInit) done before. */
+/* `iterations` iterations of kReduceStep (p, s, x, r, u updated; w = A u; alpha, beta), the set-up
+ * (pcg_init, reduce_finish kReduceInit) done before, for the segments groupOrder[0 .. groupCount):
+ * a work-group per compute unit, each taking the next segment from the claim word after the list
+ * until none is left. The host lists them the costliest first, so this is the longest-first list
+ * schedule whatever the runtime does with work-groups: PoCL hands a thread ceil(remaining /
+ * threads) work-groups at a time, so with a work-group per segment in the scene's order the first
+ * thread took the first half of the bodies (40 bodies of 880 to 4,480 elements on 2 cores: 77 ms
+ * with the largest first in the scene against 51 ms with the smallest first). */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
 void pcg_iterate_group(COROFEM_GROUP_PCG_PARAMS) {
   __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
-  __local uint running;
-  const uint lid = get_local_id(0), seg = get_global_id(0) / COROFEM_WG;
-  const GroupSegment g = group_segment(segInfo, segCoef, seg);
-  __global sum_real* scalars = allScalars + kScalarCount * seg;
-  /* kSegRunningPacked: pcg_iterate_pack's body */
-  if (lid == 0) running = seg_info(segInfo, seg, kSegActive) == kSegRunning ? 1u : 0u;
-  barrier(CLK_LOCAL_MEM_FENCE);
-  for (uint it = 0; it < iterations && running != 0u; ++it) {
-    const real alpha = (real)scalars[kScalarAlpha], beta = (real)scalars[kScalarBeta];
-    for (uint v = lid; v < g.nodeItems; v += COROFEM_WG) group_update_item(&g, v, alpha, beta, w, minv, p, sv, x, r, u, partials);
-    barrier(CLK_GLOBAL_MEM_FENCE);
-    for (uint v = lid; v < g.elemItems; v += COROFEM_WG) group_product_item(&g, v, S, nodes, geom, rotGrad, u, elemOut);
-    barrier(CLK_GLOBAL_MEM_FENCE);
-    for (uint v = lid; v < g.nodeItems; v += COROFEM_WG)
-      group_gather_item(&g, v, start, entries, elemOut, mass, free, u, w, partialsW);
-    barrier(CLK_GLOBAL_MEM_FENCE);
-    /* reduce_finish(kReduceStep) */
-    segment_sums(segInfo, seg, g.nodeItems, partials, partialsW, s0, s1, s2, s3);
-    if (lid == 0) {
-      update_scalars(segInfo, seg, scalars, kReduceStep, tol2, s0[0], s1[0], s2[0], s3[0]);
-      running = seg_info(segInfo, seg, kSegActive);
+  __local uint running, claimed;
+  const uint lid = get_local_id(0);
+  for (;;) {
+    if (lid == 0) claimed = atomic_inc(groupOrder + groupCount);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    const uint k = claimed; /* the same for every item: they leave together */
+    if (k >= groupCount) return;
+    const uint seg = groupOrder[k];
+    const GroupSegment g = group_segment(segInfo, segCoef, seg);
+    __global sum_real* scalars = allScalars + kScalarCount * seg;
+    /* kSegRunningPacked: pcg_iterate_pack's body. Every item has read `claimed` before this
+     * barrier, so item 0 may claim again after the next one. */
+    if (lid == 0) running = seg_info(segInfo, seg, kSegActive) == kSegRunning ? 1u : 0u;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint it = 0; it < iterations && running != 0u; ++it) {
+      const real alpha = (real)scalars[kScalarAlpha], beta = (real)scalars[kScalarBeta];
+      for (uint v = lid; v < g.nodeItems; v += COROFEM_WG) group_update_item(&g, v, alpha, beta, w, minv, p, sv, x, r, u, partials);
+      barrier(CLK_GLOBAL_MEM_FENCE);
+      for (uint v = lid; v < g.elemItems; v += COROFEM_WG) group_product_item(&g, v, S, nodes, geom, rotGrad, u, elemOut);
+      barrier(CLK_GLOBAL_MEM_FENCE);
+      for (uint v = lid; v < g.nodeItems; v += COROFEM_WG)
+        group_gather_item(&g, v, start, entries, elemOut, mass, free, u, w, partialsW);
+      barrier(CLK_GLOBAL_MEM_FENCE);
+      /* reduce_finish(kReduceStep) */
+      segment_sums(segInfo, seg, g.nodeItems, partials, partialsW, s0, s1, s2, s3);
+      if (lid == 0) {
+        update_scalars(segInfo, seg, scalars, kReduceStep, tol2, s0[0], s1[0], s2[0], s3[0]);
+        running = seg_info(segInfo, seg, kSegActive);
+      }
+      barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
     }
-    barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
   }
 }
 

@@ -527,7 +527,8 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
   // (each at its own iteration), stop at a cap of 1, 2 or 7 iterations, start cold or warm; with
   // no, diagonal (on CPUs the update's 4-wide vector branch) and block preconditioners, and in
   // mixed precision too. Teams of 2, 3 and 8 work-groups: 8 is more than this machine's cores, so
-  // some groups start only after others have done the work (the late group's path).
+  // some groups start only after others have done the work (the late group's path). The work-groups
+  // of pcg_iterate_group take the bodies in turn: one of them takes them all in a further way.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t K = ps.size();
@@ -545,7 +546,12 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
     detail::OpenCLOptions options;
     unsigned long long (*launches)();
   };
-  std::vector<Way> ways = {{"one work-group per body", grouped, &detail::groupPcgLaunchCount}};
+  // A work-group per compute unit takes the bodies in turn from a claim word; with one, it takes
+  // every body, one after the other.
+  detail::OpenCLOptions single = grouped;
+  single.groupPcgTakers = 1;
+  std::vector<Way> ways = {{"one work-group per body", grouped, &detail::groupPcgLaunchCount},
+                           {"one work-group taking every body in turn", single, &detail::groupPcgLaunchCount}};
   if (context()->info().cpu)
     for (std::size_t team : {2, 3, 8}) {
       detail::OpenCLOptions t = grouped;
@@ -1246,6 +1252,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   const bool teams = context()->info().cpu && !context()->info().gpu && context()->info().computeUnits > 1 &&
                      detail::usableCpus() >= context()->info().computeUnits && !(tp && std::string(tp) == "0") &&
                      !(gp && std::string(gp) == "0");
+  const bool group = context()->info().cpu && !context()->info().gpu && !(gp && std::string(gp) == "0");
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
                       bool stored, bool quaternion) {
     std::size_t S = 0, N = 0, E = 0, claims = 0;
@@ -1273,6 +1280,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     bytes += std::max(r * 3 * std::max(S / 512, N / 4), energyPerItem ? r * (S / 8) : 0) + r * 3 * (N / 4) +
              r * 12 * K;
     if (teams && !stored) bytes += 4 * (16 * K + claims);  // pcg_iterate_team's state (stored K_e: none)
+    if (group && !stored) bytes += buf(4 * (K + 1));  // pcg_iterate_group's list of bodies and claim word
     return bytes;
   };
   SolverDesc s = solver();

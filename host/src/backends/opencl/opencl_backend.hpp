@@ -80,6 +80,9 @@ struct OpenCLOptions {
   /// Tests: the work-groups that take a round's packs (pcg_iterate_pack: each takes the next slot,
   /// the costliest first, until none is left); 0 = the device's compute units.
   std::size_t packPcgTakers = 0;
+  /// Tests: the work-groups of pcg_iterate_group (each takes the next body, the costliest first,
+  /// until none is left); 0 = the device's compute units.
+  std::size_t groupPcgTakers = 0;
   /// Tests: the epoch pcg_iterate_team's claims start from (the wrap of the 32-bit epochs, which
   /// otherwise comes after about 10^9 phases); 0 = the default.
   unsigned teamEpochStart = 0;

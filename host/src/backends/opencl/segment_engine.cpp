@@ -333,6 +333,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   }
   packs_ = packs_ && groupPcg_ && !treeReduce_;
   packTakers_ = options.packPcgTakers ? options.packPcgTakers : std::max<std::size_t>(1, ctx_->info().computeUnits);
+  groupTakers_ = options.groupPcgTakers ? options.groupPcgTakers : std::max<std::size_t>(1, ctx_->info().computeUnits);
   packMinLanes_ = options.packPcgMinLanes ? options.packPcgMinLanes : kPackMinLanes;
   if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG_MIN"); env && *env && !options.packPcgMinLanes)
     packMinLanes_ = std::strtoul(env, nullptr, 10);  // tuning experiments
@@ -676,6 +677,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
                    dev_);
   partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
+  if (groupPcg_) groupOrder_.create(c, (K + 1) * sizeof(cl_uint), dev_);
   if (teamPcg_) {
     const std::vector<cl_uint> state = teamStateAtRest();
     teamState_.create(c, state.size() * sizeof(cl_uint), dev_);
@@ -779,6 +781,7 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"pcg_s", &s_},                       {"partial_sums", &partials_},
       {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_},
       {"reduce_counters", &counters_},      {"pcg_team_counters", &teamState_},
+      {"pcg_group_order", &groupOrder_},
       {"pack_table", &packInfo_},           {"pack_corners", &packCorners_},
       {"pack_element_rows", &packElem_},    {"pack_node_sums", &packSums_},
       {"pack_pcg_vectors", &packVec_},      {"pack_free_mask", &packFree_},
@@ -1670,11 +1673,30 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           teamEpoch_ = 0;
         }
         teamSize_ = team;
+        if (unpacked && !teamed) {
+          // The unpacked bodies the costliest first (elements times last iterations), then the
+          // claim word; a work-group per compute unit takes them in turn (pcg_iterate_group).
+          std::vector<cl_uint> order;
+          for (const Running& run : runs)
+            if (!packed[run.request->body]) order.push_back(static_cast<cl_uint>(run.request->body));
+          const auto cost = [&](cl_uint s) {
+            return segs_[s].elems * static_cast<std::size_t>(std::max(1, lastIterations_[s]));
+          };
+          std::stable_sort(order.begin(), order.end(), [&](cl_uint a, cl_uint b) { return cost(a) > cost(b); });
+          const std::size_t count = order.size();
+          order.push_back(0);
+          uploadRaw(groupOrder_, order);
+          launchGroups(kPcgIterateGroup_, std::min(count, groupTakers_), wg_, cl_uint(stride_), cl_uint(team),
+                       teamEpoch_, teamState_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(),
+                       nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_, partials_,
+                       partialsW_, scalars_, iterations, tol2, groupOrder_, cl_uint(count));
+        }
+        if (unpacked && teamed)
+          launch(kPcgIterateTeam_, Span::Teams, cl_uint(stride_), cl_uint(team), teamEpoch_, teamState_, segInfoBuf_,
+                 segCoefBuf_, elemNodes_, geom_, rotatedGradients(), nodeStart_, nodeEntries_, elemOut_, mass_, free_,
+                 minv_, p_, s_, x_, r_, z_, q_, partials_, partialsW_, scalars_, iterations, tol2, groupOrder_,
+                 cl_uint(0));
         if (unpacked) {
-          launch(teamed ? kPcgIterateTeam_ : kPcgIterateGroup_, Span::Teams, cl_uint(stride_), cl_uint(team),
-                 teamEpoch_, teamState_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), nodeStart_,
-                 nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_, partials_, partialsW_, scalars_,
-                 iterations, tol2);
           if (teamed) {
             teamEpoch_ += 4 * iterations;
             ++teamPcgLaunches;

@@ -440,6 +440,7 @@ class SegmentEngine {
   bool packAlways_ = false;              ///< ... in every round (tests), not only where kPackCost says so
   std::size_t packMinLanes_ = 0;         ///< the fewest bodies of a pack
   std::size_t packTakers_ = 1;           ///< pcg_iterate_pack's work-groups (each takes slots in turn)
+  std::size_t groupTakers_ = 1;          ///< pcg_iterate_group's work-groups (each takes bodies in turn)
   std::vector<PackMesh> packMeshes_;
   std::vector<PackSlotPlace> packSlots_;
   std::size_t packNodeRows_ = 0;         ///< node rows of all slots (each vector of packVec_)
@@ -496,6 +497,7 @@ class SegmentEngine {
   // partials_ takes pcg_init/pcg_update's and element_energy's sums, partialsW_ gather_product's.
   ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
   ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's state, kTeamStride per segment, then claim words
+  ClBuffer groupOrder_; ///< groupPcg_: pcg_iterate_group's segments, the costliest first, then the claim word
   ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
   // packs_ (corofem_layout.h, "packs of bodies"): the slots' table of the round, the pack meshes'
   // corners, the slots' element rows (a_i, volume), node sums, PCG vectors (x r u p s w b), free
