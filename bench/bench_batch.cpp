@@ -13,7 +13,10 @@
 // PCG iteration counts differ: a converged body stops costing work in the batch.
 //
 // A second variant gives every body the same material (same PCG counts), which separates the
-// saving of shared launches from the cost of iterating until the slowest body has converged.
+// saving of shared launches from the cost of iterating until the slowest body has converged. A
+// third gives the bodies different meshes (one material): lengths of 8 to 44 cells (800 to 4,400
+// elements), the largest first in the scene, so that nothing packs and pcg_iterate_group's
+// work-groups take bodies of very different costs.
 //
 // BM_Rendezvous: the host side of a batched step alone (the pool's threads and the rendezvous of
 // each round), 100 bodies on a device that answers at once, 1 or 6 calls per body and step.
@@ -65,14 +68,19 @@ const int kBodies = [] {
 }();
 constexpr int kStepsPerSample = 3;
 
-/// Body i of the set; `varied` false gives every body the same material (body 0's stiffness at
-/// the middle of the range), which isolates the launch sharing from the spread of PCG counts.
-BodyDesc body(int i, bool varied) {
+/// The sets: 100 materials (the issue's), one material, one material and 100 meshes.
+enum Set { kOneMaterial = 0, kMaterials = 1, kMeshes = 2 };
+
+/// Body i of the set; kOneMaterial gives every body the same material (body 0's stiffness at the
+/// middle of the range), which isolates the launch sharing from the spread of PCG counts.
+BodyDesc body(int i, int set) {
+  const bool varied = set == kMaterials;
   BodyDesc b;
   b.name = "body" + std::to_string(i);
   BoxSpec box;
   box.max = {1.0, 0.2, 0.25};
   box.cells = {20, 4, 5};
+  if (set == kMeshes) box.cells = {8 + (kBodies - 1 - i) * 36 / (kBodies - 1), 4, 5};  // the largest first
   box.tetsPerCell = 5;
   b.mesh.box = box;
   b.mesh.translate = {0.0, 0.0, 0.5 * i};
@@ -131,20 +139,21 @@ struct Setups {
   std::vector<Simulation> separate;
 };
 
-Setups& setups(bool varied) {
-  static std::unique_ptr<Setups> made[2];
-  std::unique_ptr<Setups>& s = made[varied ? 1 : 0];
+Setups& setups(int set) {
+  static std::unique_ptr<Setups> made[3];
+  std::unique_ptr<Setups>& s = made[set];
   if (!s) {
     std::vector<BodyDesc> bodies;
-    for (int i = 0; i < kBodies; ++i) bodies.push_back(body(i, varied));
+    for (int i = 0; i < kBodies; ++i) bodies.push_back(body(i, set));
     Simulation batched = make(scene(bodies, true));
     Simulation unbatched = make(scene(bodies, false));
     std::vector<Simulation> separate;
     for (const BodyDesc& b : bodies) separate.push_back(make(scene({b}, true)));
     s.reset(new Setups{std::move(batched), std::move(unbatched), std::move(separate)});
     const nlohmann::json sched = nlohmann::json::parse(s->batched.schedulerReport());
-    std::cerr << "bench_batch: " << kBodies << " bodies of " << s->batched.restMesh(0).tetCount() << " elements ("
-              << (varied ? "varied" : "uniform") << " materials) on " << s->batched.deviceName() << "; batches: "
+    static const char* const names[] = {"one material", "100 materials", "one material, 100 meshes"};
+    std::cerr << "bench_batch: " << kBodies << " bodies, the first of " << s->batched.restMesh(0).tetCount()
+              << " elements (" << names[set] << ") on " << s->batched.deviceName() << "; batches: "
               << sched["batches"].size() << " (" << (sched["batches"].empty() ? 0 : sched["batches"][0]["bodies"].size())
               << " bodies in the first)" << (sched["unbatched"].empty() ? "" : "; unbatched: " + sched["unbatched"].dump())
               << std::endl;
@@ -171,7 +180,7 @@ int stepOrDie(Simulation& sim, long long& pcg) {
 }
 
 void BM_HundredBodies(benchmark::State& state) {
-  Setups& s = setups(state.range(0) != 0);
+  Setups& s = setups(static_cast<int>(state.range(0)));
   const auto deviceSeconds = [&] {
     return nlohmann::json::parse(s.batched.schedulerReport())["batches"][0]["device_seconds"].get<double>();
   };
@@ -228,8 +237,9 @@ void BM_HundredBodies(benchmark::State& state) {
   }
   state.counters["batched_wait_fraction"] = waitSeconds / tBatched;
 }
-// Arg: 1 = varied materials (the benchmark), 0 = one material for all.
-BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
+// Arg: 1 = varied materials (the benchmark), 0 = one material for all, 2 = one material
+// and 100 meshes of 800 to 4,400 elements.
+BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Arg(2)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 
 /// A batch device that answers every request at once without work.
 class IdleBatchDevice final : public detail::BatchDevice {
@@ -281,7 +291,7 @@ void BM_HundredBodySurfaces(benchmark::State& state) {
     if (!writeSurfaceMesh(obj, test::uvSphere({0.5, 0.1, 0.125}, 0.09, 40, 50))) std::exit(1);
     std::vector<BodyDesc> bodies;
     for (int i = 0; i < kBodies; ++i) {
-      bodies.push_back(body(i, false));
+      bodies.push_back(body(i, kOneMaterial));
       bodies.back().surface = obj;
     }
     sim = std::make_unique<Simulation>(make(scene(bodies, true)));

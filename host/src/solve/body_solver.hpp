@@ -255,7 +255,7 @@ class DynamicSolver final : public BodySolver {
   /// step's samples, all in the bodies' host work while the device waits for their next calls.
   State start_;
   struct Scratch {
-    Eigen::VectorXd vb, xb, target, fext, v, x, a, fint, cv, r, dv, ma, rhs, reaction;
+    Eigen::VectorXd vb, xb, target, fext, v, x, a, fint, cv, r, dv, rhs, reaction;
   } w_;
   double t_ = 0.0, tPrev_ = 0.0;
   bool started_ = false;
