@@ -424,6 +424,31 @@ TEST(BatchGroup, StressWithFibersOnOneAndOnThreeThreads) {
   stressManyBodies(3);
 }
 
+TEST(BatchGroup, FiberStacksThatCannotBeMappedFallBackToAThreadPerBody) {
+  // Stacks of 2^60 bytes cannot be mapped: the step runs with a thread per body instead, with the
+  // same answers, and the group stays that way.
+  if (!detail::fibersAvailable()) GTEST_SKIP() << "no fibers in this build (AddressSanitizer or no ucontext)";
+  Watchdog dog(60);
+  const std::size_t n = 5;
+  auto group = fakeGroup(n);
+  group->setFiberWorkers(2, std::size_t{1} << 60);
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
+  for (int step = 0; step < 2; ++step) {
+    std::vector<Eigen::VectorXd> f(n);
+    const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+      const Eigen::VectorXd x = Eigen::VectorXd::Constant(3, static_cast<double>(i + step));
+      views[i]->setPositions(x);
+      views[i]->internalForces(f[i]);
+    });
+    for (std::size_t i = 0; i < n; ++i) {
+      EXPECT_FALSE(errors[i]);
+      EXPECT_EQ(f[i], (1.0 + static_cast<double>(i)) * Eigen::VectorXd::Constant(3, static_cast<double>(i + step)));
+    }
+    EXPECT_EQ(group->fiberWorkers(), 0u);
+  }
+  EXPECT_EQ(group->stats().rounds, 4);
+}
+
 TEST(BatchGroup, FibersKeepTheirOwnCaughtExceptions) {
   // Eight bodies as fibers on one thread. Each throws its own exception and, inside the catch
   // block, calls its view (the fiber suspends there and the others run, throwing and catching

@@ -292,6 +292,7 @@ struct BatchGroup::Pool {
   /// A fiber's stack: reserved, and committed only as far as it is used (a thread's default).
   static constexpr std::size_t kFiberStack = std::size_t{8} << 20;
   std::size_t fiberWorkers = 0;                ///< threads of a step's fibers; 0: a thread per body
+  std::size_t fiberStack = kFiberStack;        ///< each fiber's stack
   std::vector<std::unique_ptr<Fiber>> fibers;  ///< fibers[k] drives the step's body k (kept between steps)
 
   std::mutex m;
@@ -371,9 +372,12 @@ BatchGroup::BatchGroup(std::unique_ptr<BatchDevice> device)
   setFiberWorkers(workers);
 }
 
-void BatchGroup::setFiberWorkers(std::size_t workers) {
+void BatchGroup::setFiberWorkers(std::size_t workers, std::size_t stackBytes) {
   if (pool_->inStep) fail(ErrorCode::Internal, "BatchGroup::setFiberWorkers: inside a step");
   pool_->fiberWorkers = fibersAvailable() ? workers : 0;
+  const std::size_t stack = stackBytes ? stackBytes : Pool::kFiberStack;
+  if (stack != pool_->fiberStack) pool_->fibers.clear();  // made again with the new size
+  pool_->fiberStack = stack;
 }
 
 std::size_t BatchGroup::fiberWorkers() const { return pool_->fiberWorkers; }
@@ -419,12 +423,20 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
       fail(ErrorCode::Internal, "BatchGroup::startStep: body ", b, " is out of range or listed twice");
     seen[b] = 1;
   }
-  const std::size_t workers = std::min(p.fiberWorkers, bodies.size());
+  std::size_t workers = std::min(p.fiberWorkers, bodies.size());
   std::unique_lock<std::mutex> lk(p.m);
-  // Threads and fiber stacks first: a failure to create one leaves no body marked as inside the step.
+  // Fiber stacks and threads first: a failure to create one leaves no body marked as inside the
+  // step. Where the stacks cannot be mapped (a strict overcommit policy, an address-space limit),
+  // the group gives each body a thread from then on, as without fibers.
+  if (workers > 0) {
+    try {
+      while (p.fibers.size() < bodies.size()) p.fibers.push_back(std::make_unique<Fiber>(p.fiberStack));
+    } catch (const Error&) {
+      p.fibers.clear();
+      p.fiberWorkers = workers = 0;
+    }
+  }
   while (p.threads.size() < (workers > 0 ? workers : bodies.size())) p.threads.emplace_back([&p] { p.loop(); });
-  if (workers > 0)
-    while (p.fibers.size() < bodies.size()) p.fibers.push_back(std::make_unique<Fiber>(Pool::kFiberStack));
   {
     // Every body enters before any runs: no round may start while one has yet to enter.
     std::lock_guard<std::mutex> g(shared_->m);

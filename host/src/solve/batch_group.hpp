@@ -96,8 +96,10 @@ class BatchGroup {
 
   /// The threads that run a step's bodies as fibers (0: a thread per body, as where fibers are not
   /// available, which makes this 0 whatever is asked). Default: COROFEM_BATCH_FIBERS if set, else
-  /// the usable CPUs. Between steps only.
-  void setFiberWorkers(std::size_t workers);
+  /// the usable CPUs. `stackBytes`: each fiber's stack (0: 8 MiB, a thread's default). Where a
+  /// step cannot map the stacks, the group gives each body a thread from then on (fiberWorkers()
+  /// then says 0). Between steps only.
+  void setFiberWorkers(std::size_t workers, std::size_t stackBytes = 0);
   std::size_t fiberWorkers() const;
 
   struct Shared;  ///< rendezvous state, shared with the views (batch_group.cpp)
