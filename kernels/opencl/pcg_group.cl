@@ -1,5 +1,7 @@
-/* The PCG iterations of pcg.cl for whole segments, one work-group per segment, in ONE launch
- * (CPU devices: per-work-item partial sums, no COROFEM_TREE_REDUCE).
+/* The PCG iterations of pcg.cl for whole segments, a work-group at a time per segment, in ONE
+ * launch (CPU devices: per-work-item partial sums, no COROFEM_TREE_REDUCE). pcg_iterate_group's
+ * work-groups take the segments in turn from a list (one per compute unit); pcg_iterate_team's
+ * teams have a segment each.
  *
  * The launched PCG runs 4 kernels per iteration (pcg_update, element_product, gather_product,
  * reduce_finish), each over every active segment. On a CPU device each launch costs a few
@@ -110,16 +112,16 @@ void pcg_iterate_group(COROFEM_GROUP_PCG_PARAMS) {
   __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
   __local uint running, claimed;
   const uint lid = get_local_id(0);
-  for (;;) {
-    if (lid == 0) claimed = atomic_inc(groupOrder + groupCount);
-    barrier(CLK_LOCAL_MEM_FENCE);
-    const uint k = claimed; /* the same for every item: they leave together */
-    if (k >= groupCount) return;
+  /* One exit, at the loop's uniform test (no early return: see the header). Each claim is read by
+   * every item before the next barrier, and item 0 writes the next one only after it. */
+  if (lid == 0) claimed = atomic_inc(groupOrder + groupCount);
+  barrier(CLK_LOCAL_MEM_FENCE);
+  uint k = claimed;
+  while (k < groupCount) {
     const uint seg = groupOrder[k];
     const GroupSegment g = group_segment(segInfo, segCoef, seg);
     __global sum_real* scalars = allScalars + kScalarCount * seg;
-    /* kSegRunningPacked: pcg_iterate_pack's body. Every item has read `claimed` before this
-     * barrier, so item 0 may claim again after the next one. */
+    /* kSegRunningPacked: pcg_iterate_pack's body */
     if (lid == 0) running = seg_info(segInfo, seg, kSegActive) == kSegRunning ? 1u : 0u;
     barrier(CLK_LOCAL_MEM_FENCE);
     for (uint it = 0; it < iterations && running != 0u; ++it) {
@@ -139,6 +141,9 @@ void pcg_iterate_group(COROFEM_GROUP_PCG_PARAMS) {
       }
       barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);
     }
+    if (lid == 0) claimed = atomic_inc(groupOrder + groupCount);
+    barrier(CLK_LOCAL_MEM_FENCE);
+    k = claimed;
   }
 }
 

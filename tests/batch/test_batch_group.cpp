@@ -449,6 +449,37 @@ TEST(BatchGroup, FiberStacksThatCannotBeMappedFallBackToAThreadPerBody) {
   EXPECT_EQ(group->stats().rounds, 4);
 }
 
+TEST(BatchGroup, ABodyThatLeftTheGroupStepsBesideTheFibers) {
+  // Body 0's view was replaced (it failed over): its calls never wait for a round, so it steps on a
+  // thread of its own. Here it waits until the other three, fibers of the one fiber thread, have
+  // made their calls: as a fiber of that thread it would keep them from running until its deadline.
+  if (!detail::fibersAvailable()) GTEST_SKIP() << "no fibers in this build (AddressSanitizer or no ucontext)";
+  Watchdog dog(60);
+  const std::size_t n = 4;
+  auto group = fakeGroup(n, {}, 1);
+  std::vector<std::unique_ptr<Backend>> views = allViews(*group);
+  views[0] = std::make_unique<FakeBackend>(1.0);  // as FailoverBackend replaces a view: body 0 leaves
+  std::atomic<int> done{0};
+  bool sawOthers = false;
+  const auto errors = group->runStep(allBodies(n), [&](std::size_t i) {
+    Eigen::VectorXd x = Eigen::VectorXd::Constant(3, static_cast<double>(i)), f;
+    if (i == 0) {
+      const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+      while (done.load() < 3 && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      sawOthers = done.load() == 3;
+      views[0]->setPositions(x);
+      return;
+    }
+    views[i]->setPositions(x);
+    views[i]->internalForces(f);
+    ++done;
+  });
+  for (const auto& e : errors) EXPECT_FALSE(e);
+  EXPECT_TRUE(sawOthers) << "the other bodies did not step while body 0 stepped";
+  EXPECT_EQ(group->stats().rounds, 2);
+}
+
 TEST(BatchGroup, FibersKeepTheirOwnCaughtExceptions) {
   // Eight bodies as fibers on one thread. Each throws its own exception and, inside the catch
   // block, calls its view (the fiber suspends there and the others run, throwing and catching

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <cstdio>
 #include <cstdlib>
 #include <mutex>
 #include <thread>
@@ -333,12 +334,11 @@ struct BatchGroup::Pool {
   /// in turn whenever it can go on (Shared::canGoOn), until all have finished; the thread waits on
   /// shared.workers while none can.
   void runFibers(Shared& shared, std::size_t w, std::size_t workers, const std::vector<std::size_t>& bodies,
-                 const std::function<void(std::size_t)>& bodyTask) {
+                 const std::vector<std::size_t>& tasks, const std::function<void(std::size_t)>& bodyTask) {
+    // Tasks k = tasks[w], tasks[w + workers], ...: the bodies' indices in the step.
     std::vector<std::size_t> mine;
-    for (std::size_t k = w; k < bodies.size(); k += workers) {
-      fibers[k]->start([&bodyTask, k] { bodyTask(k); });
-      mine.push_back(k);
-    }
+    for (std::size_t i = w; i < tasks.size(); i += workers) mine.push_back(tasks[i]);
+    for (std::size_t k : mine) fibers[k]->start([&bodyTask, k] { bodyTask(k); });
     std::size_t left = mine.size(), at = 0;
     std::unique_lock<std::mutex> lk(shared.m);
     while (left > 0) {
@@ -354,7 +354,14 @@ struct BatchGroup::Pool {
       at = pick + 1;  // the others first next time: every body gets its turn
       Fiber& f = *fibers[mine[pick]];
       lk.unlock();
-      f.resume();
+      try {
+        f.resume();
+      } catch (...) {
+        // Its context could not be made (it never ran): the body's step fails and it leaves.
+        errors[mine[pick]] = std::current_exception();
+        std::lock_guard<std::mutex> g(shared.m);
+        shared.leave(shared.slots[bodies[mine[pick]]]);
+      }
       lk.lock();
       if (f.finished()) --left;
     }
@@ -368,7 +375,20 @@ BatchGroup::BatchGroup(std::unique_ptr<BatchDevice> device)
   shared_->device = std::move(device);
   // A fiber worker per usable CPU; COROFEM_BATCH_FIBERS=0 gives each body a thread, =N N workers.
   std::size_t workers = usableCpus();
-  if (const char* env = std::getenv("COROFEM_BATCH_FIBERS"); env && *env) workers = std::strtoul(env, nullptr, 10);
+  if (const char* env = std::getenv("COROFEM_BATCH_FIBERS"); env && *env) {
+    char* end = nullptr;
+    const long asked = std::strtol(env, &end, 10);
+    if (*end != '\0' || asked < 0) {
+      static const bool once = [&] {
+        std::fprintf(stderr, "[corofem] COROFEM_BATCH_FIBERS='%s' is not a whole number of at least 0; using %zu "
+                     "fiber threads\n", env, workers);
+        return true;
+      }();
+      (void)once;
+    } else {
+      workers = static_cast<std::size_t>(std::min<long>(asked, 256));
+    }
+  }
   setFiberWorkers(workers);
 }
 
@@ -423,7 +443,16 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
       fail(ErrorCode::Internal, "BatchGroup::startStep: body ", b, " is out of range or listed twice");
     seen[b] = 1;
   }
-  std::size_t workers = std::min(p.fiberWorkers, bodies.size());
+  // The bodies in the rendezvous (their view alive) run as fibers. A body whose view is gone (it
+  // failed over) runs its step on a thread of its own: its calls never wait for a round, so as a
+  // fiber it would keep its thread's other bodies, and every round, waiting for its whole step.
+  std::vector<std::size_t> fiberTasks, threadTasks;
+  {
+    std::lock_guard<std::mutex> g(shared_->m);
+    for (std::size_t k = 0; k < bodies.size(); ++k)
+      (shared_->slots[bodies[k]].attached ? fiberTasks : threadTasks).push_back(k);
+  }
+  std::size_t workers = std::min(p.fiberWorkers, fiberTasks.size());
   std::unique_lock<std::mutex> lk(p.m);
   // Fiber stacks and threads first: a failure to create one leaves no body marked as inside the
   // step. Where the stacks cannot be mapped (a strict overcommit policy, an address-space limit),
@@ -436,7 +465,12 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
       p.fiberWorkers = workers = 0;
     }
   }
-  while (p.threads.size() < (workers > 0 ? workers : bodies.size())) p.threads.emplace_back([&p] { p.loop(); });
+  if (workers == 0) {
+    threadTasks.resize(bodies.size());
+    for (std::size_t k = 0; k < bodies.size(); ++k) threadTasks[k] = k;
+    fiberTasks.clear();
+  }
+  while (p.threads.size() < workers + threadTasks.size()) p.threads.emplace_back([&p] { p.loop(); });
   {
     // Every body enters before any runs: no round may start while one has yet to enter.
     std::lock_guard<std::mutex> g(shared_->m);
@@ -460,15 +494,13 @@ void BatchGroup::startStep(const std::vector<std::size_t>& bodies, std::function
     std::lock_guard<std::mutex> g(shared->m);
     shared->leave(shared->slots[bodies[k]]);
   };
-  if (workers > 0) {
-    p.task = [&p, shared = shared_, bodies, workers, bodyTask = std::move(bodyTask)](std::size_t w) {
-      p.runFibers(*shared, w, workers, bodies, bodyTask);
-    };
-    p.tasks = workers;
-  } else {
-    p.task = std::move(bodyTask);
-    p.tasks = bodies.size();
-  }
+  // Tasks [0, workers): fiber threads; then a task per body on a thread of its own.
+  p.task = [&p, shared = shared_, bodies, workers, fiberTasks, threadTasks,
+            bodyTask = std::move(bodyTask)](std::size_t t) {
+    if (t < workers) p.runFibers(*shared, t, workers, bodies, fiberTasks, bodyTask);
+    else bodyTask(threadTasks[t - workers]);
+  };
+  p.tasks = workers + threadTasks.size();
   p.next = 0;
   p.remaining = p.tasks;
   // Woken after the unlock, the workers do not all queue on the pool's mutex at once: with 100

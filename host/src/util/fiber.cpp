@@ -17,7 +17,7 @@
 #define COROFEM_ASAN 1
 #endif
 
-#if defined(__GLIBC__) || defined(__linux__)
+#if defined(__GLIBC__)  // makecontext and swapcontext (musl and bionic have neither)
 #include <cxxabi.h>
 #include <sys/mman.h>
 #include <ucontext.h>
@@ -76,7 +76,13 @@ Fiber::Fiber(std::size_t stackBytes) : self_(new Context()), host_(new Context()
          " (set COROFEM_BATCH_FIBERS=0 for a thread per body)");
   }
   // The lowest page traps an overflow (stacks grow down) instead of writing past the stack.
-  mprotect(p, page, PROT_NONE);
+  if (mprotect(p, page, PROT_NONE) != 0) {
+    const int err = errno;
+    munmap(p, mapped_);
+    delete self_;
+    delete host_;
+    fail(ErrorCode::Internal, "could not protect a fiber stack's guard page: ", std::strerror(err));
+  }
   stack_ = p;
 }
 
@@ -96,7 +102,12 @@ void Fiber::start(std::function<void()> fn) {
 void Fiber::resume() {
   if (finished_) return;
   if (fresh_) {
-    if (getcontext(&self_->uc) != 0) fail(ErrorCode::Internal, "getcontext failed: ", std::strerror(errno));
+    if (getcontext(&self_->uc) != 0) {
+      fresh_ = false;  // never entered: finished, so that start() may use it again
+      finished_ = true;
+      fn_ = nullptr;
+      fail(ErrorCode::Internal, "getcontext failed: ", std::strerror(errno));
+    }
     self_->uc.uc_stack.ss_sp = static_cast<char*>(stack_) + (mapped_ - stackBytes_);
     self_->uc.uc_stack.ss_size = stackBytes_;
     self_->uc.uc_link = nullptr;  // entry() never returns: it switches back itself

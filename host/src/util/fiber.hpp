@@ -33,7 +33,8 @@ class Fiber {
   /// suspended inside a previous fn (finished() or never started).
   void start(std::function<void()> fn);
   /// Runs the fiber on the calling thread until fn returns (finished()) or calls suspend(). A
-  /// suspended fiber is resumed by the same thread only.
+  /// suspended fiber is resumed by the same thread only. Throws Error(Internal), leaving the fiber
+  /// finished without having run fn, where a fresh fiber's context cannot be made.
   void resume();
   bool finished() const { return finished_; }
 
