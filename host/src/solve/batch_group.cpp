@@ -8,8 +8,6 @@
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
-#include <cstdio>
-#include <cstdlib>
 #include <mutex>
 #include <thread>
 #include <utility>
@@ -373,22 +371,9 @@ BatchGroup::BatchGroup(std::unique_ptr<BatchDevice> device)
   if (!device) fail(ErrorCode::Internal, "BatchGroup: no device");
   shared_->slots.resize(device->bodyCount());
   shared_->device = std::move(device);
-  // A fiber worker per usable CPU; COROFEM_BATCH_FIBERS=0 gives each body a thread, =N N workers.
-  std::size_t workers = usableCpus();
-  if (const char* env = std::getenv("COROFEM_BATCH_FIBERS"); env && *env) {
-    char* end = nullptr;
-    const long asked = std::strtol(env, &end, 10);
-    if (*end != '\0' || asked < 0) {
-      static const bool once = [&] {
-        std::fprintf(stderr, "[corofem] COROFEM_BATCH_FIBERS='%s' is not a whole number of at least 0; using %zu "
-                     "fiber threads\n", env, workers);
-        return true;
-      }();
-      (void)once;
-    } else {
-      workers = static_cast<std::size_t>(std::min<long>(asked, 256));
-    }
-  }
+  // A fiber worker per usable CPU; COROFEM_BATCH_FIBERS=0 gives each body a thread, =N N workers
+  // (read once: a bad value is said once).
+  static const std::size_t workers = threadCountFromEnv("COROFEM_BATCH_FIBERS", 0, 256, usableCpus(), "fiber threads");
   setFiberWorkers(workers);
 }
 

@@ -149,20 +149,24 @@ std::size_t usableCpus() {
   return n;
 }
 
+std::size_t threadCountFromEnv(const char* name, std::size_t least, std::size_t most, std::size_t fallback,
+                               const char* what) {
+  const char* env = std::getenv(name);
+  if (!env || !*env) return fallback;
+  char* end = nullptr;
+  const long asked = std::strtol(env, &end, 10);
+  if (*end != '\0' || asked < static_cast<long>(least)) {
+    std::fprintf(stderr, "[corofem] %s='%s' is not a whole number of at least %zu; using %zu %s\n", name, env, least,
+                 fallback, what);
+    return fallback;
+  }
+  return std::min(static_cast<std::size_t>(asked), most);
+}
+
 std::size_t hostThreads() {
-  static const std::size_t n = [] {
-    const std::size_t byHardware = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 8);
-    const char* env = std::getenv("COROFEM_HOST_THREADS");
-    if (!env || !*env) return byHardware;
-    char* end = nullptr;
-    const long asked = std::strtol(env, &end, 10);
-    if (*end != '\0' || asked < 1) {
-      std::fprintf(stderr, "[corofem] COROFEM_HOST_THREADS='%s' is not a whole number of at least 1; using %zu "
-                   "host threads\n", env, byHardware);
-      return byHardware;
-    }
-    return static_cast<std::size_t>(std::min<long>(asked, 64));  // more than 64 gains nothing here
-  }();
+  // More than 64 gains nothing here.
+  static const std::size_t n = threadCountFromEnv(
+      "COROFEM_HOST_THREADS", 1, 64, std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 8), "host threads");
   return n;
 }
 

@@ -25,6 +25,12 @@ inline std::size_t chunkCount(std::size_t n, std::size_t chunkSize) { return (n 
 /// neither can be read. Read once.
 std::size_t usableCpus();
 
+/// A count of threads from the environment variable `name`: `fallback` where it is unset or empty;
+/// where it is not a whole number of at least `least`, `fallback` too, said on stderr with the
+/// variable's name and value; else the number, at most `most`.
+std::size_t threadCountFromEnv(const char* name, std::size_t least, std::size_t most, std::size_t fallback,
+                               const char* what);
+
 /// Threads the pool asks for: $COROFEM_HOST_THREADS if set (1 to 64; anything else is reported on
 /// stderr and ignored), else the hardware's, at most 8. The system may grant fewer.
 std::size_t hostThreads();
