@@ -1,12 +1,12 @@
 // The OpenCL backend's locality order (mesh/locality_order.hpp) on real meshes: the meshes of
-// ../shared/data as their files number them (OpenCLOptions::localityOrder = 0) against the device's
+// ../shared/data as their files number them (OpenCLTuning::localityOrder = 0) against the device's
 // Morton order (the default rule, which takes it for every mesh here), on every OpenCL device, float:
 //   product/<mesh>/<order>   the matrix-free product y = A p (element pass + gather), device only;
 //   step/<mesh>/<order>      a dynamic step as bench_opencl's dynamic_step: positions up, rotations,
 //                            forces down, PCG with 20 iterations (diagonal), the solution down.
 // And the box generator's 100k-element box, whose layered numbering the rule keeps, with the Morton
 // order forced (localityOrder = 1), for what that order costs where it is not taken; and on the
-// Armadillo, denormal floats flushed (the default on CPUs) against kept (OpenCLOptions::
+// Armadillo, denormal floats flushed (the default on CPUs) against kept (OpenCLTuning::
 // flushDenormals = 0): the step as above, and the product of a vector of 1e-39, a denormal float
 // (the velocities of a body that came to rest under damping long ago, in a scene without
 // analysis.sleep, decay to such values).
@@ -96,7 +96,7 @@ void run(benchmark::State& state, std::string name, int order, bool step, int fl
   s.tolerance = 1e-30;  // exactly 20 iterations
   s.maxIterations = 20;
   s.checkEvery = 4;
-  detail::OpenCLOptions o;
+  detail::OpenCLTuning o;
   o.localityOrder = order;
   o.flushDenormals = flush;
   std::unique_ptr<detail::OpenCLBackendInternal> b;

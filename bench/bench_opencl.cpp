@@ -1,8 +1,9 @@
-// OpenCL backend benchmarks: per kernel (rotation methods, internal force, product with gradients
-// vs stored K_e, PCG iteration) on generated boxes of ~1k, 10k, 100k and 1M elements, on every
+// OpenCL backend benchmarks: per kernel (rotation methods, internal force, product, PCG
+// iteration) on generated boxes of ~1k, 10k, 100k and 1M elements, on every
 // OpenCL device, plus a full dynamic step of a 10k-element beam (20 PCG iterations, transfers
 // included). Reports elements/s and the fraction of the device bandwidth measured here by a copy
-// kernel. Run:  bench_opencl --benchmark_format=json [--benchmark_filter=-1M]  (skip the 1M mesh)
+// kernel. Run:  bench_opencl --benchmark_format=json [--benchmark_filter=-1M]  (skip the 1M mesh);
+// --tuning=field=value,... and --profile: bench_opencl_options.hpp.
 // Precision is float unless the name says double or mixed (pcg_iteration_mixed: float vectors and
 // products, dot products and PCG scalars in double; pcg_iteration_double for the third point). Device work only (no transfers) except
 // dynamic_step, which is what an application sees per frame.
@@ -12,6 +13,7 @@
 
 #define COROFEM_BENCHMARK
 #include "backends/opencl/opencl_backend.hpp"
+#include "bench_opencl_options.hpp"
 #include "opencl/opencl_test_support.hpp"
 
 #include <chrono>
@@ -100,7 +102,7 @@ double measuredBandwidth(int device) {
   return bw;
 }
 
-enum class Work { Rotation, Force, Product, ProductStored, PcgIteration };
+enum class Work { Rotation, Force, Product, PcgIteration };
 
 struct Config {
   int device;
@@ -125,8 +127,6 @@ double bytesPerElement(const Config& c, const detail::Problem& p) {
       return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 3;
     case Work::Product:  // as forces, node: mass, p, y
       return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 9;
-    case Work::ProductStored:  // 78 K entries + 9 R instead of 10
-      return 16 + r * (87 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * 9;
     case Work::PcgIteration:  // product + vector updates (x, r, p, q, z, minv: ~12 node vectors);
                               // timed: set-up (1 product) + 20 iterations, counted as 20
       return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * (9 + 3 * 12);
@@ -143,11 +143,9 @@ void runKernel(benchmark::State& state, Config c) {
   s.tolerance = 1e-30;  // PCG: run exactly maxIterations
   s.maxIterations = 20;
   s.checkEvery = 1000;
-  detail::OpenCLOptions o;
-  o.storedStiffness = c.work == Work::ProductStored;
   std::unique_ptr<detail::OpenCLBackendInternal> b;
   try {
-    b = detail::createOpenCLBackendOn(p, s, detail::cl::Context::shared(std::to_string(c.device)), o);
+    b = detail::createOpenCLBackendOn(p, s, bench::benchContext(c.device), bench::openclOptions().tuning);
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
     return;
@@ -165,8 +163,7 @@ void runKernel(benchmark::State& state, Config c) {
     switch (c.work) {
       case Work::Rotation: b->enqueueRotations(); break;
       case Work::Force: b->enqueueForces(); break;
-      case Work::Product:
-      case Work::ProductStored: b->enqueueProduct(coeffs); break;
+      case Work::Product: b->enqueueProduct(coeffs); break;
       case Work::PcgIteration: b->enqueuePcgIterations(coeffs, 20); break;
     }
     b->finish();
@@ -212,7 +209,7 @@ void dynamicStep(benchmark::State& state, int device, const MeshSize* size) {
   s.checkEvery = 4;
   std::unique_ptr<detail::OpenCLBackendInternal> b;
   try {
-    b = detail::createOpenCLBackendOn(problem, s, detail::cl::Context::shared(std::to_string(device)));
+    b = detail::createOpenCLBackendOn(problem, s, bench::benchContext(device), bench::openclOptions().tuning);
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
     return;
@@ -243,6 +240,7 @@ void dynamicStep(benchmark::State& state, int device, const MeshSize* size) {
   state.counters["elements"] = static_cast<double>(problem.mesh.tetCount());
   state.counters["pcg_iterations"] = iterations;
   state.SetLabel(b->deviceName());
+  bench::printProfile(b->engine(), std::string("dynamic_step/dev") + std::to_string(device) + "/" + (size ? size->label : "10k_beam"));
 }
 
 const char* workName(Work w) {
@@ -250,7 +248,6 @@ const char* workName(Work w) {
     case Work::Rotation: return "rotation";
     case Work::Force: return "internal_force";
     case Work::Product: return "product";
-    case Work::ProductStored: return "product_stored_Ke";
     case Work::PcgIteration: return "pcg_iteration";
   }
   return "?";
@@ -279,7 +276,6 @@ int registerAll() {
         add(std::string("rotation_") + toString(m), {dev, size, Work::Rotation, m});
       add(workName(Work::Force), {dev, size, Work::Force});
       add(workName(Work::Product), {dev, size, Work::Product});
-      add(workName(Work::ProductStored), {dev, size, Work::ProductStored});
       if (devices[d].fp64) add("product_double", {dev, size, Work::Product, RotationMethod::Polar, Precision::Double});
       add(workName(Work::PcgIteration), {dev, size, Work::PcgIteration});
       if (devices[d].fp64) {
@@ -298,4 +294,13 @@ const int registered = registerAll();
 
 #endif  // COROFEM_WITH_OPENCL
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+#ifdef COROFEM_WITH_OPENCL
+  corofem::bench::parseOpenCLBenchOptions(argc, argv);
+#endif
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -3,9 +3,10 @@
 # OpenCL driver, runs every test binary (each OpenCL test runs on every device present, here the
 # GPU) and the OpenCL benchmarks, and leaves logs and JSON in $OUT. STAGES (default
 # "probe tests bench") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
-# narrows it), profile (COROFEM_OPENCL_PROFILE on the 10k and 1M steps), ab (the dynamic steps of
-# the bench_opencl binaries named in AB, in turns), envab (bench_opencl under each environment
-# setting in ENVAB, in turns; a comma joins several variables into one setting), sweep (work-group sizes), more (bench_backends,
+# narrows it), profile (bench_opencl --profile on the 10k and 1M steps), ab (the dynamic steps of
+# the bench_opencl binaries named in AB, in turns), tuningab (bench_opencl under each tuning in
+# TUNINGAB, in turns: space-separated --tuning values such as "groupPcg=0 groupPcg=1,workGroupSize=128";
+# "-" for the defaults), sweep (work-group sizes), more (bench_backends,
 # bench_embed, bench_batch), batch (bench_batch alone; BATCH_FILTER), meshorder (bench_mesh_order: real meshes in their files' numbering and
 # in the device's Morton order). The tests stage also runs five suites again with the Morton order
 # forced on every body (COROFEM_OPENCL_REORDER=1), as CTest does, at the same time; TEST_TIMEOUT and
@@ -83,7 +84,7 @@ fi
 
 if has profile; then  # per kernel: launches, device time, device idle before it
   for size in 10k 1M; do
-    COROFEM_OPENCL_PROFILE=1 timeout 120 "$B/bench_opencl" --benchmark_filter="dynamic_step_20pcg/dev0/$size" \
+    timeout 120 "$B/bench_opencl" --profile --benchmark_filter="dynamic_step_20pcg/dev0/$size" \
       --benchmark_repetitions=1 --benchmark_min_time=1 2>&1 | grep -E 'profile\]|median' > "/tmp/logs/profile_$size.txt"
     echo "== profile $size"; cat "/tmp/logs/profile_$size.txt" | cut -c25-160
   done
@@ -98,18 +99,19 @@ if has ab; then  # A/B: the binaries named in AB (in .gpu/bin), in turns, twice
   done | tee /tmp/logs/ab.txt
 fi
 
-if has envab; then  # A/B of environment settings (ENVAB, e.g. "COROFEM_OPENCL_FUSED=0 COROFEM_OPENCL_FUSED=1"), in turns
-  for round in $(seq "${ENVAB_ROUNDS:-2}"); do
-    for v in ${ENVAB:-X=0}; do
-      env ${v//,/ } timeout 150 "$B/bench_opencl" --benchmark_filter="${ENVAB_FILTER:-dynamic_step|pcg_iteration/dev0/(1k|10k|1M)}" \
+if has tuningab; then  # A/B of OpenCLTuning settings (TUNINGAB, e.g. "- groupPcg=0"), in turns
+  for round in $(seq "${TUNINGAB_ROUNDS:-2}"); do
+    for v in ${TUNINGAB:--}; do
+      t=(); [[ $v != - ]] && t=("--tuning=$v")
+      timeout 150 "$B/bench_opencl" "${t[@]}" --benchmark_filter="${TUNINGAB_FILTER:-dynamic_step|pcg_iteration/dev0/(1k|10k|1M)}" \
         --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v b=$v '{print b, $1, $2, $3}'
     done
-  done | tee /tmp/logs/envab.txt
+  done | tee /tmp/logs/tuningab.txt
 fi
 
 if has sweep; then  # work-group sizes on the GPU
   for wg in 64 128 256; do
-    COROFEM_OPENCL_WG=$wg timeout 120 "$B/bench_opencl" --benchmark_filter='(product|pcg_iteration|rotation_polar|internal_force)/dev0/(10k|1M)|dynamic_step_20pcg/dev0/(10k|1M)' \
+    timeout 120 "$B/bench_opencl" --tuning=workGroupSize=$wg --benchmark_filter='(product|pcg_iteration|rotation_polar|internal_force)/dev0/(10k|1M)|dynamic_step_20pcg/dev0/(10k|1M)' \
       --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | awk -v wg=$wg '{print "wg" wg, $1, $2, $3}'
   done | tee /tmp/logs/sweep.txt
 fi

@@ -238,10 +238,9 @@ COROFEM_FN void update_scalars(__global uint* segInfo, uint seg, __global sum_re
  * read of the scalars cost that segment nothing and leave its x as it was at the stop. */
 /* The sums of the first `count` partials of segment seg (pcg_init/pcg_update's three,
  * gather_product's first) into s0..s3[0], in a fixed order: strided lanes, then a tree (the same
- * for a body alone or in a batch, and in reduce_finish and gather_product_finish). Volatile:
- * gather_product_finish reads partials that other work-groups of its own launch wrote. */
+ * for a body alone or in a batch). */
 COROFEM_FN void segment_sums(__global const uint* segInfo, uint seg, uint count,
-                             __global volatile const sum_real* partials, __global volatile const sum_real* partialsW,
+                             __global const sum_real* partials, __global const sum_real* partialsW,
                              __local sum_real* s0, __local sum_real* s1, __local sum_real* s2, __local sum_real* s3) {
   const uint lid = get_local_id(0);
   const uint begin = kPartialComponents * seg_info(segInfo, seg, kSegPartialBegin);
@@ -283,59 +282,3 @@ void reduce_finish(__global uint* restrict segInfo, __global const sum_real* res
     update_scalars(segInfo, seg, allScalars + kScalarCount * seg, mode, tol2, s0[0], s1[0], s2[0], s3[0]);
 }
 
-#ifdef COROFEM_FUSED_REDUCE
-/* gather_product (projected) followed, in the last of a segment's work-groups to finish, by
- * reduce_finish's second stage for that segment: the same sums in the same order, so the same bits,
- * without a launch of its own (PCG set-up and iterations on GPUs, where a launch costs more than
- * the sums). Every work-group of an active segment counts itself done in counters[s] after storing
- * its partial or partials; the one whose count completes the
- * segment's sums them, updates the scalars and resets the count for the next launch. Inactive
- * segments count nothing, as reduce_finish leaves their scalars alone. With per-work-item partials
- * (CPUs) a group counts itself once all its items have stored theirs. */
-__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void gather_product_finish(__global const uint* restrict nodeSeg, __global uint* restrict segInfo,
-                           __global const real* restrict segCoef, __global const uint* restrict start,
-                           __global const uint* restrict entries, __global const real* restrict elemOut,
-                           __global const real* restrict mass, __global const real* restrict free,
-                           __global const real* restrict p, __global real* restrict y,
-                           __global const sum_real* restrict partials, __global sum_real* partialsW,
-                           __global sum_real* restrict allScalars, __global uint* restrict counters,
-                           const uint mode, const sum_real tol2) {
-  __local sum_real s0[COROFEM_WG], s1[COROFEM_WG], s2[COROFEM_WG], s3[COROFEM_WG];
-  __local uint lastGroup;
-  /* No early return (unlike gather_product): PoCL 3.1 ran the lid == 0 code after the barriers
-   * below on every work-item of a kernel that held one. An inactive segment's groups (whole groups:
-   * segments are padded to them) gather nothing and count nothing. */
-  const uint lid = get_local_id(0), first = get_global_id(0) * COROFEM_CHUNK;
-  const uint s = node_segment(nodeSeg, first);
-  const bool active = seg_info(segInfo, s, kSegActive) != 0u;
-  const uint last = active ? min(first + (uint)COROFEM_CHUNK, seg_info(segInfo, s, kSegNodeEnd)) : first;
-  sum_real sums[3];
-  gather_product_nodes(first, last, seg_coef(segCoef, s, kCoefMass), start, entries, elemOut, mass, free, 1u, p,
-                       (__global const real*)0, y, sums);
-  const sum_real dot = sums[0];
-  /* The partials (inactive: zeros nobody reads), then the number of work-groups of the segment. */
-#ifdef COROFEM_TREE_REDUCE
-  group_sum3(s0, s1, s2, dot, (sum_real)0, (sum_real)0, partialsW);  /* one per group, by work-item 0 */
-  const uint groups = seg_info(segInfo, s, kSegPartialCount);
-#else
-  item_store3(dot, (sum_real)0, (sum_real)0, partialsW);  /* one per work-item */
-  barrier(CLK_GLOBAL_MEM_FENCE);                          /* all of the group's before it counts itself */
-  const uint groups = seg_info(segInfo, s, kSegPartialCount) / COROFEM_WG;
-#endif
-  if (lid == 0) {
-    mem_fence(CLK_GLOBAL_MEM_FENCE);  /* the partial before the count */
-    lastGroup = active && atomic_inc(counters + s) + 1u == groups ? 1u : 0u;
-  }
-  barrier(CLK_LOCAL_MEM_FENCE | CLK_GLOBAL_MEM_FENCE);  /* lastGroup, and the group's own partial */
-  /* Every group runs the tree's barriers (none inside a branch, for PoCL's sake); only the last
-   * group of an active segment loads the partials. */
-  const bool mine = lastGroup != 0u;
-  mem_fence(CLK_GLOBAL_MEM_FENCE);
-  segment_sums(segInfo, s, mine ? seg_info(segInfo, s, kSegPartialCount) : 0u, partials, partialsW, s0, s1, s2, s3);
-  if (lid == 0 && mine) {
-    counters[s] = 0u;
-    update_scalars(segInfo, s, allScalars + kScalarCount * s, mode, tol2, s0[0], s1[0], s2[0], s3[0]);
-  }
-}
-#endif

@@ -14,9 +14,9 @@
  * preconditioner kernels use instead of R (see element_force.cl), and, with writeCorners, the
  * per-corner a_c that node_stiffness_blocks gathers (the device-only benchmark pass; the host's
  * setPositions leaves the blocks to the solve, by corner_gradients, since the forces overwrite the
- * corners first). R itself only with writeR: the stored-K_e product reads it, the other
- * kernels do not (the host asks for it when it reads the rotations back; 9 of the 30 reals an
- * element writes). Only the work-groups of active segments (bodies) run.
+ * corners first). R itself only with writeR: no kernel reads it (the host asks for it when it
+ * reads the rotations back, and the Quaternion method's passes write it always; 9 of the 30 reals
+ * an element writes). Only the work-groups of active segments (bodies) run.
  * quat is NULL unless the method is COROFEM_ROT_QUAT.
  */
 #ifndef COROFEM_EMBEDDED

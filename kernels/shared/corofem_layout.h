@@ -65,9 +65,6 @@ COROFEM_CONSTANT(unsigned, kRotComponents, 9);
 COROFEM_CONSTANT(unsigned, kRotGradComponents, 9);
 /* Warm-start quaternion of the Quaternion rotation method (x, y, z, w) at k * S + e.             */
 COROFEM_CONSTANT(unsigned, kQuatComponents, 4);
-/* Stored element stiffness (stored-K_e variant): the upper triangle of the symmetric 12x12 K_e,
- * row by row (entry (r, c), c >= r, at index r * 12 - r (r - 1) / 2 + (c - r)), 78 components.   */
-COROFEM_CONSTANT(unsigned, kStoredKComponents, 78);
 /* Per-element output 12-vector (forces, products, preconditioner corner data), in blocks of
  * B = COROFEM_VEC elements so that a work-item writes whole vectors: component k of corner c of
  * element e at ((e / B) * 12 + 3 c + k) * B + e % B (B = 1 on GPUs: 12 contiguous per element).   */

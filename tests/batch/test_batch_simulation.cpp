@@ -161,9 +161,9 @@ struct Trace {
 };
 
 /// Calls step() until the analysis is finished (at most 2 x steps calls), recording everything.
-Trace run(const Scene& scene) {
+Trace run(const Scene& scene, const SimulationOptions& options = {}) {
   Trace t;
-  auto sim = Simulation::create(scene);
+  auto sim = Simulation::create(scene, options);
   EXPECT_TRUE(sim) << sim.message();
   if (!sim) return t;
   for (int call = 0; call < 2 * sim->stepCount() && !sim->finished(); ++call) {
@@ -562,30 +562,17 @@ TEST(BatchSimulation, OpenCLBatchAgreesWithUnbatchedBodies) {
 }
 
 /// Sets an environment variable for its lifetime (read when a backend or batch is made).
-struct ScopedEnv {
-  std::string name;
-  const char* was;
-  std::string value;
-  ScopedEnv(const char* n, const char* v) : name(n), was(std::getenv(n)), value(was ? was : "") {
-    setenv(n, v, 1);
-  }
-  ~ScopedEnv() {
-    if (was) setenv(name.c_str(), value.c_str(), 1);
-    else unsetenv(name.c_str());
-  }
-};
-
 TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
 #ifndef COROFEM_WITH_OPENCL
   GTEST_SKIP() << "built without COROFEM_WITH_OPENCL";
 #else
   if (!haveOpenCLDevice()) GTEST_SKIP() << "no OpenCL device on this machine";
   // The bodies batched (on a CPU device each solve round's PCG iterations run in one launch,
-  // pcg_iterate_group) and each alone (one launch too: with COROFEM_OPENCL_TEAM_PCG_MIN=1 every
+  // pcg_iterate_group) and each alone (one launch too: with teams on and teamPcgMinElements 1 every
   // body alone gets a team of work-groups, pcg_iterate_team, small as these bodies are), against the
-  // same runs without teams (COROFEM_OPENCL_TEAM_PCG=0) and with every PCG iteration launched
-  // (COROFEM_OPENCL_GROUP_PCG=0): the same statuses, reports, positions, velocities and energies,
-  // bit for bit. On a GPU all three launch every iteration.
+  // same runs without teams and with every PCG iteration launched (groupPcg 0; OpenCLTuning through
+  // SimulationOptions): the same statuses, reports, positions, velocities and energies, bit for bit.
+  // On a GPU all three launch every iteration.
   const auto oneLaunches = [] { return detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount(); };
   for (Precision precision : {Precision::Float, Precision::Double}) {
     SCOPED_TRACE(toString(precision));
@@ -601,27 +588,30 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
       const unsigned long long before = oneLaunches();
       const unsigned long long teamsBefore = detail::teamPcgLaunchCount();
       {
-        const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
-        const ScopedEnv teams("COROFEM_OPENCL_TEAM_PCG", "1");
-        const ScopedEnv small("COROFEM_OPENCL_TEAM_PCG_MIN", "1");
-        grouped = run(scene);
+        SimulationOptions o;
+        o.opencl.groupPcg = 1;
+        o.opencl.teamPcg = 1;
+        o.opencl.teamPcgMinElements = 1;
+        grouped = run(scene, o);
       }
       const unsigned long long between = oneLaunches(), teamsBetween = detail::teamPcgLaunchCount();
       const detail::cl::DeviceInfo& info = detail::cl::Context::shared("")->info();
       if (!batch && info.cpu && info.computeUnits > 1)
         EXPECT_GT(teamsBetween, teamsBefore) << "each body alone took teams on this CPU device";
       {
-        const ScopedEnv on("COROFEM_OPENCL_GROUP_PCG", "1");
-        const ScopedEnv noTeam("COROFEM_OPENCL_TEAM_PCG", "0");
-        noTeams = run(scene);
+        SimulationOptions o;
+        o.opencl.groupPcg = 1;
+        o.opencl.teamPcg = 0;
+        noTeams = run(scene, o);
       }
-      EXPECT_EQ(detail::teamPcgLaunchCount(), teamsBetween) << "COROFEM_OPENCL_TEAM_PCG=0 launched no team";
+      EXPECT_EQ(detail::teamPcgLaunchCount(), teamsBetween) << "teamPcg 0 launched no team";
       const unsigned long long after = oneLaunches();
       {
-        const ScopedEnv off("COROFEM_OPENCL_GROUP_PCG", "0");
-        launched = run(scene);
+        SimulationOptions o;
+        o.opencl.groupPcg = 0;
+        launched = run(scene, o);
       }
-      EXPECT_EQ(oneLaunches(), after) << "COROFEM_OPENCL_GROUP_PCG=0 launched no group";
+      EXPECT_EQ(oneLaunches(), after) << "groupPcg 0 launched no group";
       if (!detail::cl::Context::shared("")->info().gpu)
         EXPECT_GT(between, before) << "a CPU device runs these small bodies' iterations in one launch";
       ASSERT_EQ(noTeams.states.size(), 6u);
@@ -641,7 +631,7 @@ TEST(BatchSimulation, PacksOfOneMeshGiveTheOneWorkGroupRunBitForBit) {
   // Ten copies of one beam (each its own material, density and damping; one linear, one unloaded
   // that falls asleep, one of another cross-section) and a body of another mesh, batched: on a
   // CPU device the copies' PCG iterations run in packs, a body per vector lane (pcg_iterate_pack),
-  // and must give the run of one work-group per body (COROFEM_OPENCL_PACK_PCG=0) bit for bit:
+  // and must give the run of one work-group per body (packPcg 0) bit for bit:
   // statuses, reports, positions, velocities and energies. A GPU runs neither (it launches every
   // iteration) and both runs agree trivially.
   for (Precision precision : {Precision::Float, Precision::Double}) {
@@ -676,15 +666,17 @@ TEST(BatchSimulation, PacksOfOneMeshGiveTheOneWorkGroupRunBitForBit) {
     Trace packed, grouped;
     const unsigned long long before = detail::packPcgLaunchCount();
     {
-      const ScopedEnv on("COROFEM_OPENCL_PACK_PCG", "1");
-      packed = run(scene);
+      SimulationOptions o;
+      o.opencl.packPcg = 1;
+      packed = run(scene, o);
     }
     const unsigned long long between = detail::packPcgLaunchCount();
     {
-      const ScopedEnv off("COROFEM_OPENCL_PACK_PCG", "0");
-      grouped = run(scene);
+      SimulationOptions o;
+      o.opencl.packPcg = 0;
+      grouped = run(scene, o);
     }
-    EXPECT_EQ(detail::packPcgLaunchCount(), between) << "COROFEM_OPENCL_PACK_PCG=0 ran no pack";
+    EXPECT_EQ(detail::packPcgLaunchCount(), between) << "packPcg 0 ran no pack";
     if (!detail::cl::Context::shared("")->info().gpu)
       EXPECT_GT(between, before) << "a CPU device runs the copies' iterations in packs";
     ASSERT_EQ(packed.states.size(), 5u);

@@ -143,17 +143,8 @@ TEST_P(EmbedDevice, MatchesHostReference) {
   }
 }
 
-/// Restores COROFEM_SURFACE_LANES as the user had it, whatever a test's outcome.
-struct ScopedSurfaceLanes {
-  const char* was = std::getenv("COROFEM_SURFACE_LANES");
-  std::string value = was ? was : "";
-  ~ScopedSurfaceLanes() {
-    if (was) setenv("COROFEM_SURFACE_LANES", value.c_str(), 1);
-    else unsetenv("COROFEM_SURFACE_LANES");
-  }
-};
-
-/// Pass 2's vertices per work-item (COROFEM_SURFACE_LANES: 1 on GPUs, 8 or 16 vectors on CPUs) change
+/// Pass 2's vertices per work-item (DeviceSurfaceOptions::normalPassLanes: 1 on GPUs, 8 or 16 vectors
+/// on CPUs) change
 /// how the work is cut, not the mathematics: every width matches the host reference within the
 /// tolerances of MatchesHostReference, including the vertices of the last, partial block. Both
 /// numberings of the sphere: row by row, where some ring slots of a block of vertices hold
@@ -162,7 +153,6 @@ struct ScopedSurfaceLanes {
 /// from the run's start, or the slot's entries gathered lane by lane) are checked at every width. A
 /// width the kernels do not have is refused with the fix.
 TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
-  const ScopedSurfaceLanes restore;
   for (bool shuffled : {false, true}) {
     SCOPED_TRACE(shuffled ? "vertices shuffled" : "vertices row by row");
     const Scene s = makeScene(shuffled);
@@ -184,9 +174,10 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
     ASSERT_TRUE(deformSurface(s.binding, x.data(), s.tets.nodeCount(), o).isOk());
     const bool dbl = GetParam().doublePrecision;
     const float posTol = dbl ? 5e-7f : 4e-6f, nTol = dbl ? 1e-6f : 2e-4f;
-    for (const char* lanes : {"1", "8", "16"}) {
-      setenv("COROFEM_SURFACE_LANES", lanes, 1);
-      auto device = DeviceSurface::create(s.binding, options());
+    for (std::size_t lanes : {1, 8, 16}) {
+      DeviceSurfaceOptions lanesOptions = options();
+      lanesOptions.normalPassLanes = lanes;
+      auto device = DeviceSurface::create(s.binding, lanesOptions);
       ASSERT_TRUE(device.isOk()) << lanes << " lanes: " << device.message();
       std::vector<float> dev(6 * n, NAN);
       ASSERT_TRUE(device->update(x.data(), s.tets.nodeCount()).isOk());
@@ -199,18 +190,19 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
           ASSERT_TRUE(std::isfinite(dev[6 * v + c]) && std::isfinite(dev[6 * v + 3 + c]))
               << lanes << " lanes, vertex " << v;
         }
-      std::printf("[ device   ] %s, %s lanes: worst |position| difference %.3g, worst |normal| difference %.3g\n",
+      std::printf("[ device   ] %s, %zu lanes: worst |position| difference %.3g, worst |normal| difference %.3g\n",
                   shuffled ? "shuffled" : "row by row", lanes, worstPos, worstNormal);
       EXPECT_LE(worstPos, posTol) << lanes << " lanes";
       EXPECT_LE(worstNormal, nTol) << lanes << " lanes";
     }
   }
   const Scene s = makeScene();
-  setenv("COROFEM_SURFACE_LANES", "4", 1);
-  auto refused = DeviceSurface::create(s.binding, options());
+  DeviceSurfaceOptions four = options();
+  four.normalPassLanes = 4;
+  auto refused = DeviceSurface::create(s.binding, four);
   ASSERT_FALSE(refused.isOk());
   EXPECT_EQ(refused.status().code(), ErrorCode::BadInput);
-  EXPECT_NE(refused.message().find("COROFEM_SURFACE_LANES='4': give 1, 8 or 16"), std::string::npos) << refused.message();
+  EXPECT_NE(refused.message().find("normalPassLanes = 4: give 1, 8 or 16"), std::string::npos) << refused.message();
 }
 
 /// DeviceSurfaceOptions::separateStreams writes the same values as the interleaved layout, bit for bit,
@@ -218,16 +210,15 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
 /// gathers, the last block partial); each layout reads back as either (read(interleaved) and
 /// read(positions, normals)), and a null pointer is refused.
 TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
-  const ScopedSurfaceLanes restore;
   for (bool shuffled : {false, true}) {
     const Scene s = makeScene(shuffled);
     const std::size_t n = s.binding.vertexCount();
     std::mt19937 rng(31);
     const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
-    for (const char* lanes : {"1", "8", "16"}) {
-      SCOPED_TRACE(std::string(shuffled ? "shuffled, " : "row by row, ") + lanes + " lanes");
-      setenv("COROFEM_SURFACE_LANES", lanes, 1);
+    for (std::size_t lanes : {1, 8, 16}) {
+      SCOPED_TRACE(std::string(shuffled ? "shuffled, " : "row by row, ") + std::to_string(lanes) + " lanes");
       DeviceSurfaceOptions o = options();
+      o.normalPassLanes = lanes;
       auto interleaved = DeviceSurface::create(s.binding, o);
       o.separateStreams = true;
       auto separate = DeviceSurface::create(s.binding, o);
@@ -431,7 +422,6 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
 /// centroid far from the origin, at every lane width, in both output layouts. Each body's output is
 /// a sub-buffer holding exactly its vertices.
 TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
-  const ScopedSurfaceLanes restore;
   const bool dbl = GetParam().doublePrecision;
   auto ctx = detail::cl::Context::shared(std::to_string(GetParam().device));
   const Scene rows = makeScene(false), shuffled = makeScene(true);
@@ -456,11 +446,11 @@ TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
   o.deviceId = ctx->device();
   // The device's lane width in both layouts, and one lane (the GPU configuration); each case builds
   // two programs, so not every combination.
-  const std::pair<const char*, bool> cases[] = {{"", false}, {"", true}, {"1", false}};
+  const std::pair<std::size_t, bool> cases[] = {{0, false}, {0, true}, {1, false}};
   for (const auto& [lanes, separate] : cases) {
-    SCOPED_TRACE(std::string(*lanes ? lanes : "default") + " lanes, " + (separate ? "separate" : "interleaved"));
-    if (*lanes) setenv("COROFEM_SURFACE_LANES", lanes, 1);
-    else unsetenv("COROFEM_SURFACE_LANES");
+    SCOPED_TRACE((lanes ? std::to_string(lanes) : std::string("default")) + " lanes, " +
+                 (separate ? "separate" : "interleaved"));
+    o.normalPassLanes = lanes;
     o.separateStreams = separate;
     std::vector<detail::DeviceSurfaceGroup::Member> members;
     for (int m = 0; m < 3; ++m) members.push_back({&scenes[m]->binding, first[m]});

@@ -62,7 +62,7 @@ class OpenCLBackendVsReference : public ::testing::TestWithParam<DeviceCase> {
     return s;
   }
   std::unique_ptr<detail::OpenCLBackendInternal> openclBackend(const detail::Problem& p, const SolverDesc& s,
-                                                              const detail::OpenCLOptions& o = {}) {
+                                                              const detail::OpenCLTuning& o = {}) {
     return detail::createOpenCLBackendOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)), o);
   }
   static double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
@@ -81,29 +81,24 @@ TEST_P(OpenCLBackendVsReference, ForcesProductAndEnergyMatch) {
   const detail::Problem p = beam();
   const SolverDesc s = solver();
   auto ref = detail::createReferenceBackend(p, s);
-  for (bool stored : {false, true}) {
-    detail::OpenCLOptions o;
-    o.storedStiffness = stored;
-    auto ocl = openclBackend(p, s, o);
-    const Eigen::VectorXd x = bent(p);
-    ref->setPositions(x);
-    ocl->setPositions(x);
-    Eigen::VectorXd fr, fo;
-    ref->internalForces(fr);
-    ocl->internalForces(fo);
-    const double tol = isDouble() ? 1e-10 : 1e-4;
-    EXPECT_LE((fo - fr).cwiseAbs().maxCoeff(), tol * fr.cwiseAbs().maxCoeff()) << "forces";
-    EXPECT_NEAR(ocl->elasticEnergy(), ref->elasticEnergy(), tol * ref->elasticEnergy());
-    const Eigen::VectorXd v = randomVector(p.dofCount(), 3);
-    for (detail::SystemCoeffs c : {detail::SystemCoeffs{14400.0, 120.0, 1.0}, detail::SystemCoeffs{0.0, 0.0, 1.0},
-                                   detail::SystemCoeffs{1.0, 0.0, 0.0}}) {
-      Eigen::VectorXd yr, yo;
-      ref->apply(c, v, yr);
-      ocl->apply(c, v, yo);
-      EXPECT_LE((yo - yr).cwiseAbs().maxCoeff(), tol * yr.cwiseAbs().maxCoeff())
-          << "apply with m=" << c.mass << " c=" << c.damping << " k=" << c.stiffness
-          << (stored ? " (stored K_e)" : "");
-    }
+  auto ocl = openclBackend(p, s);
+  const Eigen::VectorXd x = bent(p);
+  ref->setPositions(x);
+  ocl->setPositions(x);
+  Eigen::VectorXd fr, fo;
+  ref->internalForces(fr);
+  ocl->internalForces(fo);
+  const double tol = isDouble() ? 1e-10 : 1e-4;
+  EXPECT_LE((fo - fr).cwiseAbs().maxCoeff(), tol * fr.cwiseAbs().maxCoeff()) << "forces";
+  EXPECT_NEAR(ocl->elasticEnergy(), ref->elasticEnergy(), tol * ref->elasticEnergy());
+  const Eigen::VectorXd v = randomVector(p.dofCount(), 3);
+  for (detail::SystemCoeffs c : {detail::SystemCoeffs{14400.0, 120.0, 1.0}, detail::SystemCoeffs{0.0, 0.0, 1.0},
+                                 detail::SystemCoeffs{1.0, 0.0, 0.0}}) {
+    Eigen::VectorXd yr, yo;
+    ref->apply(c, v, yr);
+    ocl->apply(c, v, yo);
+    EXPECT_LE((yo - yr).cwiseAbs().maxCoeff(), tol * yr.cwiseAbs().maxCoeff())
+        << "apply with m=" << c.mass << " c=" << c.damping << " k=" << c.stiffness;
   }
 }
 
@@ -194,11 +189,10 @@ TEST_P(OpenCLBackendVsReference, GpuAndCpuKernelConfigurationsAgree) {
   Eigen::VectorXd sols[2];
   int config = 0;
   for (std::size_t width : {1, 8}) {
-    detail::OpenCLOptions o;
-    o.vectorWidth = width;
-    o.nodeChunk = width == 1 ? 1 : 0;
-    o.treeReduce = width == 1 ? 1 : -1;
-    o.fusedReduce = width == 1 ? 1 : -1;  // GPUs finish the PCG sums in gather_product_finish
+    detail::OpenCLTuning o;
+    o.elementsPerItem = width;
+    o.nodesPerItem = width == 1 ? 1 : 0;
+    o.workGroupSums = width == 1 ? 1 : -1;
     auto ocl = openclBackend(p, solver(), o);
     ocl->setPositions(x);
     sols[config] = Eigen::VectorXd::Zero(b.size());
@@ -449,56 +443,6 @@ TEST_P(OpenCLBackendVsReference, ProductQueuedBehindTheForcesGivesTheSolveItsOwn
   }
 }
 
-TEST_P(OpenCLBackendVsReference, FusedReductionGivesTheBitsOfReduceFinish) {
-  // Opt-in (OpenCLOptions::fusedReduce): the PCG's sums finished in the last work-group of
-  // gather_product_finish instead of a reduce_finish launch: the same sums in the same order, so
-  // the same bits, iteration counts and stops, in the GPU configuration (one partial per
-  // work-group) and the CPU one (one per work-item), here on whatever device is present: a solve
-  // that converges (the stop test deactivates the body inside the fused kernel), a warm start from
-  // it, and one capped at its iteration limit (the cap's last iteration keeps reduce_finish).
-  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  const detail::Problem p = beam();
-  const Eigen::VectorXd x = bent(p), b1 = randomVector(p.dofCount(), 41), b2 = randomVector(p.dofCount(), 42);
-  const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
-  for (bool gpuConfig : {true, false}) {
-    struct Run {
-      Eigen::VectorXd sol[3];
-      detail::LinearSolveStats stats[3];
-    } runs[2];
-    for (int fused : {0, 1}) {
-      detail::OpenCLOptions o;
-      o.vectorWidth = gpuConfig ? 1 : 8;
-      o.nodeChunk = gpuConfig ? 1 : 4;
-      o.treeReduce = gpuConfig ? 1 : 0;
-      o.fusedReduce = fused;
-      auto ocl = openclBackend(p, solver(), o);
-      EXPECT_EQ(ocl->buildOptions().find("COROFEM_FUSED_REDUCE") != std::string::npos, fused == 1);
-      ocl->setPositions(x);
-      Run& r = runs[fused];
-      r.sol[0] = Eigen::VectorXd::Zero(b1.size());
-      r.stats[0] = ocl->solve(c, b1, r.sol[0]);
-      EXPECT_TRUE(r.stats[0].converged);
-      r.sol[1] = r.sol[0];
-      r.stats[1] = ocl->solve(c, b2, r.sol[1]);  // warm start from the previous solution
-      SolverDesc capped = solver();
-      capped.maxIterations = 7;
-      auto cap = openclBackend(p, capped, o);
-      cap->setPositions(x);
-      r.sol[2] = r.sol[1];
-      r.stats[2] = cap->solve(c, b1, r.sol[2]);
-      EXPECT_EQ(r.stats[2].iterations, 7);
-    }
-    const char* config = gpuConfig ? "GPU configuration" : "CPU configuration";
-    for (int k = 0; k < 3; ++k) {
-      EXPECT_TRUE(test::sameBits(runs[1].sol[k], runs[0].sol[k])) << config << ", solve " << k;
-      EXPECT_EQ(runs[1].stats[k].iterations, runs[0].stats[k].iterations) << config << ", solve " << k;
-      EXPECT_EQ(runs[1].stats[k].converged, runs[0].stats[k].converged) << config << ", solve " << k;
-      EXPECT_EQ(runs[1].stats[k].relativeResidual, runs[0].stats[k].relativeResidual) << config << ", solve " << k;
-    }
-    EXPECT_GT(runs[0].stats[0].iterations, 8) << "a solve long enough to run the fused kernel many times";
-  }
-}
-
 TEST_P(OpenCLBackendVsReference, HostPassesInChunksGiveTheAnswersOfOnePass) {
   // The host packs, converts and checks node vectors in chunks of 65,536 entries on its threads (a
   // 1M-element body makes 9); chunks of 7 and 96 entries run the test beam's 459 dofs the same way.
@@ -515,7 +459,7 @@ TEST_P(OpenCLBackendVsReference, HostPassesInChunksGiveTheAnswersOfOnePass) {
   s.maxIterations = 9;  // capped: the answers depend on the start
   s.tolerance = 1e-14;
   auto run = [&](std::size_t chunk, Eigen::VectorXd& f, Eigen::VectorXd& y, Eigen::VectorXd& sol) {
-    detail::OpenCLOptions o;
+    detail::OpenCLTuning o;
     o.hostChunk = chunk;
     auto ocl = openclBackend(p, s, o);
     ocl->setPositions(x);
@@ -535,7 +479,7 @@ TEST_P(OpenCLBackendVsReference, HostPassesInChunksGiveTheAnswersOfOnePass) {
     EXPECT_LE(relErr(y, y0), tol) << "chunk " << chunk;
     EXPECT_LE(relErr(sol, sol0), isDouble() ? 1e-9 : 1e-3) << "chunk " << chunk;
     auto fresh = [&](const Eigen::VectorXd& start, const Eigen::VectorXd& rhs) {
-      detail::OpenCLOptions o;
+      detail::OpenCLTuning o;
       o.hostChunk = chunk;
       auto other = openclBackend(p, s, o);
       other->setPositions(x);
@@ -560,7 +504,7 @@ TEST_P(OpenCLBackendVsReference, HostPassesInChunksGiveTheAnswersOfOnePass) {
 
 TEST_P(OpenCLBackendVsReference, LocalityOrderChangesNothingTheHostSees) {
   // The device numbers a mesh's elements and nodes along a Morton curve where the mesh's own
-  // numbering scatters the kernels' loads (OpenCLOptions::localityOrder, mesh/locality_order.hpp);
+  // numbering scatters the kernels' loads (OpenCLTuning::localityOrder, mesh/locality_order.hpp);
   // every host vector keeps the mesh's numbering. A beam numbered at random (as Gmsh numbers its
   // meshes) is reordered by the default rule; its answers match the mesh's own numbering on the
   // device: each element's rotation to its convergence (the same positions reach each element, but
@@ -582,10 +526,9 @@ TEST_P(OpenCLBackendVsReference, LocalityOrderChangesNothingTheHostSees) {
     double energy = 0.0;
     std::vector<double> rotations;
   };
-  auto run = [&](int order, bool stored) {
-    detail::OpenCLOptions o;
+  auto run = [&](int order) {
+    detail::OpenCLTuning o;
     o.localityOrder = order;
-    o.storedStiffness = stored;
     auto ocl = openclBackend(p, solver(), o);
     Answers a;
     detail::DevicePositions where;
@@ -602,28 +545,25 @@ TEST_P(OpenCLBackendVsReference, LocalityOrderChangesNothingTheHostSees) {
   };
   const double tol = isDouble() ? 1e-12 : 2e-5;
   double forceScale = 0.0, energyScale = 0.0;  // of the bent beam, for the rest state below
-  for (bool stored : {false, true}) {
-    SCOPED_TRACE(stored ? "stored K_e" : "gradients");
-    const Answers own = run(0, stored), rule = run(-1, stored);
-    forceScale = own.f.cwiseAbs().maxCoeff();
-    energyScale = own.energy;
-    EXPECT_FALSE(own.reordered);
-    EXPECT_TRUE(rule.reordered) << "a randomly numbered mesh is reordered by default";
-    ASSERT_EQ(own.rotations.size(), rule.rotations.size());
-    double worst = 0.0;
-    for (std::size_t i = 0; i < own.rotations.size(); ++i) worst = std::max(worst, std::abs(own.rotations[i] - rule.rotations[i]));
-    EXPECT_LE(worst, isDouble() ? 1e-12 : 1e-5) << "rotations, per element in the mesh's order";
-    EXPECT_LE(relErr(rule.f, own.f), tol);
-    EXPECT_NEAR(rule.energy, own.energy, tol * own.energy);
-    EXPECT_LE(relErr(rule.y, own.y), tol);
-    EXPECT_LE(relErr(rule.sol, own.sol), isDouble() ? 1e-8 : 1e-3);
-    for (std::size_t d = 0; d < p.dofCount(); ++d)
-      if (p.constrained[d]) EXPECT_EQ(rule.sol[static_cast<Eigen::Index>(d)], 0.0) << "constrained dof " << d;
-  }
+  const Answers own = run(0), rule = run(-1);
+  forceScale = own.f.cwiseAbs().maxCoeff();
+  energyScale = own.energy;
+  EXPECT_FALSE(own.reordered);
+  EXPECT_TRUE(rule.reordered) << "a randomly numbered mesh is reordered by default";
+  ASSERT_EQ(own.rotations.size(), rule.rotations.size());
+  double worst = 0.0;
+  for (std::size_t i = 0; i < own.rotations.size(); ++i) worst = std::max(worst, std::abs(own.rotations[i] - rule.rotations[i]));
+  EXPECT_LE(worst, isDouble() ? 1e-12 : 1e-5) << "rotations, per element in the mesh's order";
+  EXPECT_LE(relErr(rule.f, own.f), tol);
+  EXPECT_NEAR(rule.energy, own.energy, tol * own.energy);
+  EXPECT_LE(relErr(rule.y, own.y), tol);
+  EXPECT_LE(relErr(rule.sol, own.sol), isDouble() ? 1e-8 : 1e-3);
+  for (std::size_t d = 0; d < p.dofCount(); ++d)
+    if (p.constrained[d]) EXPECT_EQ(rule.sol[static_cast<Eigen::Index>(d)], 0.0) << "constrained dof " << d;
   // Before any setPositions the device holds the rest shape (the interface's promise), in its own
   // numbering too: no forces, no energy.
   {
-    detail::OpenCLOptions o;
+    detail::OpenCLTuning o;
     o.localityOrder = 1;
     auto atRest = openclBackend(p, solver(), o);
     Eigen::VectorXd f;
@@ -642,7 +582,7 @@ TEST_P(OpenCLBackendVsReference, LocalityOrderChangesNothingTheHostSees) {
 }
 
 TEST_P(OpenCLBackendVsReference, DenormalsAreFlushedOnCpuDevicesAndChangeNoAnswer) {
-  // -cl-denorms-are-zero by default on CPU devices only (OpenCLOptions::flushDenormals): a denormal
+  // -cl-denorms-are-zero by default on CPU devices only (OpenCLTuning::flushDenormals): a denormal
   // float costs an x86 core a microcode assist per operation (bench_mesh_order: the Armadillo in
   // other units). Forced either way, the beam's forces, product and solve agree to the precision.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
@@ -652,7 +592,7 @@ TEST_P(OpenCLBackendVsReference, DenormalsAreFlushedOnCpuDevicesAndChangeNoAnswe
   const bool cpu = detail::cl::Context::shared(std::to_string(GetParam().device))->info().cpu;
   Eigen::VectorXd f[2], y[2], sol[2];
   for (int flush : {-1, 0, 1}) {
-    detail::OpenCLOptions o;
+    detail::OpenCLTuning o;
     o.flushDenormals = flush;
     auto ocl = openclBackend(p, solver(), o);
     const bool flushed = ocl->buildOptions().find("-cl-denorms-are-zero") != std::string::npos;

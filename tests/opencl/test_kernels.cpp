@@ -80,7 +80,7 @@ class OpenCLKernels : public ::testing::TestWithParam<DeviceCase> {
   double relTol() const { return isDouble() ? 1e-10 : 1e-4; }
 
   std::unique_ptr<detail::OpenCLBackendInternal> backend(const detail::Problem& p, RotationMethod m,
-                                                        const detail::OpenCLOptions& o = {}) {
+                                                        const detail::OpenCLTuning& o = {}) {
     // The same solver settings as test_backend.cpp (block preconditioner), so that both files
     // share the programs built once per process (PoCL compiles take seconds each).
     SolverDesc s;
@@ -259,40 +259,35 @@ TEST_P(OpenCLKernels, ProductMatchesRotatedStiffnessWithMassAndDamping) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   std::mt19937 rng(23);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (bool stored : {false, true}) {
-    for (std::size_t n : kSizes) {
-      detail::Problem p = test::makeProblem(test::randomSoup(n, rng), 3e5, 0.3, 1200.0);
-      p.rayleighMass = 0.3;
-      p.rayleighStiffness = 0.02;
-      detail::OpenCLOptions o;
-      o.storedStiffness = stored;
-      auto b = backend(p, RotationMethod::Polar, o);
-      const Eigen::VectorXd x = deform(p.mesh, Shape::WellShaped, rng);
-      b->setPositions(x);
-      Eigen::VectorXd v(x.size());
-      for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-      detail::SystemCoeffs c;
-      c.mass = 3600.0;
-      c.damping = 60.0;
-      c.stiffness = 1.0;
-      Eigen::VectorXd y;
-      b->apply(c, v, y);
-      // (m M + c (alpha M + beta K^R) + k K^R) v, element by element (each node in one element).
-      Eigen::VectorXd ref = (c.mass + c.damping * p.rayleighMass) * p.lumpedMass.cwiseProduct(v);
-      const double kCoef = c.stiffness + c.damping * p.rayleighStiffness;
-      for (std::size_t e = 0; e < n; ++e) {
-        const Mat3 R = detail::polarRotation(detail::deformationGradient(p.elements[e], corners(x, p.mesh, e)));
-        const detail::Mat12 KR = detail::rotateStiffness(detail::linearStiffness(p.elements[e], p.lame), R);
-        detail::Vec12 ve;
-        for (int k = 0; k < 4; ++k) ve.segment<3>(3 * k) = v.segment<3>(3 * p.mesh.tets[4 * e + k]);
-        const detail::Vec12 ye = kCoef * KR * ve;
-        for (int k = 0; k < 4; ++k) ref.segment<3>(3 * p.mesh.tets[4 * e + k]) += ye.segment<3>(3 * k);
-      }
-      const double scale = ref.cwiseAbs().maxCoeff();
-      if (n == 1001) std::printf("[info] product (%s): max error / max |y| = %.3g\n", stored ? "stored K_e" : "gradients", (y - ref).cwiseAbs().maxCoeff() / scale);
-      EXPECT_LE((y - ref).cwiseAbs().maxCoeff(), relTol() * scale)
-          << n << " elements, " << (stored ? "stored K_e" : "gradients");
+  for (std::size_t n : kSizes) {
+    detail::Problem p = test::makeProblem(test::randomSoup(n, rng), 3e5, 0.3, 1200.0);
+    p.rayleighMass = 0.3;
+    p.rayleighStiffness = 0.02;
+    auto b = backend(p, RotationMethod::Polar);
+    const Eigen::VectorXd x = deform(p.mesh, Shape::WellShaped, rng);
+    b->setPositions(x);
+    Eigen::VectorXd v(x.size());
+    for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
+    detail::SystemCoeffs c;
+    c.mass = 3600.0;
+    c.damping = 60.0;
+    c.stiffness = 1.0;
+    Eigen::VectorXd y;
+    b->apply(c, v, y);
+    // (m M + c (alpha M + beta K^R) + k K^R) v, element by element (each node in one element).
+    Eigen::VectorXd ref = (c.mass + c.damping * p.rayleighMass) * p.lumpedMass.cwiseProduct(v);
+    const double kCoef = c.stiffness + c.damping * p.rayleighStiffness;
+    for (std::size_t e = 0; e < n; ++e) {
+      const Mat3 R = detail::polarRotation(detail::deformationGradient(p.elements[e], corners(x, p.mesh, e)));
+      const detail::Mat12 KR = detail::rotateStiffness(detail::linearStiffness(p.elements[e], p.lame), R);
+      detail::Vec12 ve;
+      for (int k = 0; k < 4; ++k) ve.segment<3>(3 * k) = v.segment<3>(3 * p.mesh.tets[4 * e + k]);
+      const detail::Vec12 ye = kCoef * KR * ve;
+      for (int k = 0; k < 4; ++k) ref.segment<3>(3 * p.mesh.tets[4 * e + k]) += ye.segment<3>(3 * k);
     }
+    const double scale = ref.cwiseAbs().maxCoeff();
+    if (n == 1001) std::printf("[info] product: max error / max |y| = %.3g\n", (y - ref).cwiseAbs().maxCoeff() / scale);
+    EXPECT_LE((y - ref).cwiseAbs().maxCoeff(), relTol() * scale) << n << " elements";
   }
 }
 
@@ -308,11 +303,11 @@ TEST_P(OpenCLKernels, EveryVectorWidthGivesTheSameOperators) {
   for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
   Eigen::VectorXd f1, y1;
   for (std::size_t width : {1, 8, 16}) {
-    detail::OpenCLOptions o;
-    o.vectorWidth = width;
+    detail::OpenCLTuning o;
+    o.elementsPerItem = width;
     // Width 1 as on GPUs (local-memory tree reductions), the program test_backend.cpp also builds.
-    o.nodeChunk = width == 1 ? 1 : 0;
-    o.treeReduce = width == 1 ? 1 : -1;
+    o.nodesPerItem = width == 1 ? 1 : 0;
+    o.workGroupSums = width == 1 ? 1 : -1;
     auto b = backend(p, RotationMethod::Polar, o);  // Polar: scalar at width 1, vectorised above
     b->setPositions(x);
     Eigen::VectorXd f, y;

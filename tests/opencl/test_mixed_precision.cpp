@@ -15,6 +15,7 @@
 // same request: on 54k dofs mixed reaches the same true residual as float (the float operator
 // sets the floor; the two-stage reduction was never the limit), see the comment there.
 #include "backends/opencl/opencl_backend.hpp"
+#include "common/opencl_test_access.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "util/error.hpp"
 
@@ -194,17 +195,15 @@ TEST(OpenCLMixedPrecision, SameSolveTwiceGivesIdenticalBits) {
 }
 
 TEST(OpenCLMixedPrecision, MixedWithoutFp64IsAClearError) {
-  // Every device here may well have cl_khr_fp64 (PoCL does), so the backend's test switch
-  // OpenCLOptions::assumeNoFp64 makes it take the path of a device without it.
+  // Every device here may well have cl_khr_fp64 (PoCL does), so a context that reports none
+  // (tests/common/opencl_test_access.hpp) takes the path of a device without it.
   bool any = false;
   fp64Device(any);
   if (!any) GTEST_SKIP() << "no OpenCL device found (install pocl-opencl-icd)";
   const detail::Problem p = beam();
-  detail::OpenCLOptions o;
-  o.assumeNoFp64 = true;
-  auto ctx = contextOf(0);
+  auto ctx = detail::ContextTestAccess::withoutFp64("0");
   try {
-    detail::createOpenCLBackendOn(p, solverOf(Precision::Mixed, 1e-5), ctx, o);
+    detail::createOpenCLBackendOn(p, solverOf(Precision::Mixed, 1e-5), ctx);
     FAIL() << "mixed precision was accepted on a device without cl_khr_fp64";
   } catch (const detail::Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::DeviceError);
@@ -213,8 +212,8 @@ TEST(OpenCLMixedPrecision, MixedWithoutFp64IsAClearError) {
     EXPECT_NE(msg.find("cl_khr_fp64"), std::string::npos) << msg;
     EXPECT_NE(msg.find("\"float\""), std::string::npos) << msg;        // and the fix
   }
-  // Float needs no fp64: the same switch leaves it working.
-  EXPECT_NO_THROW(detail::createOpenCLBackendOn(p, solverOf(Precision::Float, 1e-5), ctx, o));
+  // Float needs no fp64: the same device works.
+  EXPECT_NO_THROW(detail::createOpenCLBackendOn(p, solverOf(Precision::Float, 1e-5), ctx));
 }
 
 TEST(OpenCLMixedPrecision, LargeSystemTrueResidualIsLimitedByTheFloatOperator) {

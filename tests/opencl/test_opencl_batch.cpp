@@ -12,6 +12,7 @@
 // forces, the float operator times cond(A) ~1e3 gives 1e-3 on solutions).
 #include "backends/opencl/opencl_backend.hpp"
 #include "backends/opencl/segment_engine.hpp"
+#include "common/opencl_test_access.hpp"
 #include "common/shuffled_mesh.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "solve/batch.hpp"
@@ -141,7 +142,7 @@ std::vector<detail::Problem> instances(std::size_t count, bool rotated = true) {
 }
 
 /// How many of `copies` bodies of one mesh a round packs when packs are forced: 8 to a pack, a
-/// remainder of fewer than 3 (OpenCLOptions::packPcgMinLanes' default) in work-groups of their own.
+/// remainder of fewer than 3 (OpenCLTuning::packPcgMinLanes' default) in work-groups of their own.
 std::size_t packedLanes(std::size_t copies) { return copies / 8 * 8 + (copies % 8 >= 3 ? copies % 8 : 0); }
 
 /// Rotated, bent positions (a different rotation per body).
@@ -197,20 +198,20 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
   std::shared_ptr<detail::cl::Context> context() const {
     return detail::cl::Context::shared(std::to_string(GetParam().device));
   }
-  std::unique_ptr<detail::BatchDevice> batchOf(const std::vector<detail::Problem>& ps, const SolverDesc& s,
-                                               const detail::OpenCLOptions& o = {}) const {
+  std::unique_ptr<detail::OpenCLBatchDeviceInternal> batchOf(const std::vector<detail::Problem>& ps, const SolverDesc& s,
+                                               const detail::OpenCLTuning& o = {}) const {
     std::vector<const detail::Problem*> ptrs;
     for (const auto& p : ps) ptrs.push_back(&p);
     return detail::createOpenCLBatchDeviceOn(ptrs, s, context(), o);
   }
   std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> singlesOf(const std::vector<detail::Problem>& ps,
                                                                         const SolverDesc& s,
-                                                                        const detail::OpenCLOptions& o = {}) const {
+                                                                        const detail::OpenCLTuning& o = {}) const {
     std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> out;
     for (const auto& p : ps) out.push_back(detail::createOpenCLBackendOn(p, s, context(), o));
     return out;
   }
-  void everyRequestMatches(const detail::OpenCLOptions& o, const std::vector<detail::Problem>& ps = bodies());
+  void everyRequestMatches(const detail::OpenCLTuning& o, const std::vector<detail::Problem>& ps = bodies());
   /// Runs a round and expects no request to fail.
   static void runOk(detail::BatchDevice& device, std::vector<BatchRequest>& requests) {
     std::vector<BatchRequest*> round;
@@ -232,12 +233,12 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
   /// Options whose every solve round runs one work-group per body (pcg_iterate_group; no teams),
   /// in the given numbering and node chunk, with packs (packPcg = 1) or without (0): the packs'
   /// tests compare the two.
-  static detail::OpenCLOptions oneLaunchRounds(int packPcg, int localityOrder, std::size_t nodeChunk = 0) {
-    detail::OpenCLOptions o;
+  static detail::OpenCLTuning oneLaunchRounds(int packPcg, int localityOrder, std::size_t nodeChunk = 0) {
+    detail::OpenCLTuning o;
     o.groupPcg = 1;
     o.teamPcg = 0;
     o.groupPcgSmallElements = 1 << 20;
-    o.nodeChunk = nodeChunk;
+    o.nodesPerItem = nodeChunk;
     o.localityOrder = localityOrder;
     o.packPcg = packPcg;
     return o;
@@ -283,7 +284,7 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
 
 /// Every request type for every body (one round per type, then one round of mixed types),
 /// batch vs one single backend per body (same options) vs the reference.
-void OpenCLBatch::everyRequestMatches(const detail::OpenCLOptions& o, const std::vector<detail::Problem>& ps) {
+void OpenCLBatch::everyRequestMatches(const detail::OpenCLTuning& o, const std::vector<detail::Problem>& ps) {
   const std::size_t K = ps.size();
   const SolverDesc s = solver();
   auto batch = batchOf(ps, s, o);
@@ -430,12 +431,11 @@ TEST_P(OpenCLBatch, GpuKernelConfigurationMatchesToo) {
   // GPU configuration: partials per work-group, segments aligned to 32 nodes and 32 elements),
   // here on whatever device is present.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  detail::OpenCLOptions o;
+  detail::OpenCLTuning o;
   o.workGroupSize = 32;
-  o.vectorWidth = 1;
-  o.nodeChunk = 1;
-  o.treeReduce = 1;
-  o.fusedReduce = 1;  // each segment's sums finished by its own last work-group
+  o.elementsPerItem = 1;
+  o.nodesPerItem = 1;
+  o.workGroupSums = 1;
   everyRequestMatches(o);
 }
 
@@ -443,7 +443,7 @@ TEST_P(OpenCLBatch, TilesOfOneBodyMatchToo) {
   // CPUs run the requesting bodies in tiles that fit the cache; a 1-byte budget makes every body
   // its own tile (one launch sequence per body, per-tile transfers): the same answers.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  detail::OpenCLOptions o;
+  detail::OpenCLTuning o;
   o.tileBytes = 1;
   everyRequestMatches(o);
 }
@@ -452,12 +452,12 @@ TEST_P(OpenCLBatch, LaunchedIterationsMatchToo) {
   // CPUs run the PCG iterations of rounds of small bodies in one launch (pcg_iterate_group); the
   // launched iterations, which larger bodies and GPUs take, give the same answers.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  detail::OpenCLOptions o;
+  detail::OpenCLTuning o;
   o.groupPcg = 0;
   everyRequestMatches(o);
 }
 
-// The CPU tile budget (segment_engine.cpp: measured on 8 and 32 MiB L3s): 8 MiB where the cache
+// The CPU tile budget (tuning.hpp; docs/performance.md: measured on 8 and 32 MiB L3s): 8 MiB where the cache
 // holds it, the whole cache below that, a quarter of it above 32 MiB.
 TEST(OpenCLBatchTiles, DefaultTileBytesFollowsTheCache) {
   constexpr std::size_t MiB = std::size_t{1} << 20;
@@ -482,7 +482,7 @@ TEST_P(OpenCLBatch, WarmAndColdStartsInOneRoundMatchEachBodyAlone) {
   s.maxIterations = 10;  // capped: each answer depends on its start and on A x
   s.tolerance = 1e-14;
   for (std::size_t tileBytes : {std::size_t{0}, std::size_t{1}}) {
-    detail::OpenCLOptions o;
+    detail::OpenCLTuning o;
     if (tileBytes) o.tileBytes = static_cast<long long>(tileBytes);
     auto batch = batchOf(ps, s, o);
     auto singles = singlesOf(ps, s, o);
@@ -535,26 +535,26 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
   // Per-item partials (the CPU configuration) on every device: on a GPU this checks the group
   // kernel's barriers and fences on real hardware (PoCL runs each barrier as a full split,
   // whatever its flags). Teams are for CPU devices only (their hand-offs need coherent caches).
-  detail::OpenCLOptions grouped, launched;
-  grouped.treeReduce = launched.treeReduce = 0;
+  detail::OpenCLTuning grouped, launched;
+  grouped.workGroupSums = launched.workGroupSums = 0;
   grouped.groupPcg = 1;
   grouped.teamPcg = 0;
   grouped.groupPcgSmallElements = 1 << 20;  // every round takes it, whatever the device's cores
   launched.groupPcg = 0;
   struct Way {
     std::string name;
-    detail::OpenCLOptions options;
+    detail::OpenCLTuning options;
     unsigned long long (*launches)();
   };
   // A work-group per compute unit takes the bodies in turn from a claim word; with one, it takes
   // every body, one after the other.
-  detail::OpenCLOptions single = grouped;
-  single.groupPcgTakers = 1;
+  detail::OpenCLTuning single = grouped;
+  single.claimWorkGroups = 1;
   std::vector<Way> ways = {{"one work-group per body", grouped, &detail::groupPcgLaunchCount},
                            {"one work-group taking every body in turn", single, &detail::groupPcgLaunchCount}};
   if (context()->info().cpu)
     for (std::size_t team : {2, 3, 8}) {
-      detail::OpenCLOptions t = grouped;
+      detail::OpenCLTuning t = grouped;
       t.teamPcg = 1;
       t.teamPcgSize = team;
       ways.push_back({"teams of " + std::to_string(team), t, &detail::teamPcgLaunchCount});
@@ -635,9 +635,9 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
   for (const Variant& variant : variants) {
     const std::vector<detail::Problem>& ps = variant.bodies;
     const std::size_t K = ps.size();
-    detail::OpenCLOptions packed = oneLaunchRounds(1, variant.order, variant.chunk);
-    const detail::OpenCLOptions grouped = oneLaunchRounds(0, variant.order, variant.chunk);
-    packed.packPcgTakers = variant.takers;
+    detail::OpenCLTuning packed = oneLaunchRounds(1, variant.order, variant.chunk);
+    const detail::OpenCLTuning grouped = oneLaunchRounds(0, variant.order, variant.chunk);
+    packed.claimWorkGroups = variant.takers;
     const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
     const detail::SystemCoeffs stat{0.0, 0.0, 1.0};
     for (const SolverDesc& s : pcgSettings()) {
@@ -706,7 +706,7 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
   const std::size_t K = ps.size();
   // The mesh's own numbering, so that the rotated copies pack under COROFEM_OPENCL_REORDER=1 too
   // (their Morton orders differ).
-  const detail::OpenCLOptions packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
+  const detail::OpenCLTuning packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
   const detail::SystemCoeffs c{900.0, 30.0, 1.0};
   std::vector<Eigen::VectorXd> x(K), rhs(K);
   for (std::size_t i = 0; i < K; ++i) {
@@ -714,7 +714,7 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
     rhs[i] = randomVector(ps[i].dofCount(), 1700 + static_cast<unsigned>(i));
   }
   // Solves every body on a batch with the given options and cap: the requests (stats) and the x.
-  auto solveAll = [&](const detail::OpenCLOptions& o, int cap, std::vector<Eigen::VectorXd>& sol) {
+  auto solveAll = [&](const detail::OpenCLTuning& o, int cap, std::vector<Eigen::VectorXd>& sol) {
     SolverDesc s = solver();
     s.preconditioner = PreconditionerKind::Diagonal;
     s.maxIterations = cap;
@@ -766,12 +766,12 @@ TEST_P(OpenCLBatch, UnpackedBodyStoppedAtTheSetUpStaysStoppedBesidePacks) {
   const std::vector<detail::Problem> ps = instances(11);
   const std::size_t K = ps.size();
   // The mesh's own numbering: the copies pack under COROFEM_OPENCL_REORDER=1 too.
-  const detail::OpenCLOptions packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
+  const detail::OpenCLTuning packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
   const detail::SystemCoeffs c{900.0, 30.0, 1.0};
   for (PreconditionerKind pc : {PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
     SolverDesc s = solver();
     s.preconditioner = pc;
-    auto run = [&](const detail::OpenCLOptions& o, std::vector<Eigen::VectorXd>& sol) {
+    auto run = [&](const detail::OpenCLTuning& o, std::vector<Eigen::VectorXd>& sol) {
       auto batch = batchOf(ps, s, o);
       std::vector<Eigen::VectorXd> x(K), rhs(K), x0(K);
       std::vector<BatchRequest> set, apply, solves;
@@ -819,7 +819,7 @@ TEST_P(OpenCLBatch, CopiesOfOneMeshBatchedGiveEachAlonesBits) {
   s.maxIterations = 10;
   const detail::SystemCoeffs c{14400.0, 120.0, 1.0};
   for (int order : {1, -1, 0}) {
-    detail::OpenCLOptions o;
+    detail::OpenCLTuning o;
     o.localityOrder = order;
     auto batch = batchOf(ps, s, o);
     auto singles = singlesOf(ps, s, o);
@@ -844,14 +844,12 @@ TEST_P(OpenCLBatch, CopiesOfOneMeshBatchedGiveEachAlonesBits) {
 }
 
 TEST_P(OpenCLBatch, PackRuleTakesPacksWhereTheyShortenTheRound) {
-  // By default (OpenCLOptions::packPcg = -1) a round packs a mesh's bodies only where
+  // By default (OpenCLTuning::packPcg = -1) a round packs a mesh's bodies only where
   // ceil(bodies / cores) exceeds 2.5 x ceil(packs / cores) (SegmentEngine::kPackCost): cores + 1
   // copies stay in one work-group each (2 per core at most against a pack on one core), 8 x cores
-  // copies take packs; COROFEM_OPENCL_PACK_PCG=0 never packs.
+  // copies take packs.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   if (!context()->info().cpu || context()->info().gpu) GTEST_SKIP() << "packs run on CPU devices only";
-  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env)
-    GTEST_SKIP() << "COROFEM_OPENCL_PACK_PCG is set: the default rule is not in force";
   const std::size_t cores = std::max<std::size_t>(1, context()->info().computeUnits);
   for (const auto& [count, packs] : {std::pair<std::size_t, bool>{cores + 1, false}, {8 * cores, true}}) {
     SCOPED_TRACE(std::to_string(count) + " copies on " + std::to_string(cores) + " compute units");
@@ -880,17 +878,17 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
   if (!context()->info().cpu) GTEST_SKIP() << "teams run on CPU devices only";
   const std::vector<detail::Problem> ps = bodiesWithABlock();
   const std::size_t K = ps.size();
-  detail::OpenCLOptions launched;
+  detail::OpenCLTuning launched;
   launched.groupPcg = 0;
   for (std::size_t team : {2, 5}) {
-    detail::OpenCLOptions teamed;
+    detail::OpenCLTuning teamed;
     teamed.groupPcg = 1;
     teamed.teamPcg = 1;
     teamed.teamPcgSize = team;
     // The claims' 32-bit epochs wrap within the first rounds (the host resets the claim words):
     // without the reset, every chunk would look claimed and the iterations would do nothing.
-    teamed.teamEpochStart = 0xffffffffu - 20000u;  // each round advances 4 x (cap - 1) = 7,996
     auto a = batchOf(ps, solver(), teamed), b = batchOf(ps, solver(), launched);
+    detail::SegmentEngineTestAccess::setTeamEpoch(a->engine(), 0xffffffffu - 20000u);  // a round advances 4 x (cap - 1) = 7,996
     const unsigned long long before = detail::teamPcgLaunchCount();
     int rounds = 0;
     for (int frame = 0; frame < 3; ++frame) {
@@ -934,8 +932,8 @@ TEST_P(OpenCLBatch, OneLaunchRuleLeavesLargeAndUnevenRoundsLaunched) {
   // lopsided round is launched.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const std::vector<detail::Problem> ps = bodies();
-  detail::OpenCLOptions o;
-  o.treeReduce = 0;  // per-item partials, as on CPUs: on a GPU too
+  detail::OpenCLTuning o;
+  o.workGroupSums = 0;  // per-item partials, as on CPUs: on a GPU too
   o.groupPcg = 1;
   o.teamPcg = 0;  // the team rule: TeamRuleTakesRoundsOfFewerBodiesThanCores
   o.groupPcgSmallElements = 100;
@@ -967,7 +965,7 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   if (!context()->info().cpu) GTEST_SKIP() << "teams run on CPU devices only";
   const std::vector<detail::Problem> ps = bodies();
-  detail::OpenCLOptions o;
+  detail::OpenCLTuning o;
   o.groupPcg = 1;
   o.teamPcg = 1;
   o.groupPcgSmallElements = 100;
@@ -1052,7 +1050,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
     }
     return a;
   };
-  detail::OpenCLOptions launched;
+  detail::OpenCLTuning launched;
   launched.groupPcg = 0;
   const Answers expected = solveRounds(*detail::createOpenCLBatchDeviceOn(all, s, context(), launched));
   ASSERT_TRUE(expected.error.empty()) << expected.error;
@@ -1060,7 +1058,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
   constexpr int kRepeats = 3;
   Answers got[2];
   auto worker = [&](int t) {
-    detail::OpenCLOptions o;
+    detail::OpenCLTuning o;
     o.groupPcg = 1;
     o.teamPcg = 1;
     o.teamPcgSize = t == 0 ? 2 : 8;
@@ -1238,23 +1236,16 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   // here (work-group 64, 8 elements per work-item, 4 nodes per PCG work-item, per-item partials):
   // elements padded to 512 per body, nodes to 256.
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  detail::OpenCLOptions o;
+  detail::OpenCLTuning o;
   o.workGroupSize = 64;
-  o.vectorWidth = 8;
-  o.nodeChunk = 4;
-  o.treeReduce = 0;
+  o.elementsPerItem = 8;
+  o.nodesPerItem = 4;
+  o.workGroupSums = 0;
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t r = isDouble() ? 8 : 4;  // real; sum_real is the same outside mixed precision
-  const char* ewf = std::getenv("COROFEM_OPENCL_ENERGY_WITH_FORCES");
-  const bool energyPerItem = !(ewf && std::string(ewf) == "0");  // per-item partials (no trees): on
-  const char* tp = std::getenv("COROFEM_OPENCL_TEAM_PCG");
-  const char* gp = std::getenv("COROFEM_OPENCL_GROUP_PCG");
-  const bool teams = context()->info().cpu && !context()->info().gpu && context()->info().computeUnits > 1 &&
-                     detail::usableCpus() >= context()->info().computeUnits && !(tp && std::string(tp) == "0") &&
-                     !(gp && std::string(gp) == "0");
-  const bool group = context()->info().cpu && !context()->info().gpu && !(gp && std::string(gp) == "0");
+  const bool group = !context()->info().gpu;  // pcg_iterate_group (per-item partials); teams are off by default
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
-                      bool stored, bool quaternion) {
+                      bool quaternion, bool teams = false) {
     std::size_t S = 0, N = 0, E = 0, claims = 0;
     for (const detail::Problem* p : set) {
       const std::size_t s = (p->mesh.tetCount() + 511) / 512 * 512, n = (p->mesh.nodeCount() + 255) / 256 * 256;
@@ -1267,9 +1258,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     auto buf = [](std::size_t b) { return std::max<std::size_t>(b, 16); };  // the smallest buffer: 16 bytes
     std::size_t bytes = buf(4 * (S / 512)) + buf(4 * (N / 64)) + 4 * 8 * K + r * 8 * K;  // segment tables
     bytes += 4 * 4 * S + r * (10 + 9 + 12) * S;  // corners, geometry, a_i, element outputs
-    if (stored || quaternion) bytes += r * 9 * S;   // R: read by those kernels only
-    if (quaternion) bytes += r * 4 * S;
-    if (stored) bytes += r * 78 * S;
+    if (quaternion) bytes += r * 9 * S + r * 4 * S;   // R (every pass writes it) and the quaternions
     bytes += 4 * (N + 1) + 4 * 4 * E;  // gather lists
     bytes += r * 3 * N * (1 + 1 + 7);  // positions, free mask, x b r u p w s
     if (mass) bytes += r * 3 * N;
@@ -1277,10 +1266,9 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
       bytes += r * (pc == PreconditionerKind::BlockDiagonal ? 6 + 9 : 3 + 3) * N;
     // Two partial buffers (the first also holds element_forces' energy per element work-item:
     // S / 8 reals on CPUs), scalars.
-    bytes += std::max(r * 3 * std::max(S / 512, N / 4), energyPerItem ? r * (S / 8) : 0) + r * 3 * (N / 4) +
-             r * 12 * K;
-    if (teams && !stored) bytes += 4 * (16 * K + claims);  // pcg_iterate_team's state (stored K_e: none)
-    if (group && !stored) bytes += buf(4 * (K + 1));  // pcg_iterate_group's list of bodies and claim word
+    bytes += std::max(r * 3 * std::max(S / 512, N / 4), r * (S / 8)) + r * 3 * (N / 4) + r * 12 * K;
+    if (teams) bytes += 4 * (16 * K + claims);  // pcg_iterate_team's state
+    if (group) bytes += buf(4 * (K + 1));  // pcg_iterate_group's list of bodies and claim word
     return bytes;
   };
   SolverDesc s = solver();
@@ -1291,9 +1279,9 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   zeroMass.lumpedMass.setZero();
   auto ctx = context();
   const std::size_t dynamicBytes = detail::createOpenCLBackendOn(beam, s, ctx, o)->allocatedBytes();
-  EXPECT_EQ(dynamicBytes, expected({&beam}, true, s.preconditioner, false, false));
+  EXPECT_EQ(dynamicBytes, expected({&beam}, true, s.preconditioner, false));
   const std::size_t staticBytes = detail::createOpenCLBackendOn(staticBeam, s, ctx, o)->allocatedBytes();
-  EXPECT_EQ(staticBytes, expected({&beam}, false, s.preconditioner, false, false));
+  EXPECT_EQ(staticBytes, expected({&beam}, false, s.preconditioner, false));
   EXPECT_EQ(dynamicBytes - staticBytes, r * 3 * 256) << "exactly the mass buffer";
   EXPECT_EQ(detail::createOpenCLBackendOn(zeroMass, s, ctx, o)->allocatedBytes(), staticBytes);
   {
@@ -1310,28 +1298,28 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     linear.formulation = Formulation::Linear;
     EXPECT_EQ(detail::createOpenCLBackendOn(linear, s, ctx, o)->allocatedBytes(), dynamicBytes - r * 9 * 512);
   }
-  {
-    detail::OpenCLOptions stored = o;
-    stored.storedStiffness = true;
-    EXPECT_EQ(detail::createOpenCLBackendOn(beam, s, ctx, stored)->allocatedBytes(),
-              expected({&beam}, true, s.preconditioner, true, false));
+  if (group) {
+    detail::OpenCLTuning teamed = o;
+    teamed.teamPcg = 1;
+    EXPECT_EQ(detail::createOpenCLBackendOn(beam, s, ctx, teamed)->allocatedBytes(),
+              expected({&beam}, true, s.preconditioner, false, context()->info().cpu));
   }
   {
     SolverDesc q = s;
     q.rotation = RotationMethod::Quaternion;
     q.preconditioner = PreconditionerKind::None;
     EXPECT_EQ(detail::createOpenCLBackendOn(beam, q, ctx, o)->allocatedBytes(),
-              expected({&beam}, true, PreconditionerKind::None, false, true));
+              expected({&beam}, true, PreconditionerKind::None, true));
   }
   {
     SolverDesc d = s;  // the diagonal preconditioner: diagonal blocks (3 per node), not 6
     d.preconditioner = PreconditionerKind::Diagonal;
     EXPECT_EQ(detail::createOpenCLBackendOn(beam, d, ctx, o)->allocatedBytes(),
-              expected({&beam}, true, PreconditionerKind::Diagonal, false, false));
+              expected({&beam}, true, PreconditionerKind::Diagonal, false));
   }
   std::vector<const detail::Problem*> all;
   for (const auto& p : ps) all.push_back(&p);
-  EXPECT_EQ(batchOf(ps, s, o)->allocatedBytes(), expected(all, true, s.preconditioner, false, false));
+  EXPECT_EQ(batchOf(ps, s, o)->allocatedBytes(), expected(all, true, s.preconditioner, false));
   {
     // Packs (pcg_iterate_pack): 11 copies of one mesh of 300 tets and 108 nodes take 2 slots of 8
     // lanes, each with rows for 304 elements and 112 nodes (padded to 8), and the mesh's corners
@@ -1340,7 +1328,7 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     // mask, mass and block inverse (7 x 3, 6, 3, 3 and 9 rows per node) and 64 partial triples per
     // slot (the bodies' own count).
     const std::vector<detail::Problem> copies = instances(11, false);  // one numbering, Morton or not
-    detail::OpenCLOptions packed = o, plain = o;
+    detail::OpenCLTuning packed = o, plain = o;
     packed.groupPcg = plain.groupPcg = 1;
     packed.packPcg = 1;
     plain.packPcg = 0;

@@ -22,16 +22,17 @@ const char* kTinySource = R"(
 __kernel void scale(__global float* v, const float s) { v[get_global_id(0)] *= s; }
 )";
 
-/// Points $COROFEM_KERNEL_CACHE at a fresh folder for the test, restoring it afterwards.
+/// Points $COROFEM_CACHE_DIR at a fresh folder for the test (the kernel cache is its kernels/
+/// folder, `dir`), restoring it afterwards.
 class ScopedCacheDir {
  public:
   explicit ScopedCacheDir(const fs::path& dir) : dir_(dir) {
-    if (const char* old = std::getenv("COROFEM_KERNEL_CACHE")) old_ = old, hadOld_ = true;
-    setenv("COROFEM_KERNEL_CACHE", dir.string().c_str(), 1);
+    if (const char* old = std::getenv("COROFEM_CACHE_DIR")) old_ = old, hadOld_ = true;
+    setenv("COROFEM_CACHE_DIR", dir.parent_path().string().c_str(), 1);
   }
   ~ScopedCacheDir() {
-    if (hadOld_) setenv("COROFEM_KERNEL_CACHE", old_.c_str(), 1);
-    else unsetenv("COROFEM_KERNEL_CACHE");
+    if (hadOld_) setenv("COROFEM_CACHE_DIR", old_.c_str(), 1);
+    else unsetenv("COROFEM_CACHE_DIR");
   }
   const fs::path& dir() const { return dir_; }
 

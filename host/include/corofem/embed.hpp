@@ -137,6 +137,10 @@ struct DeviceSurfaceOptions {
   /// positions in vertexBuffer() and the normals in normalBuffer(), for renderers that bind them as
   /// separate vertex buffers. The same values either way, bit for bit.
   bool separateStreams = false;
+  /// Vertices per work-item vector of the normal pass: 1, 8 or 16 (the same values, bit for bit,
+  /// at any width); 0 = the device's (1 on GPUs, whose warps coalesce one vertex per work-item;
+  /// 16 in float and 8 in double on CPU devices, one AVX-512 register).
+  std::size_t normalPassLanes = 0;
 };
 
 /// One device buffer of a DeviceSurface: what it holds and its size as allocated.

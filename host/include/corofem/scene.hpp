@@ -6,6 +6,7 @@
 #include <corofem/status.hpp>
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -148,6 +149,9 @@ struct BackendDesc {
   BackendKind kind = BackendKind::Auto;
   std::string device;  ///< device name substring or index ("" = the scheduler's choice)
   bool batch = true;   ///< bodies scheduled on one OpenCL device share its buffers and kernel launches
+  /// "auto": bodies with fewer elements than this run on the reference backend without a
+  /// calibration (a device launch then costs more than the whole step), >= 0.
+  std::size_t minDeviceElements = 512;
 };
 
 /// A probe: the mean displacement of a node set, written to probes.csv each step/increment.

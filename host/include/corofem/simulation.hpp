@@ -6,9 +6,11 @@
 #pragma once
 
 #include <corofem/embed.hpp>
+#include <corofem/log.hpp>
 #include <corofem/mesh.hpp>
 #include <corofem/scene.hpp>
 #include <corofem/status.hpp>
+#include <corofem/tuning.hpp>
 
 #include <memory>
 #include <string>
@@ -35,11 +37,17 @@ struct EnergyReport {
   double externalWork = 0.0;  ///< work of the external loads since the start
 };
 
+/// What an application adds to a scene when it creates a Simulation.
+struct SimulationOptions {
+  LogDesc log;          ///< where the library's messages go (none: dropped)
+  OpenCLTuning opencl;  ///< the OpenCL backend's kernels and strategies (automatic by default)
+};
+
 class Simulation {
  public:
   /// Loads meshes, builds the problem of every body and the backend. Errors: bad input (mesh,
   /// node set, material), not compiled in (backend), device error.
-  static Result<Simulation> create(const Scene& scene);
+  static Result<Simulation> create(const Scene& scene, const SimulationOptions& options = {});
 
   Simulation(Simulation&&) noexcept;
   Simulation& operator=(Simulation&&) noexcept;

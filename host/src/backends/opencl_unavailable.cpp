@@ -8,14 +8,14 @@
 
 namespace corofem::detail {
 
-std::unique_ptr<Backend> createOpenCLBackend(const Problem&, const SolverDesc&, const std::string&) {
+std::unique_ptr<Backend> createOpenCLBackend(const Problem&, const SolverDesc&, const std::string&, const OpenCLTuning&) {
   fail(ErrorCode::NotCompiledIn,
        "the OpenCL backend is not compiled into this corofem build; reconfigure with "
        "-DCOROFEM_WITH_OPENCL=ON (cmake --preset opencl), or use \"backend\": \"reference\"");
 }
 
 std::unique_ptr<BatchDevice> createOpenCLBatchDevice(const std::vector<const Problem*>&, const SolverDesc&,
-                                                     const std::string&) {
+                                                     const std::string&, const OpenCLTuning&) {
   fail(ErrorCode::NotCompiledIn,
        "the OpenCL batch device (many bodies, one set of launches) is not compiled into this corofem "
        "build; reconfigure with -DCOROFEM_WITH_OPENCL=ON (cmake --preset opencl), or use \"backend\": "

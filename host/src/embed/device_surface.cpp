@@ -29,13 +29,12 @@
 namespace corofem {
 
 namespace detail {
-std::size_t surfaceLanes(bool gpu, bool doublePrecision) {
-  if (const char* env = std::getenv("COROFEM_SURFACE_LANES"); env && *env) {  // tests and tuning
-    const std::string lanes(env);
-    if (lanes != "1" && lanes != "8" && lanes != "16")
-      fail(ErrorCode::BadInput, "COROFEM_SURFACE_LANES='", lanes, "': give 1, 8 or 16 (vertices per work-item "
-           "vector in the surface normal pass), or unset it for the device's default");
-    return static_cast<std::size_t>(std::stoul(lanes));
+std::size_t surfaceLanes(bool gpu, bool doublePrecision, std::size_t requested) {
+  if (requested != 0) {
+    if (requested != 1 && requested != 8 && requested != 16)
+      fail(ErrorCode::BadInput, "DeviceSurfaceOptions::normalPassLanes = ", requested, ": give 1, 8 or 16 (vertices "
+           "per work-item vector in the surface normal pass), or 0 for the device's default");
+    return requested;
   }
   // CPUs: vectors of 16 floats or 8 doubles (one AVX-512 register, two AVX2 ones). GPUs: one vertex
   // per work-item (SURF_W = 1): a warp's loads of consecutive vertices coalesce, while 16-wide
@@ -404,7 +403,7 @@ DeviceSurface DeviceSurface::make(const SurfaceBinding& binding, const DeviceSur
   if (impl->doublePrecision && !impl->ctx->info().fp64)
     fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
          "' has no cl_khr_fp64; use float (doublePrecision = false) or another device");
-  const std::size_t lanes = detail::surfaceLanes(impl->ctx->info().gpu, impl->doublePrecision);
+  const std::size_t lanes = detail::surfaceLanes(impl->ctx->info().gpu, impl->doublePrecision, options.normalPassLanes);
   Impl& k = *impl;
   try {
     k.realSize = k.doublePrecision ? sizeof(double) : sizeof(float);
@@ -632,7 +631,7 @@ DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::
     fail(ErrorCode::Internal, "DeviceSurfaceGroup: give the position buffer's context, queue and device");
   auto ctx = cl::Context::adopt(options.context, options.queue, options.deviceId);
   const bool gpu = ctx->info().gpu;
-  const std::size_t lanes = surfaceLanes(gpu, options.doublePrecision), blocksPerItem = gpu ? 1 : 4;
+  const std::size_t lanes = surfaceLanes(gpu, options.doublePrecision, options.normalPassLanes), blocksPerItem = gpu ? 1 : 4;
   // Each body starts at a work-item's first block (its blocks are its own) and at an address a
   // sub-buffer may start at (CL_DEVICE_MEM_BASE_ADDR_ALIGN, in bits).
   cl_uint alignBits = 0;

@@ -28,9 +28,10 @@ struct DeviceSurfaceLayout {
 DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding, std::size_t lanes);
 
 /// Vertices per work-item vector in the normal pass, as DeviceSurface::create chooses them:
-/// COROFEM_SURFACE_LANES (1, 8 or 16; another value throws Error(BadInput) naming the fix), else 1 on
-/// GPUs, 16 in float and 8 in double on CPUs.
-std::size_t surfaceLanes(bool gpu, bool doublePrecision);
+/// `requested` (DeviceSurfaceOptions::normalPassLanes: 1, 8 or 16; another value throws
+/// Error(BadInput) naming the fix), or for 0 the device's: 1 on GPUs, 16 in float and 8 in double
+/// on CPUs.
+std::size_t surfaceLanes(bool gpu, bool doublePrecision, std::size_t requested = 0);
 
 /// Tests: while set, every DeviceSurfaceGroup being made fails as an allocation the device refused
 /// (Error(DeviceError)), as a batch whose merged surfaces exceed the device's allocations does.

@@ -17,11 +17,11 @@
 namespace corofem::detail {
 
 FailoverBackend::FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
-                                 bool fallbackAtCreate)
-    : problem_(problem), solver_(solver), order_(std::move(order)) {
+                                 bool fallbackAtCreate, const OpenCLTuning& tuning)
+    : problem_(problem), solver_(solver), tuning_(tuning), order_(std::move(order)) {
   if (order_.empty()) fail(ErrorCode::Internal, "body '", problem_.name, "': no backend candidate");
   try {
-    current_ = createBackendFor(problem_, solver_, order_[0]);
+    current_ = createBackendFor(problem_, solver_, order_[0], tuning_);
   } catch (const Error& e) {
     if (!fallbackAtCreate || e.code() != ErrorCode::DeviceError || order_.size() < 2) throw;
     advance("create", e.what());
@@ -29,8 +29,8 @@ FailoverBackend::FailoverBackend(const Problem& problem, const SolverDesc& solve
 }
 
 FailoverBackend::FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
-                                 std::unique_ptr<Backend> first)
-    : problem_(problem), solver_(solver), order_(std::move(order)), current_(std::move(first)) {
+                                 std::unique_ptr<Backend> first, const OpenCLTuning& tuning)
+    : problem_(problem), solver_(solver), tuning_(tuning), order_(std::move(order)), current_(std::move(first)) {
   if (order_.empty()) fail(ErrorCode::Internal, "body '", problem_.name, "': no backend candidate");
   if (!current_) fail(ErrorCode::Internal, "body '", problem_.name, "': no first backend");
 }
@@ -51,7 +51,7 @@ void FailoverBackend::advance(const std::string& call, const std::string& error)
         // while it holds the lock.
         static std::mutex creating;
         std::lock_guard<std::mutex> lock(creating);
-        next = createBackendFor(problem_, solver_, order_[index_]);
+        next = createBackendFor(problem_, solver_, order_[index_], tuning_);
       }
       if (havePositions_) next->setPositions(lastX_);
       // Replacing a batch view makes the body leave its group's rendezvous (its destructor).

@@ -2,6 +2,7 @@
 #include "schedule/scheduler.hpp"
 
 #include "solve/body_solver.hpp"
+#include "util/cache_dir.hpp"
 #include "util/error.hpp"
 
 #ifdef COROFEM_WITH_OPENCL
@@ -108,8 +109,8 @@ void writeCache(const std::string& path, const json& j) {
 /// Median wall time (ms) of the body's first step on candidate c: one warm-up, then up to
 /// kCalibrationRepeats repetitions, each undone by rollback() so that every repetition is the
 /// same step. Throws whatever the backend or the driver throws.
-double calibrate(const Problem& problem, const Scene& scene, const Candidate& c) {
-  std::unique_ptr<Backend> backend = createBackendFor(problem, scene.solver, c);
+double calibrate(const Problem& problem, const Scene& scene, const Candidate& c, const OpenCLTuning& tuning) {
+  std::unique_ptr<Backend> backend = createBackendFor(problem, scene.solver, c, tuning);
   std::unique_ptr<BodySolver> solver = createBodySolver(problem, *backend, scene.analysis);
   const int count = scene.analysis.kind == AnalysisDesc::Kind::Static ? std::max(1, scene.analysis.statics.increments)
                                                                       : std::max(1, scene.analysis.dynamics.steps);
@@ -219,9 +220,10 @@ DeviceRequest requestedDevice(const Scene& scene) {
   return {};
 }
 
-std::unique_ptr<Backend> createBackendFor(const Problem& problem, const SolverDesc& solver, const Candidate& c) {
+std::unique_ptr<Backend> createBackendFor(const Problem& problem, const SolverDesc& solver, const Candidate& c,
+                                          const OpenCLTuning& tuning) {
   if (hooks().factory) return hooks().factory(problem, solver, c);
-  if (c.kind == BackendKind::OpenCL) return createOpenCLBackend(problem, solver, c.selector);
+  if (c.kind == BackendKind::OpenCL) return createOpenCLBackend(problem, solver, c.selector, tuning);
   return createReferenceBackend(problem, solver);
 }
 
@@ -237,15 +239,12 @@ int sizeBucket(std::size_t elements) {
 }
 
 std::string schedulerCachePath() {
-  if (const char* d = std::getenv("COROFEM_CACHE_DIR"); d && *d) return (fs::path(d) / "scheduler.json").string();
-  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x)
-    return (fs::path(x) / "corofem" / "scheduler.json").string();
-  if (const char* h = std::getenv("HOME"); h && *h)
-    return (fs::path(h) / ".cache" / "corofem" / "scheduler.json").string();
-  return "";
+  const std::string dir = cacheDirectory();
+  return dir.empty() ? dir : (fs::path(dir) / "scheduler.json").string();
 }
 
-BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Scene& scene) {
+BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Scene& scene,
+                          const OpenCLTuning& tuning) {
   BodySchedule s;
   s.body = desc.name;
   const Candidate reference = referenceCandidate();
@@ -310,17 +309,10 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
     return onlyReference("the Cholesky solver runs only on the reference backend");
   if (candidates.size() == 1) return onlyReference("no OpenCL device in this build or on this machine");
   const std::size_t elements = problem.elements.size();
-  std::size_t minElements = kMinDeviceElements;
-  if (const char* env = std::getenv("COROFEM_SCHEDULER_MIN_ELEMENTS"); env && *env) {
-    char* end = nullptr;
-    const long long v = std::strtoll(env, &end, 10);
-    if (*end != '\0' || v < 0)
-      fail(ErrorCode::BadInput, "COROFEM_SCHEDULER_MIN_ELEMENTS=\"", env, "\" is not an element count >= 0");
-    minElements = static_cast<std::size_t>(v);
-  }
+  const std::size_t minElements = scene.backend.minDeviceElements;
   if (elements < minElements && hooks().candidates.empty())
     return onlyReference(std::to_string(elements) + " elements is below " + std::to_string(minElements) +
-                         " (COROFEM_SCHEDULER_MIN_ELEMENTS): a device launch costs more than the whole step");
+                         " (backend.min_device_elements): a device launch costs more than the whole step");
 
   const std::string path = schedulerCachePath();
   json cache = readCache(path);
@@ -344,7 +336,7 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
     t.fromCache = false;
     allCached = false;
     try {
-      t.msPerStep = calibrate(problem, scene, c);
+      t.msPerStep = calibrate(problem, scene, c, tuning);
     } catch (const Error& e) {
       t.error = std::string(toString(e.code())) + ": " + e.what();
     } catch (const std::exception& e) {

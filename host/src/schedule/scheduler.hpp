@@ -5,7 +5,7 @@
 //   1. An explicit choice wins: the scene's / API's "backend" when it is not "auto", else the
 //      COROFEM_DEVICE environment variable ("reference", "opencl", "opencl:1", "opencl:pthread").
 //   2. "auto": hyperelastic formulations and the Cholesky solver go to the reference backend (the
-//      only one that has them); so does a body below kMinDeviceElements elements (a device launch
+//      only one that has them); so does a body below BackendDesc::minDeviceElements elements (a device launch
 //      then costs more than the whole step; measured numbers in docs/scene-format.md).
 //   3. Otherwise every candidate runs a short calibration: a fresh backend and driver on the body's
 //      own problem take the scene's first step (one warm-up, then up to kCalibrationRepeats timed
@@ -36,9 +36,6 @@
 
 namespace corofem::detail {
 
-/// Bodies smaller than this go to the reference backend under "auto" without calibration
-/// (COROFEM_SCHEDULER_MIN_ELEMENTS overrides it).
-constexpr std::size_t kMinDeviceElements = 512;
 /// Timed repetitions of the calibration step (after one warm-up).
 constexpr int kCalibrationRepeats = 3;
 /// Calibration stops early once one candidate has spent this long (s) on it.
@@ -104,7 +101,8 @@ using BackendFactory =
     std::function<std::unique_ptr<Backend>(const Problem&, const SolverDesc&, const Candidate&)>;
 
 /// Creates the backend of a candidate (through the test factory when one is set).
-std::unique_ptr<Backend> createBackendFor(const Problem& problem, const SolverDesc& solver, const Candidate& c);
+std::unique_ptr<Backend> createBackendFor(const Problem& problem, const SolverDesc& solver, const Candidate& c,
+                                          const OpenCLTuning& tuning = {});
 
 /// Test hooks (not thread-safe; reset with an empty SchedulerHooks{}).
 struct SchedulerHooks {
@@ -118,10 +116,11 @@ void setSchedulerHooksForTesting(SchedulerHooks hooks);
 /// Decides where one body runs (see the top of this file). Never calibrates for an explicit
 /// choice. Throws Error(BadInput) for a bad COROFEM_DEVICE or a formulation the explicit backend
 /// lacks.
-BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Scene& scene);
+BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Scene& scene,
+                          const OpenCLTuning& tuning = {});
 
-/// $COROFEM_CACHE_DIR/scheduler.json, else $XDG_CACHE_HOME/corofem/scheduler.json, else
-/// ~/.cache/corofem/scheduler.json ("" when none of them is set).
+/// scheduler.json in the cache folder (util/cache_dir.hpp: $COROFEM_CACHE_DIR, else
+/// $XDG_CACHE_HOME/corofem, else ~/.cache/corofem; "" when there is none).
 std::string schedulerCachePath();
 
 /// What the calibration cache's times were measured with: corofem's version and, in OpenCL builds,
@@ -144,11 +143,11 @@ class FailoverBackend final : public Backend {
   /// Creates the first candidate that can be created. With `fallbackAtCreate` false a failure of
   /// the first candidate is thrown as is (an explicit choice that cannot start is an error).
   FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
-                  bool fallbackAtCreate);
+                  bool fallbackAtCreate, const OpenCLTuning& tuning = {});
   /// Starts on `first`, an already-made backend that stands for order[0] (a body's view of a
   /// batch, solve/batch_group.hpp); a device failure moves to order[1], order[2], ... as above.
   FailoverBackend(const Problem& problem, const SolverDesc& solver, std::vector<Candidate> order,
-                  std::unique_ptr<Backend> first);
+                  std::unique_ptr<Backend> first, const OpenCLTuning& tuning = {});
   ~FailoverBackend() override;
 
   std::string name() const override;
@@ -177,6 +176,7 @@ class FailoverBackend final : public Backend {
 
   const Problem& problem_;
   SolverDesc solver_;
+  OpenCLTuning tuning_;
   std::vector<Candidate> order_;
   std::size_t index_ = 0;
   std::unique_ptr<Backend> current_;

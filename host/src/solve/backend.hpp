@@ -10,6 +10,7 @@
 #include "model/problem.hpp"
 
 #include <corofem/scene.hpp>
+#include <corofem/tuning.hpp>
 
 #include <Eigen/Core>
 
@@ -105,6 +106,6 @@ std::unique_ptr<Backend> createReferenceBackend(const Problem& problem, const So
 /// The OpenCL backend (co-rotational and linear formulations). Throws Error(NotCompiledIn) when
 /// the library was built without COROFEM_WITH_OPENCL, Error(DeviceError) when no device fits.
 std::unique_ptr<Backend> createOpenCLBackend(const Problem& problem, const SolverDesc& solver,
-                                             const std::string& deviceSelector);
+                                             const std::string& deviceSelector, const OpenCLTuning& tuning = {});
 
 }  // namespace corofem::detail

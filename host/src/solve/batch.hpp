@@ -89,6 +89,7 @@ std::unique_ptr<BatchDevice> createLoopBatchDevice(std::vector<std::unique_ptr<B
 /// Error(NotCompiledIn) without COROFEM_WITH_OPENCL, Error(BadInput) for a formulation other than
 /// co-rotational or linear, Error(DeviceError) for a device problem. The problems must outlive it.
 std::unique_ptr<BatchDevice> createOpenCLBatchDevice(const std::vector<const Problem*>& problems,
-                                                     const SolverDesc& solver, const std::string& deviceSelector);
+                                                     const SolverDesc& solver, const std::string& deviceSelector,
+                                                     const OpenCLTuning& tuning = {});
 
 }  // namespace corofem::detail

@@ -514,9 +514,9 @@ std::vector<std::exception_ptr> BatchGroup::runStep(const std::vector<std::size_
 
 // ------------------------------------------------------------------ factory
 std::unique_ptr<BatchDevice> createBatchDeviceFor(const std::vector<const Problem*>& problems, const SolverDesc& solver,
-                                                  const std::string& deviceSelector) {
+                                                  const std::string& deviceSelector, const OpenCLTuning& tuning) {
   if (testFactory()) return testFactory()(problems, solver, deviceSelector);
-  return createOpenCLBatchDevice(problems, solver, deviceSelector);
+  return createOpenCLBatchDevice(problems, solver, deviceSelector, tuning);
 }
 
 void setBatchDeviceFactoryForTesting(BatchDeviceFactory factory) { testFactory() = std::move(factory); }

@@ -113,7 +113,7 @@ class BatchGroup {
 /// Creates the batch device for bodies scheduled on one OpenCL device: createOpenCLBatchDevice, or
 /// the factory set by setBatchDeviceFactoryForTesting.
 std::unique_ptr<BatchDevice> createBatchDeviceFor(const std::vector<const Problem*>& problems, const SolverDesc& solver,
-                                                  const std::string& deviceSelector);
+                                                  const std::string& deviceSelector, const OpenCLTuning& tuning = {});
 
 using BatchDeviceFactory = std::function<std::unique_ptr<BatchDevice>(
     const std::vector<const Problem*>& problems, const SolverDesc& solver, const std::string& deviceSelector)>;

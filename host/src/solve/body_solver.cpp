@@ -7,7 +7,8 @@
 
 namespace corofem::detail {
 
-BodySolver::BodySolver(const Problem& problem, Backend& backend) : problem_(problem), backend_(backend) {
+BodySolver::BodySolver(const Problem& problem, Backend& backend, const Log& log)
+    : problem_(problem), backend_(backend), log_(log) {
   const Eigen::Index n = problem.restPositions.size();
   freeMask_ = Eigen::ArrayXd::Ones(n);
   for (Eigen::Index d = 0; d < n; ++d)
@@ -72,10 +73,11 @@ void BodySolver::setBackendPositions(const Eigen::VectorXd& x, bool committed) {
   backendAtCommitted_ = committed;
 }
 
-std::unique_ptr<BodySolver> createBodySolver(const Problem& problem, Backend& backend, const AnalysisDesc& analysis) {
+std::unique_ptr<BodySolver> createBodySolver(const Problem& problem, Backend& backend, const AnalysisDesc& analysis,
+                                             const Log& log) {
   if (analysis.kind == AnalysisDesc::Kind::Static)
-    return std::make_unique<StaticSolver>(problem, backend, analysis.statics);
-  return std::make_unique<DynamicSolver>(problem, backend, analysis.dynamics);
+    return std::make_unique<StaticSolver>(problem, backend, analysis.statics, log);
+  return std::make_unique<DynamicSolver>(problem, backend, analysis.dynamics, log);
 }
 
 }  // namespace corofem::detail

@@ -11,6 +11,7 @@
 
 #include "model/problem.hpp"
 #include "solve/backend.hpp"
+#include "util/log.hpp"
 
 #include <corofem/scene.hpp>
 
@@ -60,7 +61,7 @@ class BodySolver {
   void syncBackendPositions();
 
  protected:
-  BodySolver(const Problem& problem, Backend& backend);
+  BodySolver(const Problem& problem, Backend& backend, const Log& log);
 
   /// Euclidean norm over the free dofs.
   double freeNorm(const Eigen::VectorXd& v) const;
@@ -71,6 +72,7 @@ class BodySolver {
 
   const Problem& problem_;
   Backend& backend_;
+  const Log& log_;  ///< the Simulation's (debug: per-iteration residuals, substep retries)
   Eigen::ArrayXd freeMask_;   ///< 1 on free dofs, 0 on constrained ones
   double diagonal_ = 1.0;     ///< rest bounding-box diagonal (m), the body's length scale
   /// Force below which a residual counts as zero: the force that strains the whole body by 1e-8,
@@ -113,10 +115,10 @@ class BodySolver {
 /// 1/16 of it, and the sub-increment grows back after two successes (Abaqus-style automatic
 /// incrementation inside the user's increment). Every step() still ends at lambda = k / n; the
 /// report sums the Newton iterations of all attempts. Only when even 1/16 fails does the step throw.
-/// Set COROFEM_DEBUG_NEWTON=1 to print every iteration's residual and step length.
+/// Every iteration's residual and step length go to the log at LogLevel::Debug.
 class StaticSolver final : public BodySolver {
  public:
-  StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc);
+  StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc, const Log& log = Log::none());
   BodyStepStats step(int increment, int incrementCount) override;
   void rollback() override;
 
@@ -210,7 +212,7 @@ class StaticSolver final : public BodySolver {
 /// but dissipates the spin itself (KE down to 1.8 % after 1000 steps).
 class DynamicSolver final : public BodySolver {
  public:
-  DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc);
+  DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc, const Log& log = Log::none());
   BodyStepStats step(int index, int count) override;
   void rollback() override;
   double time() const { return t_; }
@@ -268,7 +270,8 @@ class DynamicSolver final : public BodySolver {
 };
 
 /// Creates the driver the analysis asks for.
+/// Creates the driver the analysis asks for; `log` must outlive it.
 std::unique_ptr<BodySolver> createBodySolver(const Problem& problem, Backend& backend,
-                                             const AnalysisDesc& analysis);
+                                             const AnalysisDesc& analysis, const Log& log = Log::none());
 
 }  // namespace corofem::detail

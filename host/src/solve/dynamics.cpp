@@ -27,8 +27,8 @@ constexpr double kRunawayEnergyRatio = 1.25;
 
 }  // namespace
 
-DynamicSolver::DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc)
-    : BodySolver(problem, backend), desc_(desc) {
+DynamicSolver::DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc, const Log& log)
+    : BodySolver(problem, backend, log), desc_(desc) {
   if (problem.initialVelocity.size() == v_.size()) v_ = problem.initialVelocity;
   v_ = (v_.array() * freeMask_).matrix();  // constrained dofs start at rest
   vPrev_ = v_;
@@ -148,8 +148,9 @@ BodyStepStats DynamicSolver::step(int index, int count) {
       }
     }
   }
-  if (std::getenv("COROFEM_DEBUG_NEWTON") && total.substeps > 1)
-    std::fprintf(stderr, "dynamic step %d/%d: retried, succeeded with %d substeps\n", index, count, total.substeps);
+  if (total.substeps > 1)
+    log_(LogLevel::Debug, "body '", problem_.name, "': time step ", index, "/", count, " retried, succeeded with ",
+         total.substeps, " substeps");
 
   // The rollback copy is the state before the whole step, whatever the substeps.
   keepForRollback(start);
@@ -276,9 +277,8 @@ BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
     v += dv;
     evaluated = false;  // the loop evaluates the new v before it ends
   }
-  if (std::getenv("COROFEM_DEBUG_NEWTON"))
-    std::fprintf(stderr, "dynamic %s: %d Newton iterations, relative residual %.3e -> %.3e\n", where.c_str(),
-                 stats.newtonIterations, initialRelative, stats.residual);
+  log_(LogLevel::Debug, "body '", problem_.name, "': ", where, ": ", stats.newtonIterations,
+       " Newton iterations, relative residual ", sci(initialRelative), " -> ", sci(stats.residual));
   // The loop ends only right after evaluating its v: x and a are that evaluation's, and x and v
   // were checked there.
   if (!allFinite(a)) failHere("produced non-finite velocities or positions", stepFix);

@@ -111,6 +111,8 @@ struct Simulation::Impl {
   };
 
   Scene scene;
+  detail::Log log;       ///< SimulationOptions::log; the drivers hold a reference
+  OpenCLTuning opencl;   ///< SimulationOptions::opencl
   std::vector<Body> bodies;
   std::vector<Batch> batches;
   std::vector<Unbatched> unbatched;
@@ -203,7 +205,8 @@ struct Simulation::Impl {
       for (std::size_t i : members) problems.push_back(bodies[i].problem.get());
       std::unique_ptr<detail::BatchDevice> device;
       try {
-        device = detail::createBatchDeviceFor(problems, scene.solver, bodies[members.front()].schedule.choice().selector);
+        device = detail::createBatchDeviceFor(problems, scene.solver, bodies[members.front()].schedule.choice().selector,
+                                              opencl);
       } catch (const detail::Error& e) {
         unbatched.push_back({members, label, std::string(toString(e.code())) + ": " + e.what()});
         continue;
@@ -218,7 +221,7 @@ struct Simulation::Impl {
       for (std::size_t k = 0; k < members.size(); ++k) {
         Body& b = bodies[members[k]];
         auto failover = std::make_unique<detail::FailoverBackend>(*b.problem, scene.solver, b.schedule.order,
-                                                                  batch.group->view(k));
+                                                                  batch.group->view(k), opencl);
         b.failover = failover.get();
         b.backend = std::move(failover);
         b.batch = static_cast<int>(batches.size());
@@ -523,10 +526,12 @@ struct Simulation::Impl {
   }
 };
 
-Result<Simulation> Simulation::create(const Scene& scene) {
+Result<Simulation> Simulation::create(const Scene& scene, const SimulationOptions& options) {
   return detail::guardResult<Simulation>([&]() {
     auto impl = std::make_unique<Impl>();
     impl->scene = scene;
+    impl->log = detail::Log(options.log);
+    impl->opencl = options.opencl;
     if (scene.bodies.empty())
       detail::fail(ErrorCode::BadInput, "scene '", scene.name, "' has no bodies; add at least one to \"bodies\"");
     for (const BodyDesc& desc : scene.bodies) {
@@ -543,7 +548,7 @@ Result<Simulation> Simulation::create(const Scene& scene) {
 
       // Where the body runs: the explicit choice (scene / API, else COROFEM_DEVICE), or for "auto"
       // the scheduler's calibrated (or cached) choice; hyperelastic bodies always on the reference.
-      body.schedule = detail::scheduleBody(desc, *body.problem, scene);
+      body.schedule = detail::scheduleBody(desc, *body.problem, scene, impl->opencl);
       impl->bodies.push_back(std::move(body));
     }
     impl->formBatches();
@@ -551,11 +556,11 @@ Result<Simulation> Simulation::create(const Scene& scene) {
     for (Impl::Body& body : impl->bodies) {
       if (body.batch < 0) {
         auto failover = std::make_unique<detail::FailoverBackend>(*body.problem, scene.solver, body.schedule.order,
-                                                                  !body.schedule.explicitChoice);
+                                                                  !body.schedule.explicitChoice, impl->opencl);
         body.failover = failover.get();
         body.backend = std::move(failover);
       }
-      body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis);
+      body.solver = detail::createBodySolver(*body.problem, *body.backend, scene.analysis, impl->log);
       // On an OpenCL backend: the surface's buffers and kernels now (a batch's: formSurfaceGroups).
       if (!impl->surfaceGroupOf(body)) Impl::deviceSurfaceOf(body);
     }

@@ -38,8 +38,8 @@ struct AttemptFailed {
 
 }  // namespace
 
-StaticSolver::StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc)
-    : BodySolver(problem, backend), desc_(desc) {
+StaticSolver::StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc, const Log& log)
+    : BodySolver(problem, backend, log), desc_(desc) {
   track_.fext = Eigen::VectorXd::Zero(problem.restPositions.size());
   trackSaved_ = track_;
 }
@@ -51,7 +51,6 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
   // (see the class comment: a linear problem solved exactly converges in one iteration).
   const double linearAcceptance = std::min(1e-8, 1e-2 * desc_.residualTolerance);
   const double displacementFloor = 1e-12 * diagonal_ * std::sqrt(std::max(1.0, freeMask_.sum()));
-  const bool debug = std::getenv("COROFEM_DEBUG_NEWTON") != nullptr;
   const double fextNorm = freeNorm(fext);
 
   const Eigen::Index n = x.size();
@@ -81,9 +80,8 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
       out.relative = relative;
       out.correction = dxNorm / displacementScale;
       stats.residual = relative;
-      if (debug)
-        std::fprintf(stderr, "static lambda %.6g iteration %d: relative residual %.3e, |dx| %.3e\n", lambda,
-                     iteration, relative, dxNorm);
+      log_(LogLevel::Debug, "body '", problem_.name, "': static load factor ", lambda, ", Newton iteration ", iteration,
+           ": relative residual ", sci(relative), ", |dx| ", sci(dxNorm));
       if (!std::isfinite(relative) || !allFinite(x))
         throw AttemptFailed{"produced non-finite forces or positions after " + std::to_string(iteration) +
                             " Newton iterations"};
@@ -164,7 +162,8 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
         if (static_cast<int>(history.size()) > kHistory) history.pop_front();
       }
       dxNorm = t * d.norm();
-      if (debug) std::fprintf(stderr, "  step length %.3g, g0 %.3e, history %zu\n", t, g0, history.size());
+      log_(LogLevel::Debug, "body '", problem_.name, "': line search step length ", t, ", g0 ", sci(g0), ", L-BFGS pairs ",
+           history.size());
       x = trial;
       fint = trialForce;
       r = trialResidual;

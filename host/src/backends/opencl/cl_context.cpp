@@ -126,11 +126,7 @@ std::shared_ptr<Context> Context::createOn(const DeviceInfo& info) {
                                    reinterpret_cast<cl_context_properties>(info.platform), 0};
   ctx->context_ = clCreateContext(props, 1, &info.device, nullptr, nullptr, &status);
   checkCl(status, "clCreateContext", info.name);
-  // COROFEM_OPENCL_PROFILE=1: profiling queue, the backend prints per-kernel device times.
-  const char* profile = std::getenv("COROFEM_OPENCL_PROFILE");
-  const cl_command_queue_properties props2 =
-      (profile && *profile && std::string(profile) != "0") ? CL_QUEUE_PROFILING_ENABLE : 0;
-  ctx->queue_ = clCreateCommandQueue(ctx->context_, info.device, props2, &status);
+  ctx->queue_ = clCreateCommandQueue(ctx->context_, info.device, 0, &status);
   checkCl(status, "clCreateCommandQueue", info.name);
   return ctx;
 }

@@ -75,6 +75,7 @@ class Context {
   void storeProgram(const std::string& key, cl_program program);
 
  private:
+  friend struct ContextTestAccess;  // tests/common/opencl_test_access.hpp
   Context() = default;
   static std::shared_ptr<Context> createOn(const DeviceInfo& info);
   DeviceInfo info_;

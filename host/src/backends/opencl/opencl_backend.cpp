@@ -32,8 +32,8 @@ namespace {
 class OpenCLBackend final : public OpenCLBackendInternal {
  public:
   OpenCLBackend(const Problem& problem, const SolverDesc& solver, std::shared_ptr<cl::Context> ctx,
-                const OpenCLOptions& options)
-      : engine_({&problem}, solver, std::move(ctx), options) {}
+                const OpenCLTuning& tuning)
+      : engine_({&problem}, solver, std::move(ctx), tuning) {}
 
   std::string name() const override { return "opencl"; }
   std::string deviceName() const override { return engine_.deviceDescription(); }
@@ -71,6 +71,7 @@ class OpenCLBackend final : public OpenCLBackendInternal {
     engine_.enqueuePcgIterations(c, iterations);
   }
   void finish() override { engine_.finish(); }
+  SegmentEngine& engine() override { return engine_; }
 
  private:
   /// A round of one: the body's own Backend call; its failure is thrown here.
@@ -89,8 +90,8 @@ class OpenCLBackend final : public OpenCLBackendInternal {
 
 std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& problem, const SolverDesc& solver,
                                                              std::shared_ptr<cl::Context> context,
-                                                             const OpenCLOptions& options) {
-  return std::make_unique<OpenCLBackend>(problem, solver, std::move(context), options);
+                                                             const OpenCLTuning& tuning) {
+  return std::make_unique<OpenCLBackend>(problem, solver, std::move(context), tuning);
 }
 
 std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem& problem,
@@ -98,13 +99,13 @@ std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem
                                                                    cl_context context,
                                                                    cl_command_queue queue,
                                                                    cl_device_id device,
-                                                                   const OpenCLOptions& options) {
-  return createOpenCLBackendOn(problem, solver, cl::Context::adopt(context, queue, device), options);
+                                                                   const OpenCLTuning& tuning) {
+  return createOpenCLBackendOn(problem, solver, cl::Context::adopt(context, queue, device), tuning);
 }
 
 std::unique_ptr<Backend> createOpenCLBackend(const Problem& problem, const SolverDesc& solver,
-                                             const std::string& deviceSelector) {
-  return createOpenCLBackendOn(problem, solver, cl::Context::shared(deviceSelector));
+                                             const std::string& deviceSelector, const OpenCLTuning& tuning) {
+  return createOpenCLBackendOn(problem, solver, cl::Context::shared(deviceSelector), tuning);
 }
 
 }  // namespace corofem::detail

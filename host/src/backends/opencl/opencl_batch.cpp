@@ -16,11 +16,11 @@ namespace corofem::detail {
 
 namespace {
 
-class OpenCLBatchDevice final : public BatchDevice {
+class OpenCLBatchDevice final : public OpenCLBatchDeviceInternal {
  public:
   OpenCLBatchDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
-                    std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options)
-      : engine_(problems, solver, std::move(ctx), options) {}
+                    std::shared_ptr<cl::Context> ctx, const OpenCLTuning& tuning)
+      : engine_(problems, solver, std::move(ctx), tuning) {}
 
   std::string name() const override { return "opencl"; }
   std::string deviceName() const override { return engine_.deviceDescription(); }
@@ -32,6 +32,8 @@ class OpenCLBatchDevice final : public BatchDevice {
     out = engine_.devicePositions(body);
     return true;
   }
+
+  SegmentEngine& engine() override { return engine_; }
 
   void run(std::vector<BatchRequest*>& round) override {
     constexpr std::size_t kOps = 5;  // BatchOp values, in the order they run
@@ -68,14 +70,16 @@ class OpenCLBatchDevice final : public BatchDevice {
 }  // namespace
 
 std::unique_ptr<BatchDevice> createOpenCLBatchDevice(const std::vector<const Problem*>& problems,
-                                                     const SolverDesc& solver, const std::string& deviceSelector) {
-  return std::make_unique<OpenCLBatchDevice>(problems, solver, cl::Context::shared(deviceSelector), OpenCLOptions{});
+                                                     const SolverDesc& solver, const std::string& deviceSelector,
+                                                     const OpenCLTuning& tuning) {
+  return std::make_unique<OpenCLBatchDevice>(problems, solver, cl::Context::shared(deviceSelector), tuning);
 }
 
-std::unique_ptr<BatchDevice> createOpenCLBatchDeviceOn(const std::vector<const Problem*>& problems,
-                                                       const SolverDesc& solver, std::shared_ptr<cl::Context> context,
-                                                       const OpenCLOptions& options) {
-  return std::make_unique<OpenCLBatchDevice>(problems, solver, std::move(context), options);
+std::unique_ptr<OpenCLBatchDeviceInternal> createOpenCLBatchDeviceOn(const std::vector<const Problem*>& problems,
+                                                                    const SolverDesc& solver,
+                                                                    std::shared_ptr<cl::Context> context,
+                                                                    const OpenCLTuning& tuning) {
+  return std::make_unique<OpenCLBatchDevice>(problems, solver, std::move(context), tuning);
 }
 
 }  // namespace corofem::detail

@@ -1,6 +1,8 @@
 // Program building and caching (program_cache.hpp).
 #include "backends/opencl/program_cache.hpp"
 
+#include "util/cache_dir.hpp"
+
 #include "util/error.hpp"
 
 #include <algorithm>
@@ -38,15 +40,8 @@ std::uint64_t fnv1a64(const std::string& text, std::uint64_t seed) {
 }
 
 std::string kernelCacheDirectory() {
-  if (const char* env = std::getenv("COROFEM_KERNEL_CACHE")) {
-    if (std::string(env) == "off") return {};
-    if (*env) return env;
-  }
-  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg)
-    return (fs::path(xdg) / "corofem" / "kernels").string();
-  if (const char* home = std::getenv("HOME"); home && *home)
-    return (fs::path(home) / ".cache" / "corofem" / "kernels").string();
-  return {};
+  const std::string dir = cacheDirectory();
+  return dir.empty() ? dir : (fs::path(dir) / "kernels").string();
 }
 
 std::string corofemProgramSource() {

@@ -1,8 +1,8 @@
 // OpenCL programs built from the embedded kernel sources (kernels/opencl/*.cl after
 // kernels/shared/*.h) with -D switches, cached in memory per context and on disk as device binaries.
-// Disk cache: $COROFEM_KERNEL_CACHE (the value "off" disables it) or ~/.cache/corofem/kernels (or
-// $XDG_CACHE_HOME/corofem/kernels); one file per (device name, driver version, options, source
-// hash). A cache file that does not load is rebuilt from source and overwritten, never fatal.
+// Disk cache: the kernels/ folder of the cache folder (util/cache_dir.hpp: $COROFEM_CACHE_DIR, whose
+// value "off" disables it, else $XDG_CACHE_HOME/corofem or ~/.cache/corofem); one file per (device
+// name, driver version, options, source hash). A cache file that does not load is rebuilt from source and overwritten, never fatal.
 #pragma once
 
 #include "backends/opencl/cl_context.hpp"

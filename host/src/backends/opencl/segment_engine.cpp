@@ -6,11 +6,7 @@
 // the reducing node kernels (COROFEM_CHUNK: 4 on CPUs; COROFEM_TREE_REDUCE: local-memory trees on
 // GPUs). Per body (tables, no switch): Lame parameters, lumped mass, constraints, Rayleigh damping
 // (C = alpha M + beta K^R folds into the two coefficients of M and K^R), formulation (the linear one
-// never runs compute_rotations).
-// Tuning overrides for experiments (not for production): COROFEM_OPENCL_WG, COROFEM_OPENCL_VEC,
-// COROFEM_OPENCL_CHUNK, COROFEM_OPENCL_TREE, COROFEM_OPENCL_TILE_BYTES, COROFEM_OPENCL_OPTIONS (extra compiler options),
-// COROFEM_OPENCL_PROFILE=1 (per kernel: launches, device time and the device idle time before it, printed when
-// the engine is destroyed; the events are not waited for, so the timeline is that of a normal run).
+// never runs compute_rotations). The switches' values come from the tuning (tuning.hpp).
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/segment_engine.hpp"
@@ -43,7 +39,6 @@ namespace {
 using cl::checkCl;
 using namespace layout;
 
-constexpr std::size_t kDefaultWorkGroup = 64;
 static_assert(kPackLanes == 8, "pcg_pack.cl's PACK_L and its vector types are 8 lanes");
 
 std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
@@ -205,23 +200,9 @@ unsigned long long teamPcgLaunchCount() { return teamPcgLaunches.load(); }
 unsigned long long packPcgLaunchCount() { return packPcgLaunches.load(); }
 unsigned long long packPcgLaneCount() { return packPcgLanes.load(); }
 
-std::size_t defaultTileBytes(std::size_t cacheBytes) {
-  // Measured with bench_batch (100 bodies of 2,000 elements, float, PoCL on 2 cores):
-  // - 32 MiB L3: tiles of ~20 bodies (~7 MB) solved 1.5x faster per body than one tile of 100
-  //   (~35 MB, streamed from memory every PCG iteration), with 5x the launches.
-  // - 8 MiB L3: tiles of 2 MiB (a quarter of the cache, the earlier rule: 4 bodies a tile) gave
-  //   1.75-1.90x the throughput of separate runs, 6-8 MiB tiles 2.4-2.6x (three rounds in turns):
-  //   there a tile's launches cost more than the misses of a working set the size of the cache.
-  // So: 8 MiB, or a quarter of the cache where that is more (the 32 MiB measurement), never more
-  // than the cache.
-  constexpr std::size_t kTileTarget = std::size_t{8} << 20;
-  return std::min(cacheBytes, std::max(cacheBytes / 4, kTileTarget));
-}
-
 SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const SolverDesc& solver,
-                             std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options)
-    : ctx_(std::move(ctx)), solver_(solver), precond_(solver.preconditioner),
-      storedStiffness_(options.storedStiffness) {
+                             std::shared_ptr<cl::Context> ctx, const OpenCLTuning& tuning)
+    : ctx_(std::move(ctx)), solver_(solver), precond_(solver.preconditioner) {
   dev_ = ctx_->deviceName();
   cl_command_queue_properties queueProps = 0;
   clGetCommandQueueInfo(ctx_->queue(), CL_QUEUE_PROPERTIES, sizeof(queueProps), &queueProps, nullptr);
@@ -238,7 +219,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
          "\"cholesky\" is available on the reference backend (\"backend\": \"reference\")");
   double_ = solver.precision == Precision::Double;
   mixed_ = solver.precision == Precision::Mixed;
-  const bool fp64 = ctx_->info().fp64 && !options.assumeNoFp64;
+  const bool fp64 = ctx_->info().fp64;
   if (double_ && !fp64)
     fail(ErrorCode::DeviceError, "OpenCL device '", dev_, "' has no double precision (cl_khr_fp64); "
          "set the solver precision to \"float\" or choose another device");
@@ -249,102 +230,25 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   realSize_ = double_ ? sizeof(double) : sizeof(float);
   // Mixed: the vectors are float (realSize_), the partial sums and PCG scalars double (sumSize_).
   sumSize_ = double_ || mixed_ ? sizeof(double) : sizeof(float);
-  wg_ = options.workGroupSize ? options.workGroupSize : kDefaultWorkGroup;
-  vec_ = options.vectorWidth ? options.vectorWidth : (ctx_->info().gpu ? 1 : 8);
-  if (const char* env = std::getenv("COROFEM_OPENCL_VEC"); env && *env && !options.vectorWidth)
-    vec_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
-  chunk_ = options.nodeChunk ? options.nodeChunk : (ctx_->info().gpu ? 1 : 4);  // 4: enough work-groups to balance 2+ threads on small meshes
-  if (const char* env = std::getenv("COROFEM_OPENCL_CHUNK"); env && *env && !options.nodeChunk)
-    chunk_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
-  if (vec_ != 1 && vec_ != 4 && vec_ != 8 && vec_ != 16)
-    fail(ErrorCode::BadInput, "OpenCL element vector width ", vec_, " must be 1, 4, 8 or 16");
-  if (const char* env = std::getenv("COROFEM_OPENCL_WG"); env && *env && !options.workGroupSize)
-    wg_ = static_cast<std::size_t>(std::strtoul(env, nullptr, 10));  // tuning experiments
-  if (wg_ == 0 || (wg_ & (wg_ - 1)) != 0 || wg_ > ctx_->info().maxWorkGroupSize)
-    fail(ErrorCode::BadInput, "OpenCL work-group size ", wg_, " must be a power of two <= ",
-         ctx_->info().maxWorkGroupSize, " on device '", dev_, "'");
-  treeReduce_ = options.treeReduce >= 0 ? options.treeReduce != 0 : ctx_->info().gpu;
-  if (const char* env = std::getenv("COROFEM_OPENCL_TREE"); env && *env && options.treeReduce < 0)
-    treeReduce_ = std::string(env) != "0";  // tuning experiments
+  cl_ulong cache = 0;
+  clGetDeviceInfo(ctx_->device(), CL_DEVICE_GLOBAL_MEM_CACHE_SIZE, sizeof(cache), &cache, nullptr);
+  tuning_ = resolveTuning(tuning, ctx_->info(), static_cast<std::size_t>(cache));
+  wg_ = tuning_.workGroupSize;
+  vec_ = tuning_.elementsPerItem;
+  chunk_ = tuning_.nodesPerItem;
+  treeReduce_ = tuning_.workGroupSums != 0;
   energyWithForces_ = !treeReduce_;  // GPUs: element_energy's work-group trees (no per-item reads)
-  if (const char* env = std::getenv("COROFEM_OPENCL_ENERGY_WITH_FORCES"); env && *env && !treeReduce_)
-    energyWithForces_ = std::string(env) != "0";  // tuning experiments
-  // Off unless asked for: OpenCL 1.2 orders memory between work-groups only through atomics, and
-  // NVIDIA's compiler turns mem_fence(CLK_GLOBAL_MEM_FENCE) into a block-scope fence (membar.cta),
-  // so the last group's view of the other groups' partials is not guaranteed (kernels/opencl/README.md).
-  fusedReduce_ = options.fusedReduce > 0;
-  hostChunk_ = options.hostChunk ? options.hostChunk : kHostChunk;
-  if (const char* env = std::getenv("COROFEM_OPENCL_FUSED"); env && *env && options.fusedReduce < 0)
-    fusedReduce_ = std::string(env) != "0";  // tuning experiments
-  // Tiles of bodies per launch sequence (CPUs only; defaultTileBytes).
-  if (!ctx_->info().gpu) {
-    cl_ulong cache = 0;
-    clGetDeviceInfo(ctx_->device(), CL_DEVICE_GLOBAL_MEM_CACHE_SIZE, sizeof(cache), &cache, nullptr);
-    tileBytes_ = defaultTileBytes(static_cast<std::size_t>(cache));
-  }
-  if (options.tileBytes >= 0) tileBytes_ = static_cast<std::size_t>(options.tileBytes);
-  // The one-launch PCG iterations (pcg.cl's per-work-item partials only; the gradient product only).
-  groupPcg_ = options.groupPcg >= 0 ? options.groupPcg != 0 : !ctx_->info().gpu;
-  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG"); env && *env && options.groupPcg < 0)
-    groupPcg_ = std::string(env) != "0";  // tuning experiments
-  if (treeReduce_ || options.storedStiffness) groupPcg_ = false;
-  groupPcgMinBodies_ = options.groupPcgMinBodies ? options.groupPcgMinBodies
-                                                 : std::max<std::size_t>(1, ctx_->info().computeUnits);
-  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_MIN"); env && *env && !options.groupPcgMinBodies)
-    groupPcgMinBodies_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
-  // One core without launches against all cores with them: measured at 2 cores (crossover between
-  // 1k and 10k elements); with more cores the launched iterations gain, so the bound shrinks.
-  groupPcgSmallElems_ = options.groupPcgSmallElements
-                            ? options.groupPcgSmallElements
-                            : 8192 / std::max<std::size_t>(1, ctx_->info().computeUnits);
-  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_SMALL"); env && *env && !options.groupPcgSmallElements)
-    groupPcgSmallElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments (0: bodies never count as small)
-  groupPcgMaxElems_ = options.groupPcgMaxElements ? options.groupPcgMaxElements
-                                                  : 32768 / std::max<std::size_t>(1, ctx_->info().computeUnits);
-  if (const char* env = std::getenv("COROFEM_OPENCL_GROUP_PCG_MAX"); env && *env && !options.groupPcgMaxElements)
-    groupPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
-  // Teams of work-groups per body for rounds of fewer bodies than cores (pcg_iterate_team).
-  // CPU devices only: the team's hand-offs rely on coherent caches (pcg_group.cl). By default only
-  // where the process may run on as many CPUs as the device has compute units: PoCL starts a
-  // worker per compute unit whatever the affinity mask or cgroup quota allows, and a team member
-  // waiting for a descheduled one spins out its time slice (a review measured a process pinned to
-  // one of 2 CPUs 60x slower with teams than launched).
-  teamPcg_ = options.teamPcg >= 0 ? options.teamPcg != 0
-                                  : ctx_->info().computeUnits > 1 && usableCpus() >= ctx_->info().computeUnits;
-  if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG"); env && *env && options.teamPcg < 0)
-    teamPcg_ = std::string(env) != "0";  // tuning experiments
-  teamPcg_ = teamPcg_ && groupPcg_ && ctx_->info().cpu && !ctx_->info().gpu;
-  teamPcgSize_ = options.teamPcgSize;
-  teamEpoch_ = options.teamEpochStart;
-  teamPcgMinElems_ = options.teamPcgMinElements ? options.teamPcgMinElements : kTeamPcgMinElements;
-  if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MIN"); env && *env && !options.teamPcgMinElements)
-    teamPcgMinElems_ = std::max<std::size_t>(1, std::strtoul(env, nullptr, 10));  // tuning experiments
-  teamPcgMaxElems_ = options.teamPcgMaxElements ? options.teamPcgMaxElements
-                                                : kTeamPcgMaxElementsPerCore * ctx_->info().computeUnits;
-  if (const char* env = std::getenv("COROFEM_OPENCL_TEAM_PCG_MAX"); env && *env && !options.teamPcgMaxElements)
-    teamPcgMaxElems_ = std::strtoul(env, nullptr, 10);  // tuning experiments
-  // Packs of bodies with one mesh (pcg_pack.cl): by default where pcg_iterate_group runs on a CPU
-  // device (one work-item per pack: a GPU would run a pack on one of its thousands of lanes).
-  packs_ = options.packPcg >= 0 ? options.packPcg != 0 : ctx_->info().cpu && !ctx_->info().gpu;
-  packAlways_ = options.packPcg > 0;
-  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG"); env && *env && options.packPcg < 0) {
-    packs_ = std::string(env) != "0";  // tuning experiments
-    packAlways_ = packs_;
-  }
-  packs_ = packs_ && groupPcg_ && !treeReduce_;
-  packTakers_ = options.packPcgTakers ? options.packPcgTakers : std::max<std::size_t>(1, ctx_->info().computeUnits);
-  groupTakers_ = options.groupPcgTakers ? options.groupPcgTakers : std::max<std::size_t>(1, ctx_->info().computeUnits);
-  packMinLanes_ = options.packPcgMinLanes ? options.packPcgMinLanes : kPackMinLanes;
-  if (const char* env = std::getenv("COROFEM_OPENCL_PACK_PCG_MIN"); env && *env && !options.packPcgMinLanes)
-    packMinLanes_ = std::strtoul(env, nullptr, 10);  // tuning experiments
-  packMinLanes_ = std::clamp<std::size_t>(packMinLanes_, 1, kPackLanes);
-  if (const char* env = std::getenv("COROFEM_OPENCL_TILE_BYTES"); env && *env && options.tileBytes < 0)
-    tileBytes_ = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));  // tuning experiments (0: one tile)
+  hostChunk_ = tuning_.hostChunk;
+  tileBytes_ = static_cast<std::size_t>(tuning_.tileBytes);
+  groupPcg_ = tuning_.groupPcg != 0;
+  teamPcg_ = tuning_.teamPcg != 0;
+  packs_ = tuning_.packPcg != 0;
+  packAlways_ = tuning_.packPcg > 0;
 
   // -- the device's numbering per body: a Morton order where the mesh's own scatters the kernels'
   // loads (mesh/locality_order.hpp). The buffers below are made from a copy of the problem in that
   // order, released at the end of the constructor; host vectors are permuted at every transfer.
-  int reorder = options.localityOrder;
+  int reorder = tuning_.localityOrder;
   if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); env && *env && reorder < 0)
     reorder = std::string(env) != "0" ? 1 : 0;
   std::vector<std::unique_ptr<Problem>> ordered(problems.size());
@@ -353,7 +257,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
     for (std::size_t s = 0; s < problems.size(); ++s) {
       const Problem& p = *problems[s];
       if (p.elements.size() != p.mesh.tetCount() || p.dofCount() != 3 * p.mesh.nodeCount()) continue;  // reported below
-      const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
+      const std::size_t widest = kElemOutComponents;
       if (p.mesh.tetCount() * widest >= (std::size_t(1) << 32) / 2 || 9 * p.mesh.nodeCount() >= (std::size_t(1) << 32) / 2)
         continue;  // over the 32-bit indexing on its own: refused below, not sorted first
       // Each body its own order, as alone (a batched body's bits are its own run's): copies of one
@@ -402,15 +306,15 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
     hasMass_ = hasMass_ || hasNonzeroMass(*problem);
     segs_.push_back(std::move(sg));
   }
-  const std::size_t widest = options.storedStiffness ? kStoredKComponents : kElemOutComponents;
+  const std::size_t widest = kElemOutComponents;
   if (stride_ * widest >= (std::size_t(1) << 32) / 2 || 9 * nodeTotal_ >= (std::size_t(1) << 32) / 2)
     fail(ErrorCode::BadInput, "body '", problems.front()->name, "'", problems.size() > 1 ? " and the others" : "",
          ": ", stride_, " (padded) elements exceed the OpenCL backend's 32-bit element indexing; split the "
          "body or batch fewer bodies per device");
 
   findPackMeshes();
-  build(solver, options);
-  allocate(options);
+  build(solver);
+  allocate();
   setAllActive();
   refreshBlocks(false);
   finish();
@@ -421,14 +325,15 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
 SegmentEngine::~SegmentEngine() {
   clFinish(ctx_->queue());  // pending writes read, and reads (energyItems_) write, this engine's host bytes
   writesDone();
-  if (profile_) {
-    clFinish(ctx_->queue());
-    harvestProfile(true);
-  }
-  for (const auto& [kernel, entry] : profileTimes_)
-    std::fprintf(stderr, "[corofem opencl profile] %-24s %8ld launches %10.1f us each, device idle %8.1f us before each\n",
-                 kernel.c_str(), entry.launches, 1e6 * entry.busy / static_cast<double>(entry.launches),
-                 1e6 * entry.idleBefore / static_cast<double>(entry.launches));
+}
+
+std::vector<KernelProfile> SegmentEngine::kernelProfile() {
+  if (!profile_) return {};
+  checkCl(clFinish(ctx_->queue()), "clFinish", dev_);
+  harvestProfile(true);
+  std::vector<KernelProfile> out;
+  for (const auto& [kernel, entry] : profileTimes_) out.push_back({kernel, entry.launches, entry.busy, entry.idleBefore});
+  return out;
 }
 
 void SegmentEngine::harvestProfile(bool all) {
@@ -456,43 +361,31 @@ void SegmentEngine::harvestProfile(bool all) {
   }
 }
 
-void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options) {
+void SegmentEngine::build(const SolverDesc& solver) {
   // -- program: only the features these problems use
   options_ = "-cl-std=CL1.2 -DCOROFEM_WG=" + std::to_string(wg_) + " -DCOROFEM_VEC=" + std::to_string(vec_) +
-             " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "") +
-             (fusedReduce_ ? " -DCOROFEM_FUSED_REDUCE" : "");
+             " -DCOROFEM_CHUNK=" + std::to_string(chunk_) + (treeReduce_ ? " -DCOROFEM_TREE_REDUCE" : "");
   if (double_) options_ += " -DCOROFEM_DOUBLE";
   if (mixed_) options_ += " -DCOROFEM_MIXED";
-  // Denormals flushed to zero on CPUs (PoCL then runs the kernels with the FTZ and DAZ bits of
-  // MXCSR set). An x86 core takes a microcode assist of ~100 cycles per operation on a denormal
-  // float: bench_mesh_order's product of a vector of 1e-39 (velocities decayed at rest) on the
-  // Armadillo took 1,015-1,029 us with them kept against 380-390 flushed (four runs); with normal
-  // values the flush changes little (the 20-iteration step 11.2-11.3 against 10.8-10.9 ms).
-  // Nothing physical lives below float's 1.2e-38.
-  // GPUs handle denormals at full speed and keep the default (not measured there).
-  int flush = options.flushDenormals;
-  if (const char* env = std::getenv("COROFEM_OPENCL_FTZ"); env && *env && flush < 0) flush = std::string(env) != "0";
-  if (flush < 0) flush = ctx_->info().cpu && !ctx_->info().gpu;
-  if (flush) options_ += " -cl-denorms-are-zero";
+  // Denormals flushed to zero (CPU devices by default: PoCL then runs the kernels with the FTZ and
+  // DAZ bits of MXCSR set). Nothing physical lives below float's 1.2e-38.
+  if (tuning_.flushDenormals) options_ += " -cl-denorms-are-zero";
   switch (solver.rotation) {
     case RotationMethod::Polar: options_ += " -DCOROFEM_ROT_POLAR"; break;
     case RotationMethod::Svd: options_ += " -DCOROFEM_ROT_SVD"; break;
     case RotationMethod::Quaternion: options_ += " -DCOROFEM_ROT_QUAT"; break;
     case RotationMethod::Qr: options_ += " -DCOROFEM_ROT_QR"; break;
   }
-  if (options.quaternionIterations > 0)
-    options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(options.quaternionIterations);
+  if (solver.rotation == RotationMethod::Quaternion)
+    options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(tuning_.quaternionIterations);
   if (precond_ == PreconditionerKind::BlockDiagonal) options_ += " -DCOROFEM_PRECOND_BLOCK";
   else if (precond_ == PreconditionerKind::Diagonal) options_ += " -DCOROFEM_PRECOND_DIAG";
-  if (const char* extra = std::getenv("COROFEM_OPENCL_OPTIONS"); extra && *extra)
-    options_ += std::string(" ") + extra;  // tuning experiments: extra compiler options
   static const std::string source = cl::corofemProgramSource();
   build_ = cl::buildProgram(*ctx_, "corofem", source, options_);
   kRotations_.create(build_.program, "compute_rotations", dev_);
   kForces_.create(build_.program, "element_forces", dev_);
   kEnergy_.create(build_.program, "element_energy", dev_);
   kProduct_.create(build_.program, "element_product", dev_);
-  kProductStored_.create(build_.program, "element_product_stored", dev_);
   kGatherSum_.create(build_.program, "gather_sum", dev_);
   kGatherProduct_.create(build_.program, "gather_product", dev_);
   kBlocks_.create(build_.program, "node_stiffness_blocks", dev_);
@@ -500,7 +393,6 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   kPcgInit_.create(build_.program, "pcg_init", dev_);
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
-  if (fusedReduce_) kGatherProductFinish_.create(build_.program, "gather_product_finish", dev_);
   if (groupPcg_) kPcgIterateGroup_.create(build_.program, "pcg_iterate_group", dev_);
   if (teamPcg_) kPcgIterateTeam_.create(build_.program, "pcg_iterate_team", dev_);
   if (packs_) {
@@ -510,7 +402,7 @@ void SegmentEngine::build(const SolverDesc& solver, const OpenCLOptions& options
   }
 }
 
-void SegmentEngine::allocate(const OpenCLOptions& options) {
+void SegmentEngine::allocate() {
   const std::size_t S = stride_, K = segs_.size();
   cl_context c = ctx_->context();
 
@@ -565,7 +457,7 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
   for (const Segment& sg : segs_) anyCorotational = anyCorotational || sg.corotational;
   // The Quaternion method's state only where something rotates (linear bodies never do).
   const bool quaternion = solver_.rotation == RotationMethod::Quaternion && anyCorotational;
-  rAlways_ = storedStiffness_ || quaternion;
+  rAlways_ = quaternion;
   {
     std::vector<double> geom(kGeomComponents * S, 0.0), quat(quaternion ? kQuatComponents * S : 0, 0.0);
     for (const Segment& sg : segs_)
@@ -579,9 +471,8 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
       }
     createReal(geom_, geom.size());
     upload(geom_, geom.data(), 0, geom.size());
-    // R itself only where every pass writes it (rAlways_: the stored-K_e product reads it; the
-    // Quaternion method cannot run a pass again for readRotations); otherwise the first
-    // readRotations makes it (ensureRotations).
+    // R itself only where every pass writes it (rAlways_: the Quaternion method cannot run a pass
+    // again for readRotations); otherwise the first readRotations makes it (ensureRotations).
     if (rAlways_) ensureRotations();
     // At rest (and always for the linear formulation) R = I, so a_i = grad N_i. Without a
     // co-rotational body nothing ever changes them: the kernels read the gradients of geom_, whose
@@ -595,18 +486,6 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
       createReal(quat_, quat.size());
       upload(quat_, quat.data(), 0, quat.size());
     }
-  }
-  if (options.storedStiffness) {
-    std::vector<double> K12(kStoredKComponents * S, 0.0);
-    for (const Segment& sg : segs_)
-      for (std::size_t e = 0; e < sg.elems; ++e) {
-        const Mat12 Ke = linearStiffness(sg.problem->elements[e], sg.problem->lame);
-        std::size_t idx = 0;
-        for (int r = 0; r < 12; ++r)
-          for (int col = r; col < 12; ++col, ++idx) K12[idx * S + sg.elemBegin + e] = Ke(r, col);
-      }
-    createReal(stiffness_, K12.size());
-    upload(stiffness_, K12.data(), 0, K12.size());
   }
   createReal(elemOut_, kElemOutComponents * S);
 
@@ -683,10 +562,6 @@ void SegmentEngine::allocate(const OpenCLOptions& options) {
     teamState_.create(c, state.size() * sizeof(cl_uint), dev_);
     uploadRaw(teamState_, state);
   }
-  if (fusedReduce_) {
-    counters_.create(c, K * sizeof(cl_uint), dev_);
-    uploadRaw(counters_, std::vector<cl_uint>(K, 0u));
-  }
   lastIterations_.assign(K, 0);
   if (packs_) {
     // The pack meshes' corners (the pack's own node numbers). pcg_iterate_pack adds the element
@@ -744,7 +619,7 @@ void SegmentEngine::findPackMeshes() {
     const bool padded = segs_[bodies.front()].elemSpan >= roundUp(size.second, kPackLanes) &&
                         segs_[bodies.front()].nodeSpan >= roundUp(size.first, kPackLanes);
     for (std::vector<std::size_t>& m : meshes)
-      if (m.size() >= packMinLanes_ && padded) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0});
+      if (m.size() >= tuning_.packPcgMinLanes && padded) packMeshes_.push_back(PackMesh{std::move(m), 0, 0, 0});
   }
   std::sort(packMeshes_.begin(), packMeshes_.end(),
             [](const PackMesh& a, const PackMesh& b) { return a.bodies.front() < b.bodies.front(); });
@@ -770,7 +645,7 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"segment_info", &segInfoBuf_},       {"segment_coefficients", &segCoefBuf_},
       {"element_nodes", &elemNodes_},       {"element_geometry", &geom_},
       {"rotations", &rot_},                 {"rotated_gradients", &rotGrad_},
-      {"quaternions", &quat_},              {"stored_stiffness_Ke", &stiffness_},
+      {"quaternions", &quat_},
       {"element_output", &elemOut_},        {"gather_starts", &nodeStart_},
       {"gather_entries", &nodeEntries_},    {"positions", &pos_},
       {"lumped_mass", &mass_},              {"free_mask", &free_},
@@ -780,7 +655,7 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
       {"pcg_p", &p_},                       {"pcg_w", &q_},
       {"pcg_s", &s_},                       {"partial_sums", &partials_},
       {"partial_sums_w", &partialsW_},      {"pcg_scalars", &scalars_},
-      {"reduce_counters", &counters_},      {"pcg_team_counters", &teamState_},
+      {"pcg_team_counters", &teamState_},
       {"pcg_group_order", &groupOrder_},
       {"pack_table", &packInfo_},           {"pack_corners", &packCorners_},
       {"pack_element_rows", &packElem_},    {"pack_node_sums", &packSums_},
@@ -1065,7 +940,7 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   // The claims' 32-bit epochs advance by 4 per iteration of a launch: caps beyond kTeamMaxIterations
   // (never needed: PCG converges in at most the system's size) take the other paths.
   const bool teams = teamPcg_ && solver_.maxIterations <= kTeamMaxIterations;
-  if (teams && teamPcgSize_ > 0) return teamPcgSize_;  // tests
+  if (teams && tuning_.teamPcgSize > 0) return tuning_.teamPcgSize;
   std::size_t largest = 0, total = 0;
   for (const BatchRequest* r : requests) {
     largest = std::max(largest, segs_[r->body].elems);
@@ -1073,19 +948,19 @@ std::size_t SegmentEngine::groupTeam(const std::vector<BatchRequest*>& requests)
   }
   const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
   // Fewer bodies than cores: a team of up to cores / bodies work-groups per body, each with at
-  // least teamPcgMinElems_ elements of the largest (below that, one core without the team's
-  // hand-offs is as fast), none larger than teamPcgMaxElems_ (above that, the launched iterations,
+  // least tuning_.teamPcgMinElements elements of the largest (below that, one core without the team's
+  // hand-offs is as fast), none larger than tuning_.teamPcgMaxElements (above that, the launched iterations,
   // which keep their pace when other processes take cores).
-  if (teams && requests.size() < cores && largest <= teamPcgMaxElems_) {
-    const std::size_t team = std::min(cores / requests.size(), largest / teamPcgMinElems_);
+  if (teams && requests.size() < cores && largest <= tuning_.teamPcgMaxElements) {
+    const std::size_t team = std::min(cores / requests.size(), largest / tuning_.teamPcgMinElements);
     if (team >= 2) return team;
   }
-  if (largest <= groupPcgSmallElems_) return 1;  // one core without launches wins for each
+  if (largest <= tuning_.groupPcgSmallElements) return 1;  // one core without launches wins for each
   // Enough bodies for the cores, none too large for one core's cache, and none much larger than a
   // core's share (the one-launch round lasts as long as its largest body on one core). A review
   // measured on 2 cores: 10k + 10k elements 4.8 ms one-launch against 7.0 launched, 35k + 35k 20.6
   // against 18.7, 94k + 384 72 against 25.
-  return requests.size() >= groupPcgMinBodies_ && largest <= groupPcgMaxElems_ && largest * cores <= 2 * total ? 1 : 0;
+  return requests.size() >= tuning_.groupPcgMinBodies && largest <= tuning_.groupPcgMaxElements && largest * cores <= 2 * total ? 1 : 0;
 }
 
 std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& requests, std::vector<char>& packed) const {
@@ -1103,7 +978,7 @@ std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& 
     // A pack takes a core for about what kPackCost bodies take alone (pcg_iterate_group): packed
     // only where that shortens the round, unless packs were asked for (packAlways_).
     const std::size_t cores = std::max<std::size_t>(1, ctx_->info().computeUnits);
-    const std::size_t slotsNeeded = bodies.size() / kPackLanes + (bodies.size() % kPackLanes >= packMinLanes_ ? 1 : 0);
+    const std::size_t slotsNeeded = bodies.size() / kPackLanes + (bodies.size() % kPackLanes >= tuning_.packPcgMinLanes ? 1 : 0);
     if (!packAlways_ && static_cast<double>((bodies.size() + cores - 1) / cores) <=
                             kPackCost * static_cast<double>((slotsNeeded + cores - 1) / cores))
       continue;
@@ -1113,7 +988,7 @@ std::vector<cl_uint> SegmentEngine::packRound(const std::vector<BatchRequest*>& 
                      [&](std::size_t a, std::size_t b) { return lastIterations_[a] > lastIterations_[b]; });
     for (std::size_t k = 0; k < m.slots && k * kPackLanes < bodies.size(); ++k) {
       const std::size_t n = std::min<std::size_t>(kPackLanes, bodies.size() - k * kPackLanes);
-      if (n < packMinLanes_) break;
+      if (n < tuning_.packPcgMinLanes) break;
       const std::size_t first = bodies[k * kPackLanes];
       packs.push_back({m.firstSlot + k, segs_[first].elems * static_cast<std::size_t>(std::max(1, lastIterations_[first])),
                        std::vector<std::size_t>(bodies.begin() + k * kPackLanes, bodies.begin() + k * kPackLanes + n)});
@@ -1350,12 +1225,8 @@ double SegmentEngine::energyOf(std::size_t s, const unsigned char* items, std::s
 void SegmentEngine::elementProduct(const ClBuffer& v) {
   flushCoefficients();
   const cl_uint S = static_cast<cl_uint>(stride_);
-  if (storedStiffness_)
-    launch(kProductStored_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, stiffness_, rot_, v,
-           elemOut_);
-  else
-    launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), v,
-           elemOut_);
+  launch(kProduct_, Span::Elements, S, elemSeg_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(), v,
+         elemOut_);
 }
 
 void SegmentEngine::product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials,
@@ -1425,14 +1296,8 @@ void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char
 
 void SegmentEngine::productAndFinish(cl_uint mode) {
   const SumReal tol2{solver_.tolerance * solver_.tolerance};
-  if (fusedReduce_) {
-    elementProduct(z_);
-    launch(kGatherProductFinish_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, nodeStart_, nodeEntries_,
-           elemOut_, mass_, free_, z_, q_, partials_, partialsW_, scalars_, counters_, mode, tol2);
-  } else {
-    product(z_, q_, true, partialsW_);
-    launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, mode, tol2);
-  }
+  product(z_, q_, true, partialsW_);
+  launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, mode, tol2);
 }
 
 void SegmentEngine::pcgIteration(bool last) {
@@ -1686,7 +1551,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
           const std::size_t count = order.size();
           order.push_back(0);
           uploadRaw(groupOrder_, order);
-          launchGroups(kPcgIterateGroup_, std::min(count, groupTakers_), wg_, cl_uint(stride_), cl_uint(team),
+          launchGroups(kPcgIterateGroup_, std::min(count, tuning_.claimWorkGroups), wg_, cl_uint(stride_), cl_uint(team),
                        teamEpoch_, teamState_, segInfoBuf_, segCoefBuf_, elemNodes_, geom_, rotatedGradients(),
                        nodeStart_, nodeEntries_, elemOut_, mass_, free_, minv_, p_, s_, x_, r_, z_, q_, partials_,
                        partialsW_, scalars_, iterations, tol2, groupOrder_, cl_uint(count));
@@ -1712,7 +1577,7 @@ void SegmentEngine::solve(const std::vector<BatchRequest*>& requests) {
                        r_, z_, p_, s_, q_, b_, minv_, mass_, free_, packElem_, packVec_, packMinv_, packMass_,
                        packFree_, rows, cl_uint(packFresh ? 1 : 0));
           // A work-group per compute unit, each taking slots from the claim word (costliest first).
-          launchGroups(kPcgIteratePack_, std::min(slots, packTakers_), 1, packInfo_, cl_uint(slots), segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
+          launchGroups(kPcgIteratePack_, std::min(slots, tuning_.claimWorkGroups), 1, packInfo_, cl_uint(slots), segInfoBuf_, segCoefBuf_, packCorners_, packElem_,
                        packSums_, packVec_, packFree_, packMass_, packMinv_, packPartials_, partials_,
                        scalars_, rows, iterations, cl_uint(packFresh ? 1 : 0), tol2);
           launchGroups(kPackOut_, slots, wg_, packInfo_, segInfoBuf_, x_, r_, z_, p_, s_, q_, packVec_, rows);

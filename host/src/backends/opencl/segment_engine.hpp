@@ -15,7 +15,7 @@
 //                   x, the rotations and the coefficients are unchanged)
 //   Apply           one write of p; element_product + gather_product; one read
 //   Solve           writes of b and x; M^-1, r = b - A x, w = A M^-1 r (pcg_init); PCG iterations
-//                   for all active segments (4 launches each, 3 with fusedReduce_ on GPUs;
+//                   for all active segments (4 launches each;
 //                   kernels/opencl/pcg.cl; on CPUs all but the cap's last in one launch,
 //                   pcg_iterate_group, for rounds of small bodies or of many: groupRound; bodies
 //                   with the same mesh in packs of kPackLanes, a body per vector lane:
@@ -29,6 +29,7 @@
 #pragma once
 
 #include "backends/opencl/opencl_backend.hpp"
+#include "backends/opencl/tuning.hpp"
 #include "solve/batch.hpp"
 #include "util/parallel.hpp"
 
@@ -112,11 +113,13 @@ class ClKernel {
   mutable std::vector<std::vector<unsigned char>> args_;  ///< the bytes last set, per argument
 };
 
-/// The working set of the bodies a batch runs together on a CPU device whose last-level cache holds
-/// `cacheBytes` (CL_DEVICE_GLOBAL_MEM_CACHE_SIZE): 8 MiB, or a quarter of the cache where that is
-/// more, never more than the cache (segment_engine.cpp says what was measured). 0 (one tile) when
-/// the device reports no cache.
-std::size_t defaultTileBytes(std::size_t cacheBytes);
+/// One kernel's totals on a profiling queue (SegmentEngine::kernelProfile).
+struct KernelProfile {
+  std::string kernel;
+  long launches = 0;
+  double deviceSeconds = 0.0;      ///< summed device time of its launches
+  double idleSecondsBefore = 0.0;  ///< summed idle time of the device before its launches
+};
 
 /// Launches of pcg_iterate_group (one-launch PCG iterations) by every engine of the process so
 /// far: tests check with it that the path they compare was taken.
@@ -130,12 +133,13 @@ unsigned long long packPcgLaneCount();
 
 class SegmentEngine {
  public:
-  /// All problems share the program (precision, rotation method, preconditioner, options of
-  /// `solver`/`options`); each keeps its material, mass, Rayleigh damping, constraints and
+  friend struct SegmentEngineTestAccess;  // tests/common/opencl_test_access.hpp
+  /// All problems share the program (precision, rotation method, preconditioner of `solver`;
+  /// the kernels' shapes and strategies of `tuning`, resolved for the device); each keeps its material, mass, Rayleigh damping, constraints and
   /// formulation (co-rotational or linear). Throws Error(BadInput) for another formulation or
   /// an empty body, Error(DeviceError) for a device problem. The problems must outlive the engine.
   SegmentEngine(const std::vector<const Problem*>& problems, const SolverDesc& solver,
-                std::shared_ptr<cl::Context> ctx, const OpenCLOptions& options);
+                std::shared_ptr<cl::Context> ctx, const OpenCLTuning& tuning);
   ~SegmentEngine();
   SegmentEngine(const SegmentEngine&) = delete;
   SegmentEngine& operator=(const SegmentEngine&) = delete;
@@ -177,6 +181,10 @@ class SegmentEngine {
   void enqueueElementProduct(const SystemCoeffs& c);
   void enqueuePcgIterations(const SystemCoeffs& c, int iterations);
   void finish();
+  /// Per kernel so far: launches, device seconds and the device's idle seconds before its launches
+  /// (the previous command's end to its start: launch overhead and host round trips). Only on a
+  /// queue created with CL_QUEUE_PROFILING_ENABLE (benchmarks adopt one); empty otherwise.
+  std::vector<KernelProfile> kernelProfile();
 
  private:
   struct Segment {
@@ -266,35 +274,7 @@ class SegmentEngine {
     else
       fn(reinterpret_cast<std::conditional_t<ro, const float, float>*>(base) + begin);
   }
-  /// Entries per chunk of the host's passes over node vectors (parallelChunks): a 1M-element
-  /// body's 3N = 525k entries make 9 chunks; a body of up to 21,845 nodes is one chunk, run inline
-  /// (on an H200's host, 100k elements in two chunks ran 7 % slower than inline).
-  static constexpr std::size_t kHostChunk = std::size_t{1} << 16;
-  /// pcg_iterate_team's bounds, measured with one body on 2 cores (bench_opencl's dynamic step, 20
-  /// iterations). At least kTeamPcgMinElements of the largest body per work-group of the team:
-  /// against pcg_iterate_group on one core a team of 2 lost at 1k elements (0.46 ms against 0.42),
-  /// tied at 2.3k and won from 2.9k on (1.6 ms against 2.2 at 10k). At most
-  /// kTeamPcgMaxElementsPerCore per compute unit (the default of OpenCLOptions::teamPcgMaxElements):
-  /// against the launched iterations the team won at 10k (1.6 ms against 2.1) and 100k (12.5
-  /// against 14.1) and tied at 1M on an idle machine, but with one other busy process on the 2
-  /// cores it lost at 100k (25.4-27.8 ms against 20.8-21.0: a member waiting for a descheduled one
-  /// spins) while still winning at 10k (2.43 against 2.49-2.67).
-  static constexpr std::size_t kTeamPcgMinElements = 1280;
-  static constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
-  /// The largest iteration cap for pcg_iterate_team (4 epochs per iteration must fit a launch into
-  /// the claims' 32 bits with room to spare; a review hung a team with a cap of 2^30 + 1).
-  static constexpr int kTeamMaxIterations = 1 << 24;
-  /// The fewest bodies of a pack (OpenCLOptions::packPcgMinLanes' default): a pack costs its
-  /// kPackLanes lanes whatever it holds, about kPackCost bodies' worth, so a remainder of fewer
-  /// than 3 runs as bodies of its own.
-  static constexpr std::size_t kPackMinLanes = 3;
-  /// What a pack's iteration costs a core, in iterations of one body of the same mesh alone
-  /// (pcg_iterate_group): 2.2-2.75 measured on a 2-core Zen 4 with 2,000-element bodies (6 bodies:
-  /// one pack 4.3 ms a step against 5.5 in three work-groups per core; 3 and 4 bodies: 4.0 against
-  /// 3.7-3.8; 100 bodies in 13 packs against 50 per core). A round packs a mesh's bodies only where
-  /// ceil(bodies / cores) exceeds kPackCost * ceil(packs / cores) (OpenCLOptions::packPcg = 1: always).
-  static constexpr double kPackCost = 2.5;
-  std::size_t hostChunk_ = kHostChunk;  ///< OpenCLOptions::hostChunk, else kHostChunk
+  std::size_t hostChunk_ = 0;  ///< OpenCLTuning::hostChunk
   /// Reals [begin, begin + count) of `base` = value(0 .. count - 1), converted to the device
   /// precision (in chunks on the host's threads).
   template <class Fn>
@@ -313,8 +293,8 @@ class SegmentEngine {
   std::pair<std::size_t, std::size_t> dofRange(const std::vector<BatchRequest*>& requests) const;
 
   // -- the operations
-  void build(const SolverDesc& solver, const OpenCLOptions& options);
-  void allocate(const OpenCLOptions& options);
+  void build(const SolverDesc& solver);
+  void allocate();
   void refreshBlocks(bool cornersWritten);
   /// The preconditioner's node blocks of the running segments whose rotations changed since their
   /// blocks were formed (blocksStale_), before a solve: the last evaluation of a step (a dynamic
@@ -335,8 +315,7 @@ class SegmentEngine {
   /// With `residualOf` (b): y = free b - A v instead, and the sums (0, y . y, |free b|^2).
   void product(const ClBuffer& v, const ClBuffer& y, bool project, const ClBuffer& partials,
                const ClBuffer* residualOf = nullptr);
-  /// w = A u (projected) into q_, then reduce_finish's scalar update in `mode`: one kernel fewer
-  /// with fusedReduce_ (gather_product_finish), else product + reduce_finish.
+  /// w = A u (projected) into q_, then reduce_finish's scalar update in `mode`.
   void productAndFinish(cl_uint mode);
   /// M^-1 from the blocks and the coefficients (nothing without a preconditioner), r = b - A x,
   /// u = M^-1 r, w = A u and the first scalars; `haveAx`: q_ holds A x already (internalForces);
@@ -360,9 +339,9 @@ class SegmentEngine {
 
   std::shared_ptr<cl::Context> ctx_;
   std::string dev_;
-  /// COROFEM_OPENCL_PROFILE: per kernel, its launches, device time and the device's idle time
-  /// before it (the previous command's end to its start: launch overhead and host round trips),
-  /// printed on destruction. Events are kept, not waited for, and harvested once complete.
+  /// On a queue with CL_QUEUE_PROFILING_ENABLE (benchmarks): per kernel, its launches, device time
+  /// and the device's idle time before it (kernelProfile). Events are kept, not waited for, and
+  /// harvested once complete.
   struct ProfileEntry {
     long launches = 0;
     double busy = 0.0, idleBefore = 0.0;
@@ -374,10 +353,9 @@ class SegmentEngine {
   void harvestProfile(bool all);
   SolverDesc solver_;
   PreconditionerKind precond_;
-  bool storedStiffness_ = false;
-  /// Every rotation pass writes R: the stored-K_e product reads it, and the Quaternion method cannot
-  /// run a pass again for readRotations (each pass advances its warm start). Otherwise R is written
-  /// only when read back.
+  OpenCLTuning tuning_;                  ///< resolved for the device (resolveTuning)
+  /// Every rotation pass writes R: the Quaternion method cannot run a pass again for readRotations
+  /// (each pass advances its warm start). Otherwise R is written only when read back.
   bool rAlways_ = false;
   std::vector<char> rStale_;             ///< per segment: rotated since R was last written
   std::vector<char> blocksStale_;        ///< per segment: rotated since its node blocks were formed
@@ -391,16 +369,9 @@ class SegmentEngine {
   std::size_t vec_ = 1;                  ///< elements per work-item in the element kernels
   std::size_t chunk_ = 1;                ///< nodes per work-item in the PCG node kernels
   bool treeReduce_ = false;              ///< partial sums per work-group (GPUs) or per work-item
-  bool fusedReduce_ = false;             ///< PCG sums finished in gather_product_finish (needs treeReduce_)
   std::size_t tileBytes_ = 0;            ///< working set of the bodies run together (0: all at once)
   bool groupPcg_ = false;                ///< PCG iterations of a round in pcg_iterate_group (one launch)
-  std::size_t groupPcgMinBodies_ = 1;    ///< ... when the round has at least this many bodies,
-  std::size_t groupPcgSmallElems_ = 0;   ///< ... or when none has more elements than this
-  std::size_t groupPcgMaxElems_ = 0;     ///< ... and (for the count rule) none has more than this
   bool teamPcg_ = false;                 ///< ... and rounds of fewer bodies than cores in pcg_iterate_team
-  std::size_t teamPcgMaxElems_ = 0;      ///< ... when none has more elements than this
-  std::size_t teamPcgMinElems_ = 0;      ///< ... and each work-group of the team has this many
-  std::size_t teamPcgSize_ = 0;          ///< OpenCLOptions::teamPcgSize (tests: every round in teams of this size)
   std::size_t teamSize_ = 1;             ///< work-groups per segment of Span::Teams (the round's)
   cl_uint teamEpoch_ = 0;                ///< the last epoch pcg_iterate_team's claim words may hold
   /// teamState_ between launches: the counts at zero, the claim words at epoch 0.
@@ -408,15 +379,15 @@ class SegmentEngine {
   /// How a solve round of these bodies runs its PCG iterations: 0 launched (4 launches per
   /// iteration); 1 in pcg_iterate_group, a work-group per body on one core, when each body is small
   /// enough that one core without launches beats all cores with them, or when the bodies fill the
-  /// cores and none is too large for one core (groupPcgMaxElems_) or much larger than a core's share
+  /// cores and none is too large for one core (groupPcgMaxElements) or much larger than a core's share
   /// of the round; T >= 2 in pcg_iterate_team, T work-groups per body, when fewer bodies than cores
-  /// would leave cores idle (teamPcg_, none larger than teamPcgMaxElems_).
+  /// would leave cores idle (teamPcg_, none larger than teamPcgMaxElements).
   std::size_t groupTeam(const std::vector<BatchRequest*>& requests) const;
   bool groupRound(const std::vector<BatchRequest*>& requests) const { return groupTeam(requests) > 0; }
 
   // -- packs (pcg_pack.cl): the PCG solves of up to kPackLanes bodies with the same mesh (corners
   // and node count) in one work-item, a body per vector lane, on CPU devices in rounds that take
-  // pcg_iterate_group. Each mesh shared by at least packMinLanes_ bodies (a *pack mesh*) gets its
+  // pcg_iterate_group. Each mesh shared by at least packPcgMinLanes bodies (a *pack mesh*) gets its
   // corners once and ceil(bodies / kPackLanes) slots of lane-interleaved rows.
   struct PackMesh {
     std::vector<std::size_t> bodies;      ///< its segments
@@ -434,13 +405,10 @@ class SegmentEngine {
   /// each, the costliest first, then the claim word at 0; empty without packs), with packed[s] = 1
   /// for the bodies they take. Bodies of a pack mesh
   /// are packed in the order of their last solve's iterations (bodies that stop together share a
-  /// pack), kPackLanes at a time; a remainder of fewer than packMinLanes_ bodies is not packed.
+  /// pack), kPackLanes at a time; a remainder of fewer than packPcgMinLanes bodies is not packed.
   std::vector<cl_uint> packRound(const std::vector<BatchRequest*>& requests, std::vector<char>& packed) const;
   bool packs_ = false;                   ///< pcg_iterate_pack for the pack meshes' bodies
-  bool packAlways_ = false;              ///< ... in every round (tests), not only where kPackCost says so
-  std::size_t packMinLanes_ = 0;         ///< the fewest bodies of a pack
-  std::size_t packTakers_ = 1;           ///< pcg_iterate_pack's work-groups (each takes slots in turn)
-  std::size_t groupTakers_ = 1;          ///< pcg_iterate_group's work-groups (each takes bodies in turn)
+  bool packAlways_ = false;              ///< ... in every round, not only where kPackCost says so
   std::vector<PackMesh> packMeshes_;
   std::vector<PackSlotPlace> packSlots_;
   std::size_t packNodeRows_ = 0;         ///< node rows of all slots (each vector of packVec_)
@@ -488,17 +456,16 @@ class SegmentEngine {
   std::vector<unsigned char> staging_;   ///< device-precision staging of other blocking reads
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 
-  ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kProductStored_, kGatherSum_, kGatherProduct_, kBlocks_,
-      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kGatherProductFinish_, kPcgIterateGroup_,
+  ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kGatherSum_, kGatherProduct_, kBlocks_,
+      kCornerGradients_, kPcgInit_, kPcgUpdate_, kReduceFinish_, kPcgIterateGroup_,
       kPcgIterateTeam_, kPcgIteratePack_, kPackIn_, kPackOut_;
   ClBuffer elemSeg_, nodeSeg_, segInfoBuf_, segCoefBuf_;
-  ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, stiffness_, elemOut_, nodeStart_, nodeEntries_;
+  ClBuffer elemNodes_, geom_, rot_, rotGrad_, quat_, elemOut_, nodeStart_, nodeEntries_;
   // PCG (pcg.cl): z_ holds u = M^-1 r, q_ holds w = A u (and A v of apply), s_ holds s = A p;
   // partials_ takes pcg_init/pcg_update's and element_energy's sums, partialsW_ gather_product's.
   ClBuffer pos_, mass_, free_, blocks_, minv_, x_, b_, r_, z_, p_, q_, s_, partials_, partialsW_, scalars_;
   ClBuffer teamState_;  ///< teamPcg_: pcg_iterate_team's state, kTeamStride per segment, then claim words
   ClBuffer groupOrder_; ///< groupPcg_: pcg_iterate_group's segments, the costliest first, then the claim word
-  ClBuffer counters_;  ///< fusedReduce_: per segment, gather_product_finish's work-groups done (0 between launches)
   // packs_ (corofem_layout.h, "packs of bodies"): the slots' table of the round, the pack meshes'
   // corners, the slots' element rows (a_i, volume), node sums, PCG vectors (x r u p s w b), free
   // masks, masses, M^-1 and partial sums.

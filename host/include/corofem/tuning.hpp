@@ -1,0 +1,83 @@
+// Tuning of the device backends: how they shape their kernels and which launch strategies they
+// take on a device. None of it changes the mathematics: every setting gives the same answer to
+// rounding, and the OpenCL strategies of one device class (launched, pcg_iterate_group,
+// pcg_iterate_pack) the same bits.
+//
+// Every field's "automatic" value (0, or -1 for the switches) means "the value of the device's
+// class" (CPU devices such as PoCL, GPUs); any other value overrides it. The measurements behind
+// the defaults are in docs/performance.md.
+#pragma once
+
+#include <cstddef>
+
+namespace corofem {
+
+struct OpenCLTuning {
+  /// Work-items per work-group of every kernel: a power of two, at most the device's maximum.
+  /// 0 = 64.
+  std::size_t workGroupSize = 0;
+  /// Elements per work-item in the element kernels (rotations, forces, products): 1, 4, 8 or 16.
+  /// 0 = 8 on CPU devices (vector code), 1 on GPUs.
+  std::size_t elementsPerItem = 0;
+  /// Nodes per work-item in the PCG node kernels, >= 1. 0 = 4 on CPU devices, 1 on GPUs.
+  std::size_t nodesPerItem = 0;
+  /// Partial sums of the dot products: 1 one per work-group (local-memory trees, GPU style), 0 one
+  /// per work-item (CPU style, which also lets the forces' pass return the strain energy);
+  /// -1 = 1 on GPUs, 0 on CPU devices.
+  int workGroupSums = -1;
+  /// Entries (doubles) per chunk of the host's passes over node vectors (packing, converting and
+  /// checking 3N-entry vectors on the host's threads), >= 1. 0 = 65,536: a body of up to 21,845
+  /// nodes is one chunk, run on the calling thread.
+  std::size_t hostChunk = 0;
+  /// Quaternion rotation method: fixed-point iterations per update, >= 1. 0 = 6.
+  int quaternionIterations = 0;
+  /// Batches on CPU devices: consecutive bodies whose working set fits in this many bytes run
+  /// each launch sequence together (a tile), so that a tile's solve stays in the cache. 0 = all
+  /// bodies in one tile; -1 = CPU devices: defaultTileBytes of the last-level cache, GPUs: 0.
+  long long tileBytes = -1;
+  /// PCG iterations of a solve round in one launch, a work-group per body (pcg_iterate_group), for
+  /// rounds of small bodies (at most groupPcgSmallElements each) or of at least groupPcgMinBodies
+  /// bodies none larger than groupPcgMaxElements: 1 on, 0 off, -1 = on on CPU devices (needs
+  /// per-work-item sums: workGroupSums 0).
+  int groupPcg = -1;
+  /// The fewest bodies of a round run by pcg_iterate_group for their count, >= 1. 0 = the device's
+  /// compute units (a work-group per body uses no more cores than there are bodies).
+  std::size_t groupPcgMinBodies = 0;
+  /// Rounds whose bodies have at most this many elements each run in one launch whatever their
+  /// count (one core without launches beats all cores with them). 0 = 8,192 / compute units.
+  std::size_t groupPcgSmallElements = 0;
+  /// The largest body (elements) of a round run in one launch for its count; none may also exceed
+  /// twice its share (elements of the round / compute units). 0 = 32,768 / compute units.
+  std::size_t groupPcgMaxElements = 0;
+  /// Rounds of fewer bodies than compute units in one launch with a team of work-groups per body
+  /// (pcg_iterate_team): 1 on, 0 or -1 off. Off by default: a team's members wait for each other
+  /// spinning on claim words, which OpenCL does not promise to make progress (a member the OS has
+  /// descheduled stalls the others), so another busy process on the cores slows it many times.
+  int teamPcg = -1;
+  /// The largest body (elements) for pcg_iterate_team. 0 = 16,384 per compute unit.
+  std::size_t teamPcgMaxElements = 0;
+  /// The fewest elements of the largest body per work-group of a team, >= 1. 0 = 1,280.
+  std::size_t teamPcgMinElements = 0;
+  /// With teamPcg on: work-groups per body in every solve round, whatever the rule above says
+  /// (more than the compute units too: then they run in turns). 0 = by the rule.
+  std::size_t teamPcgSize = 0;
+  /// In rounds run by pcg_iterate_group, the bodies that share one mesh (the same element corners
+  /// and node count) iterate in packs of 8, a body per vector lane (pcg_iterate_pack): 1 in every
+  /// such round, 0 never, -1 = on CPU devices where packs shorten the round (a pack's iteration
+  /// costs a core about 2.5 bodies' iterations).
+  int packPcg = -1;
+  /// The fewest bodies of a pack (a pack costs its 8 lanes whatever it holds), 1 to 8. 0 = 3.
+  std::size_t packPcgMinLanes = 0;
+  /// Work-groups of pcg_iterate_group and pcg_iterate_pack, each taking the next body or pack (the
+  /// costliest first) from a claim word until none is left, >= 1. 0 = the device's compute units.
+  std::size_t claimWorkGroups = 0;
+  /// The device's numbering of a body's elements and nodes: 1 a Morton order always, 0 the mesh's
+  /// own, -1 = a Morton order where it is more local than the mesh's (mesh/locality_order.hpp).
+  /// Host vectors keep the mesh's numbering either way.
+  int localityOrder = -1;
+  /// Denormal floats flushed to zero (-cl-denorms-are-zero): 1 on, 0 off, -1 = on CPU devices,
+  /// where an x86 core takes a microcode assist per operation on a denormal.
+  int flushDenormals = -1;
+};
+
+}  // namespace corofem
