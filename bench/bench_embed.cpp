@@ -28,6 +28,7 @@
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
 #include "backends/opencl/program_cache.hpp"
+#include "bench_bandwidth.hpp"
 #include "embed/device_surface.hpp"
 #endif
 
@@ -244,42 +245,6 @@ void BM_DeviceSurface1M(benchmark::State& state) {
 }
 BENCHMARK(BM_DeviceSurface1M)->Arg(0)->Arg(1)->ArgName("double")->Unit(benchmark::kMillisecond)->UseRealTime();
 
-/// Device bandwidth (bytes/s) measured with the copy kernel of bandwidth.cl on 64 MiB buffers (read +
-/// write counted), median of 9 runs after a warm-up; the approach of bench_opencl.cpp. Measured again
-/// by every benchmark that uses it, right after its own timing loop, so that both see the same load
-/// on a shared machine.
-double measuredBandwidth(detail::cl::Context& ctx) {
-  const auto build = detail::cl::buildProgram(ctx, "corofem", detail::cl::corofemProgramSource(),
-                                              "-cl-std=CL1.2 -DCOROFEM_WG=64");
-  cl_int status = CL_SUCCESS;
-  cl_kernel k = clCreateKernel(build.program, "bandwidth_copy", &status);
-  const std::size_t bytes = 64u << 20, count = bytes / 16;
-  cl_mem a = clCreateBuffer(ctx.context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
-  cl_mem b = clCreateBuffer(ctx.context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
-  const float one = 1.0f;
-  clEnqueueFillBuffer(ctx.queue(), a, &one, sizeof(one), 0, bytes, 0, nullptr, nullptr);
-  cl_uint n = static_cast<cl_uint>(count);
-  clSetKernelArg(k, 0, sizeof(n), &n);
-  clSetKernelArg(k, 1, sizeof(cl_mem), &a);
-  clSetKernelArg(k, 2, sizeof(cl_mem), &b);
-  std::vector<double> times;
-  for (int rep = 0; rep < 10; ++rep) {
-    const std::size_t global = count, local = 256;
-    const auto t0 = std::chrono::steady_clock::now();
-    clEnqueueNDRangeKernel(ctx.queue(), k, 1, nullptr, &global, &local, 0, nullptr, nullptr);
-    clFinish(ctx.queue());
-    const auto t1 = std::chrono::steady_clock::now();
-    if (rep > 0) times.push_back(std::chrono::duration<double>(t1 - t0).count());  // first: warm-up
-  }
-  std::sort(times.begin(), times.end());
-  clReleaseMemObject(a);
-  clReleaseMemObject(b);
-  clReleaseKernel(k);
-  const double bandwidth = 2.0 * bytes / times[times.size() / 2];
-  std::fprintf(stderr, "[bench_embed] %s: copy bandwidth %.1f GB/s\n", ctx.deviceName().c_str(), bandwidth / 1e9);
-  return bandwidth;
-}
-
 /// updateFromDevice alone: the node positions are already on the device (as the OpenCL backend keeps
 /// them, relative to the centroid, which the kernel adds back), so a frame is the kernels and
 /// finish(), no upload, no read-back. range(0): 1 = double, 0 = float; range(1): 0 = the sphere's
@@ -375,7 +340,7 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
                        nv * (3 * r + 24) +
                        static_cast<double>(layout.overflowVertices) * (8 + 12) +                // pass 3
                        4.0 * static_cast<double>(layout.overflowEntries);
-  const double bandwidth = measuredBandwidth(*ctx);
+  const double bandwidth = bench::measuredBandwidth(*ctx, "bench_embed");
   state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations() * n));
   state.SetBytesProcessed(static_cast<std::int64_t>(static_cast<double>(state.iterations()) * bytes));
   state.counters["bytes_per_vertex"] = bytes / nv;

@@ -13,6 +13,7 @@
 
 #define COROFEM_BENCHMARK
 #include "backends/opencl/opencl_backend.hpp"
+#include "bench_bandwidth.hpp"
 #include "bench_opencl_options.hpp"
 #include "opencl/opencl_test_support.hpp"
 
@@ -62,44 +63,8 @@ Eigen::VectorXd deformed(const detail::Problem& p) {
   return x;
 }
 
-/// Device bandwidth (bytes/s) measured with the copy kernel of bandwidth.cl on 64 MiB buffers
-/// (read + write counted), median of 9 runs. Measured again by every benchmark right after its own
-/// timing loop, so that the fraction pairs two measurements taken under the same load (the machine
-/// is shared; one measurement per run once caught a slow spell and skewed every fraction).
 double measuredBandwidth(int device) {
-  auto ctx = detail::cl::Context::shared(std::to_string(device));
-  const auto build = detail::cl::buildProgram(*ctx, "corofem", detail::cl::corofemProgramSource(),
-                                              "-cl-std=CL1.2 -DCOROFEM_WG=64");
-  cl_int status = CL_SUCCESS;
-  cl_kernel k = clCreateKernel(build.program, "bandwidth_copy", &status);
-  // 64 MiB on CPUs (2x the development machine's L3); 512 MiB on GPUs, whose L2 (60 MB on an H200)
-  // would otherwise hold much of a 64 MiB pair.
-  const std::size_t bytes = (ctx->info().gpu ? std::size_t{512} : std::size_t{64}) << 20, count = bytes / 16;
-  cl_mem a = clCreateBuffer(ctx->context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
-  cl_mem b = clCreateBuffer(ctx->context(), CL_MEM_READ_WRITE, bytes, nullptr, &status);
-  const float zero = 1.0f;
-  clEnqueueFillBuffer(ctx->queue(), a, &zero, sizeof(zero), 0, bytes, 0, nullptr, nullptr);
-  cl_uint n = static_cast<cl_uint>(count);
-  clSetKernelArg(k, 0, sizeof(n), &n);
-  clSetKernelArg(k, 1, sizeof(cl_mem), &a);
-  clSetKernelArg(k, 2, sizeof(cl_mem), &b);
-  std::vector<double> times;
-  for (int rep = 0; rep < 10; ++rep) {
-    const std::size_t global = count, local = 256;
-    const auto t0 = std::chrono::steady_clock::now();
-    clEnqueueNDRangeKernel(ctx->queue(), k, 1, nullptr, &global, &local, 0, nullptr, nullptr);
-    clFinish(ctx->queue());
-    const auto t1 = std::chrono::steady_clock::now();
-    if (rep > 0) times.push_back(std::chrono::duration<double>(t1 - t0).count());  // first: warm-up
-  }
-  std::sort(times.begin(), times.end());
-  const double bw = 2.0 * bytes / times[times.size() / 2];
-  clReleaseMemObject(a);
-  clReleaseMemObject(b);
-  clReleaseKernel(k);
-  std::fprintf(stderr, "[bench_opencl] device %d (%s): copy bandwidth %.1f GB/s\n", device,
-               ctx->deviceName().c_str(), bw / 1e9);
-  return bw;
+  return bench::measuredBandwidth(*detail::cl::Context::shared(std::to_string(device)), "bench_opencl");
 }
 
 enum class Work { Rotation, Force, Product, PcgIteration };

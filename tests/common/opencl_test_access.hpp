@@ -3,6 +3,7 @@
 #pragma once
 
 #include "backends/opencl/cl_context.hpp"
+#include "backends/opencl/cpu_pcg.hpp"
 #include "backends/opencl/segment_engine.hpp"
 
 #include <memory>
@@ -24,7 +25,7 @@ using cl::ContextTestAccess;
 
 struct SegmentEngineTestAccess {
   /// The last epoch the team's claim words may hold (before the engine's first launch).
-  static void setTeamEpoch(SegmentEngine& engine, unsigned epoch) { engine.teamEpoch_ = epoch; }
+  static void setTeamEpoch(SegmentEngine& engine, unsigned epoch) { engine.cpu_->teamEpoch_ = epoch; }
 };
 
 }  // namespace corofem::detail

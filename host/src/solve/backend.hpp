@@ -1,12 +1,9 @@
-// The small interface every backend implements (reference Eigen, OpenCL, later Vulkan). Newton,
-// the time integrators and the Simulation are written once in solve/ against it.
-//
-// System matrices: A = mass * M + damping * C + stiffness * K_t, with M the lumped mass,
-// C = alpha M + beta K_t (Rayleigh, alpha/beta from the problem) and K_t the tangent stiffness
-// at the current positions (R K R^T summed over elements for the co-rotational formulation,
-// K for the linear one, the consistent tangent for the hyperelastic ones).
+// One body's view of a device (device/device.hpp) as the per-body drivers (solve/body_solver.hpp)
+// call it: the device's operations for the set of that one body, and a whole linear solve. The
+// system matrices are the device's (A = mass M + damping C + stiffness K_t).
 #pragma once
 
+#include "device/device.hpp"
 #include "model/problem.hpp"
 
 #include <corofem/scene.hpp>
@@ -18,49 +15,7 @@
 #include <string>
 #include <vector>
 
-// OpenCL's opaque handle types, declared so that this header needs no OpenCL.
-struct _cl_context;
-struct _cl_command_queue;
-struct _cl_device_id;
-struct _cl_mem;
-
 namespace corofem::detail {
-
-/// Where a backend keeps a body's node positions on an OpenCL device (the device surface reads
-/// them there: no host round trip). 3 reals per node, double when isDouble else float, those last
-/// given to setPositions minus `centroid` (3 doubles), node n of the body at node firstNode + n of
-/// `buffer`, or firstNode + deviceNode[n] where deviceNode is set (a batch holds many bodies in one
-/// buffer). Valid while the backend lives.
-struct DevicePositions {
-  _cl_context* context = nullptr;
-  _cl_command_queue* queue = nullptr;  ///< in-order queue that writes them
-  _cl_device_id* device = nullptr;
-  _cl_mem* buffer = nullptr;
-  std::size_t firstNode = 0;
-  bool isDouble = false;
-  const double* centroid = nullptr;
-  /// The device's index (from firstNode) of each of the body's nodes, where the device numbers them
-  /// in an order of its own (the OpenCL backend's locality order); nullptr: node i is at i.
-  const std::uint32_t* deviceNode = nullptr;
-};
-
-struct SystemCoeffs {
-  double mass = 0.0;
-  double damping = 0.0;
-  double stiffness = 1.0;
-};
-
-/// A device buffer a backend allocated: what it holds and its size at allocation.
-struct DeviceBuffer {
-  std::string name;
-  std::size_t bytes = 0;
-};
-
-struct LinearSolveStats {
-  int iterations = 0;             ///< PCG iterations (0 for a direct solve)
-  double relativeResidual = 0.0;  ///< |b - A x| / |b| on the free dofs (0 when b = 0)
-  bool converged = false;
-};
 
 class Backend {
  public:
@@ -99,8 +54,31 @@ class Backend {
   }
 };
 
-/// The reference backend: assembled sparse matrices, Eigen's CG (diagonal preconditioner) or
-/// sparse Cholesky, double precision. Supports every formulation.
+/// One body of a device seen as a Backend: its calls are the device's for the set of that body,
+/// its solve is solveLinear (solve/pcg.hpp).
+class DeviceBody : public Backend {
+ public:
+  DeviceBody(std::shared_ptr<Device> device, std::size_t body, const SolverDesc& solver);
+  std::string name() const override { return device_->name(); }
+  std::string deviceName() const override { return device_->deviceName(); }
+  void setPositions(const Eigen::VectorXd& x) override;
+  void internalForces(Eigen::VectorXd& f) override;
+  void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override;
+  LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override;
+  double elasticEnergy() override;
+  /// The device's buffers where the body has it to itself.
+  std::vector<DeviceBuffer> deviceBuffers() const override;
+  bool devicePositions(DevicePositions& out) const override { return device_->devicePositions(body_, out); }
+  Device& device() const { return *device_; }
+
+ private:
+  std::shared_ptr<Device> device_;
+  std::size_t body_;
+  SolverDesc solver_;
+};
+
+/// The reference backend: assembled sparse matrices, the device backends' PCG in double or
+/// sparse Cholesky. Supports every formulation.
 std::unique_ptr<Backend> createReferenceBackend(const Problem& problem, const SolverDesc& solver);
 
 /// The OpenCL backend (co-rotational and linear formulations). Throws Error(NotCompiledIn) when

@@ -77,6 +77,29 @@ class BatchDevice {
   }
 };
 
+/// A device's bodies as a BatchDevice: each kind of call in a round is one device call for the
+/// bodies that made it (solves through solvePcg, solve/pcg.hpp). A request whose vectors do not fit
+/// its body fails alone (Error(Internal)); a device failure fails every request of the round.
+class DeviceBatch : public BatchDevice {
+ public:
+  DeviceBatch(std::shared_ptr<Device> device, const SolverDesc& solver);
+  std::string name() const override { return device_->name(); }
+  std::string deviceName() const override { return device_->deviceName(); }
+  std::size_t bodyCount() const override { return device_->bodyCount(); }
+  std::size_t allocatedBytes() const override;
+  std::vector<DeviceBuffer> deviceBuffers() const override { return device_->buffers(); }
+  bool devicePositions(std::size_t body, DevicePositions& out) const override {
+    return device_->devicePositions(body, out);
+  }
+  void run(std::vector<BatchRequest*>& round) override;
+  Device& device() const { return *device_; }
+
+ private:
+  void runOp(BatchOp op, std::vector<BatchRequest*>& requests);
+  std::shared_ptr<Device> device_;
+  SolverDesc solver_;
+};
+
 /// The batch as a loop over one Backend per body (reference or any other): no speed-up, but
 /// bit-identical to running the bodies separately. Tests the BatchGroup on any machine; also the
 /// fallback when no device batches.

@@ -1,5 +1,5 @@
-// The OpenCL backend (co-rotational and linear formulations): internal interface for tests and
-// benchmarks, beyond the Backend interface of solve/backend.hpp.
+// The OpenCL backend (co-rotational and linear formulations): its Device (opencl_device.cpp, over a
+// SegmentEngine), and what tests and benchmarks see beyond the Device and Backend interfaces.
 #pragma once
 
 #include "backends/opencl/cl_context.hpp"
@@ -65,10 +65,16 @@ std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& prob
                                                              const OpenCLTuning& tuning = {});
 
 /// The OpenCL batch device with its engine in view (tests, benchmarks).
-class OpenCLBatchDeviceInternal : public BatchDevice {
+class OpenCLBatchDeviceInternal : public DeviceBatch {
  public:
+  using DeviceBatch::DeviceBatch;
   virtual SegmentEngine& engine() = 0;
 };
+
+/// The OpenCL device of `problems` on a given context (the registry's factory, tests). Throws as
+/// SegmentEngine does.
+std::unique_ptr<Device> createOpenCLDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                           std::shared_ptr<cl::Context> context, const OpenCLTuning& tuning = {});
 
 /// The OpenCL batch device (solve/batch.hpp: createOpenCLBatchDevice) on a given context and with
 /// the tuning options of the single backend (tests, benchmarks).

@@ -47,9 +47,9 @@ std::string kernelCacheDirectory() {
 std::string corofemProgramSource() {
   // Headers first, then the kernel files in dependency order; unknown files last (alphabetical,
   // as CMake globbed them).
-  static const std::array<const char*, 9> kOrder = {"mat3.cl",   "rotation.cl", "element_force.cl",
+  static const std::array<const char*, 8> kOrder = {"mat3.cl",   "rotation.cl", "element_force.cl",
                                                     "gather.cl", "precond.cl",  "pcg.cl", "pcg_group.cl",
-                                                    "pcg_pack.cl", "bandwidth.cl"};
+                                                    "pcg_pack.cl"};
   std::vector<const EmbeddedSource*> headers, kernels, others;
   for (std::size_t i = 0; i < corofem_opencl_sources_count; ++i) {
     const EmbeddedSource& s = corofem_opencl_sources[i];

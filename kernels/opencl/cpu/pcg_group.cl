@@ -23,12 +23,12 @@
  * `restrict` on the arguments: with it, PoCL 3.1 gave wrong iterates from the second iteration of
  * the loop on (the first was right), presumably by moving loads across the loop's barriers. */
 #ifndef COROFEM_EMBEDDED
-#include "../shared/corofem_layout.h"
-#include "../shared/corofem_reduce.h"
-#include "../shared/corofem_vector.h"
-#include "element_force.cl"
-#include "gather.cl"
-#include "pcg.cl"
+#include "../../shared/corofem_layout.h"
+#include "../../shared/corofem_reduce.h"
+#include "../../shared/corofem_vector.h"
+#include "../element_force.cl"
+#include "../gather.cl"
+#include "../pcg.cl"
 #endif
 
 #ifndef COROFEM_TREE_REDUCE

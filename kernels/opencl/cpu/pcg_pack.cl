@@ -25,12 +25,12 @@
  *
  * No `restrict`, as in pcg_group.cl. */
 #ifndef COROFEM_EMBEDDED
-#include "../shared/corofem_layout.h"
-#include "../shared/corofem_reduce.h"
-#include "../shared/corofem_vector.h"
-#include "element_force.cl"
-#include "gather.cl"
-#include "pcg.cl"
+#include "../../shared/corofem_layout.h"
+#include "../../shared/corofem_reduce.h"
+#include "../../shared/corofem_vector.h"
+#include "../element_force.cl"
+#include "../gather.cl"
+#include "../pcg.cl"
 #endif
 
 #ifndef COROFEM_TREE_REDUCE

@@ -1,0 +1,517 @@
+// The reference device: plain Eigen, double precision, assembled sparse matrices, one body after
+// another. It is the oracle the device backends are tested against -- their element operations
+// and, since it runs the same single-reduction PCG (kernels/opencl/pcg.cl) on the same projected
+// system, their iterations -- so it favours clarity over speed.
+//
+// Precision: SolverDesc::precision is accepted and ignored; this device always computes in double.
+// Rotation: every RotationMethod is computed here by the SVD-based polar decomposition
+// (polarRotation); the cheaper methods are device variants measured against it.
+// The PCG runs on the free dofs of the assembled A (the constrained rows and columns dropped),
+// which is the device backends' projected system.
+#include "backends/reference/reference_device.hpp"
+
+#include "backends/reference/block_jacobi.hpp"
+#include "model/hyperelastic.hpp"
+#include "util/error.hpp"
+
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+#include <memory>
+
+namespace corofem::detail {
+
+namespace {
+
+using SpMat = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
+
+bool isHyperelastic(Formulation f) { return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean; }
+
+/// One body: its element state at the current positions, its assembled system on the free dofs,
+/// and the PCG state of the solve in progress.
+class ReferenceBody {
+ public:
+  ReferenceBody(const Problem& problem, const SolverDesc& solver) : p_(problem), solver_(solver) {
+    const std::size_t ne = p_.elements.size();
+    if (p_.mesh.tetCount() != ne)
+      fail(ErrorCode::Internal, "reference backend: problem '", p_.name, "' has ", ne, " element records for ",
+           p_.mesh.tetCount(), " tetrahedra");
+    if (static_cast<std::size_t>(p_.lumpedMass.size()) != p_.dofCount() || p_.constrained.size() != p_.dofCount())
+      fail(ErrorCode::Internal, "reference backend: problem '", p_.name, "' has inconsistent dof arrays");
+    hyper_ = isHyperelastic(p_.formulation);
+    if (hyper_) model_ = hyperelasticModelOf(p_.formulation);
+    restNodes_.resize(ne);
+    for (std::size_t e = 0; e < ne; ++e) restNodes_[e] = gather(p_.restPositions, e);
+    if (!hyper_) {
+      stiffness_.resize(ne);
+      for (std::size_t e = 0; e < ne; ++e) stiffness_[e] = linearStiffness(p_.elements[e], p_.lame);
+    }
+    rotations_.assign(ne, Mat3::Identity());
+    gradients_.assign(ne, Mat3::Identity());
+    x_ = p_.restPositions;
+    buildPattern();
+  }
+
+  const Problem& problem() const { return p_; }
+
+  void setPositions(const Eigen::VectorXd& x) {
+    checkSize(x, "setPositions");
+    x_ = x;
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      const Mat3 F = deformationGradient(p_.elements[e], gather(x_, e));
+      gradients_[e] = F;
+      // Co-rotational: R = rotational part of F (polar decomposition). Linear: R = I.
+      rotations_[e] = p_.formulation == Formulation::Corotational ? polarRotation(F) : Mat3::Identity();
+    }
+    tangentsValid_ = false;
+  }
+
+  void internalForces(Eigen::VectorXd& f) {
+    f.setZero(static_cast<Eigen::Index>(p_.dofCount()));
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      Vec12 fe;
+      if (hyper_) {
+        checkInversion(e);
+        fe = hyperelasticForce(model_, p_.elements[e], p_.lame, gradients_[e]);
+      } else {
+        fe = corotationalForce(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);  // Eq. 9
+      }
+      scatterAdd(f, e, fe);
+    }
+  }
+
+  void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) {
+    checkSize(p, "apply");
+    ensureTangents();
+    const double massScale = c.mass + c.damping * p_.rayleighMass;
+    const double stiffScale = c.stiffness + c.damping * p_.rayleighStiffness;
+    // y = (m + c alpha) M p + (k + c beta) K_t p, M lumped (diagonal), K_t by element loops.
+    y = massScale * p_.lumpedMass.cwiseProduct(p);
+    if (stiffScale == 0.0) return;
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      Vec12 pe;
+      for (int k = 0; k < 4; ++k) pe.segment<3>(3 * k) = p.segment<3>(3 * node(e, k));
+      scatterAdd(y, e, stiffScale * (tangents_[e] * pe));
+    }
+  }
+
+  double elasticEnergy() {
+    double energy = 0.0;
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      if (hyper_)
+        energy += hyperelasticEnergy(model_, p_.elements[e], p_.lame, gradients_[e]);
+      else  // 1/2 u^T K u, u = R^T x - X (R = I for the linear formulation)
+        energy += corotationalEnergy(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);
+    }
+    return energy;
+  }
+
+  // -- PCG (kernels/opencl/pcg.cl's single-reduction form, in double, on the free dofs)
+
+  PcgStart pcgBegin(const SystemCoeffs& c, const Eigen::VectorXd& b, const Eigen::VectorXd& x, double tolerance,
+                    int maxIterations) {
+    checkSize(b, "the right-hand side of a solve");
+    tol2_ = tolerance * tolerance;
+    cap_ = maxIterations;
+    running_ = false;
+    const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs_.size());
+    bf_.resize(nf);
+    xf_.resize(nf);
+    for (Eigen::Index i = 0; i < nf; ++i) {
+      const Eigen::Index d = freeDofs_[static_cast<std::size_t>(i)];
+      bf_[i] = b[d];
+      xf_[i] = x.size() == b.size() && std::isfinite(x[d]) ? x[d] : 0.0;  // a non-finite start is useless, not fatal
+    }
+    sc_ = PcgScalars{};
+    sc_.bb = bf_.squaredNorm();
+    if (!std::isfinite(sc_.bb)) return PcgStart::NonFiniteRhs;
+    if (sc_.bb == 0.0) {
+      xf_.setZero();
+      sc_.stop = PcgStop::Converged;
+      return PcgStart::ZeroRhs;
+    }
+    assemble(c);
+    formPreconditioner();
+    r_ = bf_ - A_ * xf_;
+    u_ = precondition(r_);
+    d_ = ad_ = Eigen::VectorXd::Zero(nf);
+    w_ = A_ * u_;
+    gamma_ = r_.dot(u_);
+    sc_.rr = r_.squaredNorm();
+    const double delta = u_.dot(w_);
+    beta_ = 0.0;
+    const bool breakdown = !(delta > 0.0);
+    alpha_ = breakdown ? 0.0 : gamma_ / delta;
+    stopTest(breakdown);
+    running_ = true;
+    return PcgStart::Running;
+  }
+
+  /// One iteration if the body is still running; `last`: the cap's last (no next product).
+  void pcgIteration(bool last) {
+    if (!running_ || sc_.stop != PcgStop::Running) return;
+    d_ = u_ + beta_ * d_;     // p = u + beta p
+    ad_ = w_ + beta_ * ad_;   // s = A p = w + beta s
+    xf_ += alpha_ * d_;
+    r_ -= alpha_ * ad_;
+    u_ = precondition(r_);
+    const double gammaNew = r_.dot(u_);
+    sc_.rr = r_.squaredNorm();
+    bool breakdown = false;
+    if (!last) {
+      w_ = A_ * u_;
+      const double delta = u_.dot(w_);
+      beta_ = gamma_ != 0.0 ? gammaNew / gamma_ : 0.0;
+      const double pq = alpha_ != 0.0 ? delta - beta_ * gammaNew / alpha_ : 0.0;
+      breakdown = !(pq > 0.0);
+      alpha_ = breakdown ? 0.0 : gammaNew / pq;
+    }
+    gamma_ = gammaNew;
+    sc_.iterations += 1;
+    stopTest(breakdown);
+  }
+
+  const PcgScalars& scalars() const { return sc_; }
+  bool running() const { return running_; }
+  int cap() const { return cap_; }
+
+  PcgScalars trueResidual() const {
+    PcgScalars t = sc_;
+    t.rr = (bf_ - A_ * xf_).squaredNorm();
+    return t;
+  }
+
+  void pcgEnd(Eigen::VectorXd& x) const {
+    x.setZero(static_cast<Eigen::Index>(p_.dofCount()));
+    for (std::size_t i = 0; i < freeDofs_.size(); ++i) x[freeDofs_[i]] = xf_[static_cast<Eigen::Index>(i)];
+  }
+
+  LinearSolveStats solveDirect(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+    checkSize(b, "the right-hand side of a solve");
+    const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs_.size());
+    Eigen::VectorXd bf(nf);
+    for (Eigen::Index i = 0; i < nf; ++i) bf[i] = b[freeDofs_[static_cast<std::size_t>(i)]];
+    if (!bf.allFinite())
+      fail(ErrorCode::SolveFailed, "body '", p_.name, "': the right-hand side of the linear system has non-finite "
+           "entries (the state diverged; try a smaller time step or load increment)");
+    if (x.size() != b.size()) x = Eigen::VectorXd::Zero(b.size());
+    LinearSolveStats stats;
+    if (nf == 0) {  // everything constrained: nothing to solve
+      x.setZero();
+      stats.converged = true;
+      return stats;
+    }
+    assemble(c);
+    // LDL^T, not LL^T: the hyperelastic tangents become indefinite near buckling and still factor.
+    if (!analyzed_) {
+      ldlt_.analyzePattern(A_);
+      analyzed_ = true;
+    }
+    ldlt_.factorize(A_);
+    Eigen::VectorXd xf = Eigen::VectorXd::Zero(nf);
+    if (ldlt_.info() == Eigen::Success) {
+      xf = ldlt_.solve(bf);
+      stats.converged = true;
+    }
+    if (!xf.allFinite())
+      fail(ErrorCode::SolveFailed, "body '", p_.name, "': the direct solve (LDL^T) produced non-finite values; the "
+           "system matrix is probably singular or the state diverged");
+    // True residual on the free dofs.
+    const double bNorm = bf.norm();
+    stats.relativeResidual = bNorm > 0.0 ? (bf - A_ * xf).norm() / bNorm : (A_ * xf).norm();
+    stats.converged = stats.converged && stats.relativeResidual <= std::max(solver_.tolerance, 1e-8);
+    x.setZero();
+    for (Eigen::Index i = 0; i < nf; ++i) x[freeDofs_[static_cast<std::size_t>(i)]] = xf[i];
+    return stats;
+  }
+
+ private:
+  Eigen::Index node(std::size_t e, int k) const { return static_cast<Eigen::Index>(p_.mesh.tets[4 * e + k]); }
+
+  std::array<Vec3d, 4> gather(const Eigen::VectorXd& v, std::size_t e) const {
+    std::array<Vec3d, 4> out;
+    for (int k = 0; k < 4; ++k) out[k] = v.segment<3>(3 * node(e, k));
+    return out;
+  }
+
+  void scatterAdd(Eigen::VectorXd& v, std::size_t e, const Vec12& fe) const {
+    for (int k = 0; k < 4; ++k) v.segment<3>(3 * node(e, k)) += fe.segment<3>(3 * k);
+  }
+
+  void checkSize(const Eigen::VectorXd& v, const char* what) const {
+    if (static_cast<std::size_t>(v.size()) != p_.dofCount())
+      fail(ErrorCode::Internal, "reference backend ", what, ": vector of size ", v.size(), " for ", p_.dofCount(),
+           " dofs");
+  }
+
+  void checkInversion(std::size_t e) const {
+    if (model_ == HyperelasticModel::NeoHookean && !(gradients_[e].determinant() > 0.0))
+      fail(ErrorCode::SolveFailed, "body '", p_.name, "': element ", e, " (nodes ", node(e, 0), ", ", node(e, 1), ", ",
+           node(e, 2), ", ", node(e, 3), ") is inverted (det F = ", gradients_[e].determinant(),
+           "); the Neo-Hookean energy is undefined there. Use smaller load increments or time steps");
+  }
+
+  /// Element tangents at the current positions: R K R^T (Eq. 11), K (linear) or the consistent
+  /// hyperelastic tangent.
+  void ensureTangents() {
+    if (tangentsValid_) return;
+    tangents_.resize(p_.elements.size());
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      if (hyper_) {
+        checkInversion(e);
+        tangents_[e] = hyperelasticTangent(model_, p_.elements[e], p_.lame, gradients_[e]);
+      } else if (p_.formulation == Formulation::Corotational) {
+        tangents_[e] = rotateStiffness(stiffness_[e], rotations_[e]);
+      } else {
+        tangents_[e] = stiffness_[e];
+      }
+    }
+    tangentsValid_ = true;
+  }
+
+  /// The sparsity pattern of A on the free dofs is fixed by the mesh and the constraints: built once
+  /// here, with the position in A's value array of every (element, row, col) entry, so that each
+  /// assembly only refills values.
+  void buildPattern() {
+    const std::size_t n = p_.dofCount();
+    freeIndex_.assign(n, -1);
+    freeDofs_.clear();
+    blockStarts_.clear();
+    for (std::size_t d = 0; d < n; ++d) {
+      if (p_.constrained[d]) continue;
+      if (blockStarts_.empty() || d / 3 != static_cast<std::size_t>(freeDofs_.back()) / 3)
+        blockStarts_.push_back(static_cast<int>(freeDofs_.size()));  // a new node's block begins
+      freeIndex_[d] = static_cast<int>(freeDofs_.size());
+      freeDofs_.push_back(static_cast<Eigen::Index>(d));
+    }
+    blockStarts_.push_back(static_cast<int>(freeDofs_.size()));
+    const int nf = static_cast<int>(freeDofs_.size());
+
+    std::vector<Eigen::Triplet<double, int>> triplets;
+    triplets.reserve(p_.elements.size() * 144 + static_cast<std::size_t>(nf));
+    for (int i = 0; i < nf; ++i) triplets.emplace_back(i, i, 0.0);  // mass diagonal
+    for (std::size_t e = 0; e < p_.elements.size(); ++e)
+      for (int a = 0; a < 12; ++a)
+        for (int b = 0; b < 12; ++b) {
+          const int r = freeIndex_[static_cast<std::size_t>(3 * node(e, a / 3) + a % 3)];
+          const int c = freeIndex_[static_cast<std::size_t>(3 * node(e, b / 3) + b % 3)];
+          if (r >= 0 && c >= 0) triplets.emplace_back(r, c, 0.0);
+        }
+    A_.resize(nf, nf);
+    A_.setFromTriplets(triplets.begin(), triplets.end());
+    A_.makeCompressed();
+
+    const auto slotOf = [&](int r, int c) {
+      const int* begin = A_.innerIndexPtr() + A_.outerIndexPtr()[c];
+      const int* end = A_.innerIndexPtr() + A_.outerIndexPtr()[c + 1];
+      return static_cast<int>(std::lower_bound(begin, end, r) - A_.innerIndexPtr());
+    };
+    diagSlot_.resize(static_cast<std::size_t>(nf));
+    for (int i = 0; i < nf; ++i) diagSlot_[static_cast<std::size_t>(i)] = slotOf(i, i);
+    elementSlots_.assign(p_.elements.size() * 144, -1);
+    for (std::size_t e = 0; e < p_.elements.size(); ++e)
+      for (int a = 0; a < 12; ++a)
+        for (int b = 0; b < 12; ++b) {
+          const int r = freeIndex_[static_cast<std::size_t>(3 * node(e, a / 3) + a % 3)];
+          const int c = freeIndex_[static_cast<std::size_t>(3 * node(e, b / 3) + b % 3)];
+          if (r >= 0 && c >= 0) elementSlots_[e * 144 + static_cast<std::size_t>(12 * a + b)] = slotOf(r, c);
+        }
+  }
+
+  /// A = (m + c alpha) M + (k + c beta) K_t restricted to the free dofs (x_c = 0).
+  void assemble(const SystemCoeffs& c) {
+    ensureTangents();
+    const double massScale = c.mass + c.damping * p_.rayleighMass;
+    const double stiffScale = c.stiffness + c.damping * p_.rayleighStiffness;
+    double* values = A_.valuePtr();
+    std::fill(values, values + A_.nonZeros(), 0.0);
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      const int* slots = &elementSlots_[e * 144];
+      for (int a = 0; a < 12; ++a)
+        for (int b = 0; b < 12; ++b)
+          if (slots[12 * a + b] >= 0) values[slots[12 * a + b]] += stiffScale * tangents_[e](a, b);
+    }
+    for (std::size_t i = 0; i < freeDofs_.size(); ++i) values[diagSlot_[i]] += massScale * p_.lumpedMass[freeDofs_[i]];
+  }
+
+  /// M^-1 of the assembled A: none, its diagonal (1 where a diagonal entry is 0), or its 3x3 node
+  /// blocks over each node's free dofs (BlockJacobiPreconditioner).
+  void formPreconditioner() {
+    switch (solver_.preconditioner) {
+      case PreconditionerKind::None: break;
+      case PreconditionerKind::Diagonal:
+        diagInverse_.resize(A_.rows());
+        for (std::size_t i = 0; i < diagSlot_.size(); ++i) {
+          const double d = A_.valuePtr()[diagSlot_[i]];
+          diagInverse_[static_cast<Eigen::Index>(i)] = d != 0.0 ? 1.0 / d : 1.0;
+        }
+        break;
+      case PreconditionerKind::BlockDiagonal:
+        blocks_.setBlocks(blockStarts_);
+        blocks_.factorize(A_);
+        break;
+    }
+  }
+
+  Eigen::VectorXd precondition(const Eigen::VectorXd& r) const {
+    switch (solver_.preconditioner) {
+      case PreconditionerKind::None: return r;
+      case PreconditionerKind::Diagonal: return diagInverse_.cwiseProduct(r);
+      case PreconditionerKind::BlockDiagonal: return blocks_.solve(r);
+    }
+    return r;
+  }
+
+  /// The kernels' stop test after the set-up and every iteration (pcg.cl, update_scalars).
+  void stopTest(bool breakdown) {
+    sc_.stop = !std::isfinite(sc_.rr) ? PcgStop::NonFinite
+               : sc_.rr <= tol2_ * sc_.bb ? PcgStop::Converged
+               : breakdown               ? PcgStop::Breakdown
+                                         : PcgStop::Running;
+  }
+
+  Problem p_;  // a copy: the body stays valid whatever happens to the caller's problem
+  SolverDesc solver_;
+  bool hyper_ = false;
+  HyperelasticModel model_ = HyperelasticModel::StVenantKirchhoff;
+  std::vector<std::array<Vec3d, 4>> restNodes_;
+  std::vector<Mat12> stiffness_;  ///< K_e (linear, co-rotational)
+  std::vector<Mat3> rotations_;   ///< R_e at the current positions
+  std::vector<Mat3> gradients_;   ///< F_e at the current positions
+  std::vector<Mat12> tangents_;   ///< element tangents, valid when tangentsValid_
+  bool tangentsValid_ = false;
+  Eigen::VectorXd x_;
+
+  std::vector<int> freeIndex_;           ///< dof -> free index or -1
+  std::vector<Eigen::Index> freeDofs_;   ///< free index -> dof
+  std::vector<int> blockStarts_;         ///< per-node blocks of the free dofs (block Jacobi)
+  std::vector<int> elementSlots_;        ///< 144 per element: index into A_'s values, -1 if constrained
+  std::vector<int> diagSlot_;
+  SpMat A_;
+  Eigen::SimplicialLDLT<SpMat, Eigen::Lower> ldlt_;
+  bool analyzed_ = false;
+
+  // The solve in progress (free dofs): b, x, r, u = M^-1 r, the direction p (d_) and s = A p (ad_),
+  // w = A u; its scalars and preconditioner.
+  Eigen::VectorXd bf_, xf_, r_, u_, d_, ad_, w_, diagInverse_;
+  BlockJacobiPreconditioner blocks_;
+  PcgScalars sc_;
+  double gamma_ = 0.0, alpha_ = 0.0, beta_ = 0.0, tol2_ = 0.0;
+  int cap_ = 0;
+  bool running_ = false;
+};
+
+class ReferenceDevice final : public Device {
+ public:
+  ReferenceDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver) {
+    for (const Problem* p : problems) bodies_.push_back(std::make_unique<ReferenceBody>(*p, solver));
+  }
+
+  std::string name() const override { return "reference"; }
+  std::string deviceName() const override { return "host (Eigen, double)"; }
+  std::size_t bodyCount() const override { return bodies_.size(); }
+  const Problem& problem(std::size_t body) const override { return at(body).problem(); }
+
+  void setPositions(const BodySet& set, const ConstVectors& x) override {
+    check(set, x.size());
+    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setPositions(*x[i]);
+  }
+  void internalForces(const BodySet& set, const Vectors& f) override {
+    check(set, f.size());
+    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).internalForces(*f[i]);
+  }
+  void apply(const BodySet& set, const std::vector<SystemCoeffs>& c, const ConstVectors& p, const Vectors& y) override {
+    check(set, p.size());
+    check(set, y.size());
+    check(set, c.size());
+    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).apply(c[i], *p[i], *y[i]);
+  }
+  void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
+    energy.resize(set.size());
+    for (std::size_t i = 0; i < set.size(); ++i) energy[i] = at(set[i]).elasticEnergy();
+  }
+
+  std::vector<PcgStart> pcgBegin(const BodySet& set, const std::vector<SystemCoeffs>& c, const ConstVectors& b,
+                                 const ConstVectors& x, double tolerance, int maxIterations) override {
+    check(set, b.size());
+    check(set, x.size());
+    check(set, c.size());
+    solve_ = set;
+    enqueued_ = 0;
+    cap_ = maxIterations;
+    reads_.clear();
+    std::vector<PcgStart> out(set.size());
+    for (std::size_t i = 0; i < set.size(); ++i) out[i] = at(set[i]).pcgBegin(c[i], *b[i], *x[i], tolerance, maxIterations);
+    return out;
+  }
+
+  void pcgIterate(int n, const std::vector<char>&) override {
+    for (int k = 0; k < n && enqueued_ < cap_; ++k) {
+      ++enqueued_;
+      for (std::size_t body : solve_) at(body).pcgIteration(enqueued_ == cap_);
+    }
+  }
+
+  PcgTicket pcgRead() override {
+    std::vector<PcgScalars> now;
+    for (std::size_t body : solve_) now.push_back(at(body).scalars());
+    reads_.push_back(std::move(now));
+    return firstTicket_ + reads_.size() - 1;
+  }
+
+  void pcgTake(PcgTicket ticket, std::vector<PcgScalars>& scalars) override {
+    if (reads_.empty() || ticket != firstTicket_)
+      fail(ErrorCode::Internal, "reference backend: PCG reads taken out of order");
+    scalars = std::move(reads_.front());
+    reads_.pop_front();
+    ++firstTicket_;
+  }
+
+  void pcgResidual(const std::vector<char>& bodies) override { residualFor_ = bodies; }
+
+  void pcgEnd(const std::vector<int>&, const Vectors& x, std::vector<PcgScalars>& residual) override {
+    residual.assign(solve_.size(), PcgScalars{});
+    for (std::size_t i = 0; i < solve_.size(); ++i) {
+      ReferenceBody& b = at(solve_[i]);
+      if (i < residualFor_.size() && residualFor_[i]) residual[i] = b.trueResidual();
+      if (b.running()) b.pcgEnd(*x[i]);
+    }
+    firstTicket_ += reads_.size();
+    reads_.clear();
+    residualFor_.clear();
+  }
+
+  bool hasDirectSolve() const override { return true; }
+  LinearSolveStats solveDirect(std::size_t body, const SystemCoeffs& c, const Eigen::VectorXd& b,
+                               Eigen::VectorXd& x) override {
+    return at(body).solveDirect(c, b, x);
+  }
+
+ private:
+  ReferenceBody& at(std::size_t body) const {
+    if (body >= bodies_.size())
+      fail(ErrorCode::Internal, "reference backend: body ", body, " of ", bodies_.size());
+    return *bodies_[body];
+  }
+  static void check(const BodySet& set, std::size_t n) {
+    if (set.size() != n) fail(ErrorCode::Internal, "reference backend: ", n, " vectors for ", set.size(), " bodies");
+  }
+
+  std::vector<std::unique_ptr<ReferenceBody>> bodies_;
+  BodySet solve_;  ///< the bodies of the solve in progress
+  int enqueued_ = 0, cap_ = 0;
+  std::deque<std::vector<PcgScalars>> reads_;  ///< snapshots not yet taken, the oldest first
+  PcgTicket firstTicket_ = 0;                  ///< the ticket of reads_.front()
+  std::vector<char> residualFor_;
+};
+
+}  // namespace
+
+std::unique_ptr<Device> createReferenceDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver) {
+  return std::make_unique<ReferenceDevice>(problems, solver);
+}
+
+}  // namespace corofem::detail

@@ -1,0 +1,182 @@
+// The one interface every backend implements (reference Eigen, OpenCL, later Vulkan): a device
+// holding a set of bodies, each with its own problem, that runs the element operations and the
+// building blocks of PCG for any subset of them at once (one body is a set of one). Newton, the
+// time integrators and the PCG loop itself (solve/pcg.hpp) are written once above it; a backend
+// only runs their steps.
+//
+// System matrices: A = mass * M + damping * C + stiffness * K_t, with M the lumped mass,
+// C = alpha M + beta K_t (Rayleigh, alpha/beta from each body's problem) and K_t the tangent
+// stiffness at the current positions (R K R^T summed over elements for the co-rotational
+// formulation, K for the linear one, the consistent tangent for the hyperelastic ones).
+//
+// Calls take a BodySet (indices into the device's bodies, strictly ascending) and one vector per
+// body of the set, in the set's order, 3N entries each in the problem's own node numbering.
+// Bodies outside the set keep their state. A device error (allocation, launch, read-back) throws
+// Error(DeviceError) and fails the whole call; a caller's mistake (a wrong vector size) throws
+// Error(Internal).
+#pragma once
+
+#include "model/problem.hpp"
+
+#include <corofem/scene.hpp>
+
+#include <Eigen/Core>
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+// OpenCL's opaque handle types, declared so that this header needs no OpenCL.
+struct _cl_context;
+struct _cl_command_queue;
+struct _cl_device_id;
+struct _cl_mem;
+
+namespace corofem::detail {
+
+struct SystemCoeffs {
+  double mass = 0.0;
+  double damping = 0.0;
+  double stiffness = 1.0;
+};
+
+/// What one linear solve did.
+struct LinearSolveStats {
+  int iterations = 0;             ///< PCG iterations (0 for a direct solve)
+  double relativeResidual = 0.0;  ///< |b - A x| / |b| on the free dofs (0 when b = 0)
+  bool converged = false;
+};
+
+/// A device buffer a backend allocated: what it holds and its size at allocation.
+struct DeviceBuffer {
+  std::string name;
+  std::size_t bytes = 0;
+};
+
+/// Where a device keeps a body's node positions on an OpenCL device (the device surface reads
+/// them there: no host round trip). 3 reals per node, double when isDouble else float, those last
+/// given to setPositions minus `centroid` (3 doubles), node n of the body at node firstNode + n of
+/// `buffer`, or firstNode + deviceNode[n] where deviceNode is set. Valid while the device lives.
+struct DevicePositions {
+  _cl_context* context = nullptr;
+  _cl_command_queue* queue = nullptr;  ///< in-order queue that writes them
+  _cl_device_id* device = nullptr;
+  _cl_mem* buffer = nullptr;
+  std::size_t firstNode = 0;
+  bool isDouble = false;
+  const double* centroid = nullptr;
+  /// The device's index (from firstNode) of each of the body's nodes, where the device numbers them
+  /// in an order of its own (a locality order); nullptr: node i is at i.
+  const std::uint32_t* deviceNode = nullptr;
+};
+
+using BodySet = std::vector<std::size_t>;
+using ConstVectors = std::vector<const Eigen::VectorXd*>;
+using Vectors = std::vector<Eigen::VectorXd*>;
+
+/// Why a body's PCG stopped (the same values as the kernels' kStop*).
+enum class PcgStop : unsigned { Running = 0, Converged = 1, Breakdown = 2, NonFinite = 3 };
+
+/// A body's PCG scalars as the device holds them: after the set-up, after any iteration, or after
+/// the true residual (pcgEnd).
+struct PcgScalars {
+  int iterations = 0;   ///< iterations done
+  double rr = 0.0;      ///< r . r on the free dofs (the recurrence's r, or b - A x after pcgEnd)
+  double bb = 0.0;      ///< |free b|^2
+  PcgStop stop = PcgStop::Running;
+};
+
+/// How a body enters a solve (pcgBegin).
+enum class PcgStart {
+  Running,      ///< set up; iterates until it stops
+  ZeroRhs,      ///< |free b| = 0: answered x = 0 at once, no iteration
+  NonFiniteRhs  ///< b holds NaN or Inf (or overflows the device precision): not solved
+};
+
+/// A pending non-blocking read of the PCG scalars (pcgRead).
+using PcgTicket = std::size_t;
+
+class Device {
+ public:
+  virtual ~Device() = default;
+  virtual std::string name() const = 0;        ///< the backend: "reference", "opencl"
+  virtual std::string deviceName() const = 0;  ///< human-readable device
+  virtual std::size_t bodyCount() const = 0;
+  /// Body `body`'s problem (as given at creation; it outlives the device).
+  virtual const Problem& problem(std::size_t body) const = 0;
+
+  // -- element operations
+
+  /// Sets the bodies' current positions and refreshes the per-element state that depends on them
+  /// (rotations for the co-rotational formulation, F for the hyperelastic ones).
+  virtual void setPositions(const BodySet& bodies, const ConstVectors& x) = 0;
+  /// Internal forces at the current positions. Constrained dofs are not zeroed.
+  virtual void internalForces(const BodySet& bodies, const Vectors& f) = 0;
+  /// y = A p on all dofs (no projection of constraints), with each body's coefficients.
+  virtual void apply(const BodySet& bodies, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
+                     const Vectors& y) = 0;
+  /// Strain energy at the current positions (J), one per body of the set.
+  virtual void elasticEnergy(const BodySet& bodies, std::vector<double>& energy) = 0;
+
+  // -- PCG building blocks (driven by solvePcg, solve/pcg.hpp): the single-reduction PCG of
+  // kernels/opencl/pcg.cl on the projected system (constrained dofs: identity rows and columns,
+  // their entries of x kept at 0), preconditioned as the solver says. One solve at a time.
+
+  /// The bodies of a solve in tiles that solvePcg solves one after another (a device whose cache
+  /// holds a tile's working set but not the whole set's), or all at once.
+  virtual std::vector<BodySet> pcgTiles(const BodySet& bodies) const { return {bodies}; }
+  /// Starts the solve of A x = b for each body of the set (its coefficients), x its starting
+  /// vector (constrained and non-finite entries taken as 0): r = b - A x, u = M^-1 r, w = A u and
+  /// the first scalars, the convergence test included. Returns how each body entered.
+  virtual std::vector<PcgStart> pcgBegin(const BodySet& bodies, const std::vector<SystemCoeffs>& coeffs,
+                                         const ConstVectors& b, const ConstVectors& x, double tolerance,
+                                         int maxIterations) = 0;
+  /// Whether the device runs any number of iterations in one launch for this solve (the driver
+  /// then asks for all it may run at once; the device still tests convergence after each).
+  virtual bool pcgOneLaunch() const { return false; }
+  /// Whether the scalars of the set-up can be read before the first pcgIterate (false: they come
+  /// with the first read after it).
+  virtual bool pcgSetupReadable() const { return true; }
+  /// Enqueues `n` more iterations (never past maxIterations) for the bodies still running; a body
+  /// the device has stopped costs nothing. `running`: per body of the set, whether the host still
+  /// sees it running (the device may narrow its launches to those).
+  virtual void pcgIterate(int n, const std::vector<char>& running) = 0;
+  /// A non-blocking read of every body's scalars, in order after what was enqueued before it.
+  virtual PcgTicket pcgRead() = 0;
+  /// Waits for a read (tickets are taken in the order they were issued) and gives its scalars,
+  /// one per body of the set.
+  virtual void pcgTake(PcgTicket ticket, std::vector<PcgScalars>& scalars) = 0;
+  /// Enqueues the true residual r = free (b - A x) for the bodies marked in `bodies` (per body of
+  /// the set); pcgEnd gives its r . r. Called at most once per solve, after every iteration.
+  virtual void pcgResidual(const std::vector<char>& bodies) = 0;
+  /// Ends the solve: x of every running body read back (non-finite entries as the device holds
+  /// them), and for the bodies given to pcgResidual their true r . r and b . b in `residual`.
+  /// `iterations`: what each body did (the device may plan its next solves with it). Pending reads
+  /// are dropped.
+  virtual void pcgEnd(const std::vector<int>& iterations, const Vectors& x, std::vector<PcgScalars>& residual) = 0;
+
+  // -- a direct solve (the reference backend's sparse Cholesky)
+
+  /// Whether solveDirect exists on this device.
+  virtual bool hasDirectSolve() const { return false; }
+  /// Solves A x = b on the free dofs of one body directly. Throws Error(BadInput) where there is none.
+  virtual LinearSolveStats solveDirect(std::size_t body, const SystemCoeffs& coeffs, const Eigen::VectorXd& b,
+                                       Eigen::VectorXd& x);
+
+  // -- what it holds
+
+  /// The device buffers it allocated, each at its allocated size (empty for host devices).
+  virtual std::vector<DeviceBuffer> buffers() const { return {}; }
+  /// Fills `out` and returns true when the body's node positions live on an OpenCL device.
+  virtual bool devicePositions(std::size_t body, DevicePositions& out) const {
+    (void)body;
+    (void)out;
+    return false;
+  }
+};
+
+/// The set {0, ..., n - 1}.
+BodySet allBodies(std::size_t n);
+
+}  // namespace corofem::detail
