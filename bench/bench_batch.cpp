@@ -1,6 +1,6 @@
 // Many bodies, one set of launches (issue 5): 100 bodies of 2,000 elements each, stepped
 //   batched    in one Simulation whose bodies share the device's buffers and launches
-//              (solve/batch_group.hpp, the default);
+//              (one device call per operation for the whole set, solve/driver.hpp; the default);
 //   separate   as 100 separate Simulations of one body each (what an application without batching
 //              does), stepped one after the other;
 //   unbatched  in one Simulation with "backend": {"batch": false} (100 backends, stepped in turn).
@@ -18,9 +18,6 @@
 // elements), the largest first in the scene, so that nothing packs and pcg_iterate_group's
 // work-groups take bodies of very different costs.
 //
-// BM_Rendezvous: the host side of a batched step alone (the pool's threads and the rendezvous of
-// each round), 100 bodies on a device that answers at once, 1 or 6 calls per body and step.
-//
 // BM_HundredBodySurfaces: the same 100 bodies (one material), batched, each driving a render
 // surface (a UV sphere of 2,002 vertices inside the body, written as OBJ to a temporary folder):
 // a frame is one step plus every body's surface brought up to date on the device (updateSurface,
@@ -30,8 +27,8 @@
 // One benchmark iteration = kStepsPerSample steps of the whole set with each of the three, taken
 // alternately so that all three go through the same physical states; the counters are set-steps
 // per second (one set-step = every body advanced one step) and the ratios, and per batched
-// set-step and call (set_positions, internal_forces, solve, ...): the rounds, their device time and
-// the wait before them (the bodies' host work and the rendezvous, while the device idles). Each configuration is
+// set-step and call (set_positions, internal_forces, solve, ...): the device calls ("rounds"), their
+// device time and the host's time before them (the drivers' own arithmetic, while the device idles). Each configuration is
 // created and warmed up (one step) once, outside the timing.
 //
 //   ./build/bench/bench_batch --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
@@ -39,7 +36,6 @@
 #include <corofem/corofem.hpp>
 
 #include "embed/embed_test_util.hpp"
-#include "solve/batch_group.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -184,8 +180,8 @@ void BM_HundredBodies(benchmark::State& state) {
   const auto deviceSeconds = [&] {
     return nlohmann::json::parse(s.batched.schedulerReport())["batches"][0]["device_seconds"].get<double>();
   };
-  // Per call of the bodies inside the batched steps: rounds, device seconds, and the wait before
-  // the rounds (the bodies' host work and the rendezvous), summed from the scheduler's report.
+  // Per call of the bodies inside the batched steps: calls, device seconds, and the host's time
+  // before them (the drivers' arithmetic), summed from the scheduler's report.
   const auto byCall = [&] {
     return nlohmann::json::parse(s.batched.schedulerReport())["batches"][0]["rounds_by_call"];
   };
@@ -218,7 +214,7 @@ void BM_HundredBodies(benchmark::State& state) {
   // at once, but the launches go on): the slowest body's count per step.
   state.counters["pcg_slowest_body_step"] = pcgSlowest / steps;
   state.counters["body_steps_per_s_batched"] = steps * kBodies / tBatched;
-  // Share of the batched step spent in the device's rounds (the rest: host driver work, rendezvous).
+  // Share of the batched step spent in the device's calls (the rest: the drivers' host work).
   state.counters["batched_device_fraction"] = (deviceSeconds() - device0) / tBatched;
   // Per set-step of the batched runs, by call: rounds, device ms and wait ms before them.
   const nlohmann::json calls1 = byCall();
@@ -240,46 +236,6 @@ void BM_HundredBodies(benchmark::State& state) {
 // Arg: 1 = varied materials (the issue's benchmark), 0 = one material for all, 2 = one material
 // and 100 meshes of 800 to 4,400 elements.
 BENCHMARK(BM_HundredBodies)->ArgName("varied")->Arg(1)->Arg(0)->Arg(2)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
-
-/// A batch device that answers every request at once without work.
-class IdleBatchDevice final : public detail::BatchDevice {
- public:
-  explicit IdleBatchDevice(std::size_t bodies) : bodies_(bodies) {}
-  std::string name() const override { return "idle"; }
-  std::string deviceName() const override { return "idle"; }
-  std::size_t bodyCount() const override { return bodies_; }
-  void run(std::vector<detail::BatchRequest*>&) override {}
-
- private:
-  std::size_t bodies_;
-};
-
-/// The host side of a batched step alone: kBodies bodies on a device that does nothing, each step
-/// the given number of calls per body (a dynamic step with one Newton iteration makes 6). What it
-/// measures is the start of the step on the pool's threads and the rendezvous of each round, i.e.
-/// the part of batched_<call>_wait_ms above that is not the drivers' own arithmetic.
-void BM_Rendezvous(benchmark::State& state) {
-  const int calls = static_cast<int>(state.range(0));
-  detail::BatchGroup group(std::make_unique<IdleBatchDevice>(kBodies));
-  std::vector<std::unique_ptr<detail::Backend>> views;
-  std::vector<std::size_t> all;
-  for (int i = 0; i < kBodies; ++i) {
-    views.push_back(group.view(static_cast<std::size_t>(i)));
-    all.push_back(static_cast<std::size_t>(i));
-  }
-  for (auto _ : state) {
-    const auto errors = group.runStep(all, [&](std::size_t i) {
-      Eigen::VectorXd f;
-      for (int c = 0; c < calls; ++c) views[i]->internalForces(f);
-    });
-    if (std::any_of(errors.begin(), errors.end(), [](const std::exception_ptr& e) { return e != nullptr; })) {
-      state.SkipWithError("a body's step failed on the idle device");
-      break;
-    }
-  }
-  state.counters["rounds_per_step"] = static_cast<double>(group.stats().rounds) / static_cast<double>(state.iterations());
-}
-BENCHMARK(BM_Rendezvous)->ArgName("calls")->Arg(1)->Arg(6)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 void BM_HundredBodySurfaces(benchmark::State& state) {
   static std::unique_ptr<Simulation> sim;

@@ -29,7 +29,7 @@
 #include "backends/opencl/cl_context.hpp"
 #include "backends/opencl/program_cache.hpp"
 #include "bench_bandwidth.hpp"
-#include "embed/device_surface.hpp"
+#include "backends/opencl/device_surface.hpp"
 #endif
 
 namespace {

@@ -18,7 +18,7 @@
 
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
-#include "embed/device_surface.hpp"
+#include "backends/opencl/device_surface.hpp"
 
 #include <CL/cl.h>
 #endif

@@ -1,6 +1,6 @@
 // Helpers of the numerical-extremes suite: the backends every test runs on (reference double;
 // OpenCL double and float on every device found), scenes on small generated boxes, and a "direct"
-// body (Problem + Backend + BodySolver without a Simulation) for the cases the Scene API cannot
+// body (Problem + device + driver without a Simulation) for the cases the Scene API cannot
 // express (a body released from an inverted or squashed shape).
 #pragma once
 
@@ -9,8 +9,8 @@
 #include <corofem/simulation.hpp>
 
 #include "model/problem.hpp"
-#include "solve/backend.hpp"
-#include "solve/body_solver.hpp"
+#include "common/body_drivers.hpp"
+#include "device/registry.hpp"
 #include "util/error.hpp"
 
 #ifdef COROFEM_WITH_OPENCL
@@ -177,13 +177,12 @@ inline std::unique_ptr<Simulation> createSim(const Scene& scene, std::string* sk
     return;                                                 \
   }
 
-/// Problem + backend + driver of body 0 of a scene, built as Simulation::create does, for tests
-/// that need BodySolver::setInitialState.
+/// Problem + device + driver of body 0 of a scene, built as Simulation::create does, for tests
+/// that need the driver's setInitialState.
 struct DirectBody {
   TetMesh mesh;
   std::unique_ptr<detail::Problem> problem;
-  std::unique_ptr<detail::Backend> backend;
-  std::unique_ptr<detail::BodySolver> solver;
+  std::unique_ptr<BodyDriver> solver;
 };
 
 /// Builds it; returns false with *skip set when the backend/device is missing.
@@ -194,11 +193,11 @@ inline bool makeDirectBody(const Scene& scene, DirectBody& out, std::string* ski
     out.mesh = mesh.value();
     out.problem = std::make_unique<detail::Problem>(
         detail::buildProblem(scene.bodies[0], out.mesh, scene.solver, scene.baseDir));
-    if (scene.backend.kind == BackendKind::OpenCL)
-      out.backend = detail::createOpenCLBackend(*out.problem, scene.solver, scene.backend.device);
-    else
-      out.backend = detail::createReferenceBackend(*out.problem, scene.solver);
-    out.solver = detail::createBodySolver(*out.problem, *out.backend, scene.analysis);
+    const auto entry = detail::findBackend(toString(scene.backend.kind));
+    if (!entry) detail::fail(ErrorCode::NotCompiledIn, "no backend '", toString(scene.backend.kind), "'");
+    const detail::Candidate c = entry->resolve(scene.backend.device);
+    out.solver = std::make_unique<BodyDriver>(entry->create({out.problem.get()}, scene.solver, c, {}), scene.analysis,
+                                              scene.solver);
     return true;
   } catch (const detail::Error& e) {
     if (e.code() == ErrorCode::NotCompiledIn || e.code() == ErrorCode::DeviceError) {

@@ -3,6 +3,8 @@
 #pragma once
 
 #include "backends/opencl/cl_context.hpp"
+#include "backends/opencl/opencl_backend.hpp"
+#include "common/morton.hpp"
 #include "model/element.hpp"
 #include "model/problem.hpp"
 
@@ -57,6 +59,20 @@ inline std::string caseName(const testing::TestParamInfo<DeviceCase>& info) {
                       "pocl-opencl-icd); the OpenCL backend cannot be tested here";              \
   } while (0)
 #endif
+
+/// One body on an OpenCL device (createOpenCLBackendOn), in the Morton order where the run forces it
+/// (--corofem_morton, common/morton.hpp).
+inline std::unique_ptr<detail::OpenCLBackendInternal> openclOn(const detail::Problem& problem, const SolverDesc& solver,
+                                                               std::shared_ptr<detail::cl::Context> context,
+                                                               const OpenCLTuning& tuning = {}) {
+  return detail::createOpenCLBackendOn(problem, solver, std::move(context), morton(tuning));
+}
+
+/// Bodies on one OpenCL device (createOpenCLBatchOn), in the Morton order where the run forces it.
+inline detail::OpenCLBatch openclBatchOn(const std::vector<const detail::Problem*>& problems, const SolverDesc& solver,
+                                         std::shared_ptr<detail::cl::Context> context, const OpenCLTuning& tuning = {}) {
+  return detail::createOpenCLBatchOn(problems, solver, std::move(context), morton(tuning));
+}
 
 /// A problem from a mesh with the elements set up by detail::computeElementRest (no scene needed).
 inline detail::Problem makeProblem(const TetMesh& mesh, double E = 1e5, double nu = 0.3,

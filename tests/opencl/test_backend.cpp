@@ -10,6 +10,7 @@
 // reference) of 1e-3, the solution to 1e-3 and forces/products to 1e-4 relative (positions
 // rounded to float; see test_kernels.cpp).
 #include "backends/opencl/opencl_backend.hpp"
+#include "common/body_backend.hpp"
 #include "common/shuffled_mesh.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "util/error.hpp"
@@ -63,7 +64,7 @@ class OpenCLBackendVsReference : public ::testing::TestWithParam<DeviceCase> {
   }
   std::unique_ptr<detail::OpenCLBackendInternal> openclBackend(const detail::Problem& p, const SolverDesc& s,
                                                               const detail::OpenCLTuning& o = {}) {
-    return detail::createOpenCLBackendOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)), o);
+    return test::openclOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)), o);
   }
   static double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
     return (a - b).norm() / std::max(b.norm(), 1e-300);
@@ -80,7 +81,7 @@ TEST_P(OpenCLBackendVsReference, ForcesProductAndEnergyMatch) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const detail::Problem p = beam();
   const SolverDesc s = solver();
-  auto ref = detail::createReferenceBackend(p, s);
+  auto ref = test::createReferenceBackend(p, s);
   auto ocl = openclBackend(p, s);
   const Eigen::VectorXd x = bent(p);
   ref->setPositions(x);
@@ -111,7 +112,7 @@ TEST_P(OpenCLBackendVsReference, EnergyKnownFromTheForcesIsTheEnergyOfThosePosit
   const detail::Problem p = beam();
   const SolverDesc s = solver();
   auto ocl = openclBackend(p, s), fresh = openclBackend(p, s);
-  auto ref = detail::createReferenceBackend(p, s);
+  auto ref = test::createReferenceBackend(p, s);
   const Eigen::VectorXd x1 = bent(p), x2 = p.restPositions + 0.5 * (x1 - p.restPositions);
   Eigen::VectorXd f;
   ocl->setPositions(x1);
@@ -144,7 +145,7 @@ TEST_P(OpenCLBackendVsReference, SolveMatchesDirectSolveForEveryPreconditioner) 
   const detail::Problem p = beam();
   SolverDesc direct = solver();
   direct.linearSolver = LinearSolverKind::Cholesky;
-  auto ref = detail::createReferenceBackend(p, direct);
+  auto ref = test::createReferenceBackend(p, direct);
   const Eigen::VectorXd x = bent(p);
   ref->setPositions(x);
   const Eigen::VectorXd b = randomVector(p.dofCount(), 5);
@@ -265,7 +266,7 @@ TEST_P(OpenCLBackendVsReference, PreconditionerIsFormedAtThePositionsOfTheSolve)
       EXPECT_EQ(0, std::memcmp(fresh.data(), other.data(), sizeof(double) * b.size()))
           << what << " after " << before.size() << " other positions" << (solveBetween ? " and solves" : "");
     }
-    auto ref = detail::createReferenceBackend(p, s);
+    auto ref = test::createReferenceBackend(p, s);
     Eigen::VectorXd xr = Eigen::VectorXd::Zero(b.size());
     ref->setPositions(x);
     ref->solve(c, b, xr);
@@ -571,9 +572,9 @@ TEST_P(OpenCLBackendVsReference, LocalityOrderChangesNothingTheHostSees) {
     EXPECT_LE(f.cwiseAbs().maxCoeff(), (isDouble() ? 1e-9 : 1e-4) * forceScale) << "forces at rest";
     EXPECT_LE(std::abs(atRest->elasticEnergy()), (isDouble() ? 1e-12 : 1e-6) * energyScale) << "energy at rest";
   }
-  // The box generator's layered numbering is kept by the rule (unless COROFEM_OPENCL_REORDER forces
-  // the Morton order, as the suite's second run does).
-  if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); !env || !*env) {
+  // The box generator's layered numbering is kept by the rule (unless the suite's second run forces
+  // the Morton order, --corofem_morton).
+  if (!test::mortonEverywhere()) {
     auto boxBackend = openclBackend(ordered, solver());
     detail::DevicePositions where;
     ASSERT_TRUE(boxBackend->devicePositions(where));
@@ -596,9 +597,7 @@ TEST_P(OpenCLBackendVsReference, DenormalsAreFlushedOnCpuDevicesAndChangeNoAnswe
     o.flushDenormals = flush;
     auto ocl = openclBackend(p, solver(), o);
     const bool flushed = ocl->buildOptions().find("-cl-denorms-are-zero") != std::string::npos;
-    const char* env = std::getenv("COROFEM_OPENCL_FTZ");  // read as the engine reads it
-    const bool byDefault = env && *env ? std::string(env) != "0" : cpu;
-    EXPECT_EQ(flushed, flush == 1 || (flush == -1 && byDefault)) << "flush " << flush;
+    EXPECT_EQ(flushed, flush == 1 || (flush == -1 && cpu)) << "flush " << flush;
     if (flush < 0) continue;
     ocl->setPositions(x);
     ocl->internalForces(f[flush]);
@@ -629,7 +628,7 @@ TEST_P(OpenCLBackendVsReference, BodyFarFromTheOriginKeepsItsAccuracy) {
   const Eigen::VectorXd x0 = bent(atOrigin);
   Eigen::VectorXd x = x0;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) x.segment<3>(3 * n) += shift;
-  auto ref = detail::createReferenceBackend(atOrigin, solver());
+  auto ref = test::createReferenceBackend(atOrigin, solver());
   auto ocl = openclBackend(p, solver());
   ref->setPositions(x0);
   ocl->setPositions(x);
@@ -669,7 +668,7 @@ TEST_P(OpenCLBackendVsReference, AdoptedContextGivesTheSameForces) {
   ASSERT_EQ(status, CL_SUCCESS);
   Eigen::VectorXd fa, fs;
   {
-    auto adopted = detail::createOpenCLBackendAdopting(p, solver(), ctx, queue, info.device);
+    auto adopted = detail::createOpenCLBackendAdopting(p, solver(), ctx, queue, info.device, test::morton());
     adopted->setPositions(bent(p));
     adopted->internalForces(fa);
   }
@@ -696,7 +695,7 @@ TEST_P(OpenCLBackendVsReference, AdoptingAnOutOfOrderOrForeignQueueIsAClearError
   ASSERT_EQ(status, CL_SUCCESS);
   auto expectBadInput = [&](cl_command_queue queue, const char* words) {
     try {
-      detail::createOpenCLBackendAdopting(p, solver(), ctx, queue, info.device);
+      detail::createOpenCLBackendAdopting(p, solver(), ctx, queue, info.device, test::morton());
       ADD_FAILURE() << "expected BadInput mentioning '" << words << "'";
     } catch (const detail::Error& e) {
       EXPECT_EQ(e.code(), ErrorCode::BadInput);

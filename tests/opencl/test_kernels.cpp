@@ -87,7 +87,7 @@ class OpenCLKernels : public ::testing::TestWithParam<DeviceCase> {
     s.precision = GetParam().precision;
     s.rotation = m;
     s.preconditioner = PreconditionerKind::BlockDiagonal;
-    return detail::createOpenCLBackendOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)), o);
+    return test::openclOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)), o);
   }
 
   /// Max over elements of max |R_device - R_reference| entries, and checks every R is proper.

@@ -15,6 +15,7 @@
 // same request: on 54k dofs mixed reaches the same true residual as float (the float operator
 // sets the floor; the two-stage reduction was never the limit), see the comment there.
 #include "backends/opencl/opencl_backend.hpp"
+#include "common/body_backend.hpp"
 #include "common/opencl_test_access.hpp"
 #include "opencl/opencl_test_support.hpp"
 #include "util/error.hpp"
@@ -100,7 +101,7 @@ double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
 }
 
 /// |free (b - A x)| / |free b| with the reference backend's (double) operator.
-double trueResidual(detail::Backend& ref, const detail::Problem& p, const detail::SystemCoeffs& c,
+double trueResidual(test::Backend& ref, const detail::Problem& p, const detail::SystemCoeffs& c,
                     const Eigen::VectorXd& b, const Eigen::VectorXd& x) {
   Eigen::VectorXd Ax;
   ref.apply(c, x, Ax);
@@ -122,7 +123,7 @@ TEST(OpenCLMixedPrecision, SceneValueMixedParses) {
 TEST(OpenCLMixedPrecision, BuildsFloatVectorsWithDoubleSums) {
   COROFEM_REQUIRE_FP64_DEVICE(device);
   const detail::Problem p = beam();
-  auto mixed = detail::createOpenCLBackendOn(p, solverOf(Precision::Mixed, 1e-5), contextOf(device));
+  auto mixed = test::openclOn(p, solverOf(Precision::Mixed, 1e-5), contextOf(device));
   const std::string& options = mixed->buildOptions();
   EXPECT_NE(options.find("-DCOROFEM_MIXED"), std::string::npos) << options;
   EXPECT_EQ(options.find("-DCOROFEM_DOUBLE"), std::string::npos) << options;
@@ -140,7 +141,7 @@ TEST(OpenCLMixedPrecision, SolveMatchesDirectSolveForEveryPreconditioner) {
   const detail::Problem p = beam();
   SolverDesc direct = solverOf(Precision::Double, 1e-10);
   direct.linearSolver = LinearSolverKind::Cholesky;
-  auto ref = detail::createReferenceBackend(p, direct);
+  auto ref = test::createReferenceBackend(p, direct);
   const Eigen::VectorXd x = bent(p);
   ref->setPositions(x);
   const Eigen::VectorXd b = randomVector(p.dofCount(), 5);
@@ -150,7 +151,7 @@ TEST(OpenCLMixedPrecision, SolveMatchesDirectSolveForEveryPreconditioner) {
     ref->solve(c, b, xr);
     for (PreconditionerKind pc :
          {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
-      auto ocl = detail::createOpenCLBackendOn(p, solverOf(Precision::Mixed, 1e-5, pc), contextOf(device));
+      auto ocl = test::openclOn(p, solverOf(Precision::Mixed, 1e-5, pc), contextOf(device));
       ocl->setPositions(x);
       Eigen::VectorXd xo = Eigen::VectorXd::Zero(b.size());
       const detail::LinearSolveStats st = ocl->solve(c, b, xo);
@@ -176,8 +177,8 @@ TEST(OpenCLMixedPrecision, SameSolveTwiceGivesIdenticalBits) {
   const detail::Problem p = beam();
   const Eigen::VectorXd x = bent(p), b = randomVector(p.dofCount(), 11);
   const SolverDesc s = solverOf(Precision::Mixed, 1e-5);
-  auto first = detail::createOpenCLBackendOn(p, s, contextOf(device));
-  auto fresh = detail::createOpenCLBackendOn(p, s, contextOf(device));
+  auto first = test::openclOn(p, s, contextOf(device));
+  auto fresh = test::openclOn(p, s, contextOf(device));
   Eigen::VectorXd results[3];
   detail::LinearSolveStats stats[3];
   for (int run = 0; run < 3; ++run) {
@@ -203,7 +204,7 @@ TEST(OpenCLMixedPrecision, MixedWithoutFp64IsAClearError) {
   const detail::Problem p = beam();
   auto ctx = detail::ContextTestAccess::withoutFp64("0");
   try {
-    detail::createOpenCLBackendOn(p, solverOf(Precision::Mixed, 1e-5), ctx);
+    test::openclOn(p, solverOf(Precision::Mixed, 1e-5), ctx);
     FAIL() << "mixed precision was accepted on a device without cl_khr_fp64";
   } catch (const detail::Error& e) {
     EXPECT_EQ(e.code(), ErrorCode::DeviceError);
@@ -213,7 +214,7 @@ TEST(OpenCLMixedPrecision, MixedWithoutFp64IsAClearError) {
     EXPECT_NE(msg.find("\"float\""), std::string::npos) << msg;        // and the fix
   }
   // Float needs no fp64: the same device works.
-  EXPECT_NO_THROW(detail::createOpenCLBackendOn(p, solverOf(Precision::Float, 1e-5), ctx));
+  EXPECT_NO_THROW(test::openclOn(p, solverOf(Precision::Float, 1e-5), ctx));
 }
 
 TEST(OpenCLMixedPrecision, LargeSystemTrueResidualIsLimitedByTheFloatOperator) {
@@ -243,7 +244,7 @@ TEST(OpenCLMixedPrecision, LargeSystemTrueResidualIsLimitedByTheFloatOperator) {
   const detail::SystemCoeffs c{14400.0, 0.0, 1.0};
   const Eigen::VectorXd b = randomVector(p.dofCount(), 21);
   SolverDesc direct = solverOf(Precision::Double, 1e-12);
-  auto ref = detail::createReferenceBackend(p, direct);
+  auto ref = test::createReferenceBackend(p, direct);
   ref->setPositions(p.restPositions);
   double res[3] = {0, 0, 0};
   int its[3] = {0, 0, 0};
@@ -252,7 +253,7 @@ TEST(OpenCLMixedPrecision, LargeSystemTrueResidualIsLimitedByTheFloatOperator) {
   for (int i = 0; i < 3; ++i) {
     SolverDesc s = solverOf(precisions[i], 1e-9);
     s.maxIterations = 3000;
-    auto ocl = detail::createOpenCLBackendOn(p, s, contextOf(device));
+    auto ocl = test::openclOn(p, s, contextOf(device));
     ocl->setPositions(p.restPositions);
     Eigen::VectorXd xo = Eigen::VectorXd::Zero(b.size());
     const auto t0 = std::chrono::steady_clock::now();

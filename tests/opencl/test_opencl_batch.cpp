@@ -1,6 +1,6 @@
-// The OpenCL batch device (createOpenCLBatchDevice, solve/batch.hpp): several different bodies in
-// one set of buffers and launches, each request compared with one single-body OpenCL backend per
-// body and with the reference backend.
+// The OpenCL device of several bodies (createOpenCLBatchOn): different bodies in one set of buffers
+// and launches, driven in rounds of requests (common/device_batch.hpp), each request compared with
+// one single-body OpenCL device per body and with the reference backend.
 //
 // Tolerances. Batch vs single backend: bit-identical, in double and in float. Both run the same
 // kernels of the same program; a body's elements and nodes start at multiples of the work-group
@@ -15,7 +15,8 @@
 #include "common/opencl_test_access.hpp"
 #include "common/shuffled_mesh.hpp"
 #include "opencl/opencl_test_support.hpp"
-#include "solve/batch.hpp"
+#include "common/body_backend.hpp"
+#include "common/device_batch.hpp"
 #include "util/error.hpp"
 #include "util/parallel.hpp"
 
@@ -33,9 +34,37 @@ namespace {
 
 using test::sameBits;
 using test::DeviceCase;
-using detail::BatchOp;
-using detail::BatchRequest;
+using test::BatchOp;
+using test::BatchRequest;
 using test::randomVector;
+
+/// Bodies on one OpenCL device, in rounds of requests, with the device and its engine in view.
+class BatchOnDevice : public test::DeviceBatch {
+ public:
+  BatchOnDevice(detail::OpenCLBatch b, const SolverDesc& solver)
+      : test::DeviceBatch(*b.device, solver), batch_(std::move(b)) {}
+  std::string name() const { return batch_.device->name(); }
+  bool devicePositions(std::size_t body, detail::DevicePositions& out) const {
+    return batch_.device->devicePositions(body, out);
+  }
+  detail::Device& device() { return *batch_.device; }
+  detail::SegmentEngine& engine() { return *batch_.engine; }
+  /// Bytes of device memory the device allocated (the sum of its buffers' sizes).
+  std::size_t allocatedBytes() const {
+    std::size_t bytes = 0;
+    for (const detail::DeviceBuffer& b : batch_.device->buffers()) bytes += b.bytes;
+    return bytes;
+  }
+
+ private:
+  detail::OpenCLBatch batch_;
+};
+
+/// The bodies `problems` on one device of `context`.
+std::unique_ptr<BatchOnDevice> batchOn(const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                                       std::shared_ptr<detail::cl::Context> context, const detail::OpenCLTuning& o) {
+  return std::make_unique<BatchOnDevice>(test::openclBatchOn(problems, s, std::move(context), o), s);
+}
 
 /// Five different bodies: different meshes (none a multiple of the work-group span), materials,
 /// densities, Rayleigh coefficients, constraints and one linear formulation.
@@ -198,22 +227,22 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
   std::shared_ptr<detail::cl::Context> context() const {
     return detail::cl::Context::shared(std::to_string(GetParam().device));
   }
-  std::unique_ptr<detail::OpenCLBatchDeviceInternal> batchOf(const std::vector<detail::Problem>& ps, const SolverDesc& s,
+  std::unique_ptr<BatchOnDevice> batchOf(const std::vector<detail::Problem>& ps, const SolverDesc& s,
                                                const detail::OpenCLTuning& o = {}) const {
     std::vector<const detail::Problem*> ptrs;
     for (const auto& p : ps) ptrs.push_back(&p);
-    return detail::createOpenCLBatchDeviceOn(ptrs, s, context(), o);
+    return batchOn(ptrs, s, context(), o);
   }
   std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> singlesOf(const std::vector<detail::Problem>& ps,
                                                                         const SolverDesc& s,
                                                                         const detail::OpenCLTuning& o = {}) const {
     std::vector<std::unique_ptr<detail::OpenCLBackendInternal>> out;
-    for (const auto& p : ps) out.push_back(detail::createOpenCLBackendOn(p, s, context(), o));
+    for (const auto& p : ps) out.push_back(test::openclOn(p, s, context(), o));
     return out;
   }
   void everyRequestMatches(const detail::OpenCLTuning& o, const std::vector<detail::Problem>& ps = bodies());
   /// Runs a round and expects no request to fail.
-  static void runOk(detail::BatchDevice& device, std::vector<BatchRequest>& requests) {
+  static void runOk(test::DeviceBatch& device, std::vector<BatchRequest>& requests) {
     std::vector<BatchRequest*> round;
     for (auto& r : requests) round.push_back(&r);
     device.run(round);
@@ -266,7 +295,7 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
     /// Solves the bodies `who` from zero on `batch` (positions set): 2 when their iterations ran
     /// in teams (pcg_iterate_team), 1 in one work-group per body (pcg_iterate_group) or in packs
     /// (pcg_iterate_pack, which such rounds take for bodies of one mesh), 0 launched.
-    int path(detail::BatchDevice& batch, const std::vector<std::size_t>& who) {
+    int path(test::DeviceBatch& batch, const std::vector<std::size_t>& who) {
       std::vector<BatchRequest> round;
       for (std::size_t i : who) {
         sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
@@ -291,10 +320,10 @@ void OpenCLBatch::everyRequestMatches(const detail::OpenCLTuning& o, const std::
   ASSERT_EQ(batch->bodyCount(), K);
   EXPECT_EQ(batch->name(), "opencl");
   auto singles = singlesOf(ps, s, o);
-  std::vector<std::unique_ptr<detail::Backend>> refs;
+  std::vector<std::unique_ptr<test::Backend>> refs;
   std::vector<Eigen::VectorXd> x(K), v(K), b(K);
   for (std::size_t i = 0; i < K; ++i) {
-    refs.push_back(detail::createReferenceBackend(ps[i], s));
+    refs.push_back(test::createReferenceBackend(ps[i], s));
     x[i] = deformed(ps[i], 0.3 + 0.4 * static_cast<double>(i));
     v[i] = randomVector(ps[i].dofCount(), 100 + static_cast<unsigned>(i));
     b[i] = randomVector(ps[i].dofCount(), 200 + static_cast<unsigned>(i));
@@ -415,14 +444,14 @@ TEST_P(OpenCLBatch, BodiesInTheMeshsNumberingAndInTheDevicesOwnMatchToo) {
   ps.insert(ps.begin() + 2, std::move(shuffled));
   std::vector<const detail::Problem*> ptrs;
   for (const detail::Problem& p : ps) ptrs.push_back(&p);
-  auto batch = detail::createOpenCLBatchDeviceOn(ptrs, solver(), context(), {});
+  auto batch = batchOn(ptrs, solver(), context(), {});
   std::size_t reordered = 0;
   for (std::size_t i = 0; i < ps.size(); ++i) {
     detail::DevicePositions where;
     ASSERT_TRUE(batch->devicePositions(i, where));
     reordered += where.deviceNode != nullptr;
   }
-  if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); !env || !*env) EXPECT_EQ(reordered, 1u);
+  if (!test::mortonEverywhere()) EXPECT_EQ(reordered, 1u);
   everyRequestMatches({}, ps);
 }
 
@@ -704,7 +733,7 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
   if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
   const std::vector<detail::Problem> ps = instances(11);
   const std::size_t K = ps.size();
-  // The mesh's own numbering, so that the rotated copies pack under COROFEM_OPENCL_REORDER=1 too
+  // The mesh's own numbering, so that the rotated copies pack under --corofem_morton too
   // (their Morton orders differ).
   const detail::OpenCLTuning packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
   const detail::SystemCoeffs c{900.0, 30.0, 1.0};
@@ -765,7 +794,7 @@ TEST_P(OpenCLBatch, UnpackedBodyStoppedAtTheSetUpStaysStoppedBesidePacks) {
   if (!context()->info().cpu) GTEST_SKIP() << "packs run where pcg_iterate_group runs: CPU devices";
   const std::vector<detail::Problem> ps = instances(11);
   const std::size_t K = ps.size();
-  // The mesh's own numbering: the copies pack under COROFEM_OPENCL_REORDER=1 too.
+  // The mesh's own numbering: the copies pack under --corofem_morton too.
   const detail::OpenCLTuning packed = oneLaunchRounds(1, 0), grouped = oneLaunchRounds(0, 0);
   const detail::SystemCoeffs c{900.0, 30.0, 1.0};
   for (PreconditionerKind pc : {PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
@@ -1025,7 +1054,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
     std::vector<std::vector<int>> iterations;
     std::string error;
   };
-  auto solveRounds = [&](detail::BatchDevice& batch) {
+  auto solveRounds = [&](test::DeviceBatch& batch) {
     Answers a{std::vector<std::vector<Eigen::VectorXd>>(rounds.size(), std::vector<Eigen::VectorXd>(K)),
               std::vector<std::vector<int>>(rounds.size(), std::vector<int>(K, -1)), ""};
     for (std::size_t r = 0; r < rounds.size(); ++r) {
@@ -1052,7 +1081,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
   };
   detail::OpenCLTuning launched;
   launched.groupPcg = 0;
-  const Answers expected = solveRounds(*detail::createOpenCLBatchDeviceOn(all, s, context(), launched));
+  const Answers expected = solveRounds(*batchOn(all, s, context(), launched));
   ASSERT_TRUE(expected.error.empty()) << expected.error;
   const unsigned long long before = detail::teamPcgLaunchCount();
   constexpr int kRepeats = 3;
@@ -1064,7 +1093,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
     o.teamPcgSize = t == 0 ? 2 : 8;
     try {
       auto ctx = detail::cl::Context::create(std::to_string(GetParam().device));
-      auto batch = detail::createOpenCLBatchDeviceOn(all, s, ctx, o);
+      auto batch = batchOn(all, s, ctx, o);
       for (int k = 0; k < kRepeats; ++k) got[t] = solveRounds(*batch);
     } catch (const std::exception& e) {
       got[t].error = e.what();
@@ -1278,15 +1307,15 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   detail::Problem zeroMass = beam;
   zeroMass.lumpedMass.setZero();
   auto ctx = context();
-  const std::size_t dynamicBytes = detail::createOpenCLBackendOn(beam, s, ctx, o)->allocatedBytes();
+  const std::size_t dynamicBytes = test::openclOn(beam, s, ctx, o)->allocatedBytes();
   EXPECT_EQ(dynamicBytes, expected({&beam}, true, s.preconditioner, false));
-  const std::size_t staticBytes = detail::createOpenCLBackendOn(staticBeam, s, ctx, o)->allocatedBytes();
+  const std::size_t staticBytes = test::openclOn(staticBeam, s, ctx, o)->allocatedBytes();
   EXPECT_EQ(staticBytes, expected({&beam}, false, s.preconditioner, false));
   EXPECT_EQ(dynamicBytes - staticBytes, r * 3 * 256) << "exactly the mass buffer";
-  EXPECT_EQ(detail::createOpenCLBackendOn(zeroMass, s, ctx, o)->allocatedBytes(), staticBytes);
+  EXPECT_EQ(test::openclOn(zeroMass, s, ctx, o)->allocatedBytes(), staticBytes);
   {
     // R is made when first read back (readRotations), and then it is the identity at rest.
-    auto b = detail::createOpenCLBackendOn(beam, s, ctx, o);
+    auto b = test::openclOn(beam, s, ctx, o);
     const std::vector<double> R = b->readRotations();
     EXPECT_EQ(b->allocatedBytes(), dynamicBytes + r * 9 * 512);
     ASSERT_EQ(R.size(), 9 * beam.mesh.tetCount());
@@ -1296,25 +1325,25 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     // The linear formulation rotates nothing: its kernels read the rest gradients of the geometry.
     detail::Problem linear = beam;
     linear.formulation = Formulation::Linear;
-    EXPECT_EQ(detail::createOpenCLBackendOn(linear, s, ctx, o)->allocatedBytes(), dynamicBytes - r * 9 * 512);
+    EXPECT_EQ(test::openclOn(linear, s, ctx, o)->allocatedBytes(), dynamicBytes - r * 9 * 512);
   }
   if (group) {
     detail::OpenCLTuning teamed = o;
     teamed.teamPcg = 1;
-    EXPECT_EQ(detail::createOpenCLBackendOn(beam, s, ctx, teamed)->allocatedBytes(),
+    EXPECT_EQ(test::openclOn(beam, s, ctx, teamed)->allocatedBytes(),
               expected({&beam}, true, s.preconditioner, false, context()->info().cpu));
   }
   {
     SolverDesc q = s;
     q.rotation = RotationMethod::Quaternion;
     q.preconditioner = PreconditionerKind::None;
-    EXPECT_EQ(detail::createOpenCLBackendOn(beam, q, ctx, o)->allocatedBytes(),
+    EXPECT_EQ(test::openclOn(beam, q, ctx, o)->allocatedBytes(),
               expected({&beam}, true, PreconditionerKind::None, true));
   }
   {
     SolverDesc d = s;  // the diagonal preconditioner: diagonal blocks (3 per node), not 6
     d.preconditioner = PreconditionerKind::Diagonal;
-    EXPECT_EQ(detail::createOpenCLBackendOn(beam, d, ctx, o)->allocatedBytes(),
+    EXPECT_EQ(test::openclOn(beam, d, ctx, o)->allocatedBytes(),
               expected({&beam}, true, PreconditionerKind::Diagonal, false));
   }
   std::vector<const detail::Problem*> all;
@@ -1338,8 +1367,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     EXPECT_EQ(batchOf(copies, s, packed)->allocatedBytes(), batchOf(copies, s, plain)->allocatedBytes() + packBytes);
   }
   // The static problem still solves (a mass coefficient meets no mass) like one with zero mass.
-  auto a = detail::createOpenCLBackendOn(staticBeam, s, ctx, o);
-  auto z = detail::createOpenCLBackendOn(zeroMass, s, ctx, o);
+  auto a = test::openclOn(staticBeam, s, ctx, o);
+  auto z = test::openclOn(zeroMass, s, ctx, o);
   const Eigen::VectorXd x = deformed(beam, 0.1), b = randomVector(beam.dofCount(), 3);
   a->setPositions(x);
   z->setPositions(x);

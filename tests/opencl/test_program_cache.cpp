@@ -100,10 +100,10 @@ TEST_P(OpenCLProgramCache, BackendCreationHitsTheDiskCache) {
   const detail::Problem p = test::makeProblem(test::boxMesh(2, 1, 1));
   SolverDesc s;
   s.precision = GetParam().precision;
-  auto b1 = detail::createOpenCLBackendOn(p, s, detail::cl::Context::create(selector()));
+  auto b1 = test::openclOn(p, s, detail::cl::Context::create(selector()));
   EXPECT_EQ(b1->programOrigin(), detail::cl::ProgramOrigin::Compiled);
   EXPECT_TRUE(fs::exists(b1->programBuild().cacheFile));
-  auto b2 = detail::createOpenCLBackendOn(p, s, detail::cl::Context::create(selector()));
+  auto b2 = test::openclOn(p, s, detail::cl::Context::create(selector()));
   EXPECT_EQ(b2->programOrigin(), detail::cl::ProgramOrigin::Disk);
   // And the program from disk computes the same forces.
   Eigen::VectorXd x = p.restPositions * 1.01, f1, f2;
@@ -155,7 +155,7 @@ TEST_P(OpenCLProgramCache, UnsupportedFormulationNamesItAndTheReferenceBackend) 
   for (Formulation f : {Formulation::StVenantKirchhoff, Formulation::NeoHookean}) {
     p.formulation = f;
     try {
-      detail::createOpenCLBackend(p, SolverDesc{}, selector());
+      test::openclOn(p, SolverDesc{}, detail::cl::Context::shared(selector()));
       FAIL() << "expected BadInput for " << toString(f);
     } catch (const detail::Error& e) {
       const std::string msg = e.what();
@@ -168,7 +168,7 @@ TEST_P(OpenCLProgramCache, UnsupportedFormulationNamesItAndTheReferenceBackend) 
   p.formulation = Formulation::Corotational;
   SolverDesc cholesky;
   cholesky.linearSolver = LinearSolverKind::Cholesky;
-  EXPECT_THROW(detail::createOpenCLBackend(p, cholesky, selector()), detail::Error);
+  EXPECT_THROW(test::openclOn(p, cholesky, detail::cl::Context::shared(selector())), detail::Error);
 }
 
 TEST_P(OpenCLProgramCache, BadDeviceSelectorListsTheDevices) {
@@ -177,7 +177,7 @@ TEST_P(OpenCLProgramCache, BadDeviceSelectorListsTheDevices) {
   const auto devices = detail::cl::listDevices();
   for (const std::string sel : {std::string("no-such-device-xyz"), std::to_string(devices.size() + 5)}) {
     try {
-      detail::createOpenCLBackend(p, SolverDesc{}, sel);
+      test::openclOn(p, SolverDesc{}, detail::cl::Context::shared(sel));
       FAIL() << "expected DeviceError for selector " << sel;
     } catch (const detail::Error& e) {
       const std::string msg = e.what();
@@ -200,7 +200,7 @@ TEST_P(OpenCLProgramCache, DoubleOnADeviceWithoutFp64IsAClearError) {
   SolverDesc s;
   s.precision = Precision::Double;
   try {
-    detail::createOpenCLBackend(p, s, std::to_string(GetParam().device));
+    test::openclOn(p, s, detail::cl::Context::shared(std::to_string(GetParam().device)));
     FAIL();
   } catch (const detail::Error& e) {
     EXPECT_NE(std::string(e.what()).find("float"), std::string::npos) << e.what();

@@ -4,7 +4,7 @@
 #include "common/test_data.hpp"
 
 #include "model/hyperelastic.hpp"
-#include "solve/backend.hpp"
+#include "common/body_backend.hpp"
 
 #include <gtest/gtest.h>
 
@@ -72,7 +72,7 @@ TEST(RealMeshes, PatchTestOnTheLiver) {
     s.linearSolver = kind;
     s.tolerance = 1e-13;
     s.maxIterations = 10000;
-    auto backend = createReferenceBackend(p, s);
+    auto backend = test::createReferenceBackend(p, s);
     Eigen::VectorXd x = p.restPositions;
     p.applyPrescribed(x, 1.0, false);
     backend->setPositions(x);
@@ -96,7 +96,7 @@ TEST(RealMeshes, RigidRotationOfTheBarHasNoCorotationalForce) {
   const double E = 1e7;
   for (Formulation form : {Formulation::Corotational, Formulation::Linear}) {
     const Problem p = test::makeProblem(mesh, E, 0.3, 1000.0, form);
-    auto backend = createReferenceBackend(p, SolverDesc{});
+    auto backend = test::createReferenceBackend(p, SolverDesc{});
     for (const Vec3d& axis : {Vec3d::UnitX(), Vec3d::UnitY(), Vec3d::UnitZ()}) {
       const Mat3 Q = test::rotation(axis, M_PI);
       Eigen::VectorXd x(p.restPositions.size());
@@ -128,7 +128,7 @@ TEST(RealMeshes, LdltFactorsAnIndefiniteSvkTangent) {
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) x[3 * n] *= 0.4;
   SolverDesc s;
   s.linearSolver = LinearSolverKind::Cholesky;
-  auto backend = createReferenceBackend(p, s);
+  auto backend = test::createReferenceBackend(p, s);
   backend->setPositions(x);
 
   // The free-dof tangent (dense, from apply on unit vectors) is indeed indefinite.

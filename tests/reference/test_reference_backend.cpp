@@ -3,7 +3,7 @@
 #include "small_meshes.hpp"
 
 #include "model/hyperelastic.hpp"
-#include "solve/backend.hpp"
+#include "common/body_backend.hpp"
 #include "util/error.hpp"
 
 #include <gtest/gtest.h>
@@ -77,7 +77,7 @@ TEST_P(ReferenceBackendByFormulation, ApplyEqualsDenseAssembly) {
   Problem p = makeProblem(boxMesh(2, 2, 3, 1.0, 1.0, 1.5, 0.2, 4), 1e5, 0.3, 1000.0, GetParam());
   p.rayleighMass = 0.3;
   p.rayleighStiffness = 0.01;
-  auto backend = createReferenceBackend(p, SolverDesc{});
+  auto backend = test::createReferenceBackend(p, SolverDesc{});
   const Eigen::VectorXd x = randomDeformation(p, 0.05, 1);
   backend->setPositions(x);
   const Eigen::MatrixXd K = denseTangent(p, x);
@@ -119,7 +119,7 @@ TEST_P(ReferenceBackendByFormulation, PcgAndCholeskyAgreeAndRespectConstraints) 
   const Eigen::VectorXd b = Eigen::VectorXd::Random(static_cast<Eigen::Index>(p.dofCount()));
   const SystemCoeffs c{1.0, 0.0, 1.0};  // a dynamics-like system, SPD for every formulation here
 
-  auto chol = createReferenceBackend(p, solverDesc(LinearSolverKind::Cholesky));
+  auto chol = test::createReferenceBackend(p, solverDesc(LinearSolverKind::Cholesky));
   chol->setPositions(x);
   Eigen::VectorXd xc = Eigen::VectorXd::Zero(b.size());
   const LinearSolveStats sc = chol->solve(c, b, xc);
@@ -129,7 +129,7 @@ TEST_P(ReferenceBackendByFormulation, PcgAndCholeskyAgreeAndRespectConstraints) 
 
   for (PreconditionerKind pre : {PreconditionerKind::None, PreconditionerKind::Diagonal,
                                  PreconditionerKind::BlockDiagonal}) {
-    auto pcg = createReferenceBackend(p, solverDesc(LinearSolverKind::Pcg, pre, 1e-10));
+    auto pcg = test::createReferenceBackend(p, solverDesc(LinearSolverKind::Pcg, pre, 1e-10));
     pcg->setPositions(x);
     Eigen::VectorXd xp = Eigen::VectorXd::Constant(b.size(), 3.0);  // constrained entries must come back 0
     const LinearSolveStats sp = pcg->solve(c, b, xp);
@@ -179,7 +179,7 @@ TEST(ReferenceBackend, NameZeroRhsAndNonFinite) {
   fixPlane(p, 0, 0.0);
   SolverDesc s;
   s.precision = Precision::Float;  // accepted: the reference backend computes in double anyway
-  auto backend = createReferenceBackend(p, s);
+  auto backend = test::createReferenceBackend(p, s);
   EXPECT_EQ(backend->name(), "reference");
   EXPECT_EQ(backend->deviceName(), "host (Eigen, double)");
   backend->setPositions(p.restPositions);
@@ -208,7 +208,7 @@ TEST(ReferenceBackend, RigidMotionOfAMeshHasNoCorotationalForce) {
   for (Formulation form : {Formulation::Corotational, Formulation::Linear, Formulation::StVenantKirchhoff,
                            Formulation::NeoHookean}) {
     const Problem p = makeProblem(mesh, E, 0.3, 1000.0, form);
-    auto backend = createReferenceBackend(p, SolverDesc{});
+    auto backend = test::createReferenceBackend(p, SolverDesc{});
     // Force scale: E times a characteristic area (the box is O(1) m; elements ~ (0.3 m)^2).
     const double forceScale = E * 0.1;
     for (const Mat3& Q : rotations) {
@@ -260,7 +260,7 @@ TEST(ReferenceBackend, PatchTestLinearAndCorotational) {
     }
     ASSERT_EQ(interior, 8u);
     p.prescribed.push_back(pd);
-    auto backend = createReferenceBackend(p, solverDesc(LinearSolverKind::Cholesky));
+    auto backend = test::createReferenceBackend(p, solverDesc(LinearSolverKind::Cholesky));
     Eigen::VectorXd x = p.restPositions;
     p.applyPrescribed(x, 1.0, false);
     // Newton on f_int(x) = 0 over the free dofs (one step for the linear formulation).
@@ -300,7 +300,7 @@ TEST(ReferenceBackend, PatchTestLinearAndCorotational) {
 
 TEST(ReferenceBackend, InvertedNeoHookeanElementIsASolveFailureNamingIt) {
   Problem p = makeProblem(boxMesh(1, 1, 1), 1e5, 0.3, 1000.0, Formulation::NeoHookean);
-  auto backend = createReferenceBackend(p, SolverDesc{});
+  auto backend = test::createReferenceBackend(p, SolverDesc{});
   Eigen::VectorXd x = p.restPositions;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) x[3 * n + 2] *= -1.0;  // mirror: every element inverted
   backend->setPositions(x);
@@ -316,7 +316,7 @@ TEST(ReferenceBackend, InvertedNeoHookeanElementIsASolveFailureNamingIt) {
   }
   // St. Venant-Kirchhoff stays defined for the same state (finite forces, no error).
   p.formulation = Formulation::StVenantKirchhoff;
-  auto svk = createReferenceBackend(p, SolverDesc{});
+  auto svk = test::createReferenceBackend(p, SolverDesc{});
   svk->setPositions(x);
   svk->internalForces(f);
   EXPECT_TRUE(f.allFinite());

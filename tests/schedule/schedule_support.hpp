@@ -1,7 +1,8 @@
-// Helpers of the scheduler tests: small box scenes, a hook guard, runs to the end.
+// Helpers of the scheduler tests: small box scenes, a scope with a fresh calibration cache, fake
+// backends (common/device_fakes.hpp), runs to the end.
 #pragma once
 
-#include "schedule/fault_injection.hpp"
+#include "common/device_fakes.hpp"
 #include "schedule/scheduler.hpp"
 
 #include "common/test_data.hpp"
@@ -70,17 +71,18 @@ inline Scene staticScene(const BodyDesc& body, int increments = 3) {
   return s;
 }
 
-/// Installs scheduler hooks for the scope of a test and points the cache at a fresh folder.
+/// Points the calibration cache at a fresh folder for the scope of a test (and unsets
+/// COROFEM_DEVICE); registers the fake backends given, if any, for the same scope.
 class HookScope {
  public:
-  explicit HookScope(detail::SchedulerHooks hooks = {}) {
+  explicit HookScope(std::vector<detail::BackendEntry> backends = {}) {
     cacheDir_ = tempDir().string();
     setenv("COROFEM_CACHE_DIR", cacheDir_.c_str(), 1);
     unsetenv("COROFEM_DEVICE");
-    detail::setSchedulerHooksForTesting(std::move(hooks));
+    for (detail::BackendEntry& e : backends) registered_.push_back(std::make_unique<ScopedBackend>(std::move(e)));
   }
   ~HookScope() {
-    detail::setSchedulerHooksForTesting({});
+    registered_.clear();
     unsetenv("COROFEM_CACHE_DIR");
     unsetenv("COROFEM_DEVICE");
   }
@@ -88,6 +90,7 @@ class HookScope {
 
  private:
   std::string cacheDir_;
+  std::vector<std::unique_ptr<ScopedBackend>> registered_;
 };
 
 /// Runs a simulation to its end; returns the final positions of body 0 (empty on failure).
@@ -102,17 +105,6 @@ inline std::vector<double> runToEnd(Simulation& sim) {
   return x;
 }
 
-inline detail::Candidate fakeCandidate(BackendKind kind, const std::string& device, const std::string& selector = "") {
-  detail::Candidate c;
-  c.kind = kind;
-  c.device = device;
-  c.selector = selector;
-  c.driver = "test";
-  return c;
-}
-
-inline detail::Candidate referenceCandidate() {
-  return fakeCandidate(BackendKind::Reference, "host (Eigen, double)");
-}
+inline detail::Candidate referenceCandidate() { return detail::referenceCandidate(); }
 
 }  // namespace corofem::test

@@ -1,10 +1,10 @@
-// Device failure fallback: a fault-injecting backend (schedule/fault_injection.hpp) fails the way
-// an OpenCL device does (program build, allocation, kernel launch, read-back) and the body carries
+// Device failure fallback: a fault-injecting device (common/device_fakes.hpp) fails the way an
+// OpenCL device does (program build, allocation, kernel launch, read-back) and the body carries
 // on, state and all, on the next candidate.
 #include "schedule_support.hpp"
 
+#include "backends/reference/reference_device.hpp"
 #include "output/run_outputs.hpp"
-#include "solve/body_solver.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -13,21 +13,33 @@
 namespace corofem::test {
 namespace {
 
-using detail::FaultKind;
-using detail::FaultSpec;
+/// A backend "faulty" whose devices (a, b) are reference devices with `spec`'s fault injected (the
+/// fault of device b: `specB`); the factory counts the devices it made.
+detail::BackendEntry faultyBackend(const FaultSpec& spec, int* created = nullptr, const FaultSpec& specB = {}) {
+  return fakeBackend("faulty", {fakeCandidate("faulty", "faulty", "a"), fakeCandidate("faulty", "faulty-b", "b")},
+                     [spec, specB, created](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                                            const detail::Candidate& c) {
+                       if (created) ++*created;
+                       return injectFaults(detail::createReferenceDevice(problems, s), c.selector == "a" ? spec : specB);
+                     });
+}
 
-/// Hooks: body runs on "faulty" (a reference backend with the fault injected), then the plain
-/// reference backend. The factory counts the backends it made.
-detail::SchedulerHooks faultyFirst(const FaultSpec& spec, int* created = nullptr) {
-  detail::SchedulerHooks h;
-  h.forcedOrder = {fakeCandidate(BackendKind::Reference, "faulty"), referenceCandidate()};
-  h.factory = [spec, created](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c) {
-    if (created) ++*created;
-    auto inner = detail::createReferenceBackend(p, s);
-    if (c.device == "faulty") return detail::injectFaults(std::move(inner), spec);
-    return inner;
+/// The body on "faulty" first (no calibration), then the reference backend.
+SimulationOptions faultyFirst() {
+  SimulationOptions o;
+  o.devices = {"faulty:a"};
+  return o;
+}
+
+/// Counts the reference devices made (the replacements).
+detail::BackendEntry countingReference(int* created) {
+  detail::BackendEntry e = *detail::findBackend("reference");
+  e.create = [created](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                       const detail::Candidate&, const detail::DeviceOptions&) {
+    ++*created;
+    return detail::createReferenceDevice(problems, s);
   };
-  return h;
+  return e;
 }
 
 std::vector<double> undisturbed(const Scene& scene) {
@@ -63,8 +75,8 @@ TEST(Failover, EveryFaultKindEndsBitIdenticalOnTheFallback) {
     for (const FaultCase& fc : cases) {
       SCOPED_TRACE(std::string(dynamic ? "dynamic, " : "static, ") + fc.name);
       int created = 0;
-      HookScope scope(faultyFirst(fc.spec, &created));
-      auto sim = Simulation::create(scene);
+      HookScope scope({faultyBackend(fc.spec, &created), countingReference(&created)});
+      auto sim = Simulation::create(scene, faultyFirst());
       ASSERT_TRUE(sim) << sim.message();
       const std::vector<double> x = runToEnd(sim.value());
       ASSERT_EQ(x.size(), expected.size());
@@ -74,7 +86,7 @@ TEST(Failover, EveryFaultKindEndsBitIdenticalOnTheFallback) {
       const auto report = nlohmann::json::parse(sim->schedulerReport());
       ASSERT_EQ(report["fallbacks"].size(), 1u) << report.dump(1);
       const auto& ev = report["fallbacks"][0];
-      EXPECT_EQ(ev["from"], "reference (faulty)");
+      EXPECT_EQ(ev["from"], "faulty:a (faulty)");
       EXPECT_EQ(ev["to"], "reference");
       EXPECT_NE(ev["error"].get<std::string>().find("injected"), std::string::npos) << ev.dump();
       if (*fc.call) {
@@ -94,8 +106,8 @@ TEST(Failover, EveryFaultKindEndsBitIdenticalOnTheFallback) {
 
 // The fallback is recorded in summary.json.
 TEST(Failover, SummaryListsTheFallback) {
-  HookScope scope(faultyFirst({FaultKind::Launch, 2}));
-  auto sim = Simulation::create(dynamicScene(boxBeam(), 3));
+  HookScope scope({faultyBackend({FaultKind::Launch, 2})});
+  auto sim = Simulation::create(dynamicScene(boxBeam(), 3), faultyFirst());
   ASSERT_TRUE(sim) << sim.message();
   const std::string dir = scope.cacheDir() + "/out";
   detail::RunOutputs out(sim.value(), dir);
@@ -115,15 +127,17 @@ TEST(Failover, SummaryListsTheFallback) {
 // When every candidate fails the step reports DeviceError naming each failure, and the body keeps
 // its last good state.
 TEST(Failover, EveryCandidateFailingIsADeviceErrorAndKeepsTheState) {
-  detail::SchedulerHooks h;
-  h.forcedOrder = {fakeCandidate(BackendKind::Reference, "faulty-a"), fakeCandidate(BackendKind::Reference, "faulty-b")};
-  h.factory = [](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c) {
-    // a fails at its 3rd solve, b (its replacement) at its first.
-    return detail::injectFaults(detail::createReferenceBackend(p, s),
-                                {FaultKind::Launch, c.device == "faulty-a" ? 3 : 1});
+  // a fails at its 3rd solve, b (its replacement) at its first, and the reference backend (always
+  // the last of an order) is replaced by one that fails at its first: every device fails.
+  detail::BackendEntry failingReference = *detail::findBackend("reference");
+  failingReference.create = [](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                               const detail::Candidate&, const detail::DeviceOptions&) {
+    return injectFaults(detail::createReferenceDevice(problems, s), {FaultKind::Launch, 1});
   };
-  HookScope scope(h);
-  auto sim = Simulation::create(dynamicScene(boxBeam(), 6));
+  HookScope scope({faultyBackend({FaultKind::Launch, 3}, nullptr, {FaultKind::Launch, 1}), failingReference});
+  SimulationOptions o;
+  o.devices = {"faulty:a", "faulty:b"};
+  auto sim = Simulation::create(dynamicScene(boxBeam(), 6), o);
   ASSERT_TRUE(sim) << sim.message();
   Status st;
   std::vector<double> before;
@@ -133,7 +147,7 @@ TEST(Failover, EveryCandidateFailingIsADeviceErrorAndKeepsTheState) {
     if (!st) break;
   }
   ASSERT_FALSE(st);
-  EXPECT_EQ(st.code(), ErrorCode::DeviceError);
+  EXPECT_EQ(st.code(), ErrorCode::DeviceError) << st.message();
   EXPECT_NE(st.message().find("every backend failed"), std::string::npos) << st.message();
   EXPECT_NE(st.message().find("faulty") , std::string::npos) << st.message();
   std::vector<double> after;
@@ -182,15 +196,12 @@ TEST(Failover, OpenClLaunchFailureFinishesOnTheReference) {
   const detail::Candidate device = cands.front();
   const Scene scene = dynamicScene(boxBeam(), 6);
   const std::vector<double> expected = undisturbed(scene);
-  detail::SchedulerHooks h;
-  h.forcedOrder = {device, referenceCandidate()};
-  h.factory = [](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c) -> std::unique_ptr<detail::Backend> {
-    if (c.kind == BackendKind::OpenCL)
-      return detail::injectFaults(detail::createOpenCLBackend(p, s, c.selector), {FaultKind::Launch, 6});
-    return detail::createReferenceBackend(p, s);
-  };
-  HookScope scope(h);
-  auto sim = Simulation::create(scene);
+  HookScope scope({wrapBackend("opencl", [](std::unique_ptr<detail::Device> d, const auto&) {
+    return injectFaults(std::move(d), {FaultKind::Launch, 6});
+  })});
+  SimulationOptions o;
+  o.devices = {"opencl:" + device.selector};
+  auto sim = Simulation::create(scene, o);
   ASSERT_TRUE(sim) << sim.message();
   EXPECT_EQ(sim->backendName(), "opencl");
   const std::vector<double> x = runToEnd(sim.value());

@@ -2,6 +2,9 @@
 // needs.
 #include "schedule_support.hpp"
 
+#include "backends/reference/reference_device.hpp"
+#include "common/morton.hpp"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
@@ -27,22 +30,23 @@ bool anyContains(const json& list, const std::string& word) {
   return false;
 }
 
-/// Plans of a scene on the reference backend and on an OpenCL-kind candidate (the plan is a host
-/// estimate; the fake candidate's backend underneath is the reference one).
+/// Plans of a scene on the reference backend and on an "opencl" device that is a fake (the plan is
+/// a host estimate; the fake device underneath is a reference one).
 std::vector<json> plans(const Scene& scene) {
   std::vector<json> out;
   for (bool device : {false, true}) {
-    detail::SchedulerHooks h;
+    std::vector<detail::BackendEntry> fakes;
+    SimulationOptions options;
     if (device) {
-      h.forcedOrder = {fakeCandidate(BackendKind::OpenCL, "fake-gpu", "0"), referenceCandidate()};
-      h.factory = [](const detail::Problem& p, const SolverDesc& s, const detail::Candidate&) {
-        return detail::createReferenceBackend(p, s);
-      };
+      fakes.push_back(fakeBackend("opencl", {fakeCandidate("opencl", "fake-gpu", "0", true)},
+                                  [](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                                     const detail::Candidate&) { return detail::createReferenceDevice(problems, s); }));
+      options.devices = {"opencl"};
     }
-    HookScope scope(h);
+    HookScope scope(std::move(fakes));
     Scene sc = scene;
     if (!device) sc.backend.kind = BackendKind::Reference;
-    auto sim = Simulation::create(sc);
+    auto sim = Simulation::create(sc, options);
     EXPECT_TRUE(sim) << sim.message();
     if (!sim) return out;
     const json plan = json::parse(sim->planReport());
@@ -51,6 +55,13 @@ std::vector<json> plans(const Scene& scene) {
     EXPECT_EQ(out.back()["backend"], device ? "opencl" : "reference");
   }
   return out;
+}
+
+/// Whether this build and machine have an OpenCL device.
+bool haveOpenCL() {
+  for (const detail::Candidate& c : detail::listCandidates())
+    if (c.backend == "opencl") return true;
+  return false;
 }
 
 TEST(Plan, StaticSceneHasNoDynamicBuffersOrTerms) {
@@ -121,9 +132,7 @@ TEST(Plan, SizesFollowTheModel) {
 // On a real OpenCL device the plan also lists what the backend allocated, buffer by buffer (the
 // engine's own list, each at its clCreateBuffer size): only what the scene reads.
 TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
-  bool opencl = false;
-  for (const detail::Candidate& c : detail::listCandidates()) opencl = opencl || c.kind == BackendKind::OpenCL;
-  if (!opencl) GTEST_SKIP() << "no OpenCL device (or built without COROFEM_WITH_OPENCL)";
+  if (!haveOpenCL()) GTEST_SKIP() << "no OpenCL device (or built without COROFEM_WITH_OPENCL)";
   HookScope scope;
   auto allocated = [](const Scene& scene) {
     auto sim = Simulation::create(scene);
@@ -206,10 +215,8 @@ TEST(Plan, DeviceBuffersAllocatedAreListedAndOnlyWhatTheSceneReads) {
 TEST(Plan, DeviceNumberingIsTheMeshsForABoxAndMortonForAMeshFile) {
   // The OpenCL backend lays a body out in a Morton order of its own where the mesh's numbering is
   // less local (mesh/locality_order.hpp): a Gmsh file's is, the box generator's is not.
-  bool opencl = false;
-  for (const detail::Candidate& c : detail::listCandidates()) opencl = opencl || c.kind == BackendKind::OpenCL;
-  if (!opencl) GTEST_SKIP() << "no OpenCL device (or built without COROFEM_WITH_OPENCL)";
-  if (const char* env = std::getenv("COROFEM_OPENCL_REORDER"); env && *env) GTEST_SKIP() << "COROFEM_OPENCL_REORDER decides";
+  if (!haveOpenCL()) GTEST_SKIP() << "no OpenCL device (or built without COROFEM_WITH_OPENCL)";
+  if (mortonEverywhere()) GTEST_SKIP() << "--corofem_morton lays every body out in Morton order";
   COROFEM_REQUIRE_DATA("meshes/ipc/bar-2523.msh");
   HookScope scope;
   Scene box = dynamicScene(boxBeam({20, 4, 4}), 1), file = box;

@@ -2,6 +2,7 @@
 // calibration, calibration on fake candidates, and the cache file.
 #include "schedule_support.hpp"
 
+#include "backends/reference/reference_device.hpp"
 #include "util/error.hpp"
 
 #include <nlohmann/json.hpp>
@@ -24,15 +25,15 @@ std::string parseError(const std::string& spec) {
 }
 
 TEST(DeviceSpec, AcceptedForms) {
-  EXPECT_EQ(detail::parseDeviceSpec("reference", "x").kind, BackendKind::Reference);
-  EXPECT_EQ(detail::parseDeviceSpec("auto", "x").kind, BackendKind::Auto);
+  EXPECT_EQ(detail::parseDeviceSpec("reference", "x").backend, "reference");
+  EXPECT_EQ(detail::parseDeviceSpec("auto", "x").backend, "") << "no explicit request";
   auto r = detail::parseDeviceSpec("opencl", "x");
-  EXPECT_EQ(r.kind, BackendKind::OpenCL);
+  EXPECT_EQ(r.backend, "opencl");
   EXPECT_EQ(r.device, "");
   r = detail::parseDeviceSpec("opencl:1", "x");
   EXPECT_EQ(r.device, "1");
   r = detail::parseDeviceSpec("OpenCL:pthread", "x");  // the name keeps its case, the backend does not matter
-  EXPECT_EQ(r.kind, BackendKind::OpenCL);
+  EXPECT_EQ(r.backend, "opencl");
   EXPECT_EQ(r.device, "pthread");
 }
 
@@ -69,35 +70,48 @@ TEST(DeviceSpec, EnvironmentOverridesAutoAndABadValueIsBadInput) {
   EXPECT_NE(rep["reason"].get<std::string>().find("scene"), std::string::npos) << rep.dump();
 }
 
-/// Candidates: a fake "device" and the reference, both reference backends underneath; the one
-/// named `slow` sleeps in every solve, so calibration must rank it last.
-detail::SchedulerHooks fakeDevices(const std::string& slow, int* created) {
-  detail::SchedulerHooks h;
-  h.candidates = {fakeCandidate(BackendKind::OpenCL, "fake-gpu", "0"), referenceCandidate()};
-  h.factory = [slow, created](const detail::Problem& p, const SolverDesc& s, const detail::Candidate& c)
-      -> std::unique_ptr<detail::Backend> {
+/// Sleeps 50 ms in every solve: far beyond the whole step of a 400-element body (about 1 ms),
+/// whatever the load.
+class SlowDevice : public ForwardingDevice {
+ public:
+  using ForwardingDevice::ForwardingDevice;
+  std::vector<detail::PcgStart> pcgBegin(const detail::BodySet& bodies, const std::vector<detail::SystemCoeffs>& c,
+                                         const detail::ConstVectors& b, const detail::ConstVectors& x, double tolerance,
+                                         int maxIterations) override {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    return ForwardingDevice::pcgBegin(bodies, c, b, x, tolerance, maxIterations);
+  }
+};
+
+/// Candidates: a fake GPU of a fake "opencl" backend and the reference, both reference devices
+/// underneath; the one whose device is named `slow` sleeps in every solve, so calibration must
+/// rank it last. The fake refuses what the real OpenCL backend refuses (hyperelastic bodies, the
+/// Cholesky solver); `created` counts the devices of both.
+std::vector<detail::BackendEntry> fakeDevices(const std::string& slow, int* created) {
+  auto make = [slow, created](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                              const detail::Candidate& c) -> std::unique_ptr<detail::Device> {
     ++*created;
-    auto inner = detail::createReferenceBackend(p, s);
+    auto inner = detail::createReferenceDevice(problems, s);
     if (c.device != slow) return inner;
-    struct Slow final : detail::Backend {
-      std::unique_ptr<detail::Backend> b;
-      std::string name() const override { return b->name(); }
-      std::string deviceName() const override { return b->deviceName(); }
-      void setPositions(const Eigen::VectorXd& x) override { b->setPositions(x); }
-      void internalForces(Eigen::VectorXd& f) override { b->internalForces(f); }
-      void apply(const detail::SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override { b->apply(c, p, y); }
-      detail::LinearSolveStats solve(const detail::SystemCoeffs& c, const Eigen::VectorXd& r, Eigen::VectorXd& x) override {
-        // 50 ms: far beyond the whole step of this 400-element body (about 1 ms), whatever the load.
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-        return b->solve(c, r, x);
-      }
-      double elasticEnergy() override { return b->elasticEnergy(); }
-    };
-    auto s2 = std::make_unique<Slow>();
-    s2->b = std::move(inner);
-    return s2;
+    return std::make_unique<SlowDevice>(std::move(inner));
   };
-  return h;
+  detail::BackendEntry gpu = fakeBackend("opencl", {fakeCandidate("opencl", "fake-gpu", "0", true)}, make);
+  gpu.refuses = [](const detail::Problem& p, const SolverDesc& s) -> std::string {
+    if (p.formulation != Formulation::Corotational && p.formulation != Formulation::Linear)
+      return std::string("the fake device cannot run the ") + toString(p.formulation) + " formulation";
+    if (s.linearSolver == LinearSolverKind::Cholesky) return "the fake device has no Cholesky solver";
+    return "";
+  };
+  detail::BackendEntry reference = *detail::findBackend("reference");
+  reference.create = [make](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                            const detail::Candidate& c, const detail::DeviceOptions&) { return make(problems, s, c); };
+  return {gpu, reference};
+}
+
+/// `scene` with every body calibrated, however small (the fake devices' bodies have 400 elements).
+Scene calibrated(Scene scene) {
+  scene.backend.minDeviceElements = 0;
+  return scene;
 }
 
 TEST(Scheduler, CalibrationPicksTheFasterCandidateAndCachesIt) {
@@ -105,7 +119,7 @@ TEST(Scheduler, CalibrationPicksTheFasterCandidateAndCachesIt) {
     SCOPED_TRACE("slow: " + slow);
     int created = 0;
     HookScope scope(fakeDevices(slow, &created));
-    const Scene scene = dynamicScene(boxBeam(), 4);
+    const Scene scene = calibrated(dynamicScene(boxBeam(), 4));
     auto sim = Simulation::create(scene);
     ASSERT_TRUE(sim) << sim.message();
     auto rep = nlohmann::json::parse(sim->schedulerReport());
@@ -141,16 +155,16 @@ TEST(Scheduler, CalibrationPicksTheFasterCandidateAndCachesIt) {
 TEST(Scheduler, CacheIsKeyedBySizeAndAnalysis) {
   int created = 0;
   HookScope scope(fakeDevices("", &created));  // no slow candidate: only the counts matter here
-  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam(), 2)));
+  ASSERT_TRUE(Simulation::create(calibrated(dynamicScene(boxBeam(), 2))));
   EXPECT_EQ(created, 3);
   created = 0;
-  ASSERT_TRUE(Simulation::create(staticScene(boxBeam(), 1)));  // other analysis: calibrates again
+  ASSERT_TRUE(Simulation::create(calibrated(staticScene(boxBeam(), 1))));  // other analysis: calibrates again
   EXPECT_EQ(created, 3);
   created = 0;
-  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam({40, 2, 2}), 2)));  // 800 elements: next log2 bucket
+  ASSERT_TRUE(Simulation::create(calibrated(dynamicScene(boxBeam({40, 2, 2}), 2))));  // 800 elements: next log2 bucket
   EXPECT_EQ(created, 3);
   created = 0;
-  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam({21, 2, 2}), 2)));  // 420 elements: same bucket as 400
+  ASSERT_TRUE(Simulation::create(calibrated(dynamicScene(boxBeam({21, 2, 2}), 2))));  // 420 elements: same bucket as 400
   EXPECT_EQ(created, 1);
   EXPECT_EQ(detail::sizeBucket(400), 8);
   EXPECT_EQ(detail::sizeBucket(420), 8);
@@ -162,21 +176,23 @@ TEST(Scheduler, CachedNumbersDecide) {
   int created = 0;
   HookScope scope(fakeDevices("", &created));
   nlohmann::json cache;
-  const std::string tail = "|test|dynamic|double|pcg|log2e=8|build=" + detail::calibrationBuild();
+  // Keys: backend|device|driver|analysis|precision|solver|size bucket|build.
+  const std::string tail = "|dynamic|double|pcg|log2e=8|build=" + detail::calibrationBuild();
+  const std::string gpuKey = "opencl|fake-gpu|test" + tail, referenceKey = "reference|host (Eigen, double)|corofem" + tail;
   cache["version"] = 1;
-  cache["entries"]["opencl|fake-gpu" + tail] = {{"ms_per_step", 0.5}};
-  cache["entries"]["reference|host (Eigen, double)" + tail] = {{"ms_per_step", 7.0}};
+  cache["entries"][gpuKey] = {{"ms_per_step", 0.5}};
+  cache["entries"][referenceKey] = {{"ms_per_step", 7.0}};
   std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
-  auto sim = Simulation::create(dynamicScene(boxBeam(), 2));
+  auto sim = Simulation::create(calibrated(dynamicScene(boxBeam(), 2)));
   ASSERT_TRUE(sim) << sim.message();
   auto rep = nlohmann::json::parse(sim->schedulerReport());
   EXPECT_EQ(rep["choice"], "opencl:0 (fake-gpu)") << rep.dump(1);
   EXPECT_EQ(rep["from_cache"], true);
   EXPECT_EQ(created, 1);
   // A cached device error excludes the candidate.
-  cache["entries"]["opencl|fake-gpu" + tail] = {{"error", "DeviceError: no fp64"}};
+  cache["entries"][gpuKey] = {{"error", "DeviceError: no fp64"}};
   std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
-  auto sim2 = Simulation::create(dynamicScene(boxBeam(), 2));
+  auto sim2 = Simulation::create(calibrated(dynamicScene(boxBeam(), 2)));
   ASSERT_TRUE(sim2) << sim2.message();
   rep = nlohmann::json::parse(sim2->schedulerReport());
   EXPECT_EQ(rep["choice"], "reference") << rep.dump(1);
@@ -184,7 +200,7 @@ TEST(Scheduler, CachedNumbersDecide) {
   // A damaged cache file is recalibrated and rewritten.
   std::ofstream(scope.cacheDir() + "/scheduler.json") << "{not json";
   created = 0;
-  ASSERT_TRUE(Simulation::create(dynamicScene(boxBeam(), 2)));
+  ASSERT_TRUE(Simulation::create(calibrated(dynamicScene(boxBeam(), 2))));
   EXPECT_EQ(created, 3);
   std::ifstream in(scope.cacheDir() + "/scheduler.json");
   EXPECT_NO_THROW(nlohmann::json::parse(in));
@@ -204,9 +220,9 @@ TEST(Scheduler, ACacheOfAnotherBuildIsMeasuredAgain) {
     const std::string tail = "|test|dynamic|double|pcg|log2e=8";
     cache["version"] = 1;
     cache["entries"]["opencl|fake-gpu" + tail + other] = {{"ms_per_step", 0.5}};
-    cache["entries"]["reference|host (Eigen, double)" + tail + other] = {{"ms_per_step", 7.0}};
+    cache["entries"]["reference|host (Eigen, double)|corofem|dynamic|double|pcg|log2e=8" + other] = {{"ms_per_step", 7.0}};
     std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
-    auto sim = Simulation::create(dynamicScene(boxBeam(), 2));
+    auto sim = Simulation::create(calibrated(dynamicScene(boxBeam(), 2)));
     ASSERT_TRUE(sim) << sim.message();
     EXPECT_EQ(nlohmann::json::parse(sim->schedulerReport())["from_cache"], false);
     EXPECT_EQ(created, 3) << "both candidates calibrated again";
@@ -217,7 +233,7 @@ TEST(Scheduler, ACacheOfAnotherBuildIsMeasuredAgain) {
     EXPECT_TRUE(rewritten["entries"].contains("opencl|fake-gpu" + tail + "|build=" + detail::calibrationBuild()));
     EXPECT_NE(detail::calibrationBuild().find("corofem "), std::string::npos);
     created = 0;
-    auto again = Simulation::create(dynamicScene(boxBeam(), 2));
+    auto again = Simulation::create(calibrated(dynamicScene(boxBeam(), 2)));
     ASSERT_TRUE(again) << again.message();
     EXPECT_EQ(nlohmann::json::parse(again->schedulerReport())["from_cache"], true);
     EXPECT_EQ(created, 1);
@@ -229,7 +245,7 @@ TEST(Scheduler, HyperelasticAndCholeskyGoToTheReferenceWithoutCalibration) {
   HookScope scope(fakeDevices("", &created));
   BodyDesc body = boxBeam();
   body.formulation = Formulation::NeoHookean;
-  auto sim = Simulation::create(dynamicScene(body, 1));
+  auto sim = Simulation::create(calibrated(dynamicScene(body, 1)));
   ASSERT_TRUE(sim) << sim.message();
   auto rep = nlohmann::json::parse(sim->schedulerReport());
   EXPECT_EQ(rep["choice"], "reference");
@@ -237,7 +253,7 @@ TEST(Scheduler, HyperelasticAndCholeskyGoToTheReferenceWithoutCalibration) {
   EXPECT_EQ(created, 1);
 
   created = 0;
-  Scene chol = staticScene(boxBeam(), 1);
+  Scene chol = calibrated(staticScene(boxBeam(), 1));
   chol.solver.linearSolver = LinearSolverKind::Cholesky;
   auto sim2 = Simulation::create(chol);
   ASSERT_TRUE(sim2) << sim2.message();

@@ -1,11 +1,13 @@
-// A tiny Backend for unit tests of the solve/ drivers: a chain of springs along x with lumped
-// masses, each Cartesian component an independent 1-D chain. Spring s joins nodes s and s+1 and
-// carries g(e) = k e + k3 e^3 for the relative displacement e = u_{s+1} - u_s of each component
-// (k3 = 0: linear). Dense matrices, exact LDLT solves: closed-form answers and no solver noise.
+// A tiny Device of one body for unit tests of the solve/ drivers: a chain of springs along x with
+// lumped masses, each Cartesian component an independent 1-D chain. Spring s joins nodes s and s+1
+// and carries g(e) = k e + k3 e^3 for the relative displacement e = u_{s+1} - u_s of each component
+// (k3 = 0: linear). Dense matrices, exact LDLT solves (the device's direct solve; the drivers are
+// given the Cholesky solver for it): closed-form answers and no solver noise. The tests keep the
+// object and hand the drivers a view of it (common/body_drivers.hpp).
 #pragma once
 
+#include "device/device.hpp"
 #include "model/problem.hpp"
-#include "solve/backend.hpp"
 #include "util/error.hpp"
 
 #include <Eigen/Dense>
@@ -16,17 +18,42 @@
 
 namespace corofem::test {
 
-class SpringChainBackend final : public detail::Backend {
+class SpringChainBackend final : public detail::Device {
  public:
   SpringChainBackend(const detail::Problem& problem, double k, double k3 = 0.0)
       : problem_(problem), k_(k), k3_(k3), x_(problem.restPositions) {}
 
   std::string name() const override { return "mock"; }
   std::string deviceName() const override { return "spring chain"; }
+  std::size_t bodyCount() const override { return 1; }
+  const detail::Problem& problem(std::size_t) const override { return problem_; }
 
-  void setPositions(const Eigen::VectorXd& x) override { x_ = x; }
+  void setPositions(const detail::BodySet&, const detail::ConstVectors& x) override { setPositions(*x.at(0)); }
+  void internalForces(const detail::BodySet&, const detail::Vectors& f) override { internalForces(*f.at(0)); }
+  void apply(const detail::BodySet&, const std::vector<detail::SystemCoeffs>& c, const detail::ConstVectors& p,
+             const detail::Vectors& y) override {
+    apply(c.at(0), *p.at(0), *y.at(0));
+  }
+  void elasticEnergy(const detail::BodySet&, std::vector<double>& e) override { e.assign(1, elasticEnergy()); }
+  std::vector<detail::PcgStart> pcgBegin(const detail::BodySet&, const std::vector<detail::SystemCoeffs>&,
+                                         const detail::ConstVectors&, const detail::ConstVectors&, double,
+                                         int) override {
+    detail::fail(ErrorCode::Internal, "the spring chain solves directly (give the drivers the Cholesky solver)");
+  }
+  void pcgIterate(int, const std::vector<char>&) override {}
+  detail::PcgTicket pcgRead() override { return 0; }
+  void pcgTake(detail::PcgTicket, std::vector<detail::PcgScalars>&) override {}
+  void pcgResidual(const std::vector<char>&) override {}
+  void pcgEnd(const std::vector<int>&, const detail::Vectors&, std::vector<detail::PcgScalars>&) override {}
+  bool hasDirectSolve() const override { return true; }
+  detail::LinearSolveStats solveDirect(std::size_t, const detail::SystemCoeffs& c, const Eigen::VectorXd& b,
+                                       Eigen::VectorXd& x) override {
+    return solve(c, b, x);
+  }
 
-  void internalForces(Eigen::VectorXd& f) override {
+  void setPositions(const Eigen::VectorXd& x) { x_ = x; }
+
+  void internalForces(Eigen::VectorXd& f) {
     ++forceCalls;
     const Eigen::VectorXd u = x_ - problem_.restPositions;
     f = Eigen::VectorXd::Zero(u.size());
@@ -46,11 +73,9 @@ class SpringChainBackend final : public detail::Backend {
     if (nanAfterForceCalls >= 0 && forceCalls > nanAfterForceCalls) f[f.size() - 1] = std::nan("");
   }
 
-  void apply(const detail::SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override {
-    y = matrix(c) * p;
-  }
+  void apply(const detail::SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) { y = matrix(c) * p; }
 
-  detail::LinearSolveStats solve(const detail::SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override {
+  detail::LinearSolveStats solve(const detail::SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
     ++solveCalls;
     const Eigen::MatrixXd a = matrix(c);
     std::vector<int> free;
@@ -75,7 +100,7 @@ class SpringChainBackend final : public detail::Backend {
     return stats;
   }
 
-  double elasticEnergy() override {
+  double elasticEnergy() {
     const Eigen::VectorXd u = x_ - problem_.restPositions;
     double energy = 0;
     for (int s = 0; s + 1 < nodes(); ++s)

@@ -1,45 +1,40 @@
 // Issue 5, "a damping-free scene builds no damping code": what damping costs, measured by counting
-// the Backend calls a dynamic step makes. Rayleigh damping C = alpha M + beta K_t has no kernel of
+// the device calls a dynamic step makes. Rayleigh damping C = alpha M + beta K_t has no kernel of
 // its own on any backend (the OpenCL backend folds it into the two coefficients of M and K^R of
-// the system matrix), so its only work is the residual's C v: one Backend::apply per Newton
+// the system matrix), so its only work is the residual's C v: one device apply per Newton
 // evaluation with stiffness damping (beta > 0), none with mass damping alone (alpha M v, formed by
 // the solver), and a damping-free problem must never ask for it.
 #include "mock_backend.hpp"
 
-#include "solve/body_solver.hpp"
+#include "common/body_drivers.hpp"
 
 #include <gtest/gtest.h>
 
 namespace corofem {
 namespace {
 
-/// A Backend decorator that counts calls and remembers the coefficients of every solve.
-class CountingBackend final : public detail::Backend {
+/// A device decorator that counts calls and remembers the coefficients of every solve.
+class CountingBackend final : public test::ForwardingDevice {
  public:
-  explicit CountingBackend(detail::Backend& inner) : inner_(inner) {}
-  std::string name() const override { return inner_.name(); }
-  std::string deviceName() const override { return inner_.deviceName(); }
-  void setPositions(const Eigen::VectorXd& x) override { inner_.setPositions(x); }
-  void internalForces(Eigen::VectorXd& f) override {
+  explicit CountingBackend(detail::Device& inner) : ForwardingDevice(inner) {}
+  void internalForces(const detail::BodySet& b, const detail::Vectors& f) override {
     ++forces;
-    inner_.internalForces(f);
+    ForwardingDevice::internalForces(b, f);
   }
-  void apply(const detail::SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override {
+  void apply(const detail::BodySet& b, const std::vector<detail::SystemCoeffs>& c, const detail::ConstVectors& p,
+             const detail::Vectors& y) override {
     ++applies;
-    inner_.apply(c, p, y);
+    ForwardingDevice::apply(b, c, p, y);
   }
-  detail::LinearSolveStats solve(const detail::SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override {
+  detail::LinearSolveStats solveDirect(std::size_t body, const detail::SystemCoeffs& c, const Eigen::VectorXd& b,
+                                       Eigen::VectorXd& x) override {
     ++solves;
     lastCoeffs = c;
-    return inner_.solve(c, b, x);
+    return ForwardingDevice::solveDirect(body, c, b, x);
   }
-  double elasticEnergy() override { return inner_.elasticEnergy(); }
 
   int forces = 0, applies = 0, solves = 0;
   detail::SystemCoeffs lastCoeffs;
-
- private:
-  detail::Backend& inner_;
 };
 
 struct Counts {
@@ -48,7 +43,7 @@ struct Counts {
 };
 
 /// Runs `steps` Newmark steps of a loaded spring chain with the given Rayleigh coefficients and
-/// Newton iterations, and returns the Backend calls made by the steps (not by the set-up).
+/// Newton iterations, and returns the device calls made by the steps (not by the set-up).
 Counts runChain(double alpha, double beta, int newtonIterations, int steps) {
   detail::Problem p = test::springChainProblem(5, 1.0);
   p.rayleighMass = alpha;
@@ -63,7 +58,7 @@ Counts runChain(double alpha, double beta, int newtonIterations, int steps) {
   desc.timeStep = 0.01;
   desc.newtonIterations = newtonIterations;
   desc.newtonTolerance = 1e-14;  // never met early: every allowed iteration runs
-  detail::DynamicSolver solver(p, backend, desc);
+  test::DynamicSolver solver(p, backend, desc);
   solver.step(1, steps);  // the first step also computes a_0 (one more force evaluation)
   const Counts before{backend.forces, backend.applies, backend.solves, {}};
   for (int s = 2; s <= steps; ++s) solver.step(s, steps);

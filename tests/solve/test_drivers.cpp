@@ -2,7 +2,7 @@
 // mock spring-chain backend with closed-form answers (tests/solve/mock_backend.hpp).
 #include "mock_backend.hpp"
 
-#include "solve/body_solver.hpp"
+#include "common/body_drivers.hpp"
 #include "util/error.hpp"
 
 #include <gtest/gtest.h>
@@ -15,8 +15,8 @@ namespace corofem {
 namespace {
 
 using detail::BodyStepStats;
-using detail::DynamicSolver;
-using detail::StaticSolver;
+using test::DynamicSolver;
+using test::StaticSolver;
 using test::SpringChainBackend;
 using test::springChainProblem;
 

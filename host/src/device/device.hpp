@@ -18,12 +18,14 @@
 
 #include "model/problem.hpp"
 
+#include <corofem/embed.hpp>
 #include <corofem/scene.hpp>
 
 #include <Eigen/Core>
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -71,6 +73,16 @@ struct DevicePositions {
   const std::uint32_t* deviceNode = nullptr;
 };
 
+/// A buffer on a device as a renderer binds it (the surface's output).
+struct DeviceBufferHandle {
+  enum class Api { None, OpenCL, Vulkan };
+  Api api = Api::None;
+  std::uintptr_t buffer = 0;  ///< OpenCL: the cl_mem; Vulkan: the VkBuffer
+  std::size_t offset = 0;     ///< bytes from the buffer's start
+  std::size_t stride = 0;     ///< bytes from one vertex to the next
+  explicit operator bool() const { return buffer != 0; }
+};
+
 using BodySet = std::vector<std::size_t>;
 using ConstVectors = std::vector<const Eigen::VectorXd*>;
 using Vectors = std::vector<Eigen::VectorXd*>;
@@ -96,6 +108,32 @@ enum class PcgStart {
 
 /// A pending non-blocking read of the PCG scalars (pcgRead).
 using PcgTicket = std::size_t;
+
+/// The render surfaces of some of a device's bodies (the coupled mesh, paper Sec. 5), updated on the
+/// device from the device's own node positions: positions x_v = sum_k w_vk x_{n_vk} and smooth unit
+/// normals, into buffers a renderer draws from (6 float32 per vertex interleaved, or two streams of
+/// 3), the same values as deformSurface's to the device's precision.
+class DeviceSurfaces {
+ public:
+  virtual ~DeviceSurfaces() = default;
+  /// Enqueues the update of every member from the device's positions now (not waited for).
+  virtual void update() = 0;
+  /// Blocking read of member m's output as two streams of 3 floats per vertex.
+  virtual void read(std::size_t member, float* positions, float* normals) = 0;
+  /// Member m's output (positions alone with separate streams) and normals (separate streams only).
+  virtual DeviceBufferHandle vertexBuffer(std::size_t member) const = 0;
+  virtual DeviceBufferHandle normalBuffer(std::size_t member) const = 0;
+  virtual bool separateStreams() const = 0;
+  /// Waits for every update enqueued.
+  virtual void finish() = 0;
+  virtual std::vector<DeviceBuffer> buffers() const = 0;
+};
+
+/// One body's surface among a DeviceSurfaces' members.
+struct SurfaceMember {
+  std::size_t body = 0;
+  const SurfaceBinding* binding = nullptr;  ///< bound to the body's mesh in the problem's numbering
+};
 
 class Device {
  public:
@@ -163,6 +201,19 @@ class Device {
   /// Solves A x = b on the free dofs of one body directly. Throws Error(BadInput) where there is none.
   virtual LinearSolveStats solveDirect(std::size_t body, const SystemCoeffs& coeffs, const Eigen::VectorXd& b,
                                        Eigen::VectorXd& x);
+
+  // -- render surfaces
+
+  /// The surfaces of `members` (bodies of this device) updated in one set of launches per update,
+  /// each from its body's positions as last set; `separateStreams`: the output layout. Null where
+  /// the device has none (the host computes the surfaces: deformSurface). Throws Error(DeviceError)
+  /// where the device cannot hold them together (the caller may try them one by one).
+  virtual std::unique_ptr<DeviceSurfaces> createSurfaces(const std::vector<SurfaceMember>& members,
+                                                         bool separateStreams) {
+    (void)members;
+    (void)separateStreams;
+    return nullptr;
+  }
 
   // -- what it holds
 

@@ -71,7 +71,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const bool precond = pcg && scene.solver.preconditioner != PreconditionerKind::None;
   const bool block = scene.solver.preconditioner == PreconditionerKind::BlockDiagonal;
   const Candidate& c = schedule.choice();
-  const bool device = c.kind == BackendKind::OpenCL;
+  const bool device = c.backend != "reference";
   const double r = device && scene.solver.precision == Precision::Float ? 4.0 : 8.0;
   const double E = static_cast<double>(problem.elements.size());
   const double N = static_cast<double>(problem.mesh.nodeCount());
@@ -79,7 +79,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
 
   json j;
   j["body"] = desc.name;
-  j["backend"] = device ? "opencl" : "reference";
+  j["backend"] = c.backend;
   j["device"] = c.device;
   j["choice"] = c.label();
   j["reason"] = schedule.reason;
@@ -99,7 +99,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   f["damping"] = damping;
   f["surface_update"] = !desc.surface.empty();
   f["prescribed_displacements"] = !problem.prescribed.empty();
-  // Batching (solve/batch_group.hpp): the bodies of one device share its buffers and every launch;
+  // Batching (solve/driver.hpp): the bodies of one device share its buffers and every launch;
   // the buffers and bytes below are this body's share (its segment of the shared buffers).
   const bool batched = batchMates.size() >= 2;
   if (batched) {

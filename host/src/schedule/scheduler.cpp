@@ -1,14 +1,10 @@
 // Scheduler: candidates, explicit requests, calibration and its cache (see scheduler.hpp).
 #include "schedule/scheduler.hpp"
 
-#include "solve/body_solver.hpp"
+#include "solve/driver.hpp"
 #include "util/cache_dir.hpp"
 #include "util/error.hpp"
 
-#ifdef COROFEM_WITH_OPENCL
-#include "backends/opencl/cl_context.hpp"
-#include "backends/opencl/program_cache.hpp"
-#endif
 
 #include <nlohmann/json.hpp>
 
@@ -29,45 +25,27 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-SchedulerHooks& hooks() {
-  static SchedulerHooks h;
-  return h;
-}
-
-bool isHyperelastic(Formulation f) {
-  return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean;
-}
-
 std::string lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return s;
 }
 
-const char* kindName(BackendKind k) { return k == BackendKind::OpenCL ? "opencl" : "reference"; }
-
-Candidate referenceCandidate() {
-  Candidate c;
-  c.kind = BackendKind::Reference;
-  c.device = "host (Eigen, double)";
-  c.driver = "corofem";
-  return c;
-}
-
 std::string choicesText() {
-  std::string s = "choices: \"auto\", \"reference\", \"opencl\" (first GPU, else first device), "
-                  "\"opencl:<index>\" or \"opencl:<device name substring>\"";
-  std::vector<Candidate> cands = listCandidates();
+  std::string s = "choices: \"auto\"";
+  for (const BackendEntry& e : registeredBackends())
+    s += ", \"" + e.name + "\"" + (e.name == "reference" ? "" : ", \"" + e.name + ":<index>\" or \"" + e.name +
+                                                                      ":<device name substring>\"");
   std::string devices;
-  for (const Candidate& c : cands)
-    if (c.kind == BackendKind::OpenCL) devices += (devices.empty() ? "" : ", ") + c.label();
-  s += devices.empty() ? "; this build/machine has no OpenCL device" : "; devices here: " + devices;
+  for (const Candidate& c : listCandidates())
+    if (c.backend != "reference") devices += (devices.empty() ? "" : ", ") + c.label();
+  s += devices.empty() ? "; this build/machine has no device besides the host" : "; devices here: " + devices;
   return s;
 }
 
 // ------------------------------------------------------------------ cache
 std::string cacheKey(const Candidate& c, const Scene& scene, std::size_t elements) {
   std::ostringstream os;
-  os << kindName(c.kind) << '|' << c.device << '|' << c.driver << '|'
+  os << c.backend << '|' << c.device << '|' << c.driver << '|'
      << (scene.analysis.kind == AnalysisDesc::Kind::Static ? "static" : "dynamic") << '|'
      << (scene.solver.precision == Precision::Float ? "float" : "double") << '|'
      << (scene.solver.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg") << "|log2e="
@@ -108,19 +86,20 @@ void writeCache(const std::string& path, const json& j) {
 // ------------------------------------------------------------------ calibration
 /// Median wall time (ms) of the body's first step on candidate c: one warm-up, then up to
 /// kCalibrationRepeats repetitions, each undone by rollback() so that every repetition is the
-/// same step. Throws whatever the backend or the driver throws.
-double calibrate(const Problem& problem, const Scene& scene, const Candidate& c, const OpenCLTuning& tuning) {
-  std::unique_ptr<Backend> backend = createBackendFor(problem, scene.solver, c, tuning);
-  std::unique_ptr<BodySolver> solver = createBodySolver(problem, *backend, scene.analysis);
+/// same step. Throws whatever the device or the driver throws.
+double calibrate(const Problem& problem, const Scene& scene, const Candidate& c, const DeviceOptions& options) {
+  DeviceSlot slot({&problem}, scene.solver, {c}, false, options);
+  std::unique_ptr<Driver> driver = createDriver(slot, scene.analysis);
   const int count = scene.analysis.kind == AnalysisDesc::Kind::Static ? std::max(1, scene.analysis.statics.increments)
                                                                       : std::max(1, scene.analysis.dynamics.steps);
   using Clock = std::chrono::steady_clock;
   const auto begin = Clock::now();
   auto timeStep = [&] {
     const auto t0 = Clock::now();
-    solver->step(1, count);
+    const std::vector<BodyOutcome> out = driver->step({0}, 1, count);
+    if (out.at(0).error) std::rethrow_exception(out[0].error);
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-    solver->rollback();
+    driver->rollback(0);
     return ms;
   };
   std::vector<double> samples{timeStep()};  // warm-up (first launches, lazy set-up)
@@ -145,55 +124,35 @@ std::string formatMs(double ms) {
 
 std::string calibrationBuild() {
   std::string build = std::string("corofem ") + COROFEM_VERSION;
-#ifdef COROFEM_WITH_OPENCL
-  std::ostringstream hex;
-  hex << std::hex << cl::fnv1a64(cl::corofemProgramSource());
-  build += ", kernels " + hex.str();
-#endif
+  for (const BackendEntry& e : registeredBackends())
+    if (e.buildId) {
+      const std::string id = e.buildId();
+      if (!id.empty()) build += ", " + e.name + " " + id;
+    }
   return build;
 }
 
-std::string Candidate::label() const {
-  if (kind == BackendKind::Reference)
-    return device.empty() || device == referenceCandidate().device ? "reference" : "reference (" + device + ")";
-  return "opencl:" + selector + " (" + device + ")";
-}
-
 std::vector<Candidate> listCandidates() {
-  if (!hooks().candidates.empty()) return hooks().candidates;
-  std::vector<Candidate> out;
-#ifdef COROFEM_WITH_OPENCL
-  const std::vector<cl::DeviceInfo> devices = cl::listDevices();
-  for (int pass = 0; pass < 2; ++pass)  // GPUs first
-    for (std::size_t i = 0; i < devices.size(); ++i) {
-      if (devices[i].gpu != (pass == 0)) continue;
-      Candidate c;
-      c.kind = BackendKind::OpenCL;
-      c.device = devices[i].name;
-      c.selector = std::to_string(i);
-      c.driver = devices[i].platformName + " " + devices[i].driverVersion;
-      c.gpu = devices[i].gpu;
-      out.push_back(c);
-    }
-#endif
-  out.push_back(referenceCandidate());
-  return out;
+  std::vector<Candidate> gpus, others;
+  for (const BackendEntry& e : registeredBackends()) {
+    if (e.name == "reference") continue;
+    for (const Candidate& c : e.candidates()) (c.gpu ? gpus : others).push_back(c);
+  }
+  gpus.insert(gpus.end(), others.begin(), others.end());
+  gpus.push_back(referenceCandidate());
+  return gpus;
 }
 
 DeviceRequest parseDeviceSpec(const std::string& spec, const std::string& source) {
   DeviceRequest r;
   r.source = source;
-  const std::string s = lower(spec);
-  const std::size_t colon = s.find(':');
-  const std::string head = s.substr(0, colon);
+  const std::size_t colon = spec.find(':');
+  const std::string head = lower(spec.substr(0, colon));
   const std::string tail = colon == std::string::npos ? "" : spec.substr(colon + 1);
   if (head == "auto" && colon == std::string::npos) return r;
-  if (head == "reference" && colon == std::string::npos) {
-    r.kind = BackendKind::Reference;
-    return r;
-  }
-  if (head == "opencl" && (colon == std::string::npos || !tail.empty())) {
-    r.kind = BackendKind::OpenCL;
+  const bool reference = head == "reference";
+  if (findBackend(head) && (colon == std::string::npos || (!tail.empty() && !reference))) {
+    r.backend = head;
     r.device = tail;
     return r;
   }
@@ -203,7 +162,7 @@ DeviceRequest parseDeviceSpec(const std::string& spec, const std::string& source
 DeviceRequest requestedDevice(const Scene& scene) {
   if (scene.backend.kind != BackendKind::Auto) {
     DeviceRequest r;
-    r.kind = scene.backend.kind;
+    r.backend = toString(scene.backend.kind);
     r.device = scene.backend.device;
     r.source = "scene";
     return r;
@@ -211,7 +170,7 @@ DeviceRequest requestedDevice(const Scene& scene) {
   // "auto" with a device named: the user chose that OpenCL device ("" is the scheduler's choice).
   if (!scene.backend.device.empty()) {
     DeviceRequest r;
-    r.kind = BackendKind::OpenCL;
+    r.backend = "opencl";
     r.device = scene.backend.device;
     r.source = "the scene (\"backend.device\": \"" + scene.backend.device + "\")";
     return r;
@@ -219,15 +178,6 @@ DeviceRequest requestedDevice(const Scene& scene) {
   if (const char* env = std::getenv("COROFEM_DEVICE"); env && *env) return parseDeviceSpec(env, "COROFEM_DEVICE");
   return {};
 }
-
-std::unique_ptr<Backend> createBackendFor(const Problem& problem, const SolverDesc& solver, const Candidate& c,
-                                          const OpenCLTuning& tuning) {
-  if (hooks().factory) return hooks().factory(problem, solver, c);
-  if (c.kind == BackendKind::OpenCL) return createOpenCLBackend(problem, solver, c.selector, tuning);
-  return createReferenceBackend(problem, solver);
-}
-
-void setSchedulerHooksForTesting(SchedulerHooks h) { hooks() = std::move(h); }
 
 int sizeBucket(std::size_t elements) {
   int b = 0;
@@ -244,73 +194,73 @@ std::string schedulerCachePath() {
 }
 
 BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Scene& scene,
-                          const OpenCLTuning& tuning) {
+                          const DeviceOptions& options, const std::vector<std::string>& devices) {
   BodySchedule s;
   s.body = desc.name;
   const Candidate reference = referenceCandidate();
 
-  if (!hooks().forcedOrder.empty()) {
-    s.order = hooks().forcedOrder;
-    s.reason = "order forced by a test hook";
-    s.explicitChoice = false;  // falls back at create too (the build-failure test)
+  // The application's order: each entry resolved by its backend, the reference backend last.
+  if (!devices.empty()) {
+    for (const std::string& spec : devices) {
+      const DeviceRequest req = parseDeviceSpec(spec, "SimulationOptions::devices entry");
+      if (req.backend.empty()) fail(ErrorCode::BadInput, "SimulationOptions::devices: \"auto\" cannot be part of an order");
+      const auto entry = findBackend(req.backend);
+      s.order.push_back(entry->resolve ? entry->resolve(req.device) : entry->candidates().at(0));
+    }
+    if (s.order.back().backend != "reference") s.order.push_back(reference);
+    s.reason = "the order the application gave (SimulationOptions::devices)";
+    s.explicitChoice = false;  // falls back at create too: the application listed the fallbacks
     return s;
   }
 
   const DeviceRequest req = requestedDevice(scene);
-  if (req.kind == BackendKind::Reference) {
+  if (req.backend == "reference") {
     s.order = {reference};
     s.reason = "requested by " + (req.source == "scene" ? std::string("the scene (\"backend\": \"reference\")") : req.source);
     s.explicitChoice = true;
     return s;
   }
-  if (req.kind == BackendKind::OpenCL) {
-    if (isHyperelastic(desc.formulation))
-      fail(ErrorCode::BadInput, "body '", desc.name, "': the ", toString(desc.formulation),
-           " formulation runs only on the reference backend; set \"backend\": \"reference\" "
-           "or use the \"corotational\" or \"linear\" formulation");
+  if (!req.backend.empty()) {
+    const auto entry = findBackend(req.backend);
+    if (const std::string why = entry->refuses ? entry->refuses(problem, scene.solver) : ""; !why.empty())
+      fail(ErrorCode::BadInput, "body '", desc.name, "': ", why);
+    // The selector resolved to the device's own (index and name) so that the label and the cache
+    // name it; an unknown selector is left as given, for the backend's DeviceError to list the devices.
     Candidate c;
-    c.kind = BackendKind::OpenCL;
+    c.backend = req.backend;
     c.selector = req.device;
-    c.device = req.device.empty() ? "default OpenCL device" : req.device;
-#ifdef COROFEM_WITH_OPENCL
-    // Resolve the selector to the device's index so that the label and the cache name it. An
-    // unknown selector is left as given: the backend's DeviceError lists the devices.
-    if (hooks().candidates.empty()) {
+    c.device = req.device.empty() ? "default " + req.backend + " device" : req.device;
+    if (entry->resolve) {
       try {
-        const cl::DeviceInfo info = cl::selectDevice(req.device);
-        const std::vector<cl::DeviceInfo> all = cl::listDevices();
-        for (std::size_t i = 0; i < all.size(); ++i)
-          if (all[i].device == info.device) {
-            c.selector = std::to_string(i);
-            c.device = info.name;
-            c.driver = info.platformName + " " + info.driverVersion;
-            c.gpu = info.gpu;
-          }
+        c = entry->resolve(req.device);
       } catch (const Error&) {
       }
     }
-#endif
     s.order = {c, reference};
-    s.reason = "requested by " + (req.source == "scene" ? std::string("the scene (\"backend\": \"opencl\")") : req.source);
+    s.reason = "requested by " + (req.source == "scene" ? "the scene (\"backend\": \"" + req.backend + "\")" : req.source);
     s.explicitChoice = true;
     return s;
   }
 
-  // "auto"
-  std::vector<Candidate> candidates = listCandidates();
+  // "auto": the candidates of the backends that can run this body.
   auto onlyReference = [&](const std::string& why) {
     s.order = {reference};
     s.reason = why;
     return s;
   };
-  if (isHyperelastic(desc.formulation))
-    return onlyReference(std::string("the ") + toString(desc.formulation) + " formulation runs only on the reference backend");
-  if (scene.solver.linearSolver == LinearSolverKind::Cholesky)
-    return onlyReference("the Cholesky solver runs only on the reference backend");
-  if (candidates.size() == 1) return onlyReference("no OpenCL device in this build or on this machine");
+  std::vector<Candidate> candidates;
+  std::string refusal;
+  for (const Candidate& c : listCandidates()) {
+    const auto entry = findBackend(c.backend);
+    const std::string why = entry && entry->refuses ? entry->refuses(problem, scene.solver) : "";
+    if (why.empty()) candidates.push_back(c);
+    else if (refusal.empty()) refusal = why;
+  }
+  if (candidates.size() == 1)
+    return onlyReference(refusal.empty() ? "no device besides the host in this build or on this machine" : refusal);
   const std::size_t elements = problem.elements.size();
   const std::size_t minElements = scene.backend.minDeviceElements;
-  if (elements < minElements && hooks().candidates.empty())
+  if (elements < minElements)
     return onlyReference(std::to_string(elements) + " elements is below " + std::to_string(minElements) +
                          " (backend.min_device_elements): a device launch costs more than the whole step");
 
@@ -336,7 +286,7 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
     t.fromCache = false;
     allCached = false;
     try {
-      t.msPerStep = calibrate(problem, scene, c, tuning);
+      t.msPerStep = calibrate(problem, scene, c, options);
     } catch (const Error& e) {
       t.error = std::string(toString(e.code())) + ": " + e.what();
     } catch (const std::exception& e) {
@@ -362,9 +312,9 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
   std::stable_sort(ok.begin(), ok.end(), [](auto* a, auto* b) { return a->msPerStep < b->msPerStep; });
   // Devices in order of speed, then the reference backend (the last resort of every body; when it
   // is the fastest it is the only entry: nothing falls back from it).
-  const bool referenceFirst = !ok.empty() && ok.front()->candidate.kind == BackendKind::Reference;
+  const bool referenceFirst = !ok.empty() && ok.front()->candidate.backend == "reference";
   for (const CandidateTiming* t : ok)
-    if (!referenceFirst && t->candidate.kind != BackendKind::Reference) s.order.push_back(t->candidate);
+    if (!referenceFirst && t->candidate.backend != "reference") s.order.push_back(t->candidate);
   s.order.push_back(reference);
   if (ok.empty()) {
     s.reason = "calibration failed on every candidate (see candidates); the reference backend reports the error";
@@ -383,14 +333,14 @@ std::string scheduleJson(const BodySchedule& s) {
   json j;
   j["body"] = s.body;
   j["choice"] = s.choice().label();
-  j["backend"] = kindName(s.choice().kind);
+  j["backend"] = s.choice().backend;
   j["device"] = s.choice().device;
   j["reason"] = s.reason;
   j["from_cache"] = s.fromCache;
   j["explicit"] = s.explicitChoice;
   json cands = json::array();
   for (const CandidateTiming& t : s.timings) {
-    json c{{"backend", kindName(t.candidate.kind)}, {"device", t.candidate.device},
+    json c{{"backend", t.candidate.backend}, {"device", t.candidate.device},
            {"label", t.candidate.label()}, {"from_cache", t.fromCache}};
     c["ms_per_step"] = std::isnan(t.msPerStep) ? json(nullptr) : json(t.msPerStep);
     if (!t.error.empty()) c["error"] = t.error;

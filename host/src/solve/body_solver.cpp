@@ -1,5 +1,5 @@
-// Shared part of the per-body drivers: free-dof norms, scales, energies, the driver factory.
-#include "solve/body_solver.hpp"
+// BodyView, and the shared part of the per-body drivers: free-dof norms, scales, energies.
+#include "solve/statics.hpp"
 #include "util/error.hpp"
 #include "util/finite.hpp"
 
@@ -7,8 +7,24 @@
 
 namespace corofem::detail {
 
-BodySolver::BodySolver(const Problem& problem, Backend& backend, const Log& log)
-    : problem_(problem), backend_(backend), log_(log) {
+LinearSolveStats BodyView::solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+  std::vector<PcgSolve> one(1);
+  one[0].coeffs = c;
+  one[0].b = &b;
+  one[0].x = &x;
+  slot_->solve({body_}, one);
+  if (!one[0].failure.empty()) throw Error(ErrorCode::SolveFailed, one[0].failure);
+  return one[0].stats;
+}
+
+double BodyView::elasticEnergy() {
+  std::vector<double> e;
+  slot_->elasticEnergy({body_}, e);
+  return e.at(0);
+}
+
+BodySolver::BodySolver(const Problem& problem, BodyView body, const Log& log)
+    : problem_(problem), body_(body), log_(log) {
   const Eigen::Index n = problem.restPositions.size();
   freeMask_ = Eigen::ArrayXd::Ones(n);
   for (Eigen::Index d = 0; d < n; ++d)
@@ -47,7 +63,7 @@ void BodySolver::setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd
   v_ = (v.array() * freeMask_).matrix();
   xPrev_ = x_;
   vPrev_ = v_;
-  backendAtCommitted_ = false;
+  deviceAtCommitted_ = false;
 }
 
 double BodySolver::kineticEnergy() const {
@@ -56,28 +72,21 @@ double BodySolver::kineticEnergy() const {
 }
 
 double BodySolver::elasticEnergy() {
-  syncBackendPositions();
-  return backend_.elasticEnergy();
+  syncDevicePositions();
+  return body_.elasticEnergy();
 }
 
-void BodySolver::syncBackendPositions() {
-  if (!backendAtCommitted_) setBackendPositions(x_, true);
+void BodySolver::syncDevicePositions() {
+  if (!deviceAtCommitted_) setDevicePositions(x_, true);
 }
 
 double BodySolver::freeNorm(const Eigen::VectorXd& v) const { return (v.array() * freeMask_).matrix().norm(); }
 
 bool BodySolver::allFinite(const Eigen::VectorXd& v) { return allFiniteEntries(v); }
 
-void BodySolver::setBackendPositions(const Eigen::VectorXd& x, bool committed) {
-  backend_.setPositions(x);
-  backendAtCommitted_ = committed;
-}
-
-std::unique_ptr<BodySolver> createBodySolver(const Problem& problem, Backend& backend, const AnalysisDesc& analysis,
-                                             const Log& log) {
-  if (analysis.kind == AnalysisDesc::Kind::Static)
-    return std::make_unique<StaticSolver>(problem, backend, analysis.statics, log);
-  return std::make_unique<DynamicSolver>(problem, backend, analysis.dynamics, log);
+void BodySolver::setDevicePositions(const Eigen::VectorXd& x, bool committed) {
+  body_.setPositions(x);
+  deviceAtCommitted_ = committed;
 }
 
 }  // namespace corofem::detail

@@ -1,14 +1,15 @@
-// Implicit Newmark and backward Euler (paper Eq. 14) solved for the velocities by Newton. The
-// scheme, the constraint handling, the warm start and the blow-up rule are documented on
-// DynamicSolver in body_solver.hpp.
-#include "solve/body_solver.hpp"
+// Implicit Newmark and backward Euler (paper Eq. 14) solved for the velocities by Newton, for a set
+// of bodies in lock-step. The scheme, the constraint handling, the warm start and the blow-up rule
+// are documented on DynamicsDriver in dynamics.hpp.
+#include "solve/dynamics.hpp"
+
 #include "util/error.hpp"
 #include "util/format.hpp"
+#include "util/parallel.hpp"
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
+#include <sstream>
 #include <string>
 #include <utility>
 
@@ -22,341 +23,593 @@ namespace {
 constexpr double kBlowUpResidual = 1e-3;
 
 /// Mechanical energy (kinetic + elastic), in units of the energy the body was ever given, above
-/// which a step ran away (see DynamicSolver).
+/// which a step ran away (see DynamicsDriver).
 constexpr double kRunawayEnergyRatio = 1.25;
+
+/// fn(i) for every i < n on the host's threads (each i a body's own work: no shared writes).
+template <class Fn>
+void forEach(std::size_t n, Fn&& fn) {
+  parallelChunks(n, 1, [&](std::size_t, std::size_t lo, std::size_t hi) {
+    for (std::size_t i = lo; i < hi; ++i) fn(i);
+  });
+}
+
+bool allFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
+
+/// A number as a message streams it ("0.05", "2.39").
+std::string num(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
 
 }  // namespace
 
-DynamicSolver::DynamicSolver(const Problem& problem, Backend& backend, const DynamicDesc& desc, const Log& log)
-    : BodySolver(problem, backend, log), desc_(desc) {
-  if (problem.initialVelocity.size() == v_.size()) v_ = problem.initialVelocity;
-  v_ = (v_.array() * freeMask_).matrix();  // constrained dofs start at rest
-  vPrev_ = v_;
-  fextPrev_ = Eigen::VectorXd::Zero(x_.size());
-  fextPrevSaved_ = fextPrev_;
-  reactionPrev_ = Eigen::VectorXd::Zero(x_.size());
-  reactionPrevSaved_ = reactionPrev_;
-}
-
-void DynamicSolver::initialAcceleration() {
-  const Eigen::Index n = x_.size();
-  Eigen::VectorXd fint(n), cv = Eigen::VectorXd::Zero(n);
-  setBackendPositions(x_, true);
-  backend_.internalForces(fint);
-  if (problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0) dampingForce(v_, cv);
-  fextPrev_ = problem_.externalForce(0.0, /*dynamic=*/true);
-  a_ = Eigen::VectorXd::Zero(n);
-  for (Eigen::Index d = 0; d < n; ++d) {
-    const double m = problem_.lumpedMass.size() == n ? problem_.lumpedMass[d] : 0.0;
-    if (freeMask_[d] != 0.0 && m > 0.0) a_[d] = (fextPrev_[d] - cv[d] - fint[d]) / m;
-  }
-  // Reactions of the supports at t = 0 (a = 0 on constrained dofs), and the energy at t = 0.
-  reactionPrev_ = ((cv + fint - fextPrev_).array() * (1.0 - freeMask_)).matrix();
-  initialEnergy_ = kineticEnergy() + backend_.elasticEnergy();
-  if (!allFinite(a_))
-    fail(ErrorCode::SolveFailed, "body '", problem_.name,
-         "': the initial acceleration is not finite; check the material, the loads and the initial velocity");
-}
-
-void DynamicSolver::dampingForce(const Eigen::VectorXd& v, Eigen::VectorXd& cv) {
-  if (problem_.rayleighStiffness == 0.0 && problem_.lumpedMass.size() == v.size()) {
-    cv = problem_.rayleighMass * problem_.lumpedMass.cwiseProduct(v);  // the reference's apply, to the bit
-    return;
-  }
-  backend_.apply(SystemCoeffs{0.0, 1.0, 0.0}, v, cv);
-}
-
-void DynamicSolver::keepForRollback(State& s) {
-  xPrev_.swap(s.x);
-  vPrev_.swap(s.v);
-  aPrev_.swap(s.a);
-  workPrev_ = s.work;
-  tPrev_ = s.t;
-  fextPrevSaved_.swap(s.fextPrev);
-  supportWorkSaved_ = s.supportWork;
-  reactionPrevSaved_.swap(s.reactionPrev);
-}
-
-void DynamicSolver::capture(State& s) const {
-  s.x = x_;
-  s.v = v_;
-  s.a = a_;
-  s.fextPrev = fextPrev_;
-  s.reactionPrev = reactionPrev_;
-  s.work = work_;
-  s.t = t_;
-  s.supportWork = supportWork_;
-}
-
-void DynamicSolver::restore(const State& s) {
-  x_ = s.x;
-  v_ = s.v;
-  a_ = s.a;
-  fextPrev_ = s.fextPrev;
-  reactionPrev_ = s.reactionPrev;
-  work_ = s.work;
-  t_ = s.t;
-  supportWork_ = s.supportWork;
-  backendAtCommitted_ = false;
-}
-
-BodyStepStats DynamicSolver::step(int index, int count) {
-  if (!started_) {
-    initialAcceleration();
-    started_ = true;
-  }
-  State& start = start_;
-  capture(start);
-  const double h = desc_.timeStep;
-  const int maxSubsteps = std::max(1, desc_.maxSubsteps);
-  const std::string where = "time step " + std::to_string(index) + "/" + std::to_string(count);
-  BodyStepStats total;  // iterations of every attempt: the cost really paid
-  std::string tried;    // "1, 2, 4"
-  for (int substeps = 1;; substeps *= 2) {
-    tried += (tried.empty() ? "" : ", ") + std::to_string(substeps);
-    try {
-      BodyStepStats attempt;
-      attempt.converged = true;
-      for (int k = 1; k <= substeps; ++k) {
-        // End time of substep k as start + k h / K, so that the step ends exactly at t_n + h.
-        const double t1 = start.t + h * k / substeps;
-        const BodyStepStats s = advance(t1 - t_, substeps == 1 ? where
-                                                 : where + ", substep " + std::to_string(k) + "/" +
-                                                       std::to_string(substeps));
-        attempt.newtonIterations += s.newtonIterations;
-        attempt.linearIterations += s.linearIterations;
-        attempt.residual = std::max(attempt.residual, s.residual);
-        attempt.linearResidual = std::max(attempt.linearResidual, s.linearResidual);
-        attempt.converged = attempt.converged && s.converged;
+DynamicsDriver::DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const Log& log)
+    : slot_(slot), desc_(desc), log_(log) {
+  bodies_.resize(slot.bodyCount());
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    Body& b = bodies_[i];
+    const Problem& p = slot.problem(i);
+    b.problem = &p;
+    const Eigen::Index n = p.restPositions.size();
+    b.freeMask = Eigen::ArrayXd::Ones(n);
+    for (Eigen::Index d = 0; d < n; ++d)
+      if (static_cast<std::size_t>(d) < p.constrained.size() && p.constrained[static_cast<std::size_t>(d)])
+        b.freeMask[d] = 0.0;
+    // Bounding-box diagonal of the rest positions: the body's length scale.
+    if (n >= 3) {
+      Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = Eigen::Vector3d::Constant(-INFINITY);
+      for (Eigen::Index k = 0; k + 2 < n; k += 3) {
+        const Eigen::Vector3d q = p.restPositions.segment<3>(k);
+        lo = lo.cwiseMin(q);
+        hi = hi.cwiseMax(q);
       }
-      total.newtonIterations += attempt.newtonIterations;
-      total.linearIterations += attempt.linearIterations;
-      total.residual = attempt.residual;
-      total.linearResidual = attempt.linearResidual;
-      total.converged = attempt.converged;
-      total.substeps = substeps;
-      break;
-    } catch (const Error& e) {
-      restore(start);
-      setBackendPositions(x_, true);
-      if (e.code() != ErrorCode::SolveFailed) throw;
-      if (substeps * 2 > maxSubsteps) {
-        if (substeps == 1) fail(ErrorCode::SolveFailed, e.what(), " The body keeps its state at t = ", start.t, " s");
-        fail(ErrorCode::SolveFailed, "body '", problem_.name, "': ", where, " failed with ", tried,
-             " substeps (analysis.max_substeps = ", maxSubsteps, "); the last attempt: ", e.what(),
-             " The body keeps its state at t = ", start.t, " s");
-      }
+      b.diagonal = (hi - lo).norm();
+    }
+    if (!(b.diagonal > 0.0) || !std::isfinite(b.diagonal)) b.diagonal = 1.0;
+    const double modulus = p.lame.lambda + 2.0 * p.lame.mu;  // P-wave modulus, > 0
+    b.forceFloor = 1e-8 * (modulus > 0.0 ? modulus : 1.0) * b.diagonal * b.diagonal;
+    b.x = p.restPositions;
+    b.v = p.initialVelocity.size() == n ? p.initialVelocity : Eigen::VectorXd::Zero(n);
+    b.v = (b.v.array() * b.freeMask).matrix();  // constrained dofs start at rest
+    b.a = Eigen::VectorXd::Zero(n);
+    b.fextPrev = Eigen::VectorXd::Zero(n);
+    b.reactionPrev = Eigen::VectorXd::Zero(n);
+    capture(b, b.previous);
+  }
+}
+
+double DynamicsDriver::freeNorm(const Body& b, const Eigen::VectorXd& v) const {
+  return (v.array() * b.freeMask).matrix().norm();
+}
+
+void DynamicsDriver::capture(const Body& b, State& s) const {
+  s.x = b.x;
+  s.v = b.v;
+  s.a = b.a;
+  s.fextPrev = b.fextPrev;
+  s.reactionPrev = b.reactionPrev;
+  s.work = b.work;
+  s.t = b.t;
+  s.supportWork = b.supportWork;
+}
+
+void DynamicsDriver::restore(Body& b, const State& s) {
+  b.x = s.x;
+  b.v = s.v;
+  b.a = s.a;
+  b.fextPrev = s.fextPrev;
+  b.reactionPrev = s.reactionPrev;
+  b.work = s.work;
+  b.t = s.t;
+  b.supportWork = s.supportWork;
+  b.deviceAtCommitted = false;
+}
+
+void DynamicsDriver::setInitialState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+  Body& b = bodies_.at(body);
+  if (x.size() != b.x.size() || v.size() != b.x.size())
+    fail(ErrorCode::BadInput, "body '", b.problem->name, "': an initial state needs ", b.x.size(),
+         " positions and velocities (3 per node), got ", x.size(), " and ", v.size());
+  if (!x.allFinite() || !v.allFinite())
+    fail(ErrorCode::BadInput, "body '", b.problem->name, "': the initial positions or velocities are not finite");
+  b.x = x;
+  b.v = (v.array() * b.freeMask).matrix();
+  capture(b, b.previous);
+  b.deviceAtCommitted = false;
+}
+
+double DynamicsDriver::kineticEnergy(std::size_t body) const {
+  const Body& b = bodies_.at(body);
+  const Eigen::VectorXd& m = b.problem->lumpedMass;
+  if (m.size() != b.v.size()) return 0.0;
+  return 0.5 * (m.array() * b.v.array().square()).sum();
+}
+
+double DynamicsDriver::elasticEnergy(std::size_t body) {
+  syncDevicePositions({body});
+  std::vector<double> e;
+  slot_.elasticEnergy({body}, e);
+  return e.at(0);
+}
+
+void DynamicsDriver::syncDevicePositions(const BodySet& set) {
+  BodySet stale;
+  ConstVectors xs;
+  for (std::size_t i : set)
+    if (!bodies_.at(i).deviceAtCommitted) {
+      stale.push_back(i);
+      xs.push_back(&bodies_[i].x);
+    }
+  if (stale.empty()) return;
+  slot_.setPositions(stale, xs);
+  for (std::size_t i : stale) bodies_[i].deviceAtCommitted = true;
+}
+
+void DynamicsDriver::dampingForces(const BodySet& set, const ConstVectors& v, const Vectors& cv) {
+  // Mass damping alone (beta = 0, the common "air drag") is a scaling of the lumped mass: formed
+  // here in double, the same expression and bits as the reference device's apply, with no device
+  // call (on a device that call is an upload, a product and a read per force evaluation).
+  BodySet stiff;
+  ConstVectors stiffV;
+  Vectors stiffCv;
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    const Problem& p = *bodies_[set[i]].problem;
+    if (p.rayleighStiffness == 0.0 && p.lumpedMass.size() == v[i]->size()) {
+      *cv[i] = p.rayleighMass * p.lumpedMass.cwiseProduct(*v[i]);
+    } else {
+      stiff.push_back(set[i]);
+      stiffV.push_back(v[i]);
+      stiffCv.push_back(cv[i]);
     }
   }
-  if (total.substeps > 1)
-    log_(LogLevel::Debug, "body '", problem_.name, "': time step ", index, "/", count, " retried, succeeded with ",
-         total.substeps, " substeps");
-
-  // The rollback copy is the state before the whole step, whatever the substeps.
-  keepForRollback(start);
-  return total;
+  if (!stiff.empty()) slot_.apply(stiff, std::vector<SystemCoeffs>(stiff.size(), SystemCoeffs{0.0, 1.0, 0.0}), stiffV, stiffCv);
 }
 
-BodyStepStats DynamicSolver::advance(double h, const std::string& where) {
-  const Eigen::Index n = x_.size();
-  const double t1 = t_ + h;
-
-  // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme. The vectors are the
-  // solver's scratch (sized by the first step, then assigned in place: no allocation per step).
-  double ka = 0.0, kx = 0.0;
-  Eigen::VectorXd &vb = w_.vb, &xb = w_.xb;
-  if (desc_.integrator == Integrator::Newmark) {
-    const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
-    ka = 1.0 / (h * gamma);
-    kx = h * beta / gamma;
-    vb = v_ + h * (1.0 - gamma) * a_;
-    xb = x_ + h * v_ + h * h * (0.5 - beta) * a_ - kx * vb;
-  } else {
-    ka = 1.0 / h;
-    kx = h;
-    vb = v_;
-    xb = x_;
+void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure) {
+  BodySet fresh;
+  for (std::size_t i : set)
+    if (!bodies_[i].started) fresh.push_back(i);
+  if (fresh.empty()) return;
+  const std::size_t n = fresh.size();
+  ConstVectors xs(n), vs(n);
+  Vectors fs(n), cvs(n);
+  std::vector<Eigen::VectorXd> fint(n), cv(n);
+  BodySet damped;
+  ConstVectors dampedV;
+  Vectors dampedCv;
+  for (std::size_t k = 0; k < n; ++k) {
+    Body& b = bodies_[fresh[k]];
+    xs[k] = &b.x;
+    fs[k] = &fint[k];
+    cv[k] = Eigen::VectorXd::Zero(b.x.size());
+    if (b.problem->rayleighMass != 0.0 || b.problem->rayleighStiffness != 0.0) {
+      damped.push_back(fresh[k]);
+      dampedV.push_back(&b.v);
+      dampedCv.push_back(&cv[k]);
+    }
   }
-  const bool damped = problem_.rayleighMass != 0.0 || problem_.rayleighStiffness != 0.0;
-  const SystemCoeffs system{1.0, 1.0 / ka, kx / ka};
+  slot_.setPositions(fresh, xs);
+  for (std::size_t i : fresh) bodies_[i].deviceAtCommitted = true;
+  slot_.internalForces(fresh, fs);
+  if (!damped.empty()) dampingForces(damped, dampedV, dampedCv);
+  std::vector<double> energy;
+  slot_.elasticEnergy(fresh, energy);
+  for (std::size_t k = 0; k < n; ++k) {
+    Body& b = bodies_[fresh[k]];
+    const Problem& p = *b.problem;
+    const Eigen::Index size = b.x.size();
+    b.fextPrev = p.externalForce(0.0, /*dynamic=*/true);
+    b.a = Eigen::VectorXd::Zero(size);
+    for (Eigen::Index d = 0; d < size; ++d) {
+      const double m = p.lumpedMass.size() == size ? p.lumpedMass[d] : 0.0;
+      if (b.freeMask[d] != 0.0 && m > 0.0) b.a[d] = (b.fextPrev[d] - cv[k][d] - fint[k][d]) / m;
+    }
+    // Reactions of the supports at t = 0 (a = 0 on constrained dofs), and the energy at t = 0.
+    b.reactionPrev = ((cv[k] + fint[k] - b.fextPrev).array() * (1.0 - b.freeMask)).matrix();
+    b.initialEnergy = kineticEnergy(fresh[k]) + energy[k];
+    if (!allFinite(b.a)) {
+      failure[fresh[k]] = "body '" + p.name +
+                          "': the initial acceleration is not finite; check the material, the loads and the initial velocity";
+      continue;
+    }
+    b.started = true;
+    capture(b, b.previous);
+  }
+}
 
-  // The caller (step) restores the state of t_n and says so in the message.
-  auto failHere = [&](const std::string& what, const std::string& fix) {
-    setBackendPositions(x_, true);
-    fail(ErrorCode::SolveFailed, "body '", problem_.name, "': ", where, " (t = ", t1, " s) ", what, "; ", fix,
-         ".");
-  };
+std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int count) {
+  std::vector<BodyOutcome> out(set.size());
+  std::vector<std::string> startFailure(bodies_.size());
+  try {
+    start(set, startFailure);
+  } catch (const Error& e) {
+    // The initial state could not be evaluated (every device failed): nothing moved.
+    for (BodyOutcome& o : out) o.error = std::current_exception();
+    return out;
+  }
+  const std::string where = "time step " + std::to_string(index) + "/" + std::to_string(count);
+  Attempts at(set.size());
+  std::vector<std::size_t>& pending = at.pending;
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    if (!startFailure[set[i]].empty()) {
+      out[i].error = std::make_exception_ptr(Error(ErrorCode::SolveFailed, startFailure[set[i]]));
+      continue;
+    }
+    capture(bodies_[set[i]], bodies_[set[i]].start);
+    pending.push_back(i);
+  }
+  try {
+    runAttempts(set, where, at, out);
+  } catch (const Error& e) {
+    // Every device of the slot failed (a DeviceError): the bodies still stepping keep their state
+    // at the step's start; substeps would not help.
+    if (e.code() != ErrorCode::DeviceError) throw;
+    for (std::size_t i : pending) {
+      restore(bodies_[set[i]], bodies_[set[i]].start);
+      out[i].error = std::current_exception();
+    }
+  }
+  return out;
+}
+
+void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, Attempts& at,
+                                 std::vector<BodyOutcome>& out) {
+  std::vector<std::size_t>& pending = at.pending;
+  std::vector<BodyStepStats>& total = at.total;
+  std::vector<std::string>& tried = at.tried;
+  std::vector<std::string>& lastFailure = at.lastFailure;
+  const double h = desc_.timeStep;
+  const int maxSubsteps = std::max(1, desc_.maxSubsteps);
+  for (int substeps = 1; !pending.empty(); substeps *= 2) {
+    std::vector<BodyStepStats> attempt(set.size());
+    for (std::size_t i : pending) {
+      tried[i] += (tried[i].empty() ? "" : ", ") + std::to_string(substeps);
+      attempt[i].converged = true;
+    }
+    std::vector<std::size_t> going = pending;  // still succeeding in this attempt
+    for (int k = 1; k <= substeps && !going.empty(); ++k) {
+      std::vector<Advance> adv(going.size());
+      for (std::size_t j = 0; j < going.size(); ++j) {
+        Body& b = bodies_[set[going[j]]];
+        Advance& a = adv[j];
+        a.body = set[going[j]];
+        // End time of substep k as start + k h / K, so that the step ends exactly at t_n + h.
+        a.t1 = b.start.t + h * k / substeps;
+        a.h = a.t1 - b.t;
+        a.where = substeps == 1 ? where
+                                : where + ", substep " + std::to_string(k) + "/" + std::to_string(substeps);
+      }
+      advance(adv);
+      std::vector<std::size_t> still;
+      for (std::size_t j = 0; j < going.size(); ++j) {
+        const std::size_t i = going[j];
+        const BodyStepStats& s = adv[j].stats;
+        attempt[i].newtonIterations += s.newtonIterations;
+        attempt[i].linearIterations += s.linearIterations;
+        attempt[i].residual = std::max(attempt[i].residual, s.residual);
+        attempt[i].linearResidual = std::max(attempt[i].linearResidual, s.linearResidual);
+        attempt[i].converged = attempt[i].converged && s.converged;
+        if (adv[j].failure.empty()) {
+          still.push_back(i);
+        } else {
+          lastFailure[i] = adv[j].failure;
+          restore(bodies_[set[i]], bodies_[set[i]].start);
+        }
+      }
+      going = std::move(still);
+    }
+    // The bodies that went through every substep succeeded with this many.
+    for (std::size_t i : going) {
+      total[i].newtonIterations = attempt[i].newtonIterations;
+      total[i].linearIterations = attempt[i].linearIterations;
+      total[i].residual = attempt[i].residual;
+      total[i].linearResidual = attempt[i].linearResidual;
+      total[i].converged = attempt[i].converged;
+      total[i].substeps = substeps;
+      if (substeps > 1)
+        log_(LogLevel::Debug, "body '", bodies_[set[i]].problem->name, "': ", where, " retried, succeeded with ",
+             substeps, " substeps");
+      // The rollback copy is the state before the whole step, whatever the substeps.
+      std::swap(bodies_[set[i]].previous, bodies_[set[i]].start);
+      out[i].stats = total[i];
+    }
+    std::vector<std::size_t> retry;
+    for (std::size_t i : pending) {
+      if (std::find(going.begin(), going.end(), i) != going.end()) continue;
+      const Body& b = bodies_[set[i]];
+      if (substeps * 2 > maxSubsteps) {
+        const std::string message =
+            substeps == 1 ? lastFailure[i] + " The body keeps its state at t = " + num(b.start.t) + " s"
+                          : "body '" + b.problem->name + "': " + where + " failed with " + tried[i] +
+                                " substeps (analysis.max_substeps = " + std::to_string(maxSubsteps) +
+                                "); the last attempt: " + lastFailure[i] + " The body keeps its state at t = " +
+                                num(b.start.t) + " s";
+        out[i].stats = total[i];
+        out[i].error = std::make_exception_ptr(Error(ErrorCode::SolveFailed, message));
+      } else {
+        retry.push_back(i);
+      }
+    }
+    pending = std::move(retry);
+  }
+}
+
+std::string DynamicsDriver::failureText(const Advance& a, const std::string& what, const std::string& fix) const {
+  return "body '" + bodies_[a.body].problem->name + "': " + a.where + " (t = " + num(a.t1) + " s) " + what + "; " +
+         fix + ".";
+}
+
+void DynamicsDriver::advance(std::vector<Advance>& adv) {
   const std::string retryFix =
       desc_.maxSubsteps <= 1 ? ", or let failed steps be retried in substeps with analysis.max_substeps (e.g. 8)" : "";
   const std::string stepFix =
       "try a smaller analysis.time_step, more analysis.newton_iterations or a tighter solver.tolerance "
       "(or more solver.max_iterations)" + retryFix;
+  auto failHere = [&](Advance& a, const std::string& what) {
+    if (a.failure.empty()) a.failure = failureText(a, what, stepFix);
+    a.running = false;
+  };
 
-  // Targets of the constrained dofs at t_{n+1}: rest position (fixed) or X + ramp * value (prescribed).
-  Eigen::VectorXd& target = w_.target;
-  target = problem_.restPositions;
-  problem_.applyPrescribed(target, t1, /*dynamic=*/true);
-  Eigen::VectorXd& fext = w_.fext;
-  problem_.externalForce(t1, /*dynamic=*/true, fext);
-  const double fextNorm = freeNorm(fext);
+  // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme, the targets of the
+  // constrained dofs at t_{n+1} (rest position, or X + ramp * value for prescribed ones), f_ext,
+  // and Newton's starting point v = v_n (constrained dofs hitting their targets).
+  forEach(adv.size(), [&](std::size_t j) {
+    Advance& a = adv[j];
+    Body& b = bodies_[a.body];
+    const Problem& p = *b.problem;
+    auto& w = b.w;
+    const double h = a.h;
+    if (desc_.integrator == Integrator::Newmark) {
+      const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
+      a.ka = 1.0 / (h * gamma);
+      a.kx = h * beta / gamma;
+      w.vb = b.v + h * (1.0 - gamma) * b.a;
+      w.xb = b.x + h * b.v + h * h * (0.5 - beta) * b.a - a.kx * w.vb;
+    } else {
+      a.ka = 1.0 / h;
+      a.kx = h;
+      w.vb = b.v;
+      w.xb = b.x;
+    }
+    w.target = p.restPositions;
+    p.applyPrescribed(w.target, a.t1, /*dynamic=*/true);
+    p.externalForce(a.t1, /*dynamic=*/true, w.fext);
+    a.fextNorm = freeNorm(b, w.fext);
+    const Eigen::Index n = b.x.size();
+    w.v = b.v;
+    for (Eigen::Index d = 0; d < n; ++d)
+      if (b.freeMask[d] == 0.0) w.v[d] = (w.target[d] - w.xb[d]) / a.kx;
+    w.x.resize(n);
+    w.a.resize(n);
+    w.fint.resize(n);
+    w.cv.setZero(n);
+    w.r.resize(n);
+    w.dv.resize(n);
+  });
 
-  // Newton's starting point: v = v_n on the free dofs; constrained dofs hit their targets.
-  Eigen::VectorXd& v = w_.v;
-  v = v_;
-  for (Eigen::Index d = 0; d < n; ++d)
-    if (freeMask_[d] == 0.0) v[d] = (target[d] - xb[d]) / kx;
-
-  const Eigen::VectorXd& mass = problem_.lumpedMass;
-  Eigen::VectorXd &x = w_.x, &a = w_.a, &fint = w_.fint, &cv = w_.cv, &r = w_.r, &dv = w_.dv;
-  x.resize(n);
-  a.resize(n);
-  fint.resize(n);
-  cv.setZero(n);
-  r.resize(n);
-  dv.resize(n);
-  BodyStepStats stats;
-  double initialRelative = 0.0, initialNorm = 0.0, residualNorm = 0.0;
-  bool allLinearConverged = true;
-  bool evaluated = false;  // stats.residual was measured at the final v
   const int maxIterations = std::max(1, desc_.newtonIterations);
   for (int iteration = 0;; ++iteration) {
-    x = xb + kx * v;
-    a = ka * (v - vb);
+    std::vector<std::size_t> live;  // indices into adv
+    for (std::size_t j = 0; j < adv.size(); ++j)
+      if (adv[j].running) live.push_back(j);
+    if (live.empty()) break;
+    BodySet set;
+    ConstVectors xs, vs;
+    Vectors fs, cvs;
+    for (std::size_t j : live) {
+      Body& b = bodies_[adv[j].body];
+      b.w.x = b.w.xb + adv[j].kx * b.w.v;
+      b.w.a = adv[j].ka * (b.w.v - b.w.vb);
+      set.push_back(adv[j].body);
+      xs.push_back(&b.w.x);
+      fs.push_back(&b.w.fint);
+    }
+    BodySet damped;
+    for (std::size_t j : live) {
+      const Problem& p = *bodies_[adv[j].body].problem;
+      if (p.rayleighMass != 0.0 || p.rayleighStiffness != 0.0) {
+        damped.push_back(adv[j].body);
+        vs.push_back(&bodies_[adv[j].body].w.v);
+        cvs.push_back(&bodies_[adv[j].body].w.cv);
+      }
+    }
     try {
-      setBackendPositions(x, false);
-      backend_.internalForces(fint);
-      if (damped) dampingForce(v, cv);
+      slot_.setPositions(set, xs);
+      for (std::size_t i : set) bodies_[i].deviceAtCommitted = false;
+      slot_.internalForces(set, fs);
+      if (!damped.empty()) dampingForces(damped, vs, cvs);
     } catch (const Error& e) {
-      failHere(std::string("failed: ") + e.what(), stepFix);
+      if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
+      for (std::size_t j : live) failHere(adv[j], std::string("failed: ") + e.what());
+      break;
     }
     // r = M a + C v + f_int - f_ext, the free norms of its terms and of r, and whether x and v are
-    // finite, in one pass over the body's vectors where there were eight (a batch's 100 bodies
-    // stream them from memory between rounds). The norms' sums run in dof order (Eigen's
-    // reductions summed in its own order: the last bits of the residual may differ from before).
-    double maSq = 0.0, cvSq = 0.0, fintSq = 0.0, rSq = 0.0;
-    bool finite = true;
-    for (Eigen::Index d = 0; d < n; ++d) {
-      const double ma = mass[d] * a[d];
-      const double rd = ma + cv[d] + fint[d] - fext[d];
-      r[d] = rd;
-      const double f = freeMask_[d], maf = ma * f, cvf = cv[d] * f, fintf = fint[d] * f, rf = rd * f;
-      maSq += maf * maf;
-      cvSq += cvf * cvf;
-      fintSq += fintf * fintf;
-      rSq += rf * rf;
-      finite = finite && std::isfinite(x[d]) && std::isfinite(v[d]);
-    }
-    const double scale = std::max({std::sqrt(maSq), std::sqrt(cvSq), std::sqrt(fintSq), fextNorm, forceFloor_});
-    residualNorm = std::sqrt(rSq);
-    const double relative = residualNorm / scale;
-    if (!std::isfinite(relative) || !finite)
-      failHere("produced non-finite forces, velocities or positions", stepFix);
-    if (iteration == 0) {
-      initialRelative = relative;
-      initialNorm = residualNorm;
-    }
-    stats.residual = relative;
-    evaluated = true;
-    if (relative <= desc_.newtonTolerance || iteration == maxIterations) break;
+    // finite, in one pass over the body's vectors. The norms' sums run in dof order.
+    forEach(live.size(), [&](std::size_t k) {
+      Advance& a = adv[live[k]];
+      Body& b = bodies_[a.body];
+      auto& w = b.w;
+      const Eigen::VectorXd& mass = b.problem->lumpedMass;
+      const Eigen::Index n = b.x.size();
+      double maSq = 0.0, cvSq = 0.0, fintSq = 0.0, rSq = 0.0;
+      bool finite = true;
+      for (Eigen::Index d = 0; d < n; ++d) {
+        const double ma = mass[d] * w.a[d];
+        const double rd = ma + w.cv[d] + w.fint[d] - w.fext[d];
+        w.r[d] = rd;
+        const double f = b.freeMask[d], maf = ma * f, cvf = w.cv[d] * f, fintf = w.fint[d] * f, rf = rd * f;
+        maSq += maf * maf;
+        cvSq += cvf * cvf;
+        fintSq += fintf * fintf;
+        rSq += rf * rf;
+        finite = finite && std::isfinite(w.x[d]) && std::isfinite(w.v[d]);
+      }
+      const double scale =
+          std::max({std::sqrt(maSq), std::sqrt(cvSq), std::sqrt(fintSq), a.fextNorm, b.forceFloor});
+      a.residualNorm = std::sqrt(rSq);
+      const double relative = a.residualNorm / scale;
+      if (!std::isfinite(relative) || !finite) {
+        failHere(a, "produced non-finite forces, velocities or positions");
+        return;
+      }
+      if (iteration == 0) {
+        a.initialRelative = relative;
+        a.initialNorm = a.residualNorm;
+      }
+      a.stats.residual = relative;
+      a.evaluated = true;
+      if (relative <= desc_.newtonTolerance || iteration == maxIterations) a.running = false;
+    });
 
-    // Newton update: A dv = -r / ka with A = M + (1/ka) C + (kx/ka) K_t. Starting vector dv = 0,
-    // i.e. the previous velocities (first iteration) or the current iterate.
-    dv.setZero();
-    LinearSolveStats ls;
+    // Newton update: A dv = -r / ka with A = M + (1/ka) C + (kx/ka) K_t, starting at dv = 0 (the
+    // previous velocities on the first iteration, the current iterate after).
+    std::vector<std::size_t> solving;
+    for (std::size_t j : live)
+      if (adv[j].running) solving.push_back(j);
+    if (solving.empty()) break;
+    BodySet solveSet;
+    std::vector<PcgSolve> solves(solving.size());
+    for (std::size_t k = 0; k < solving.size(); ++k) {
+      Advance& a = adv[solving[k]];
+      Body& b = bodies_[a.body];
+      b.w.dv.setZero();
+      b.w.rhs = -b.w.r / a.ka;
+      solveSet.push_back(a.body);
+      solves[k].coeffs = SystemCoeffs{1.0, 1.0 / a.ka, a.kx / a.ka};
+      solves[k].b = &b.w.rhs;
+      solves[k].x = &b.w.dv;
+    }
     try {
-      w_.rhs = -r / ka;
-      ls = backend_.solve(system, w_.rhs, dv);
+      slot_.solve(solveSet, solves);
     } catch (const Error& e) {
-      failHere(std::string("failed in the linear solve: ") + e.what(), stepFix);
+      if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
+      for (std::size_t j : solving) failHere(adv[j], std::string("failed in the linear solve: ") + e.what());
+      break;
     }
-    stats.newtonIterations += 1;
-    stats.linearIterations += ls.iterations;
-    stats.linearResidual = std::max(stats.linearResidual, ls.relativeResidual);
-    allLinearConverged = allLinearConverged && ls.converged;
-    if (!allFinite(dv)) failHere("produced non-finite velocities", stepFix);
-    v += dv;
-    evaluated = false;  // the loop evaluates the new v before it ends
+    for (std::size_t k = 0; k < solving.size(); ++k) {
+      Advance& a = adv[solving[k]];
+      Body& b = bodies_[a.body];
+      if (!solves[k].failure.empty()) {
+        failHere(a, "failed in the linear solve: " + solves[k].failure);
+        continue;
+      }
+      const LinearSolveStats& ls = solves[k].stats;
+      a.stats.newtonIterations += 1;
+      a.stats.linearIterations += ls.iterations;
+      a.stats.linearResidual = std::max(a.stats.linearResidual, ls.relativeResidual);
+      a.allLinearConverged = a.allLinearConverged && ls.converged;
+      if (!allFinite(b.w.dv)) {
+        failHere(a, "produced non-finite velocities");
+        continue;
+      }
+      b.w.v += b.w.dv;
+      a.evaluated = false;  // the loop evaluates the new v before it ends
+    }
   }
-  log_(LogLevel::Debug, "body '", problem_.name, "': ", where, ": ", stats.newtonIterations,
-       " Newton iterations, relative residual ", sci(initialRelative), " -> ", sci(stats.residual));
-  // The loop ends only right after evaluating its v: x and a are that evaluation's, and x and v
-  // were checked there.
-  if (!allFinite(a)) failHere("produced non-finite velocities or positions", stepFix);
-  // Growth is judged on the absolute residual: the relative one is bounded by the number of terms
-  // when f_int dominates, exactly as it does in a blow-up.
-  if (!allLinearConverged && evaluated && residualNorm > initialNorm && stats.residual > kBlowUpResidual)
-    failHere("blew up: the linear solve did not converge and the Newton residual grew from " +
-                 sci(initialNorm) + " N to " + sci(residualNorm) + " N (relative " + sci(initialRelative) +
-                 " to " + sci(stats.residual) + ")",
-             stepFix);
-  stats.converged = allLinearConverged;
 
-  // Runaway guard (see the class comment). The reactions are the constrained rows of the last
-  // residual, evaluated at the final v (or at the predictor when Newton stopped there).
-  Eigen::VectorXd& reaction = w_.reaction;
-  reaction = (r.array() * (1.0 - freeMask_)).matrix();
-  const double supportWork = supportWork_ + 0.5 * (reactionPrev_ + reaction).dot(x - x_);
-  const double loadWork = work_ + 0.5 * (fextPrev_ + fext).dot(x - x_);
-  const double kinetic = 0.5 * (mass.array() * v.array().square()).sum();
-  double elastic = 0.0;
+  // The loop ends for a body only right after evaluating its v: x and a are that evaluation's, and
+  // x and v were checked there. Growth is judged on the absolute residual: the relative one is
+  // bounded by the number of terms when f_int dominates, exactly as it does in a blow-up.
+  std::vector<std::size_t> ok;
+  for (std::size_t j = 0; j < adv.size(); ++j) {
+    Advance& a = adv[j];
+    if (!a.failure.empty()) continue;
+    Body& b = bodies_[a.body];
+    log_(LogLevel::Debug, "body '", b.problem->name, "': ", a.where, ": ", a.stats.newtonIterations,
+         " Newton iterations, relative residual ", sci(a.initialRelative), " -> ", sci(a.stats.residual));
+    if (!allFinite(b.w.a)) {
+      failHere(a, "produced non-finite velocities or positions");
+      continue;
+    }
+    if (!a.allLinearConverged && a.evaluated && a.residualNorm > a.initialNorm && a.stats.residual > kBlowUpResidual) {
+      failHere(a, "blew up: the linear solve did not converge and the Newton residual grew from " +
+                      sci(a.initialNorm) + " N to " + sci(a.residualNorm) + " N (relative " + sci(a.initialRelative) +
+                      " to " + sci(a.stats.residual) + ")");
+      continue;
+    }
+    a.stats.converged = a.allLinearConverged;
+    ok.push_back(j);
+  }
+  if (ok.empty()) return;
+
+  // Runaway guard (see the class comment): an elastic-energy evaluation per step, at the final v.
+  BodySet reset, energySet;
+  ConstVectors resetX;
+  for (std::size_t j : ok) {
+    Body& b = bodies_[adv[j].body];
+    energySet.push_back(adv[j].body);
+    if (!adv[j].evaluated) {
+      reset.push_back(adv[j].body);
+      resetX.push_back(&b.w.x);
+    }
+  }
+  std::vector<double> elastic;
   try {
-    if (!evaluated) setBackendPositions(x, false);
-    elastic = backend_.elasticEnergy();  // an element pass per step, unless the backend has it from the forces
+    if (!reset.empty()) slot_.setPositions(reset, resetX);
+    slot_.elasticEnergy(energySet, elastic);
   } catch (const Error& e) {
-    failHere(std::string("failed: ") + e.what(), stepFix);
+    if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
+    for (std::size_t j : ok) failHere(adv[j], std::string("failed: ") + e.what());
+    return;
   }
-  evaluated = true;  // the backend now holds x
-  const double given = initialEnergy_ + std::abs(loadWork) + std::abs(supportWork);
-  if (!(kinetic + elastic <= kRunawayEnergyRatio * given + forceFloor_ * diagonal_))
-    failHere("ran away: the kinetic + elastic energy " + sci(kinetic + elastic) + " J exceeds " +
-                 std::to_string(kRunawayEnergyRatio).substr(0, 4) + " times the energy the body was ever given (" + sci(given) +
-                 " J: initial energy plus the work of the loads and supports); the scheme is feeding energy in",
-             "use more analysis.newton_iterations (with analysis.newton_tolerance), a smaller analysis.time_step, "
-             "a dissipative scheme (analysis.integrator \"backward_euler\", or analysis.newmark_gamma 0.6 with "
-             "newmark_beta 0.3025), or a tighter solver.tolerance / more solver.max_iterations" + retryFix);
-
-  // Commit (step() keeps the rollback copy): swapped with the scratch, whose old contents the next
-  // step overwrites.
-  work_ = loadWork;  // trapezoidal rule in time
-  fextPrev_.swap(fext);
-  supportWork_ = supportWork;
-  reactionPrev_.swap(reaction);
-  x_.swap(x);
-  v_.swap(v);
-  a_.swap(a);
-  t_ = t1;
-  backendAtCommitted_ = evaluated;  // the backend's positions are x only when evaluated at the final v
-  return stats;
+  const std::string runawayFix =
+      "use more analysis.newton_iterations (with analysis.newton_tolerance), a smaller analysis.time_step, "
+      "a dissipative scheme (analysis.integrator \"backward_euler\", or analysis.newmark_gamma 0.6 with "
+      "newmark_beta 0.3025), or a tighter solver.tolerance / more solver.max_iterations" + retryFix;
+  for (std::size_t k = 0; k < ok.size(); ++k) {
+    Advance& a = adv[ok[k]];
+    Body& b = bodies_[a.body];
+    auto& w = b.w;
+    const Eigen::VectorXd& mass = b.problem->lumpedMass;
+    // The reactions are the constrained rows of the last residual, evaluated at the final v (or at
+    // the predictor when Newton stopped there).
+    w.reaction = (w.r.array() * (1.0 - b.freeMask)).matrix();
+    const double supportWork = b.supportWork + 0.5 * (b.reactionPrev + w.reaction).dot(w.x - b.x);
+    const double loadWork = b.work + 0.5 * (b.fextPrev + w.fext).dot(w.x - b.x);
+    const double kinetic = 0.5 * (mass.array() * w.v.array().square()).sum();
+    const double given = b.initialEnergy + std::abs(loadWork) + std::abs(supportWork);
+    b.deviceAtCommitted = false;  // the device holds w.x now: committed below, or the step fails
+    if (!(kinetic + elastic[k] <= kRunawayEnergyRatio * given + b.forceFloor * b.diagonal)) {
+      a.failure = failureText(a,
+                              "ran away: the kinetic + elastic energy " + sci(kinetic + elastic[k]) + " J exceeds " +
+                                  std::to_string(kRunawayEnergyRatio).substr(0, 4) +
+                                  " times the energy the body was ever given (" + sci(given) +
+                                  " J: initial energy plus the work of the loads and supports); the scheme is "
+                                  "feeding energy in",
+                              runawayFix);
+      continue;
+    }
+    // Commit: swapped with the scratch, whose old contents the next step overwrites.
+    b.work = loadWork;  // trapezoidal rule in time
+    b.fextPrev.swap(w.fext);
+    b.supportWork = supportWork;
+    b.reactionPrev.swap(w.reaction);
+    b.x.swap(w.x);
+    b.v.swap(w.v);
+    b.a.swap(w.a);
+    b.t = a.t1;
+    b.deviceAtCommitted = true;  // the device's positions are x: evaluated at the final v
+  }
 }
 
-BodyStepStats DynamicSolver::idleStep(int, int) {
-  if (!started_) {
-    initialAcceleration();
-    started_ = true;
-  }
-  State& start = start_;
-  capture(start);
-  t_ = start.t + desc_.timeStep;
-  v_.setZero();
-  a_.setZero();
-  fextPrev_ = problem_.externalForce(t_, /*dynamic=*/true);
-  keepForRollback(start);
-  BodyStepStats stats;
-  stats.newtonIterations = 0;
-  stats.converged = true;
-  return stats;
+void DynamicsDriver::idleStep(std::size_t body) {
+  std::vector<std::string> failure(bodies_.size());
+  start({body}, failure);
+  if (!failure[body].empty()) fail(ErrorCode::SolveFailed, failure[body]);
+  Body& b = bodies_[body];
+  capture(b, b.start);
+  b.t = b.start.t + desc_.timeStep;
+  b.v.setZero();
+  b.a.setZero();
+  b.fextPrev = b.problem->externalForce(b.t, /*dynamic=*/true);
+  std::swap(b.previous, b.start);
 }
 
-void DynamicSolver::rollback() {
-  x_ = xPrev_;
-  v_ = vPrev_;
-  a_ = aPrev_;
-  work_ = workPrev_;
-  t_ = tPrev_;
-  fextPrev_ = fextPrevSaved_;
-  supportWork_ = supportWorkSaved_;
-  reactionPrev_ = reactionPrevSaved_;
-  backendAtCommitted_ = false;
+void DynamicsDriver::rollback(std::size_t body) {
+  Body& b = bodies_.at(body);
+  restore(b, b.previous);
 }
 
 }  // namespace corofem::detail

@@ -1,7 +1,7 @@
 // Newton-Raphson statics (paper Eqs. 12-13), one load increment per call. The criteria, the
 // quasi-Newton correction, the line search and the automatic cut-back are documented on
-// StaticSolver in body_solver.hpp.
-#include "solve/body_solver.hpp"
+// StaticSolver in statics.hpp.
+#include "solve/statics.hpp"
 #include "util/error.hpp"
 #include "util/format.hpp"
 
@@ -38,8 +38,8 @@ struct AttemptFailed {
 
 }  // namespace
 
-StaticSolver::StaticSolver(const Problem& problem, Backend& backend, const StaticDesc& desc, const Log& log)
-    : BodySolver(problem, backend, log), desc_(desc) {
+StaticSolver::StaticSolver(const Problem& problem, BodyView body, const StaticDesc& desc, const Log& log)
+    : BodySolver(problem, body, log), desc_(desc) {
   track_.fext = Eigen::VectorXd::Zero(problem.restPositions.size());
   trackSaved_ = track_;
 }
@@ -59,8 +59,8 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
   // Non-finite results and SolveFailed from the backend end the attempt; other errors propagate.
   auto evaluate = [&](const Eigen::VectorXd& y, Eigen::VectorXd& force, Eigen::VectorXd& residual) {
     try {
-      setBackendPositions(y, false);
-      backend_.internalForces(force);
+      setDevicePositions(y, false);
+      body_.internalForces(force);
     } catch (const Error& e) {
       if (e.code() != ErrorCode::SolveFailed) throw;
       throw AttemptFailed{std::string("failed: ") + e.what()};
@@ -110,7 +110,7 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
       z.setZero();
       LinearSolveStats ls;
       try {
-        ls = backend_.solve(SystemCoeffs{0.0, 0.0, 1.0}, q, z);
+        ls = body_.solve(SystemCoeffs{0.0, 0.0, 1.0}, q, z);
       } catch (const Error& e) {
         if (e.code() != ErrorCode::SolveFailed) throw;
         throw AttemptFailed{std::string("failed in the linear solve: ") + e.what()};
@@ -220,7 +220,7 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
     }
     if (cuts == kMaxCuts) {
       stats.converged = false;
-      setBackendPositions(x_, true);  // the backend goes back to the last converged state too
+      setDevicePositions(x_, true);  // the device goes back to the last converged state too
       // A stall at the rounding floor: the corrections have shrunk to nothing while the residual
       // stays well above the tolerance. More iterations or increments cannot help; it is what the
       // float backends show (positions rounded to ulp of the body's size give f_int a noise of
@@ -244,14 +244,14 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
     // A cut-back restarts from the last converged state with the predictor of that state.
   }
 
-  // Converged: commit. The backend holds the last evaluated positions, which are xDone.
+  // Converged: commit. The device holds the last evaluated positions, which are xDone.
   xPrev_ = x_;
   workPrev_ = work_;
   trackSaved_ = track_;
   x_ = xDone;
   work_ = work;
   track_ = track;
-  backendAtCommitted_ = true;
+  deviceAtCommitted_ = true;
   stats.converged = true;
   return stats;
 }
@@ -260,7 +260,7 @@ void StaticSolver::rollback() {
   x_ = xPrev_;
   work_ = workPrev_;
   track_ = trackSaved_;
-  backendAtCommitted_ = false;
+  deviceAtCommitted_ = false;
 }
 
 }  // namespace corofem::detail

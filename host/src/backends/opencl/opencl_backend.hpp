@@ -5,8 +5,9 @@
 #include "backends/opencl/cl_context.hpp"
 #include "backends/opencl/program_cache.hpp"
 #include "backends/opencl/tuning.hpp"
-#include "solve/backend.hpp"
-#include "solve/batch.hpp"
+#include "device/device.hpp"
+
+#include <Eigen/Core>
 
 #include <memory>
 #include <string>
@@ -16,21 +17,36 @@ namespace corofem::detail {
 
 class SegmentEngine;
 
-/// Backend plus what the conformance tests and the benchmark need to see.
-class OpenCLBackendInternal : public Backend {
+/// One body on an OpenCL device of its own, with what the conformance tests and the benchmarks
+/// need to see: the device's calls for that body, a whole linear solve (solvePcg), and internals.
+class OpenCLBackendInternal {
  public:
+  OpenCLBackendInternal(std::unique_ptr<Device> device, SegmentEngine& engine, const SolverDesc& solver);
+  ~OpenCLBackendInternal();
+  std::string name() const { return device_->name(); }
+  std::string deviceName() const { return device_->deviceName(); }
+  void setPositions(const Eigen::VectorXd& x) { device_->setPositions({0}, {&x}); }
+  void internalForces(Eigen::VectorXd& f) { device_->internalForces({0}, {&f}); }
+  void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) { device_->apply({0}, {c}, {&p}, {&y}); }
+  /// Solves A x = b (x: the starting vector in); throws Error(SolveFailed) for a failure.
+  LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x);
+  double elasticEnergy();
+  std::vector<DeviceBuffer> deviceBuffers() const { return device_->buffers(); }
+  bool devicePositions(DevicePositions& out) const { return device_->devicePositions(0, out); }
+  Device& device() { return *device_; }
+
   /// The element rotations, 9 per element (row-major R), as last computed by setPositions.
-  virtual std::vector<double> readRotations() = 0;
+  std::vector<double> readRotations();
   /// The -D options the program was built with.
-  virtual const std::string& buildOptions() const = 0;
+  const std::string& buildOptions() const;
   /// Where the program came from (memory, disk cache, compiler).
-  virtual cl::ProgramOrigin programOrigin() const = 0;
-  virtual const cl::ProgramBuild& programBuild() const = 0;
-  virtual cl::Context& context() = 0;
-  /// Bytes of device memory the backend allocated (the sum of its buffers' sizes). Only buffers
+  cl::ProgramOrigin programOrigin() const;
+  const cl::ProgramBuild& programBuild() const;
+  cl::Context& context();
+  /// Bytes of device memory the device allocated (the sum of its buffers' sizes). Only buffers
   /// something reads exist: no mass buffer for a static problem (no nonzero lumped mass),
   /// quaternions only for that rotation method, preconditioner data only with a preconditioner.
-  virtual std::size_t allocatedBytes() const = 0;
+  std::size_t allocatedBytes() const;
 
   // The node positions on the device (e.g. for DeviceSurface::updateFromDevice, no host round trip):
   // 3 reals per node (double when positionsAreDouble(), else float, also in mixed precision), those
@@ -38,23 +54,28 @@ class OpenCLBackendInternal : public Backend {
   // double so that float keeps its resolution far from the origin): x_n = pos[m] + centroid, with m
   // = n, or m = DevicePositions::deviceNode[n] where the device numbers the nodes in its locality
   // order (OpenCLTuning::localityOrder).
-  /// The buffer of 3 * nodeCount relative positions; owned by the backend, valid for its lifetime.
-  virtual cl_mem positionBuffer() const = 0;
-  virtual bool positionsAreDouble() const = 0;
+  /// The buffer of 3 * nodeCount relative positions; owned by the device, valid for its lifetime.
+  cl_mem positionBuffer() const;
+  bool positionsAreDouble() const;
   /// The centroid subtracted by the last setPositions (0 before the first).
-  virtual const double* positionCentroid() const = 0;
+  const double* positionCentroid() const;
 
   // Device-only work for the benchmark (no transfers); finish() waits for it.
-  virtual void enqueueRotations() = 0;         ///< rotations from the positions on the device
-  virtual void enqueueForces() = 0;            ///< element forces + gather
-  virtual void enqueueElementForces() = 0;     ///< element forces only (no gather)
-  virtual void enqueueProduct(const SystemCoeffs& c) = 0;  ///< q = A p (element product + gather)
-  virtual void enqueueElementProduct(const SystemCoeffs& c) = 0;  ///< element product only
+  void enqueueRotations();         ///< rotations from the positions on the device
+  void enqueueForces();            ///< element forces + gather
+  void enqueueElementForces();     ///< element forces only (no gather)
+  void enqueueProduct(const SystemCoeffs& c);  ///< q = A p (element product + gather)
+  void enqueueElementProduct(const SystemCoeffs& c);  ///< element product only
   /// PCG set-up from the b and x last given to solve(), then `iterations` iterations, no reads.
-  virtual void enqueuePcgIterations(const SystemCoeffs& c, int iterations) = 0;
-  virtual void finish() = 0;
-  /// The engine under the backend (benchmarks: its kernel profile; tests: its internals).
-  virtual SegmentEngine& engine() = 0;
+  void enqueuePcgIterations(const SystemCoeffs& c, int iterations);
+  void finish();
+  /// The engine under the device (benchmarks: its kernel profile; tests: its internals).
+  SegmentEngine& engine() { return engine_; }
+
+ private:
+  std::unique_ptr<Device> device_;
+  SegmentEngine& engine_;
+  SolverDesc solver_;
 };
 
 /// The backend on a given context (shared, private or adopted). Throws Error(BadInput) for a
@@ -64,24 +85,20 @@ std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& prob
                                                              std::shared_ptr<cl::Context> context,
                                                              const OpenCLTuning& tuning = {});
 
-/// The OpenCL batch device with its engine in view (tests, benchmarks).
-class OpenCLBatchDeviceInternal : public DeviceBatch {
- public:
-  using DeviceBatch::DeviceBatch;
-  virtual SegmentEngine& engine() = 0;
-};
-
 /// The OpenCL device of `problems` on a given context (the registry's factory, tests). Throws as
 /// SegmentEngine does.
 std::unique_ptr<Device> createOpenCLDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
                                            std::shared_ptr<cl::Context> context, const OpenCLTuning& tuning = {});
 
-/// The OpenCL batch device (solve/batch.hpp: createOpenCLBatchDevice) on a given context and with
-/// the tuning options of the single backend (tests, benchmarks).
-std::unique_ptr<OpenCLBatchDeviceInternal> createOpenCLBatchDeviceOn(const std::vector<const Problem*>& problems,
-                                                       const SolverDesc& solver,
-                                                       std::shared_ptr<cl::Context> context,
-                                                       const OpenCLTuning& tuning = {});
+/// Bodies on one OpenCL device, with its engine in view (tests, benchmarks).
+struct OpenCLBatch {
+  std::unique_ptr<Device> device;
+  SegmentEngine* engine = nullptr;  ///< the device's own
+};
+
+/// The OpenCL device of `problems` on a given context, with its engine (tests, benchmarks).
+OpenCLBatch createOpenCLBatchOn(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                std::shared_ptr<cl::Context> context, const OpenCLTuning& tuning = {});
 
 /// The backend on an application's own context, queue and device (retained, never released
 /// beyond the backend's own references).

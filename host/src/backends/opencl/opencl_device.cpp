@@ -1,16 +1,19 @@
 // The OpenCL device (device/device.hpp) over a SegmentEngine (segment_engine.hpp), which holds the
 // kernels' data and launch sequences for one or many bodies: per-element rotations, matrix-free
 // co-rotational forces and products, deterministic per-node gathers and the PCG building blocks
-// with the scalars on the device (kernels/opencl/). Also the per-body Backend and the batch of
-// solve/ over it, and the factories.
+// with the scalars on the device (kernels/opencl/). Also the one-body view of the tests and
+// benchmarks, the factories and the registry's entry.
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/opencl_backend.hpp"
 
+#include "backends/opencl/opencl_surfaces.hpp"
 #include "backends/opencl/segment_engine.hpp"
+#include "device/registry.hpp"
 #include "solve/pcg.hpp"
 #include "util/error.hpp"
 
+#include <sstream>
 #include <utility>
 
 namespace corofem::detail {
@@ -52,6 +55,11 @@ class OpenCLDevice final : public Device {
     engine_.pcgEnd(iterations, x, residual);
   }
 
+  std::unique_ptr<DeviceSurfaces> createSurfaces(const std::vector<SurfaceMember>& members,
+                                                 bool separateStreams) override {
+    return createOpenCLSurfaces(engine_, members, separateStreams);
+  }
+
   std::vector<DeviceBuffer> buffers() const override { return engine_.buffers(); }
   bool devicePositions(std::size_t body, DevicePositions& out) const override {
     if (body >= engine_.segmentCount()) return false;
@@ -65,62 +73,6 @@ class OpenCLDevice final : public Device {
   SegmentEngine engine_;
 };
 
-/// One body on a device of its own, with the internals tests and benchmarks read.
-class OpenCLBackend final : public OpenCLBackendInternal {
- public:
-  OpenCLBackend(const Problem& problem, const SolverDesc& solver, std::shared_ptr<cl::Context> ctx,
-                const OpenCLTuning& tuning)
-      : device_(std::make_shared<OpenCLDevice>(std::vector<const Problem*>{&problem}, solver, std::move(ctx), tuning)),
-        body_(device_, 0, solver) {}
-
-  std::string name() const override { return body_.name(); }
-  std::string deviceName() const override { return body_.deviceName(); }
-  void setPositions(const Eigen::VectorXd& x) override { body_.setPositions(x); }
-  void internalForces(Eigen::VectorXd& f) override { body_.internalForces(f); }
-  void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) override { body_.apply(c, p, y); }
-  LinearSolveStats solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) override {
-    return body_.solve(c, b, x);
-  }
-  double elasticEnergy() override { return body_.elasticEnergy(); }
-  std::vector<DeviceBuffer> deviceBuffers() const override { return engine().buffers(); }
-  bool devicePositions(DevicePositions& out) const override { return body_.devicePositions(out); }
-
-  std::vector<double> readRotations() override { return engine().readRotations(0); }
-  const std::string& buildOptions() const override { return engine().buildOptions(); }
-  cl::ProgramOrigin programOrigin() const override { return engine().programBuild().origin; }
-  const cl::ProgramBuild& programBuild() const override { return engine().programBuild(); }
-  cl::Context& context() override { return engine().context(); }
-  std::size_t allocatedBytes() const override { return engine().allocatedBytes(); }
-  cl_mem positionBuffer() const override { return engine().positionBuffer(); }
-  bool positionsAreDouble() const override { return engine().positionsAreDouble(); }
-  const double* positionCentroid() const override { return engine().positionCentroid(0); }
-  void enqueueRotations() override { engine().enqueueRotations(); }
-  void enqueueForces() override { engine().enqueueForces(); }
-  void enqueueElementForces() override { engine().enqueueElementForces(); }
-  void enqueueProduct(const SystemCoeffs& c) override { engine().enqueueProduct(c); }
-  void enqueueElementProduct(const SystemCoeffs& c) override { engine().enqueueElementProduct(c); }
-  void enqueuePcgIterations(const SystemCoeffs& c, int iterations) override {
-    engine().enqueuePcgIterations(c, iterations);
-  }
-  void finish() override { engine().finish(); }
-  SegmentEngine& engine() override { return device_->engine(); }
-
- private:
-  const SegmentEngine& engine() const { return device_->engine(); }
-  std::shared_ptr<OpenCLDevice> device_;
-  DeviceBody body_;
-};
-
-class OpenCLBatch final : public OpenCLBatchDeviceInternal {
- public:
-  OpenCLBatch(std::shared_ptr<OpenCLDevice> device, const SolverDesc& solver)
-      : OpenCLBatchDeviceInternal(device, solver), device_(std::move(device)) {}
-  SegmentEngine& engine() override { return device_->engine(); }
-
- private:
-  std::shared_ptr<OpenCLDevice> device_;
-};
-
 }  // namespace
 
 std::unique_ptr<Device> createOpenCLDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
@@ -128,10 +80,52 @@ std::unique_ptr<Device> createOpenCLDevice(const std::vector<const Problem*>& pr
   return std::make_unique<OpenCLDevice>(problems, solver, std::move(context), tuning);
 }
 
+OpenCLBackendInternal::OpenCLBackendInternal(std::unique_ptr<Device> device, SegmentEngine& engine,
+                                             const SolverDesc& solver)
+    : device_(std::move(device)), engine_(engine), solver_(solver) {}
+OpenCLBackendInternal::~OpenCLBackendInternal() = default;
+
+LinearSolveStats OpenCLBackendInternal::solve(const SystemCoeffs& c, const Eigen::VectorXd& b, Eigen::VectorXd& x) {
+  return solveLinear(*device_, 0, c, b, x, solver_);
+}
+double OpenCLBackendInternal::elasticEnergy() {
+  std::vector<double> e;
+  device_->elasticEnergy({0}, e);
+  return e.at(0);
+}
+std::vector<double> OpenCLBackendInternal::readRotations() { return engine_.readRotations(0); }
+const std::string& OpenCLBackendInternal::buildOptions() const { return engine_.buildOptions(); }
+cl::ProgramOrigin OpenCLBackendInternal::programOrigin() const { return engine_.programBuild().origin; }
+const cl::ProgramBuild& OpenCLBackendInternal::programBuild() const { return engine_.programBuild(); }
+cl::Context& OpenCLBackendInternal::context() { return engine_.context(); }
+std::size_t OpenCLBackendInternal::allocatedBytes() const { return engine_.allocatedBytes(); }
+cl_mem OpenCLBackendInternal::positionBuffer() const { return engine_.positionBuffer(); }
+bool OpenCLBackendInternal::positionsAreDouble() const { return engine_.positionsAreDouble(); }
+const double* OpenCLBackendInternal::positionCentroid() const { return engine_.positionCentroid(0); }
+void OpenCLBackendInternal::enqueueRotations() { engine_.enqueueRotations(); }
+void OpenCLBackendInternal::enqueueForces() { engine_.enqueueForces(); }
+void OpenCLBackendInternal::enqueueElementForces() { engine_.enqueueElementForces(); }
+void OpenCLBackendInternal::enqueueProduct(const SystemCoeffs& c) { engine_.enqueueProduct(c); }
+void OpenCLBackendInternal::enqueueElementProduct(const SystemCoeffs& c) { engine_.enqueueElementProduct(c); }
+void OpenCLBackendInternal::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
+  engine_.enqueuePcgIterations(c, iterations);
+}
+void OpenCLBackendInternal::finish() { engine_.finish(); }
+
+OpenCLBatch createOpenCLBatchOn(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                std::shared_ptr<cl::Context> context, const OpenCLTuning& tuning) {
+  auto device = std::make_unique<OpenCLDevice>(problems, solver, std::move(context), tuning);
+  OpenCLBatch out;
+  out.engine = &device->engine();
+  out.device = std::move(device);
+  return out;
+}
+
 std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendOn(const Problem& problem, const SolverDesc& solver,
                                                              std::shared_ptr<cl::Context> context,
                                                              const OpenCLTuning& tuning) {
-  return std::make_unique<OpenCLBackend>(problem, solver, std::move(context), tuning);
+  OpenCLBatch one = createOpenCLBatchOn({&problem}, solver, std::move(context), tuning);
+  return std::make_unique<OpenCLBackendInternal>(std::move(one.device), *one.engine, solver);
 }
 
 std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem& problem, const SolverDesc& solver,
@@ -140,23 +134,60 @@ std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem
   return createOpenCLBackendOn(problem, solver, cl::Context::adopt(context, queue, device), tuning);
 }
 
-std::unique_ptr<Backend> createOpenCLBackend(const Problem& problem, const SolverDesc& solver,
-                                             const std::string& deviceSelector, const OpenCLTuning& tuning) {
-  return createOpenCLBackendOn(problem, solver, cl::Context::shared(deviceSelector), tuning);
+// ---------------------------------------------------------------------------- the registry's entry
+
+namespace {
+
+bool isHyperelastic(Formulation f) { return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean; }
+
+Candidate candidateOf(const cl::DeviceInfo& info, std::size_t index) {
+  Candidate c;
+  c.backend = "opencl";
+  c.device = info.name;
+  c.selector = std::to_string(index);
+  c.driver = info.platformName + " " + info.driverVersion;
+  c.gpu = info.gpu;
+  return c;
 }
 
-std::unique_ptr<OpenCLBatchDeviceInternal> createOpenCLBatchDeviceOn(const std::vector<const Problem*>& problems,
-                                                                    const SolverDesc& solver,
-                                                                    std::shared_ptr<cl::Context> context,
-                                                                    const OpenCLTuning& tuning) {
-  return std::make_unique<OpenCLBatch>(std::make_shared<OpenCLDevice>(problems, solver, std::move(context), tuning),
-                                       solver);
-}
+}  // namespace
 
-std::unique_ptr<BatchDevice> createOpenCLBatchDevice(const std::vector<const Problem*>& problems,
-                                                     const SolverDesc& solver, const std::string& deviceSelector,
-                                                     const OpenCLTuning& tuning) {
-  return createOpenCLBatchDeviceOn(problems, solver, cl::Context::shared(deviceSelector), tuning);
+void registerOpenCLBackend() {
+  BackendEntry e;
+  e.name = "opencl";
+  e.batches = true;
+  e.candidates = [] {
+    std::vector<Candidate> out;
+    const std::vector<cl::DeviceInfo> devices = cl::listDevices();
+    for (std::size_t i = 0; i < devices.size(); ++i) out.push_back(candidateOf(devices[i], i));
+    return out;
+  };
+  e.resolve = [](const std::string& selector) {
+    const cl::DeviceInfo info = cl::selectDevice(selector);  // DeviceError listing the devices
+    const std::vector<cl::DeviceInfo> all = cl::listDevices();
+    for (std::size_t i = 0; i < all.size(); ++i)
+      if (all[i].device == info.device) return candidateOf(info, i);
+    fail(ErrorCode::DeviceError, "OpenCL device '", info.name, "' is not in the device list");
+  };
+  e.refuses = [](const Problem& p, const SolverDesc& s) -> std::string {
+    if (isHyperelastic(p.formulation))
+      return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
+             "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
+    if (s.linearSolver == LinearSolverKind::Cholesky)
+      return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the "
+             "solver \"pcg\"";
+    return "";
+  };
+  e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
+                const DeviceOptions& options) {
+    return createOpenCLDevice(problems, solver, cl::Context::shared(c.selector), options.opencl);
+  };
+  e.buildId = [] {
+    std::ostringstream hex;
+    hex << "kernels " << std::hex << cl::fnv1a64(cl::corofemProgramSource());
+    return hex.str();
+  };
+  registerBackend(std::move(e));
 }
 
 }  // namespace corofem::detail

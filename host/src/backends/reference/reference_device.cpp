@@ -11,6 +11,7 @@
 #include "backends/reference/reference_device.hpp"
 
 #include "backends/reference/block_jacobi.hpp"
+#include "device/registry.hpp"
 #include "model/hyperelastic.hpp"
 #include "util/error.hpp"
 
@@ -512,6 +513,16 @@ class ReferenceDevice final : public Device {
 
 std::unique_ptr<Device> createReferenceDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver) {
   return std::make_unique<ReferenceDevice>(problems, solver);
+}
+
+void registerReferenceBackend() {
+  BackendEntry e;
+  e.name = "reference";
+  e.candidates = [] { return std::vector<Candidate>{referenceCandidate()}; };
+  e.resolve = [](const std::string&) { return referenceCandidate(); };
+  e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate&,
+                const DeviceOptions&) { return createReferenceDevice(problems, solver); };
+  registerBackend(std::move(e));
 }
 
 }  // namespace corofem::detail

@@ -1,14 +1,14 @@
 // DeviceSurface: the per-frame coupled-mesh update on an OpenCL device (kernels/opencl/surface_update.cl),
 // the same mathematics as deformSurface (deform_surface.cpp): positions, then per vertex the normal from
-// its one-ring (the ring layout is built here, once). Without COROFEM_WITH_OPENCL every entry point
-// reports ErrorCode::NotCompiledIn.
-#include "embed/device_surface.hpp"
+// its one-ring (the ring layout is built here, once). A build without OpenCL has the stubs of
+// backends/device_surface_unavailable.cpp instead, which report ErrorCode::NotCompiledIn.
+#ifdef COROFEM_WITH_OPENCL
+#include "backends/opencl/device_surface.hpp"
 
 #include <corofem/embed.hpp>
 
 #include "util/error.hpp"
 
-#ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_check.hpp"
 #include "backends/opencl/cl_context.hpp"
 #include "backends/opencl/program_cache.hpp"
@@ -19,7 +19,6 @@
 #include <limits>
 #include <numeric>
 #include <vector>
-#endif
 
 #include <atomic>
 #include <cstdlib>
@@ -42,14 +41,7 @@ std::size_t surfaceLanes(bool gpu, bool doublePrecision, std::size_t requested) 
   return gpu ? 1 : doublePrecision ? 8 : 16;
 }
 
-namespace {
-std::atomic<bool> failSurfaceGroups{false};
-}  // namespace
-
-void failSurfaceGroupsForTesting(bool fail) { failSurfaceGroups = fail; }
 }  // namespace detail
-
-#ifdef COROFEM_WITH_OPENCL
 
 struct EmbeddedSource {
   const char* name;
@@ -599,6 +591,7 @@ Status DeviceSurface::finish() const {
   return detail::guard([&] { checkCl(clFinish(impl_->ctx->queue()), "clFinish", impl_->device()); });
 }
 
+
 // ------------------------------------------------------------------ many bodies
 namespace detail {
 
@@ -677,10 +670,6 @@ DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::
     for (std::uint32_t t : b.triangles) all.triangles.push_back(t + vbase);
     for (std::uint32_t t : b.vertexTriangles) all.vertexTriangles.push_back(t + tbase);
   }
-  if (failSurfaceGroups)
-    fail(ErrorCode::DeviceError, "OpenCL: clCreateBuffer for the merged surfaces of ", members.size(), " bodies (",
-         all.vertexCount(), " vertices) failed on device '", ctx->deviceName(),
-         "': CL_MEM_OBJECT_ALLOCATION_FAILURE (injected by a test)");
   // The body of each block of the normal pass (the blocks past the last vertex: the last body).
   const std::size_t stride = paddedVertexCount(all.vertexCount());
   std::vector<std::uint32_t> blockBody(stride / lanes, static_cast<std::uint32_t>(members.size() - 1));
@@ -761,69 +750,6 @@ bool DeviceSurface::separateStreams() const { return impl_->separate; }
 std::size_t DeviceSurface::vertexCount() const { return impl_->vertexCount; }
 std::string DeviceSurface::deviceName() const { return impl_->device(); }
 
-#else  // no OpenCL in this build
-
-namespace detail {
-DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding&, std::size_t) { return {}; }
-}  // namespace detail
-
-struct DeviceSurface::Impl {};
-
-namespace {
-Status notCompiledIn() {
-  return Status(ErrorCode::NotCompiledIn,
-                "DeviceSurface: this corofem was built without OpenCL; reconfigure with -DCOROFEM_WITH_OPENCL=ON "
-                "(and an OpenCL ICD such as pocl-opencl-icd) or use deformSurface on the host");
-}
-}  // namespace
-
-DeviceSurface::DeviceSurface(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
-DeviceSurface::DeviceSurface(DeviceSurface&&) noexcept = default;
-DeviceSurface& DeviceSurface::operator=(DeviceSurface&&) noexcept = default;
-DeviceSurface::~DeviceSurface() = default;
-
-Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding&, const DeviceSurfaceOptions&) {
-  return notCompiledIn();
-}
-Status DeviceSurface::update(const double*, std::size_t) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*, const double*, std::size_t) { return notCompiledIn(); }
-Status DeviceSurface::read(float*) const { return notCompiledIn(); }
-Status DeviceSurface::read(float*, float*) const { return notCompiledIn(); }
-Status DeviceSurface::finish() const { return notCompiledIn(); }
-DeviceSurface DeviceSurface::make(const SurfaceBinding&, const DeviceSurfaceOptions&, std::size_t,
-                                  const std::vector<std::uint32_t>*) {
-  detail::fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-namespace detail {
-struct DeviceSurfaceGroup::State {};
-DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>&, std::size_t, const DeviceSurfaceOptions&) {
-  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-DeviceSurfaceGroup::~DeviceSurfaceGroup() = default;
-std::size_t DeviceSurfaceGroup::size() const { return 0; }
-void DeviceSurfaceGroup::update(_cl_mem*, const std::vector<const double*>&) {
-  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-_cl_mem* DeviceSurfaceGroup::vertexBuffer(std::size_t) const { return nullptr; }
-_cl_mem* DeviceSurfaceGroup::normalBuffer(std::size_t) const { return nullptr; }
-bool DeviceSurfaceGroup::separateStreams() const { return false; }
-void DeviceSurfaceGroup::read(std::size_t, float*, float*) const {
-  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-void DeviceSurfaceGroup::finish() const {}
-std::vector<DeviceSurfaceBuffer> DeviceSurfaceGroup::buffers() const { return {}; }
-std::size_t DeviceSurfaceGroup::allocatedBytes() const { return 0; }
-}  // namespace detail
-std::vector<DeviceSurfaceBuffer> DeviceSurface::buffers() const { return {}; }
-std::size_t DeviceSurface::allocatedBytes() const { return 0; }
-_cl_mem* DeviceSurface::vertexBuffer() const { return nullptr; }
-_cl_mem* DeviceSurface::normalBuffer() const { return nullptr; }
-bool DeviceSurface::separateStreams() const { return false; }
-std::size_t DeviceSurface::vertexCount() const { return 0; }
-std::string DeviceSurface::deviceName() const { return {}; }
-
-#endif
-
 }  // namespace corofem
+
+#endif  // COROFEM_WITH_OPENCL

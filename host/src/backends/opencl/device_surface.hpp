@@ -33,10 +33,6 @@ DeviceSurfaceLayout deviceSurfaceLayout(const SurfaceBinding& binding, std::size
 /// on CPUs.
 std::size_t surfaceLanes(bool gpu, bool doublePrecision, std::size_t requested = 0);
 
-/// Tests: while set, every DeviceSurfaceGroup being made fails as an allocation the device refused
-/// (Error(DeviceError)), as a batch whose merged surfaces exceed the device's allocations does.
-void failSurfaceGroupsForTesting(bool fail);
-
 /// Many bodies' render surfaces updated in one set of launches: the bodies of a batch, whose node
 /// positions share one device buffer (body m's nodes from node firstNode on, relative to its own
 /// centroid). One DeviceSurface over the bodies' bindings laid end to end (each starting at a vector

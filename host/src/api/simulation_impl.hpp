@@ -1,0 +1,121 @@
+// The Simulation's inside (api/): the bodies (mesh, problem, schedule, render surface, sleep), the
+// groups of bodies that share a device (a DeviceSlot with its failover, and the driver that steps
+// them), and the surfaces on the devices. simulation.cpp is the façade, reports.cpp the JSON
+// reports, surfaces.cpp the render surfaces.
+#pragma once
+
+#include <corofem/simulation.hpp>
+
+#include "model/problem.hpp"
+#include "schedule/scheduler.hpp"
+#include "solve/device_slot.hpp"
+#include "solve/driver.hpp"
+#include "util/log.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem {
+
+struct Simulation::Impl {
+  struct Body {
+    TetMesh mesh;
+    MeshReadReport report;
+    // Heap-held: the slot and the driver keep references to it.
+    std::unique_ptr<detail::Problem> problem;
+    detail::BodySchedule schedule;
+    std::size_t group = 0;  ///< index into groups
+    std::size_t index = 0;  ///< the body's index in its group's slot and driver
+    // Render surface bound to the tet mesh (paper Sec. 5), when the body names one.
+    std::unique_ptr<SurfaceMesh> surface;
+    std::unique_ptr<SurfaceBinding> binding;
+    bool separateStreams = false;  ///< BodyDesc::surfaceLayout == Separate
+    // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and
+    // prescribed positions it fell asleep under (the reference a change is measured against).
+    struct Sleep {
+      bool asleep = false;
+      int quiet = 0;
+      long long sleptSteps = 0, wakes = 0;
+      Eigen::VectorXd fRef, xpRef;
+    } sleep;
+  };
+
+  /// The surfaces of some of a group's bodies on its device, updated together (one output layout).
+  struct SurfaceSet {
+    std::unique_ptr<detail::DeviceSurfaces> surfaces;
+    std::vector<std::size_t> bodies;  ///< scene body indices, in member order
+    bool dirty = true;                ///< a body stepped since the last update
+    bool own = false;                 ///< one body's, because the group's could not be made together
+  };
+
+  /// Bodies that run on one device: all the bodies scheduled on one device that batches (a batch,
+  /// sharing its buffers and launches), or one body.
+  struct Group {
+    std::vector<std::size_t> bodies;  ///< scene indices, in the slot's order
+    std::unique_ptr<detail::DeviceSlot> slot;
+    std::unique_ptr<detail::Driver> driver;
+    bool batch = false;               ///< formed as a batch of two or more bodies
+    std::string candidate;            ///< the device's candidate label when formed
+    std::vector<SurfaceSet> surfaces; ///< on the device (none on a host device)
+    /// The slot's generation the surfaces were made for (a failover makes them again).
+    std::size_t surfacesFor = std::numeric_limits<std::size_t>::max();
+    std::string surfacesNotShared;    ///< why the group's surfaces could not be made together
+  };
+
+  /// A set of bodies that could have shared a device but runs unbatched, and why.
+  struct Unbatched {
+    std::vector<std::size_t> bodies;
+    std::string candidate, reason;
+  };
+
+  Scene scene;
+  detail::Log log;                  ///< SimulationOptions::log; the drivers and slots hold a reference
+  detail::DeviceOptions device;     ///< SimulationOptions::opencl
+  std::vector<std::string> devices; ///< SimulationOptions::devices
+  std::vector<Body> bodies;
+  std::vector<Group> groups;
+  std::vector<Unbatched> unbatched;
+  int stepsTaken = 0;
+
+  // The drivers and slots go first (they refer to the problems).
+  ~Impl() { groups.clear(); }
+
+  bool isStatic() const { return scene.analysis.kind == AnalysisDesc::Kind::Static; }
+  int stepCount() const {
+    return isStatic() ? std::max(1, scene.analysis.statics.increments) : std::max(1, scene.analysis.dynamics.steps);
+  }
+  const Body& body(int index) const;
+  Body& bodyForSurface(int index);
+  detail::Driver& driverOf(const Body& b) const { return *groups[b.group].driver; }
+  detail::DeviceSlot& slotOf(const Body& b) const { return *groups[b.group].slot; }
+
+  // -- set-up (simulation.cpp)
+  /// The groups: batches of the bodies whose first candidate is the same device of a backend that
+  /// batches (backend.batch on), each other body alone. A batch that cannot be made leaves its
+  /// bodies unbatched, with the reason.
+  void formGroups();
+  void makeGroup(std::vector<std::size_t> members, bool batch);
+
+  // -- steps (simulation.cpp)
+  /// Steps every body of the group (sleeping ones idle): outcomes per group body.
+  std::vector<detail::BodyOutcome> stepGroup(Group& g, int index, int count);
+
+  // -- surfaces (surfaces.cpp)
+  /// The set that holds body b's surface on its device, up to date (enqueued), or nullptr on the
+  /// host path; *member its index in the set.
+  SurfaceSet* refreshSurface(Body& b, std::size_t* member);
+  /// Makes the group's surface sets for its device as it is now (after a failover too).
+  void ensureSurfaces(Group& g);
+  nlohmann::json surfacePlanJson(const Body& b);
+
+  // -- reports (reports.cpp)
+  nlohmann::json batchJson(const Body& b) const;
+  nlohmann::json batchesJson() const;
+  nlohmann::json unbatchedJson() const;
+};
+
+}  // namespace corofem

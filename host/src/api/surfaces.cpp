@@ -1,0 +1,183 @@
+// The Simulation's render surfaces (paper Sec. 5): on a device that has them (device/device.hpp:
+// DeviceSurfaces) each group's surfaces of one output layout are updated together from the device's
+// own node positions, into buffers a renderer draws from; on a host device they are computed on
+// request (deformSurface).
+#include "api/simulation_impl.hpp"
+
+#include "util/error.hpp"
+
+namespace corofem {
+
+void Simulation::Impl::ensureSurfaces(Group& g) {
+  if (g.surfacesFor == g.slot->generation()) return;
+  g.surfaces.clear();
+  g.surfacesNotShared.clear();
+  g.surfacesFor = g.slot->generation();
+  for (bool separate : {false, true}) {
+    std::vector<std::size_t> members;  // scene indices
+    for (std::size_t i : g.bodies)
+      if (bodies[i].binding && bodies[i].separateStreams == separate) members.push_back(i);
+    if (members.empty()) continue;
+    auto make = [&](const std::vector<std::size_t>& which) {
+      std::vector<detail::SurfaceMember> list;
+      for (std::size_t i : which) list.push_back({bodies[i].index, bodies[i].binding.get()});
+      return g.slot->device().createSurfaces(list, separate);
+    };
+    std::unique_ptr<detail::DeviceSurfaces> together;
+    try {
+      together = make(members);
+    } catch (const detail::Error& e) {
+      // The merged buffers hold every body's vertices and may exceed what the device allocates at
+      // once: each body then gets surfaces of its own.
+      if (e.code() != ErrorCode::DeviceError || members.size() < 2) throw;
+      g.surfacesNotShared = e.what();
+      for (std::size_t i : members) {
+        SurfaceSet own;
+        own.surfaces = make({i});
+        if (!own.surfaces) return;  // a host device: no surfaces at all
+        own.bodies = {i};
+        own.own = true;
+        g.surfaces.push_back(std::move(own));
+      }
+      continue;
+    }
+    if (!together) return;  // a host device: the surfaces are computed on the host
+    SurfaceSet set;
+    set.surfaces = std::move(together);
+    set.bodies = members;
+    g.surfaces.push_back(std::move(set));
+  }
+}
+
+Simulation::Impl::SurfaceSet* Simulation::Impl::refreshSurface(Body& b, std::size_t* member) {
+  Group& g = groups[b.group];
+  const std::size_t self = static_cast<std::size_t>(&b - bodies.data());  // the body's scene index
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    ensureSurfaces(g);
+    SurfaceSet* found = nullptr;
+    for (SurfaceSet& set : g.surfaces)
+      for (std::size_t m = 0; m < set.bodies.size(); ++m)
+        if (set.bodies[m] == self) {
+          found = &set;
+          *member = m;
+        }
+    if (!found) return nullptr;
+    if (!found->dirty) return found;
+    // The members' device positions made their committed ones first (a driver may have left
+    // trial positions there); a device failure there moves the group to another device, whose
+    // surfaces are made again.
+    detail::BodySet slotBodies;
+    for (std::size_t i : found->bodies) slotBodies.push_back(bodies[i].index);
+    const std::size_t generation = g.slot->generation();
+    g.driver->syncDevicePositions(slotBodies);
+    if (g.slot->generation() != generation) continue;
+    found->surfaces->update();
+    found->dirty = false;
+    return found;
+  }
+  return nullptr;
+}
+
+Status Simulation::readSurface(int body, std::vector<double>& positions, std::vector<float>* normals) const {
+  return detail::guard([&] {
+    Impl::Body& b = impl_->bodyForSurface(body);
+    const std::size_t n = b.binding->vertexCount();
+    std::size_t member = 0;
+    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) {
+      // Explicit read-back of the device buffer(s), as two streams of 3 floats per vertex.
+      std::vector<float> p(3 * n), m(3 * n);
+      set->surfaces->read(member, p.data(), m.data());
+      positions.assign(p.begin(), p.end());
+      if (normals) *normals = std::move(m);
+      return;
+    }
+    const Eigen::VectorXd& x = impl_->driverOf(b).positions(b.index);
+    SurfaceOutput out;
+    positions.resize(3 * n);
+    out.positionsDouble = positions.data();
+    if (normals) {
+      normals->resize(3 * n);
+      out.normals = normals->data();
+    }
+    Status st = deformSurface(*b.binding, x.data(), b.mesh.nodeCount(), out);
+    if (!st) throw detail::Error(st.code(), st.message());
+  });
+}
+
+_cl_mem* Simulation::surfaceDeviceBuffer(int body) const {
+  _cl_mem* buffer = nullptr;
+  const Status st = detail::guard([&] {
+    if (body < 0 || body >= bodyCount()) return;
+    Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
+    if (!b.binding) return;
+    std::size_t member = 0;
+    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) {
+      const detail::DeviceBufferHandle h = set->surfaces->vertexBuffer(member);
+      if (h.api == detail::DeviceBufferHandle::Api::OpenCL) buffer = reinterpret_cast<_cl_mem*>(h.buffer);
+    }
+  });
+  return st ? buffer : nullptr;
+}
+
+_cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
+  _cl_mem* buffer = nullptr;
+  const Status st = detail::guard([&] {
+    if (body < 0 || body >= bodyCount()) return;
+    Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
+    if (!b.binding || !b.separateStreams) return;
+    std::size_t member = 0;
+    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) {
+      const detail::DeviceBufferHandle h = set->surfaces->normalBuffer(member);
+      if (h.api == detail::DeviceBufferHandle::Api::OpenCL) buffer = reinterpret_cast<_cl_mem*>(h.buffer);
+    }
+  });
+  return st ? buffer : nullptr;
+}
+
+Status Simulation::updateSurface(int body) const {
+  return detail::guard([&] {
+    Impl::Body& b = impl_->bodyForSurface(body);
+    std::size_t member = 0;
+    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) set->surfaces->finish();
+  });
+}
+
+nlohmann::json Simulation::Impl::surfacePlanJson(const Body& b) {
+  nlohmann::json j;
+  j["vertices"] = b.binding->vertexCount();
+  j["triangles"] = b.surface->triangleCount();
+  Group& g = groups[b.group];
+  ensureSurfaces(g);
+  const SurfaceSet* set = nullptr;
+  for (const SurfaceSet& s : g.surfaces)
+    for (std::size_t i : s.bodies)
+      if (&bodies[i] == &b) set = &s;
+  j["where"] = set ? "device" : "host";
+  if (set) {
+    const bool separate = set->surfaces->separateStreams();
+    j["layout"] = separate ? "separate" : "interleaved";
+    j["output"] = separate ? "two buffers of 3 float32 per vertex: positions (surfaceDeviceBuffer), normals "
+                             "(surfaceNormalDeviceBuffer)"
+                           : "one buffer of 6 float32 per vertex: position, normal (surfaceDeviceBuffer)";
+    nlohmann::json buffers = nlohmann::json::array();
+    std::size_t total = 0;
+    for (const detail::DeviceBuffer& x : set->surfaces->buffers()) {
+      buffers.push_back({{"name", x.name}, {"bytes", x.bytes}});
+      total += x.bytes;
+    }
+    j["device_buffers_allocated"] = buffers;
+    j["device_bytes_allocated"] = total;
+    if (g.batch && !set->own) {  // one set of buffers and launches for the batch's surfaces of this layout
+      nlohmann::json names = nlohmann::json::array();
+      for (std::size_t i : set->bodies) names.push_back(scene.bodies[i].name);
+      j["shared_by"] = names;
+    } else if (!g.surfacesNotShared.empty()) {
+      j["not_shared"] = g.surfacesNotShared;
+    }
+  } else {
+    j["output"] = "host arrays on request (readSurface; the layout applies to device buffers only)";
+  }
+  return j;
+}
+
+}  // namespace corofem

@@ -1,0 +1,97 @@
+// The backend registry (registry.hpp).
+#include "device/registry.hpp"
+
+#include "util/error.hpp"
+
+#include <mutex>
+
+namespace corofem::detail {
+
+namespace {
+
+struct Registry {
+  std::mutex mutex;
+  std::vector<std::shared_ptr<const BackendEntry>> entries;  ///< the reference backend last
+  bool builtins = false;
+};
+
+Registry& registry() {
+  static Registry r;
+  return r;
+}
+
+/// The registry with the built-in backends in it (registered on first use, outside the lock:
+/// registerBuiltinBackends calls registerBackend).
+Registry& ready() {
+  static std::once_flag once;
+  std::call_once(once, [] { registerBuiltinBackends(); });
+  return registry();
+}
+
+}  // namespace
+
+std::string Candidate::label() const {
+  if (backend == "reference" && (device.empty() || device == referenceCandidate().device)) return "reference";
+  return backend + ":" + selector + " (" + device + ")";
+}
+
+Candidate referenceCandidate() {
+  Candidate c;
+  c.backend = "reference";
+  c.device = "host (Eigen, double)";
+  c.driver = "corofem";
+  return c;
+}
+
+void registerBackend(BackendEntry entry) {
+  if (entry.name.empty() || !entry.candidates || !entry.create)
+    fail(ErrorCode::BadInput, "registering a backend: it needs a name, a candidates function and a create function");
+  Registry& r = registry();
+  std::lock_guard<std::mutex> lock(r.mutex);
+  auto made = std::make_shared<const BackendEntry>(std::move(entry));
+  for (auto& e : r.entries)
+    if (e->name == made->name) {
+      e = made;
+      return;
+    }
+  // Before the reference backend, which stays last (the fallback of every body).
+  auto at = r.entries.end();
+  if (!r.entries.empty() && r.entries.back()->name == "reference" && made->name != "reference") --at;
+  r.entries.insert(at, made);
+}
+
+void unregisterBackend(const std::string& name) {
+  if (name == "reference") fail(ErrorCode::BadInput, "the reference backend cannot be unregistered");
+  Registry& r = ready();
+  std::lock_guard<std::mutex> lock(r.mutex);
+  for (auto it = r.entries.begin(); it != r.entries.end(); ++it)
+    if ((*it)->name == name) {
+      r.entries.erase(it);
+      return;
+    }
+}
+
+std::vector<BackendEntry> registeredBackends() {
+  Registry& r = ready();
+  std::lock_guard<std::mutex> lock(r.mutex);
+  std::vector<BackendEntry> out;
+  for (const auto& e : r.entries) out.push_back(*e);
+  return out;
+}
+
+std::shared_ptr<const BackendEntry> findBackend(const std::string& name) {
+  Registry& r = ready();
+  std::lock_guard<std::mutex> lock(r.mutex);
+  for (const auto& e : r.entries)
+    if (e->name == name) return e;
+  return nullptr;
+}
+
+std::shared_ptr<const BackendEntry> backendOf(const Candidate& c) {
+  if (auto e = findBackend(c.backend)) return e;
+  std::string names;
+  for (const BackendEntry& e : registeredBackends()) names += (names.empty() ? "" : ", ") + e.name;
+  fail(ErrorCode::BadInput, "no backend named '", c.backend, "' is registered (registered: ", names, ")");
+}
+
+}  // namespace corofem::detail

@@ -1,0 +1,76 @@
+// The backend registry: every backend compiled into the library (reference, OpenCL; later Vulkan),
+// and any an embedder or a test registers, behind one entry each. The scheduler, failover, the
+// calibration cache, `corofem run --plan` and the command's device list iterate it; nothing above
+// backends/ names a particular API.
+#pragma once
+
+#include "device/device.hpp"
+
+#include <corofem/scene.hpp>
+#include <corofem/tuning.hpp>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::detail {
+
+/// What the devices get beyond the scene (SimulationOptions).
+struct DeviceOptions {
+  OpenCLTuning opencl;
+};
+
+/// One place a body can run: a backend and one of its devices.
+struct Candidate {
+  std::string backend;   ///< the registry name: "reference", "opencl", ...
+  std::string device;    ///< the device's name (the reference backend: "host (Eigen, double)")
+  std::string selector;  ///< what the backend's factory finds the device by (OpenCL: its index as text)
+  std::string driver;    ///< the driver's version (part of the calibration cache's key)
+  bool gpu = false;
+  /// "reference", or "<backend>:<selector> (<device>)".
+  std::string label() const;
+};
+
+struct BackendEntry {
+  std::string name;  ///< "reference", "opencl": what scenes, COROFEM_DEVICE and the reports call it
+  /// The devices of this backend on this machine, in the order they are tried (empty: none).
+  std::function<std::vector<Candidate>()> candidates;
+  /// The candidate a request names: `selector` "" for the backend's default device, else what the
+  /// backend understands (OpenCL: an index or a part of a name). An unknown selector may be kept
+  /// as given, for the factory's error to list the devices.
+  std::function<Candidate(const std::string& selector)> resolve;
+  /// "" when the backend can run this body with these solver settings, else why not (a sentence
+  /// naming the fix).
+  std::function<std::string(const Problem& problem, const SolverDesc& solver)> refuses;
+  /// A device of candidate `c` holding `problems` (which outlive it). Throws Error(DeviceError)
+  /// for a device that cannot be used, Error(BadInput) for what it cannot run.
+  std::function<std::unique_ptr<Device>(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                        const Candidate& c, const DeviceOptions& options)>
+      create;
+  /// What the backend's answers and speed depend on beyond the scene (a kernel source's hash),
+  /// for the calibration cache's key; "" for none.
+  std::function<std::string()> buildId;
+  /// Bodies scheduled on one of its devices share its buffers and launches (BackendDesc::batch).
+  bool batches = false;
+};
+
+/// Registers a backend (replacing one of the same name). The built-in ones are registered before
+/// the first use of the registry. Not thread-safe against concurrent Simulation::create calls.
+void registerBackend(BackendEntry entry);
+/// Removes a registered backend ("reference" cannot be removed).
+void unregisterBackend(const std::string& name);
+/// Every registered backend, the reference backend last.
+std::vector<BackendEntry> registeredBackends();
+/// The backend of that name, or null.
+std::shared_ptr<const BackendEntry> findBackend(const std::string& name);
+/// The backend of a candidate; throws Error(BadInput) naming the registered ones when there is none.
+std::shared_ptr<const BackendEntry> backendOf(const Candidate& c);
+
+/// The reference backend's one candidate.
+Candidate referenceCandidate();
+
+/// Registers the backends compiled into this library (backends/builtin_backends.cpp).
+void registerBuiltinBackends();
+
+}  // namespace corofem::detail

@@ -1,0 +1,179 @@
+// The failover-aware device of a set of bodies (device_slot.hpp).
+#include "solve/device_slot.hpp"
+
+#include "util/error.hpp"
+
+#include <mutex>
+
+namespace corofem::detail {
+
+const char* slotCallName(std::size_t call) {
+  static const char* const names[] = {"set_positions", "internal_forces", "apply", "solve", "elastic_energy"};
+  return call < SlotStats::kCalls ? names[call] : "unknown";
+}
+
+namespace {
+
+/// The name of a call in fallback events: the per-body calls of the drivers.
+const char* eventName(SlotStats::Call call) {
+  static const char* const names[] = {"setPositions", "internalForces", "apply", "solve", "elasticEnergy"};
+  return names[call];
+}
+
+std::unique_ptr<Device> makeDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                   const Candidate& c, const DeviceOptions& options) {
+  // One device is created at a time: device and program set-up is not known to be re-entrant in
+  // every driver.
+  static std::mutex creating;
+  std::lock_guard<std::mutex> lock(creating);
+  return backendOf(c)->create(problems, solver, c, options);
+}
+
+}  // namespace
+
+DeviceSlot::DeviceSlot(std::vector<const Problem*> problems, const SolverDesc& solver, std::vector<Candidate> order,
+                       bool fallbackAtCreate, const DeviceOptions& options, const Log& log)
+    : problems_(std::move(problems)), solver_(solver), options_(options), log_(log), order_(std::move(order)) {
+  if (order_.empty() || problems_.empty()) fail(ErrorCode::Internal, "DeviceSlot: no candidate or no body");
+  lastX_.resize(problems_.size());
+  try {
+    device_ = makeDevice(problems_, solver_, order_[0], options_);
+  } catch (const Error& e) {
+    if (!fallbackAtCreate || e.code() != ErrorCode::DeviceError || order_.size() < 2) throw;
+    advance("create", e.what());
+  }
+}
+
+DeviceSlot::DeviceSlot(std::unique_ptr<Device> device, const SolverDesc& solver, const Log& log)
+    : solver_(solver), log_(log), device_(std::move(device)) {
+  if (!device_ || device_->bodyCount() == 0) fail(ErrorCode::Internal, "DeviceSlot: no device or no body");
+  for (std::size_t b = 0; b < device_->bodyCount(); ++b) problems_.push_back(&device_->problem(b));
+  Candidate given;
+  given.backend = device_->name();
+  given.device = device_->deviceName();
+  given.selector = "given";
+  order_.push_back(given);
+  lastX_.resize(problems_.size());
+}
+
+void DeviceSlot::advance(const std::string& call, const std::string& error) {
+  failures_ += "\n  " + order_[index_].label() + " (" + call + "): " + error;
+  while (index_ + 1 < order_.size()) {
+    const std::size_t from = index_;
+    ++index_;
+    try {
+      std::unique_ptr<Device> next = makeDevice(problems_, solver_, order_[index_], options_);
+      BodySet known;
+      ConstVectors xs;
+      for (std::size_t b = 0; b < lastX_.size(); ++b)
+        if (lastX_[b].size() > 0) {
+          known.push_back(b);
+          xs.push_back(&lastX_[b]);
+        }
+      if (!known.empty()) next->setPositions(known, xs);
+      device_ = std::move(next);
+      ++generation_;
+    } catch (const Error& e) {
+      if (e.code() != ErrorCode::DeviceError) throw;
+      failures_ += "\n  " + order_[index_].label() + " (create): " + e.what();
+      continue;
+    }
+    for (const Problem* p : problems_) {
+      FallbackEvent ev{p->name, when_, call, order_[from].label(), order_[index_].label(), error};
+      log_(LogLevel::Warning, "body '", ev.body, "': device failure on ", ev.from,
+           ev.call == ev.when ? " at " + ev.when : " in " + ev.call + " (" + ev.when + ")", ": ", ev.error,
+           "; continuing on ", ev.to);
+      events_.push_back(std::move(ev));
+    }
+    return;
+  }
+  device_.reset();
+  std::string names;
+  for (const Problem* p : problems_) names += (names.empty() ? "'" : ", '") + p->name + "'";
+  fail(ErrorCode::DeviceError, problems_.size() > 1 ? "bodies " : "body ", names, ": every backend failed:", failures_);
+}
+
+void DeviceSlot::beginStep() {
+  inStep_ = true;
+  lastEnd_ = std::chrono::steady_clock::now();
+}
+
+template <class Fn>
+void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  for (;;) {
+    if (!device_) {
+      std::string names;
+      for (const Problem* p : problems_) names += (names.empty() ? "'" : ", '") + p->name + "'";
+      fail(ErrorCode::DeviceError, "body ", names, ": every backend failed:", failures_);
+    }
+    try {
+      fn(*device_);
+      break;
+    } catch (const Error& e) {
+      if (e.code() != ErrorCode::DeviceError) throw;
+      advance(eventName(call), e.what());
+    }
+  }
+  const auto end = Clock::now();
+  const double seconds = std::chrono::duration<double>(end - start).count();
+  stats_.calls += 1;
+  stats_.bodies += static_cast<long long>(bodies.size());
+  stats_.largestCall = std::max(stats_.largestCall, bodies.size());
+  stats_.deviceSeconds += seconds;
+  if (inStep_) {
+    SlotCallStats& c = stats_.byCall[call];
+    c.calls += 1;
+    c.bodies += static_cast<long long>(bodies.size());
+    c.deviceSeconds += seconds;
+    c.waitSeconds += std::chrono::duration<double>(start - lastEnd_).count();
+    lastEnd_ = end;
+  }
+}
+
+void DeviceSlot::setPositions(const BodySet& bodies, const ConstVectors& x) {
+  // The positions are kept for a failover (advance gives the new device them): a repeat is harmless.
+  for (std::size_t i = 0; i < bodies.size(); ++i) lastX_.at(bodies[i]) = *x[i];
+  guarded(SlotStats::SetPositions, bodies, [&](Device& d) { d.setPositions(bodies, x); });
+}
+
+void DeviceSlot::internalForces(const BodySet& bodies, const Vectors& f) {
+  guarded(SlotStats::InternalForces, bodies, [&](Device& d) { d.internalForces(bodies, f); });
+}
+
+void DeviceSlot::apply(const BodySet& bodies, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
+                       const Vectors& y) {
+  guarded(SlotStats::Apply, bodies, [&](Device& d) { d.apply(bodies, coeffs, p, y); });
+}
+
+void DeviceSlot::elasticEnergy(const BodySet& bodies, std::vector<double>& energy) {
+  guarded(SlotStats::ElasticEnergy, bodies, [&](Device& d) { d.elasticEnergy(bodies, energy); });
+}
+
+void DeviceSlot::solve(const BodySet& bodies, std::vector<PcgSolve>& solves) {
+  // The starting vectors, restored before a repeat (members: no allocation per solve).
+  if (solveStart_.size() < solves.size()) solveStart_.resize(solves.size());
+  for (std::size_t i = 0; i < solves.size(); ++i) solveStart_[i] = *solves[i].x;
+  bool first = true;
+  guarded(SlotStats::Solve, bodies, [&](Device& d) {
+    if (!first)
+      for (std::size_t i = 0; i < solves.size(); ++i) *solves[i].x = solveStart_[i];
+    first = false;
+    if (solver_.linearSolver == LinearSolverKind::Cholesky) {
+      for (std::size_t i = 0; i < bodies.size(); ++i) {
+        solves[i].failure.clear();
+        try {
+          solves[i].stats = d.solveDirect(bodies[i], solves[i].coeffs, *solves[i].b, *solves[i].x);
+        } catch (const Error& e) {
+          if (e.code() != ErrorCode::SolveFailed) throw;  // a device error fails over, the rest propagate
+          solves[i].failure = e.what();
+        }
+      }
+      return;
+    }
+    solvePcg(d, bodies, solves, solver_);
+  });
+}
+
+}  // namespace corofem::detail

@@ -1,0 +1,22 @@
+// --corofem_morton (tests/common/test_main.cpp): every OpenCL device the tests make lays its bodies
+// out in a Morton order of its own (OpenCLTuning::localityOrder = 1), so that every host-device
+// transfer's permutation, the batches' and the device surfaces' are tested too.
+#pragma once
+
+#include <corofem/tuning.hpp>
+
+namespace corofem::test {
+
+/// Whether the run forces the Morton order on every OpenCL device.
+inline bool& mortonEverywhere() {
+  static bool on = false;
+  return on;
+}
+
+/// `t` with the Morton order forced where the run asks for it and `t` leaves the order automatic.
+inline OpenCLTuning morton(OpenCLTuning t = {}) {
+  if (mortonEverywhere() && t.localityOrder < 0) t.localityOrder = 1;
+  return t;
+}
+
+}  // namespace corofem::test

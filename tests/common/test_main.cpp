@@ -1,0 +1,28 @@
+// The tests' main: GoogleTest's, plus --corofem_morton (common/morton.hpp), which also registers
+// the OpenCL backend again so that the devices a Simulation makes through the registry take the
+// Morton order.
+#include "common/morton.hpp"
+#include "device/registry.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  for (int i = 1; i < argc; ++i)
+    if (std::strcmp(argv[i], "--corofem_morton") == 0) corofem::test::mortonEverywhere() = true;
+  if (corofem::test::mortonEverywhere())
+    if (auto opencl = corofem::detail::findBackend("opencl")) {
+      corofem::detail::BackendEntry e = *opencl;
+      e.create = [inner = opencl->create](const std::vector<const corofem::detail::Problem*>& problems,
+                                          const corofem::SolverDesc& solver, const corofem::detail::Candidate& c,
+                                          const corofem::detail::DeviceOptions& options) {
+        corofem::detail::DeviceOptions o = options;
+        o.opencl = corofem::test::morton(o.opencl);
+        return inner(problems, solver, c, o);
+      };
+      corofem::detail::registerBackend(std::move(e));
+    }
+  return RUN_ALL_TESTS();
+}
