@@ -9,7 +9,7 @@
 # "-" for the defaults), sweep (work-group sizes), more (bench_backends,
 # bench_embed, bench_batch), batch (bench_batch alone; BATCH_FILTER), meshorder (bench_mesh_order: real meshes in their files' numbering and
 # in the device's Morton order). The tests stage also runs five suites again with the Morton order
-# forced on every body (COROFEM_OPENCL_REORDER=1), as CTest does, at the same time; TEST_TIMEOUT and
+# forced on every body (the test binaries' --corofem_morton flag), as CTest does, at the same time; TEST_TIMEOUT and
 # MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, and test_opencl runs in OPENCL_SHARDS
 # (6) gtest shards in each numbering.
 set -uo pipefail
@@ -19,7 +19,7 @@ OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/logs
 stages=${STAGES:-probe tests bench}
 has() { [[ " $stages " == *" $1 "* ]]; }
 export LD_LIBRARY_PATH=$g/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
-export COROFEM_DATA_DIR=$g/data COROFEM_KERNEL_CACHE=/tmp/corofem-kernels
+export COROFEM_DATA_DIR=$g/data COROFEM_CACHE_DIR=/tmp/corofem-cache  # built kernels (and calibrations) there
 # The test binaries know the project as /work/main and the data as ../shared/data beside it.
 if [[ $root != /work/main ]] && { [[ ! -e /work/main ]] || [[ -L /work/main ]]; }; then mkdir -p /work; ln -sfn "$root" /work/main; fi
 [[ -e /work/shared ]] || ln -sfn "$g" /work/shared
@@ -45,26 +45,26 @@ if has tests; then  # every suite and the Morton reruns at once (16 cores; the G
   shards=${OPENCL_SHARDS:-6}
   rm -rf /tmp/logs && mkdir -p /tmp/logs  # a warm machine's earlier run must not mix in
   pids=()
-  run_one() {  # log name, environment setting (or X=0), timeout, binary, shard index or ""
-    local log=$1 envset=$2 limit=$3 bin=$4 shard=$5
+  run_one() {  # log name, extra flag of the test binary (or ""), timeout, binary, shard index or ""
+    local log=$1 flag=$2 limit=$3 bin=$4 shard=$5
     (cd "$root" || exit 1; if [[ -n $shard ]]; then export GTEST_TOTAL_SHARDS=$shards GTEST_SHARD_INDEX=$shard; fi
-     env "$envset" timeout "$limit" "$bin" --gtest_brief=1 > "/tmp/logs/$log.log" 2>&1; echo "$log exit $?" >> /tmp/logs/exits) &
+     timeout "$limit" "$bin" --gtest_brief=1 ${flag:+"$flag"} > "/tmp/logs/$log.log" 2>&1; echo "$log exit $?" >> /tmp/logs/exits) &
     pids+=($!)
   }
   for t in "$g"/bin/test_*; do
     n=$(basename "$t")
     if [[ $n == test_opencl ]]; then
-      for ((k = 0; k < shards; ++k)); do run_one "${n}_$k" X=0 "${TEST_TIMEOUT:-400}" "$t" $k; done
+      for ((k = 0; k < shards; ++k)); do run_one "${n}_$k" "" "${TEST_TIMEOUT:-400}" "$t" $k; done
     else
-      run_one "$n" X=0 "${TEST_TIMEOUT:-400}" "$t" ""
+      run_one "$n" "" "${TEST_TIMEOUT:-400}" "$t" ""
     fi
   done
   for n in test_batch test_embed test_opencl test_solve test_schedule; do
     [[ -x $g/bin/$n ]] || continue
     if [[ $n == test_opencl ]]; then
-      for ((k = 0; k < shards; ++k)); do run_one "morton_${n}_$k" COROFEM_OPENCL_REORDER=1 "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" $k; done
+      for ((k = 0; k < shards; ++k)); do run_one "morton_${n}_$k" --corofem_morton "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" $k; done
     else
-      run_one "morton_$n" COROFEM_OPENCL_REORDER=1 "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" ""
+      run_one "morton_$n" --corofem_morton "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" ""
     fi
   done
   wait "${pids[@]}"
