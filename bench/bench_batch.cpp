@@ -264,10 +264,10 @@ void BM_HundredBodySurfaces(benchmark::State& state) {
     for (int k = 0; k < kStepsPerSample; ++k) {
       tStep += secondsOf([&] { stepOrDie(*sim, pcg); });
       tSurfaces += secondsOf([&] {
-        // Enqueue every update (surfaceDeviceBuffer), then wait once: the batch's bodies share one
+        // Enqueue every update (surfaceBuffer), then wait once: the batch's bodies share one
         // in-order queue, so the last body's updateSurface waits for all of them.
         for (int b = 0; b < kBodies; ++b)
-          if (!sim->surfaceDeviceBuffer(b)) std::exit(1);
+          if (!sim->surfaceBuffer(b)) std::exit(1);
         if (!sim->updateSurface(kBodies - 1)) std::exit(1);
       });
     }
@@ -279,7 +279,7 @@ void BM_HundredBodySurfaces(benchmark::State& state) {
   state.counters["surfaces_share"] = tSurfaces / (tStep + tSurfaces);
   state.counters["surface_vertices"] = static_cast<double>(vertices);
   state.counters["surface_vertices_per_s"] = static_cast<double>(vertices) * frames / tSurfaces;
-  state.counters["on_device"] = sim->surfaceDeviceBuffer(0) != nullptr ? 1 : 0;
+  state.counters["on_device"] = sim->surfaceBuffer(0) ? 1 : 0;
 }
 BENCHMARK(BM_HundredBodySurfaces)->Iterations(1)->Unit(benchmark::kSecond)->UseRealTime();
 

@@ -292,9 +292,7 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
   DeviceSurfaceOptions options;
   options.doublePrecision = dbl;
   options.separateStreams = separate;
-  options.context = ctx->context();
-  options.queue = ctx->queue();
-  options.deviceId = ctx->device();
+  options.external = {GpuApi::OpenCL, ctx->context(), ctx->queue(), ctx->device()};
   auto device = DeviceSurface::create(*binding, options);
   if (!device) {
     state.SkipWithError(device.message().c_str());
@@ -318,13 +316,13 @@ void BM_DeviceSurfaceFromDevice1M(benchmark::State& state) {
     return;
   }
   for (int warm = 0; warm < 2; ++warm)  // PoCL specialises kernels on their first launches
-    if (!device->updateFromDevice(positions, c) || !device->finish()) {
+    if (!device->updateFromDevice(detail::cl::bufferOf(positions), c) || !device->finish()) {
       clReleaseMemObject(positions);
       state.SkipWithError("warm-up update failed");
       return;
     }
   for (auto _ : state) {
-    const Status s = device->updateFromDevice(positions, c);
+    const Status s = device->updateFromDevice(detail::cl::bufferOf(positions), c);
     const Status f = device->finish();
     if (!s || !f) {
       state.SkipWithError((s ? f : s).message().c_str());

@@ -24,6 +24,7 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <thread>
 
 namespace corofem::test {
 namespace {
@@ -267,6 +268,36 @@ TEST(BatchSimulation, DeviceCallsPerStepDoNotGrowWithTheBodies) {
   EXPECT_EQ(rounds[0], rounds[2]);
 }
 
+TEST(BatchSimulation, AnApplicationsTaskRunnerRunsTheHostWork) {
+  // SimulationOptions::tasks: the per-body host work of the batch runs on the application's tasks
+  // (here half on the calling thread, backwards, half on a thread of the application's), with the
+  // answer of the library's own pool bit for bit.
+  const Scene scene = fiveBodies(8);
+  Trace plain, withTasks;
+  {
+    HookScope scope(backends());
+    plain = run(scene, onBatchDevice());
+  }
+  std::atomic<long long> calls{0}, tasks{0};
+  SimulationOptions o = onBatchDevice();
+  o.tasks = [&](std::size_t count, const std::function<void(std::size_t)>& task) {
+    ++calls;
+    tasks += static_cast<long long>(count);
+    std::thread other([&] {
+      for (std::size_t i = count / 2; i < count; ++i) task(i);
+    });
+    for (std::size_t i = count / 2; i-- > 0;) task(i);
+    other.join();
+  };
+  {
+    HookScope scope(backends());
+    withTasks = run(scene, o);
+  }
+  expectSameRun(withTasks, plain);
+  EXPECT_GT(calls.load(), 0) << "the batch's host work did not reach the application's tasks";
+  EXPECT_GE(tasks.load(), 2 * calls.load()) << "a call of one task runs on the caller, without the runner";
+}
+
 TEST(BatchSimulation, StaticFailureRollsEveryBatchedBodyBack) {
   // Statics: body "hard" cannot converge in 2 Newton iterations; every batched body stays at the
   // rest state and the status names "hard", as without batching.
@@ -374,7 +405,7 @@ TEST(BatchSimulation, BatchOffAndSingleBodiesStayUnbatchedSurfacesJoin) {
     EXPECT_EQ(sched["batches"][0]["bodies"], json({"a", "damped", "flaky", "quiet", "linear"}));
     EXPECT_FALSE(sched["bodies"][0]["batch"].is_null());
     EXPECT_EQ(made.load(), 1);
-    EXPECT_EQ(sim->surfaceDeviceBuffer(0), nullptr);
+    EXPECT_FALSE(sim->surfaceBuffer(0));
     EXPECT_EQ(json::parse(sim->planReport())["bodies"][0]["surface"]["where"], "host");
     ASSERT_TRUE(sim->step());
     std::vector<double> positions;

@@ -4,6 +4,9 @@
 #include <corofem/mesh.hpp>
 
 #include "embed/embed_test_util.hpp"
+#ifdef COROFEM_WITH_OPENCL
+#include "common/gpu_handles.hpp"
+#endif
 
 #include <gtest/gtest.h>
 
@@ -226,14 +229,18 @@ TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
       ASSERT_TRUE(separate.isOk()) << separate.message();
       EXPECT_FALSE(interleaved->separateStreams());
       EXPECT_TRUE(separate->separateStreams());
-      EXPECT_EQ(interleaved->normalBuffer(), nullptr);
-      ASSERT_NE(separate->normalBuffer(), nullptr);
+      EXPECT_FALSE(interleaved->normalBuffer());
+      ASSERT_TRUE(separate->normalBuffer());
+      EXPECT_EQ(interleaved->vertexBuffer().stride, 24u);
+      EXPECT_EQ(separate->vertexBuffer().stride, 12u);
+      EXPECT_EQ(separate->normalBuffer().bytes, 12 * n);
       for (auto [buffer, floats] : {std::pair{interleaved->vertexBuffer(), 6 * n},
                                     std::pair{separate->vertexBuffer(), 3 * n},
                                     std::pair{separate->normalBuffer(), 3 * n}}) {
         std::size_t bytes = 0;
-        ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
+        ASSERT_EQ(clGetMemObjectInfo(test::clMem(buffer), CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
         EXPECT_EQ(bytes, floats * sizeof(float));
+        EXPECT_EQ(buffer.bytes, bytes);
       }
       ASSERT_TRUE(interleaved->update(x.data(), s.tets.nodeCount()).isOk());
       ASSERT_TRUE(separate->update(x.data(), s.tets.nodeCount()).isOk());
@@ -281,7 +288,7 @@ TEST_P(EmbedDevice, ListsItsBuffersAsAllocated) {
   std::map<std::string, std::size_t> before = sizes();
   EXPECT_EQ(before.count("node positions"), 0u);
   std::size_t bytes = 0;
-  ASSERT_EQ(clGetMemObjectInfo(device->vertexBuffer(), CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
+  ASSERT_EQ(clGetMemObjectInfo(test::clMem(device->vertexBuffer()), CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), CL_SUCCESS);
   EXPECT_EQ(before["output vertex"], bytes);
   EXPECT_EQ(bytes, 6 * sizeof(float) * s.binding.vertexCount());
   ASSERT_TRUE(device->update(s.tets.nodes.data(), s.tets.nodeCount()).isOk());
@@ -309,7 +316,7 @@ TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {
   const Status wrong = device->update(x.data(), s.tets.nodeCount() + 1);
   EXPECT_EQ(wrong.code(), ErrorCode::BadInput);
   EXPECT_NE(wrong.message().find("344 node positions given"), std::string::npos) << wrong.message();
-  ASSERT_NE(device->vertexBuffer(), nullptr);
+  ASSERT_TRUE(device->vertexBuffer());
 }
 
 /// Stores `value` as real number `index` of a device-precision byte array (double or float).
@@ -329,9 +336,7 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   const bool dbl = GetParam().doublePrecision;
   auto ctx = detail::cl::Context::shared(std::to_string(GetParam().device));
   DeviceSurfaceOptions o = options();
-  o.context = ctx->context();
-  o.queue = ctx->queue();
-  o.deviceId = ctx->device();
+  o.external = test::externalOf(*ctx);
   auto device = DeviceSurface::create(s.binding, o);
   ASSERT_TRUE(device.isOk()) << device.message();
   std::mt19937 rng(23);
@@ -355,29 +360,42 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
   };
   cl_mem absolute = upload(false), relative = upload(true);
   std::vector<float> a(6 * n, NAN), r(6 * n, NAN), r0(6 * n, NAN), host(6 * n);
-  ASSERT_TRUE(device->updateFromDevice(absolute).isOk());
+  ASSERT_TRUE(device->updateFromDevice(test::gpuBuffer(absolute)).isOk());
   ASSERT_TRUE(device->read(a.data()).isOk());
-  ASSERT_TRUE(device->updateFromDevice(relative, c).isOk());
+  ASSERT_TRUE(device->updateFromDevice(test::gpuBuffer(relative), c).isOk());
   ASSERT_TRUE(device->read(r.data()).isOk());
-  ASSERT_TRUE(device->updateFromDevice(relative, nullptr).isOk());  // offset 0: the relative surface
+  ASSERT_TRUE(device->updateFromDevice(test::gpuBuffer(relative), nullptr).isOk());  // offset 0: the relative surface
   ASSERT_TRUE(device->read(r0.data()).isOk());
-  ASSERT_TRUE(device->updateFromDevice(relative).isOk());  // the old overload: no offset either
+  ASSERT_TRUE(device->updateFromDevice(test::gpuBuffer(relative)).isOk());  // the defaults: no offset either
   std::vector<float> r1(6 * n, NAN);
   ASSERT_TRUE(device->read(r1.data()).isOk());
-  // The same nodes after 7 nodes of another body (firstNode 7): the same bits as r.
+  // The same nodes after 7 nodes of another body (firstNode 7, or the buffer's offset 7 nodes on):
+  // the same bits as r.
   cl_mem shared = upload(true, 7);
-  std::vector<float> rs(6 * n, NAN);
-  ASSERT_TRUE(device->updateFromDevice(shared, c, 7).isOk());
+  const std::size_t nodeBytes = 3 * (dbl ? sizeof(double) : sizeof(float));
+  std::vector<float> rs(6 * n, NAN), ro(6 * n, NAN);
+  ASSERT_TRUE(device->updateFromDevice(test::gpuBuffer(shared), c, 7).isOk());
   ASSERT_TRUE(device->read(rs.data()).isOk());
   EXPECT_EQ(std::memcmp(rs.data(), r.data(), r.size() * sizeof(float)), 0);
+  ASSERT_TRUE(device->updateFromDevice(test::gpuBuffer(shared, 7 * nodeBytes), c).isOk());
+  ASSERT_TRUE(device->read(ro.data()).isOk());
+  EXPECT_EQ(std::memcmp(ro.data(), r.data(), r.size() * sizeof(float)), 0);
+  // An offset inside a node, an empty handle and another API's handle are refused.
+  EXPECT_EQ(device->updateFromDevice(test::gpuBuffer(shared, nodeBytes + 4), c).code(), ErrorCode::BadInput);
+  EXPECT_EQ(device->updateFromDevice(GpuBuffer{}, c).code(), ErrorCode::BadInput);
+  GpuBuffer vulkan = test::gpuBuffer(shared);
+  vulkan.api = GpuApi::Vulkan;
+  const Status other = device->updateFromDevice(vulkan, c);
+  EXPECT_EQ(other.code(), ErrorCode::BadInput);
+  EXPECT_NE(other.message().find("not an OpenCL one"), std::string::npos) << other.message();
   // Nodes past the buffer's end are refused, not read.
-  const Status tooFar = device->updateFromDevice(shared, c, 8);
+  const Status tooFar = device->updateFromDevice(test::gpuBuffer(shared), c, 8);
   EXPECT_EQ(tooFar.code(), ErrorCode::BadInput);
   EXPECT_NE(tooFar.message().find("holds " + std::to_string(3 * (7 + nodes) * (dbl ? 8 : 4)) + " bytes (350 nodes of 3 " + (dbl ? "doubles" : "floats") + "), but the surface reads 343 nodes from node 8 on"), std::string::npos) << "message: " << tooFar.message();
-  EXPECT_EQ(device->updateFromDevice(relative, c, 1).code(), ErrorCode::BadInput);
+  EXPECT_EQ(device->updateFromDevice(test::gpuBuffer(relative), c, 1).code(), ErrorCode::BadInput);
   // A first node whose byte offset would wrap around, and one past 32 bits: refused, not read.
-  EXPECT_EQ(device->updateFromDevice(shared, c, (~std::size_t{0}) / 12 - 100).code(), ErrorCode::BadInput);
-  EXPECT_EQ(device->updateFromDevice(shared, c, std::size_t{1} << 33).code(), ErrorCode::BadInput);
+  EXPECT_EQ(device->updateFromDevice(test::gpuBuffer(shared), c, (~std::size_t{0}) / 12 - 100).code(), ErrorCode::BadInput);
+  EXPECT_EQ(device->updateFromDevice(test::gpuBuffer(shared), c, std::size_t{1} << 33).code(), ErrorCode::BadInput);
   clReleaseMemObject(shared);
   clReleaseMemObject(absolute);
   clReleaseMemObject(relative);
@@ -441,9 +459,7 @@ TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
                                  &status);
   ASSERT_EQ(status, CL_SUCCESS);
   DeviceSurfaceOptions o = options();
-  o.context = ctx->context();
-  o.queue = ctx->queue();
-  o.deviceId = ctx->device();
+  o.external = test::externalOf(*ctx);
   // The device's lane width in both layouts, and one lane (the GPU configuration); each case builds
   // two programs, so not every combination.
   const std::pair<std::size_t, bool> cases[] = {{0, false}, {0, true}, {1, false}};
@@ -462,7 +478,7 @@ TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
       const std::size_t n = scenes[m]->binding.vertexCount();
       auto alone = DeviceSurface::create(scenes[m]->binding, o);
       ASSERT_TRUE(alone.isOk()) << alone.message();
-      ASSERT_TRUE(alone->updateFromDevice(shared, centroid[m], first[m]).isOk());
+      ASSERT_TRUE(alone->updateFromDevice(test::gpuBuffer(shared), centroid[m], first[m]).isOk());
       std::vector<float> p(3 * n, NAN), q(3 * n, NAN), ap(3 * n, NAN), aq(3 * n, NAN);
       group.read(m, p.data(), q.data());
       ASSERT_TRUE(alone->read(ap.data(), aq.data()).isOk());
@@ -470,9 +486,9 @@ TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
       EXPECT_EQ(std::memcmp(q.data(), aq.data(), q.size() * sizeof(float)), 0);
       EXPECT_TRUE(std::isfinite(p[0]) && std::abs(p[0] - centroid[m][0]) < 2.0) << p[0];
       std::size_t size = 0;
-      ASSERT_EQ(clGetMemObjectInfo(group.vertexBuffer(m), CL_MEM_SIZE, sizeof(size), &size, nullptr), CL_SUCCESS);
+      ASSERT_EQ(clGetMemObjectInfo(test::clMem(group.vertexBuffer(m)), CL_MEM_SIZE, sizeof(size), &size, nullptr), CL_SUCCESS);
       EXPECT_EQ(size, (separate ? 3 : 6) * n * sizeof(float));
-      EXPECT_EQ(group.normalBuffer(m) != nullptr, separate);
+      EXPECT_EQ(static_cast<bool>(group.normalBuffer(m)), separate);
     }
   }
   clReleaseMemObject(shared);

@@ -1,6 +1,6 @@
 // The coupled surface through the Simulation: on the OpenCL backend it is recomputed on the device
 // from the backend's own (centroid-relative) position buffer, with no host round trip of the tet
-// nodes, and read back explicitly (readSurface) or drawn from surfaceDeviceBuffer(); on the
+// nodes, and read back explicitly (readSurface) or drawn from surfaceBuffer(); on the
 // reference backend it is computed on the host. Both must describe the same deformed surface.
 #include <corofem/embed.hpp>
 #include <corofem/simulation.hpp>
@@ -8,6 +8,10 @@
 #include "common/test_data.hpp"
 #include "backends/opencl/device_surface.hpp"
 #include "common/device_fakes.hpp"
+#ifdef COROFEM_WITH_OPENCL
+#include "common/gpu_handles.hpp"
+#include "backends/opencl/cl_context.hpp"
+#endif
 #include "solve/beam_helpers.hpp"
 #include "util/error.hpp"
 
@@ -123,10 +127,11 @@ double worstDifference(const std::vector<float>& a, const std::vector<float>& b)
 TEST(EmbedSimulation, ReferenceBackendKeepsTheSurfaceOnTheHost) {
   auto sim = Simulation::create(surfaceScene(BackendKind::Reference, Precision::Double));
   ASSERT_TRUE(sim) << sim.message();
-  EXPECT_EQ(sim->surfaceDeviceBuffer(0), nullptr);
-  EXPECT_EQ(sim->surfaceDeviceBuffer(5), nullptr);  // out of range: null, no crash
-  EXPECT_EQ(sim->surfaceNormalDeviceBuffer(0), nullptr);
-  EXPECT_EQ(sim->surfaceNormalDeviceBuffer(-1), nullptr);
+  EXPECT_FALSE(sim->surfaceBuffer(0));
+  EXPECT_EQ(sim->surfaceBuffer(0).api, GpuApi::None);
+  EXPECT_FALSE(sim->surfaceBuffer(5));  // out of range: empty, no crash
+  EXPECT_FALSE(sim->surfaceNormalBuffer(0));
+  EXPECT_FALSE(sim->surfaceNormalBuffer(-1));
   const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][0]["surface"];
   EXPECT_EQ(plan["where"], "host") << plan.dump(1);
   EXPECT_FALSE(plan.contains("device_buffers_allocated"));
@@ -183,7 +188,7 @@ TEST_P(EmbedSimulationOpenCL, DeviceSurfaceMatchesTheReferenceRun) {
   ASSERT_EQ(sim->backendName(), "opencl");
   auto ref = Simulation::create(surfaceScene(BackendKind::Reference, precision));
   ASSERT_TRUE(ref) << ref.message();
-  ASSERT_NE(sim->surfaceDeviceBuffer(0), nullptr);  // made at create()
+  ASSERT_TRUE(sim->surfaceBuffer(0));  // made at create()
   const std::size_t n = sim->restSurface(0)->vertexCount();
   const SurfaceBinding binding = *bindSurface(sim->restMesh(0), *sim->restSurface(0));
 
@@ -231,9 +236,14 @@ TEST_P(EmbedSimulationOpenCL, DeviceSurfaceMatchesTheReferenceRun) {
   // The buffer as a renderer sees it after explicit synchronisation, read on a queue of our own:
   // 6 floats per vertex, the same numbers readSurface returned.
   ASSERT_TRUE(sim->updateSurface(0));
-  cl_mem buffer = sim->surfaceDeviceBuffer(0);
+  const GpuBuffer handle = sim->surfaceBuffer(0);
+  EXPECT_EQ(handle.api, GpuApi::OpenCL);
+  EXPECT_EQ(handle.offset, 0u);
+  EXPECT_EQ(handle.stride, 24u);
+  EXPECT_EQ(handle.bytes, 24 * n);
+  cl_mem buffer = test::clMem(handle);
   ASSERT_NE(buffer, nullptr);
-  EXPECT_EQ(sim->surfaceNormalDeviceBuffer(0), nullptr);  // interleaved: one buffer
+  EXPECT_FALSE(sim->surfaceNormalBuffer(0));  // interleaved: one buffer
   EXPECT_EQ(bufferBytes(buffer), 6 * sizeof(float) * n);  // 24-byte stride
   const std::vector<float> drawn = drawnFloats(buffer, 6 * n);
   const SurfaceState last = readState(sim.value());
@@ -266,8 +276,10 @@ TEST(EmbedSimulation, SeparateLayoutHoldsTheInterleavedValuesInTwoBuffers) {
 
   ASSERT_TRUE(interleaved->updateSurface(0));
   ASSERT_TRUE(separate->updateSurface(0));
-  cl_mem both = interleaved->surfaceDeviceBuffer(0), positions = separate->surfaceDeviceBuffer(0),
-         normals = separate->surfaceNormalDeviceBuffer(0);
+  cl_mem both = test::clMem(interleaved->surfaceBuffer(0)), positions = test::clMem(separate->surfaceBuffer(0)),
+         normals = test::clMem(separate->surfaceNormalBuffer(0));
+  EXPECT_EQ(separate->surfaceBuffer(0).stride, 12u);
+  EXPECT_EQ(separate->surfaceNormalBuffer(0).stride, 12u);
   ASSERT_NE(both, nullptr);
   ASSERT_NE(positions, nullptr);
   ASSERT_NE(normals, nullptr);
@@ -360,7 +372,7 @@ std::vector<std::vector<double>> expectTheUnbatchedSurfaces(Simulation& sim, Sim
     EXPECT_EQ(positions, refPositions);
     EXPECT_EQ(normals, refNormals);
     EXPECT_TRUE(sim.updateSurface(i));
-    cl_mem buffer = sim.surfaceDeviceBuffer(i);
+    cl_mem buffer = test::clMem(sim.surfaceBuffer(i));
     buffers.push_back(buffer);
     if (!buffer || positions.size() != 3 * n) {
       ADD_FAILURE() << "no device buffer, or a surface of the wrong size";
@@ -407,7 +419,7 @@ TEST(EmbedSimulation, BatchedBodiesUpdateTheirSurfacesOnTheDevice) {
     const SurfaceBinding binding = *bindSurface(sim->restMesh(i), *sim->restSurface(i));
     ASSERT_TRUE(deformSurface(binding, nodes.data(), sim->restMesh(i).nodeCount(), out));
     EXPECT_LE(worstDifference(positions, own), 2.5e-6);
-    EXPECT_EQ(sim->surfaceNormalDeviceBuffer(i) != nullptr, i == 2);
+    EXPECT_EQ(static_cast<bool>(sim->surfaceNormalBuffer(i)), i == 2);
     const nlohmann::json plan = nlohmann::json::parse(sim->planReport())["bodies"][i]["surface"];
     EXPECT_EQ(plan["where"], "device");
     // One set of launches per layout for the batch's surfaces.
@@ -481,7 +493,7 @@ TEST(EmbedSimulation, ABatchThatFailsOverComputesItsSurfacesOnTheHost) {
   auto sim = Simulation::create(scene);
   if (!sim && sim.status().code() == ErrorCode::DeviceError) GTEST_SKIP() << "no OpenCL device: " << sim.message();
   ASSERT_TRUE(sim) << sim.message();
-  ASSERT_NE(sim->surfaceDeviceBuffer(1), nullptr);  // on the batch's device before the failure
+  ASSERT_TRUE(sim->surfaceBuffer(1));  // on the batch's device before the failure
   for (int k = 1; k <= 6; ++k) ASSERT_TRUE(sim->step()) << "step " << k;
   const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
   ASSERT_EQ(sched["fallbacks"].size(), 3u) << sched.dump(1);
@@ -490,7 +502,7 @@ TEST(EmbedSimulation, ABatchThatFailsOverComputesItsSurfacesOnTheHost) {
     SCOPED_TRACE("body " + std::to_string(i));
     EXPECT_EQ(sched["bodies"][i]["current"], "reference");
     EXPECT_EQ(plan["bodies"][i]["surface"]["where"], "host") << plan.dump(1);
-    EXPECT_EQ(sim->surfaceDeviceBuffer(i), nullptr);
+    EXPECT_FALSE(sim->surfaceBuffer(i));
     std::vector<double> positions, nodes, own;
     ASSERT_TRUE(sim->readSurface(i, positions));
     ASSERT_TRUE(sim->readPositions(i, nodes));
@@ -501,6 +513,83 @@ TEST(EmbedSimulation, ABatchThatFailsOverComputesItsSurfacesOnTheHost) {
     ASSERT_TRUE(deformSurface(binding, nodes.data(), sim->restMesh(i).nodeCount(), out));
     EXPECT_EQ(positions, own);  // the host path, exactly
   }
+}
+
+/// An application's own OpenCL context and queue (SimulationOptions::device): every body runs
+/// there, with the answer of corofem's own context on that device bit for bit (the same kernels on
+/// the same device), the surface's buffer lives in the application's context, and the update the
+/// buffer's handout enqueues comes before the application's own work on its in-order queue. The
+/// application's objects stay valid after the Simulation is gone.
+TEST(EmbedSimulation, TheApplicationsContextHoldsTheBodiesAndTheSurfaceBuffers) {
+  const std::vector<detail::cl::DeviceInfo> devices = detail::cl::listDevices();
+  if (devices.empty()) GTEST_SKIP() << "no OpenCL device";
+  const detail::cl::DeviceInfo info = detail::cl::selectDevice("");
+  std::size_t index = 0;
+  while (devices[index].device != info.device) ++index;
+  cl_int status = CL_SUCCESS;
+  cl_context context = clCreateContext(nullptr, 1, &info.device, nullptr, nullptr, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  cl_command_queue queue = clCreateCommandQueue(context, info.device, 0, &status);
+  ASSERT_EQ(status, CL_SUCCESS);
+  {
+    const Scene scene = surfaceScene(BackendKind::OpenCL, Precision::Float);
+    SimulationOptions lent, own;
+    lent.device = {GpuApi::OpenCL, context, queue, info.device};
+    own.devices = {"opencl:" + std::to_string(index)};
+    auto sim = Simulation::create(scene, lent);
+    ASSERT_TRUE(sim) << sim.message();
+    auto ref = Simulation::create(scene, own);
+    ASSERT_TRUE(ref) << ref.message();
+    const nlohmann::json sched = nlohmann::json::parse(sim->schedulerReport());
+    EXPECT_EQ(sched["choice"], "opencl:external (the application's OpenCL device)") << sched.dump(1);
+    EXPECT_EQ(sim->deviceName(), ref->deviceName());
+    EXPECT_NE(sim->deviceName().find(info.name), std::string::npos) << sim->deviceName();
+    for (int k = 1; k <= 3; ++k) {
+      ASSERT_TRUE(sim->step()) << "step " << k;
+      ASSERT_TRUE(ref->step()) << "step " << k;
+    }
+    const SurfaceState a = readState(sim.value()), b = readState(ref.value());
+    EXPECT_EQ(a.nodes, b.nodes);
+    EXPECT_EQ(a.positions, b.positions);
+    ASSERT_TRUE(sim->step());
+    // The buffer is the application's context's; reading it on the application's queue right after
+    // the handout (no updateSurface) sees this step's surface.
+    cl_mem buffer = test::clMem(sim->surfaceBuffer(0));
+    ASSERT_NE(buffer, nullptr);
+    cl_context owner = nullptr;
+    ASSERT_EQ(clGetMemObjectInfo(buffer, CL_MEM_CONTEXT, sizeof(owner), &owner, nullptr), CL_SUCCESS);
+    EXPECT_EQ(owner, context);
+    const std::size_t n = sim->restSurface(0)->vertexCount();
+    std::vector<float> drawn(6 * n, NAN);
+    ASSERT_EQ(clEnqueueReadBuffer(queue, buffer, CL_TRUE, 0, drawn.size() * sizeof(float), drawn.data(), 0, nullptr,
+                                  nullptr),
+              CL_SUCCESS);
+    const SurfaceState now = readState(sim.value());
+    for (std::size_t v = 0; v < n; ++v)
+      for (std::size_t c = 0; c < 3; ++c)
+        ASSERT_EQ(static_cast<double>(drawn[6 * v + c]), now.positions[3 * v + c]) << "vertex " << v;
+
+    // What cannot work is said at create().
+    SimulationOptions noQueue = lent;
+    noQueue.device.queue = nullptr;
+    auto bad = Simulation::create(scene, noQueue);
+    ASSERT_FALSE(bad);
+    EXPECT_EQ(bad.status().code(), ErrorCode::BadInput);
+    EXPECT_NE(bad.message().find("SimulationOptions::device"), std::string::npos) << bad.message();
+    SimulationOptions both = lent;
+    both.devices = {"reference"};
+    auto twice = Simulation::create(scene, both);
+    ASSERT_FALSE(twice);
+    EXPECT_NE(twice.message().find("not both"), std::string::npos) << twice.message();
+    SimulationOptions vulkan = lent;
+    vulkan.device.api = GpuApi::Vulkan;
+    auto none = Simulation::create(scene, vulkan);
+    ASSERT_FALSE(none);
+    EXPECT_EQ(none.status().code(), ErrorCode::NotCompiledIn) << none.message();
+  }
+  EXPECT_EQ(clFinish(queue), CL_SUCCESS);
+  EXPECT_EQ(clReleaseCommandQueue(queue), CL_SUCCESS);
+  EXPECT_EQ(clReleaseContext(context), CL_SUCCESS);
 }
 
 // Mixed keeps float positions on the device (the float tolerances apply).

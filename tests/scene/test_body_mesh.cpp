@@ -6,6 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <functional>
+#include <memory>
 #include <filesystem>
 
 namespace corofem {
@@ -118,6 +121,82 @@ TEST(BodyMesh, VegaBouSelectsTheEndFaceOfBeam3) {
   auto inBox = resolveNodeSet(box, *mesh);
   ASSERT_TRUE(inBox.isOk()) << inBox.message();
   EXPECT_EQ(*inBox, *fixed);
+}
+
+// A mesh the application holds in memory (MeshSourceDesc::mesh): the box's answer when it is the
+// box's mesh, scaled and translated the same way; checked like a file's, inverted elements turned.
+TEST(BodyMesh, InMemoryMeshIsTheBoxsAndIsChecked) {
+  BoxSpec box;
+  box.max = {0.8, 0.1, 0.1};
+  box.cells = {8, 1, 1};
+  BodyDesc fromBox;
+  fromBox.mesh.box = box;
+  fromBox.mesh.scale = 2.0;
+  fromBox.mesh.translate = {1, -1, 0.5};
+  Result<TetMesh> generated = generateBox(box);
+  ASSERT_TRUE(generated) << generated.message();
+  BodyDesc fromMemory = fromBox;
+  fromMemory.name = "held";
+  fromMemory.mesh.box.reset();
+  fromMemory.mesh.mesh = std::make_shared<const TetMesh>(generated.value());
+  MeshReadReport report;
+  Result<TetMesh> a = loadBodyMesh(fromBox, ""), b = loadBodyMesh(fromMemory, "", &report);
+  ASSERT_TRUE(a) << a.message();
+  ASSERT_TRUE(b) << b.message();
+  EXPECT_EQ(a->nodes, b->nodes);
+  EXPECT_EQ(a->tets, b->tets);
+  EXPECT_EQ(report.format, "in memory");
+  EXPECT_EQ(report.reorientedElements, 0u);
+
+  // An inverted element is turned and counted, as a reader does; the application's mesh is untouched.
+  TetMesh inverted = generated.value();
+  std::swap(inverted.tets[2], inverted.tets[3]);
+  fromMemory.mesh.mesh = std::make_shared<const TetMesh>(inverted);
+  Result<TetMesh> turned = loadBodyMesh(fromMemory, "", &report);
+  ASSERT_TRUE(turned) << turned.message();
+  EXPECT_EQ(report.reorientedElements, 1u);
+  EXPECT_EQ(turned->tets, a->tets);
+  EXPECT_NE(fromMemory.mesh.mesh->tets, a->tets);
+
+  // Bad meshes: a clear BadInput naming the body, the mesh and the fix.
+  struct Bad {
+    const char* what;
+    std::function<void(TetMesh&)> spoil;
+    const char* says;
+  };
+  const std::vector<Bad> bad = {
+      {"index out of range", [](TetMesh& m) { m.tets[5] = static_cast<std::uint32_t>(m.nodeCount()); }, "names node"},
+      {"a node twice", [](TetMesh& m) { m.tets[1] = m.tets[0]; }, "twice"},
+      {"not finite", [](TetMesh& m) { m.nodes[4] = std::nan(""); }, "not finite"},
+      {"flat element",
+       [](TetMesh& m) {  // element 0's fourth node moved into the plane of its other three
+         const std::uint32_t* t = &m.tets[0];
+         for (int a = 0; a < 3; ++a)
+           m.nodes[3 * t[3] + a] = m.nodes[3 * t[1] + a] + m.nodes[3 * t[2] + a] - m.nodes[3 * t[0] + a];
+       },
+       "volume"},
+      {"sizes", [](TetMesh& m) { m.tets.pop_back(); }, "4 per element"},
+      {"regions", [](TetMesh& m) { m.regions = {1, 2}; }, "region ids"},
+      {"empty", [](TetMesh& m) { m.tets.clear(); }, "no tetrahedra"},
+  };
+  for (const Bad& c : bad) {
+    SCOPED_TRACE(c.what);
+    TetMesh spoilt = generated.value();
+    c.spoil(spoilt);
+    fromMemory.mesh.mesh = std::make_shared<const TetMesh>(spoilt);
+    Result<TetMesh> r = loadBodyMesh(fromMemory, "");
+    ASSERT_FALSE(r);
+    EXPECT_EQ(r.status().code(), ErrorCode::BadInput);
+    EXPECT_NE(r.message().find("body \"held\""), std::string::npos) << r.message();
+    EXPECT_NE(r.message().find("MeshSourceDesc::mesh"), std::string::npos) << r.message();
+    EXPECT_NE(r.message().find(c.says), std::string::npos) << r.message();
+  }
+  // Exactly one source.
+  fromMemory.mesh.mesh = std::make_shared<const TetMesh>(generated.value());
+  fromMemory.mesh.box = box;
+  Result<TetMesh> two = loadBodyMesh(fromMemory, "");
+  ASSERT_FALSE(two);
+  EXPECT_NE(two.message().find("exactly one"), std::string::npos) << two.message();
 }
 
 }  // namespace

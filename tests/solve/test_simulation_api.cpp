@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -208,6 +210,48 @@ TEST(SimulationApi, MeshErrorsReachTheCaller) {
   ASSERT_FALSE(sim);
   EXPECT_NE(sim.status().code(), ErrorCode::Ok);
   EXPECT_NE(sim.message().find("no/such/mesh.msh"), std::string::npos) << sim.message();
+}
+
+TEST(SimulationApi, AMeshInMemoryRunsAsTheBoxItCameFrom) {
+  // MeshSourceDesc::mesh: the application's mesh, here the very mesh of the scene's box; the same
+  // steps, bit for bit.
+  Scene boxScene = staticScene(smallBeam(Formulation::Corotational, 20.0), 2);
+  Result<TetMesh> mesh = loadBodyMesh(boxScene.bodies[0], "");
+  ASSERT_TRUE(mesh) << mesh.message();
+  Scene held = boxScene;
+  held.bodies[0].mesh = MeshSourceDesc{};
+  held.bodies[0].mesh.mesh = std::make_shared<const TetMesh>(mesh.value());
+  auto a = Simulation::create(boxScene), b = Simulation::create(held);
+  ASSERT_TRUE(a) << a.message();
+  ASSERT_TRUE(b) << b.message();
+  EXPECT_EQ(b->meshReport(0).format, "in memory");
+  while (!a->finished()) {
+    ASSERT_TRUE(a->step());
+    ASSERT_TRUE(b->step());
+  }
+  std::vector<double> xa, xb;
+  ASSERT_TRUE(a->readPositions(0, xa));
+  ASSERT_TRUE(b->readPositions(0, xb));
+  EXPECT_EQ(xa, xb);
+}
+
+TEST(SimulationApi, ABadHostThreadCountIsAWarningInTheLog) {
+  // COROFEM_HOST_THREADS that is not a count is ignored and said in the application's log (the
+  // library writes nothing to stderr).
+  setenv("COROFEM_HOST_THREADS", "lots", 1);
+  std::vector<std::string> warnings;
+  SimulationOptions o;
+  o.log.callback = [&](LogLevel level, const std::string& message) {
+    if (level == LogLevel::Warning) warnings.push_back(message);
+  };
+  auto sim = Simulation::create(staticScene(smallBeam(Formulation::Linear, 1.0), 1), o);
+  unsetenv("COROFEM_HOST_THREADS");
+  ASSERT_TRUE(sim) << sim.message();
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_NE(warnings[0].find("COROFEM_HOST_THREADS='lots'"), std::string::npos) << warnings[0];
+  warnings.clear();
+  ASSERT_TRUE(Simulation::create(staticScene(smallBeam(Formulation::Linear, 1.0), 1), o));
+  EXPECT_TRUE(warnings.empty()) << warnings.front();
 }
 
 }  // namespace

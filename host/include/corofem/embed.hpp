@@ -12,6 +12,7 @@
 //   corofem::deformSurface(*binding, positions.data(), tetMesh.nodeCount(), out);   // every frame
 #pragma once
 
+#include <corofem/gpu.hpp>
 #include <corofem/mesh.hpp>
 #include <corofem/status.hpp>
 
@@ -20,13 +21,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-
-// OpenCL handle types, declared as OpenCL itself declares them (CL/cl.h: typedef struct _cl_mem*
-// cl_mem, ...), so this header needs no OpenCL headers.
-struct _cl_context;
-struct _cl_command_queue;
-struct _cl_device_id;
-struct _cl_mem;
 
 namespace corofem {
 
@@ -127,11 +121,10 @@ struct DeviceSurfaceOptions {
   /// The output buffer is float either way. Node positions given to updateFromDevice() must be of this
   /// precision.
   bool doublePrecision = false;
-  /// The application's own context, queue and device (all three, or none): the buffers and kernels
-  /// live there (e.g. where a cl_mem shared with the renderer was created). Retained, not owned.
-  _cl_context* context = nullptr;
-  _cl_command_queue* queue = nullptr;  ///< in-order queue on `context`
-  _cl_device_id* deviceId = nullptr;   ///< device of `queue`
+  /// The application's own OpenCL context, queue and device (GpuApi::OpenCL, all three): the
+  /// buffers and kernels live there (e.g. where a cl_mem shared with the renderer was created).
+  /// Retained, not owned. None (the default): corofem's own, from `device`.
+  ExternalDevice external;
   /// Output layout on the device: false (the default), one buffer of 6 floats per vertex (position,
   /// normal: SurfaceOutput::interleaved); true, two separate streams of 3 floats per vertex, the
   /// positions in vertexBuffer() and the normals in normalBuffer(), for renderers that bind them as
@@ -173,29 +166,29 @@ class DeviceSurface {
   /// device and enqueues the update. Errors: BadInput (node count differs from the binding's),
   /// DeviceError.
   Status update(const double* tetNodePositions, std::size_t tetNodeCount);
-  /// Enqueues the update from node positions already on the device: a buffer of 3 reals per node
-  /// (float or double as DeviceSurfaceOptions::doublePrecision), e.g. the simulation's own buffer.
-  Status updateFromDevice(_cl_mem* tetNodePositions);
-  /// As above, from node positions relative to an offset c (3 doubles; nullptr = 0), e.g. the OpenCL
-  /// backend's positions relative to the body's centroid: the weights sum to 1, so the kernel writes
-  /// x_v = sum_k w_vk (x_{n_vk} - c) + c. The normals do not depend on c.
-  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset);
-  /// As above, with node n of the tet mesh at node firstNode + n of the buffer (one buffer holding
-  /// many bodies' nodes, as a batch does).
-  /// Errors (all three overloads): BadInput for a null buffer or one too small for the nodes read
-  /// (checked against its CL_MEM_SIZE), DeviceError.
-  Status updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode);
+  /// Enqueues the update from node positions already on the device (GpuApi::OpenCL: a cl_mem in
+  /// this surface's context): 3 reals per node (float or double as
+  /// DeviceSurfaceOptions::doublePrecision) from byte `positions.offset`, e.g. the simulation's
+  /// own buffer. `offset` (3 doubles; nullptr = 0): the positions are relative to this point c, as
+  /// the OpenCL backend keeps them relative to the body's centroid; the weights sum to 1, so the
+  /// kernel writes x_v = sum_k w_vk (x_{n_vk} - c) + c (the normals do not depend on c).
+  /// `firstNode`: node n of the tet mesh is node firstNode + n of the buffer (one buffer holding
+  /// many bodies' nodes, as a batch does). Errors: BadInput for an empty handle, another API, an
+  /// offset that is not a whole number of nodes, or a buffer too small for the nodes read (checked
+  /// against its CL_MEM_SIZE); DeviceError.
+  Status updateFromDevice(const GpuBuffer& positions, const double* offset = nullptr, std::size_t firstNode = 0);
   /// Blocking read of the output, 6 floats per vertex (waits for the enqueued update), in either
   /// layout (separate streams are interleaved on the host).
   Status read(float* interleaved) const;
   /// Blocking read of the output as two streams of 3 floats per vertex, positions and normals, in
   /// either layout (an interleaved buffer is split on the host). Errors: BadInput for a null pointer.
   Status read(float* positions, float* normals) const;
-  /// The output buffer, owned by this object and valid for its lifetime: 6 * vertexCount() floats
-  /// (interleaved), or with separateStreams the 3 * vertexCount() floats of the positions.
-  _cl_mem* vertexBuffer() const;
-  /// With separateStreams, the normals' buffer (3 * vertexCount() floats); nullptr otherwise.
-  _cl_mem* normalBuffer() const;
+  /// The output buffer (GpuApi::OpenCL), owned by this object and valid for its lifetime: 6 *
+  /// vertexCount() floats (interleaved, a 24-byte stride), or with separateStreams the 3 *
+  /// vertexCount() floats of the positions (a 12-byte stride).
+  GpuBuffer vertexBuffer() const;
+  /// With separateStreams, the normals' buffer (3 * vertexCount() floats); empty otherwise.
+  GpuBuffer normalBuffer() const;
   /// Whether the output is two streams (DeviceSurfaceOptions::separateStreams).
   bool separateStreams() const;
   /// Blocks until all enqueued work is done.

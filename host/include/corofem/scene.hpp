@@ -8,6 +8,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -48,6 +49,10 @@ enum class Formulation {
 struct MeshSourceDesc {
   std::string file;            ///< mesh file, resolved relative to the scene file's folder
   std::optional<BoxSpec> box;  ///< generated box when set
+  /// A mesh the application holds in memory (API only; a scene file cannot name one), checked as a
+  /// file's is (indices, repeated nodes, finite coordinates, zero volume) and reoriented where an
+  /// element is inverted (MeshReadReport::reorientedElements). Exactly one of file, box and mesh.
+  std::shared_ptr<const TetMesh> mesh;
   double scale = 1.0;          ///< multiplies node coordinates after loading, > 0
   Vec3 translate{0, 0, 0};     ///< added to node coordinates after scaling (m)
 };

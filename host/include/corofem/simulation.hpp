@@ -6,17 +6,25 @@
 #pragma once
 
 #include <corofem/embed.hpp>
+#include <corofem/gpu.hpp>
 #include <corofem/log.hpp>
 #include <corofem/mesh.hpp>
 #include <corofem/scene.hpp>
 #include <corofem/status.hpp>
 #include <corofem/tuning.hpp>
 
+#include <cstddef>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 namespace corofem {
+
+/// Runs task(0), ..., task(count - 1), each exactly once, and returns when every one has returned.
+/// The tasks are independent: they may run at once on any threads, in any order (an engine's job
+/// system, a thread pool, or a plain loop). They do not throw.
+using TaskRunner = std::function<void(std::size_t count, const std::function<void(std::size_t)>& task)>;
 
 /// What one step (dynamics) or one load increment (statics) did, summed over bodies.
 struct StepReport {
@@ -46,6 +54,16 @@ struct SimulationOptions {
   /// device that fails (at creation too) hands its bodies to the next, and the reference backend
   /// is always the last. Empty (the default): the scene's "backend" decides (scheduler).
   std::vector<std::string> devices;
+  /// The application's own device (its OpenCL context, queue and device): every body runs there,
+  /// the reference backend its fallback (as devices = {"opencl:external"}), and the surfaces'
+  /// buffers (surfaceBuffer) live in the application's context. None (the default): corofem makes
+  /// its own.
+  ExternalDevice device;
+  /// Where the host's work between device calls runs (per-body passes over a batch's bodies, passes
+  /// over large node vectors): the application's task system. Empty (the default): a small pool of
+  /// the library's own (COROFEM_HOST_THREADS threads). The Simulation calls it only from inside its
+  /// own calls (create, step, reads), on the thread that made them.
+  TaskRunner tasks;
 };
 
 class Simulation {
@@ -82,32 +100,34 @@ class Simulation {
   /// The deformed surface at the current state: 3 doubles per vertex and, when `normals` is given,
   /// smooth unit normals (3 floats per vertex). BadInput for a body without a surface.
   ///
-  /// On a body that runs on the OpenCL backend the surface is computed on the device, from the
-  /// backend's own node positions (no host round trip of the tet nodes; see surfaceDeviceBuffer),
-  /// and this call is the explicit read-back: the positions are then float-rounded (the device
-  /// buffer holds floats). On the reference backend it is computed on the host (deformSurface).
+  /// On a body that runs on a device with surfaces (the OpenCL backend) the surface is computed on
+  /// the device, from the device's own node positions (no host round trip of the tet nodes; see
+  /// surfaceBuffer), and this call is the explicit read-back: the positions are then float-rounded
+  /// (the device buffer holds floats). On the reference backend it is computed on the host
+  /// (deformSurface).
   Status readSurface(int body, std::vector<double>& positions, std::vector<float>* normals = nullptr) const;
-  /// The device buffer of the deformed surface (a cl_mem) when the body has a surface and runs on the
-  /// OpenCL backend, else nullptr (no surface, reference backend, built without OpenCL, or an update
-  /// that could not be enqueued). Layout (BodyDesc::surfaceLayout, scene key "surface_layout"):
-  /// interleaved (the default), per vertex 6 float32 -- position x, y, z then unit normal x, y, z --
-  /// a 24-byte stride (DeviceSurface::vertexBuffer); separate, the positions only, 3 float32 per
-  /// vertex (a 12-byte stride), the normals in surfaceNormalDeviceBuffer(). Vertices in the order of
-  /// restSurface(body). On a batch (backend.batch) the surfaces of the batch's bodies with one layout
-  /// are one set of buffers and launches: each body's buffer is its region (a sub-buffer) of the
-  /// shared output, and bringing one body's surface up to date updates them all. The call enqueues the update on the backend's in-order command queue when the
-  /// body stepped since the last one and does not wait: work the application enqueues on that queue
-  /// afterwards sees the current surface; from another queue or API, call updateSurface() first. The
-  /// buffer belongs to the Simulation and stays valid until it is destroyed or the body moves to
-  /// another backend (a device failure); ask for it again after step() rather than caching it.
-  _cl_mem* surfaceDeviceBuffer(int body) const;
-  /// With "surface_layout": "separate", the device buffer of the surface's unit normals, 3 float32 per
-  /// vertex, updated together with surfaceDeviceBuffer() (the same rules: the update is enqueued
-  /// lazily, the buffer stays valid until the Simulation is destroyed or the body moves to another
-  /// backend); nullptr for the interleaved layout and wherever surfaceDeviceBuffer() is nullptr.
-  _cl_mem* surfaceNormalDeviceBuffer(int body) const;
+  /// The device buffer of the deformed surface when the body has a surface and runs on a device
+  /// that computes it (GpuApi::OpenCL: the handle is a cl_mem), else an empty GpuBuffer (no
+  /// surface, the reference backend, or an update that could not be enqueued). Layout
+  /// (BodyDesc::surfaceLayout, scene key "surface_layout"): interleaved (the default), per vertex 6
+  /// float32 -- position x, y, z then unit normal x, y, z -- a 24-byte stride; separate, the
+  /// positions only, 3 float32 per vertex (a 12-byte stride), the normals in surfaceNormalBuffer().
+  /// Vertices in the order of restSurface(body). On a batch (backend.batch) the surfaces of the
+  /// batch's bodies with one layout are one set of buffers and launches: each body's buffer is its
+  /// region (an OpenCL sub-buffer) of the shared output, and bringing one body's surface up to date
+  /// updates them all. The call enqueues the update on the device's in-order queue when the body
+  /// stepped since the last one and does not wait: work the application enqueues on that queue
+  /// afterwards (SimulationOptions::device) sees the current surface; from another queue or API,
+  /// call updateSurface() first. The buffer belongs to the Simulation and stays valid until it is
+  /// destroyed or the body moves to another device (a device failure); ask for it again after
+  /// step() rather than caching it.
+  GpuBuffer surfaceBuffer(int body) const;
+  /// With "surface_layout": "separate", the device buffer of the surface's unit normals, 3 float32
+  /// per vertex, updated together with surfaceBuffer() (the same rules); empty for the interleaved
+  /// layout and wherever surfaceBuffer() is empty.
+  GpuBuffer surfaceNormalBuffer(int body) const;
   /// Brings the device surface of `body` up to date and waits for it (explicit synchronisation:
-  /// step() enqueues nothing for the surface; this or surfaceDeviceBuffer() does, lazily). Ok and
+  /// step() enqueues nothing for the surface; this or surfaceBuffer() does, lazily). Ok and
   /// nothing to do when the body's surface is computed on the host. BadInput for a body without a
   /// surface or an index out of range; DeviceError when the device fails.
   Status updateSurface(int body) const;

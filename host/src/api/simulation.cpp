@@ -177,8 +177,25 @@ Result<Simulation> Simulation::create(const Scene& scene, const SimulationOption
     auto impl = std::make_unique<Impl>();
     impl->scene = scene;
     impl->log = detail::Log(options.log);
+    impl->tasks = options.tasks;
+    const detail::TaskScope tasks(impl->tasks);  // calibration and set-up run on the application's tasks
+    if (const std::string problem = detail::hostThreadsProblem(); !problem.empty())
+      impl->log(LogLevel::Warning, problem);
     impl->device.opencl = options.opencl;
+    impl->device.external = options.device;
     impl->devices = options.devices;
+    if (options.device) {
+      // Every body on the application's device, the reference backend its fallback.
+      const char* backend = options.device.api == GpuApi::OpenCL ? "opencl" : "vulkan";
+      const auto entry = detail::findBackend(backend);
+      if (!entry)
+        detail::fail(ErrorCode::NotCompiledIn, "SimulationOptions::device: ", backend, " handles need the ", backend,
+                     " backend, which this build does not have");
+      if (!impl->devices.empty())
+        detail::fail(ErrorCode::BadInput, "SimulationOptions: give either `device` (the application's device, where "
+                     "every body runs) or `devices` (an order of corofem's devices), not both");
+      impl->devices = {std::string(backend) + ":" + detail::kExternalSelector};
+    }
     if (scene.bodies.empty())
       detail::fail(ErrorCode::BadInput, "scene '", scene.name, "' has no bodies; add at least one to \"bodies\"");
     for (const BodyDesc& desc : scene.bodies) {
@@ -212,6 +229,7 @@ Simulation::~Simulation() = default;
 Status Simulation::step(StepReport* report) {
   const auto start = std::chrono::steady_clock::now();
   StepReport r;
+  const detail::TaskScope tasks(impl_->tasks);
   Status status = detail::guard([&] {
     Impl& s = *impl_;
     const int count = s.stepCount();
@@ -309,6 +327,7 @@ EnergyReport Simulation::energies(int body) const {
   detail::Driver& driver = impl_->driverOf(b);
   e.kinetic = driver.kineticEnergy(b.index);
   e.externalWork = driver.externalWork(b.index);
+  const detail::TaskScope tasks(impl_->tasks);
   Status st = detail::guard([&] { e.elastic = driver.elasticEnergy(b.index); });
   if (!st) e.elastic = std::nan("");  // a device failure here has no other channel; NaN marks it
   return e;

@@ -11,6 +11,7 @@
 #include "solve/device_slot.hpp"
 #include "solve/driver.hpp"
 #include "util/log.hpp"
+#include "util/parallel.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -74,7 +75,8 @@ struct Simulation::Impl {
 
   Scene scene;
   detail::Log log;                  ///< SimulationOptions::log; the drivers and slots hold a reference
-  detail::DeviceOptions device;     ///< SimulationOptions::opencl
+  detail::DeviceOptions device;     ///< SimulationOptions::opencl, device
+  detail::TaskRunnerFn tasks;       ///< SimulationOptions::tasks (empty: the library's pool)
   std::vector<std::string> devices; ///< SimulationOptions::devices
   std::vector<Body> bodies;
   std::vector<Group> groups;

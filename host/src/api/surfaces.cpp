@@ -79,6 +79,7 @@ Simulation::Impl::SurfaceSet* Simulation::Impl::refreshSurface(Body& b, std::siz
 }
 
 Status Simulation::readSurface(int body, std::vector<double>& positions, std::vector<float>* normals) const {
+  const detail::TaskScope tasks(impl_->tasks);
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
     const std::size_t n = b.binding->vertexCount();
@@ -104,37 +105,34 @@ Status Simulation::readSurface(int body, std::vector<double>& positions, std::ve
   });
 }
 
-_cl_mem* Simulation::surfaceDeviceBuffer(int body) const {
-  _cl_mem* buffer = nullptr;
+GpuBuffer Simulation::surfaceBuffer(int body) const {
+  GpuBuffer buffer;
+  const detail::TaskScope tasks(impl_->tasks);
   const Status st = detail::guard([&] {
     if (body < 0 || body >= bodyCount()) return;
     Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
     if (!b.binding) return;
     std::size_t member = 0;
-    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) {
-      const detail::DeviceBufferHandle h = set->surfaces->vertexBuffer(member);
-      if (h.api == detail::DeviceBufferHandle::Api::OpenCL) buffer = reinterpret_cast<_cl_mem*>(h.buffer);
-    }
+    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) buffer = set->surfaces->vertexBuffer(member);
   });
-  return st ? buffer : nullptr;
+  return st ? buffer : GpuBuffer{};
 }
 
-_cl_mem* Simulation::surfaceNormalDeviceBuffer(int body) const {
-  _cl_mem* buffer = nullptr;
+GpuBuffer Simulation::surfaceNormalBuffer(int body) const {
+  GpuBuffer buffer;
+  const detail::TaskScope tasks(impl_->tasks);
   const Status st = detail::guard([&] {
     if (body < 0 || body >= bodyCount()) return;
     Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
     if (!b.binding || !b.separateStreams) return;
     std::size_t member = 0;
-    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) {
-      const detail::DeviceBufferHandle h = set->surfaces->normalBuffer(member);
-      if (h.api == detail::DeviceBufferHandle::Api::OpenCL) buffer = reinterpret_cast<_cl_mem*>(h.buffer);
-    }
+    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) buffer = set->surfaces->normalBuffer(member);
   });
-  return st ? buffer : nullptr;
+  return st ? buffer : GpuBuffer{};
 }
 
 Status Simulation::updateSurface(int body) const {
+  const detail::TaskScope tasks(impl_->tasks);
   return detail::guard([&] {
     Impl::Body& b = impl_->bodyForSurface(body);
     std::size_t member = 0;

@@ -1,4 +1,4 @@
-// DeviceSurface and the device surface groups in a build without OpenCL: every entry point reports
+// DeviceSurface in a build without OpenCL: every entry point reports
 // ErrorCode::NotCompiledIn (backends/opencl/device_surface.cpp is the implementation).
 #ifndef COROFEM_WITH_OPENCL
 
@@ -32,9 +32,7 @@ Result<DeviceSurface> DeviceSurface::create(const SurfaceBinding&, const DeviceS
   return notCompiledIn();
 }
 Status DeviceSurface::update(const double*, std::size_t) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*, const double*) { return notCompiledIn(); }
-Status DeviceSurface::updateFromDevice(_cl_mem*, const double*, std::size_t) { return notCompiledIn(); }
+Status DeviceSurface::updateFromDevice(const GpuBuffer&, const double*, std::size_t) { return notCompiledIn(); }
 Status DeviceSurface::read(float*) const { return notCompiledIn(); }
 Status DeviceSurface::read(float*, float*) const { return notCompiledIn(); }
 Status DeviceSurface::finish() const { return notCompiledIn(); }
@@ -42,30 +40,10 @@ DeviceSurface DeviceSurface::make(const SurfaceBinding&, const DeviceSurfaceOpti
                                   const std::vector<std::uint32_t>*) {
   detail::fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
 }
-namespace detail {
-struct DeviceSurfaceGroup::State {};
-DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>&, std::size_t, const DeviceSurfaceOptions&) {
-  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-DeviceSurfaceGroup::~DeviceSurfaceGroup() = default;
-std::size_t DeviceSurfaceGroup::size() const { return 0; }
-void DeviceSurfaceGroup::update(_cl_mem*, const std::vector<const double*>&) {
-  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-_cl_mem* DeviceSurfaceGroup::vertexBuffer(std::size_t) const { return nullptr; }
-_cl_mem* DeviceSurfaceGroup::normalBuffer(std::size_t) const { return nullptr; }
-bool DeviceSurfaceGroup::separateStreams() const { return false; }
-void DeviceSurfaceGroup::read(std::size_t, float*, float*) const {
-  fail(ErrorCode::NotCompiledIn, notCompiledIn().message());
-}
-void DeviceSurfaceGroup::finish() const {}
-std::vector<DeviceSurfaceBuffer> DeviceSurfaceGroup::buffers() const { return {}; }
-std::size_t DeviceSurfaceGroup::allocatedBytes() const { return 0; }
-}  // namespace detail
 std::vector<DeviceSurfaceBuffer> DeviceSurface::buffers() const { return {}; }
 std::size_t DeviceSurface::allocatedBytes() const { return 0; }
-_cl_mem* DeviceSurface::vertexBuffer() const { return nullptr; }
-_cl_mem* DeviceSurface::normalBuffer() const { return nullptr; }
+GpuBuffer DeviceSurface::vertexBuffer() const { return {}; }
+GpuBuffer DeviceSurface::normalBuffer() const { return {}; }
 bool DeviceSurface::separateStreams() const { return false; }
 std::size_t DeviceSurface::vertexCount() const { return 0; }
 std::string DeviceSurface::deviceName() const { return {}; }

@@ -19,6 +19,7 @@
 #include "model/problem.hpp"
 
 #include <corofem/embed.hpp>
+#include <corofem/gpu.hpp>
 #include <corofem/scene.hpp>
 
 #include <Eigen/Core>
@@ -30,10 +31,6 @@
 #include <vector>
 
 // OpenCL's opaque handle types, declared so that this header needs no OpenCL.
-struct _cl_context;
-struct _cl_command_queue;
-struct _cl_device_id;
-struct _cl_mem;
 
 namespace corofem::detail {
 
@@ -61,26 +58,14 @@ struct DeviceBuffer {
 /// given to setPositions minus `centroid` (3 doubles), node n of the body at node firstNode + n of
 /// `buffer`, or firstNode + deviceNode[n] where deviceNode is set. Valid while the device lives.
 struct DevicePositions {
-  _cl_context* context = nullptr;
-  _cl_command_queue* queue = nullptr;  ///< in-order queue that writes them
-  _cl_device_id* device = nullptr;
-  _cl_mem* buffer = nullptr;
+  ExternalDevice device;  ///< the context, the in-order queue that writes them, the device
+  GpuBuffer buffer;       ///< the positions of every body of the device
   std::size_t firstNode = 0;
   bool isDouble = false;
   const double* centroid = nullptr;
   /// The device's index (from firstNode) of each of the body's nodes, where the device numbers them
   /// in an order of its own (a locality order); nullptr: node i is at i.
   const std::uint32_t* deviceNode = nullptr;
-};
-
-/// A buffer on a device as a renderer binds it (the surface's output).
-struct DeviceBufferHandle {
-  enum class Api { None, OpenCL, Vulkan };
-  Api api = Api::None;
-  std::uintptr_t buffer = 0;  ///< OpenCL: the cl_mem; Vulkan: the VkBuffer
-  std::size_t offset = 0;     ///< bytes from the buffer's start
-  std::size_t stride = 0;     ///< bytes from one vertex to the next
-  explicit operator bool() const { return buffer != 0; }
 };
 
 using BodySet = std::vector<std::size_t>;
@@ -121,8 +106,8 @@ class DeviceSurfaces {
   /// Blocking read of member m's output as two streams of 3 floats per vertex.
   virtual void read(std::size_t member, float* positions, float* normals) = 0;
   /// Member m's output (positions alone with separate streams) and normals (separate streams only).
-  virtual DeviceBufferHandle vertexBuffer(std::size_t member) const = 0;
-  virtual DeviceBufferHandle normalBuffer(std::size_t member) const = 0;
+  virtual GpuBuffer vertexBuffer(std::size_t member) const = 0;
+  virtual GpuBuffer normalBuffer(std::size_t member) const = 0;
   virtual bool separateStreams() const = 0;
   /// Waits for every update enqueued.
   virtual void finish() = 0;

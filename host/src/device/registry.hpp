@@ -6,6 +6,7 @@
 
 #include "device/device.hpp"
 
+#include <corofem/gpu.hpp>
 #include <corofem/scene.hpp>
 #include <corofem/tuning.hpp>
 
@@ -19,7 +20,13 @@ namespace corofem::detail {
 /// What the devices get beyond the scene (SimulationOptions).
 struct DeviceOptions {
   OpenCLTuning opencl;
+  /// The application's device; a backend of its API makes it the device of the selector
+  /// kExternalSelector.
+  ExternalDevice external;
 };
+
+/// The selector of the device an application lends (SimulationOptions::device): "opencl:external".
+constexpr const char* kExternalSelector = "external";
 
 /// One place a body can run: a backend and one of its devices.
 struct Candidate {

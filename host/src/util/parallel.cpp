@@ -149,33 +149,57 @@ std::size_t usableCpus() {
   return n;
 }
 
-std::size_t threadCountFromEnv(const char* name, std::size_t least, std::size_t most, std::size_t fallback,
-                               const char* what) {
-  const char* env = std::getenv(name);
-  if (!env || !*env) return fallback;
+namespace {
+
+thread_local const TaskRunnerFn* currentRunner = nullptr;
+
+/// $COROFEM_HOST_THREADS as a count, 0 where it is unset, empty or not a whole number from 1.
+std::size_t hostThreadsFromEnv() {
+  const char* env = std::getenv("COROFEM_HOST_THREADS");
+  if (!env || !*env) return 0;
   char* end = nullptr;
   const long asked = std::strtol(env, &end, 10);
-  if (*end != '\0' || asked < static_cast<long>(least)) {
-    std::fprintf(stderr, "[corofem] %s='%s' is not a whole number of at least %zu; using %zu %s\n", name, env, least,
-                 fallback, what);
-    return fallback;
-  }
-  return std::min(static_cast<std::size_t>(asked), most);
+  if (*end != '\0' || asked < 1) return 0;
+  return std::min<std::size_t>(static_cast<std::size_t>(asked), 64);  // more gains nothing here
+}
+
+}  // namespace
+
+TaskScope::TaskScope(const TaskRunnerFn& runner) : previous_(currentRunner), installed_(static_cast<bool>(runner)) {
+  if (installed_) currentRunner = &runner;
+}
+
+TaskScope::~TaskScope() {
+  if (installed_) currentRunner = previous_;
 }
 
 std::size_t hostThreads() {
-  // More than 64 gains nothing here.
-  static const std::size_t n = threadCountFromEnv(
-      "COROFEM_HOST_THREADS", 1, 64, std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 8), "host threads");
+  static const std::size_t n = [] {
+    const std::size_t asked = hostThreadsFromEnv();
+    return asked ? asked : std::clamp<std::size_t>(usableCpus(), 1, 8);
+  }();
   return n;
+}
+
+std::string hostThreadsProblem() {
+  const char* env = std::getenv("COROFEM_HOST_THREADS");
+  if (!env || !*env || hostThreadsFromEnv() != 0) return "";
+  return std::string("COROFEM_HOST_THREADS='") + std::string(env).substr(0, 40) +
+         "' is not a whole number from 1 to 64; it is ignored, and the host uses " + std::to_string(hostThreads()) +
+         " threads";
 }
 
 void parallelChunks(std::size_t n, std::size_t chunkSize,
                     const std::function<void(std::size_t chunk, std::size_t begin, std::size_t end)>& fn) {
   chunkSize = std::max<std::size_t>(chunkSize, 1);
   const std::size_t chunks = chunkCount(n, chunkSize);
+  auto one = [&](std::size_t c) { fn(c, c * chunkSize, std::min(n, (c + 1) * chunkSize)); };
+  if (chunks > 1 && currentRunner) {
+    (*currentRunner)(chunks, one);
+    return;
+  }
   if (chunks > 1 && hostThreads() > 1 && pool().run(chunks, n, chunkSize, fn)) return;
-  for (std::size_t c = 0; c < chunks; ++c) fn(c, c * chunkSize, std::min(n, (c + 1) * chunkSize));
+  for (std::size_t c = 0; c < chunks; ++c) one(c);
 }
 
 }  // namespace corofem::detail

@@ -1,19 +1,41 @@
-// A small pool of host threads for the passes over large node vectors that the OpenCL backend
-// makes between device work (packing, converting and checking 3N-entry vectors): on a 1M-element
-// body each such pass is milliseconds of one core's memory bandwidth while the device waits.
+// The host's parallel work between device calls: the passes over large node vectors (packing,
+// converting and checking 3N-entry vectors: on a 1M-element body each is milliseconds of one core's
+// memory bandwidth while the device waits) and the per-body work of a batch's drivers. It runs on
+// an application's task system where one is installed (TaskScope), else on a small pool of the
+// library's own.
 #pragma once
 
 #include <cstddef>
 #include <functional>
+#include <string>
 
 namespace corofem::detail {
+
+/// Where the host's parallel work runs: an application's task system (SimulationOptions::tasks),
+/// the same type as corofem::TaskRunner. Empty: the library's own pool.
+using TaskRunnerFn = std::function<void(std::size_t count, const std::function<void(std::size_t)>& task)>;
+
+/// Installs `runner` for the calling thread's parallelChunks calls until destroyed (the previous
+/// one back then); an empty runner installs nothing.
+class TaskScope {
+ public:
+  explicit TaskScope(const TaskRunnerFn& runner);
+  ~TaskScope();
+  TaskScope(const TaskScope&) = delete;
+  TaskScope& operator=(const TaskScope&) = delete;
+
+ private:
+  const TaskRunnerFn* previous_ = nullptr;
+  bool installed_ = false;
+};
 
 /// Runs fn(chunk, begin, end) for every chunk of [0, n): chunk c covers
 /// [c * chunkSize, min(n, (c + 1) * chunkSize)). The chunks do not depend on the number of threads,
 /// so per-chunk results combined in chunk order give the same bits with any number of threads.
-/// Runs on the caller alone when there is one chunk, when the pool has one thread
-/// (COROFEM_HOST_THREADS=1), or when another thread is using the pool; else on the pool's threads and
-/// the caller, returning when every chunk is done. fn must not throw.
+/// Runs on the caller alone when there is one chunk; else on the calling thread's TaskScope runner
+/// where one is installed, else on the pool's threads and the caller (on the caller alone when
+/// the pool has one thread, COROFEM_HOST_THREADS=1, or another thread is using it), returning when
+/// every chunk is done. fn must not throw.
 void parallelChunks(std::size_t n, std::size_t chunkSize,
                     const std::function<void(std::size_t chunk, std::size_t begin, std::size_t end)>& fn);
 
@@ -25,14 +47,10 @@ inline std::size_t chunkCount(std::size_t n, std::size_t chunkSize) { return (n 
 /// neither can be read. Read once.
 std::size_t usableCpus();
 
-/// A count of threads from the environment variable `name`: `fallback` where it is unset or empty;
-/// where it is not a whole number of at least `least`, `fallback` too, said on stderr with the
-/// variable's name and value; else the number, at most `most`.
-std::size_t threadCountFromEnv(const char* name, std::size_t least, std::size_t most, std::size_t fallback,
-                               const char* what);
-
-/// Threads the pool asks for: $COROFEM_HOST_THREADS if set (1 to 64; anything else is reported on
-/// stderr and ignored), else the hardware's, at most 8. The system may grant fewer.
+/// Threads the pool asks for: $COROFEM_HOST_THREADS if it is a whole number from 1 (at most 64),
+/// else the usable CPUs, at most 8. The system may grant fewer.
 std::size_t hostThreads();
+/// Why $COROFEM_HOST_THREADS is ignored ("" when it is unset or valid), for the application's log.
+std::string hostThreadsProblem();
 
 }  // namespace corofem::detail

@@ -146,6 +146,34 @@ std::shared_ptr<Context> Context::shared(const std::string& selector) {
   return made;
 }
 
+std::shared_ptr<Context> Context::adopt(const ExternalDevice& external, const std::string& what) {
+  if (external.api != GpuApi::OpenCL)
+    fail(ErrorCode::BadInput, what, ": the handles are not OpenCL's (ExternalDevice::api); this device takes an "
+         "OpenCL context, queue and device");
+  if (!external.context || !external.queue || !external.device)
+    fail(ErrorCode::BadInput, what, ": give the OpenCL context, queue and device together");
+  return adopt(static_cast<cl_context>(external.context), static_cast<cl_command_queue>(external.queue),
+               static_cast<cl_device_id>(external.device));
+}
+
+GpuBuffer bufferOf(cl_mem buffer, std::size_t offset, std::size_t stride, std::size_t count) {
+  GpuBuffer b;
+  if (!buffer) return b;
+  b.api = GpuApi::OpenCL;
+  b.handle = static_cast<std::uint64_t>(reinterpret_cast<std::uintptr_t>(buffer));
+  b.offset = offset;
+  b.stride = stride;
+  b.bytes = stride * count;
+  return b;
+}
+
+cl_mem memOf(const GpuBuffer& buffer, const std::string& what) {
+  if (buffer.api != GpuApi::OpenCL || !buffer.handle)
+    fail(ErrorCode::BadInput, what, ": ", buffer.handle ? "the buffer is not an OpenCL one (GpuBuffer::api)" : "the buffer is empty",
+         "; give a cl_mem as GpuBuffer{GpuApi::OpenCL, handle}");
+  return reinterpret_cast<cl_mem>(static_cast<std::uintptr_t>(buffer.handle));
+}
+
 std::shared_ptr<Context> Context::adopt(cl_context context, cl_command_queue queue, cl_device_id device) {
   if (!context || !queue || !device)
     fail(ErrorCode::BadInput, "adopting an OpenCL context: the context, queue and device must all be "

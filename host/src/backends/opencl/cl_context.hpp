@@ -5,6 +5,8 @@
 
 #include "backends/opencl/cl_check.hpp"
 
+#include <corofem/gpu.hpp>
+
 #include <map>
 #include <memory>
 #include <mutex>
@@ -58,6 +60,9 @@ class Context {
   static std::shared_ptr<Context> shared(const std::string& selector);
   /// Adopts an application's context, queue and device (retained here, released on destruction).
   static std::shared_ptr<Context> adopt(cl_context context, cl_command_queue queue, cl_device_id device);
+  /// The same from an application's handles (GpuApi::OpenCL, all three); `what` names the option
+  /// in errors. Throws Error(BadInput) for another API or a missing handle.
+  static std::shared_ptr<Context> adopt(const ExternalDevice& external, const std::string& what);
 
   ~Context();
   Context(const Context&) = delete;
@@ -84,5 +89,11 @@ class Context {
   std::mutex mutex_;
   std::map<std::string, cl_program> programs_;
 };
+
+/// A GpuBuffer of an OpenCL buffer: `count` vertices of `stride` bytes from byte `offset`.
+GpuBuffer bufferOf(cl_mem buffer, std::size_t offset = 0, std::size_t stride = 0, std::size_t count = 0);
+/// The cl_mem of an OpenCL GpuBuffer; throws Error(BadInput), naming `what`, for an empty handle or
+/// another API.
+cl_mem memOf(const GpuBuffer& buffer, const std::string& what);
 
 }  // namespace corofem::detail::cl

@@ -383,14 +383,9 @@ DeviceSurface DeviceSurface::make(const SurfaceBinding& binding, const DeviceSur
       binding.vertexTriangles.size() != binding.triangles.size())
     fail(ErrorCode::BadInput, "DeviceSurface::create: the SurfaceBinding is inconsistent (array sizes do not "
          "match its ", n, " vertices); make it with bindSurface");
-  const bool some = options.context || options.queue || options.deviceId;
-  const bool all = options.context && options.queue && options.deviceId;
-  if (some && !all)
-    fail(ErrorCode::BadInput, "DeviceSurfaceOptions: give context, queue and deviceId together, or none of them");
-
   auto impl = std::make_unique<Impl>();
-  impl->ctx = all ? detail::cl::Context::adopt(options.context, options.queue, options.deviceId)
-                  : detail::cl::Context::shared(options.device);
+  impl->ctx = options.external ? detail::cl::Context::adopt(options.external, "DeviceSurfaceOptions::external")
+                               : detail::cl::Context::shared(options.device);
   impl->doublePrecision = options.doublePrecision;
   if (impl->doublePrecision && !impl->ctx->info().fp64)
     fail(ErrorCode::BadInput, "DeviceSurfaceOptions::doublePrecision: device '", impl->device(),
@@ -533,30 +528,27 @@ Status DeviceSurface::update(const double* tetNodePositions, std::size_t tetNode
   });
 }
 
-Status DeviceSurface::updateFromDevice(_cl_mem* tetNodePositions) {
-  return updateFromDevice(tetNodePositions, nullptr, 0);
-}
-
-Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset) {
-  return updateFromDevice(relativeTetNodePositions, offset, 0);
-}
-
-Status DeviceSurface::updateFromDevice(_cl_mem* relativeTetNodePositions, const double* offset, std::size_t firstNode) {
+Status DeviceSurface::updateFromDevice(const GpuBuffer& positions, const double* offset, std::size_t firstNode) {
   return detail::guard([&] {
-    if (!relativeTetNodePositions) fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the buffer is null");
     const Impl& k = *impl_;
+    cl_mem buffer = detail::cl::memOf(positions, "DeviceSurface::updateFromDevice");
+    if (positions.offset % (3 * k.realSize) != 0)
+      fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the positions start at byte ", positions.offset,
+           ", not a whole number of nodes of 3 ", k.doublePrecision ? "doubles" : "floats", "; give the node with ",
+           "firstNode instead");
+    firstNode += positions.offset / (3 * k.realSize);
     // The kernels would read past the buffer: refuse (OpenCL does not check). In whole nodes, so
     // that nothing overflows; the kernel takes the first node as a 32-bit index.
     std::size_t bytes = 0;
-    checkCl(clGetMemObjectInfo(relativeTetNodePositions, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr),
-            "clGetMemObjectInfo (node positions)", k.device());
+    checkCl(clGetMemObjectInfo(buffer, CL_MEM_SIZE, sizeof(bytes), &bytes, nullptr), "clGetMemObjectInfo (node positions)",
+            k.device());
     const std::size_t held = bytes / (3 * k.realSize);  // whole nodes in the buffer
     if (firstNode > std::numeric_limits<cl_uint>::max() || firstNode > held || k.nodeCount > held - firstNode)
       fail(ErrorCode::BadInput, "DeviceSurface::updateFromDevice: the node positions buffer holds ", bytes,
            " bytes (", held, " nodes of 3 ", k.doublePrecision ? "doubles" : "floats", "), but the surface reads ",
            k.nodeCount, " nodes from node ", firstNode, " on; pass the buffer of the tet mesh the surface was "
            "bound to in the surface's precision, and that mesh's first node in it");
-    impl_->run(relativeTetNodePositions, offset, firstNode);
+    impl_->run(buffer, offset, firstNode);
   });
 }
 
@@ -620,15 +612,13 @@ DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::
                                        const DeviceSurfaceOptions& options)
     : s_(std::make_unique<State>()) {
   if (members.empty()) fail(ErrorCode::Internal, "DeviceSurfaceGroup: no bodies");
-  if (!options.context || !options.queue || !options.deviceId)
-    fail(ErrorCode::Internal, "DeviceSurfaceGroup: give the position buffer's context, queue and device");
-  auto ctx = cl::Context::adopt(options.context, options.queue, options.deviceId);
+  auto ctx = cl::Context::adopt(options.external, "DeviceSurfaceGroup (the position buffer's context)");
   const bool gpu = ctx->info().gpu;
   const std::size_t lanes = surfaceLanes(gpu, options.doublePrecision, options.normalPassLanes), blocksPerItem = gpu ? 1 : 4;
   // Each body starts at a work-item's first block (its blocks are its own) and at an address a
   // sub-buffer may start at (CL_DEVICE_MEM_BASE_ADDR_ALIGN, in bits).
   cl_uint alignBits = 0;
-  checkCl(clGetDeviceInfo(options.deviceId, CL_DEVICE_MEM_BASE_ADDR_ALIGN, sizeof(alignBits), &alignBits, nullptr),
+  checkCl(clGetDeviceInfo(ctx->device(), CL_DEVICE_MEM_BASE_ADDR_ALIGN, sizeof(alignBits), &alignBits, nullptr),
           "clGetDeviceInfo(CL_DEVICE_MEM_BASE_ADDR_ALIGN)", ctx->deviceName());
   const std::size_t alignBytes = std::max<std::size_t>(alignBits / 8, 1);
   const std::size_t streamBytes = (options.separateStreams ? 3 : 6) * sizeof(float);
@@ -696,9 +686,12 @@ DeviceSurfaceGroup::DeviceSurfaceGroup(const std::vector<Member>& members, std::
 DeviceSurfaceGroup::~DeviceSurfaceGroup() = default;
 std::size_t DeviceSurfaceGroup::size() const { return s_->base.size(); }
 bool DeviceSurfaceGroup::separateStreams() const { return s_->merged->separateStreams(); }
-_cl_mem* DeviceSurfaceGroup::vertexBuffer(std::size_t m) const { return s_->vertexSubs.at(m).get(); }
-_cl_mem* DeviceSurfaceGroup::normalBuffer(std::size_t m) const {
-  return separateStreams() ? s_->normalSubs.at(m).get() : nullptr;
+GpuBuffer DeviceSurfaceGroup::vertexBuffer(std::size_t m) const {
+  return cl::bufferOf(s_->vertexSubs.at(m).get(), 0, (separateStreams() ? 3 : 6) * sizeof(float), s_->count.at(m));
+}
+GpuBuffer DeviceSurfaceGroup::normalBuffer(std::size_t m) const {
+  return separateStreams() ? cl::bufferOf(s_->normalSubs.at(m).get(), 0, 3 * sizeof(float), s_->count.at(m))
+                           : GpuBuffer{};
 }
 std::vector<DeviceSurfaceBuffer> DeviceSurfaceGroup::buffers() const { return s_->merged->buffers(); }
 std::size_t DeviceSurfaceGroup::allocatedBytes() const { return s_->merged->allocatedBytes(); }
@@ -728,7 +721,7 @@ void DeviceSurfaceGroup::update(_cl_mem* positions, const std::vector<const doub
   checkCl(clEnqueueWriteBuffer(k.ctx->queue(), k.bodyOffsets.get(), CL_FALSE, 0, s_->offsets.size(), s_->offsets.data(),
                                0, nullptr, &s_->written),
           "clEnqueueWriteBuffer (surface body offsets)", k.device());
-  const Status st = s_->merged->updateFromDevice(positions, nullptr, 0);
+  const Status st = s_->merged->updateFromDevice(cl::bufferOf(positions), nullptr, 0);
   if (!st) fail(st.code(), st.message());
 }
 
@@ -744,8 +737,13 @@ std::size_t DeviceSurface::allocatedBytes() const {
   for (const DeviceSurfaceBuffer& b : impl_->allocated) total += b.bytes;
   return total;
 }
-_cl_mem* DeviceSurface::vertexBuffer() const { return impl_->out.get(); }
-_cl_mem* DeviceSurface::normalBuffer() const { return impl_->separate ? impl_->normalsOut.get() : nullptr; }
+GpuBuffer DeviceSurface::vertexBuffer() const {
+  return detail::cl::bufferOf(impl_->out.get(), 0, (impl_->separate ? 3 : 6) * sizeof(float), impl_->vertexCount);
+}
+GpuBuffer DeviceSurface::normalBuffer() const {
+  return impl_->separate ? detail::cl::bufferOf(impl_->normalsOut.get(), 0, 3 * sizeof(float), impl_->vertexCount)
+                         : GpuBuffer{};
+}
 bool DeviceSurface::separateStreams() const { return impl_->separate; }
 std::size_t DeviceSurface::vertexCount() const { return impl_->vertexCount; }
 std::string DeviceSurface::deviceName() const { return impl_->device(); }

@@ -3,10 +3,13 @@
 #pragma once
 
 #include <corofem/embed.hpp>
+#include <corofem/gpu.hpp>
 
 #include <cstddef>
 #include <memory>
 #include <vector>
+
+struct _cl_mem;  // cl_mem, as CL/cl.h declares it (this header is included without OpenCL too)
 
 namespace corofem::detail {
 
@@ -55,8 +58,8 @@ class DeviceSurfaceGroup {
   /// (3 doubles). Does not wait, except for the previous update's write of the offsets (whose host
   /// bytes this one rewrites).
   void update(_cl_mem* positions, const std::vector<const double*>& centroids);
-  _cl_mem* vertexBuffer(std::size_t m) const;  ///< body m's output (positions alone when separate)
-  _cl_mem* normalBuffer(std::size_t m) const;  ///< body m's normals with separate streams, else nullptr
+  GpuBuffer vertexBuffer(std::size_t m) const;  ///< body m's output (positions alone when separate)
+  GpuBuffer normalBuffer(std::size_t m) const;  ///< body m's normals with separate streams, else empty
   bool separateStreams() const;
   /// Blocking read of body m's output as two streams of 3 floats per vertex.
   void read(std::size_t m, float* positions, float* normals) const;

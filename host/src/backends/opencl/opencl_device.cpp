@@ -163,6 +163,14 @@ void registerOpenCLBackend() {
     return out;
   };
   e.resolve = [](const std::string& selector) {
+    if (selector == kExternalSelector) {
+      Candidate c;
+      c.backend = "opencl";
+      c.device = "the application's OpenCL device";
+      c.selector = kExternalSelector;
+      c.driver = "external";
+      return c;
+    }
     const cl::DeviceInfo info = cl::selectDevice(selector);  // DeviceError listing the devices
     const std::vector<cl::DeviceInfo> all = cl::listDevices();
     for (std::size_t i = 0; i < all.size(); ++i)
@@ -180,6 +188,13 @@ void registerOpenCLBackend() {
   };
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
                 const DeviceOptions& options) {
+    if (c.selector == kExternalSelector) {
+      if (!options.external)
+        fail(ErrorCode::BadInput, "\"opencl:", kExternalSelector, "\" names the application's OpenCL device, and "
+             "none was given; set SimulationOptions::device (context, queue, device)");
+      return createOpenCLDevice(problems, solver, cl::Context::adopt(options.external, "SimulationOptions::device"),
+                                options.opencl);
+    }
     return createOpenCLDevice(problems, solver, cl::Context::shared(c.selector), options.opencl);
   };
   e.buildId = [] {

@@ -37,9 +37,7 @@ class OpenCLSurfaces final : public DeviceSurfaces {
     }
     DeviceSurfaceOptions o;
     o.doublePrecision = engine.positionsAreDouble();
-    o.context = engine.context().context();
-    o.queue = engine.context().queue();
-    o.deviceId = engine.context().device();
+    o.external = {GpuApi::OpenCL, engine.context().context(), engine.context().queue(), engine.context().device()};
     o.separateStreams = separateStreams;
     group_ = std::make_unique<DeviceSurfaceGroup>(group, nodes, o);
   }
@@ -50,12 +48,8 @@ class OpenCLSurfaces final : public DeviceSurfaces {
     group_->update(engine_.positionBuffer(), centroids);
   }
   void read(std::size_t member, float* positions, float* normals) override { group_->read(member, positions, normals); }
-  DeviceBufferHandle vertexBuffer(std::size_t member) const override {
-    return handle(group_->vertexBuffer(member), group_->separateStreams() ? 12 : 24);
-  }
-  DeviceBufferHandle normalBuffer(std::size_t member) const override {
-    return group_->separateStreams() ? handle(group_->normalBuffer(member), 12) : DeviceBufferHandle{};
-  }
+  GpuBuffer vertexBuffer(std::size_t member) const override { return group_->vertexBuffer(member); }
+  GpuBuffer normalBuffer(std::size_t member) const override { return group_->normalBuffer(member); }
   bool separateStreams() const override { return group_->separateStreams(); }
   void finish() override { group_->finish(); }
   std::vector<DeviceBuffer> buffers() const override {
@@ -65,14 +59,6 @@ class OpenCLSurfaces final : public DeviceSurfaces {
   }
 
  private:
-  static DeviceBufferHandle handle(_cl_mem* mem, std::size_t stride) {
-    DeviceBufferHandle h;
-    h.api = DeviceBufferHandle::Api::OpenCL;
-    h.buffer = reinterpret_cast<std::uintptr_t>(mem);
-    h.stride = stride;
-    return h;
-  }
-
   SegmentEngine& engine_;
   std::vector<std::size_t> bodies_;
   std::unique_ptr<DeviceSurfaceGroup> group_;

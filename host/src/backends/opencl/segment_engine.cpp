@@ -408,7 +408,12 @@ std::vector<BodySet> SegmentEngine::tiles(const BodySet& bodies, std::size_t til
 
 DevicePositions SegmentEngine::devicePositions(std::size_t s) const {
   const BodySegment& sg = segs_.at(s);
-  return {ctx_->context(), ctx_->queue(), ctx_->device(), pos_.get(), sg.nodeBegin, double_, sg.centroid,
+  const std::size_t nodeBytes = 3 * (double_ ? sizeof(double) : sizeof(float));
+  return {{GpuApi::OpenCL, ctx_->context(), ctx_->queue(), ctx_->device()},
+          cl::bufferOf(pos_.get(), 0, nodeBytes, nodeTotal_),
+          sg.nodeBegin,
+          double_,
+          sg.centroid,
           sg.deviceNode.empty() ? nullptr : sg.deviceNode.data()};
 }
 

@@ -1,0 +1,50 @@
+// Handles of an application's GPU objects as corofem takes and gives them: a buffer a renderer draws
+// from (GpuBuffer) and the device objects an application lends (ExternalDevice). Plain values of
+// no API's types, so that this header and everything that includes it compile without OpenCL or
+// Vulkan headers; the application casts them to its API's types.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace corofem {
+
+/// The API a handle belongs to.
+enum class GpuApi {
+  None,    ///< no handle (a host device, or nothing to give)
+  OpenCL,  ///< cl_mem, cl_context, cl_command_queue, cl_device_id
+  Vulkan,  ///< VkBuffer, VkDevice, ... (the Vulkan backend)
+};
+
+/// A region of a device buffer holding vertices, as a renderer binds it.
+///
+///   corofem::GpuBuffer b = sim.surfaceBuffer(0);
+///   if (b.api == corofem::GpuApi::OpenCL) {
+///     cl_mem mem = reinterpret_cast<cl_mem>(static_cast<std::uintptr_t>(b.handle));
+///     // vertex v at byte b.offset + v * b.stride
+///   }
+struct GpuBuffer {
+  GpuApi api = GpuApi::None;
+  /// The API's handle as an integer: OpenCL, the cl_mem (a pointer); Vulkan, the VkBuffer (a
+  /// 64-bit non-dispatchable handle). 0: none.
+  std::uint64_t handle = 0;
+  std::size_t offset = 0;  ///< bytes from the buffer's start to the first vertex
+  std::size_t stride = 0;  ///< bytes from one vertex to the next
+  std::size_t bytes = 0;   ///< bytes of the region: vertex count * stride
+  explicit operator bool() const { return handle != 0; }
+};
+
+/// Device objects that an application owns and lends to corofem, which retains them (OpenCL) for as
+/// long as it uses them and never destroys them; the application keeps them alive meanwhile.
+struct ExternalDevice {
+  GpuApi api = GpuApi::None;  ///< None: none lent
+  /// OpenCL: the cl_context, an in-order cl_command_queue on it and that queue's cl_device_id (all
+  /// three). corofem's buffers and kernels then live in the application's context, so that its
+  /// output buffers can be shared with the application's own work on the queue.
+  void* context = nullptr;
+  void* queue = nullptr;
+  void* device = nullptr;
+  explicit operator bool() const { return api != GpuApi::None; }
+};
+
+}  // namespace corofem
