@@ -109,6 +109,8 @@ struct Simulation::Impl {
   // -- surfaces (surfaces.cpp)
   /// The set that holds body b's surface on its device, up to date (enqueued), or nullptr on the
   /// host path; *member its index in the set.
+  /// surfaceBuffer (normals false) or surfaceNormalBuffer (true) of a body: empty where there is none.
+  GpuBuffer surfaceBufferOf(int body, bool normals);
   SurfaceSet* refreshSurface(Body& b, std::size_t* member);
   /// Makes the group's surface sets for its device as it is now (after a failover too).
   void ensureSurfaces(Group& g);

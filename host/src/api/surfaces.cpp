@@ -105,31 +105,22 @@ Status Simulation::readSurface(int body, std::vector<double>& positions, std::ve
   });
 }
 
-GpuBuffer Simulation::surfaceBuffer(int body) const {
+GpuBuffer Simulation::Impl::surfaceBufferOf(int body, bool normals) {
   GpuBuffer buffer;
-  const detail::TaskScope tasks(impl_->tasks);
+  const detail::TaskScope scope(tasks);
   const Status st = detail::guard([&] {
-    if (body < 0 || body >= bodyCount()) return;
-    Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
-    if (!b.binding) return;
+    if (body < 0 || body >= static_cast<int>(bodies.size())) return;
+    Body& b = bodies[static_cast<std::size_t>(body)];
+    if (!b.binding || (normals && !b.separateStreams)) return;
     std::size_t member = 0;
-    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) buffer = set->surfaces->vertexBuffer(member);
+    if (SurfaceSet* set = refreshSurface(b, &member))
+      buffer = normals ? set->surfaces->normalBuffer(member) : set->surfaces->vertexBuffer(member);
   });
   return st ? buffer : GpuBuffer{};
 }
 
-GpuBuffer Simulation::surfaceNormalBuffer(int body) const {
-  GpuBuffer buffer;
-  const detail::TaskScope tasks(impl_->tasks);
-  const Status st = detail::guard([&] {
-    if (body < 0 || body >= bodyCount()) return;
-    Impl::Body& b = impl_->bodies[static_cast<std::size_t>(body)];
-    if (!b.binding || !b.separateStreams) return;
-    std::size_t member = 0;
-    if (Impl::SurfaceSet* set = impl_->refreshSurface(b, &member)) buffer = set->surfaces->normalBuffer(member);
-  });
-  return st ? buffer : GpuBuffer{};
-}
+GpuBuffer Simulation::surfaceBuffer(int body) const { return impl_->surfaceBufferOf(body, false); }
+GpuBuffer Simulation::surfaceNormalBuffer(int body) const { return impl_->surfaceBufferOf(body, true); }
 
 Status Simulation::updateSurface(int body) const {
   const detail::TaskScope tasks(impl_->tasks);

@@ -84,26 +84,10 @@ double DynamicsDriver::freeNorm(const Body& b, const Eigen::VectorXd& v) const {
   return (v.array() * b.freeMask).matrix().norm();
 }
 
-void DynamicsDriver::capture(const Body& b, State& s) const {
-  s.x = b.x;
-  s.v = b.v;
-  s.a = b.a;
-  s.fextPrev = b.fextPrev;
-  s.reactionPrev = b.reactionPrev;
-  s.work = b.work;
-  s.t = b.t;
-  s.supportWork = b.supportWork;
-}
+void DynamicsDriver::capture(const Body& b, State& s) const { s = static_cast<const State&>(b); }
 
 void DynamicsDriver::restore(Body& b, const State& s) {
-  b.x = s.x;
-  b.v = s.v;
-  b.a = s.a;
-  b.fextPrev = s.fextPrev;
-  b.reactionPrev = s.reactionPrev;
-  b.work = s.work;
-  b.t = s.t;
-  b.supportWork = s.supportWork;
+  static_cast<State&>(b) = s;
   b.deviceAtCommitted = false;
 }
 

@@ -100,14 +100,12 @@ class DynamicsDriver final : public Driver {
   /// One body: its constants, its committed state (the fields of State), the state before its last
   /// step (rollback), and the scratch of the step in progress (sized by the first step, then
   /// assigned in place: a step allocates no vector).
-  struct Body {
+  struct Body : State {
     const Problem* problem = nullptr;
     Eigen::ArrayXd freeMask;    ///< 1 on free dofs, 0 on constrained ones
     double diagonal = 1.0;      ///< rest bounding-box diagonal (m), the body's length scale
     /// Force below which a residual counts as zero: (lambda + 2 mu) diagonal^2 1e-8 (N).
     double forceFloor = 0.0;
-    Eigen::VectorXd x, v, a, fextPrev, reactionPrev;
-    double work = 0.0, t = 0.0, supportWork = 0.0;
     /// Kinetic + elastic energy at t = 0 (the runaway guard's budget).
     double initialEnergy = 0.0;
     bool started = false;
