@@ -593,7 +593,9 @@ TEST(BatchSimulation, OpenCLBatchAgreesWithUnbatchedBodies) {
 #endif
 }
 
-/// Sets an environment variable for its lifetime (read when a backend or batch is made).
+/// A counter of the devices a run used, from its scheduler report ("device_counters"; 0 when absent).
+long long counter(const Trace& t, const char* name) { return t.scheduler["device_counters"].value(name, 0LL); }
+
 TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
 #ifndef COROFEM_WITH_OPENCL
   GTEST_SKIP() << "built without COROFEM_WITH_OPENCL";
@@ -605,7 +607,9 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
   // same runs without teams and with every PCG iteration launched (groupPcg 0; OpenCLTuning through
   // SimulationOptions): the same statuses, reports, positions, velocities and energies, bit for bit.
   // On a GPU all three launch every iteration.
-  const auto oneLaunches = [] { return detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount(); };
+  const auto oneLaunches = [](const Trace& t) {
+    return counter(t, "pcg_group_launches") + counter(t, "pcg_team_launches");
+  };
   for (Precision precision : {Precision::Float, Precision::Double}) {
     SCOPED_TRACE(toString(precision));
     Scene scene = openclScene(precision, 6);
@@ -617,8 +621,6 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
       SCOPED_TRACE(batch ? "batched" : "each body alone");
       scene.backend.batch = batch;
       Trace grouped, noTeams, launched;
-      const unsigned long long before = oneLaunches();
-      const unsigned long long teamsBefore = detail::teamPcgLaunchCount();
       {
         SimulationOptions o;
         o.opencl.groupPcg = 1;
@@ -626,26 +628,23 @@ TEST(BatchSimulation, OneLaunchPcgGivesTheLaunchedRunBitForBit) {
         o.opencl.teamPcgMinElements = 1;
         grouped = run(scene, o);
       }
-      const unsigned long long between = oneLaunches(), teamsBetween = detail::teamPcgLaunchCount();
       const detail::cl::DeviceInfo& info = detail::cl::Context::shared("")->info();
       if (!batch && info.cpu && info.computeUnits > 1)
-        EXPECT_GT(teamsBetween, teamsBefore) << "each body alone took teams on this CPU device";
+        EXPECT_GT(counter(grouped, "pcg_team_launches"), 0) << "each body alone took teams on this CPU device";
       {
         SimulationOptions o;
         o.opencl.groupPcg = 1;
         o.opencl.teamPcg = 0;
         noTeams = run(scene, o);
       }
-      EXPECT_EQ(detail::teamPcgLaunchCount(), teamsBetween) << "teamPcg 0 launched no team";
-      const unsigned long long after = oneLaunches();
+      EXPECT_EQ(counter(noTeams, "pcg_team_launches"), 0) << "teamPcg 0 launched no team";
       {
         SimulationOptions o;
         o.opencl.groupPcg = 0;
         launched = run(scene, o);
       }
-      EXPECT_EQ(oneLaunches(), after) << "groupPcg 0 launched no group";
-      if (!detail::cl::Context::shared("")->info().gpu)
-        EXPECT_GT(between, before) << "a CPU device runs these small bodies' iterations in one launch";
+      EXPECT_EQ(oneLaunches(launched), 0) << "groupPcg 0 launched no group";
+      if (!info.gpu) EXPECT_GT(oneLaunches(grouped), 0) << "a CPU device runs these small bodies' iterations in one launch";
       ASSERT_EQ(noTeams.states.size(), 6u);
       expectSameRun(noTeams, launched);
       ASSERT_EQ(grouped.states.size(), 6u);
@@ -696,21 +695,21 @@ TEST(BatchSimulation, PacksOfOneMeshGiveTheOneWorkGroupRunBitForBit) {
       continue;
     }
     Trace packed, grouped;
-    const unsigned long long before = detail::packPcgLaunchCount();
     {
       SimulationOptions o;
       o.opencl.packPcg = 1;
       packed = run(scene, o);
     }
-    const unsigned long long between = detail::packPcgLaunchCount();
     {
       SimulationOptions o;
       o.opencl.packPcg = 0;
       grouped = run(scene, o);
     }
-    EXPECT_EQ(detail::packPcgLaunchCount(), between) << "packPcg 0 ran no pack";
-    if (!detail::cl::Context::shared("")->info().gpu)
-      EXPECT_GT(between, before) << "a CPU device runs the copies' iterations in packs";
+    EXPECT_EQ(counter(grouped, "pcg_pack_launches"), 0) << "packPcg 0 ran no pack";
+    if (!detail::cl::Context::shared("")->info().gpu) {
+      EXPECT_GT(counter(packed, "pcg_pack_launches"), 0) << "a CPU device runs the copies' iterations in packs";
+      EXPECT_GE(counter(packed, "pcg_pack_lanes"), counter(packed, "pcg_pack_launches"));
+    }
     ASSERT_EQ(packed.states.size(), 5u);
     expectSameRun(packed, grouped);
   }

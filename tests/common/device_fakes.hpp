@@ -57,6 +57,7 @@ class ForwardingDevice : public detail::Device {
     return inner_->createSurfaces(m, separate);
   }
   std::vector<detail::DeviceBuffer> buffers() const override { return inner_->buffers(); }
+  std::vector<detail::DeviceCounter> counters() const override { return inner_->counters(); }
   bool devicePositions(std::size_t body, detail::DevicePositions& out) const override {
     return inner_->devicePositions(body, out);
   }

@@ -11,6 +11,7 @@
 // largest entry, solutions cond(A) * tol ~ 1e-8; float: positions rounded to float give 1e-4 on
 // forces, the float operator times cond(A) ~1e3 gives 1e-3 on solutions).
 #include "backends/opencl/opencl_backend.hpp"
+#include "backends/opencl/cpu_pcg.hpp"
 #include "backends/opencl/segment_engine.hpp"
 #include "common/opencl_test_access.hpp"
 #include "common/shuffled_mesh.hpp"
@@ -26,7 +27,9 @@
 #include <cmath>
 #include <cstring>
 #include <cstdlib>
+#include <mutex>
 #include <random>
+#include <set>
 #include <thread>
 
 namespace corofem {
@@ -38,11 +41,50 @@ using test::BatchOp;
 using test::BatchRequest;
 using test::randomVector;
 
+class BatchOnDevice;
+
+/// The one-launch PCG iterations (detail::CpuPcgCounts) of every BatchOnDevice of the process so
+/// far, those alive and those gone: what a test compares before and after a round.
+class LaunchTotals {
+ public:
+  static LaunchTotals& get() {
+    static LaunchTotals t;
+    return t;
+  }
+  void add(const BatchOnDevice* b) {
+    std::lock_guard<std::mutex> lock(m_);
+    live_.insert(b);
+  }
+  void remove(const BatchOnDevice* b, const detail::CpuPcgCounts& c) {
+    std::lock_guard<std::mutex> lock(m_);
+    live_.erase(b);
+    accumulate(gone_, c);
+  }
+  detail::CpuPcgCounts now();
+
+ private:
+  static void accumulate(detail::CpuPcgCounts& to, const detail::CpuPcgCounts& c) {
+    to.groupLaunches += c.groupLaunches;
+    to.teamLaunches += c.teamLaunches;
+    to.packLaunches += c.packLaunches;
+    to.packLanes += c.packLanes;
+  }
+  std::mutex m_;
+  std::set<const BatchOnDevice*> live_;
+  detail::CpuPcgCounts gone_;
+};
+
 /// Bodies on one OpenCL device, in rounds of requests, with the device and its engine in view.
 class BatchOnDevice : public test::DeviceBatch {
  public:
   BatchOnDevice(detail::OpenCLBatch b, const SolverDesc& solver)
-      : test::DeviceBatch(*b.device, solver), batch_(std::move(b)) {}
+      : test::DeviceBatch(*b.device, solver), batch_(std::move(b)) {
+    LaunchTotals::get().add(this);
+  }
+  ~BatchOnDevice() { LaunchTotals::get().remove(this, batch_.engine->pcgCounts()); }
+  BatchOnDevice(const BatchOnDevice&) = delete;
+  BatchOnDevice& operator=(const BatchOnDevice&) = delete;
+  detail::CpuPcgCounts pcgCounts() const { return batch_.engine->pcgCounts(); }
   std::string name() const { return batch_.device->name(); }
   bool devicePositions(std::size_t body, detail::DevicePositions& out) const {
     return batch_.device->devicePositions(body, out);
@@ -59,6 +101,18 @@ class BatchOnDevice : public test::DeviceBatch {
  private:
   detail::OpenCLBatch batch_;
 };
+
+detail::CpuPcgCounts LaunchTotals::now() {
+  std::lock_guard<std::mutex> lock(m_);
+  detail::CpuPcgCounts sum = gone_;
+  for (const BatchOnDevice* b : live_) accumulate(sum, b->pcgCounts());
+  return sum;
+}
+
+unsigned long long groupPcgLaunchCount() { return LaunchTotals::get().now().groupLaunches; }
+unsigned long long teamPcgLaunchCount() { return LaunchTotals::get().now().teamLaunches; }
+unsigned long long packPcgLaunchCount() { return LaunchTotals::get().now().packLaunches; }
+unsigned long long packPcgLaneCount() { return LaunchTotals::get().now().packLanes; }
 
 /// The bodies `problems` on one device of `context`.
 std::unique_ptr<BatchOnDevice> batchOn(const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
@@ -301,11 +355,11 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
         sol[i] = Eigen::VectorXd::Zero(rhs[i].size());
         round.push_back(request(BatchOp::Solve, i, &rhs[i], &sol[i], {900.0, 30.0, 1.0}));
       }
-      const unsigned long long team = detail::teamPcgLaunchCount(), group = detail::groupPcgLaunchCount(),
-                               pack = detail::packPcgLaunchCount();
+      const unsigned long long team = teamPcgLaunchCount(), group = groupPcgLaunchCount(),
+                               pack = packPcgLaunchCount();
       runOk(batch, round);
-      return detail::teamPcgLaunchCount() > team                                                   ? 2
-             : detail::groupPcgLaunchCount() > group || detail::packPcgLaunchCount() > pack ? 1
+      return teamPcgLaunchCount() > team                                                   ? 2
+             : groupPcgLaunchCount() > group || packPcgLaunchCount() > pack ? 1
                                                                                              : 0;
     }
   };
@@ -579,14 +633,14 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
   // every body, one after the other.
   detail::OpenCLTuning single = grouped;
   single.claimWorkGroups = 1;
-  std::vector<Way> ways = {{"one work-group per body", grouped, &detail::groupPcgLaunchCount},
-                           {"one work-group taking every body in turn", single, &detail::groupPcgLaunchCount}};
+  std::vector<Way> ways = {{"one work-group per body", grouped, &groupPcgLaunchCount},
+                           {"one work-group taking every body in turn", single, &groupPcgLaunchCount}};
   if (context()->info().cpu)
     for (std::size_t team : {2, 3, 8}) {
       detail::OpenCLTuning t = grouped;
       t.teamPcg = 1;
       t.teamPcgSize = team;
-      ways.push_back({"teams of " + std::to_string(team), t, &detail::teamPcgLaunchCount});
+      ways.push_back({"teams of " + std::to_string(team), t, &teamPcgLaunchCount});
     }
   const detail::SystemCoeffs dyn[2] = {{14400.0, 120.0, 1.0}, {900.0, 30.0, 1.0}};
   for (const SolverDesc& s : pcgSettings()) {
@@ -602,9 +656,9 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
     }
     runOk(*b, setB);
     for (std::size_t i = 0; i < K; ++i) solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], dyn[i % 2]));
-    const unsigned long long launchedBefore = detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount();
+    const unsigned long long launchedBefore = groupPcgLaunchCount() + teamPcgLaunchCount();
     runOk(*b, solveB);
-    EXPECT_EQ(detail::groupPcgLaunchCount() + detail::teamPcgLaunchCount(), launchedBefore)
+    EXPECT_EQ(groupPcgLaunchCount() + teamPcgLaunchCount(), launchedBefore)
         << "the launched path took it";
     for (const Way& way : ways) {
       auto a = batchOf(ps, s, way.options);
@@ -700,15 +754,15 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
           solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], c));
           solveB.push_back(request(BatchOp::Solve, i, &rhs[i], &xb[i], c));
         }
-        const unsigned long long packsBefore = detail::packPcgLaunchCount(), lanesBefore = detail::packPcgLaneCount();
+        const unsigned long long packsBefore = packPcgLaunchCount(), lanesBefore = packPcgLaneCount();
         runOk(*a, solveA);
         if (cap > 1) {
-          EXPECT_EQ(detail::packPcgLaunchCount(), packsBefore + 1) << variant.name << ": the packs' iterations in one launch";
-          EXPECT_EQ(detail::packPcgLaneCount(), lanesBefore + packedLanes(copies)) << variant.name << ", round " << round;
+          EXPECT_EQ(packPcgLaunchCount(), packsBefore + 1) << variant.name << ": the packs' iterations in one launch";
+          EXPECT_EQ(packPcgLaneCount(), lanesBefore + packedLanes(copies)) << variant.name << ", round " << round;
         }
-        const unsigned long long noPacks = detail::packPcgLaunchCount();
+        const unsigned long long noPacks = packPcgLaunchCount();
         runOk(*b, solveB);
-        EXPECT_EQ(detail::packPcgLaunchCount(), noPacks) << "packPcg = 0 took the packs";
+        EXPECT_EQ(packPcgLaunchCount(), noPacks) << "packPcg = 0 took the packs";
         for (std::size_t j = 0; j < who.size(); ++j) {
           const std::size_t i = who[j];
           SCOPED_TRACE(variant.name + ", " + ps[i].name + ", round " + std::to_string(round) + ", " + describe(s));
@@ -770,9 +824,9 @@ TEST_P(OpenCLBatch, PackedBodiesConvergeAtTheCapsLastIterationAsInWorkGroups) {
   const int cap = counts[counts.size() / 2];  // some copies converge before, at or after it
   ASSERT_GE(cap, 3) << "the pack must run iterations before the cap's last";
   std::vector<Eigen::VectorXd> xa, xb;
-  const unsigned long long lanesBefore = detail::packPcgLaneCount();
+  const unsigned long long lanesBefore = packPcgLaneCount();
   const std::vector<BatchRequest> a = solveAll(packed, cap, xa);
-  EXPECT_GT(detail::packPcgLaneCount(), lanesBefore) << "the copies ran in packs";
+  EXPECT_GT(packPcgLaneCount(), lanesBefore) << "the copies ran in packs";
   const std::vector<BatchRequest> b = solveAll(grouped, cap, xb);
   int atCap = 0;
   for (std::size_t i = 0; i < K; ++i) {
@@ -827,9 +881,9 @@ TEST_P(OpenCLBatch, UnpackedBodyStoppedAtTheSetUpStaysStoppedBesidePacks) {
       return solves;
     };
     std::vector<Eigen::VectorXd> xa, xb;
-    const unsigned long long lanesBefore = detail::packPcgLaneCount();
+    const unsigned long long lanesBefore = packPcgLaneCount();
     const std::vector<BatchRequest> a = run(packed, xa);
-    EXPECT_GT(detail::packPcgLaneCount(), lanesBefore) << "the copies ran in packs";
+    EXPECT_GT(packPcgLaneCount(), lanesBefore) << "the copies ran in packs";
     const std::vector<BatchRequest> b = run(grouped, xb);
     for (std::size_t i = 0; i < K; ++i) {
       SCOPED_TRACE(ps[i].name + ", preconditioner " + std::to_string(static_cast<int>(pc)));
@@ -890,9 +944,9 @@ TEST_P(OpenCLBatch, PackRuleTakesPacksWhereTheyShortenTheRound) {
     runOk(*batch, round.set);
     std::vector<std::size_t> all(ps.size());
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = i;
-    const unsigned long long before = detail::packPcgLaunchCount();
+    const unsigned long long before = packPcgLaunchCount();
     EXPECT_EQ(round.path(*batch, all), 1) << "one launch for the round";
-    EXPECT_EQ(detail::packPcgLaunchCount() > before, packs);
+    EXPECT_EQ(packPcgLaunchCount() > before, packs);
   }
 }
 
@@ -918,7 +972,7 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
     // without the reset, every chunk would look claimed and the iterations would do nothing.
     auto a = batchOf(ps, solver(), teamed), b = batchOf(ps, solver(), launched);
     detail::SegmentEngineTestAccess::setTeamEpoch(a->engine(), 0xffffffffu - 20000u);  // a round advances 4 x (cap - 1) = 7,996
-    const unsigned long long before = detail::teamPcgLaunchCount();
+    const unsigned long long before = teamPcgLaunchCount();
     int rounds = 0;
     for (int frame = 0; frame < 3; ++frame) {
       for (const std::vector<std::size_t>& who : std::vector<std::vector<std::size_t>>{{0}, {1}, {2, 4}, {0, 1, 2, 3, 4, 5}}) {
@@ -948,7 +1002,7 @@ TEST_P(OpenCLBatch, TeamsSolveRoundAfterRoundWithCountersLeftAtZero) {
         }
       }
     }
-    EXPECT_EQ(detail::teamPcgLaunchCount(), before + static_cast<unsigned long long>(rounds))
+    EXPECT_EQ(teamPcgLaunchCount(), before + static_cast<unsigned long long>(rounds))
         << "every round's iterations ran in one team launch";
   }
 }
@@ -1022,9 +1076,9 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
     rounds.sol[0] = Eigen::VectorXd::Zero(rounds.rhs[0].size());
     std::vector<BatchRequest> solve = {
         request(BatchOp::Solve, 0, &rounds.rhs[0], &rounds.sol[0], {900.0, 30.0, 1.0})};
-    const unsigned long long team = detail::teamPcgLaunchCount();
+    const unsigned long long team = teamPcgLaunchCount();
     runOk(*capped, solve);
-    EXPECT_EQ(detail::teamPcgLaunchCount(), team) << "round " << round << ": no team with a cap of 2^30 + 1";
+    EXPECT_EQ(teamPcgLaunchCount(), team) << "round " << round << ": no team with a cap of 2^30 + 1";
     EXPECT_TRUE(solve[0].stats.converged) << "round " << round;
   }
 }
@@ -1083,7 +1137,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
   launched.groupPcg = 0;
   const Answers expected = solveRounds(*batchOn(all, s, context(), launched));
   ASSERT_TRUE(expected.error.empty()) << expected.error;
-  const unsigned long long before = detail::teamPcgLaunchCount();
+  const unsigned long long before = teamPcgLaunchCount();
   constexpr int kRepeats = 3;
   Answers got[2];
   auto worker = [&](int t) {
@@ -1111,7 +1165,7 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
         EXPECT_TRUE(sameBits(got[t].x[r][i], expected.x[r][i])) << "round " << r << ", " << ps[i].name;
       }
   }
-  EXPECT_EQ(detail::teamPcgLaunchCount() - before, 2ull * kRepeats * rounds.size()) << "every round in teams";
+  EXPECT_EQ(teamPcgLaunchCount() - before, 2ull * kRepeats * rounds.size()) << "every round in teams";
 }
 
 TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {

@@ -153,6 +153,14 @@ TEST(Failover, EveryCandidateFailingIsADeviceErrorAndKeepsTheState) {
   std::vector<double> after;
   ASSERT_TRUE(sim->readPositions(0, after));
   EXPECT_EQ(before, after);
+  // The reports still describe the scene, and the next step fails the same way, at once.
+  const auto report = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(report["fallbacks"].size(), 2u) << report.dump(1);
+  EXPECT_FALSE(nlohmann::json::parse(sim->planReport())["bodies"].empty());
+  EXPECT_FALSE(sim->backendName().empty());
+  const Status again = sim->step();
+  EXPECT_EQ(again.code(), ErrorCode::DeviceError);
+  EXPECT_NE(again.message().find("every backend failed"), std::string::npos) << again.message();
 }
 
 // An explicit choice that cannot start is an error, as before the scheduler (no silent move).

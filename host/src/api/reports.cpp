@@ -17,6 +17,13 @@ json buffersJson(const std::vector<detail::DeviceBuffer>& buffers) {
   return out;
 }
 
+/// {"name": value} of a device's counters.
+json countersJson(const std::vector<detail::DeviceCounter>& counters) {
+  json out = json::object();
+  for (const detail::DeviceCounter& c : counters) out[c.name] = c.value;
+  return out;
+}
+
 }  // namespace
 
 json Simulation::Impl::batchJson(const Body& b) const {
@@ -49,7 +56,8 @@ json Simulation::Impl::batchesJson() const {
     out.push_back({{"device", g.candidate}, {"backend", g.slot->device().name()}, {"bodies", names},
                    {"active_bodies", active}, {"rounds", st.calls}, {"requests", st.bodies},
                    {"largest_round", st.largestCall}, {"device_seconds", st.deviceSeconds},
-                   {"rounds_by_call", byCall}, {"allocated_bytes", bytes}, {"buffers", buffersJson(buffers)}});
+                   {"rounds_by_call", byCall}, {"allocated_bytes", bytes}, {"buffers", buffersJson(buffers)},
+                   {"device_counters", countersJson(g.slot->device().counters())}});
   }
   return out;
 }
@@ -88,6 +96,13 @@ std::string Simulation::schedulerReport() const {
   j["from_cache"] = first["from_cache"];
   j["bodies"] = bodies;
   j["fallbacks"] = fallbacks;
+  // What the devices in use did that the answers do not show, summed over them (a device that
+  // failed over took its counts with it).
+  json counters = json::object();
+  for (const Impl::Group& g : s.groups)
+    for (const detail::DeviceCounter& c : g.slot->device().counters())
+      counters[c.name] = counters.value(c.name, 0LL) + c.value;
+  j["device_counters"] = counters;
   // Bodies that share a device's buffers and launches, and those that could have but run alone.
   j["batches"] = s.batchesJson();
   j["unbatched"] = s.unbatchedJson();

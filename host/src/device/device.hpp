@@ -68,6 +68,12 @@ struct DevicePositions {
   const std::uint32_t* deviceNode = nullptr;
 };
 
+/// A count of something a device did, by name (the scheduler report's "device_counters").
+struct DeviceCounter {
+  std::string name;
+  long long value = 0;
+};
+
 using BodySet = std::vector<std::size_t>;
 using ConstVectors = std::vector<const Eigen::VectorXd*>;
 using Vectors = std::vector<Eigen::VectorXd*>;
@@ -204,6 +210,9 @@ class Device {
 
   /// The device buffers it allocated, each at its allocated size (empty for host devices).
   virtual std::vector<DeviceBuffer> buffers() const { return {}; }
+  /// What it did so far that the answers do not show, by name (the OpenCL backend: the PCG
+  /// strategies a CPU device took, "pcg_group_launches", ...); empty by default.
+  virtual std::vector<DeviceCounter> counters() const { return {}; }
   /// Fills `out` and returns true when the body's node positions live on an OpenCL device.
   virtual bool devicePositions(std::size_t body, DevicePositions& out) const {
     (void)body;

@@ -87,7 +87,7 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
     }
     return;
   }
-  device_.reset();
+  exhausted_ = true;  // the last device stays for the reports; no call reaches it again
   std::string names;
   for (const Problem* p : problems_) names += (names.empty() ? "'" : ", '") + p->name + "'";
   fail(ErrorCode::DeviceError, problems_.size() > 1 ? "bodies " : "body ", names, ": every backend failed:", failures_);
@@ -103,7 +103,7 @@ void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   for (;;) {
-    if (!device_) {
+    if (exhausted_) {
       std::string names;
       for (const Problem* p : problems_) names += (names.empty() ? "'" : ", '") + p->name + "'";
       fail(ErrorCode::DeviceError, "body ", names, ": every backend failed:", failures_);

@@ -105,7 +105,8 @@ class DeviceSlot {
   const Log& log_;
   std::vector<Candidate> order_;
   std::size_t index_ = 0;
-  std::unique_ptr<Device> device_;
+  std::unique_ptr<Device> device_;  ///< never null once constructed
+  bool exhausted_ = false;          ///< every candidate failed: each call is a DeviceError
   std::vector<Eigen::VectorXd> lastX_;  ///< per body: the last positions given (empty: none yet)
   std::string when_ = "create";
   std::vector<FallbackEvent> events_;

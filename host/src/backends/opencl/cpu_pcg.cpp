@@ -27,17 +27,7 @@ namespace {
 
 std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; }
 
-std::atomic<unsigned long long> groupPcgLaunches{0};
-std::atomic<unsigned long long> teamPcgLaunches{0};
-std::atomic<unsigned long long> packPcgLaunches{0};
-std::atomic<unsigned long long> packPcgLanes{0};
-
 }  // namespace
-
-unsigned long long groupPcgLaunchCount() { return groupPcgLaunches.load(); }
-unsigned long long teamPcgLaunchCount() { return teamPcgLaunches.load(); }
-unsigned long long packPcgLaunchCount() { return packPcgLaunches.load(); }
-unsigned long long packPcgLaneCount() { return packPcgLanes.load(); }
 
 CpuPcg::CpuPcg(SegmentEngine& engine) : e_(engine) {
   group_ = e_.tuning_.groupPcg != 0;
@@ -289,7 +279,7 @@ void CpuPcg::launchIterations(cl_uint iterations) {
                   e.rotatedGradients(), e.nodeStart_, e.nodeEntries_, e.elemOut_, e.mass_, e.free_, e.minv_, e.p_,
                   e.s_, e.x_, e.r_, e.z_, e.q_, e.partials_, e.partialsW_, e.scalars_, iterations, tol2, groupOrder_,
                   cl_uint(count));
-    ++groupPcgLaunches;
+    ++counts_.groupLaunches;
   }
   if (round.unpacked && teamed && e.activeLo_ < e.activeHi_) {
     // teamSize_ work-groups per segment of the active span.
@@ -300,7 +290,7 @@ void CpuPcg::launchIterations(cl_uint iterations) {
                   e.s_, e.x_, e.r_, e.z_, e.q_, e.partials_, e.partialsW_, e.scalars_, iterations, tol2, groupOrder_,
                   cl_uint(0));
     teamEpoch_ += 4 * iterations;
-    ++teamPcgLaunches;
+    ++counts_.teamLaunches;
   }
   if (!round.packTable.empty()) {  // the packs' bodies: their vectors in, the iterations, the vectors out
     const std::size_t slots = (round.packTable.size() - 1) / kPackInfoCount;  // and the claim word
@@ -316,8 +306,8 @@ void CpuPcg::launchIterations(cl_uint iterations) {
                   packPartials_, e.partials_, e.scalars_, rows, iterations, fresh, tol2);
     e.launchRange(kPackOut_, 0, slots * e.wg_, e.wg_, packInfo_, e.segInfoBuf_, e.x_, e.r_, e.z_, e.p_, e.s_, e.q_,
                   packVec_, rows);
-    ++packPcgLaunches;
-    packPcgLanes += static_cast<unsigned long long>(std::count(round.packed.begin(), round.packed.end(), char(1)));
+    ++counts_.packLaunches;
+    counts_.packLanes += static_cast<unsigned long long>(std::count(round.packed.begin(), round.packed.end(), char(1)));
   }
 }
 

@@ -20,6 +20,14 @@ namespace corofem::detail {
 
 class SegmentEngine;
 
+/// The one-launch PCG iterations an engine ran (Device::counters: "pcg_group_launches", ...).
+struct CpuPcgCounts {
+  unsigned long long groupLaunches = 0;  ///< launches of pcg_iterate_group
+  unsigned long long teamLaunches = 0;   ///< launches of pcg_iterate_team
+  unsigned long long packLaunches = 0;   ///< launches of pcg_iterate_pack
+  unsigned long long packLanes = 0;      ///< bodies iterated in those packs (one per lane of a launch)
+};
+
 class CpuPcg {
  public:
   /// After the engine's segments are laid out: finds the pack meshes.
@@ -47,8 +55,10 @@ class CpuPcg {
   /// Enqueues `iterations` iterations (every one but the cap's last) of the round's running bodies
   /// in one launch each for the unpacked (group or team) and for the packs.
   void launchIterations(cl_uint iterations);
+  const CpuPcgCounts& counts() const { return counts_; }
 
  private:
+  CpuPcgCounts counts_;
   /// teamState_ between launches: the counts at zero, the claim words at epoch 0.
   std::vector<cl_uint> teamStateAtRest() const;
   void findPackMeshes();

@@ -8,6 +8,7 @@
 #include "backends/opencl/opencl_backend.hpp"
 
 #include "backends/opencl/opencl_surfaces.hpp"
+#include "backends/opencl/cpu_pcg.hpp"
 #include "backends/opencl/segment_engine.hpp"
 #include "device/registry.hpp"
 #include "solve/pcg.hpp"
@@ -61,6 +62,13 @@ class OpenCLDevice final : public Device {
   }
 
   std::vector<DeviceBuffer> buffers() const override { return engine_.buffers(); }
+  std::vector<DeviceCounter> counters() const override {
+    const CpuPcgCounts c = engine_.pcgCounts();
+    return {{"pcg_group_launches", static_cast<long long>(c.groupLaunches)},
+            {"pcg_team_launches", static_cast<long long>(c.teamLaunches)},
+            {"pcg_pack_launches", static_cast<long long>(c.packLaunches)},
+            {"pcg_pack_lanes", static_cast<long long>(c.packLanes)}};
+  }
   bool devicePositions(std::size_t body, DevicePositions& out) const override {
     if (body >= engine_.segmentCount()) return false;
     out = engine_.devicePositions(body);

@@ -406,6 +406,8 @@ std::vector<BodySet> SegmentEngine::tiles(const BodySet& bodies, std::size_t til
   return out;
 }
 
+CpuPcgCounts SegmentEngine::pcgCounts() const { return cpu_ ? cpu_->counts() : CpuPcgCounts{}; }
+
 DevicePositions SegmentEngine::devicePositions(std::size_t s) const {
   const BodySegment& sg = segs_.at(s);
   const std::size_t nodeBytes = 3 * (double_ ? sizeof(double) : sizeof(float));

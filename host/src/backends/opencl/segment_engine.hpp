@@ -55,17 +55,8 @@ struct KernelProfile {
   double idleSecondsBefore = 0.0;  ///< summed idle time of the device before its launches
 };
 
-/// Launches of pcg_iterate_group (one-launch PCG iterations) by every engine of the process so
-/// far: tests check with it that the path they compare was taken.
-unsigned long long groupPcgLaunchCount();
-/// Launches of pcg_iterate_team (one-launch PCG iterations, several work-groups per body) so far.
-unsigned long long teamPcgLaunchCount();
-/// Launches of pcg_iterate_pack (one-launch PCG iterations, bodies of one mesh in vector lanes) so far.
-unsigned long long packPcgLaunchCount();
-/// Bodies iterated in those packs so far (one per lane of a launch).
-unsigned long long packPcgLaneCount();
-
 class CpuPcg;
+struct CpuPcgCounts;
 
 class SegmentEngine {
  public:
@@ -120,6 +111,8 @@ class SegmentEngine {
   const double* positionCentroid(std::size_t s) const { return segs_[s].centroid; }
   /// Segment s's positions as Device::devicePositions describes them (its nodes from nodeBegin).
   DevicePositions devicePositions(std::size_t s) const;
+  /// The one-launch PCG iterations this engine ran (zeros on a GPU, which launches every iteration).
+  CpuPcgCounts pcgCounts() const;
 
   // Device-only work on every segment (benchmarks), no transfers.
   void enqueueRotations();
