@@ -1,7 +1,9 @@
 // Kernel conformance of the OpenCL backend against the double-precision element mathematics
-// (model/element.hpp): rotations (every method), internal forces, the rotated-stiffness product
-// and the strain energy, on random element soups of awkward sizes (1, 7, 97, 1001 elements: not
-// multiples of the work-group size), in double and float, on every OpenCL device present.
+// (model/element.hpp): rotations (every method), internal forces with the SVD rotation, the strain
+// energy and the vector widths, on random element soups of awkward sizes (1, 7, 97, 1001 elements:
+// not multiples of the work-group size), in double and float, on every OpenCL device present. The
+// products (mass, damping, Rayleigh) and the linear formulation against the reference are
+// tests/conformance/ (every backend's).
 //
 // Tolerances, float: positions are rounded to float (relative 6e-8, absolute up to 2.4e-7 m at
 // |x| <= 4 m) and element edges are >= ~0.25 m, so F carries a relative error up to ~1e-6; the
@@ -255,42 +257,6 @@ TEST_P(OpenCLKernels, InternalForcesMatchEquation9) {
   }
 }
 
-TEST_P(OpenCLKernels, ProductMatchesRotatedStiffnessWithMassAndDamping) {
-  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  std::mt19937 rng(23);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (std::size_t n : kSizes) {
-    detail::Problem p = test::makeProblem(test::randomSoup(n, rng), 3e5, 0.3, 1200.0);
-    p.rayleighMass = 0.3;
-    p.rayleighStiffness = 0.02;
-    auto b = backend(p, RotationMethod::Polar);
-    const Eigen::VectorXd x = deform(p.mesh, Shape::WellShaped, rng);
-    b->setPositions(x);
-    Eigen::VectorXd v(x.size());
-    for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-    detail::SystemCoeffs c;
-    c.mass = 3600.0;
-    c.damping = 60.0;
-    c.stiffness = 1.0;
-    Eigen::VectorXd y;
-    b->apply(c, v, y);
-    // (m M + c (alpha M + beta K^R) + k K^R) v, element by element (each node in one element).
-    Eigen::VectorXd ref = (c.mass + c.damping * p.rayleighMass) * p.lumpedMass.cwiseProduct(v);
-    const double kCoef = c.stiffness + c.damping * p.rayleighStiffness;
-    for (std::size_t e = 0; e < n; ++e) {
-      const Mat3 R = detail::polarRotation(detail::deformationGradient(p.elements[e], corners(x, p.mesh, e)));
-      const detail::Mat12 KR = detail::rotateStiffness(detail::linearStiffness(p.elements[e], p.lame), R);
-      detail::Vec12 ve;
-      for (int k = 0; k < 4; ++k) ve.segment<3>(3 * k) = v.segment<3>(3 * p.mesh.tets[4 * e + k]);
-      const detail::Vec12 ye = kCoef * KR * ve;
-      for (int k = 0; k < 4; ++k) ref.segment<3>(3 * p.mesh.tets[4 * e + k]) += ye.segment<3>(3 * k);
-    }
-    const double scale = ref.cwiseAbs().maxCoeff();
-    if (n == 1001) std::printf("[info] product: max error / max |y| = %.3g\n", (y - ref).cwiseAbs().maxCoeff() / scale);
-    EXPECT_LE((y - ref).cwiseAbs().maxCoeff(), relTol() * scale) << n << " elements";
-  }
-}
-
 TEST_P(OpenCLKernels, EveryVectorWidthGivesTheSameOperators) {
   // The element kernels process COROFEM_VEC elements per work-item (1 on GPUs, 8 on CPUs by
   // default); every width must give the same forces and products (97: not a multiple of any).
@@ -322,29 +288,6 @@ TEST_P(OpenCLKernels, EveryVectorWidthGivesTheSameOperators) {
     EXPECT_LE((f - f1).cwiseAbs().maxCoeff(), relTol() * f1.cwiseAbs().maxCoeff()) << "width " << width;
     EXPECT_LE((y - y1).cwiseAbs().maxCoeff(), relTol() * y1.cwiseAbs().maxCoeff()) << "width " << width;
   }
-}
-
-TEST_P(OpenCLKernels, LinearFormulationUsesNoRotation) {
-  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  std::mt19937 rng(29);
-  const detail::Problem p =
-      test::makeProblem(test::randomSoup(97, rng), 1e5, 0.3, 1000.0, Formulation::Linear);
-  auto b = backend(p, RotationMethod::Polar);
-  const Eigen::VectorXd x = deform(p.mesh, Shape::WellShaped, rng, 0.05);
-  b->setPositions(x);
-  Eigen::VectorXd f;
-  b->internalForces(f);
-  Eigen::VectorXd ref(f.size());
-  for (std::size_t e = 0; e < 97; ++e) {
-    detail::Vec12 u;
-    for (int k = 0; k < 4; ++k) {
-      const auto n = p.mesh.tets[4 * e + k];
-      u.segment<3>(3 * k) = x.segment<3>(3 * n) - p.restPositions.segment<3>(3 * n);
-    }
-    const detail::Vec12 fe = detail::linearStiffness(p.elements[e], p.lame) * u;  // f = K (x - X)
-    for (int k = 0; k < 4; ++k) ref.segment<3>(3 * p.mesh.tets[4 * e + k]) = fe.segment<3>(3 * k);
-  }
-  EXPECT_LE((f - ref).cwiseAbs().maxCoeff(), relTol() * ref.cwiseAbs().maxCoeff());
 }
 
 INSTANTIATE_TEST_SUITE_P(Devices, OpenCLKernels, ::testing::ValuesIn(test::deviceCases()), test::caseName);

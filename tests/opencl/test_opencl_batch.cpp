@@ -1,6 +1,9 @@
 // The OpenCL device of several bodies (createOpenCLBatchOn): different bodies in one set of buffers
 // and launches, driven in rounds of requests (common/device_batch.hpp), each request compared with
-// one single-body OpenCL device per body and with the reference backend.
+// one single-body OpenCL device per body and with the reference backend, in each of OpenCL's
+// configurations and strategies (tiles, one-launch iterations, teams, packs). A subset leaving the
+// others untouched, bodies stopping on their own beside others and non-finite right-hand sides are
+// tests/conformance/ (every backend's).
 //
 // Tolerances. Batch vs single backend: bit-identical, in double and in float. Both run the same
 // kernels of the same program; a body's elements and nodes start at multiples of the work-group
@@ -1166,103 +1169,6 @@ TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
       }
   }
   EXPECT_EQ(teamPcgLaunchCount() - before, 2ull * kRepeats * rounds.size()) << "every round in teams";
-}
-
-TEST_P(OpenCLBatch, EachBodyConvergesOnItsOwnAndStopsCostingWork) {
-  // An easy system (mass-dominated: cond ~ 1) and a hard one (static: cond ~ 1e3) of the same beam
-  // in one round: the easy body stops after fewer iterations while the hard one goes on, and each
-  // takes exactly the iterations it takes alone (its scalars and stop test are its own).
-  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  std::vector<detail::Problem> ps = bodies();
-  ps.resize(2);
-  ps[1] = ps[0];
-  ps[1].name = "beam-static";
-  SolverDesc s = solver();
-  s.checkEvery = 3;
-  auto batch = batchOf(ps, s);
-  auto singles = singlesOf(ps, s);
-  const Eigen::VectorXd x = deformed(ps[0], 0.5), b = randomVector(ps[0].dofCount(), 7);
-  const detail::SystemCoeffs easy{1e6, 0.0, 1.0}, hard{0.0, 0.0, 1.0};
-  std::vector<BatchRequest> set = {request(BatchOp::SetPositions, 0, &x), request(BatchOp::SetPositions, 1, &x)};
-  runOk(*batch, set);
-  Eigen::VectorXd xe = Eigen::VectorXd::Zero(b.size()), xh = xe;
-  std::vector<BatchRequest> round = {request(BatchOp::Solve, 0, &b, &xe, easy),
-                                     request(BatchOp::Solve, 1, &b, &xh, hard)};
-  runOk(*batch, round);
-  Eigen::VectorXd ae = Eigen::VectorXd::Zero(b.size()), ah = ae;
-  singles[0]->setPositions(x);
-  singles[1]->setPositions(x);
-  const auto alone0 = singles[0]->solve(easy, b, ae), alone1 = singles[1]->solve(hard, b, ah);
-  std::printf("[info] iterations in one round: easy %d, hard %d (alone: %d, %d)\n", round[0].stats.iterations,
-              round[1].stats.iterations, alone0.iterations, alone1.iterations);
-  EXPECT_TRUE(round[0].stats.converged);
-  EXPECT_TRUE(round[1].stats.converged);
-  EXPECT_LT(round[0].stats.iterations, round[1].stats.iterations);
-  EXPECT_EQ(round[0].stats.iterations, alone0.iterations);
-  EXPECT_EQ(round[1].stats.iterations, alone1.iterations);
-  EXPECT_EQ(round[0].stats.iterations % 3, 0) << "stops only at a check";
-  EXPECT_TRUE(sameBits(xe, ae));
-  EXPECT_TRUE(sameBits(xh, ah));
-  // An iteration cap stops both at the cap.
-  s.maxIterations = 5;
-  s.tolerance = 1e-14;
-  auto capped = batchOf(ps, s);
-  runOk(*capped, set);
-  xe.setZero();
-  xh.setZero();
-  runOk(*capped, round);
-  EXPECT_EQ(round[1].stats.iterations, 5);
-  EXPECT_FALSE(round[1].stats.converged);
-  EXPECT_TRUE(xh.allFinite());
-}
-
-TEST_P(OpenCLBatch, ARoundOfSomeBodiesLeavesTheOthersUntouched) {
-  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  const std::vector<detail::Problem> ps = bodies();
-  const std::size_t K = ps.size();
-  auto batch = batchOf(ps, solver());
-  std::vector<Eigen::VectorXd> x(K), f0(K);
-  std::vector<BatchRequest> set, forces;
-  for (std::size_t i = 0; i < K; ++i) {
-    x[i] = deformed(ps[i], 0.2 * static_cast<double>(i + 1));
-    set.push_back(request(BatchOp::SetPositions, i, &x[i]));
-    forces.push_back(request(BatchOp::InternalForces, i, nullptr, &f0[i]));
-  }
-  runOk(*batch, set);
-  runOk(*batch, forces);
-  std::vector<BatchRequest> energy;
-  for (std::size_t i = 0; i < K; ++i) energy.push_back(request(BatchOp::ElasticEnergy, i));
-  runOk(*batch, energy);
-  // Bodies 1 and 3 move and solve; 0, 2 and 4 (around and between them in the buffers) do not.
-  const Eigen::VectorXd x1 = deformed(ps[1], -1.0), x3 = deformed(ps[3], 2.0);
-  const Eigen::VectorXd b1 = randomVector(ps[1].dofCount(), 1), b3 = randomVector(ps[3].dofCount(), 3);
-  Eigen::VectorXd s1 = Eigen::VectorXd::Zero(b1.size()), s3 = Eigen::VectorXd::Zero(b3.size());
-  std::vector<BatchRequest> some = {request(BatchOp::SetPositions, 1, &x1), request(BatchOp::SetPositions, 3, &x3)};
-  runOk(*batch, some);
-  std::vector<BatchRequest> solves = {request(BatchOp::Solve, 1, &b1, &s1, {0.0, 0.0, 1.0}),
-                                      request(BatchOp::Solve, 3, &b3, &s3, {0.0, 0.0, 1.0})};
-  runOk(*batch, solves);
-  std::vector<Eigen::VectorXd> f1(K);
-  std::vector<BatchRequest> again, energyAgain;
-  for (std::size_t i = 0; i < K; ++i) {
-    again.push_back(request(BatchOp::InternalForces, i, nullptr, &f1[i]));
-    energyAgain.push_back(request(BatchOp::ElasticEnergy, i));
-  }
-  runOk(*batch, again);
-  runOk(*batch, energyAgain);
-  auto singles = singlesOf(ps, solver());
-  for (std::size_t i : {0u, 2u, 4u}) {
-    EXPECT_TRUE(sameBits(f1[i], f0[i])) << ps[i].name;
-    EXPECT_EQ(energyAgain[i].energy, energy[i].energy) << ps[i].name;
-  }
-  singles[1]->setPositions(x1);
-  singles[3]->setPositions(x3);
-  Eigen::VectorXd g1, g3;
-  singles[1]->internalForces(g1);
-  singles[3]->internalForces(g3);
-  EXPECT_TRUE(sameBits(f1[1], g1));
-  EXPECT_TRUE(sameBits(f1[3], g3));
-  EXPECT_FALSE(sameBits(f1[1], f0[1])) << "body 1 moved";
 }
 
 TEST_P(OpenCLBatch, ANonFiniteRightHandSideFailsOnlyThatRequest) {
