@@ -482,6 +482,46 @@ TEST(EmbedSimulation, SurfacesTheDeviceCannotGroupAreEachBodysOwn) {
   EXPECT_NE(buffers[1], buffers[2]);
 }
 
+/// Surfaces the device cannot make at all (injected: every allocation of them fails) cost them their
+/// device buffers, never the Simulation: it is created, steps on the device, and computes the
+/// surfaces on the host, which the plan says with the reason.
+TEST(EmbedSimulation, SurfacesTheDeviceCannotMakeAreComputedOnTheHost) {
+  const Scene scene = threeSurfaceBodies(true);
+  ScopedBackend limited(test::wrapBackend("opencl", [](std::unique_ptr<detail::Device> d, const auto&) {
+    class NoSurfaces final : public ForwardingDevice {
+     public:
+      using ForwardingDevice::ForwardingDevice;
+      std::unique_ptr<detail::DeviceSurfaces> createSurfaces(const std::vector<detail::SurfaceMember>&, bool) override {
+        detail::fail(ErrorCode::DeviceError,
+                     "clCreateBuffer failed with CL_MEM_OBJECT_ALLOCATION_FAILURE (injected by the test)");
+      }
+    };
+    return std::unique_ptr<detail::Device>(std::make_unique<NoSurfaces>(std::move(d)));
+  }));
+  auto sim = Simulation::create(scene);
+  if (!sim && sim.status().code() == ErrorCode::DeviceError) GTEST_SKIP() << "no OpenCL device: " << sim.message();
+  ASSERT_TRUE(sim) << "surfaces must fall back to the host: " << sim.message();
+  EXPECT_EQ(sim->backendName(), "opencl");
+  ASSERT_TRUE(sim->step());
+  const nlohmann::json plan = nlohmann::json::parse(sim->planReport());
+  for (int i = 0; i < 3; ++i) {
+    SCOPED_TRACE("body " + std::to_string(i));
+    EXPECT_FALSE(sim->surfaceBuffer(i));
+    const nlohmann::json& surface = plan["bodies"][i]["surface"];
+    EXPECT_EQ(surface["where"], "host") << surface.dump(1);
+    EXPECT_NE(surface.value("not_on_device", std::string()).find("injected"), std::string::npos) << surface.dump(1);
+    std::vector<double> positions, nodes, own;
+    ASSERT_TRUE(sim->readSurface(i, positions));
+    ASSERT_TRUE(sim->readPositions(i, nodes));
+    own.resize(positions.size());
+    SurfaceOutput out;
+    out.positionsDouble = own.data();
+    const SurfaceBinding binding = *bindSurface(sim->restMesh(i), *sim->restSurface(i));
+    ASSERT_TRUE(deformSurface(binding, nodes.data(), sim->restMesh(i).nodeCount(), out));
+    EXPECT_EQ(positions, own);
+  }
+}
+
 /// A batch whose device fails moves, every body of it, to the reference backend: the surfaces are
 /// then computed on the host from each body's own nodes (the device buffers are gone) and keep
 /// matching them.
@@ -568,6 +608,18 @@ TEST(EmbedSimulation, TheApplicationsContextHoldsTheBodiesAndTheSurfaceBuffers) 
     for (std::size_t v = 0; v < n; ++v)
       for (std::size_t c = 0; c < 3; ++c)
         ASSERT_EQ(static_cast<double>(drawn[6 * v + c]), now.positions[3 * v + c]) << "vertex " << v;
+
+    // A body the lent device cannot run (a hyperelastic formulation) runs on the reference backend,
+    // and the report says why.
+    Scene soft = scene;
+    soft.bodies[0].formulation = Formulation::NeoHookean;
+    soft.solver.precision = Precision::Double;
+    auto onHost = Simulation::create(soft, lent);
+    ASSERT_TRUE(onHost) << onHost.message();
+    EXPECT_EQ(onHost->backendName(), "reference");
+    const nlohmann::json hostReport = nlohmann::json::parse(onHost->schedulerReport());
+    EXPECT_NE(hostReport["candidates"][0]["error"].get<std::string>().find("neo"), std::string::npos)
+        << hostReport.dump(1);
 
     // What cannot work is said at create().
     SimulationOptions noQueue = lent;

@@ -163,6 +163,55 @@ TEST(Failover, EveryCandidateFailingIsADeviceErrorAndKeepsTheState) {
   EXPECT_NE(again.message().find("every backend failed"), std::string::npos) << again.message();
 }
 
+// An application's order is a preference, not a demand: an entry that cannot take the body (a
+// device not on this machine, a formulation the backend refuses) is skipped and named in the
+// report, and a candidate whose creation fails for any reason during a failover is passed over.
+TEST(Failover, OrderEntriesThatCannotTakeTheBodyArePassedOver) {
+  int made = 0;
+  detail::BackendEntry picky = fakeBackend("picky", {fakeCandidate("picky", "picky", "a")},
+                                           [&made](const std::vector<const detail::Problem*>& problems,
+                                                   const SolverDesc& s, const detail::Candidate&) {
+                                             ++made;
+                                             return detail::createReferenceDevice(problems, s);
+                                           });
+  picky.refuses = [](const detail::Problem& p, const SolverDesc&) -> std::string {
+    return p.formulation == Formulation::Linear ? "the picky device runs no linear bodies" : "";
+  };
+  detail::BackendEntry refusing = fakeBackend("refusing", {fakeCandidate("refusing", "refusing", "a")},
+                                              [](const std::vector<const detail::Problem*>&, const SolverDesc&,
+                                                 const detail::Candidate&) -> std::unique_ptr<detail::Device> {
+                                                detail::fail(ErrorCode::BadInput,
+                                                             "workGroupSize 512 is above this device's 256");
+                                              });
+  HookScope scope({faultyBackend({FaultKind::Launch, 3}), picky, refusing});
+  BodyDesc linear = boxBeam();
+  linear.formulation = Formulation::Linear;
+  SimulationOptions o;
+  o.devices = {"faulty:nowhere", "picky:a"};
+  auto sim = Simulation::create(dynamicScene(linear, 2), o);
+  ASSERT_TRUE(sim) << sim.message();
+  auto rep = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference") << rep.dump(1);
+  ASSERT_EQ(rep["candidates"].size(), 2u) << rep.dump(1);
+  EXPECT_NE(rep["candidates"][0]["error"].get<std::string>().find("nowhere"), std::string::npos) << rep.dump(1);
+  EXPECT_NE(rep["candidates"][1]["error"].get<std::string>().find("no linear bodies"), std::string::npos);
+  EXPECT_EQ(made, 0);
+  EXPECT_FALSE(runToEnd(sim.value()).empty());
+
+  // A corotational body takes "picky"; when "faulty" fails mid-step, "refusing" cannot be made
+  // (BadInput) and the body goes on on the reference backend, the step intact.
+  const Scene scene = dynamicScene(boxBeam(), 6);
+  const std::vector<double> expected = undisturbed(scene);
+  o.devices = {"faulty:a", "refusing:a"};
+  auto moved = Simulation::create(scene, o);
+  ASSERT_TRUE(moved) << moved.message();
+  EXPECT_EQ(runToEnd(moved.value()), expected);
+  rep = nlohmann::json::parse(moved->schedulerReport());
+  ASSERT_EQ(rep["fallbacks"].size(), 1u) << rep.dump(1);
+  EXPECT_EQ(rep["fallbacks"][0]["to"], "reference");
+  EXPECT_EQ(moved->backendName(), "reference");
+}
+
 // An explicit choice that cannot start is an error, as before the scheduler (no silent move).
 TEST(Failover, ExplicitChoiceThatCannotStartIsAnError) {
   HookScope scope;

@@ -66,6 +66,10 @@ struct SimulationOptions {
   TaskRunner tasks;
 };
 
+/// One Simulation is used from one thread at a time: its reads (readSurface, surfaceBuffer,
+/// energies, the reports) may update device state and must not run during step() on another
+/// thread. Different Simulations may run on different threads. A moved-from Simulation may only be
+/// assigned to or destroyed.
 class Simulation {
  public:
   /// Loads meshes, builds the problem of every body and the backend. Errors: bad input (mesh,

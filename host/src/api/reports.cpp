@@ -111,6 +111,7 @@ std::string Simulation::schedulerReport() const {
 
 std::string Simulation::planReport() const {
   Impl& s = *impl_;
+  const detail::TaskScope tasks(s.tasks);
   json j;
   j["scene"] = s.scene.name;
   j["analysis"] = s.isStatic() ? "static" : "dynamic";
@@ -140,7 +141,13 @@ std::string Simulation::planReport() const {
     // device's own locality order (mesh/locality_order.hpp; the host's vectors keep the mesh's).
     detail::DevicePositions where;
     if (g.slot->device().devicePositions(b.index, where)) body["device_numbering"] = where.deviceNode ? "morton" : "mesh";
-    if (b.binding) body["surface"] = s.surfacePlanJson(b);
+    if (b.binding) {
+      try {
+        body["surface"] = s.surfacePlanJson(b);
+      } catch (const std::exception& e) {  // a report describes; it does not fail
+        body["surface"] = {{"error", e.what()}};
+      }
+    }
     bodies.push_back(body);
   }
   j["bodies"] = bodies;

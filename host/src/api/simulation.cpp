@@ -120,7 +120,7 @@ std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, int index
           ++b.sleep.sleptSteps;
           try {
             g.driver->idleStep(b.index);
-          } catch (const detail::Error&) {
+          } catch (...) {
             out[k].error = std::current_exception();
           }
           continue;
@@ -137,7 +137,7 @@ std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, int index
     std::vector<detail::BodyOutcome> stepped;
     try {
       stepped = g.driver->step(awake, index, count);
-    } catch (const detail::Error&) {
+    } catch (...) {
       stepped.assign(awake.size(), detail::BodyOutcome{});
       for (detail::BodyOutcome& o : stepped) o.error = std::current_exception();
     }
@@ -250,7 +250,15 @@ Status Simulation::step(StepReport* report) {
         detail::DeviceSlot& slot;
         ~EndStep() { slot.endStep(); }
       } endStep{*g.slot};
-      const std::vector<detail::BodyOutcome> done = s.stepGroup(g, index, count);
+      std::vector<detail::BodyOutcome> done;
+      try {
+        done = s.stepGroup(g, index, count);
+      } catch (...) {
+        // The drivers turn every failure into their bodies' outcomes; what escapes came before
+        // them (the bodies are where they were) and fails the group's bodies.
+        done.assign(g.bodies.size(), detail::BodyOutcome{});
+        for (detail::BodyOutcome& o : done) o.error = std::current_exception();
+      }
       for (std::size_t k = 0; k < g.bodies.size(); ++k) outcomes[g.bodies[k]] = done[k];
     }
     // The report sums the bodies in scene order, up to the first one that failed.

@@ -65,6 +65,7 @@ struct Simulation::Impl {
     /// The slot's generation the surfaces were made for (a failover makes them again).
     std::size_t surfacesFor = std::numeric_limits<std::size_t>::max();
     std::string surfacesNotShared;    ///< why the group's surfaces could not be made together
+    std::string surfacesOnHost;       ///< why some could not be made on the device at all
   };
 
   /// A set of bodies that could have shared a device but runs unbatched, and why.
@@ -107,10 +108,10 @@ struct Simulation::Impl {
   std::vector<detail::BodyOutcome> stepGroup(Group& g, int index, int count);
 
   // -- surfaces (surfaces.cpp)
-  /// The set that holds body b's surface on its device, up to date (enqueued), or nullptr on the
-  /// host path; *member its index in the set.
   /// surfaceBuffer (normals false) or surfaceNormalBuffer (true) of a body: empty where there is none.
   GpuBuffer surfaceBufferOf(int body, bool normals);
+  /// The set that holds body b's surface on its device, up to date (enqueued), or nullptr on the
+  /// host path; *member its index in the set.
   SurfaceSet* refreshSurface(Body& b, std::size_t* member);
   /// Makes the group's surface sets for its device as it is now (after a failover too).
   void ensureSurfaces(Group& g);

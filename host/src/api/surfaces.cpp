@@ -12,40 +12,48 @@ void Simulation::Impl::ensureSurfaces(Group& g) {
   if (g.surfacesFor == g.slot->generation()) return;
   g.surfaces.clear();
   g.surfacesNotShared.clear();
+  g.surfacesOnHost.clear();
   g.surfacesFor = g.slot->generation();
+  // A device error here costs the surfaces their device buffers, never the simulation: the host
+  // computes what the device cannot hold (deformSurface), and the plan says why.
+  auto make = [&](const std::vector<std::size_t>& which, bool separate) -> std::unique_ptr<detail::DeviceSurfaces> {
+    std::vector<detail::SurfaceMember> list;
+    for (std::size_t i : which) list.push_back({bodies[i].index, bodies[i].binding.get()});
+    return g.slot->device().createSurfaces(list, separate);
+  };
   for (bool separate : {false, true}) {
     std::vector<std::size_t> members;  // scene indices
     for (std::size_t i : g.bodies)
       if (bodies[i].binding && bodies[i].separateStreams == separate) members.push_back(i);
     if (members.empty()) continue;
-    auto make = [&](const std::vector<std::size_t>& which) {
-      std::vector<detail::SurfaceMember> list;
-      for (std::size_t i : which) list.push_back({bodies[i].index, bodies[i].binding.get()});
-      return g.slot->device().createSurfaces(list, separate);
-    };
-    std::unique_ptr<detail::DeviceSurfaces> together;
     try {
-      together = make(members);
-    } catch (const detail::Error& e) {
-      // The merged buffers hold every body's vertices and may exceed what the device allocates at
-      // once: each body then gets surfaces of its own.
-      if (e.code() != ErrorCode::DeviceError || members.size() < 2) throw;
-      g.surfacesNotShared = e.what();
-      for (std::size_t i : members) {
-        SurfaceSet own;
-        own.surfaces = make({i});
-        if (!own.surfaces) return;  // a host device: no surfaces at all
-        own.bodies = {i};
-        own.own = true;
-        g.surfaces.push_back(std::move(own));
-      }
+      SurfaceSet set;
+      set.surfaces = make(members, separate);
+      if (!set.surfaces) return;  // a host device: the surfaces are computed on the host
+      set.bodies = members;
+      g.surfaces.push_back(std::move(set));
       continue;
+    } catch (const detail::Error& e) {
+      if (e.code() != ErrorCode::DeviceError) throw;
+      (members.size() > 1 ? g.surfacesNotShared : g.surfacesOnHost) = e.what();
+      if (members.size() < 2) continue;
     }
-    if (!together) return;  // a host device: the surfaces are computed on the host
-    SurfaceSet set;
-    set.surfaces = std::move(together);
-    set.bodies = members;
-    g.surfaces.push_back(std::move(set));
+    // The merged buffers hold every body's vertices and may exceed what the device allocates at
+    // once: each body then gets surfaces of its own.
+    for (std::size_t i : members) {
+      SurfaceSet own;
+      try {
+        own.surfaces = make({i}, separate);
+      } catch (const detail::Error& e) {
+        if (e.code() != ErrorCode::DeviceError) throw;
+        g.surfacesOnHost = e.what();
+        continue;
+      }
+      if (!own.surfaces) return;
+      own.bodies = {i};
+      own.own = true;
+      g.surfaces.push_back(std::move(own));
+    }
   }
 }
 
@@ -142,12 +150,13 @@ nlohmann::json Simulation::Impl::surfacePlanJson(const Body& b) {
     for (std::size_t i : s.bodies)
       if (&bodies[i] == &b) set = &s;
   j["where"] = set ? "device" : "host";
+  if (!set && !g.surfacesOnHost.empty()) j["not_on_device"] = g.surfacesOnHost;
   if (set) {
     const bool separate = set->surfaces->separateStreams();
     j["layout"] = separate ? "separate" : "interleaved";
-    j["output"] = separate ? "two buffers of 3 float32 per vertex: positions (surfaceDeviceBuffer), normals "
-                             "(surfaceNormalDeviceBuffer)"
-                           : "one buffer of 6 float32 per vertex: position, normal (surfaceDeviceBuffer)";
+    j["output"] = separate ? "two buffers of 3 float32 per vertex: positions (surfaceBuffer), normals "
+                             "(surfaceNormalBuffer)"
+                           : "one buffer of 6 float32 per vertex: position, normal (surfaceBuffer)";
     nlohmann::json buffers = nlohmann::json::array();
     std::size_t total = 0;
     for (const detail::DeviceBuffer& x : set->surfaces->buffers()) {

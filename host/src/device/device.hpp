@@ -30,8 +30,6 @@
 #include <string>
 #include <vector>
 
-// OpenCL's opaque handle types, declared so that this header needs no OpenCL.
-
 namespace corofem::detail {
 
 struct SystemCoeffs {

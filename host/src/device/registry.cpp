@@ -20,11 +20,23 @@ Registry& registry() {
   return r;
 }
 
+/// Set on the thread registering the built-in backends (their registerBackend calls must not wait
+/// for the registration they are part of).
+thread_local bool registeringBuiltins = false;
+
 /// The registry with the built-in backends in it (registered on first use, outside the lock:
-/// registerBuiltinBackends calls registerBackend).
+/// registerBuiltinBackends calls registerBackend), so that a backend an application registers
+/// before the first Simulation replaces a built-in one of its name instead of being replaced.
 Registry& ready() {
   static std::once_flag once;
-  std::call_once(once, [] { registerBuiltinBackends(); });
+  if (!registeringBuiltins)
+    std::call_once(once, [] {
+      struct Flag {
+        Flag() { registeringBuiltins = true; }
+        ~Flag() { registeringBuiltins = false; }
+      } flag;
+      registerBuiltinBackends();
+    });
   return registry();
 }
 
@@ -46,7 +58,7 @@ Candidate referenceCandidate() {
 void registerBackend(BackendEntry entry) {
   if (entry.name.empty() || !entry.candidates || !entry.create)
     fail(ErrorCode::BadInput, "registering a backend: it needs a name, a candidates function and a create function");
-  Registry& r = registry();
+  Registry& r = ready();
   std::lock_guard<std::mutex> lock(r.mutex);
   auto made = std::make_shared<const BackendEntry>(std::move(entry));
   for (auto& e : r.entries)

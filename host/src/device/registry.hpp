@@ -62,8 +62,9 @@ struct BackendEntry {
   bool batches = false;
 };
 
-/// Registers a backend (replacing one of the same name). The built-in ones are registered before
-/// the first use of the registry. Not thread-safe against concurrent Simulation::create calls.
+/// Registers a backend (replacing one of the same name, a built-in one too: the built-in ones are
+/// registered at the registry's first use, this call included). Safe from any thread; devices
+/// already made stay as they are, later ones (a failover too) come from the entry then registered.
 void registerBackend(BackendEntry entry);
 /// Removes a registered backend ("reference" cannot be removed).
 void unregisterBackend(const std::string& name);

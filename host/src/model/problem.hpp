@@ -15,6 +15,10 @@
 
 namespace corofem::detail {
 
+/// Whether a formulation is one of the hyperelastic laws (St. Venant-Kirchhoff, Neo-Hookean), which
+/// only the reference backend runs.
+inline bool isHyperelastic(Formulation f) { return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean; }
+
 /// A prescribed displacement: dofs and their full values (scaled by the load factor / ramp).
 struct PrescribedDisplacement {
   std::vector<std::uint32_t> dofs;   ///< 3 * node + component

@@ -74,7 +74,7 @@ Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, M
     return Result<TetMesh>(ErrorCode::BadInput,
                            where + (source.mesh ? "the mesh has more than one of a file, a box and a mesh in memory"
                                                 : "the mesh has both a file and a box") + "; give exactly one");
-  if (sources == 0) return Result<TetMesh>(ErrorCode::BadInput, where + "the mesh needs a file or a box");
+  if (sources == 0) return Result<TetMesh>(ErrorCode::BadInput, where + "the mesh needs a file or a box (or, through the API, a mesh in memory)");
   if (!(source.scale > 0) || !std::isfinite(source.scale))
     return Result<TetMesh>(ErrorCode::BadInput,
                            where + "mesh scale " + scene::formatNumber(source.scale) + " must be a finite number > 0");

@@ -199,17 +199,37 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
   s.body = desc.name;
   const Candidate reference = referenceCandidate();
 
-  // The application's order: each entry resolved by its backend, the reference backend last.
+  // The application's order: each entry resolved by its backend, the reference backend last. An
+  // entry that cannot run this body (a device not on this machine, a formulation it refuses) is
+  // skipped, and the report says why (its "candidates").
   if (!devices.empty()) {
     for (const std::string& spec : devices) {
       const DeviceRequest req = parseDeviceSpec(spec, "SimulationOptions::devices entry");
       if (req.backend.empty()) fail(ErrorCode::BadInput, "SimulationOptions::devices: \"auto\" cannot be part of an order");
       const auto entry = findBackend(req.backend);
-      s.order.push_back(entry->resolve ? entry->resolve(req.device) : entry->candidates().at(0));
+      CandidateTiming t;
+      t.candidate.backend = req.backend;
+      t.candidate.selector = req.device;
+      t.candidate.device = req.device.empty() ? "default " + req.backend + " device" : req.device;
+      try {
+        if (entry->resolve) t.candidate = entry->resolve(req.device);
+        else if (const std::vector<Candidate> all = entry->candidates(); !all.empty()) t.candidate = all.front();
+        else fail(ErrorCode::DeviceError, "backend '", req.backend, "' has no device here");
+        if (const std::string why = entry->refuses ? entry->refuses(problem, scene.solver) : ""; !why.empty())
+          fail(ErrorCode::BadInput, why);
+      } catch (const Error& e) {
+        t.error = std::string(toString(e.code())) + ": " + e.what();
+        s.timings.push_back(t);
+        continue;
+      }
+      s.order.push_back(t.candidate);
     }
-    if (s.order.back().backend != "reference") s.order.push_back(reference);
+    if (s.order.empty() || s.order.back().backend != "reference") s.order.push_back(reference);
     s.reason = "the order the application gave (SimulationOptions::devices)";
-    s.explicitChoice = false;  // falls back at create too: the application listed the fallbacks
+    if (!s.timings.empty()) s.reason += "; skipped: see candidates";
+    // Falls back at create too (the application listed the fallbacks), except from a device the
+    // application lent (SimulationOptions::device): handles it cannot use are its error to fix.
+    s.explicitChoice = s.order.front().selector == kExternalSelector;
     return s;
   }
 

@@ -1,5 +1,7 @@
 // BodyView, and the shared part of the per-body drivers: free-dof norms, scales, energies.
 #include "solve/statics.hpp"
+
+#include "solve/body_scale.hpp"
 #include "util/error.hpp"
 #include "util/finite.hpp"
 
@@ -26,31 +28,14 @@ double BodyView::elasticEnergy() {
 BodySolver::BodySolver(const Problem& problem, BodyView body, const Log& log)
     : problem_(problem), body_(body), log_(log) {
   const Eigen::Index n = problem.restPositions.size();
-  freeMask_ = Eigen::ArrayXd::Ones(n);
-  for (Eigen::Index d = 0; d < n; ++d)
-    if (static_cast<std::size_t>(d) < problem.constrained.size() && problem.constrained[static_cast<std::size_t>(d)])
-      freeMask_[d] = 0.0;
-
-  // Bounding-box diagonal of the rest positions: the body's length scale.
-  if (n >= 3) {
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = Eigen::Vector3d::Constant(-INFINITY);
-    for (Eigen::Index i = 0; i + 2 < n; i += 3) {
-      const Eigen::Vector3d p = problem.restPositions.segment<3>(i);
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
-    diagonal_ = (hi - lo).norm();
-  }
-  if (!(diagonal_ > 0.0) || !std::isfinite(diagonal_)) diagonal_ = 1.0;
-  const double modulus = problem.lame.lambda + 2.0 * problem.lame.mu;  // P-wave modulus, > 0
-  forceFloor_ = 1e-8 * (modulus > 0.0 ? modulus : 1.0) * diagonal_ * diagonal_;
+  BodyScale scale = bodyScale(problem);
+  freeMask_ = std::move(scale.freeMask);
+  diagonal_ = scale.diagonal;
+  forceFloor_ = scale.forceFloor;
 
   x_ = problem.restPositions;
   v_ = Eigen::VectorXd::Zero(n);
-  a_ = Eigen::VectorXd::Zero(n);
   xPrev_ = x_;
-  vPrev_ = v_;
-  aPrev_ = a_;
 }
 
 void BodySolver::setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
@@ -62,7 +47,6 @@ void BodySolver::setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd
   x_ = x;
   v_ = (v.array() * freeMask_).matrix();
   xPrev_ = x_;
-  vPrev_ = v_;
   deviceAtCommitted_ = false;
 }
 

@@ -38,8 +38,9 @@ DeviceSlot::DeviceSlot(std::vector<const Problem*> problems, const SolverDesc& s
   lastX_.resize(problems_.size());
   try {
     device_ = makeDevice(problems_, solver_, order_[0], options_);
-  } catch (const Error& e) {
-    if (!fallbackAtCreate || e.code() != ErrorCode::DeviceError || order_.size() < 2) throw;
+  } catch (const std::exception& e) {
+    // A device that cannot be made, or cannot take these bodies, hands them to the next.
+    if (!fallbackAtCreate || order_.size() < 2) throw;
     advance("create", e.what());
   }
 }
@@ -73,8 +74,9 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
       if (!known.empty()) next->setPositions(known, xs);
       device_ = std::move(next);
       ++generation_;
-    } catch (const Error& e) {
-      if (e.code() != ErrorCode::DeviceError) throw;
+    } catch (const std::exception& e) {
+      // Whatever keeps this candidate from taking the bodies (no device, an allocation, a tuning
+      // it refuses): the next one is tried.
       failures_ += "\n  " + order_[index_].label() + " (create): " + e.what();
       continue;
     }
@@ -88,9 +90,15 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
     return;
   }
   exhausted_ = true;  // the last device stays for the reports; no call reaches it again
+  failExhausted();
+}
+
+void DeviceSlot::failExhausted() const {
   std::string names;
   for (const Problem* p : problems_) names += (names.empty() ? "'" : ", '") + p->name + "'";
-  fail(ErrorCode::DeviceError, problems_.size() > 1 ? "bodies " : "body ", names, ": every backend failed:", failures_);
+  fail(ErrorCode::DeviceError, problems_.size() > 1 ? "bodies " : "body ", names, ": every backend failed:", failures_,
+       "\nThe bodies keep their last good state; no device is left to step them: create the Simulation again "
+       "(after fixing the devices, or with other ones in SimulationOptions::devices) to go on.");
 }
 
 void DeviceSlot::beginStep() {
@@ -103,11 +111,7 @@ void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   for (;;) {
-    if (exhausted_) {
-      std::string names;
-      for (const Problem* p : problems_) names += (names.empty() ? "'" : ", '") + p->name + "'";
-      fail(ErrorCode::DeviceError, "body ", names, ": every backend failed:", failures_);
-    }
+    if (exhausted_) failExhausted();
     try {
       fn(*device_);
       break;

@@ -98,6 +98,8 @@ class DeviceSlot {
   /// Moves to the next candidate that can be created and given the last positions; throws
   /// Error(DeviceError) listing every failure when none is left.
   void advance(const std::string& call, const std::string& error);
+  /// Throws the DeviceError of a slot whose every candidate failed, naming the failures and the fix.
+  [[noreturn]] void failExhausted() const;
 
   std::vector<const Problem*> problems_;
   SolverDesc solver_;

@@ -20,7 +20,7 @@ class StaticsDriver final : public Driver {
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       try {
         out[i].stats = at(bodies[i]).step(index, count);
-      } catch (const Error&) {
+      } catch (...) {
         out[i].error = std::current_exception();
       }
     }

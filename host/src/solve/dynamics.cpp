@@ -3,6 +3,8 @@
 // are documented on DynamicsDriver in dynamics.hpp.
 #include "solve/dynamics.hpp"
 
+#include "solve/body_scale.hpp"
+
 #include "util/error.hpp"
 #include "util/format.hpp"
 #include "util/parallel.hpp"
@@ -53,23 +55,10 @@ DynamicsDriver::DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const 
     const Problem& p = slot.problem(i);
     b.problem = &p;
     const Eigen::Index n = p.restPositions.size();
-    b.freeMask = Eigen::ArrayXd::Ones(n);
-    for (Eigen::Index d = 0; d < n; ++d)
-      if (static_cast<std::size_t>(d) < p.constrained.size() && p.constrained[static_cast<std::size_t>(d)])
-        b.freeMask[d] = 0.0;
-    // Bounding-box diagonal of the rest positions: the body's length scale.
-    if (n >= 3) {
-      Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = Eigen::Vector3d::Constant(-INFINITY);
-      for (Eigen::Index k = 0; k + 2 < n; k += 3) {
-        const Eigen::Vector3d q = p.restPositions.segment<3>(k);
-        lo = lo.cwiseMin(q);
-        hi = hi.cwiseMax(q);
-      }
-      b.diagonal = (hi - lo).norm();
-    }
-    if (!(b.diagonal > 0.0) || !std::isfinite(b.diagonal)) b.diagonal = 1.0;
-    const double modulus = p.lame.lambda + 2.0 * p.lame.mu;  // P-wave modulus, > 0
-    b.forceFloor = 1e-8 * (modulus > 0.0 ? modulus : 1.0) * b.diagonal * b.diagonal;
+    BodyScale scale = bodyScale(p);
+    b.freeMask = std::move(scale.freeMask);
+    b.diagonal = scale.diagonal;
+    b.forceFloor = scale.forceFloor;
     b.x = p.restPositions;
     b.v = p.initialVelocity.size() == n ? p.initialVelocity : Eigen::VectorXd::Zero(n);
     b.v = (b.v.array() * b.freeMask).matrix();  // constrained dofs start at rest
@@ -208,7 +197,7 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int
   std::vector<std::string> startFailure(bodies_.size());
   try {
     start(set, startFailure);
-  } catch (const Error& e) {
+  } catch (...) {
     // The initial state could not be evaluated (every device failed): nothing moved.
     for (BodyOutcome& o : out) o.error = std::current_exception();
     return out;
@@ -226,10 +215,10 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int
   }
   try {
     runAttempts(set, where, at, out);
-  } catch (const Error& e) {
-    // Every device of the slot failed (a DeviceError): the bodies still stepping keep their state
+  } catch (...) {
+    // Every device of the slot failed (a DeviceError), or something other than a solve failed
+    // (out of memory, the application's task runner): the bodies still stepping keep their state
     // at the step's start; substeps would not help.
-    if (e.code() != ErrorCode::DeviceError) throw;
     for (std::size_t i : pending) {
       restore(bodies_[set[i]], bodies_[set[i]].start);
       out[i].error = std::current_exception();
@@ -284,10 +273,13 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, A
       }
       going = std::move(still);
     }
+    // Every attempt's iterations count (the cost really paid), failed ones too.
+    for (std::size_t i : pending) {
+      total[i].newtonIterations += attempt[i].newtonIterations;
+      total[i].linearIterations += attempt[i].linearIterations;
+    }
     // The bodies that went through every substep succeeded with this many.
     for (std::size_t i : going) {
-      total[i].newtonIterations = attempt[i].newtonIterations;
-      total[i].linearIterations = attempt[i].linearIterations;
       total[i].residual = attempt[i].residual;
       total[i].linearResidual = attempt[i].linearResidual;
       total[i].converged = attempt[i].converged;

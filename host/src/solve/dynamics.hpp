@@ -138,11 +138,9 @@ class DynamicsDriver final : public Driver {
   /// damping alone (beta = 0) as a scaling of the lumped mass on the host, the stiffness part by
   /// the device's product.
   void dampingForces(const BodySet& set, const ConstVectors& v, const Vectors& cv);
-  /// One step of the scheme for every Advance, from its body's committed state to t1 = t + h,
-  /// committed in place on success (no rollback copy); a failure leaves the body's committed state
-  /// as it was and says why in Advance::failure.
-  /// Per body of a step's set: the stats of its attempt that succeeded, the substep counts tried,
-  /// the last failure, and the bodies still to succeed (indices into the set).
+  /// Per body of a step's set: its stats (every attempt's iterations, the successful attempt's
+  /// residuals and substeps), the substep counts tried, the last failure, and the bodies still to
+  /// succeed (indices into the set).
   struct Attempts {
     explicit Attempts(std::size_t n) : total(n), tried(n), lastFailure(n) {}
     std::vector<BodyStepStats> total;
@@ -150,8 +148,12 @@ class DynamicsDriver final : public Driver {
     std::vector<std::size_t> pending;
   };
   /// The step's attempts with 1, 2, 4... substeps up to analysis.max_substeps, each body retried
-  /// alone in count of its own failures; throws a DeviceError when every device failed.
+  /// as long as it fails; throws what is not a solve failure (a DeviceError when every device
+  /// failed), leaving the pending bodies for the caller to restore.
   void runAttempts(const BodySet& set, const std::string& where, Attempts& at, std::vector<BodyOutcome>& out);
+  /// One step of the scheme for every Advance, from its body's committed state to t1 = t + h,
+  /// committed in place on success (no rollback copy); a failure leaves the body's committed state
+  /// as it was and says why in Advance::failure.
   void advance(std::vector<Advance>& adv);
   /// The message of a failed advance.
   std::string failureText(const Advance& a, const std::string& what, const std::string& fix) const;

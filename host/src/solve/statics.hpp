@@ -100,8 +100,8 @@ class BodySolver {
   /// are pure rounding, from failing a purely relative test.
   double forceFloor_ = 0.0;
 
-  Eigen::VectorXd x_, v_, a_;           ///< committed state
-  Eigen::VectorXd xPrev_, vPrev_, aPrev_;
+  Eigen::VectorXd x_, v_;               ///< committed state (statics: v only as the application set it)
+  Eigen::VectorXd xPrev_;
   double work_ = 0.0, workPrev_ = 0.0;  ///< external work since the start (trapezoidal rule)
   bool deviceAtCommitted_ = false;      ///< the device's positions equal x_
 };

@@ -23,9 +23,13 @@ class Log {
   template <class... Parts>
   void operator()(LogLevel level, const Parts&... parts) const {
     if (!enabled(level)) return;
-    std::ostringstream os;
-    (os << ... << parts);
-    desc_.callback(level, os.str());
+    try {
+      std::ostringstream os;
+      (os << ... << parts);
+      desc_.callback(level, os.str());
+    } catch (...) {
+      // A callback that throws loses its message, never the call that logged it.
+    }
   }
 
  private:

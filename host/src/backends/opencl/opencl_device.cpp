@@ -146,8 +146,6 @@ std::unique_ptr<OpenCLBackendInternal> createOpenCLBackendAdopting(const Problem
 
 namespace {
 
-bool isHyperelastic(Formulation f) { return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean; }
-
 Candidate candidateOf(const cl::DeviceInfo& info, std::size_t index) {
   Candidate c;
   c.backend = "opencl";

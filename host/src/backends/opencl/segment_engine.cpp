@@ -99,11 +99,20 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
          "body or batch fewer bodies per device");
 
   cpu_ = std::make_unique<CpuPcg>(*this);
-  build(solver);
-  allocate();
-  setAllActive();
-  refreshBlocks(false);
-  finish();
+  try {
+    build(solver);
+    allocate();
+    setAllActive();
+    refreshBlocks(false);
+    finish();
+  } catch (...) {
+    // No destructor runs for a constructor that throws: the uploads already enqueued read host
+    // bytes this object owns, so they end here before those bytes go.
+    dropReads(true);
+    clFinish(ctx_->queue());
+    writesDone();
+    throw;
+  }
   // Past the uploads the device's numbering lives in the permutations: the caller's problems again.
   for (std::size_t s = 0; s < segs_.size(); ++s) segs_[s].problem = problems[s];
 }

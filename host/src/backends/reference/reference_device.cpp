@@ -29,8 +29,6 @@ namespace {
 
 using SpMat = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
 
-bool isHyperelastic(Formulation f) { return f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean; }
-
 /// One body: its element state at the current positions, its assembled system on the free dofs,
 /// and the PCG state of the solve in progress.
 class ReferenceBody {
