@@ -1,0 +1,25 @@
+# Installs the library component of the build in BUILD into a fresh prefix, then configures, builds
+# and runs tests/package/consumer against it with find_package(corofem): the package config must
+# find every dependency the installed targets need. Run by CTest (tests/CMakeLists.txt):
+#   cmake -DBUILD=<build dir> -DSOURCE=<tests/package/consumer> -DWORK=<scratch dir> -P consumer_test.cmake
+foreach(var BUILD SOURCE WORK)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "consumer_test.cmake: -D${var}=... is required")
+  endif()
+endforeach()
+file(REMOVE_RECURSE "${WORK}")
+file(MAKE_DIRECTORY "${WORK}")
+function(run)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "failed (${rc}): ${ARGN}\n${out}\n${err}")
+  endif()
+  message(STATUS "${out}")
+endfunction()
+run(${CMAKE_COMMAND} --install "${BUILD}" --prefix "${WORK}/prefix" --component library)
+if(EXISTS "${WORK}/prefix/bin/corofem")
+  message(FATAL_ERROR "the library component installed the command too")
+endif()
+run(${CMAKE_COMMAND} -S "${SOURCE}" -B "${WORK}/build" -DCMAKE_PREFIX_PATH=${WORK}/prefix -DCMAKE_BUILD_TYPE=Release)
+run(${CMAKE_COMMAND} --build "${WORK}/build")
+run("${WORK}/build/consumer")
