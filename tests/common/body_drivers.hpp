@@ -30,16 +30,17 @@ class DynamicSolver {
  public:
   DynamicSolver(const detail::Problem&, detail::Device& device, const DynamicDesc& desc,
                 const SolverDesc& solver = directSolver())
-      : slot_(std::make_unique<BorrowedDevice>(device), solver), driver_(slot_, desc) {}
-  /// Throws the body's error (Error(SolveFailed)) with the state unchanged.
+      : slot_(std::make_unique<BorrowedDevice>(device), solver), driver_(slot_, desc), h_(desc.timeStep) {}
+  /// Step `index` of `count` (of the scene's time step). Throws the body's error
+  /// (Error(SolveFailed)) with the state unchanged.
   detail::BodyStepStats step(int index, int count) {
-    std::vector<detail::BodyOutcome> out = driver_.step({0}, index, count);
+    std::vector<detail::BodyOutcome> out = driver_.step({0}, detail::StepCall{index, count, h_});
     if (out.at(0).error) std::rethrow_exception(out[0].error);
     return out[0].stats;
   }
-  void idleStep(int, int) { driver_.idleStep(0); }
+  void idleStep(int, int) { driver_.idleStep(0, h_); }
   void rollback() { driver_.rollback(0); }
-  void setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v) { driver_.setInitialState(0, x, v); }
+  void setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v) { driver_.setState(0, x, v); }
   double time() const { return driver_.time(0); }
   const Eigen::VectorXd& positions() const { return driver_.positions(0); }
   const Eigen::VectorXd& velocities() const { return driver_.velocities(0); }
@@ -51,6 +52,7 @@ class DynamicSolver {
  private:
   detail::DeviceSlot slot_;
   detail::DynamicsDriver driver_;
+  double h_;
 };
 
 /// Newton statics of one body (body 0 of `device`).
@@ -77,15 +79,15 @@ class StaticSolver {
 class BodyDriver {
  public:
   BodyDriver(std::unique_ptr<detail::Device> device, const AnalysisDesc& analysis, const SolverDesc& solver)
-      : slot_(std::move(device), solver), driver_(detail::createDriver(slot_, analysis)) {}
+      : slot_(std::move(device), solver), driver_(detail::createDriver(slot_, analysis)), h_(analysis.dynamics.timeStep) {}
   /// Throws the body's error (Error(SolveFailed)) with the state unchanged.
   detail::BodyStepStats step(int index, int count) {
-    std::vector<detail::BodyOutcome> out = driver_->step({0}, index, count);
+    std::vector<detail::BodyOutcome> out = driver_->step({0}, detail::StepCall{index, count, h_});
     if (out.at(0).error) std::rethrow_exception(out[0].error);
     return out[0].stats;
   }
   void rollback() { driver_->rollback(0); }
-  void setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v) { driver_->setInitialState(0, x, v); }
+  void setInitialState(const Eigen::VectorXd& x, const Eigen::VectorXd& v) { driver_->setState(0, x, v); }
   const Eigen::VectorXd& positions() const { return driver_->positions(0); }
   const Eigen::VectorXd& velocities() const { return driver_->velocities(0); }
   double kineticEnergy() const { return driver_->kineticEnergy(0); }
@@ -96,6 +98,7 @@ class BodyDriver {
  private:
   detail::DeviceSlot slot_;
   std::unique_ptr<detail::Driver> driver_;
+  double h_;
 };
 
 }  // namespace corofem::test

@@ -32,6 +32,9 @@ class ForwardingDevice : public detail::Device {
     inner_->apply(b, c, p, y);
   }
   void elasticEnergy(const detail::BodySet& b, std::vector<double>& e) override { inner_->elasticEnergy(b, e); }
+  void setConstraints(const detail::BodySet& b, const std::vector<const std::vector<std::uint8_t>*>& c) override {
+    inner_->setConstraints(b, c);
+  }
   std::vector<detail::BodySet> pcgTiles(const detail::BodySet& b) const override { return inner_->pcgTiles(b); }
   std::vector<detail::PcgStart> pcgBegin(const detail::BodySet& bodies, const std::vector<detail::SystemCoeffs>& c,
                                          const detail::ConstVectors& b, const detail::ConstVectors& x, double tol,

@@ -14,6 +14,7 @@
 #include <corofem/tuning.hpp>
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -66,6 +67,27 @@ struct SimulationOptions {
   TaskRunner tasks;
 };
 
+/// What a handle holds (Simulation::addHandle): nodes of one body that an application moves as
+/// one, with a mouse drag or a VR controller.
+struct HandleDesc {
+  int body = 0;
+  /// The body's nodes it holds (indices into restMesh(body)'s nodes). Empty: the nodes within
+  /// `radius` of `point` at the body's current positions, or the node nearest `point` when none
+  /// is that near.
+  std::vector<std::uint32_t> nodes;
+  double point[3] = {0.0, 0.0, 0.0};  ///< (m)
+  double radius = 0.0;                ///< (m), >= 0
+};
+
+/// A force an application applies to a body (Simulation::setForces), in N: at a node, or at a
+/// point spread over the four nodes of the element that contains it at the current positions (the
+/// nearest element where none does) by its barycentric weights.
+struct AppliedForce {
+  int node = -1;                      ///< the node, or -1: at `point`
+  double point[3] = {0.0, 0.0, 0.0};  ///< (m), with node = -1
+  double force[3] = {0.0, 0.0, 0.0};  ///< (N)
+};
+
 /// One Simulation is used from one thread at a time: its reads (readSurface, surfaceBuffer,
 /// energies, the reports) may update device state and must not run during step() on another
 /// thread. Different Simulations may run on different threads. A moved-from Simulation may only be
@@ -80,13 +102,56 @@ class Simulation {
   Simulation& operator=(Simulation&&) noexcept;
   ~Simulation();
 
-  /// Advances one time step (dynamics) or one load increment (statics). When a solve fails the
-  /// bodies keep their last good state and the status says why (ErrorCode::SolveFailed).
+  /// Advances one time step of the scene's analysis.time_step (dynamics) or one load increment
+  /// (statics). When a solve fails, every body keeps its state before the step, the status says
+  /// why (ErrorCode::SolveFailed), and the Simulation goes on: the next step starts the bodies
+  /// that failed from their last good positions at rest (velocities zero).
   Status step(StepReport* report = nullptr);
-  bool finished() const;       ///< all steps / increments done
+  /// Advances one time step of dt seconds (dynamics only; an application's frame time). The same
+  /// failure rules as step().
+  Status step(double dt, StepReport* report = nullptr);
+  bool finished() const;       ///< all steps / increments done (never, for an open-ended analysis)
   int stepsTaken() const;
-  int stepCount() const;       ///< steps (dynamics) or increments (statics) the analysis asks for
-  double time() const;         ///< simulated time (dynamics) or load factor (statics)
+  /// Steps (dynamics) or increments (statics) the analysis asks for; 0 for an open-ended dynamic
+  /// analysis (analysis.steps = 0), which steps until the application stops.
+  int stepCount() const;
+  double time() const;         ///< simulated time (dynamics, s) or load factor (statics)
+
+  // -- Run-time control (dynamic analyses; BadInput on a static one). Each takes effect at the
+  // next step and lasts until changed. Node indices are those of restMesh(body).
+
+  /// Grabs nodes of a body with a handle, a hard constraint: from the next step on, the held nodes
+  /// follow the handle's target exactly (their velocities follow from it). Returns the handle's
+  /// id (> 0). A node held by a newer handle or pin leaves the older one.
+  Result<int> addHandle(const HandleDesc& handle);
+  /// Moves a handle: each held node is placed at target + R (g - c) at the end of the next step,
+  /// g its position when grabbed and c the centroid of those positions, R the row-major 3x3
+  /// rotation (nullptr: none). The target is where c goes (m).
+  Status moveHandle(int handle, const double target[3], const double* rotation = nullptr);
+  /// Releases a handle's nodes (free again, or back to the scene's supports where it fixed them).
+  Status removeHandle(int handle);
+  /// Pins nodes where they are now (3 dofs each) until unpinned.
+  Status pinNodes(int body, const std::vector<std::uint32_t>& nodes);
+  /// Frees nodes: pinned ones, and those the scene fixes or prescribes (released from the scene's
+  /// supports). Nodes held by a handle stay held (removeHandle releases them).
+  Status unpinNodes(int body, const std::vector<std::uint32_t>& nodes);
+  /// Replaces the forces the application applies to a body (added to the scene's loads); an empty
+  /// list removes them.
+  Status setForces(int body, const std::vector<AppliedForce>& forces);
+  /// Replaces the gravity of every body (m/s^2; acts at once, no ramp).
+  Status setGravity(const double gravity[3]);
+  /// Sets a body's node positions (3 per node, m); its velocities stay. Nodes held by the scene or
+  /// the application are moved back to their targets by the next step.
+  Status setPositions(int body, const std::vector<double>& positions);
+  /// Sets a body's velocities (3 per node, m/s; held dofs keep theirs at zero).
+  Status setVelocities(int body, const std::vector<double>& velocities);
+  /// Puts a body back at rest: rest positions, zero velocities (its handles, pins and forces stay).
+  Status resetBody(int body);
+  /// Moves a body rigidly: positions x -> R x + t, velocities v -> R v (R the row-major rotation,
+  /// t in m), and its pins and handles with it. BadInput for a body the scene fixes or prescribes
+  /// (unpin those nodes first) or an R that is not a rotation.
+  Status teleport(int body, const double rotation[9], const double translation[3]);
+
 
   const Scene& scene() const;
   int bodyCount() const;
@@ -148,6 +213,7 @@ class Simulation {
   std::string planReport() const;
 
  private:
+  Status stepWith(double h, StepReport* report);
   struct Impl;
   explicit Simulation(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <sstream>
 #include <utility>
 
 namespace corofem {
@@ -95,12 +96,12 @@ void Simulation::Impl::formGroups() {
     if (!grouped[i]) makeGroup({i}, false);
 }
 
-std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, int index, int count) {
+std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, const detail::StepCall& call) {
   std::vector<detail::BodyOutcome> out(g.bodies.size());
   const SleepDesc& cfg = scene.analysis.dynamics.sleep;
   const bool sleeps = !isStatic() && cfg.enabled;
-  const double h = scene.analysis.dynamics.timeStep;
-  const double t0 = (index - 1) * h, t1 = index * h;
+  const double h = call.h;
+  const double t0 = time, t1 = time + h;
   // Sleep (analysis.sleep, dynamics): a body asleep stays idle while its loads and prescribed
   // targets stay where they were when it fell asleep; a change wakes it for this step.
   detail::BodySet awake;
@@ -119,7 +120,7 @@ std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, int index
         if (!loadMoved && !targetMoved) {
           ++b.sleep.sleptSteps;
           try {
-            g.driver->idleStep(b.index);
+            g.driver->idleStep(b.index, h);
           } catch (...) {
             out[k].error = std::current_exception();
           }
@@ -136,7 +137,7 @@ std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, int index
   if (!awake.empty()) {
     std::vector<detail::BodyOutcome> stepped;
     try {
-      stepped = g.driver->step(awake, index, count);
+      stepped = g.driver->step(awake, call);
     } catch (...) {
       stepped.assign(awake.size(), detail::BodyOutcome{});
       for (detail::BodyOutcome& o : stepped) o.error = std::current_exception();
@@ -226,65 +227,98 @@ Simulation::Simulation(Simulation&&) noexcept = default;
 Simulation& Simulation::operator=(Simulation&&) noexcept = default;
 Simulation::~Simulation() = default;
 
+void Simulation::Impl::stepAll(double h, StepReport& r) {
+  const int count = stepCount();
+  if (count > 0 && stepsTaken >= count)
+    detail::fail(ErrorCode::BadInput, "the analysis is finished (", count,
+                 " steps taken); check finished() before step(), or make it open-ended (analysis.steps = 0)");
+  const detail::StepCall call{stepsTaken + 1, count, h};
+  const std::size_t n = bodies.size();
+  std::vector<Body::Sleep> sleepBefore;
+  for (const Body& b : bodies) sleepBefore.push_back(b.sleep);
+  // Each group's step is independent of the others', so their order does not change any answer.
+  std::vector<detail::BodyOutcome> outcomes(n);
+  for (Group& g : groups) {
+    for (SurfaceSet& set : g.surfaces) set.dirty = true;  // recomputed lazily
+    g.slot->setWhen("step " + std::to_string(call.index));
+    g.slot->beginStep();
+    struct EndStep {
+      detail::DeviceSlot& slot;
+      ~EndStep() { slot.endStep(); }
+    } endStep{*g.slot};
+    std::vector<detail::BodyOutcome> done;
+    try {
+      applyHolds(g);
+      done = stepGroup(g, call);
+    } catch (...) {
+      // The drivers turn every failure into their bodies' outcomes; what escapes came before
+      // them (the bodies are where they were) and fails the group's bodies.
+      done.assign(g.bodies.size(), detail::BodyOutcome{});
+      for (detail::BodyOutcome& o : done) o.error = std::current_exception();
+    }
+    for (std::size_t k = 0; k < g.bodies.size(); ++k) outcomes[g.bodies[k]] = done[k];
+  }
+  // The report sums the bodies in scene order, up to the first one that failed.
+  std::size_t failed = n;
+  for (std::size_t i = 0; i < n && failed == n; ++i)
+    if (outcomes[i].error) failed = i;
+  for (std::size_t i = 0; i < failed; ++i) {
+    const detail::BodyStepStats& b = outcomes[i].stats;
+    r.newtonIterations += b.newtonIterations;
+    r.linearIterations += b.linearIterations;
+    r.residual = std::max(r.residual, b.residual);
+    r.linearResidual = std::max(r.linearResidual, b.linearResidual);
+    r.converged = r.converged && b.converged;
+  }
+  if (failed < n) {
+    // A failing body restored itself; the bodies that completed the step go back one step so
+    // that the whole scene stays at the last step every body completed. The bodies that failed
+    // start the next step from their positions at rest (a dynamic analysis): a step that failed
+    // because the motion ran away is not repeated as it was. The error is that of the first
+    // failing body in scene order.
+    for (std::size_t b = 0; b < n; ++b) {
+      if (!outcomes[b].error) driverOf(bodies[b]).rollback(bodies[b].index);
+      else if (!isStatic()) bodies[b].hold.restart = true;
+    }
+    for (std::size_t b = 0; b < n; ++b) bodies[b].sleep = sleepBefore[b];
+    std::rethrow_exception(outcomes[failed].error);
+  }
+  stepsTaken = call.index;
+  if (!isStatic()) time += h;
+  r.step = call.index;
+}
+
 Status Simulation::step(StepReport* report) {
+  return stepWith(impl_->isStatic() ? 0.0 : impl_->scene.analysis.dynamics.timeStep, report);
+}
+
+Status Simulation::step(double dt, StepReport* report) {
+  if (impl_->isStatic()) {
+    if (report) {
+      *report = StepReport{};
+      report->converged = false;
+    }
+    return Status(ErrorCode::BadInput, "step(dt) takes a time step; this analysis is static (load increments): "
+                                       "call step() instead");
+  }
+  if (!(dt > 0.0 && std::isfinite(dt))) {
+    if (report) {
+      *report = StepReport{};
+      report->converged = false;
+      report->time = time();
+    }
+    std::ostringstream os;
+    os << "step(dt): the time step must be a finite number of seconds > 0, got " << dt;
+    return Status(ErrorCode::BadInput, os.str());
+  }
+  return stepWith(dt, report);
+}
+
+Status Simulation::stepWith(double h, StepReport* report) {
   const auto start = std::chrono::steady_clock::now();
   StepReport r;
   const detail::TaskScope tasks(impl_->tasks);
-  Status status = detail::guard([&] {
-    Impl& s = *impl_;
-    const int count = s.stepCount();
-    if (s.stepsTaken >= count)
-      detail::fail(ErrorCode::BadInput, "the analysis is finished (", count,
-                   " steps taken); check finished() before step()");
-    const int index = s.stepsTaken + 1;
-    const std::size_t n = s.bodies.size();
-    std::vector<Impl::Body::Sleep> sleepBefore;
-    for (const Impl::Body& b : s.bodies) sleepBefore.push_back(b.sleep);
-    // Each group's step is independent of the others', so their order does not change any answer.
-    std::vector<detail::BodyOutcome> outcomes(n);
-    for (Impl::Group& g : s.groups) {
-      for (Impl::SurfaceSet& set : g.surfaces) set.dirty = true;  // recomputed lazily
-      g.slot->setWhen("step " + std::to_string(index));
-      g.slot->beginStep();
-      struct EndStep {
-        detail::DeviceSlot& slot;
-        ~EndStep() { slot.endStep(); }
-      } endStep{*g.slot};
-      std::vector<detail::BodyOutcome> done;
-      try {
-        done = s.stepGroup(g, index, count);
-      } catch (...) {
-        // The drivers turn every failure into their bodies' outcomes; what escapes came before
-        // them (the bodies are where they were) and fails the group's bodies.
-        done.assign(g.bodies.size(), detail::BodyOutcome{});
-        for (detail::BodyOutcome& o : done) o.error = std::current_exception();
-      }
-      for (std::size_t k = 0; k < g.bodies.size(); ++k) outcomes[g.bodies[k]] = done[k];
-    }
-    // The report sums the bodies in scene order, up to the first one that failed.
-    std::size_t failed = n;
-    for (std::size_t i = 0; i < n && failed == n; ++i)
-      if (outcomes[i].error) failed = i;
-    for (std::size_t i = 0; i < failed; ++i) {
-      const detail::BodyStepStats& b = outcomes[i].stats;
-      r.newtonIterations += b.newtonIterations;
-      r.linearIterations += b.linearIterations;
-      r.residual = std::max(r.residual, b.residual);
-      r.linearResidual = std::max(r.linearResidual, b.linearResidual);
-      r.converged = r.converged && b.converged;
-    }
-    if (failed < n) {
-      // A failing body restored itself; the bodies that completed the step go back one step so
-      // that the whole scene stays at the last step every body completed. The error is that of
-      // the first failing body in scene order.
-      for (std::size_t b = 0; b < n; ++b)
-        if (!outcomes[b].error) s.driverOf(s.bodies[b]).rollback(s.bodies[b].index);
-      for (std::size_t b = 0; b < n; ++b) s.bodies[b].sleep = sleepBefore[b];
-      std::rethrow_exception(outcomes[failed].error);
-    }
-    s.stepsTaken = index;
-    r.step = index;
-  });
+  Status status = detail::guard([&] { impl_->stepAll(h, r); });
   r.time = time();
   if (!status) r.converged = false;
   r.wallSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -292,13 +326,13 @@ Status Simulation::step(StepReport* report) {
   return status;
 }
 
-bool Simulation::finished() const { return impl_->stepsTaken >= impl_->stepCount(); }
+bool Simulation::finished() const { return impl_->stepCount() > 0 && impl_->stepsTaken >= impl_->stepCount(); }
 int Simulation::stepsTaken() const { return impl_->stepsTaken; }
 int Simulation::stepCount() const { return impl_->stepCount(); }
 
 double Simulation::time() const {
   if (impl_->isStatic()) return static_cast<double>(impl_->stepsTaken) / impl_->stepCount();
-  return impl_->stepsTaken * impl_->scene.analysis.dynamics.timeStep;
+  return impl_->time;
 }
 
 const Scene& Simulation::scene() const { return impl_->scene; }

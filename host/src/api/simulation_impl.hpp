@@ -15,7 +15,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <limits>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -35,6 +37,17 @@ struct Simulation::Impl {
     std::unique_ptr<SurfaceMesh> surface;
     std::unique_ptr<SurfaceBinding> binding;
     bool separateStreams = false;  ///< BodyDesc::surfaceLayout == Separate
+    /// What the application holds the body by (control.cpp), handed to the driver (and the
+    /// constraints to the device) at the next step.
+    struct Hold {
+      static constexpr int kScene = -1, kReleased = -2, kPinned = 0;  ///< holder[n]; > 0: a handle id
+      std::vector<std::uint8_t> scene;  ///< Problem::constrained as the scene made it (3N)
+      std::vector<int> holder;          ///< per node: kScene, kReleased, kPinned or the handle's id
+      Eigen::VectorXd targets;          ///< 3N: held dofs' targets, NaN elsewhere (empty: none yet)
+      Eigen::VectorXd forces;           ///< 3N applied forces (empty: none)
+      bool constraintsChanged = false, controlsChanged = false;
+      bool restart = false;  ///< the last step failed: the next starts from the positions at rest
+    } hold;
     // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and
     // prescribed positions it fell asleep under (the reference a change is measured against).
     struct Sleep {
@@ -83,13 +96,25 @@ struct Simulation::Impl {
   std::vector<Group> groups;
   std::vector<Unbatched> unbatched;
   int stepsTaken = 0;
+  double time = 0.0;  ///< dynamics: the simulated time of the last completed step (s)
+
+  /// A handle (addHandle): its body, nodes, their positions when grabbed and their centroid.
+  struct Handle {
+    std::size_t body = 0;
+    std::vector<std::uint32_t> nodes;
+    std::vector<double> grabbed;  ///< 3 per node (m)
+    double centroid[3] = {0, 0, 0};
+  };
+  std::map<int, Handle> handles;
+  int nextHandle = 1;
 
   // The drivers and slots go first (they refer to the problems).
   ~Impl() { groups.clear(); }
 
   bool isStatic() const { return scene.analysis.kind == AnalysisDesc::Kind::Static; }
+  /// Increments (statics, at least 1) or steps (dynamics; 0: open-ended).
   int stepCount() const {
-    return isStatic() ? std::max(1, scene.analysis.statics.increments) : std::max(1, scene.analysis.dynamics.steps);
+    return isStatic() ? std::max(1, scene.analysis.statics.increments) : std::max(0, scene.analysis.dynamics.steps);
   }
   const Body& body(int index) const;
   Body& bodyForSurface(int index);
@@ -105,7 +130,19 @@ struct Simulation::Impl {
 
   // -- steps (simulation.cpp)
   /// Steps every body of the group (sleeping ones idle): outcomes per group body.
-  std::vector<detail::BodyOutcome> stepGroup(Group& g, int index, int count);
+  std::vector<detail::BodyOutcome> stepGroup(Group& g, const detail::StepCall& call);
+  /// One step (of length h, dynamics) of every group, summed into r (step() and step(dt)).
+  void stepAll(double h, StepReport& r);
+
+  // -- run-time control (control.cpp)
+  /// A body for a control call: in range, and the analysis dynamic.
+  Body& controlled(int index, const char* call);
+  /// Hands the group's changed holds to its device and driver (before a step).
+  void applyHolds(Group& g);
+  /// The body's controls changed: wake it, its surfaces are stale.
+  void touched(Body& b);
+  /// Recomputes the targets of the nodes of handle `id` (target and rotation given).
+  void placeHandle(int id, const double target[3], const double* rotation);
 
   // -- surfaces (surfaces.cpp)
   /// surfaceBuffer (normals false) or surfaceNormalBuffer (true) of a body: empty where there is none.

@@ -145,6 +145,11 @@ class Device {
                      const Vectors& y) = 0;
   /// Strain energy at the current positions (J), one per body of the set.
   virtual void elasticEnergy(const BodySet& bodies, std::vector<double>& energy) = 0;
+  /// The bodies' constrained dofs changed (an application pinned, released or grabbed nodes):
+  /// `constrained[i]` is body bodies[i]'s new mask, 3N entries in the problem's numbering, 1 where
+  /// the dof is constrained. Later solves project with it. A device that cannot change its
+  /// constraints throws Error(DeviceError) (the slot then moves the bodies to the next candidate).
+  virtual void setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained);
 
   // -- PCG building blocks (driven by solvePcg, solve/pcg.hpp): the single-reduction PCG of
   // kernels/opencl/pcg.cl on the projected system (constrained dofs: identity rows and columns,

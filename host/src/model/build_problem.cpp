@@ -149,13 +149,7 @@ Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc
     const Vec3d v(load.vector[0], load.vector[1], load.vector[2]);
     switch (load.kind) {
       case LoadDesc::Kind::Gravity: {
-        // Consistent body force of a linear tetrahedron: integral of rho g N_i = rho g V / 4.
-        ExternalForce f{Eigen::VectorXd::Zero(n3), load.rampTime};
-        for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
-          const Vec3d fi = p.density * p.elements[e].volume / 4.0 * v;
-          for (int k = 0; k < 4; ++k) f.f.segment<3>(3 * mesh.tets[4 * e + k]) += fi;
-        }
-        p.forces.push_back(std::move(f));
+        p.forces.push_back(ExternalForce{gravityForce(p, load.vector.data()), load.rampTime, /*gravity=*/true});
         break;
       }
       case LoadDesc::Kind::Force: {

@@ -18,6 +18,17 @@ double loadScale(double loadFactorOrTime, bool dynamic, double rampTime) {
 
 }  // namespace
 
+Eigen::VectorXd gravityForce(const Problem& p, const double g[3]) {
+  // Consistent body force of a linear tetrahedron: integral of rho g N_i = rho g V / 4.
+  Eigen::VectorXd f = Eigen::VectorXd::Zero(p.restPositions.size());
+  const Vec3d gv(g[0], g[1], g[2]);
+  for (std::size_t e = 0; e < p.mesh.tetCount(); ++e) {
+    const Vec3d fi = p.density * p.elements[e].volume / 4.0 * gv;
+    for (int k = 0; k < 4; ++k) f.segment<3>(3 * static_cast<Eigen::Index>(p.mesh.tets[4 * e + k])) += fi;
+  }
+  return f;
+}
+
 Eigen::VectorXd Problem::externalForce(double loadFactorOrTime, bool dynamic) const {
   Eigen::VectorXd f;
   externalForce(loadFactorOrTime, dynamic, f);

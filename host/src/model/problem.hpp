@@ -30,6 +30,7 @@ struct PrescribedDisplacement {
 struct ExternalForce {
   Eigen::VectorXd f;                 ///< 3N nodal forces at full load (N)
   double rampTime = 0.0;
+  bool gravity = false;              ///< a gravity load (Simulation::setGravity replaces these)
 };
 
 struct Problem {
@@ -58,6 +59,10 @@ struct Problem {
   /// on prescribed dofs, and x = X on the other constrained (fixed) dofs; free dofs are untouched.
   void applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const;
 };
+
+/// The consistent nodal forces of the body force rho g on the problem's elements: rho g V / 4 to
+/// each node of each element (N), 3N.
+Eigen::VectorXd gravityForce(const Problem& p, const double g[3]);
 
 /// Builds a body's problem (node sets resolved, loads assembled, elements set up). Throws
 /// Error(BadInput) with the body name and the element for a zero-volume element, bad material...

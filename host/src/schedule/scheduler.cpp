@@ -96,7 +96,7 @@ double calibrate(const Problem& problem, const Scene& scene, const Candidate& c,
   const auto begin = Clock::now();
   auto timeStep = [&] {
     const auto t0 = Clock::now();
-    const std::vector<BodyOutcome> out = driver->step({0}, 1, count);
+    const std::vector<BodyOutcome> out = driver->step({0}, StepCall{1, count, scene.analysis.dynamics.timeStep});
     if (out.at(0).error) std::rethrow_exception(out[0].error);
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
     driver->rollback(0);

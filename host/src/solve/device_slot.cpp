@@ -107,19 +107,24 @@ void DeviceSlot::beginStep() {
 }
 
 template <class Fn>
-void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
-  using Clock = std::chrono::steady_clock;
-  const auto start = Clock::now();
+void DeviceSlot::withFailover(const std::string& call, Fn&& fn) {
   for (;;) {
     if (exhausted_) failExhausted();
     try {
       fn(*device_);
-      break;
+      return;
     } catch (const Error& e) {
       if (e.code() != ErrorCode::DeviceError) throw;
-      advance(eventName(call), e.what());
+      advance(call, e.what());
     }
   }
+}
+
+template <class Fn>
+void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  withFailover(eventName(call), fn);
   const auto end = Clock::now();
   const double seconds = std::chrono::duration<double>(end - start).count();
   stats_.calls += 1;
@@ -140,6 +145,13 @@ void DeviceSlot::setPositions(const BodySet& bodies, const ConstVectors& x) {
   // The positions are kept for a failover (advance gives the new device them): a repeat is harmless.
   for (std::size_t i = 0; i < bodies.size(); ++i) lastX_.at(bodies[i]) = *x[i];
   guarded(SlotStats::SetPositions, bodies, [&](Device& d) { d.setPositions(bodies, x); });
+}
+
+void DeviceSlot::setConstraints(const BodySet& bodies) {
+  std::vector<const std::vector<std::uint8_t>*> masks;
+  for (std::size_t b : bodies) masks.push_back(&problems_.at(b)->constrained);
+  // A device made by a failover reads the new masks from the problems: the repeat is harmless.
+  withFailover("setConstraints", [&](Device& d) { d.setConstraints(bodies, masks); });
 }
 
 void DeviceSlot::internalForces(const BodySet& bodies, const Vectors& f) {

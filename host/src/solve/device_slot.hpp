@@ -72,6 +72,9 @@ class DeviceSlot {
   void internalForces(const BodySet& bodies, const Vectors& f);
   void apply(const BodySet& bodies, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p, const Vectors& y);
   void elasticEnergy(const BodySet& bodies, std::vector<double>& energy);
+  /// The bodies' problems have new constrained dofs (Problem::constrained, changed by the caller):
+  /// the device projects its later solves with them.
+  void setConstraints(const BodySet& bodies);
   /// The linear solves of `bodies` as the solver asks for them: PCG for the set (solvePcg), or the
   /// device's direct solve body by body (Cholesky). Per-body failures in `solves[i].failure`.
   void solve(const BodySet& bodies, std::vector<PcgSolve>& solves);
@@ -93,6 +96,9 @@ class DeviceSlot {
   const SlotStats& stats() const { return stats_; }
 
  private:
+  /// fn(device), repeated on the next candidate after a DeviceError.
+  template <class Fn>
+  void withFailover(const std::string& call, Fn&& fn);
   template <class Fn>
   void guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn);
   /// Moves to the next candidate that can be created and given the last positions; throws

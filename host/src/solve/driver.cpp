@@ -15,22 +15,24 @@ class StaticsDriver final : public Driver {
       solvers_.push_back(std::make_unique<StaticSolver>(slot.problem(i), BodyView(slot, i), desc, log));
   }
 
-  std::vector<BodyOutcome> step(const BodySet& bodies, int index, int count) override {
+  std::vector<BodyOutcome> step(const BodySet& bodies, const StepCall& call) override {
     std::vector<BodyOutcome> out(bodies.size());
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       try {
-        out[i].stats = at(bodies[i]).step(index, count);
+        out[i].stats = at(bodies[i]).step(call.index, call.count);
       } catch (...) {
         out[i].error = std::current_exception();
       }
     }
     return out;
   }
-  void idleStep(std::size_t) override { fail(ErrorCode::Internal, "statics have no idle steps"); }
+  void idleStep(std::size_t, double) override { fail(ErrorCode::Internal, "statics have no idle steps"); }
   void rollback(std::size_t body) override { at(body).rollback(); }
-  void setInitialState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override {
+  void setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override {
     at(body).setInitialState(x, v);
   }
+  void constraintsChanged(std::size_t) override { needsDynamics(); }
+  void setControls(std::size_t, const Eigen::VectorXd&, const Eigen::VectorXd&) override { needsDynamics(); }
   const Eigen::VectorXd& positions(std::size_t body) const override { return at(body).positions(); }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return at(body).velocities(); }
   double externalWork(std::size_t body) const override { return at(body).externalWork(); }
@@ -41,6 +43,10 @@ class StaticsDriver final : public Driver {
   }
 
  private:
+  [[noreturn]] static void needsDynamics() {
+    fail(ErrorCode::BadInput, "handles, pins and applied forces act on a dynamic analysis; this scene's is static "
+         "(analysis.type \"static\"): use \"dynamic\" to hold bodies at run time");
+  }
   StaticSolver& at(std::size_t body) const { return *solvers_.at(body); }
   std::vector<std::unique_ptr<StaticSolver>> solvers_;
 };

@@ -24,21 +24,42 @@ struct BodyOutcome {
   std::exception_ptr error;
 };
 
+/// Which step a Driver::step call takes.
+struct StepCall {
+  int index = 1;   ///< 1-based step / increment
+  int count = 1;   ///< steps / increments the analysis asks for; 0: open-ended (dynamics)
+  double h = 0.0;  ///< dynamics: the step's length (s); statics ignore it
+};
+
 class Driver {
  public:
   virtual ~Driver() = default;
-  /// Advances `bodies` (of the slot) to step / increment `index` (1-based) of `count`.
-  virtual std::vector<BodyOutcome> step(const BodySet& bodies, int index, int count) = 0;
-  /// A step of a sleeping body (dynamics, analysis.sleep): no solve; the time advances by one
-  /// step, the positions stay, velocities and accelerations become zero, f_ext moves to the new
-  /// time. Keeps the rollback copy like step().
-  virtual void idleStep(std::size_t body) = 0;
+  /// Advances `bodies` (of the slot) by one step (dynamics: from each body's time t to t + h) or to
+  /// load increment `index` of `count` (statics).
+  virtual std::vector<BodyOutcome> step(const BodySet& bodies, const StepCall& call) = 0;
+  /// A step of length h of a sleeping body (dynamics, analysis.sleep): no solve; the time advances,
+  /// the positions stay, velocities and accelerations become zero, f_ext moves to the new time.
+  /// Keeps the rollback copy like step().
+  virtual void idleStep(std::size_t body, double h) = 0;
   /// Restores the body's state before its last successful step (one level).
   virtual void rollback(std::size_t body) = 0;
-  /// Replaces the body's starting state before the first step (a body released from a squashed or
-  /// inverted shape): x and v are 3N; constrained dofs of x should sit at their targets at t = 0 and
-  /// their velocities are zeroed. Throws Error(BadInput) for a wrong size or a non-finite entry.
-  virtual void setInitialState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) = 0;
+  /// Replaces the body's state, before the first step or between steps (a body released from a
+  /// squashed shape, an application setting or resetting it): x and v are 3N; constrained dofs of x
+  /// should sit at their targets, their velocities are zeroed. Dynamics measure the acceleration and
+  /// the runaway guard's energy budget again from this state at the next step. Throws
+  /// Error(BadInput) for a wrong size or a non-finite entry.
+  virtual void setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) = 0;
+
+  // -- run-time control (dynamics; the statics driver throws Error(BadInput))
+
+  /// The body's Problem::constrained changed (the slot's device was told): the driver's free dofs
+  /// follow it from the next step.
+  virtual void constraintsChanged(std::size_t body) = 0;
+  /// What an application holds the body by, from the next step until replaced: `targets` (3N, or
+  /// empty for none) the positions of constrained dofs that replace the scene's (rest or
+  /// prescribed) targets, NaN where the scene's apply; `forces` (3N, or empty) forces added to the
+  /// scene's loads (N).
+  virtual void setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) = 0;
 
   virtual const Eigen::VectorXd& positions(std::size_t body) const = 0;
   virtual const Eigen::VectorXd& velocities(std::size_t body) const = 0;

@@ -80,17 +80,38 @@ void DynamicsDriver::restore(Body& b, const State& s) {
   b.deviceAtCommitted = false;
 }
 
-void DynamicsDriver::setInitialState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
+void DynamicsDriver::setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
   Body& b = bodies_.at(body);
   if (x.size() != b.x.size() || v.size() != b.x.size())
-    fail(ErrorCode::BadInput, "body '", b.problem->name, "': an initial state needs ", b.x.size(),
+    fail(ErrorCode::BadInput, "body '", b.problem->name, "': a state needs ", b.x.size(),
          " positions and velocities (3 per node), got ", x.size(), " and ", v.size());
   if (!x.allFinite() || !v.allFinite())
-    fail(ErrorCode::BadInput, "body '", b.problem->name, "': the initial positions or velocities are not finite");
+    fail(ErrorCode::BadInput, "body '", b.problem->name, "': the positions or velocities are not finite");
   b.x = x;
   b.v = (v.array() * b.freeMask).matrix();
+  b.started = false;  // the next step measures a and the energy budget from this state
   capture(b, b.previous);
   b.deviceAtCommitted = false;
+}
+
+void DynamicsDriver::constraintsChanged(std::size_t body) {
+  Body& b = bodies_.at(body);
+  b.freeMask = bodyScale(*b.problem).freeMask;
+}
+
+void DynamicsDriver::setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) {
+  Body& b = bodies_.at(body);
+  const Eigen::Index n = b.x.size();
+  if ((targets.size() != 0 && targets.size() != n) || (forces.size() != 0 && forces.size() != n))
+    fail(ErrorCode::Internal, "body '", b.problem->name, "': controls of size ", targets.size(), " and ", forces.size(),
+         " for ", n, " dofs");
+  b.heldTarget = targets;
+  b.appliedForce = forces;
+}
+
+void DynamicsDriver::externalForce(const Body& b, double t, Eigen::VectorXd& f) const {
+  b.problem->externalForce(t, /*dynamic=*/true, f);
+  if (b.appliedForce.size() == f.size()) f += b.appliedForce;
 }
 
 double DynamicsDriver::kineticEnergy(std::size_t body) const {
@@ -173,7 +194,7 @@ void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure
     Body& b = bodies_[fresh[k]];
     const Problem& p = *b.problem;
     const Eigen::Index size = b.x.size();
-    b.fextPrev = p.externalForce(0.0, /*dynamic=*/true);
+    externalForce(b, b.t, b.fextPrev);
     b.a = Eigen::VectorXd::Zero(size);
     for (Eigen::Index d = 0; d < size; ++d) {
       const double m = p.lumpedMass.size() == size ? p.lumpedMass[d] : 0.0;
@@ -192,7 +213,7 @@ void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure
   }
 }
 
-std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int count) {
+std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall& call) {
   std::vector<BodyOutcome> out(set.size());
   std::vector<std::string> startFailure(bodies_.size());
   try {
@@ -202,7 +223,8 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int
     for (BodyOutcome& o : out) o.error = std::current_exception();
     return out;
   }
-  const std::string where = "time step " + std::to_string(index) + "/" + std::to_string(count);
+  const std::string where =
+      "time step " + std::to_string(call.index) + (call.count > 0 ? "/" + std::to_string(call.count) : "");
   Attempts at(set.size());
   std::vector<std::size_t>& pending = at.pending;
   for (std::size_t i = 0; i < set.size(); ++i) {
@@ -214,7 +236,7 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int
     pending.push_back(i);
   }
   try {
-    runAttempts(set, where, at, out);
+    runAttempts(set, where, call.h, at, out);
   } catch (...) {
     // Every device of the slot failed (a DeviceError), or something other than a solve failed
     // (out of memory, the application's task runner): the bodies still stepping keep their state
@@ -227,13 +249,12 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, int index, int
   return out;
 }
 
-void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, Attempts& at,
+void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, double h, Attempts& at,
                                  std::vector<BodyOutcome>& out) {
   std::vector<std::size_t>& pending = at.pending;
   std::vector<BodyStepStats>& total = at.total;
   std::vector<std::string>& tried = at.tried;
   std::vector<std::string>& lastFailure = at.lastFailure;
-  const double h = desc_.timeStep;
   const int maxSubsteps = std::max(1, desc_.maxSubsteps);
   for (int substeps = 1; !pending.empty(); substeps *= 2) {
     std::vector<BodyStepStats> attempt(set.size());
@@ -351,7 +372,10 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     }
     w.target = p.restPositions;
     p.applyPrescribed(w.target, a.t1, /*dynamic=*/true);
-    p.externalForce(a.t1, /*dynamic=*/true, w.fext);
+    if (b.heldTarget.size() == w.target.size())
+      for (Eigen::Index d = 0; d < w.target.size(); ++d)
+        if (!std::isnan(b.heldTarget[d])) w.target[d] = b.heldTarget[d];
+    externalForce(b, a.t1, w.fext);
     a.fextNorm = freeNorm(b, w.fext);
     const Eigen::Index n = b.x.size();
     w.v = b.v;
@@ -570,16 +594,16 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
   }
 }
 
-void DynamicsDriver::idleStep(std::size_t body) {
+void DynamicsDriver::idleStep(std::size_t body, double h) {
   std::vector<std::string> failure(bodies_.size());
   start({body}, failure);
   if (!failure[body].empty()) fail(ErrorCode::SolveFailed, failure[body]);
   Body& b = bodies_[body];
   capture(b, b.start);
-  b.t = b.start.t + desc_.timeStep;
+  b.t = b.start.t + h;
   b.v.setZero();
   b.a.setZero();
-  b.fextPrev = b.problem->externalForce(b.t, /*dynamic=*/true);
+  externalForce(b, b.t, b.fextPrev);
   std::swap(b.previous, b.start);
 }
 

@@ -78,10 +78,12 @@ namespace corofem::detail {
 class DynamicsDriver final : public Driver {
  public:
   DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const Log& log = Log::none());
-  std::vector<BodyOutcome> step(const BodySet& bodies, int index, int count) override;
-  void idleStep(std::size_t body) override;
+  std::vector<BodyOutcome> step(const BodySet& bodies, const StepCall& call) override;
+  void idleStep(std::size_t body, double h) override;
   void rollback(std::size_t body) override;
-  void setInitialState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override;
+  void setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override;
+  void constraintsChanged(std::size_t body) override;
+  void setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) override;
   const Eigen::VectorXd& positions(std::size_t body) const override { return bodies_.at(body).x; }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return bodies_.at(body).v; }
   double externalWork(std::size_t body) const override { return bodies_.at(body).work; }
@@ -110,6 +112,9 @@ class DynamicsDriver final : public Driver {
     double initialEnergy = 0.0;
     bool started = false;
     bool deviceAtCommitted = false;  ///< the device's positions equal x
+    /// The application's hold (setControls): targets of constrained dofs (3N, NaN: the scene's
+    /// target) and added forces (3N); empty when none.
+    Eigen::VectorXd heldTarget, appliedForce;
     State start;                     ///< the state before the step in progress
     State previous;                  ///< the state before the last successful step
     struct Scratch {
@@ -150,7 +155,9 @@ class DynamicsDriver final : public Driver {
   /// The step's attempts with 1, 2, 4... substeps up to analysis.max_substeps, each body retried
   /// as long as it fails; throws what is not a solve failure (a DeviceError when every device
   /// failed), leaving the pending bodies for the caller to restore.
-  void runAttempts(const BodySet& set, const std::string& where, Attempts& at, std::vector<BodyOutcome>& out);
+  void runAttempts(const BodySet& set, const std::string& where, double h, Attempts& at, std::vector<BodyOutcome>& out);
+  /// f_ext of body b at time t: the scene's loads and the application's forces, into f.
+  void externalForce(const Body& b, double t, Eigen::VectorXd& f) const;
   /// One step of the scheme for every Advance, from its body's committed state to t1 = t + h,
   /// committed in place on success (no rollback copy); a failure leaves the body's committed state
   /// as it was and says why in Advance::failure.

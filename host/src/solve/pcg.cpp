@@ -15,6 +15,11 @@ LinearSolveStats Device::solveDirect(std::size_t body, const SystemCoeffs&, cons
        "is available on the reference backend (\"backend\": \"reference\")");
 }
 
+void Device::setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>&) {
+  if (bodies.empty()) return;
+  fail(ErrorCode::DeviceError, "the ", name(), " backend cannot change a body's constrained nodes at run time");
+}
+
 BodySet allBodies(std::size_t n) {
   BodySet set(n);
   for (std::size_t i = 0; i < n; ++i) set[i] = i;

@@ -154,6 +154,32 @@ void SegmentEngine::upload(const ClBuffer& buf, const double* src, std::size_t b
   enqueueWrite(buf, begin * realSize_, std::move(bytes));
 }
 
+void SegmentEngine::setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained) {
+  if (constrained.size() != bodies.size())
+    fail(ErrorCode::Internal, "OpenCL backend: ", constrained.size(), " constraint masks for ", bodies.size(), " bodies");
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    BodySegment& sg = segs_.at(bodies[i]);
+    const std::vector<std::uint8_t>& mask = *constrained[i];
+    if (mask.size() != sg.dofs())
+      fail(ErrorCode::Internal, "OpenCL backend: body '", sg.problem->name, "' got ", mask.size(),
+           " constraint flags for ", sg.dofs(), " dofs");
+    // The mask in the device's numbering, and the free mask the kernels project with (1 free, 0
+    // constrained) over the segment's real dofs (its padding stays constrained).
+    std::vector<unsigned char> bytes(sg.dofs() * realSize_);
+    detail::withReals(bytes.data(), double_, 0, [&](auto* out) {
+      for (std::size_t d = 0; d < sg.dofs(); ++d) {
+        sg.constrained[d] = mask[sg.hostDof(d)] ? 1 : 0;
+        out[d] = sg.constrained[d] ? 0 : 1;
+      }
+    });
+    enqueueWrite(free_, sg.dofBegin() * realSize_, std::move(bytes));
+    // What the device knew of the body's last solve (its x, A x) was on the old projection.
+    xKnown_[bodies[i]] = 0;
+    axReady_[bodies[i]] = 0;
+    warmLast_[bodies[i]] = 0;
+  }
+}
+
 void SegmentEngine::download(const ClBuffer& buf, double* dst, std::size_t begin, std::size_t count) {
   if (count == 0) return;
   staging_.resize(count * realSize_);

@@ -40,6 +40,9 @@ class OpenCLDevice final : public Device {
   void elasticEnergy(const BodySet& bodies, std::vector<double>& energy) override {
     engine_.elasticEnergy(bodies, energy);
   }
+  void setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained) override {
+    engine_.setConstraints(bodies, constrained);
+  }
 
   std::vector<BodySet> pcgTiles(const BodySet& bodies) const override { return engine_.pcgTiles(bodies); }
   std::vector<PcgStart> pcgBegin(const BodySet& bodies, const std::vector<SystemCoeffs>& c, const ConstVectors& b,

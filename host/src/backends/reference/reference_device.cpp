@@ -56,6 +56,18 @@ class ReferenceBody {
 
   const Problem& problem() const { return p_; }
 
+  /// New constrained dofs: the free-dof pattern of A is built again (and the direct solve's
+  /// analysis redone on its next use).
+  void setConstraints(const std::vector<std::uint8_t>& constrained) {
+    if (constrained.size() != p_.dofCount())
+      fail(ErrorCode::Internal, "reference backend: body '", p_.name, "' got ", constrained.size(),
+           " constraint flags for ", p_.dofCount(), " dofs");
+    p_.constrained = constrained;
+    buildPattern();
+    analyzed_ = false;
+    running_ = false;
+  }
+
   void setPositions(const Eigen::VectorXd& x) {
     checkSize(x, "setPositions");
     x_ = x;
@@ -431,6 +443,10 @@ class ReferenceDevice final : public Device {
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
     energy.resize(set.size());
     for (std::size_t i = 0; i < set.size(); ++i) energy[i] = at(set[i]).elasticEnergy();
+  }
+  void setConstraints(const BodySet& set, const std::vector<const std::vector<std::uint8_t>*>& constrained) override {
+    check(set, constrained.size());
+    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setConstraints(*constrained[i]);
   }
 
   std::vector<PcgStart> pcgBegin(const BodySet& set, const std::vector<SystemCoeffs>& c, const ConstVectors& b,

@@ -1,0 +1,371 @@
+// Run-time control of a live Simulation (simulation.hpp, "Run-time control"): handles, pins,
+// applied forces, gravity and the bodies' state. Each call records what the application wants in
+// the body's Hold; the next step hands the changes to the device (the constrained dofs, only when
+// they changed) and to the driver (targets and forces), so that a call between two steps costs no
+// device work. Held dofs are constrained dofs with targets of the application's (DynamicsDriver:
+// their velocities follow from the target at the step's end), so a handle is exact, like the
+// scene's prescribed displacements.
+#include "api/simulation_impl.hpp"
+
+#include "util/error.hpp"
+
+#include <Eigen/LU>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace corofem {
+
+namespace {
+
+using Vec3d = Eigen::Vector3d;
+using Mat3d = Eigen::Matrix3d;
+
+Vec3d vec3(const double v[3]) { return Vec3d(v[0], v[1], v[2]); }
+
+bool finite3(const double v[3]) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+/// R from 9 row-major doubles, checked to be a rotation (orthonormal, det +1, to 1e-6).
+Mat3d rotationOf(const double* r, const char* call) {
+  Mat3d R;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) R(i, j) = r[3 * i + j];
+  if (!R.allFinite() || (R.transpose() * R - Mat3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
+      std::abs(R.determinant() - 1.0) > 1e-6)
+    detail::fail(ErrorCode::BadInput, call, ": the rotation is not one (R^T R = I and det R = 1 to 1e-6 are needed); "
+                 "give 9 numbers, row by row, of an orthonormal matrix");
+  return R;
+}
+
+/// The node ids, checked against the body's node count.
+void checkNodes(const std::vector<std::uint32_t>& nodes, std::size_t nodeCount, const std::string& body,
+                const char* call) {
+  for (std::uint32_t n : nodes)
+    if (n >= nodeCount)
+      detail::fail(ErrorCode::BadInput, call, ": node ", n, " is not a node of body '", body, "' (it has ", nodeCount,
+                   " nodes, numbered from 0)");
+}
+
+/// Barycentric weights of p in element e at positions x (they sum to 1; all >= 0 inside).
+Eigen::Vector4d barycentric(const TetMesh& mesh, const Eigen::VectorXd& x, std::size_t e, const Vec3d& p) {
+  Vec3d c[4];
+  for (int k = 0; k < 4; ++k) c[k] = x.segment<3>(3 * static_cast<Eigen::Index>(mesh.tets[4 * e + k]));
+  Mat3d D;
+  D << c[1] - c[0], c[2] - c[0], c[3] - c[0];
+  const Vec3d w = D.partialPivLu().solve(p - c[0]);
+  return Eigen::Vector4d(1.0 - w.sum(), w[0], w[1], w[2]);
+}
+
+}  // namespace
+
+Simulation::Impl::Body& Simulation::Impl::controlled(int index, const char* call) {
+  Body& b = const_cast<Body&>(body(index));
+  if (isStatic())
+    detail::fail(ErrorCode::BadInput, call, ": run-time control acts on a dynamic analysis; this scene's is static "
+                 "(analysis.type \"static\"): use \"dynamic\" to hold bodies at run time");
+  Body::Hold& h = b.hold;
+  if (h.holder.empty()) {
+    h.scene = b.problem->constrained;
+    h.holder.assign(b.mesh.nodeCount(), Body::Hold::kScene);
+  }
+  return b;
+}
+
+void Simulation::Impl::touched(Body& b) {
+  b.sleep.asleep = false;
+  b.sleep.quiet = 0;
+  for (SurfaceSet& set : groups[b.group].surfaces) set.dirty = true;
+}
+
+void Simulation::Impl::applyHolds(Group& g) {
+  detail::BodySet changed;
+  for (std::size_t i : g.bodies) {
+    Body& b = bodies[i];
+    Body::Hold& h = b.hold;
+    if (h.constraintsChanged) {
+      // A dof is constrained when an application holds its node, or the scene does and the
+      // application has not released it.
+      std::vector<std::uint8_t>& c = b.problem->constrained;
+      for (std::size_t d = 0; d < c.size(); ++d) {
+        const int holder = h.holder[d / 3];
+        c[d] = holder >= Body::Hold::kPinned || (h.scene[d] && holder == Body::Hold::kScene) ? 1 : 0;
+      }
+      changed.push_back(b.index);
+    }
+  }
+  if (!changed.empty()) {
+    g.slot->setConstraints(changed);
+    for (std::size_t index : changed) g.driver->constraintsChanged(index);
+  }
+  for (std::size_t i : g.bodies) {
+    Body& b = bodies[i];
+    Body::Hold& h = b.hold;
+    h.constraintsChanged = false;
+    if (h.controlsChanged) g.driver->setControls(b.index, h.targets, h.forces);
+    h.controlsChanged = false;
+    if (h.restart) {
+      // The last step failed: this one starts from the last good positions at rest.
+      const Eigen::VectorXd x = g.driver->positions(b.index);
+      g.driver->setState(b.index, x, Eigen::VectorXd::Zero(x.size()));
+      h.restart = false;
+    }
+  }
+}
+
+void Simulation::Impl::placeHandle(int id, const double target[3], const double* rotation) {
+  const Handle& handle = handles.at(id);
+  Body& b = bodies[handle.body];
+  Body::Hold& h = b.hold;
+  const Mat3d R = rotation ? rotationOf(rotation, "moveHandle") : Mat3d::Identity();
+  const Vec3d c = vec3(handle.centroid), t = vec3(target);
+  for (std::size_t k = 0; k < handle.nodes.size(); ++k) {
+    const std::uint32_t n = handle.nodes[k];
+    if (h.holder[n] != id) continue;  // taken by a newer handle or pin
+    const Vec3d g(handle.grabbed[3 * k], handle.grabbed[3 * k + 1], handle.grabbed[3 * k + 2]);
+    h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)) = t + R * (g - c);
+  }
+  h.controlsChanged = true;
+  touched(b);
+}
+
+Result<int> Simulation::addHandle(const HandleDesc& desc) {
+  return detail::guardResult<int>([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(desc.body, "addHandle");
+    const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
+    const std::size_t nodeCount = b.mesh.nodeCount();
+    Impl::Handle handle;
+    handle.body = static_cast<std::size_t>(desc.body);
+    handle.nodes = desc.nodes;
+    if (handle.nodes.empty()) {
+      if (!finite3(desc.point) || !(desc.radius >= 0.0) || !std::isfinite(desc.radius))
+        detail::fail(ErrorCode::BadInput, "addHandle: the point must be finite and the radius a finite number >= 0 (m)");
+      const Vec3d p = vec3(desc.point);
+      std::uint32_t nearest = 0;
+      double best = std::numeric_limits<double>::infinity();
+      for (std::size_t n = 0; n < nodeCount; ++n) {
+        const double d = (x.segment<3>(3 * static_cast<Eigen::Index>(n)) - p).norm();
+        if (d <= desc.radius) handle.nodes.push_back(static_cast<std::uint32_t>(n));
+        if (d < best) {
+          best = d;
+          nearest = static_cast<std::uint32_t>(n);
+        }
+      }
+      if (handle.nodes.empty()) handle.nodes.push_back(nearest);
+    } else {
+      checkNodes(handle.nodes, nodeCount, b.problem->name, "addHandle");
+      std::sort(handle.nodes.begin(), handle.nodes.end());
+      handle.nodes.erase(std::unique(handle.nodes.begin(), handle.nodes.end()), handle.nodes.end());
+    }
+    Vec3d c = Vec3d::Zero();
+    for (std::uint32_t n : handle.nodes) {
+      const Vec3d g = x.segment<3>(3 * static_cast<Eigen::Index>(n));
+      handle.grabbed.insert(handle.grabbed.end(), {g[0], g[1], g[2]});
+      c += g;
+    }
+    c /= static_cast<double>(handle.nodes.size());
+    for (int k = 0; k < 3; ++k) handle.centroid[k] = c[k];
+    const int id = s.nextHandle++;
+    Impl::Body::Hold& h = b.hold;
+    if (h.targets.size() == 0) h.targets = Eigen::VectorXd::Constant(x.size(), std::nan(""));
+    for (std::uint32_t n : handle.nodes) h.holder[n] = id;
+    s.handles.emplace(id, std::move(handle));
+    h.constraintsChanged = true;
+    s.placeHandle(id, s.handles.at(id).centroid, nullptr);  // held where they are
+    return id;
+  });
+}
+
+Status Simulation::moveHandle(int handle, const double target[3], const double* rotation) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    if (s.handles.count(handle) == 0)
+      detail::fail(ErrorCode::BadInput, "moveHandle: there is no handle ", handle,
+                   "; use an id addHandle returned and that was not removed");
+    if (!finite3(target)) detail::fail(ErrorCode::BadInput, "moveHandle: the target must be finite (m)");
+    s.placeHandle(handle, target, rotation);
+  });
+}
+
+Status Simulation::removeHandle(int handle) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    const auto it = s.handles.find(handle);
+    if (it == s.handles.end())
+      detail::fail(ErrorCode::BadInput, "removeHandle: there is no handle ", handle,
+                   "; use an id addHandle returned and that was not removed");
+    Impl::Body& b = s.bodies[it->second.body];
+    Impl::Body::Hold& h = b.hold;
+    for (std::uint32_t n : it->second.nodes)
+      if (h.holder[n] == handle) {
+        h.holder[n] = Impl::Body::Hold::kScene;
+        h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)).setConstant(std::nan(""));
+      }
+    s.handles.erase(it);
+    h.constraintsChanged = h.controlsChanged = true;
+    s.touched(b);
+  });
+}
+
+Status Simulation::pinNodes(int body, const std::vector<std::uint32_t>& nodes) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "pinNodes");
+    checkNodes(nodes, b.mesh.nodeCount(), b.problem->name, "pinNodes");
+    const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
+    Impl::Body::Hold& h = b.hold;
+    if (h.targets.size() == 0) h.targets = Eigen::VectorXd::Constant(x.size(), std::nan(""));
+    for (std::uint32_t n : nodes) {
+      h.holder[n] = Impl::Body::Hold::kPinned;
+      const Eigen::Index d = 3 * static_cast<Eigen::Index>(n);
+      h.targets.segment<3>(d) = x.segment<3>(d);
+    }
+    h.constraintsChanged = h.controlsChanged = true;
+    s.touched(b);
+  });
+}
+
+Status Simulation::unpinNodes(int body, const std::vector<std::uint32_t>& nodes) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "unpinNodes");
+    checkNodes(nodes, b.mesh.nodeCount(), b.problem->name, "unpinNodes");
+    Impl::Body::Hold& h = b.hold;
+    for (std::uint32_t n : nodes) {
+      if (h.holder[n] > Impl::Body::Hold::kPinned) continue;  // a handle's
+      h.holder[n] = Impl::Body::Hold::kReleased;
+      if (h.targets.size() != 0) h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)).setConstant(std::nan(""));
+    }
+    h.constraintsChanged = h.controlsChanged = true;
+    s.touched(b);
+  });
+}
+
+Status Simulation::setForces(int body, const std::vector<AppliedForce>& forces) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "setForces");
+    const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
+    const TetMesh& mesh = b.problem->mesh;
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(x.size());
+    for (std::size_t i = 0; i < forces.size(); ++i) {
+      const AppliedForce& a = forces[i];
+      if (!finite3(a.force) || (a.node < 0 && !finite3(a.point)))
+        detail::fail(ErrorCode::BadInput, "setForces: force ", i, " has a non-finite force or point");
+      const Vec3d force = vec3(a.force);
+      if (a.node >= 0) {
+        checkNodes({static_cast<std::uint32_t>(a.node)}, mesh.nodeCount(), b.problem->name, "setForces");
+        f.segment<3>(3 * static_cast<Eigen::Index>(a.node)) += force;
+        continue;
+      }
+      // The element containing the point at the current positions: the one whose smallest
+      // barycentric weight is largest (>= 0 inside); outside the body the nearest by that
+      // measure, its weights clamped to >= 0 and normalised.
+      const Vec3d p = vec3(a.point);
+      double best = -std::numeric_limits<double>::infinity();
+      Eigen::Vector4d weights(0.25, 0.25, 0.25, 0.25);
+      std::size_t element = 0;
+      for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
+        const Eigen::Vector4d w = barycentric(mesh, x, e, p);
+        if (w.allFinite() && w.minCoeff() > best) {
+          best = w.minCoeff();
+          weights = w;
+          element = e;
+        }
+      }
+      weights = weights.cwiseMax(0.0);
+      weights /= weights.sum();
+      for (int k = 0; k < 4; ++k)
+        f.segment<3>(3 * static_cast<Eigen::Index>(mesh.tets[4 * element + k])) += weights[k] * force;
+    }
+    b.hold.forces = forces.empty() ? Eigen::VectorXd() : std::move(f);
+    b.hold.controlsChanged = true;
+    s.touched(b);
+  });
+}
+
+Status Simulation::setGravity(const double gravity[3]) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    if (!finite3(gravity)) detail::fail(ErrorCode::BadInput, "setGravity: the gravity must be finite (m/s^2)");
+    for (std::size_t i = 0; i < s.bodies.size(); ++i) (void)s.controlled(static_cast<int>(i), "setGravity");
+    for (Impl::Body& b : s.bodies) {
+      std::vector<detail::ExternalForce>& loads = b.problem->forces;
+      loads.erase(std::remove_if(loads.begin(), loads.end(), [](const detail::ExternalForce& f) { return f.gravity; }),
+                  loads.end());
+      loads.push_back(detail::ExternalForce{detail::gravityForce(*b.problem, gravity), 0.0, /*gravity=*/true});
+      s.touched(b);
+    }
+  });
+}
+
+Status Simulation::setPositions(int body, const std::vector<double>& positions) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "setPositions");
+    detail::Driver& driver = s.driverOf(b);
+    const Eigen::VectorXd x = Eigen::Map<const Eigen::VectorXd>(positions.data(), static_cast<Eigen::Index>(positions.size()));
+    driver.setState(b.index, x, driver.velocities(b.index));
+    s.touched(b);
+  });
+}
+
+Status Simulation::setVelocities(int body, const std::vector<double>& velocities) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "setVelocities");
+    detail::Driver& driver = s.driverOf(b);
+    const Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(velocities.data(), static_cast<Eigen::Index>(velocities.size()));
+    driver.setState(b.index, driver.positions(b.index), v);
+    s.touched(b);
+  });
+}
+
+Status Simulation::resetBody(int body) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "resetBody");
+    const Eigen::VectorXd& rest = b.problem->restPositions;
+    s.driverOf(b).setState(b.index, rest, Eigen::VectorXd::Zero(rest.size()));
+    s.touched(b);
+  });
+}
+
+Status Simulation::teleport(int body, const double rotation[9], const double translation[3]) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "teleport");
+    const Mat3d R = rotationOf(rotation, "teleport");
+    if (!finite3(translation)) detail::fail(ErrorCode::BadInput, "teleport: the translation must be finite (m)");
+    Impl::Body::Hold& h = b.hold;
+    for (std::size_t d = 0; d < h.scene.size(); ++d)
+      if (h.scene[d] && h.holder[d / 3] == Impl::Body::Hold::kScene)
+        detail::fail(ErrorCode::BadInput, "teleport: body '", b.problem->name, "' is held by the scene at node ", d / 3,
+                     " (a fixed or prescribed node); release its supports with unpinNodes first, or move it "
+                     "with a handle");
+    const Vec3d t = vec3(translation);
+    detail::Driver& driver = s.driverOf(b);
+    Eigen::VectorXd x = driver.positions(b.index), v = driver.velocities(b.index);
+    for (Eigen::Index n = 0; n + 2 < x.size(); n += 3) {
+      x.segment<3>(n) = R * x.segment<3>(n) + t;
+      v.segment<3>(n) = R * v.segment<3>(n);
+      if (h.targets.size() != 0 && !std::isnan(h.targets[n])) h.targets.segment<3>(n) = R * h.targets.segment<3>(n) + t;
+    }
+    // The handles move with the body: their grab points and centroids.
+    for (auto& [id, handle] : s.handles) {
+      if (handle.body != static_cast<std::size_t>(body)) continue;
+      for (std::size_t k = 0; k < handle.nodes.size(); ++k) {
+        const Vec3d g = R * Vec3d(handle.grabbed[3 * k], handle.grabbed[3 * k + 1], handle.grabbed[3 * k + 2]) + t;
+        for (int c = 0; c < 3; ++c) handle.grabbed[3 * k + static_cast<std::size_t>(c)] = g[c];
+      }
+      const Vec3d c = R * vec3(handle.centroid) + t;
+      for (int k = 0; k < 3; ++k) handle.centroid[k] = c[k];
+    }
+    driver.setState(b.index, x, v);
+    h.controlsChanged = true;
+    s.touched(b);
+  });
+}
+
+}  // namespace corofem

@@ -1,0 +1,380 @@
+// Run-time control of a live Simulation (simulation.hpp, "Run-time control"), on every backend
+// (reference double; OpenCL double and float on every device): each call is checked by the physics
+// it must produce, not only by its status. A handle's nodes sit on its target (a hard constraint:
+// to rounding), pinned nodes stay, released supports let the body fall freely (its momentum grows
+// as M g t), applied forces change the momentum by F t, a teleport rotates the momentum and keeps the
+// kinetic energy, and a batch of bodies under control steps like each body alone.
+#include "extremes/extremes_support.hpp"
+
+#include <corofem/simulation.hpp>
+
+#include <Eigen/LU>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numeric>
+#include <vector>
+
+namespace corofem::test {
+namespace {
+
+constexpr double kH = 1.0 / 60.0;
+const double kGravity[3] = {0.0, -9.81, 0.0};
+const double kNoGravity[3] = {0.0, 0.0, 0.0};
+
+/// A 0.5 x 0.1 x 0.1 m beam (E 1 MPa, 1000 kg/m^3), clamped at x = 0 when `clamped`, backward Euler
+/// at 60 Hz, open-ended (analysis.steps = 0), under gravity when `gravity`.
+Scene beamScene(const BackendCase& c, bool clamped, bool gravity) {
+  BodyDesc body = makeBody(box({0, 0, 0}, {0.5, 0.1, 0.1}, {10, 2, 2}), 1e6, 0.3);
+  if (clamped) body.fixed.push_back(planeSet(0, 0.0));
+  if (gravity) {
+    LoadDesc g;
+    g.kind = LoadDesc::Kind::Gravity;
+    g.vector = {0.0, -9.81, 0.0};
+    body.loads.push_back(g);
+  }
+  Scene scene = dynamicScene(c, body, kH, 0);
+  scene.analysis.dynamics.integrator = Integrator::BackwardEuler;
+  return scene;
+}
+
+Simulation create(const Scene& scene) {
+  Result<Simulation> sim = Simulation::create(scene);
+  if (!sim) throw std::runtime_error(sim.message());
+  return std::move(sim.value());
+}
+
+std::vector<double> positions(const Simulation& sim, int body = 0) {
+  std::vector<double> x;
+  EXPECT_TRUE(sim.readPositions(body, x));
+  return x;
+}
+std::vector<double> velocities(const Simulation& sim, int body = 0) {
+  std::vector<double> v;
+  EXPECT_TRUE(sim.readVelocities(body, v));
+  return v;
+}
+
+/// The nodes of a mesh with coordinate `axis` within 1e-9 of `value`.
+std::vector<std::uint32_t> nodesAt(const TetMesh& mesh, int axis, double value) {
+  std::vector<std::uint32_t> out;
+  for (std::size_t n = 0; n < mesh.nodeCount(); ++n)
+    if (std::abs(mesh.nodes[3 * n + static_cast<std::size_t>(axis)] - value) < 1e-9) out.push_back(static_cast<std::uint32_t>(n));
+  return out;
+}
+
+/// sum m v over the nodes (kg m/s), with the lumped mass rho V / 4 per node.
+std::array<double, 3> momentum(const Simulation& sim, int body = 0) {
+  const TetMesh& mesh = sim.restMesh(body);
+  const double density = sim.scene().bodies[static_cast<std::size_t>(body)].material.density;
+  std::vector<double> mass(mesh.nodeCount(), 0.0);
+  for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
+    Eigen::Matrix3d D;
+    for (int k = 1; k < 4; ++k)
+      for (int a = 0; a < 3; ++a)
+        D(a, k - 1) = mesh.nodes[3 * mesh.tets[4 * e + static_cast<std::size_t>(k)] + static_cast<std::size_t>(a)] -
+                      mesh.nodes[3 * mesh.tets[4 * e] + static_cast<std::size_t>(a)];
+    for (int k = 0; k < 4; ++k) mass[mesh.tets[4 * e + static_cast<std::size_t>(k)]] += density * std::abs(D.determinant()) / 24.0;
+  }
+  const std::vector<double> v = velocities(sim, body);
+  std::array<double, 3> p{0, 0, 0};
+  for (std::size_t n = 0; n < mass.size(); ++n)
+    for (int a = 0; a < 3; ++a) p[static_cast<std::size_t>(a)] += mass[n] * v[3 * n + static_cast<std::size_t>(a)];
+  return p;
+}
+
+double totalMass(const Simulation& sim) {
+  const BodyDesc& b = sim.scene().bodies[0];
+  return b.material.density * 0.5 * 0.1 * 0.1;
+}
+
+class Control : public ::testing::TestWithParam<BackendCase> {
+ protected:
+  /// Relative tolerance of what the linear solves decide (float devices solve to 1e-5).
+  double solveTolerance() const { return GetParam().isFloat() ? 2e-3 : 1e-5; }
+};
+
+TEST_P(Control, AHandleHoldsItsNodesOnItsTargetAndBendsTheBeam) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  const std::vector<std::uint32_t> tip = nodesAt(sim.restMesh(0), 0, 0.5);
+  HandleDesc desc;
+  desc.nodes = tip;
+  Result<int> handle = sim.addHandle(desc);
+  ASSERT_TRUE(handle) << handle.message();
+  const std::vector<double> rest = positions(sim);
+  // The handle's centroid at rest is (0.5, 0.05, 0.05); lift it 5 cm over 10 frames, then hold.
+  for (int frame = 1; frame <= 20; ++frame) {
+    const double lift = 0.05 * std::min(1.0, frame / 10.0);
+    const double target[3] = {0.5, 0.05 + lift, 0.05};
+    ASSERT_TRUE(sim.moveHandle(handle.value(), target));
+    ASSERT_TRUE(sim.step(kH)) << "frame " << frame;
+    const std::vector<double> x = positions(sim);
+    for (std::uint32_t n : tip)
+      for (int a = 0; a < 3; ++a) {
+        const double expected = rest[3 * n + static_cast<std::size_t>(a)] + (a == 1 ? lift : 0.0);
+        ASSERT_NEAR(x[3 * n + static_cast<std::size_t>(a)], expected, 1e-9) << "frame " << frame << ", node " << n;
+      }
+  }
+  EXPECT_NEAR(sim.time(), 20 * kH, 1e-12);
+  // The beam bends up between the clamp and the tip: its middle rose (gravity alone pulls it down).
+  const std::vector<double> x = positions(sim);
+  double middle = 0.0;
+  const std::vector<std::uint32_t> mid = nodesAt(sim.restMesh(0), 0, 0.25);
+  for (std::uint32_t n : mid) middle += x[3 * n + 1] - rest[3 * n + 1];
+  EXPECT_GT(middle / static_cast<double>(mid.size()), 0.005);
+
+  // Released, the tip falls back under gravity.
+  ASSERT_TRUE(sim.removeHandle(handle.value()));
+  for (int frame = 0; frame < 10; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> after = positions(sim);
+  EXPECT_LT(after[3 * tip[0] + 1], x[3 * tip[0] + 1] - 0.005);
+  EXPECT_FALSE(sim.moveHandle(handle.value(), x.data()));  // removed: BadInput
+}
+
+TEST_P(Control, PinnedNodesStayAndUnpinnedOnesMove) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  const std::vector<std::uint32_t> tip = nodesAt(sim.restMesh(0), 0, 0.5);
+  for (int frame = 0; frame < 5; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> x5 = positions(sim);
+  ASSERT_TRUE(sim.pinNodes(0, tip));
+  for (int frame = 0; frame < 10; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> x15 = positions(sim), v15 = velocities(sim);
+  for (std::uint32_t n : tip)
+    for (std::size_t a = 0; a < 3; ++a) {
+      EXPECT_NEAR(x15[3 * n + a], x5[3 * n + a], 1e-12) << "node " << n;
+      EXPECT_EQ(v15[3 * n + a], 0.0) << "node " << n;
+    }
+  ASSERT_TRUE(sim.unpinNodes(0, tip));
+  for (int frame = 0; frame < 10; ++frame) ASSERT_TRUE(sim.step(kH));
+  EXPECT_LT(positions(sim)[3 * tip[0] + 1], x15[3 * tip[0] + 1] - 1e-3);
+}
+
+TEST_P(Control, ReleasedSupportsLetTheBodyFallFreely) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, false));
+  const std::vector<std::uint32_t> clamp = nodesAt(sim.restMesh(0), 0, 0.0);
+  ASSERT_FALSE(clamp.empty());
+  ASSERT_TRUE(sim.unpinNodes(0, clamp));
+  ASSERT_TRUE(sim.setGravity(kGravity));
+  const int frames = 12;
+  for (int frame = 0; frame < frames; ++frame) ASSERT_TRUE(sim.step(kH));
+  // No support: the momentum grows as M g t (internal forces sum to zero).
+  const std::array<double, 3> p = momentum(sim);
+  const double expected = totalMass(sim) * -9.81 * frames * kH;
+  EXPECT_NEAR(p[1], expected, solveTolerance() * std::abs(expected) * 10);
+  EXPECT_NEAR(p[0], 0.0, solveTolerance() * std::abs(expected) * 10);
+  // Gravity off: the momentum stays.
+  ASSERT_TRUE(sim.setGravity(kNoGravity));
+  for (int frame = 0; frame < 6; ++frame) ASSERT_TRUE(sim.step(kH));
+  EXPECT_NEAR(momentum(sim)[1], p[1], solveTolerance() * std::abs(expected) * 10);
+}
+
+TEST_P(Control, AppliedForcesChangeTheMomentumByForceTimesTime) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), false, false));
+  AppliedForce atNode;
+  atNode.node = 0;
+  atNode.force[2] = 0.5;
+  AppliedForce atPoint;  // inside the beam: spread over an element's nodes
+  atPoint.point[0] = 0.31;
+  atPoint.point[1] = 0.043;
+  atPoint.point[2] = 0.072;
+  atPoint.force[1] = 2.0;
+  ASSERT_TRUE(sim.setForces(0, {atNode, atPoint}));
+  const int frames = 8;
+  for (int frame = 0; frame < frames; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::array<double, 3> p = momentum(sim);
+  const double t = frames * kH;
+  EXPECT_NEAR(p[1], 2.0 * t, solveTolerance() * 2.0 * t * 10);
+  EXPECT_NEAR(p[2], 0.5 * t, solveTolerance() * 2.0 * t * 10);
+  EXPECT_NEAR(p[0], 0.0, solveTolerance() * 2.0 * t * 10);
+  // Removed: the momentum stays where it is.
+  ASSERT_TRUE(sim.setForces(0, {}));
+  for (int frame = 0; frame < 4; ++frame) ASSERT_TRUE(sim.step(kH));
+  EXPECT_NEAR(momentum(sim)[1], p[1], solveTolerance() * 2.0 * t * 10);
+}
+
+TEST_P(Control, TeleportMovesTheStateRigidly) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), false, false));
+  std::vector<double> v(positions(sim).size(), 0.0);
+  for (std::size_t n = 0; n < v.size() / 3; ++n) v[3 * n] = 0.3;  // translating along x
+  ASSERT_TRUE(sim.setVelocities(0, v));
+  ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> x0 = positions(sim);
+  const std::array<double, 3> p0 = momentum(sim);
+  const double ke0 = sim.energies(0).kinetic;
+  // A quarter turn about z, then 1 m up.
+  const double R[9] = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+  const double t[3] = {0, 1, 0};
+  ASSERT_TRUE(sim.teleport(0, R, t));
+  const std::vector<double> x1 = positions(sim);
+  for (std::size_t n = 0; n < x0.size() / 3; ++n) {
+    EXPECT_NEAR(x1[3 * n], -x0[3 * n + 1], 1e-12);
+    EXPECT_NEAR(x1[3 * n + 1], x0[3 * n] + 1.0, 1e-12);
+    EXPECT_NEAR(x1[3 * n + 2], x0[3 * n + 2], 1e-12);
+  }
+  const std::array<double, 3> p1 = momentum(sim);
+  EXPECT_NEAR(p1[0], -p0[1], 1e-12);
+  EXPECT_NEAR(p1[1], p0[0], 1e-12);
+  EXPECT_NEAR(sim.energies(0).kinetic, ke0, 1e-12 * ke0);
+  // It goes on moving along +y now, with its momentum.
+  ASSERT_TRUE(sim.step(kH));
+  EXPECT_NEAR(momentum(sim)[1], p0[0], solveTolerance() * std::abs(p0[0]) * 10);
+  // A body the scene clamps cannot be teleported; a matrix that is no rotation is refused.
+  Simulation clamped = create(beamScene(GetParam(), true, false));
+  const Status refused = clamped.teleport(0, R, t);
+  EXPECT_EQ(refused.code(), ErrorCode::BadInput);
+  EXPECT_NE(refused.message().find("unpinNodes"), std::string::npos) << refused.message();
+  const double shear[9] = {1, 0.1, 0, 0, 1, 0, 0, 0, 1};
+  EXPECT_EQ(sim.teleport(0, shear, t).code(), ErrorCode::BadInput);
+}
+
+TEST_P(Control, StateCanBeSetAndReset) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  for (int frame = 0; frame < 10; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> bent = positions(sim);
+  ASSERT_TRUE(sim.resetBody(0));
+  const std::vector<double> rest = positions(sim);
+  for (std::size_t d = 0; d < rest.size(); ++d) EXPECT_EQ(rest[d], sim.restMesh(0).nodes[d]);
+  for (double v : velocities(sim)) EXPECT_EQ(v, 0.0);
+  ASSERT_TRUE(sim.setPositions(0, bent));
+  EXPECT_EQ(positions(sim), bent);
+  // Wrong sizes and non-finite values are refused, and nothing changes.
+  EXPECT_EQ(sim.setPositions(0, std::vector<double>(3)).code(), ErrorCode::BadInput);
+  std::vector<double> bad = bent;
+  bad[4] = std::nan("");
+  EXPECT_EQ(sim.setPositions(0, bad).code(), ErrorCode::BadInput);
+  EXPECT_EQ(positions(sim), bent);
+  EXPECT_EQ(sim.setVelocities(7, bent).code(), ErrorCode::BadInput);
+  ASSERT_TRUE(sim.step(kH));
+}
+
+TEST_P(Control, TheTimeStepIsGivenPerCallAndTheAnalysisIsOpenEnded) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  EXPECT_EQ(sim.stepCount(), 0);
+  double t = 0.0;
+  for (int frame = 0; frame < 12; ++frame) {
+    const double dt = frame % 3 == 0 ? 1.0 / 90.0 : 1.0 / 60.0;
+    ASSERT_TRUE(sim.step(dt));
+    t += dt;
+    EXPECT_FALSE(sim.finished());
+  }
+  EXPECT_NEAR(sim.time(), t, 1e-12);
+  EXPECT_EQ(sim.stepsTaken(), 12);
+  EXPECT_EQ(sim.step(0.0).code(), ErrorCode::BadInput);
+  EXPECT_EQ(sim.step(-kH).code(), ErrorCode::BadInput);
+  EXPECT_EQ(sim.step(std::nan("")).code(), ErrorCode::BadInput);
+  EXPECT_NEAR(sim.time(), t, 1e-12);
+}
+
+TEST_P(Control, AFailedStepIsNotTerminal) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  for (int frame = 0; frame < 3; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> before = positions(sim);
+  const double t = sim.time();
+  AppliedForce huge;
+  huge.node = static_cast<int>(nodesAt(sim.restMesh(0), 0, 0.5).front());
+  huge.force[1] = 1e300;  // the step's forces overflow
+  ASSERT_TRUE(sim.setForces(0, {huge}));
+  const Status failed = sim.step(kH);
+  ASSERT_EQ(failed.code(), ErrorCode::SolveFailed) << failed.message();
+  EXPECT_EQ(positions(sim), before);
+  EXPECT_EQ(sim.time(), t);
+  // The application takes the force away and goes on; the next step starts at rest.
+  ASSERT_TRUE(sim.setForces(0, {}));
+  for (int frame = 0; frame < 5; ++frame) ASSERT_TRUE(sim.step(kH)) << "frame " << frame;
+  EXPECT_NEAR(sim.time(), t + 5 * kH, 1e-12);
+}
+
+TEST_P(Control, ControlNeedsADynamicAnalysis) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Scene scene = beamScene(GetParam(), true, true);
+  scene.analysis.kind = AnalysisDesc::Kind::Static;
+  scene.analysis.statics.increments = 1;
+  Simulation sim = create(scene);
+  HandleDesc desc;
+  desc.nodes = {1};
+  const Result<int> handle = sim.addHandle(desc);
+  ASSERT_FALSE(handle);
+  EXPECT_EQ(handle.status().code(), ErrorCode::BadInput);
+  EXPECT_EQ(sim.pinNodes(0, {1}).code(), ErrorCode::BadInput);
+  EXPECT_EQ(sim.step(kH).code(), ErrorCode::BadInput);
+  const Status increment = sim.step();
+  EXPECT_NE(increment.code(), ErrorCode::BadInput) << increment.message();
+}
+
+TEST_P(Control, BadNodesAndHandlesAreRefused) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  const std::uint32_t nodes = static_cast<std::uint32_t>(sim.restMesh(0).nodeCount());
+  const Status pin = sim.pinNodes(0, {nodes});
+  EXPECT_EQ(pin.code(), ErrorCode::BadInput);
+  EXPECT_NE(pin.message().find(std::to_string(nodes)), std::string::npos) << pin.message();
+  HandleDesc desc;
+  desc.body = 3;
+  EXPECT_EQ(sim.addHandle(desc).status().code(), ErrorCode::BadInput);
+  EXPECT_EQ(sim.removeHandle(42).code(), ErrorCode::BadInput);
+  // A handle by point and radius grabs the nodes near the point, at least the nearest one.
+  HandleDesc near;
+  near.point[0] = 0.52;
+  near.point[1] = 0.05;
+  near.point[2] = 0.05;
+  near.radius = 0.0;
+  Result<int> one = sim.addHandle(near);
+  ASSERT_TRUE(one) << one.message();
+  ASSERT_TRUE(sim.step(kH));
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);
+
+/// Two copies of the beam in one batch (the OpenCL backend batches bodies that share a device),
+/// one held by a handle, one pushed: each steps as it does alone.
+TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
+  const std::vector<BackendCase> cases = backendCases();
+  const BackendCase* c = nullptr;
+  for (const BackendCase& k : cases)
+    if (k.isOpenCL() && k.absent.empty() && !k.isFloat()) c = &k;
+  if (!c) GTEST_SKIP() << "no OpenCL device with fp64 here: the batch runs on OpenCL devices";
+  Scene one = beamScene(*c, true, true);
+  Scene two = one;
+  two.bodies.push_back(two.bodies[0]);
+  two.bodies[1].name = "second";
+  two.backend.batch = true;
+  Simulation batch = create(two);
+  ASSERT_NE(batch.schedulerReport().find("batch"), std::string::npos);
+  Simulation alone0 = create(one), alone1 = create(one);
+  const std::vector<std::uint32_t> tip = nodesAt(batch.restMesh(0), 0, 0.5);
+  HandleDesc desc;
+  desc.nodes = tip;
+  Result<int> hb = batch.addHandle(desc), ha = alone0.addHandle(desc);
+  ASSERT_TRUE(hb && ha);
+  AppliedForce push;
+  push.node = static_cast<int>(tip.front());
+  push.force[2] = 1.5;
+  desc.body = 1;
+  ASSERT_TRUE(batch.setForces(1, {push}));
+  ASSERT_TRUE(alone1.setForces(0, {push}));
+  for (int frame = 1; frame <= 12; ++frame) {
+    const double target[3] = {0.5, 0.05 + 0.004 * frame, 0.05};
+    ASSERT_TRUE(batch.moveHandle(hb.value(), target));
+    ASSERT_TRUE(alone0.moveHandle(ha.value(), target));
+    ASSERT_TRUE(batch.step(kH));
+    ASSERT_TRUE(alone0.step(kH));
+    ASSERT_TRUE(alone1.step(kH));
+  }
+  const std::vector<double> b0 = positions(batch, 0), b1 = positions(batch, 1), a0 = positions(alone0),
+                            a1 = positions(alone1);
+  for (std::size_t d = 0; d < b0.size(); ++d) {
+    EXPECT_NEAR(b0[d], a0[d], 1e-9) << "body 0, dof " << d;
+    EXPECT_NEAR(b1[d], a1[d], 1e-9) << "body 1, dof " << d;
+  }
+}
+
+}  // namespace
+}  // namespace corofem::test
