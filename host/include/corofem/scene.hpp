@@ -96,7 +96,10 @@ struct StaticDesc {
   double displacementTolerance = 1e-8; ///< |du| <= tol * max(|u|, characteristic length)
 };
 
-enum class Integrator { Newmark, BackwardEuler };
+/// Auto: Newmark (the paper's scheme) for an analysis with a step count, backward Euler for an
+/// open-ended one (analysis.steps = 0: an application's frame loop), which stays stable under
+/// abruptly dragged handles where the linearised Newmark step runs away (bench/bench_soak.cpp).
+enum class Integrator { Newmark, BackwardEuler, Auto };
 
 /// Bodies at rest sleep (analysis.sleep, dynamics): after `steps` consecutive steps with every free
 /// node slower than `velocity` and loads steady, a body's solve is skipped (positions held,
@@ -110,9 +113,9 @@ struct SleepDesc {
 };
 
 struct DynamicDesc {
-  Integrator integrator = Integrator::Newmark;
+  Integrator integrator = Integrator::Auto;
   double timeStep = 1.0 / 60.0;  ///< s, > 0
-  int steps = 100;               ///< >= 1
+  int steps = 100;               ///< >= 1, or 0: open-ended (the application steps until it stops)
   double newmarkBeta = 0.25;     ///< 0 < beta <= 0.5
   double newmarkGamma = 0.5;     ///< 0.5 <= gamma <= 1
   int newtonIterations = 1;      ///< Newton iterations per step (1 = linearised, as in the paper), >= 1
@@ -120,6 +123,12 @@ struct DynamicDesc {
   int maxSubsteps = 1;           ///< a failed step is retried as 2, 4, ... substeps of timeStep/k, k <= this (1 = no retry), >= 1
   SleepDesc sleep;               ///< bodies at rest skip their solve (off by default)
 };
+
+/// The scheme a dynamic analysis runs: its integrator, with Auto resolved.
+inline Integrator integratorOf(const DynamicDesc& d) {
+  if (d.integrator != Integrator::Auto) return d.integrator;
+  return d.steps > 0 ? Integrator::Newmark : Integrator::BackwardEuler;
+}
 
 struct AnalysisDesc {
   enum class Kind { Static, Dynamic };

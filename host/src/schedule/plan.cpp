@@ -92,7 +92,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     f["rotation_method"] = device ? toString(problem.rotation) : "polar (the reference backend computes every method by SVD)";
   f["precision"] = device ? (scene.solver.precision == Precision::Float ? "float" : "double") : "double";
   f["analysis"] = dynamic ? "dynamic" : "static";
-  if (dynamic) f["integrator"] = scene.analysis.dynamics.integrator == Integrator::Newmark ? "newmark" : "backward_euler";
+  if (dynamic) f["integrator"] = integratorOf(scene.analysis.dynamics) == Integrator::Newmark ? "newmark" : "backward_euler";
   f["linear_solver"] = pcg ? "pcg" : "cholesky";
   if (pcg) f["preconditioner"] = toString(scene.solver.preconditioner);
   f["mass_terms"] = dynamic;

@@ -358,7 +358,7 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     const Problem& p = *b.problem;
     auto& w = b.w;
     const double h = a.h;
-    if (desc_.integrator == Integrator::Newmark) {
+    if (integratorOf(desc_) == Integrator::Newmark) {
       const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
       a.ka = 1.0 / (h * gamma);
       a.kx = h * beta / gamma;
@@ -566,10 +566,17 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     // The reactions are the constrained rows of the last residual, evaluated at the final v (or at
     // the predictor when Newton stopped there).
     w.reaction = (w.r.array() * (1.0 - b.freeMask)).matrix();
-    const double supportWork = b.supportWork + 0.5 * (b.reactionPrev + w.reaction).dot(w.x - b.x);
-    const double loadWork = b.work + 0.5 * (b.fextPrev + w.fext).dot(w.x - b.x);
+    const Eigen::VectorXd& dx = w.cv;  // scratch: C v is not needed past the residual
+    w.cv = w.x - b.x;
+    const double supportWork = b.supportWork + 0.5 * (b.reactionPrev + w.reaction).dot(dx);
+    const double loadWork = b.work + 0.5 * (b.fextPrev + w.fext).dot(dx);
+    const double g = integratorOf(desc_) == Integrator::Newmark ? desc_.newmarkGamma : 1.0;
+    const double supportWorkScheme =
+        b.supportWorkScheme + (1.0 - g) * b.reactionPrev.dot(dx) + g * w.reaction.dot(dx);
+    const double loadWorkScheme = b.loadWorkScheme + (1.0 - g) * b.fextPrev.dot(dx) + g * w.fext.dot(dx);
     const double kinetic = 0.5 * (mass.array() * w.v.array().square()).sum();
-    const double given = b.initialEnergy + std::abs(loadWork) + std::abs(supportWork);
+    const double given = b.initialEnergy + std::max(std::abs(loadWork) + std::abs(supportWork),
+                                                    std::abs(loadWorkScheme) + std::abs(supportWorkScheme));
     b.deviceAtCommitted = false;  // the device holds w.x now: committed below, or the step fails
     if (!(kinetic + elastic[k] <= kRunawayEnergyRatio * given + b.forceFloor * b.diagonal)) {
       a.failure = failureText(a,
@@ -585,6 +592,8 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     b.work = loadWork;  // trapezoidal rule in time
     b.fextPrev.swap(w.fext);
     b.supportWork = supportWork;
+    b.supportWorkScheme = supportWorkScheme;
+    b.loadWorkScheme = loadWorkScheme;
     b.reactionPrev.swap(w.reaction);
     b.x.swap(w.x);
     b.v.swap(w.v);

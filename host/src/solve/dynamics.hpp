@@ -45,7 +45,9 @@ namespace corofem::detail {
 ///   - a linear solve that did not converge together with a residual norm that grew during the
 ///     step and a relative residual above 1e-3;
 ///   - a runaway: mechanical energy above 1.25 times the energy the body was ever given,
-///     KE_{n+1} + U_{n+1} > 1.25 (KE_0 + U_0 + |W_loads| + |W_supports|) (+ a rounding floor).
+///     KE_{n+1} + U_{n+1} > 1.25 (KE_0 + U_0 + |W_loads| + |W_supports|) (+ a rounding floor),
+///     each W summed step by step by the trapezoidal rule or, where larger, with the scheme's own
+///     weights of the step's end forces (backward Euler: the end force; see State).
 ///     A stable scheme keeps KE + U <= KE_0 + U_0 + W (damping and numerical dissipation only
 ///     remove energy); the linearised trapezoidal step (gamma = 1/2, one Newton iteration) on a
 ///     co-rotational body does not: on the Fig. 8 beam (h = 0.01 s) it settles, then gains energy
@@ -98,6 +100,11 @@ class DynamicsDriver final : public Driver {
   struct State {
     Eigen::VectorXd x, v, a, fextPrev, reactionPrev;
     double work = 0.0, t = 0.0, supportWork = 0.0;
+    /// The loads' and supports' work as the scheme weighs the step's end forces, for the runaway
+    /// guard: ((1 - g) F_n + g F_{n+1}) . dx with g = gamma (Newmark; 1/2: the trapezoidal rule)
+    /// or 1 (backward Euler, whose implicit step does the work F_{n+1} dx: an abruptly dragged
+    /// handle does twice what the trapezoidal rule counts when F_n was 0).
+    double loadWorkScheme = 0.0, supportWorkScheme = 0.0;
   };
   /// One body: its constants, its committed state (the fields of State), the state before its last
   /// step (rollback), and the scratch of the step in progress (sized by the first step, then
