@@ -13,9 +13,11 @@ struct CommandResult {
   std::string output;  ///< stdout and stderr together
 };
 
-/// Runs `corofem ARGS` (the shell parses ARGS) from the project root.
-inline CommandResult runCli(const std::string& args) {
-  const std::string cmd = std::string("cd '") + COROFEM_SOURCE_DIR + "' && '" + COROFEM_CLI_PATH + "' " + args + " 2>&1";
+/// Runs `corofem ARGS` (the shell parses ARGS) from the project root; `shellPrefix` runs before it
+/// in the same shell (e.g. "ulimit -f 2;").
+inline CommandResult runCli(const std::string& args, const std::string& shellPrefix = "") {
+  const std::string cmd = shellPrefix + std::string(" cd '") + COROFEM_SOURCE_DIR + "' && '" + COROFEM_CLI_PATH +
+                          "' " + args + " 2>&1";
   CommandResult r;
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) return r;
