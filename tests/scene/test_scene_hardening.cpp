@@ -51,6 +51,14 @@ TEST(Issue27Item1, ALongNumberLiteralIsBadInputNotACrash) {
   EXPECT_LT(msg.size(), 400u);
 }
 
+TEST(Issue27Item1, ATokenHoldingTheLibrarysOwnWordsIsShortenedToo) {
+  // Found by fuzz_scene: the token quoted after "last read: '" held "'; expected ", which the first
+  // fix took for the end of the token, and the rest (1,500 characters) was quoted whole.
+  const std::string msg = parseError("{\"name\": \"st'; expected aan[" + std::string(1500, 'z'));
+  EXPECT_TRUE(has(msg, "last read: '\"st'; expected aan[zzz")) << msg;
+  EXPECT_LT(msg.size(), 400u) << msg;
+}
+
 TEST(Issue27Item1, LoadSceneToo) {
   const fs::path path = test::tempDir() / "long.json";
   std::ofstream(path) << "{\"bodies\": [], \"name\": \"" << std::string(40000, 'a');

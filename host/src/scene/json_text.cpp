@@ -92,18 +92,15 @@ bool skip(std::string_view& s, std::string_view prefix) {
   return true;
 }
 
-/// The library's description with the token it quotes ("...; last read: '<token>'" and maybe
-/// "; expected <what>" after it) shortened.
+/// The library's description with the token it quotes ("...; last read: '<token>'", maybe
+/// followed by "; expected <what>") shortened: the start of the token and the end of the text are
+/// kept. (Where the token ends cannot be told: it may hold "'; expected " itself.)
 std::string shortenLastRead(std::string_view description) {
   constexpr std::string_view kLastRead = "last read: '";
   const std::size_t open = description.find(kLastRead);
-  if (open == std::string_view::npos) return detail::shorten(description, 200);
+  if (open == std::string_view::npos) return detail::elideMiddle(description, 150, 50);
   const std::size_t begin = open + kLastRead.size();
-  std::size_t end = description.rfind("'; expected ");
-  if (end == std::string_view::npos || end < begin) end = description.rfind('\'');
-  if (end == std::string_view::npos || end < begin) end = description.size();
-  return std::string(description.substr(0, begin)) + detail::shorten(description.substr(begin, end - begin)) +
-         std::string(description.substr(end));
+  return std::string(description.substr(0, begin)) + detail::elideMiddle(description.substr(begin), 40, 60);
 }
 
 bool isNumberChar(char c) {

@@ -33,15 +33,22 @@ inline std::string shorten(std::string_view s, std::size_t max = 40) {
   return std::string(s.substr(0, utf8Prefix(s, max))) + "... (" + std::to_string(s.size()) + " bytes)";
 }
 
+/// s itself when it has at most head + tail bytes, else its first `head` and last `tail` bytes
+/// with how much was left out between them: for text whose end matters as much as its start.
+inline std::string elideMiddle(std::string_view s, std::size_t head, std::size_t tail) {
+  if (s.size() <= head + tail) return std::string(s);
+  const std::size_t front = utf8Prefix(s, head);
+  std::size_t back = s.size() - tail;
+  while (back < s.size() && (static_cast<unsigned char>(s[back]) & 0xC0) == 0x80) ++back;
+  return std::string(s.substr(0, front)) + " [... " + std::to_string(back - front) + " bytes left out ...] " +
+         std::string(s.substr(back));
+}
+
 /// A message of at most about kMaxMessageBytes: a longer one keeps its start and its end (where
 /// the fix is usually named) with the middle elided.
 inline std::string boundMessage(std::string message) {
   if (message.size() <= kMaxMessageBytes) return message;
-  const std::size_t head = utf8Prefix(message, kMaxMessageBytes * 3 / 4);
-  std::size_t tail = message.size() - kMaxMessageBytes / 4;
-  while (tail < message.size() && (static_cast<unsigned char>(message[tail]) & 0xC0) == 0x80) ++tail;
-  return message.substr(0, head) + " [... " + std::to_string(tail - head) + " bytes left out ...] " +
-         message.substr(tail);
+  return elideMiddle(message, kMaxMessageBytes * 3 / 4, kMaxMessageBytes / 4);
 }
 
 class Error : public std::runtime_error {
