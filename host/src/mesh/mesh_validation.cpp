@@ -94,7 +94,9 @@ class NodeIdMap {
   std::string describe() const {
     if (count_ == 0) return "the file defines no nodes";
     if (mode_ == Mode::Offset)
-      return "the file defines nodes " + std::to_string(base_) + ".." + std::to_string(base_ + std::int64_t(count_) - 1);
+      // (count - 1 first: base + count may pass INT64_MAX where the last id does not)
+      return "the file defines nodes " + std::to_string(base_) + ".." +
+             std::to_string(base_ + (std::int64_t(count_) - 1));
     return "the file defines " + std::to_string(count_) + " nodes with ids between " + std::to_string(min_) +
            " and " + std::to_string(max_) + ", not this one";
   }
