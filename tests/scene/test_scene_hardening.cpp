@@ -178,5 +178,24 @@ TEST(Issue27Item4, ABouFileThatIsADeviceOrAFifoIsRefused) {
   EXPECT_TRUE(has(r.message(), "pipe.bou")) << r.message();
 }
 
+// ------------------------------------------------------------------ found by fuzz_scene
+TEST(FuzzFinding, AScaleThatOverflowsOrUnderflowsTheMeshIsBadInput) {
+  // Scene values in range (a finite scale > 0) gave a mesh with infinite coordinates or elements of
+  // zero volume; loadBodyMesh returned it as good (Simulation::create refused it later, without
+  // naming the scale).
+  for (const char* scale : {"1e+308", "1e-120"}) {
+    const Scene scene = test::parseOk(std::string(R"({"bodies": [{"name": "b", "mesh": {"box": {"max": [2, 2, 2]},)") +
+                                      R"( "scale": )" + scale + "}}]}");
+    const Result<TetMesh> mesh = loadBodyMesh(scene.bodies[0], "");
+    ASSERT_FALSE(mesh.isOk()) << scale;
+    EXPECT_EQ(mesh.status().code(), ErrorCode::BadInput);
+    EXPECT_TRUE(has(mesh.message(), std::string("body \"b\": the mesh scale ") + scale)) << mesh.message();
+  }
+  const Scene far = test::parseOk(R"({"bodies": [{"mesh": {"box": {}, "translate": [1e300, 0, 0]}}]})");
+  EXPECT_TRUE(has(loadBodyMesh(far.bodies[0], "").message(), "volume round to zero"));
+  const Scene fine = test::parseOk(R"({"bodies": [{"mesh": {"box": {}, "scale": 1e-3, "translate": [5, 0, 0]}}]})");
+  EXPECT_TRUE(loadBodyMesh(fine.bodies[0], "").isOk());
+}
+
 }  // namespace
 }  // namespace corofem
