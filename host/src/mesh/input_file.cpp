@@ -3,6 +3,7 @@
 
 #include "util/error.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cstdlib>
@@ -47,7 +48,7 @@ std::string limitText(std::uint64_t limit) {
          (std::getenv(kMaxInputBytesVariable) ? "set in the environment" : "the default is 1 GiB") + ")";
 }
 
-[[noreturn]] void failTooLarge(const std::string& name, const std::string& size, std::uint64_t limit) {
+[[noreturn]] void failTooLarge(const std::string& name, std::uint64_t size, std::uint64_t limit) {
   detail::fail(ErrorCode::BadInput, "cannot read ", name, ": it has ", size, " bytes, more than the limit of ",
                limitText(limit), "; if the file is right, raise the limit, e.g. ", kMaxInputBytesVariable, "=4G");
 }
@@ -99,14 +100,16 @@ std::string readInputFile(const std::string& path, const std::string& name, cons
                  ", not a regular file; give the path of a file (corofem reads inputs from regular files only, "
                  "so save piped or generated data to a file first)");
   const auto size = static_cast<std::uint64_t>(st.st_size);
-  if (size > limit) failTooLarge(name, std::to_string(size), limit);
+  if (size > limit) failTooLarge(name, size, limit);
 
   std::string text(static_cast<std::size_t>(size), '\0');
   std::size_t got = 0;
   for (;;) {
     if (got == text.size()) {
       // At the size fstat gave: read on in case the file grew, but never past the limit.
-      if (got > limit) failTooLarge(name, "more than " + std::to_string(limit), limit);
+      if (got > limit)
+        detail::fail(ErrorCode::BadInput, "cannot read ", name, ": it grew, while being read, past the limit of ",
+                     limitText(limit), "; if the file is right, raise the limit, e.g. ", kMaxInputBytesVariable, "=4G");
       text.resize(got + std::min<std::uint64_t>(std::uint64_t(1) << 16, limit + 1 - got));
     }
     const ssize_t n = ::read(fd.get(), text.data() + got, text.size() - got);
