@@ -18,7 +18,9 @@ if [[ "${1:-}" == "--all" ]]; then all=1; fi
 
 launcher=()
 if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
-cmake --preset debug "${launcher[@]}" -DCOROFEM_BUILD_BENCHMARKS=OFF >/dev/null
+# -g1: line tables for the sanitizers' stack traces, without the full debug info (a fifth less
+# compile time).
+cmake --preset debug "${launcher[@]}" -DCMAKE_CXX_FLAGS_DEBUG=-g1 -DCOROFEM_BUILD_BENCHMARKS=OFF >/dev/null
 cmake --build build-debug -j"$(nproc)" --target corofem_cli test_mesh test_scene test_cli test_solve
 
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:strict_string_checks=1}"
