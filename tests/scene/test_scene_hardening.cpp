@@ -159,6 +159,21 @@ TEST(Issue27Item4, ASceneThatIsADirectoryOrAFifoIsRefused) {
   EXPECT_TRUE(has(scene.message(), "is a FIFO")) << scene.message();
 }
 
+TEST(Issue27Item4, ADeeplyNestedOrHugeSceneIsBadInputNotOutOfMemory) {
+  // 50 MB of "[" ran out of memory ("internal error: out of memory"): the parsed document takes
+  // many times the text's size. Nesting is limited to 64 levels, scene files to 16 MiB.
+  const std::string msg = parseError("{" + kBodies + ", \"x\": " + std::string(100000, '['));
+  EXPECT_TRUE(has(msg, "x[0][0][0]")) << msg;
+  EXPECT_TRUE(has(msg, "nest more than 64 levels deep")) << msg;
+  EXPECT_LT(msg.size(), 400u);
+  const fs::path path = test::tempDir() / "big.json";
+  std::ofstream(path) << "{" << kBodies << std::string(17 << 20, ' ') << "}";
+  auto scene = loadScene(path.string());
+  ASSERT_FALSE(scene.isOk());
+  EXPECT_EQ(scene.status().code(), ErrorCode::BadInput);
+  EXPECT_TRUE(has(scene.message(), "more than the limit of 16777216 bytes (COROFEM_MAX_INPUT_BYTES")) << scene.message();
+}
+
 TEST(Issue27Item4, ABouFileThatIsADeviceOrAFifoIsRefused) {
   const TetMesh mesh = generateBox(BoxSpec{}).value();
   const fs::path dir = test::tempDir();

@@ -45,7 +45,7 @@ const char* kindOf(mode_t mode) {
 
 std::string limitText(std::uint64_t limit) {
   return std::to_string(limit) + " bytes (" + kMaxInputBytesVariable + "; " +
-         (std::getenv(kMaxInputBytesVariable) ? "set in the environment" : "the default is 1 GiB") + ")";
+         (std::getenv(kMaxInputBytesVariable) ? "set in the environment" : "the default for this kind of file") + ")";
 }
 
 [[noreturn]] void failTooLarge(const std::string& name, std::uint64_t size, std::uint64_t limit) {
@@ -83,12 +83,13 @@ std::uint64_t limitFromEnvironment(const char* variable, std::uint64_t fallback,
   return value << shift;
 }
 
-std::uint64_t maxInputBytes() {
-  return limitFromEnvironment(kMaxInputBytesVariable, kDefaultMaxInputBytes, "4G");
+std::uint64_t maxInputBytes(std::uint64_t fallback) {
+  return limitFromEnvironment(kMaxInputBytesVariable, fallback, "4G");
 }
 
-std::string readInputFile(const std::string& path, const std::string& name, const std::string& openHint) {
-  const std::uint64_t limit = maxInputBytes();
+std::string readInputFile(const std::string& path, const std::string& name, const std::string& openHint,
+                          std::uint64_t defaultLimit) {
+  const std::uint64_t limit = maxInputBytes(defaultLimit);
   // O_NONBLOCK: opening a FIFO without a writer would otherwise wait forever. Regular files ignore it.
   const Descriptor fd(::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY));
   if (fd.get() < 0) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", std::strerror(errno), openHint);

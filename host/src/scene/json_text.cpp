@@ -20,11 +20,23 @@ namespace {
 
 using nlohmann::json;
 
+/// Objects and arrays may nest this deep (a scene needs 6 levels). Deeper, the parsed document would
+/// take memory in proportion: 50 MB of "[" ran out of memory ("internal error").
+constexpr std::size_t kMaxDepth = 64;
+
 /// Parser callback that records the first key repeated within one object (JSON parsers silently
-/// keep the last value, which hides a typo'd copy-paste), with its key path.
+/// keep the last value, which hides a typo'd copy-paste), with its key path, and stops the parse
+/// at objects or arrays nested deeper than kMaxDepth.
 class DuplicateKeyFinder {
  public:
+  explicit DuplicateKeyFinder(const std::string& prefix) : prefix_(prefix) {}
+
   bool operator()(int /*depth*/, json::parse_event_t event, json& parsed) {
+    if ((event == json::parse_event_t::object_start || event == json::parse_event_t::array_start) &&
+        stack_.size() >= kMaxDepth)
+      detail::fail(ErrorCode::BadInput, prefix_, detail::shorten(currentPath(), 120),
+                   ": objects and arrays nest more than ", kMaxDepth,
+                   " levels deep here; a scene nests 6 at most, so look for brackets that are not closed");
     switch (event) {
       case json::parse_event_t::object_start: stack_.emplace_back(); break;
       case json::parse_event_t::array_start: stack_.emplace_back().array = true; break;
@@ -60,6 +72,7 @@ class DuplicateKeyFinder {
     for (const Frame& f : stack_) path = f.array ? indexPath(path, f.index) : childPath(path, f.key);
     return path;
   }
+  const std::string& prefix_;
   std::vector<Frame> stack_;
   std::string duplicate_;
 };
@@ -160,7 +173,7 @@ std::size_t findNumberToken(const std::string& text, std::string_view literal) {
 }  // namespace
 
 json parseJsonText(const std::string& text, const std::string& messagePrefix) {
-  DuplicateKeyFinder duplicates;
+  DuplicateKeyFinder duplicates(messagePrefix);
   json root;
   try {
     root = json::parse(text, std::ref(duplicates), /*allow_exceptions=*/true, /*ignore_comments=*/true);

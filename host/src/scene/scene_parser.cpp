@@ -663,7 +663,8 @@ Result<Scene> parseScene(const std::string& jsonText, const std::string& baseDir
 
 Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides) {
   return detail::guardResult<Scene>([&] {
-    const std::string text = mesh::readInputFile(path, "the scene file \"" + path + "\"");
+    const std::string text =
+        mesh::readInputFile(path, "the scene file \"" + path + "\"", "", mesh::kDefaultMaxSceneBytes);
     const std::filesystem::path file(path);
     std::string baseDir = file.parent_path().string();
     if (baseDir.empty()) baseDir = ".";
