@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs, with apt-get, the Debian 12 packages corofem needs that are missing. Run as root
-# (or with sudo available). Installs nothing when everything is already there.
+# (or with sudo available). Installs nothing when everything is already there. clang-14 and its
+# runtime (libFuzzer, the sanitizers) build the fuzz targets (tests/fuzz/run_fuzz.sh).
 set -euo pipefail
 
 packages=(
@@ -9,6 +10,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo
   python3 python3-matplotlib python3-numpy
+  clang-14 libclang-rt-14-dev
 )
 
 missing=()

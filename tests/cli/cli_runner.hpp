@@ -3,6 +3,9 @@
 
 #include <array>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <sys/wait.h>
 
@@ -13,9 +16,11 @@ struct CommandResult {
   std::string output;  ///< stdout and stderr together
 };
 
-/// Runs `corofem ARGS` (the shell parses ARGS) from the project root.
-inline CommandResult runCli(const std::string& args) {
-  const std::string cmd = std::string("cd '") + COROFEM_SOURCE_DIR + "' && '" + COROFEM_CLI_PATH + "' " + args + " 2>&1";
+/// Runs `corofem ARGS` (the shell parses ARGS) from the project root; `shellPrefix` runs before it
+/// in the same shell (e.g. "ulimit -f 2;").
+inline CommandResult runCli(const std::string& args, const std::string& shellPrefix = "") {
+  const std::string cmd = shellPrefix + std::string(" cd '") + COROFEM_SOURCE_DIR + "' && '" + COROFEM_CLI_PATH +
+                          "' " + args + " 2>&1";
   CommandResult r;
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) return r;
@@ -25,6 +30,14 @@ inline CommandResult runCli(const std::string& args) {
   const int status = pclose(pipe);
   r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+/// The whole text of a file ("" when it cannot be read).
+inline std::string readFile(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
 }
 
 }  // namespace corofem::test

@@ -11,15 +11,9 @@
 
 namespace {
 
+using corofem::test::readFile;
 using corofem::test::runCli;
 namespace fs = std::filesystem;
-
-std::string readFile(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 std::size_t lineCount(const std::string& s) {
   std::size_t n = 0;

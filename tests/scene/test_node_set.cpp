@@ -158,7 +158,7 @@ TEST(NodeSetBou, ErrorsNameTheFileAndLine) {
 TEST(NodeSetBou, MissingFileIsAnIoErrorNamingBothPaths) {
   const std::string message = resolveError(bou("nope.bou"), ErrorCode::IoError, "/nonexistent/scenes");
   EXPECT_EQ(message, "cannot open the .bou file \"/nonexistent/scenes/nope.bou\" (\"nope.bou\" relative to "
-                     "\"/nonexistent/scenes\")");
+                     "\"/nonexistent/scenes\"): No such file or directory");
 }
 
 TEST(NodeSet, EmptyMeshIsAnError) {

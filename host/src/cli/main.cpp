@@ -211,8 +211,10 @@ int cmdRun(const std::vector<std::string>& args) {
   while (status && !sim->finished()) {
     StepReport r;
     status = sim->step(&r);
-    Status recorded = detail::guard([&] { outputs->record(sim.value(), r); });
-    if (status && !recorded) status = recorded;
+    // A failed step left the bodies at the last step recorded: no row for it (its report has no
+    // step number); summary.json says why the run stopped.
+    if (!status) break;
+    status = detail::guard([&] { outputs->record(sim.value(), r); });
     if (!quiet && status && (r.step % every == 0 || sim->finished()))
       std::cout << "  step " << r.step << "/" << sim->stepCount() << "  t=" << r.time
                 << "  newton=" << r.newtonIterations << "  pcg=" << r.linearIterations
@@ -220,7 +222,12 @@ int cmdRun(const std::vector<std::string>& args) {
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   Status finished = detail::guard([&] { outputs->finish(sim.value(), status, wall); });
-  if (!status) return report(status);
+  const std::string nonFinite = outputs->nonFiniteNote();
+  if (!nonFinite.empty()) std::cerr << "corofem: warning: " << nonFinite << '\n';
+  if (!status) {
+    if (!finished) report(finished);  // the summary was lost too: say so, then why the run stopped
+    return report(status);
+  }
   if (!finished) return report(finished);
   if (!quiet) std::cout << "corofem: done in " << wall << " s; summary in " << outDir << "/summary.json" << std::endl;
   return kExitOk;

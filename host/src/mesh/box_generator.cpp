@@ -9,15 +9,39 @@
 //    so the pattern alternates, and every face diagonal joins the face's two globally even corners:
 //    the two cells sharing a face cut it the same way.
 // Every tet is then oriented positively ((b-a).((c-a)x(d-a)) > 0) by swapping two nodes if needed.
+#include "mesh/input_file.hpp"
 #include "mesh/mesh_validation.hpp"
 #include "util/error.hpp"
 
 #include <corofem/mesh.hpp>
 
 #include <cmath>
+#include <cstdlib>
+#include <iomanip>
 #include <limits>
+#include <sstream>
 
 namespace corofem {
+
+std::string mesh::boxSizeProblem(const BoxSpec& spec) {
+  const double nodes = double(spec.cells[0] + 1.0) * double(spec.cells[1] + 1.0) * double(spec.cells[2] + 1.0);
+  const double tets = double(spec.cells[0]) * double(spec.cells[1]) * double(spec.cells[2]) * spec.tetsPerCell;
+  const std::uint64_t limit = limitFromEnvironment(kMaxBoxTetsVariable, kDefaultMaxBoxTets, "100M");
+  std::ostringstream os;
+  os << spec.cells[0] << " x " << spec.cells[1] << " x " << spec.cells[2] << " cells of " << spec.tetsPerCell
+     << " tetrahedra give " << std::setprecision(15) << tets << " tetrahedra";
+  if (tets > double(limit)) {
+    os << ", more than the limit of " << limit << " (" << kMaxBoxTetsVariable << "; "
+       << (std::getenv(kMaxBoxTetsVariable) ? "set in the environment" : "the default is 50 million")
+       << "); use fewer cells, or raise the limit if the machine has the memory";
+    return os.str();
+  }
+  if (nodes >= double(std::numeric_limits<std::uint32_t>::max())) {
+    os << " on " << nodes << " nodes, more than 32-bit node indices reach; use fewer cells";
+    return os.str();
+  }
+  return "";
+}
 
 Result<TetMesh> generateBox(const BoxSpec& spec) {
   return detail::guardResult<TetMesh>([&] {
@@ -32,12 +56,11 @@ Result<TetMesh> generateBox(const BoxSpec& spec) {
     if (spec.tetsPerCell != 5 && spec.tetsPerCell != 6)
       detail::fail(ErrorCode::BadInput, "box: tetsPerCell is ", spec.tetsPerCell,
                    "; use 5 (alternating split) or 6 (Kuhn split)");
+    const std::string tooLarge = mesh::boxSizeProblem(spec);
+    if (!tooLarge.empty()) detail::fail(ErrorCode::BadInput, "box: ", tooLarge);
     const std::size_t nx = std::size_t(spec.cells[0]), ny = std::size_t(spec.cells[1]), nz = std::size_t(spec.cells[2]);
     const double nodes = double(nx + 1) * double(ny + 1) * double(nz + 1);
     const double tets = double(nx) * double(ny) * double(nz) * spec.tetsPerCell;
-    if (nodes >= double(std::numeric_limits<std::uint32_t>::max()) || tets > 1e9)
-      detail::fail(ErrorCode::BadInput, "box: ", nx, " x ", ny, " x ", nz, " cells give ", tets,
-                   " tetrahedra, too many; use fewer cells");
 
     TetMesh mesh;
     mesh.nodes.reserve(3 * std::size_t(nodes));

@@ -65,9 +65,10 @@ class GmshParser {
         const std::string end = "$End" + std::string(tok.substr(1));
         const std::string endV1 = "$END" + std::string(tok.substr(1));
         if (!sc_.skipPast(version_ == 1 ? endV1 : end))
-          sc_.fail("section ", tok, " has no ", version_ == 1 ? endV1 : end, "; the file is truncated");
+          sc_.fail("section ", detail::shorten(tok), " has no ", detail::shorten(version_ == 1 ? endV1 : end),
+                   "; the file is truncated");
       } else {
-        sc_.fail("expected a section header such as $Nodes or $Elements, found '", tok,
+        sc_.fail("expected a section header such as $Nodes or $Elements, found '", detail::shorten(tok),
                  "'; is this a Gmsh ASCII .msh file?");
       }
     }
@@ -87,7 +88,7 @@ class GmshParser {
   void expectEnd(std::string_view end) {
     const std::string_view tok = sc_.token();
     if (tok != end)
-      sc_.fail("expected ", end, " after ", sc_.context(), ", found '", tok,
+      sc_.fail("expected ", end, " after ", sc_.context(), ", found '", detail::shorten(tok),
                "'; the count in the section header does not match the entries");
   }
 

@@ -84,7 +84,7 @@ ParsedTetMesh parseMedit(const std::string& text, const std::string& path, MeshR
       }
       while (!sc.atEnd() && startsLikeNumber(sc.peekToken())) sc.token();
     } else {
-      sc.fail("expected a Medit keyword (Vertices, Tetrahedra, ...), found '", tok, "'");
+      sc.fail("expected a Medit keyword (Vertices, Tetrahedra, ...), found '", detail::shorten(tok), "'");
     }
   }
   if (!sawVersion && !sawVertices) sc.fail("no MeshVersionFormatted or Vertices keyword; is this a Medit .mesh file?");

@@ -34,10 +34,14 @@ class NodeIdMap {
       base_ = parsed.nodeBase;
       return;
     }
-    // Fast path: consecutive ids (the usual case).
+    // Fast path: consecutive ids (the usual case). Ids come from the file and may be anywhere in
+    // the 64-bit range: every sum and difference below is checked or unsigned.
     const auto& ids = parsed.nodeIds;
     bool consecutive = true;
-    for (std::size_t i = 0; i < n && consecutive; ++i) consecutive = ids[i] == ids[0] + std::int64_t(i);
+    for (std::size_t i = 0; i < n && consecutive; ++i) {
+      std::int64_t expected = 0;
+      consecutive = !__builtin_add_overflow(ids[0], std::int64_t(i), &expected) && ids[i] == expected;
+    }
     if (consecutive) {
       base_ = n ? ids[0] : 0;
       return;
@@ -50,10 +54,10 @@ class NodeIdMap {
       detail::fail(ErrorCode::BadInput, "file ", path, " line ", lineOf(second), ": node ", ids[second],
                    " is defined twice (first on line ", lineOf(first), "); node ids must be unique");
     };
-    if (static_cast<std::uint64_t>(max_ - min_) <= 4 * std::uint64_t(n) + 1024) {
-      dense_.assign(static_cast<std::size_t>(max_ - min_ + 1), -1);
+    if (span(min_, max_) <= 4 * std::uint64_t(n) + 1024) {
+      dense_.assign(static_cast<std::size_t>(span(min_, max_) + 1), -1);
       for (std::size_t i = 0; i < n; ++i) {
-        auto& slot = dense_[static_cast<std::size_t>(ids[i] - min_)];
+        auto& slot = dense_[static_cast<std::size_t>(span(min_, ids[i]))];
         if (slot >= 0) duplicate(static_cast<std::size_t>(slot), i);
         slot = static_cast<std::int64_t>(i);
       }
@@ -72,11 +76,12 @@ class NodeIdMap {
   std::int64_t find(std::int64_t id) const {
     switch (mode_) {
       case Mode::Offset: {
-        const std::int64_t i = id - base_;
-        return (i >= 0 && i < std::int64_t(count_)) ? i : -1;
+        if (id < base_) return -1;
+        const std::uint64_t i = span(base_, id);
+        return i < count_ ? static_cast<std::int64_t>(i) : -1;
       }
       case Mode::Dense:
-        return (id >= min_ && id <= max_) ? dense_[static_cast<std::size_t>(id - min_)] : -1;
+        return (id >= min_ && id <= max_) ? dense_[static_cast<std::size_t>(span(min_, id))] : -1;
       case Mode::Sparse: {
         auto it = sparse_.find(id);
         return it == sparse_.end() ? -1 : it->second;
@@ -89,12 +94,19 @@ class NodeIdMap {
   std::string describe() const {
     if (count_ == 0) return "the file defines no nodes";
     if (mode_ == Mode::Offset)
-      return "the file defines nodes " + std::to_string(base_) + ".." + std::to_string(base_ + std::int64_t(count_) - 1);
+      // (count - 1 first: base + count may pass INT64_MAX where the last id does not)
+      return "the file defines nodes " + std::to_string(base_) + ".." +
+             std::to_string(base_ + (std::int64_t(count_) - 1));
     return "the file defines " + std::to_string(count_) + " nodes with ids between " + std::to_string(min_) +
            " and " + std::to_string(max_) + ", not this one";
   }
 
  private:
+  /// hi - lo for lo <= hi, exact over the whole 64-bit range (the signed difference may overflow).
+  static std::uint64_t span(std::int64_t lo, std::int64_t hi) {
+    return static_cast<std::uint64_t>(hi) - static_cast<std::uint64_t>(lo);
+  }
+
   enum class Mode { Offset, Dense, Sparse };
   Mode mode_ = Mode::Offset;
   std::size_t count_ = 0;

@@ -6,6 +6,8 @@
 #include "mesh/text_scanner.hpp"
 
 #include <charconv>
+#include <cmath>
+#include <limits>
 
 namespace corofem::mesh {
 namespace {
@@ -53,6 +55,10 @@ SurfaceMesh parseObj(const std::string& text, const std::string& path, MeshReadR
       sc.setContext("texture coordinate", std::int64_t(uv.size() / 2 + 1));
       const double u = sc.readDoubleOnLine();
       const double v = sc.atLineEnd() ? 0.0 : sc.readDoubleOnLine();
+      for (const double t : {u, v})  // stored as float: NaN, infinity and |t| > 3.4e38 have no value there
+        if (!(std::abs(t) <= double(std::numeric_limits<float>::max())))
+          sc.fail("texture coordinate ", uv.size() / 2 + 1, " has the value ", t,
+                  ", which is not a finite float; fix the vt line");
       uv.push_back(static_cast<float>(u));
       uv.push_back(static_cast<float>(v));
       sc.skipLine();
@@ -64,20 +70,20 @@ SurfaceMesh parseObj(const std::string& text, const std::string& path, MeshReadR
         const char* end = p + tok.size();
         std::int64_t vi = 0, ti = 0;
         bool hasUv = false;
-        if (!parseIndex(p, end, vi)) sc.fail("malformed face corner '", tok, "'");
+        if (!parseIndex(p, end, vi)) sc.fail("malformed face corner '", detail::shorten(tok), "'");
         if (p < end && *p == '/') {
           ++p;
           if (p < end && *p != '/') {
-            if (!parseIndex(p, end, ti)) sc.fail("malformed face corner '", tok, "'");
+            if (!parseIndex(p, end, ti)) sc.fail("malformed face corner '", detail::shorten(tok), "'");
             hasUv = true;
           }
           if (p < end && *p == '/') {
             ++p;
             std::int64_t ni = 0;
-            if (!parseIndex(p, end, ni)) sc.fail("malformed face corner '", tok, "'");
+            if (!parseIndex(p, end, ni)) sc.fail("malformed face corner '", detail::shorten(tok), "'");
           }
         }
-        if (p != end) sc.fail("malformed face corner '", tok, "'");
+        if (p != end) sc.fail("malformed face corner '", detail::shorten(tok), "'");
         const std::size_t v = resolve(vi, mesh.vertexCount(), "vertex");
         corners.push_back(static_cast<std::uint32_t>(v));
         if (hasUv) {

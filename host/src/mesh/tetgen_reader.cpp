@@ -5,6 +5,7 @@
 #include "mesh/text_scanner.hpp"
 
 #include <cmath>
+#include <limits>
 
 namespace corofem::mesh {
 
@@ -36,12 +37,13 @@ ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePat
       double xyz[3];
       sc.readPoint(xyz, id, true);
       out.nodes.insert(out.nodes.end(), xyz, xyz + 3);
-      for (std::int64_t k = 0; k < attributes + markers; ++k) sc.readDoubleOnLine();
+      for (std::int64_t k = 0; k < attributes; ++k) sc.readDoubleOnLine();  // (not attributes + markers:
+      for (std::int64_t k = 0; k < markers; ++k) sc.readDoubleOnLine();     //  the sum may overflow)
       sc.expectLineEnd();
     }
     if (!sc.atEnd()) {
       sc.setContext("the end of the .node file");
-      sc.fail("unexpected '", sc.peekToken(), "' after the ", n, " nodes announced in the header");
+      sc.fail("unexpected '", detail::shorten(sc.peekToken()), "' after the ", n, " nodes announced in the header");
     }
   }
   {
@@ -70,13 +72,18 @@ ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePat
       }
       for (std::int64_t k = 0; k < attributes; ++k) {
         const double a = sc.readDoubleOnLine();
-        if (k == 0) out.regions.push_back(static_cast<std::int32_t>(std::lround(a)));
+        if (k == 0) {
+          if (!(std::abs(a) <= double(std::numeric_limits<std::int32_t>::max())))
+            sc.fail("element ", out.elementIds.back(), " has the region attribute ", a,
+                    ", which is not a region id (an integer of at most 2147483647 in magnitude)");
+          out.regions.push_back(static_cast<std::int32_t>(std::lround(a)));
+        }
       }
       sc.expectLineEnd();
     }
     if (!sc.atEnd()) {
       sc.setContext("the end of the .ele file");
-      sc.fail("unexpected '", sc.peekToken(), "' after the ", m, " elements announced in the header");
+      sc.fail("unexpected '", detail::shorten(sc.peekToken()), "' after the ", m, " elements announced in the header");
     }
   }
   report.format = "tetgen";

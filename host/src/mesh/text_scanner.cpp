@@ -1,37 +1,17 @@
 // Whole-file reading and the cold (error) paths of the text scanner.
 #include "mesh/text_scanner.hpp"
 
+#include "mesh/input_file.hpp"
+
 #include <algorithm>
-#include <cerrno>
-#include <cstdio>
-#include <cstring>
-#include <fstream>
 #include <limits>
 #include <sstream>
 
 namespace corofem::mesh {
 
 std::string readWholeFile(const std::string& path) {
-  std::FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f)
-    detail::fail(ErrorCode::IoError, "cannot open mesh file ", path, ": ", std::strerror(errno),
-                 "; check the path (relative paths are taken from the working directory)");
-  std::string text;
-  if (std::fseek(f, 0, SEEK_END) == 0) {
-    const long size = std::ftell(f);
-    if (size > 0) text.resize(static_cast<std::size_t>(size));
-    std::fseek(f, 0, SEEK_SET);
-  }
-  std::size_t got = text.empty() ? 0 : std::fread(text.data(), 1, text.size(), f);
-  text.resize(got);
-  // Not seekable (a pipe) or grown meanwhile: read the rest in chunks.
-  char buffer[1 << 16];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof buffer, f)) > 0) text.append(buffer, n);
-  const bool bad = std::ferror(f) != 0;
-  std::fclose(f);
-  if (bad) detail::fail(ErrorCode::IoError, "cannot read mesh file ", path, ": read error");
-  return text;
+  return readInputFile(path, "mesh file " + path,
+                       "; check the path (relative paths are taken from the working directory)");
 }
 
 std::string lowerExtension(const std::string& path) {

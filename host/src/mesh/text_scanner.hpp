@@ -14,7 +14,9 @@
 
 namespace corofem::mesh {
 
-/// Reads the whole file into a string. Throws IoError naming the path when it cannot be read.
+/// Reads the whole mesh file into a string (readInputFile: regular files only, at most
+/// maxInputBytes()). Throws IoError naming the path when it cannot be read, BadInput when it is not
+/// a regular file or too large.
 std::string readWholeFile(const std::string& path);
 
 /// Lower-case extension with the dot (".msh"), or "" when the name has none.

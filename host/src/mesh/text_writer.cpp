@@ -4,10 +4,26 @@
 #include "util/error.hpp"
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 
 namespace corofem::mesh {
+
+namespace {
+
+/// Throws BadInput at the first non-finite value: no NaN or infinity is written to a file.
+template <class T>
+void checkFinite(const T* values, std::size_t count, int perItem, const char* item, const std::string& what,
+                 const std::string& path) {
+  for (std::size_t i = 0; i < count; ++i)
+    if (!std::isfinite(values[i]))
+      detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", what, " of ", item, " ", i / std::size_t(perItem),
+                   " is ", values[i], " (component ", i % std::size_t(perItem),
+                   "); only finite numbers are written, so fix the value or leave it out");
+}
+
+}  // namespace
 
 void TextWriter::save(const std::string& path) const {
   const std::string tmp = path + ".tmp";
@@ -15,10 +31,12 @@ void TextWriter::save(const std::string& path) const {
   if (!f)
     detail::fail(ErrorCode::IoError, "cannot write ", path, ": ", std::strerror(errno),
                  "; check that the folder exists and is writable");
-  const bool wrote = std::fwrite(buf_.data(), 1, buf_.size(), f) == buf_.size();
-  const int err = errno;
-  const bool closed = std::fclose(f) == 0;
-  if (!wrote || !closed) {
+  // errno is read right after the call that failed: fwrite usually succeeds into the buffer, and
+  // fclose, flushing it, is the call that meets a full disk.
+  int err = 0;
+  if (std::fwrite(buf_.data(), 1, buf_.size(), f) != buf_.size()) err = errno ? errno : EIO;
+  if (std::fclose(f) != 0 && err == 0) err = errno ? errno : EIO;
+  if (err != 0) {
     std::remove(tmp.c_str());
     detail::fail(ErrorCode::IoError, "cannot write ", path, ": ", std::strerror(err), " (disk full?)");
   }
@@ -50,6 +68,7 @@ void checkWritable(const TetMesh& mesh, const std::string& path) {
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the mesh arrays are not whole (", mesh.nodes.size(),
                  " node values, ", mesh.tets.size(), " element indices); they must be multiples of 3 and 4");
   const std::size_t n = mesh.nodeCount();
+  checkFinite(mesh.nodes.data(), mesh.nodes.size(), 3, "node", "the position", path);
   for (std::size_t i = 0; i < mesh.tets.size(); ++i)
     if (mesh.tets[i] >= n)
       detail::fail(ErrorCode::BadInput, "cannot write ", path, ": element ", i / 4, " refers to node ", mesh.tets[i],
@@ -64,10 +83,12 @@ void checkWritable(const SurfaceMesh& mesh, const std::string& path) {
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the surface arrays are not whole (",
                  mesh.vertices.size(), " vertex values, ", mesh.triangles.size(), " triangle indices)");
   const std::size_t n = mesh.vertexCount();
+  checkFinite(mesh.vertices.data(), mesh.vertices.size(), 3, "vertex", "the position", path);
   for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
     if (mesh.triangles[i] >= n)
       detail::fail(ErrorCode::BadInput, "cannot write ", path, ": triangle ", i / 3, " refers to vertex ",
                    mesh.triangles[i], " but the surface has ", n, " vertices (0-based indices)");
+  checkFinite(mesh.texcoords.data(), mesh.texcoords.size(), 2, "vertex", "the texture coordinate", path);
   if (!mesh.texcoords.empty() && mesh.texcoords.size() != 2 * n)
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", mesh.texcoords.size(),
                  " texcoord values for ", n, " vertices; give 2 per vertex or none");
@@ -85,6 +106,8 @@ void checkFields(const std::vector<MeshField>& fields, std::size_t nodes, std::s
       detail::fail(ErrorCode::BadInput, "cannot write ", path, ": field '", f.name, "' has ", f.values.size(),
                    " values, expected ", f.components, " x ", count, (f.perElement ? " elements" : " nodes"), " = ",
                    count * std::size_t(f.components));
+    checkFinite(f.values.data(), f.values.size(), f.components, f.perElement ? "element" : "node",
+                "field '" + detail::shorten(f.name) + "'", path);
   }
 }
 

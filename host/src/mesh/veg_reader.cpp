@@ -56,7 +56,7 @@ ParsedTetMesh parseVeg(const std::string& text, const std::string& path, MeshRea
       sc.setContext("the element type after *ELEMENTS");
       const std::string type = upper(sc.token());
       if (type != "TET")
-        sc.fail("element type ", type, " is not supported; corofem reads TET elements (linear tetrahedra)");
+        sc.fail("element type ", detail::shorten(type), " is not supported; corofem reads TET elements (linear tetrahedra)");
       sc.setContext("the *ELEMENTS header");
       const std::size_t m = sc.readCount("elements", 10);
       const std::int64_t perElement = sc.readIntOnLine();
@@ -78,7 +78,7 @@ ParsedTetMesh parseVeg(const std::string& text, const std::string& path, MeshRea
       sc.skipLine();  // *MATERIAL name, *REGION, *SET name, ...: tolerated, content skipped
       skipSection();
     } else {
-      sc.fail("expected a section such as *VERTICES or *ELEMENTS, found '", tok, "'");
+      sc.fail("expected a section such as *VERTICES or *ELEMENTS, found '", detail::shorten(tok), "'");
     }
   }
   if (!sawVertices) sc.fail("the file has no *VERTICES section; is this a Vega .veg file?");

@@ -62,7 +62,7 @@ class VtkParser {
       if (key == "dataset") {
         const std::string type = lower(sc_.token());
         if (type != "unstructured_grid")
-          sc_.fail("DATASET ", type, " is not supported; corofem reads UNSTRUCTURED_GRID tetrahedral meshes");
+          sc_.fail("DATASET ", detail::shorten(type), " is not supported; corofem reads UNSTRUCTURED_GRID tetrahedral meshes");
       } else if (key == "points") {
         readPoints();
       } else if (key == "cells") {
@@ -105,7 +105,7 @@ class VtkParser {
       } else if (key == "metadata") {
         skipMetadata();
       } else {
-        sc_.fail("unexpected '", key, "' in a VTK UNSTRUCTURED_GRID file; expected a keyword such as POINTS, CELLS, "
+        sc_.fail("unexpected '", detail::shorten(key), "' in a VTK UNSTRUCTURED_GRID file; expected a keyword such as POINTS, CELLS, "
                  "CELL_TYPES or CELL_DATA");
       }
     }
@@ -125,7 +125,7 @@ class VtkParser {
     const std::string encoding = lower(sc_.token());
     if (encoding == "binary")
       sc_.fail("binary legacy VTK files are not supported; write the file as ASCII");
-    if (encoding != "ascii") sc_.fail("expected ASCII on line 3, found '", encoding, "'");
+    if (encoding != "ascii") sc_.fail("expected ASCII on line 3, found '", detail::shorten(encoding), "'");
     char buf[16];
     std::snprintf(buf, sizeof buf, "%.1f", version_);
     report_.format = std::string("vtk legacy ") + buf;
@@ -235,7 +235,7 @@ class VtkParser {
     sc_.token();  // data type
     std::int64_t components = 1;
     if (!sc_.atLineEnd()) components = sc_.readIntOnLine();
-    if (components < 1 || components > 4) sc_.fail("SCALARS ", name, " has ", components, " components; expected 1 to 4");
+    if (components < 1 || components > 4) sc_.fail("SCALARS ", detail::shorten(name), " has ", components, " components; expected 1 to 4");
     const bool asRegions = cellScope_ && components == 1 && !haveRegions_ && isRegionArrayName(name);
     if (lower(sc_.peekToken()) == "lookup_table") {
       sc_.token();
@@ -255,10 +255,10 @@ class VtkParser {
       const std::int64_t components = sc_.readInt();
       const std::int64_t tuples = sc_.readInt();
       sc_.token();  // type
-      if (components < 0 || tuples < 0) sc_.fail("field array ", name, " has a negative size");
+      if (components < 0 || tuples < 0) sc_.fail("field array ", detail::shorten(name), " has a negative size");
       const bool asRegions = cellScope_ && components == 1 && std::size_t(tuples) == scopeCount_ && !haveRegions_ &&
                              isRegionArrayName(name);
-      const std::string label = "value of field array " + std::string(name);
+      const std::string label = "value of field array " + detail::shorten(name);
       readArray(std::size_t(components) * std::size_t(tuples), asRegions, label.c_str());
       // A 5.x file may follow an array with a METADATA block.
       if (lower(sc_.peekToken()) == "metadata") {

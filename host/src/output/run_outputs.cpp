@@ -1,5 +1,7 @@
 #include "output/run_outputs.hpp"
 
+#include "mesh/text_writer.hpp"
+#include "scene/scene_paths.hpp"
 #include "util/error.hpp"
 
 #include <nlohmann/json.hpp>
@@ -8,7 +10,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <iomanip>
 #include <numeric>
 
 namespace corofem::detail {
@@ -33,6 +34,21 @@ double median(std::vector<double> v) {
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
 
+/// Replaces every NaN or infinity in j by null (what JSON has for them), counting them and keeping
+/// the key path of the first.
+void nullNonFinite(nlohmann::json& j, const std::string& path, std::size_t& count, std::string& first) {
+  if (j.is_number_float() && !std::isfinite(j.get<double>())) {
+    const double x = j.get<double>();
+    if (count++ == 0) first = "summary.json " + path + " = " + (std::isnan(x) ? "nan" : x > 0 ? "inf" : "-inf");
+    j = nullptr;
+  } else if (j.is_object()) {
+    for (auto it = j.begin(); it != j.end(); ++it)
+      nullNonFinite(it.value(), path.empty() ? it.key() : path + "." + it.key(), count, first);
+  } else if (j.is_array()) {
+    for (std::size_t i = 0; i < j.size(); ++i) nullNonFinite(j[i], path + "[" + std::to_string(i) + "]", count, first);
+  }
+}
+
 std::string vtkName(const std::string& body, int step) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "_%06d.vtu", step);
@@ -42,15 +58,26 @@ std::string vtkName(const std::string& body, int step) {
 }  // namespace
 
 RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir) {
+  const Scene& scene = sim.scene();
+  // Body names become file names in the folder (<body>.pvd, vtk/<body>_000012.vtu): one such as
+  // "../../x" or "/abs/path" would write outside it. loadScene refuses them; so does this, for a
+  // Scene made in code.
+  for (std::size_t b = 0; b < scene.bodies.size(); ++b) {
+    const std::string problem = scene::fileNameProblem(scene.bodies[b].name);
+    if (!problem.empty())
+      fail(ErrorCode::BadInput, "bodies[", b, "].name: the name \"", shorten(scene.bodies[b].name), "\" ", problem);
+  }
   std::error_code ec;
   fs::create_directories(dir_, ec);
   if (ec) fail(ErrorCode::IoError, "cannot create the output folder ", dir_, ": ", ec.message());
 
-  const Scene& scene = sim.scene();
   for (std::size_t i = 0; i < scene.output.probes.size(); ++i) {
     const ProbeDesc& desc = scene.output.probes[i];
     Probe probe;
     probe.name = desc.name.empty() ? "probe" + std::to_string(i) : desc.name;
+    const std::string problem = scene::nameProblem(probe.name);
+    if (!problem.empty())
+      fail(ErrorCode::BadInput, "output.probes[", i, "].name: the name \"", shorten(probe.name), "\" ", problem);
     probe.body = findBody(sim, desc.body);
     auto nodes = resolveNodeSet(desc.nodes, sim.restMesh(probe.body), scene.baseDir);
     if (!nodes) fail(nodes.status().code(), "output.probes[", i, "] (\"", probe.name, "\"): ", nodes.message());
@@ -58,14 +85,12 @@ RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir
     probes_.push_back(std::move(probe));
   }
 
-  const std::string csvPath = (fs::path(dir_) / "probes.csv").string();
-  csv_.open(csvPath);
-  if (!csv_) fail(ErrorCode::IoError, "cannot write ", csvPath);
-  csv_ << "step,time,newton_iterations,linear_iterations,residual,linear_residual,converged,"
-          "elastic_energy,kinetic_energy";
-  for (const Probe& p : probes_) csv_ << ',' << p.name << "_ux," << p.name << "_uy," << p.name << "_uz";
-  csv_ << '\n';
-  csv_ << std::setprecision(10);
+  std::vector<std::string> columns{"step",     "time",      "newton_iterations", "linear_iterations",
+                                   "residual", "linear_residual", "converged", "elastic_energy",
+                                   "kinetic_energy"};
+  for (const Probe& p : probes_)
+    for (const char* c : {"_ux", "_uy", "_uz"}) columns.push_back(p.name + c);
+  csv_.open((fs::path(dir_) / "probes.csv").string(), columns);
 
   if (scene.output.vtk) {
     fs::create_directories(fs::path(dir_) / "vtk", ec);
@@ -98,9 +123,17 @@ void RunOutputs::record(const Simulation& sim, const StepReport& report) {
     elastic += e.elastic;
     kinetic += e.kinetic;
   }
-  csv_ << report.step << ',' << report.time << ',' << report.newtonIterations << ','
-       << report.linearIterations << ',' << report.residual << ',' << report.linearResidual << ','
-       << (report.converged ? 1 : 0) << ',' << elastic << ',' << kinetic;
+  const std::string where = "probes.csv step " + std::to_string(report.step);
+  csv_.beginRow();
+  csv_.add(report.step);
+  csv_.add(report.time, where);
+  csv_.add(report.newtonIterations);
+  csv_.add(report.linearIterations);
+  csv_.add(report.residual, where);
+  csv_.add(report.linearResidual, where);
+  csv_.add(report.converged ? 1 : 0);
+  csv_.add(elastic, where);
+  csv_.add(kinetic, where);
 
   lastProbe_.clear();
   std::vector<double> x;
@@ -112,11 +145,10 @@ void RunOutputs::record(const Simulation& sim, const StepReport& report) {
     for (std::uint32_t n : p.nodes)
       for (int c = 0; c < 3; ++c) u[c] += x[3 * n + c] - x0[3 * n + c];
     for (double& c : u) c /= static_cast<double>(p.nodes.size());
-    csv_ << ',' << u[0] << ',' << u[1] << ',' << u[2];
+    for (double c : u) csv_.add(c, where);
     lastProbe_.insert(lastProbe_.end(), u, u + 3);
   }
-  csv_ << '\n';
-  csv_.flush();
+  csv_.endRow();
 
   const Scene& scene = sim.scene();
   const int every = scene.output.vtkEvery;
@@ -254,10 +286,27 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
     j["vtk_series"] = vtk;
   }
 
-  const std::string path = (fs::path(dir_) / "summary.json").string();
-  std::ofstream out(path);
-  if (!out) fail(ErrorCode::IoError, "cannot write ", path);
-  out << j.dump(2) << '\n';
+  summaryNonFinite_ = 0;
+  firstSummaryNonFinite_.clear();
+  nullNonFinite(j, "", summaryNonFinite_, firstSummaryNonFinite_);
+  const std::size_t total = csv_.nonFiniteCount() + summaryNonFinite_;
+  if (total > 0)
+    j["non_finite_values"] = {{"count", total},
+                              {"first", csv_.nonFiniteCount() ? csv_.firstNonFinite() : firstSummaryNonFinite_},
+                              {"written_as", "an empty cell in probes.csv, null in summary.json"}};
+  // Through a temporary file and a rename, every write checked: a full disk is an error, and a
+  // summary that exists is whole. Invalid UTF-8 in a message is replaced, not an exception.
+  mesh::TextWriter out;
+  out << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
+  out.save((fs::path(dir_) / "summary.json").string());
+}
+
+std::string RunOutputs::nonFiniteNote() const {
+  const std::size_t total = csv_.nonFiniteCount() + summaryNonFinite_;
+  if (total == 0) return "";
+  return std::to_string(total) + (total == 1 ? " value was" : " values were") + " not finite (the first: " +
+         (csv_.nonFiniteCount() ? csv_.firstNonFinite() : firstSummaryNonFinite_) +
+         "); probes.csv leaves such a cell empty and summary.json writes null";
 }
 
 }  // namespace corofem::detail

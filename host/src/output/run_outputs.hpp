@@ -1,11 +1,16 @@
 // Outputs of a scene run: probes.csv, the VTK series (.vtu + .pvd per body), summary.json.
 // Used by `corofem run`; an embedding application may use it the same way. Every file is
-// flushed or rewritten as the run goes, so a run that fails or is killed leaves readable outputs.
+// flushed or rewritten as the run goes, so a run that fails or is killed leaves readable outputs;
+// every write is checked, so a write that fails (a full disk) is an IoError, never a silent loss.
+// Every file is inside the output folder: body names that would make a path are refused. No NaN
+// or infinity is written: probes.csv leaves such a cell empty and summary.json writes null, and
+// the summary counts them (nonFiniteNote()).
 #pragma once
 
 #include <corofem/simulation.hpp>
 
-#include <fstream>
+#include "output/csv_file.hpp"
+
 #include <memory>
 #include <string>
 #include <vector>
@@ -27,6 +32,10 @@ class RunOutputs {
 
   const std::string& dir() const { return dir_; }
 
+  /// "" when every number written was finite; else how many were not, and the first one
+  /// ("2 values were not finite (the first: probes.csv step 0, elastic_energy = inf) ...").
+  std::string nonFiniteNote() const;
+
  private:
   struct Probe {
     std::string name;
@@ -37,7 +46,9 @@ class RunOutputs {
 
   std::string dir_;
   std::vector<Probe> probes_;
-  std::ofstream csv_;
+  CsvFile csv_;
+  std::size_t summaryNonFinite_ = 0;  ///< numbers of the last summary.json written as null
+  std::string firstSummaryNonFinite_;
   std::vector<std::unique_ptr<PvdSeries>> series_;
   std::vector<std::unique_ptr<PvdSeries>> surfaceSeries_;  ///< per body; null without a surface
   std::vector<double> stepWallSeconds_;

@@ -1,6 +1,8 @@
 // Key paths, edit distance and number formatting for scene-file messages.
 #include "scene/json_path.hpp"
 
+#include "util/error.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -21,6 +23,8 @@ char lower(char c) { return static_cast<char>(std::tolower(static_cast<unsigned 
 }  // namespace
 
 std::string childPath(const std::string& parent, const std::string& key) {
+  // Paths are for messages: a key of any length from the input is shortened.
+  if (key.size() > 64) return parent + "[\"" + detail::shorten(key, 64) + "\"]";
   if (!isIdentifier(key)) return parent + "[\"" + key + "\"]";
   return parent.empty() ? key : parent + "." + key;
 }
@@ -53,6 +57,11 @@ std::string nearestName(const std::string& word, const std::vector<std::string>&
   std::string best;
   std::size_t bestDistance = std::numeric_limits<std::size_t>::max();
   for (const std::string& candidate : candidates) {
+    // The distance is at least the difference in length: skip the quadratic comparison when that
+    // alone rules the candidate out (a 50 MB key against "youngs_modulus").
+    const std::size_t longer = std::max(word.size(), candidate.size());
+    const std::size_t shorter = std::min(word.size(), candidate.size());
+    if (longer - shorter > std::max<std::size_t>(2, longer / 3)) continue;
     const std::size_t d = editDistance(word, candidate);
     if (d < bestDistance) {
       bestDistance = d;

@@ -1,6 +1,7 @@
 // Node sets: the mesh nodes a box, a plane, an index list or a Vega .bou file selects.
 #include <corofem/scene.hpp>
 
+#include "mesh/input_file.hpp"
 #include "scene/json_path.hpp"
 #include "scene/scene_paths.hpp"
 #include "util/error.hpp"
@@ -9,9 +10,9 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace corofem {
@@ -112,28 +113,30 @@ std::vector<std::uint32_t> selectList(const NodeSetDesc& set, const TetMesh& mes
 /// non-blank character is '#' are comments.
 std::vector<std::uint32_t> selectBou(const NodeSetDesc& set, const TetMesh& mesh, const std::string& baseDir) {
   const std::string path = scene::resolveScenePath(baseDir, set.bouFile);
-  std::ifstream in(path);
-  if (!in)
-    detail::fail(ErrorCode::IoError, "cannot open the .bou file \"", path, "\"",
-                 path == set.bouFile ? "" : " (\"" + set.bouFile + "\" relative to \"" + baseDir + "\")");
+  const std::string text = mesh::readInputFile(
+      path, "the .bou file \"" + path + "\"" +
+                (path == set.bouFile ? "" : " (\"" + set.bouFile + "\" relative to \"" + baseDir + "\")"));
   std::vector<std::uint32_t> selected;
-  std::string line;
   std::size_t lineNumber = 0;
-  while (std::getline(in, line)) {
+  for (std::size_t start = 0; start < text.size();) {
+    std::size_t stop = text.find('\n', start);
+    if (stop == std::string::npos) stop = text.size();
+    const std::string_view line(text.data() + start, stop - start);
+    start = stop + 1;
     ++lineNumber;
     const std::size_t first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
+    if (first == std::string_view::npos || line[first] == '#') continue;
     std::size_t i = first;
     while (i < line.size()) {
       while (i < line.size() && (line[i] == ',' || std::isspace(static_cast<unsigned char>(line[i])))) ++i;
       if (i >= line.size()) break;
       std::size_t end = i;
       while (end < line.size() && line[end] != ',' && !std::isspace(static_cast<unsigned char>(line[end]))) ++end;
-      const std::string token = line.substr(i, end - i);
+      const std::string_view token = line.substr(i, end - i);
       std::uint64_t id = 0;
       const auto parsed = std::from_chars(token.data(), token.data() + token.size(), id);
       if (parsed.ec != std::errc() || parsed.ptr != token.data() + token.size())
-        detail::fail(ErrorCode::BadInput, "file ", path, ":", lineNumber, ": \"", token,
+        detail::fail(ErrorCode::BadInput, "file ", path, ":", lineNumber, ": \"", detail::shorten(token),
                      "\" is not a node id (a .bou file lists 1-based node ids separated by commas)");
       if (id == 0)
         detail::fail(ErrorCode::BadInput, "file ", path, ":", lineNumber,
@@ -146,7 +149,6 @@ std::vector<std::uint32_t> selectBou(const NodeSetDesc& set, const TetMesh& mesh
       i = end;
     }
   }
-  if (in.bad()) detail::fail(ErrorCode::IoError, "cannot read the .bou file \"", path, "\"");
   return selected;
 }
 

@@ -17,6 +17,10 @@ namespace {
 
 using nlohmann::json;
 
+/// Segments of the longest key path an override may have (scene keys are at most 6 deep; a longer
+/// path only creates objects the schema check rejects, at a cost quadratic in its length).
+constexpr std::size_t kMaxSegments = 32;
+
 /// One step of a key path: an object key, or a number that may index an array.
 struct Segment {
   std::string text;
@@ -43,7 +47,8 @@ class OverrideError {
   OverrideError(const std::string& prefix, const std::string& text) : prefix_(prefix), text_(text) {}
   template <class... Parts>
   [[noreturn]] void operator()(const Parts&... parts) const {
-    detail::fail(ErrorCode::BadInput, prefix_, "--set \"", text_, "\": ", parts...);
+    // The override is quoted once, shortened (parts that quote it again shorten theirs too).
+    detail::fail(ErrorCode::BadInput, prefix_, "--set \"", detail::shorten(text_, 80), "\": ", parts...);
   }
 
  private:
@@ -58,7 +63,7 @@ std::vector<Segment> splitPath(const std::string& path, const OverrideError& fai
   for (std::size_t i = 0; i < path.size(); ++i) {
     const char c = path[i];
     if (c == '.') {
-      if (!haveCurrent) fail("empty segment in the key path \"", path, "\" (two dots, or a leading dot)");
+      if (!haveCurrent) fail("empty segment in the key path \"", detail::shorten(path, 80), "\" (two dots, or a leading dot)");
       segments.push_back({current, false});
       current.clear();
       haveCurrent = false;
@@ -66,9 +71,10 @@ std::vector<Segment> splitPath(const std::string& path, const OverrideError& fai
     } else if (c == '[') {
       if (haveCurrent) segments.push_back({current, false});
       const std::size_t close = path.find(']', i);
-      if (close == std::string::npos) fail("unclosed '[' in the key path \"", path, "\"");
+      if (close == std::string::npos) fail("unclosed '[' in the key path \"", detail::shorten(path, 80), "\"");
       Segment index{path.substr(i + 1, close - i - 1), true};
-      if (!index.isNumber()) fail("\"[", index.text, "]\" in the key path is not an array index (a number)");
+      if (!index.isNumber())
+        fail("\"[", detail::shorten(index.text), "]\" in the key path is not an array index (a number)");
       segments.push_back(index);
       current.clear();
       haveCurrent = false;
@@ -80,7 +86,7 @@ std::vector<Segment> splitPath(const std::string& path, const OverrideError& fai
     }
   }
   if (haveCurrent) segments.push_back({current, false});
-  else if (!path.empty() && path.back() == '.') fail("the key path \"", path, "\" ends with a dot");
+  else if (!path.empty() && path.back() == '.') fail("the key path \"", detail::shorten(path, 80), "\" ends with a dot");
   return segments;
 }
 
@@ -100,38 +106,41 @@ void applyOne(json& root, const std::string& text, const std::string& prefix) {
   if (value.is_discarded()) value = valueText;
 
   const std::vector<Segment> segments = splitPath(path, fail);
+  if (segments.size() > kMaxSegments)
+    fail("the key path has ", segments.size(), " segments; no scene key is more than ", kMaxSegments, " deep");
   json* node = &root;
   std::string where;  // key path of *node, for messages
+  auto at = [&where] { return where.empty() ? std::string("the top level") : detail::shorten(where, 120); };
   for (std::size_t s = 0; s < segments.size(); ++s) {
     const Segment& seg = segments[s];
     const bool last = s + 1 == segments.size();
     if (node->is_array()) {
       if (!seg.isNumber())
-        fail(where, " is an array: the next segment must be a numeric index (e.g. ", where, ".0), not \"",
-             seg.text, "\"");
+        fail(at(), " is an array: the next segment must be a numeric index (e.g. ", at(), ".0), not \"",
+             detail::shorten(seg.text), "\"");
       // More than 9 digits is out of range of any scene array (and of std::stoul on some platforms).
       const std::size_t index = seg.text.size() > 9 ? node->size() + 1 : std::stoul(seg.text);
       if (index >= node->size())
-        fail("index ", seg.text, " is out of range: ", where, " has ", node->size(),
+        fail("index ", detail::shorten(seg.text), " is out of range: ", at(), " has ", node->size(),
              node->size() == 1 ? " element" : " elements");
       where = indexPath(where, index);
       node = &(*node)[index];
     } else if (node->is_object()) {
       if (seg.bracketed)
-        fail(where.empty() ? "the top level" : where, " is an object, not an array: [", seg.text,
-             "] cannot index it");
+        fail(at(), " is an object, not an array: [", detail::shorten(seg.text), "] cannot index it");
       auto it = node->find(seg.text);
       if (it == node->end()) {
         // A missing intermediate object is created; a missing array cannot be indexed.
         const bool nextIsIndex = !last && segments[s + 1].isNumber();
-        if (nextIsIndex) fail("index ", segments[s + 1].text, " is out of range: ", childPath(where, seg.text),
-                              " is absent");
+        if (nextIsIndex)
+          fail("index ", detail::shorten(segments[s + 1].text), " is out of range: ",
+               detail::shorten(childPath(where, seg.text), 120), " is absent");
         it = node->emplace(seg.text, last ? json() : json::object()).first;
       }
       where = childPath(where, seg.text);
       node = &*it;
     } else {
-      fail("cannot go into ", where, ", which is ", typeName(*node), ", to set \"", seg.text, "\"");
+      fail("cannot go into ", at(), ", which is ", typeName(*node), ", to set \"", detail::shorten(seg.text), "\"");
     }
   }
   *node = std::move(value);

@@ -3,22 +3,21 @@
 // (`bodies[0].material.poisson_ratio`), with the nearest valid name for a misspelt key or value.
 #include <corofem/scene.hpp>
 
+#include "mesh/input_file.hpp"
+#include "mesh/mesh_validation.hpp"
 #include "scene/json_path.hpp"
+#include "scene/json_text.hpp"
 #include "scene/overrides.hpp"
+#include "scene/scene_paths.hpp"
 #include "util/error.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <limits>
-#include <regex>
 #include <set>
-#include <sstream>
 #include <utility>
 
 namespace corofem {
@@ -223,8 +222,9 @@ class Reader {
       if (entry.first == s) return entry.second;
     const std::string suggestion = nearestName(s, names);
     if (!suggestion.empty())
-      fail(path, "unknown value \"", s, "\"; did you mean \"", suggestion, "\"? (valid: ", quotedList(names), ")");
-    fail(path, "unknown value \"", s, "\"; valid values are ", quotedList(names));
+      fail(path, "unknown value \"", detail::shorten(s), "\"; did you mean \"", suggestion, "\"? (valid: ",
+           quotedList(names), ")");
+    fail(path, "unknown value \"", detail::shorten(s), "\"; valid values are ", quotedList(names));
   }
 
  private:
@@ -275,6 +275,10 @@ class Obj {
 };
 
 // ------------------------------------------------------------------ ranges (header comments)
+/// Upper bound of analysis.max_substeps: a failing step is retried in 2, 4, ... substeps up to this
+/// many, so the bound keeps a failing step's retries to about 2 x 1024 substeps' work.
+constexpr double kMaxSubsteps = 1024;
+
 bool positive(double x) { return x > 0; }
 bool nonNegative(double x) { return x >= 0; }
 bool atLeastOne(double x) { return x >= 1; }
@@ -382,6 +386,8 @@ MeshSourceDesc parseMesh(const Reader& r, const json& j, const std::string& path
     }
     b.read("tets_per_cell", spec.tetsPerCell,
            {[](double x) { return x == 5 || x == 6; }, "tets_per_cell = 5 or 6"});
+    const std::string tooLarge = mesh::boxSizeProblem(spec);
+    if (!tooLarge.empty()) r.fail(b.at("cells"), tooLarge);
     mesh.box = spec;
   }
   o.read("scale", mesh.scale, {positive, "scale > 0"});
@@ -480,7 +486,10 @@ AnalysisDesc parseAnalysis(const Reader& r, const json& j, const std::string& pa
   o.read("newmark_gamma", d.newmarkGamma, {[](double x) { return x >= 0.5 && x <= 1; }, "0.5 <= gamma <= 1"});
   o.read("newton_iterations", d.newtonIterations, {atLeastOne, "newton_iterations >= 1"});
   o.read("newton_tolerance", d.newtonTolerance, {positive, "newton_tolerance > 0"});
-  o.read("max_substeps", d.maxSubsteps, {atLeastOne, "max_substeps >= 1"});
+  o.read("max_substeps", d.maxSubsteps,
+         {[](double x) { return x >= 1 && x <= kMaxSubsteps; },
+          "1 <= max_substeps <= 1024 (a failed step is retried in at most 1024 substeps; for finer steps "
+          "lower time_step)"});
   if (const json* sleep = o.get("sleep")) {
     // true = the default thresholds; an object sets them (and turns sleeping on).
     if (sleep->is_boolean()) {
@@ -563,12 +572,20 @@ OutputDesc parseOutput(const Reader& r, const json& j, const std::string& path) 
   return out;
 }
 
+/// A name must be short and printable; the scene's and the bodies' become file names (fileName).
+void checkName(const Reader& r, const std::string& path, const std::string& name, bool fileName,
+               const char* origin = "") {
+  const std::string problem = fileName ? scene::fileNameProblem(name) : scene::nameProblem(name);
+  if (!problem.empty()) r.fail(path, "the name \"", detail::shorten(name), "\"", origin, " ", problem);
+}
+
 /// Checks between sections: unique names, probes naming existing bodies, features the chosen
 /// backend cannot run.
 void checkConsistency(const Reader& r, const Scene& scene) {
   std::vector<std::string> bodyNames;
   for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
     const std::string& name = scene.bodies[i].name;
+    checkName(r, childPath(indexPath("bodies", i), "name"), name, true);
     if (contains(bodyNames, name))
       r.fail(childPath(indexPath("bodies", i), "name"), "\"", name, "\" is already the name of another body; body names must be unique");
     bodyNames.push_back(name);
@@ -577,13 +594,16 @@ void checkConsistency(const Reader& r, const Scene& scene) {
   for (std::size_t i = 0; i < scene.output.probes.size(); ++i) {
     const ProbeDesc& probe = scene.output.probes[i];
     const std::string at = indexPath("output.probes", i);
+    checkName(r, childPath(at, "name"), probe.name, false);
     if (!probeNames.insert(probe.name).second)
       r.fail(childPath(at, "name"), "\"", probe.name, "\" is already the name of another probe; probe names must be unique");
     if (!probe.body.empty() && !contains(bodyNames, probe.body)) {
       const std::string suggestion = nearestName(probe.body, bodyNames);
       if (!suggestion.empty())
-        r.fail(childPath(at, "body"), "no body is named \"", probe.body, "\"; did you mean \"", suggestion, "\"?");
-      r.fail(childPath(at, "body"), "no body is named \"", probe.body, "\"; the bodies are ", quotedList(bodyNames, " and "));
+        r.fail(childPath(at, "body"), "no body is named \"", detail::shorten(probe.body), "\"; did you mean \"",
+               suggestion, "\"?");
+      r.fail(childPath(at, "body"), "no body is named \"", detail::shorten(probe.body), "\"; the bodies are ",
+             quotedList(bodyNames, " and "));
     }
   }
   if (scene.backend.kind == BackendKind::OpenCL) {
@@ -607,6 +627,8 @@ Scene parseDocument(const Reader& r, const json& root, const std::string& defaul
   Scene scene;
   if (!defaultName.empty()) scene.name = defaultName;
   o.read("name", scene.name);
+  checkName(r, "name", scene.name, true,
+            o.get("name") ? "" : " (taken from the file name, as the scene sets no \"name\")");
   const json& bodies = o.require("bodies", "a scene needs at least one body: \"bodies\": [{\"mesh\": {...}}]");
   if (!bodies.is_array()) r.fail("bodies", "expected an array of bodies, got ", describe(bodies));
   if (bodies.empty()) r.fail("bodies", "must contain at least one body");
@@ -619,118 +641,12 @@ Scene parseDocument(const Reader& r, const json& root, const std::string& defaul
   return scene;
 }
 
-// ------------------------------------------------------------------ JSON text
-/// Parser callback that records the first key repeated within one object (JSON parsers silently
-/// keep the last value, which hides a typo'd copy-paste), with its key path.
-class DuplicateKeyFinder {
- public:
-  bool operator()(int /*depth*/, json::parse_event_t event, json& parsed) {
-    switch (event) {
-      case json::parse_event_t::object_start: stack_.emplace_back(); break;
-      case json::parse_event_t::array_start: stack_.emplace_back().array = true; break;
-      case json::parse_event_t::key: {
-        Frame& top = stack_.back();
-        top.key = parsed.get<std::string>();
-        if (!top.keys.insert(top.key).second && duplicate_.empty()) duplicate_ = currentPath();
-        break;
-      }
-      case json::parse_event_t::object_end:
-      case json::parse_event_t::array_end:
-        stack_.pop_back();
-        afterValue();
-        break;
-      case json::parse_event_t::value: afterValue(); break;
-    }
-    return true;
-  }
-  const std::string& duplicate() const { return duplicate_; }
-
- private:
-  struct Frame {
-    bool array = false;
-    std::size_t index = 0;
-    std::string key;
-    std::set<std::string> keys;
-  };
-  void afterValue() {
-    if (!stack_.empty() && stack_.back().array) ++stack_.back().index;
-  }
-  std::string currentPath() const {
-    std::string path;
-    for (const Frame& f : stack_) path = f.array ? indexPath(path, f.index) : childPath(path, f.key);
-    return path;
-  }
-  std::vector<Frame> stack_;
-  std::string duplicate_;
-};
-
-/// Line and column (1-based) of a byte offset.
-std::pair<std::size_t, std::size_t> lineColumn(const std::string& text, std::size_t offset) {
-  std::size_t line = 1, column = 1;
-  for (std::size_t i = 0; i < offset && i < text.size(); ++i) {
-    if (text[i] == '\n') {
-      ++line;
-      column = 1;
-    } else {
-      ++column;
-    }
-  }
-  return {line, column};
-}
-
-json parseJsonText(const Reader& r, const std::string& text) {
-  DuplicateKeyFinder duplicates;
-  json root;
-  try {
-    root = json::parse(text, std::ref(duplicates), /*allow_exceptions=*/true, /*ignore_comments=*/true);
-  } catch (const json::parse_error& e) {
-    // nlohmann's message: "[json.exception.parse_error.101] parse error at line L, column C: <what>".
-    const std::string what = e.what();
-    static const std::regex kWhere(R"(at line (\d+), column (\d+): (.*))");
-    std::smatch m;
-    if (std::regex_search(what, m, kWhere))
-      detail::fail(ErrorCode::BadInput, r.prefix(), "line ", m[1].str(), ", column ", m[2].str(),
-                   ": invalid JSON: ", m[3].str());
-    const auto [line, column] = lineColumn(text, e.byte > 0 ? e.byte - 1 : 0);
-    detail::fail(ErrorCode::BadInput, r.prefix(), "line ", line, ", column ", column, ": invalid JSON: ", what);
-  } catch (const json::out_of_range& e) {
-    // A number too large for a double (1e999): find the literal to give its position.
-    const std::string what = e.what();
-    static const std::regex kLiteral(R"(parsing '([^']*)')");
-    std::smatch m;
-    if (std::regex_search(what, m, kLiteral)) {
-      const std::size_t at = text.find(m[1].str());
-      if (at != std::string::npos) {
-        const auto [line, column] = lineColumn(text, at);
-        detail::fail(ErrorCode::BadInput, r.prefix(), "line ", line, ", column ", column, ": the number ",
-                     m[1].str(), " is too large (numbers must be finite)");
-      }
-    }
-    detail::fail(ErrorCode::BadInput, r.prefix(), "invalid JSON: ", what);
-  }
-  if (!duplicates.duplicate().empty())
-    r.fail(duplicates.duplicate(), "duplicate key (the same key appears twice in one object)");
-  return root;
-}
-
-/// Shorthands that --set paths would need to go through are expanded first, so that
-/// `--set backend.device=1` works on `"backend": "opencl"` and `--set bodies.0.mesh.scale=2` on
-/// `"mesh": "beam.msh"`.
-void expandShorthands(json& root) {
-  if (!root.is_object()) return;
-  if (auto it = root.find("backend"); it != root.end() && it->is_string()) *it = json{{"kind", *it}};
-  if (auto it = root.find("bodies"); it != root.end() && it->is_array())
-    for (json& body : *it)
-      if (body.is_object())
-        if (auto mesh = body.find("mesh"); mesh != body.end() && mesh->is_string()) *mesh = json{{"file", *mesh}};
-}
-
 Scene parseWithSource(const std::string& text, const std::string& baseDir, const std::vector<std::string>& overrides,
                       const std::string& source, const std::string& defaultName) {
   const Reader r(source);
-  json root = parseJsonText(r, text);
+  json root = scene::parseJsonText(text, r.prefix());
   if (!overrides.empty()) {
-    expandShorthands(root);
+    scene::expandShorthands(root);
     scene::applyOverrides(root, overrides, r.prefix());
   }
   Scene scene = parseDocument(r, root, defaultName);
@@ -747,71 +663,14 @@ Result<Scene> parseScene(const std::string& jsonText, const std::string& baseDir
 
 Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides) {
   return detail::guardResult<Scene>([&] {
-    std::ifstream in(path, std::ios::binary);
-    if (!in)
-      detail::fail(ErrorCode::IoError, "cannot open the scene file \"", path, "\": ", std::strerror(errno));
-    std::ostringstream text;
-    text << in.rdbuf();
-    if (in.bad()) detail::fail(ErrorCode::IoError, "cannot read the scene file \"", path, "\"");
+    const std::string text =
+        mesh::readInputFile(path, "the scene file \"" + path + "\"", "", mesh::kDefaultMaxSceneBytes);
     const std::filesystem::path file(path);
     std::string baseDir = file.parent_path().string();
     if (baseDir.empty()) baseDir = ".";
     // The name defaults to the file stem ("fig8.json" -> "fig8").
-    return parseWithSource(text.str(), baseDir, overrides, path, file.stem().string());
+    return parseWithSource(text, baseDir, overrides, path, file.stem().string());
   });
-}
-
-// Switches rather than the parser's tables (std::string, built at start-up), so that benchmark
-// registration during static initialisation may call them; tests/scene/test_enum_names.cpp checks
-// that every name parses back to its enumerator.
-const char* toString(Formulation f) {
-  switch (f) {
-    case Formulation::Linear: return "linear";
-    case Formulation::Corotational: return "corotational";
-    case Formulation::StVenantKirchhoff: return "stvk";
-    case Formulation::NeoHookean: return "neo_hookean";
-  }
-  return "?";
-}
-const char* toString(RotationMethod m) {
-  switch (m) {
-    case RotationMethod::Polar: return "polar";
-    case RotationMethod::Svd: return "svd";
-    case RotationMethod::Quaternion: return "quaternion";
-    case RotationMethod::Qr: return "qr";
-  }
-  return "?";
-}
-const char* toString(BackendKind b) {
-  switch (b) {
-    case BackendKind::Auto: return "auto";
-    case BackendKind::Reference: return "reference";
-    case BackendKind::OpenCL: return "opencl";
-  }
-  return "?";
-}
-const char* toString(Precision p) {
-  switch (p) {
-    case Precision::Double: return "double";
-    case Precision::Float: return "float";
-    case Precision::Mixed: return "mixed";
-  }
-  return "?";
-}
-const char* toString(SurfaceLayout l) {
-  switch (l) {
-    case SurfaceLayout::Interleaved: return "interleaved";
-    case SurfaceLayout::Separate: return "separate";
-  }
-  return "?";
-}
-const char* toString(PreconditionerKind p) {
-  switch (p) {
-    case PreconditionerKind::None: return "none";
-    case PreconditionerKind::Diagonal: return "diagonal";
-    case PreconditionerKind::BlockDiagonal: return "block_diagonal";
-  }
-  return "?";
 }
 
 }  // namespace corofem

@@ -1,0 +1,219 @@
+// Regression tests of issue 27 (what fuzzing and fault injection found) for `corofem run` and
+// `corofem info`, end to end: a crash on malformed JSON, names that would write outside the output
+// folder, a full disk reported as success, files that are not regular files, unbounded messages,
+// probe names that broke probes.csv, NaN and infinity in probes.csv, uncapped substeps. Each test
+// names the item of the issue it covers.
+#include "cli/cli_runner.hpp"
+#include "common/test_data.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace {
+
+using corofem::test::readFile;
+using corofem::test::runCli;
+namespace fs = std::filesystem;
+
+bool has(const std::string& haystack, const std::string& needle) { return haystack.find(needle) != std::string::npos; }
+
+/// A two-step run of a small box on the reference backend, with a probe named `probe`.
+std::string tinyScene(const std::string& name = "tiny", const std::string& body = "beam",
+                      const std::string& probe = "tip") {
+  return R"({"name": ")" + name + R"(", "bodies": [{"name": ")" + body +
+         R"(", "mesh": {"box": {"max": [1, 0.2, 0.2], "cells": [2, 1, 1]}},
+    "fixed": [{"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}}],
+    "loads": [{"type": "gravity", "vector": [0, -9.81, 0]}]}],
+  "analysis": {"time_step": 0.01, "steps": 2}, "backend": "reference",
+  "output": {"probes": [{"name": ")" + probe + R"(", "nodes": {"plane": {"point": [1, 0, 0], "normal": [1, 0, 0]}}}],
+             "vtk": true}})";
+}
+
+fs::path writeScene(const fs::path& dir, const std::string& text, const char* file = "scene.json") {
+  std::ofstream(dir / file) << text;
+  return dir / file;
+}
+
+std::string quoted(const fs::path& p) { return "'" + p.string() + "'"; }
+
+/// Fields of one CSV line, with RFC 4180 quotes.
+std::vector<std::string> csvFields(const std::string& line) {
+  std::vector<std::string> fields(1);
+  bool inQuotes = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (inQuotes && c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+      fields.back() += '"';
+      ++i;
+    } else if (c == '"') {
+      inQuotes = !inQuotes;
+    } else if (c == ',' && !inQuotes) {
+      fields.emplace_back();
+    } else {
+      fields.back() += c;
+    }
+  }
+  return fields;
+}
+
+std::vector<std::string> lines(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+TEST(Issue27, TheTinySceneRuns) {  // the base the cases below break
+  const fs::path dir = corofem::test::tempDir();
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out"));
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  EXPECT_EQ(lines(readFile(dir / "out" / "probes.csv")).size(), 4u);  // header, steps 0, 1, 2
+}
+
+// ------------------------------------------------------------------ item 1
+TEST(Issue27Item1, ALongTokenInTheSceneIsExit2NotSigsegv) {
+  const fs::path dir = corofem::test::tempDir();
+  const std::string text = R"({"bodies": [{"mesh": {"box": {}}}], "name": ")" + std::string(40000, 'a');
+  const auto r = runCli("run " + quoted(writeScene(dir, text)) + " -q --out " + quoted(dir / "out"));
+  EXPECT_EQ(r.exitCode, 2) << r.output.substr(0, 500);
+  EXPECT_TRUE(has(r.output, "invalid JSON")) << r.output.substr(0, 500);
+  EXPECT_LT(r.output.size(), 1000u);
+}
+
+// ------------------------------------------------------------------ item 2
+TEST(Issue27Item2, ABodyNamedLikeAPathWritesNothingOutsideTheOutputFolder) {
+  const fs::path dir = corofem::test::tempDir();
+  fs::create_directories(dir / "a" / "b");
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene("tiny", "../../escaped"))) + " -q --out " +
+                        quoted(dir / "a" / "b" / "out"));
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "bodies[0].name: the name \"../../escaped\" contains '/'")) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "a" / "escaped.pvd"));
+  EXPECT_FALSE(fs::exists(dir / "a" / "b" / "out")) << "a refused scene creates no output folder";
+}
+
+TEST(Issue27Item2, ASceneNamedLikeAPathIsRefusedAsTheDefaultOutputFolder) {
+  // Without --out the folder is out/<scene name>, relative to the working directory (the project
+  // root here): "../out-issue27-escape" would be a folder beside out/.
+  const fs::path dir = corofem::test::tempDir();
+  const fs::path escaped = fs::path(COROFEM_SOURCE_DIR) / "out-issue27-escape";
+  fs::remove_all(escaped);
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene("../out-issue27-escape"))) + " -q");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "name: the name \"../out-issue27-escape\" contains '/'")) << r.output;
+  EXPECT_FALSE(fs::exists(escaped));
+  fs::remove_all(escaped);
+}
+
+// ------------------------------------------------------------------ item 3
+TEST(Issue27Item3, AFullDiskUnderProbesCsvIsAnError) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  const fs::path dir = corofem::test::tempDir();
+  fs::create_directories(dir / "out");
+  fs::create_symlink("/dev/full", dir / "out" / "probes.csv");  // every write: ENOSPC
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out"));
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_TRUE(has(r.output, "probes.csv: " + std::string(std::strerror(ENOSPC)))) << r.output;
+}
+
+TEST(Issue27Item3, AWriteThatFailsMidRunIsAnErrorAndTheSummarySaysSo) {
+  // A file size limit of 4 KiB (SIGXFSZ ignored, so a write beyond it fails with EFBIG): probes.csv
+  // reaches it after about 40 rows, the rows before stay whole, and the summary (smaller) records
+  // the failure.
+  const fs::path dir = corofem::test::tempDir();
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out") +
+                            " --set analysis.steps=200 --set output.vtk=false",
+                        "trap '' XFSZ; ulimit -f 4;");
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_TRUE(has(r.output, "probes.csv: " + std::string(std::strerror(EFBIG)))) << r.output;
+  const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary.at("status"), "failed");
+  EXPECT_EQ(summary.at("error_kind"), "i/o error");
+  EXPECT_LT(summary.at("steps_taken").get<int>(), 200);
+}
+
+TEST(Issue27Item3, AFullDiskUnderSummaryJsonIsAnError) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  const fs::path dir = corofem::test::tempDir();
+  fs::create_directories(dir / "out");
+  fs::create_symlink("/dev/full", dir / "out" / "summary.json");
+  fs::create_symlink("/dev/full", dir / "out" / "summary.json.tmp");
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out"));
+  EXPECT_EQ(r.exitCode, 1) << r.output;
+  EXPECT_TRUE(has(r.output, "summary.json: " + std::string(std::strerror(ENOSPC)))) << r.output;
+}
+
+// ------------------------------------------------------------------ item 4
+TEST(Issue27Item4, InfoOnADirectoryOrAFifoIsBadInput) {
+  const fs::path dir = corofem::test::tempDir();
+  fs::create_directories(dir / "folder.msh");
+  auto r = runCli("info " + quoted(dir / "folder.msh"));
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "is a directory, not a regular file")) << r.output;
+  EXPECT_FALSE(has(r.output, "internal error")) << r.output;
+  ASSERT_EQ(::mkfifo((dir / "pipe.vtk").string().c_str(), 0600), 0) << std::strerror(errno);
+  r = runCli("info " + quoted(dir / "pipe.vtk"));  // blocked forever before
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "is a FIFO")) << r.output;
+}
+
+// ------------------------------------------------------------------ item 5
+TEST(Issue27Item5, AHugeOverrideIsNotEchoedWhole) {
+  const fs::path dir = corofem::test::tempDir();
+  const std::string big(100000, 'z');  // (one argument may have at most 128 KiB)
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out") +
+                        " --set 'analysis..x" + big + "=1'");
+  EXPECT_EQ(r.exitCode, 2);
+  EXPECT_LT(r.output.size(), 1000u) << r.output.substr(0, 500);
+}
+
+// ------------------------------------------------------------------ item 7
+TEST(Issue27Item7, AProbeNameWithACommaKeepsTheCsvHeaderAligned) {
+  const fs::path dir = corofem::test::tempDir();
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene("tiny", "beam", "tip, \\\"left\\\""))) +
+                        " -q --out " + quoted(dir / "out"));
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  const auto rows = lines(readFile(dir / "out" / "probes.csv"));
+  ASSERT_EQ(rows.size(), 4u);
+  const auto header = csvFields(rows[0]);
+  EXPECT_EQ(header.size(), csvFields(rows[1]).size()) << rows[0];
+  EXPECT_EQ(header.back(), "tip, \"left\"_uz");
+}
+
+// ------------------------------------------------------------------ item 8
+TEST(Issue27Item8, NoNanOrInfInProbesCsvAndNoRowForAFailedStep) {
+  for (const char* set : {"bodies.0.material.youngs_modulus=1e308", "bodies.0.initial_velocity=[1e200,0,0]"}) {
+    const fs::path dir = corofem::test::tempDir();
+    const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out") +
+                          " --set '" + set + "'");
+    EXPECT_EQ(r.exitCode, 3) << set << "\n" << r.output;
+    EXPECT_TRUE(has(r.output, "warning: ")) << r.output;
+    EXPECT_TRUE(has(r.output, "not finite")) << r.output;
+    const std::string csv = readFile(dir / "out" / "probes.csv");
+    for (const char* bad : {"nan", "inf", "NaN", "Inf"}) EXPECT_FALSE(has(csv, bad)) << set << "\n" << csv;
+    // The header and step 0; the failed step 1 adds no row (it added one numbered 0).
+    EXPECT_EQ(lines(csv).size(), 2u) << set << "\n" << csv;
+    const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
+    EXPECT_GE(summary.at("non_finite_values").at("count").get<int>(), 1) << summary.dump(2);
+  }
+}
+
+// ------------------------------------------------------------------ item 9
+TEST(Issue27Item9, MaxSubstepsBeyondTheCapIsExit2) {
+  const fs::path dir = corofem::test::tempDir();
+  const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out") +
+                        " --set analysis.max_substeps=2147483647");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "max_substeps <= 1024")) << r.output;
+}
+
+}  // namespace
