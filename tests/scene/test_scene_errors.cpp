@@ -165,7 +165,7 @@ INSTANTIATE_TEST_SUITE_P(
         RangeCase{{kStatic, "analysis.displacement_tolerance=-1"},
                   "analysis.displacement_tolerance: -1 is out of range: must satisfy displacement_tolerance > 0"},
         RangeCase{{"analysis.time_step=0"}, "analysis.time_step: 0 is out of range: must satisfy time_step > 0"},
-        RangeCase{{"analysis.steps=0"}, "analysis.steps: 0 is out of range: must satisfy steps >= 1"},
+        RangeCase{{"analysis.steps=-1"}, "analysis.steps: -1 is out of range: must satisfy steps >= 1, or 0 for an open-ended analysis"},
         RangeCase{{"analysis.newmark_beta=0"},
                   "analysis.newmark_beta: 0 is out of range: must satisfy 0 < beta <= 0.5"},
         RangeCase{{"analysis.newmark_beta=0.51"},
@@ -202,7 +202,7 @@ TEST(SceneErrors, BadEnumValueSuggestsTheNearest) {
             "\"linear\", \"corotational\", \"stvk\" or \"neo_hookean\")");
   EXPECT_EQ(overrideError({"analysis.integrator=backward-euler"}),
             "analysis.integrator: unknown value \"backward-euler\"; did you mean \"backward_euler\"? (valid: "
-            "\"newmark\" or \"backward_euler\")");
+            "\"newmark\", \"backward_euler\" or \"auto\")");
   EXPECT_EQ(overrideError({"backend=OpenCL"}),
             "backend: unknown value \"OpenCL\"; did you mean \"opencl\"? (valid: \"auto\", \"reference\" or \"opencl\")");
   EXPECT_CONTAINS(overrideError({"solver.preconditioner=jacobi"}),

@@ -219,4 +219,12 @@ class Simulation {
   std::unique_ptr<Impl> impl_;
 };
 
+/// Compiles and caches ahead of time what creating and stepping `scene` on this machine compiles
+/// (the kernels of its plan on the devices it would run on, the scheduler's calibration for
+/// "auto"), so that a later Simulation::create does not stall on a cold start: create() and one
+/// step of a copy of the scene, discarded. A step that fails to converge is not an error here; the
+/// scene's errors are (bad input, no device). `seconds`, when given, receives the time it took.
+/// The cache lives in COROFEM_CACHE_DIR (else the user's cache folder); `corofem warmup` runs it.
+Status warmUp(const Scene& scene, const SimulationOptions& options = {}, double* seconds = nullptr);
+
 }  // namespace corofem

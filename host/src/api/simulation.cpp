@@ -390,4 +390,19 @@ const BindingStatistics* Simulation::surfaceBinding(int body) const {
 std::string Simulation::backendName() const { return impl_->slotOf(impl_->bodies.front()).device().name(); }
 std::string Simulation::deviceName() const { return impl_->slotOf(impl_->bodies.front()).device().deviceName(); }
 
+Status warmUp(const Scene& scene, const SimulationOptions& options, double* seconds) {
+  const auto start = std::chrono::steady_clock::now();
+  Scene copy = scene;
+  if (copy.analysis.kind == AnalysisDesc::Kind::Dynamic && copy.analysis.dynamics.steps == 0)
+    copy.analysis.dynamics.steps = 1;
+  Result<Simulation> sim = Simulation::create(copy, options);
+  Status status = sim.status();
+  if (sim) {
+    const Status step = sim->step();
+    if (!step && step.code() != ErrorCode::SolveFailed) status = step;
+  }
+  if (seconds) *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return status;
+}
+
 }  // namespace corofem

@@ -4,9 +4,11 @@
 //   corofem run SCENE --plan [--json] [--set ...]
 //   corofem info MESH [--json]
 //   corofem convert IN OUT
+//   corofem warmup [SCENE] [--set ...]
 //
 // Exit status: 0 success, 2 bad input (message on stderr), 3 a solve failed (outputs written so
 // far stay readable), 1 anything else (device error, i/o error, internal error).
+#include "device/registry.hpp"
 #include "mesh/locality_order.hpp"
 #include "output/run_outputs.hpp"
 #include "util/error.hpp"
@@ -64,6 +66,11 @@ void usage(std::ostream& os) {
         "      (.msh .node/.ele .mesh .vtk .veg) or a surface mesh (.obj).\n"
         "  corofem convert IN OUT\n"
         "      Converts a tet mesh (to .vtu .vtk .msh .mesh .node .veg) or a surface (.obj .vtk).\n"
+        "  corofem warmup [SCENE.json] [--set key.path=value ...]\n"
+        "      Compiles and caches the kernels the scene's plan uses (without a scene: the default\n"
+        "      kernels in float and double on every OpenCL device), so that the first run of an\n"
+        "      application does not wait for them. The cache: COROFEM_CACHE_DIR, else\n"
+        "      $XDG_CACHE_HOME/corofem or ~/.cache/corofem.\n"
         "exit status: 0 ok, 2 bad input, 3 solve failed, 1 other errors\n";
 }
 
@@ -176,6 +183,10 @@ int cmdRun(const std::vector<std::string>& args) {
 
   auto scene = loadScene(scenePath, overrides);
   if (!scene) return report(scene.status());
+  if (scene->analysis.kind == AnalysisDesc::Kind::Dynamic && scene->analysis.dynamics.steps == 0 && !plan)
+    return report(Status(ErrorCode::BadInput, "run: scene '" + scene->name + "' is open-ended (analysis.steps = 0, "
+                                              "for an application's frame loop); give the run a step count, e.g. "
+                                              "--set analysis.steps=100"));
   if (outDir.empty()) outDir = (std::filesystem::path("out") / scene->name).string();
 
   auto sim = Simulation::create(scene.value());
@@ -316,6 +327,69 @@ int cmdConvert(const std::vector<std::string>& args) {
   return kExitOk;
 }
 
+/// corofem warmup [SCENE] [--set ...]: warmUp() on the scene, or on a small default scene in float
+/// and double on every OpenCL device.
+int cmdWarmup(const std::vector<std::string>& args) {
+  std::string scenePath;
+  std::vector<std::string> overrides;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    if (args[i] == "--set") {
+      if (i + 1 >= args.size()) return report(Status(ErrorCode::BadInput, "--set needs a value"));
+      overrides.push_back(args[++i]);
+    } else if (args[i].rfind("--set=", 0) == 0) {
+      overrides.push_back(args[i].substr(6));
+    } else if (!args[i].empty() && args[i][0] == '-') {
+      return report(Status(ErrorCode::BadInput, "warmup: unknown option " + args[i] + " (options: --set key=value)"));
+    } else if (scenePath.empty()) {
+      scenePath = args[i];
+    } else {
+      return report(Status(ErrorCode::BadInput, "warmup: more than one scene given (" + scenePath + ", " + args[i] + ")"));
+    }
+  }
+  std::vector<std::pair<std::string, Scene>> scenes;
+  if (!scenePath.empty()) {
+    auto scene = loadScene(scenePath, overrides);
+    if (!scene) return report(scene.status());
+    scenes.emplace_back(scene->name, scene.value());
+  } else {
+    const auto opencl = detail::findBackend("opencl");
+    const std::vector<detail::Candidate> devices = opencl ? opencl->candidates() : std::vector<detail::Candidate>{};
+    if (devices.empty()) {
+      std::cout << "corofem: warmup: no OpenCL device here; the reference backend compiles nothing\n";
+      return kExitOk;
+    }
+    for (std::size_t d = 0; d < devices.size(); ++d)
+      for (Precision p : {Precision::Float, Precision::Double}) {
+        Scene s;
+        s.name = "warmup";
+        BodyDesc body;
+        body.name = "box";
+        BoxSpec box;
+        box.max = {0.4, 0.1, 0.1};
+        box.cells = {8, 2, 2};
+        body.mesh.box = box;
+        s.bodies.push_back(body);
+        s.analysis.dynamics.steps = 1;
+        s.backend.kind = BackendKind::OpenCL;
+        s.backend.device = devices[d].selector;
+        s.solver.precision = p;
+        scenes.emplace_back(devices[d].device + (p == Precision::Float ? ", float" : ", double"), s);
+      }
+  }
+  int rc = kExitOk;
+  for (const auto& [name, scene] : scenes) {
+    double seconds = 0.0;
+    const Status st = warmUp(scene, {}, &seconds);
+    if (st) {
+      std::cout << "corofem: warmup: " << name << ": compiled and cached in " << seconds << " s\n";
+    } else {
+      std::cerr << "corofem: warmup: " << name << ": " << toString(st.code()) << ": " << st.message() << '\n';
+      if (!scenePath.empty()) rc = exitCodeFor(st);
+    }
+  }
+  return rc;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -334,11 +408,12 @@ int main(int argc, char** argv) {
     if (cmd == "run") return cmdRun(args);
     if (cmd == "info") return cmdInfo(args);
     if (cmd == "convert") return cmdConvert(args);
+    if (cmd == "warmup") return cmdWarmup(args);
   } catch (const std::exception& e) {
     std::cerr << "corofem: internal error: " << e.what() << '\n';
     return kExitOther;
   }
-  std::cerr << "corofem: unknown command '" << cmd << "' (commands: run, info, convert)\n";
+  std::cerr << "corofem: unknown command '" << cmd << "' (commands: run, info, convert, warmup)\n";
   usage(std::cerr);
   return kExitBadInput;
 }

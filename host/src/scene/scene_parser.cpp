@@ -62,7 +62,8 @@ const Choices<Precision> kPrecisions{{"double", Precision::Double},
 const Choices<SurfaceLayout> kSurfaceLayouts{{"interleaved", SurfaceLayout::Interleaved},
                                              {"separate", SurfaceLayout::Separate}};
 const Choices<Integrator> kIntegrators{{"newmark", Integrator::Newmark},
-                                       {"backward_euler", Integrator::BackwardEuler}};
+                                       {"backward_euler", Integrator::BackwardEuler},
+                                       {"auto", Integrator::Auto}};
 const Choices<AnalysisDesc::Kind> kAnalysisKinds{{"static", AnalysisDesc::Kind::Static},
                                                  {"dynamic", AnalysisDesc::Kind::Dynamic}};
 const Choices<LoadDesc::Kind> kLoadKinds{{"gravity", LoadDesc::Kind::Gravity},
@@ -481,7 +482,7 @@ AnalysisDesc parseAnalysis(const Reader& r, const json& j, const std::string& pa
   DynamicDesc& d = a.dynamics;
   o.read("integrator", d.integrator, kIntegrators);
   o.read("time_step", d.timeStep, {positive, "time_step > 0"});
-  o.read("steps", d.steps, {atLeastOne, "steps >= 1"});
+  o.read("steps", d.steps, {nonNegative, "steps >= 1, or 0 for an open-ended analysis"});
   o.read("newmark_beta", d.newmarkBeta, {[](double x) { return x > 0 && x <= 0.5; }, "0 < beta <= 0.5"});
   o.read("newmark_gamma", d.newmarkGamma, {[](double x) { return x >= 0.5 && x <= 1; }, "0.5 <= gamma <= 1"});
   o.read("newton_iterations", d.newtonIterations, {atLeastOne, "newton_iterations >= 1"});
