@@ -26,15 +26,16 @@
  *   each other's messages.
  * - No exception crosses the API: every entry point catches everything (an unexpected one is
  *   COROFEM_INTERNAL).
- * - Out parameters are written only on success (except `needed`, see below). A NULL handle or a
- *   NULL pointer where an array or a value is required is COROFEM_BAD_INPUT.
+ * - Out parameters are written only on success (except `needed`, see below, and a step's report,
+ *   filled as far as the step went). A NULL handle or a NULL pointer where an array or a value is
+ *   required is COROFEM_BAD_INPUT.
  * - Arrays belong to the caller. A read takes the caller's array and its capacity in elements, and
  *   writes the number of elements it needs to *needed (when `needed` is not NULL). An array of
  *   NULL with capacity 0 asks for the size only (COROFEM_OK, nothing read). A smaller capacity is
  *   COROFEM_BAD_INPUT and nothing is written to the array. Text is read the same way, its size
  *   counting the terminating NUL.
- * - Threads: one corofem_simulation is used from one thread at a time; different ones may run on
- *   different threads. A scene may be read (create) from several threads at once.
+ * - Threads: one handle is used from one thread at a time; different simulations may run on
+ *   different threads.
  * - Indices: bodies are numbered from 0 in the scene's order; nodes are 0-based indices into the
  *   body's mesh as loaded (the file's order, or the order of corofem_scene_set_body_mesh).
  *   Vectors are 3 doubles (x, y, z) in SI units (m, m/s, N, m/s^2); rotations are 9 doubles, row

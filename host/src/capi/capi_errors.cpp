@@ -8,7 +8,8 @@
 
 namespace corofem::capi {
 
-static_assert(COROFEM_OK == static_cast<int>(ErrorCode::Ok) && COROFEM_BAD_INPUT == static_cast<int>(ErrorCode::BadInput) &&
+static_assert(COROFEM_OK == static_cast<int>(ErrorCode::Ok) &&
+                  COROFEM_BAD_INPUT == static_cast<int>(ErrorCode::BadInput) &&
                   COROFEM_SOLVE_FAILED == static_cast<int>(ErrorCode::SolveFailed) &&
                   COROFEM_DEVICE_ERROR == static_cast<int>(ErrorCode::DeviceError) &&
                   COROFEM_NOT_COMPILED_IN == static_cast<int>(ErrorCode::NotCompiledIn) &&
@@ -41,7 +42,8 @@ corofem_status record(const char* function, ErrorCode code, const char* message)
     if (code != ErrorCode::Ok) {
       const std::size_t length = std::strlen(function);
       if (!message) message = "";
-      if (std::strncmp(message, function, length) != 0 || message[length] != ':') e.message.append(function).append(": ");
+      if (std::strncmp(message, function, length) != 0 || message[length] != ':')
+        e.message.append(function).append(": ");
       e.message.append(message);
     }
   } catch (...) {

@@ -70,8 +70,8 @@ corofem_status corofem_scene_parse(const char* json, const char* base_dir, const
   return call(kFn, [&] {
     require(json, kFn, "json", "pass the scene's JSON text");
     require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
-    return giveScene(parseScene(json, base_dir ? base_dir : "", stringList(overrides, override_count, kFn, "overrides")),
-                     scene);
+    const std::vector<std::string> sets = stringList(overrides, override_count, kFn, "overrides");
+    return giveScene(parseScene(json, base_dir ? base_dir : "", sets), scene);
   });
 }
 

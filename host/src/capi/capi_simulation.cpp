@@ -21,7 +21,9 @@ void fillReport(const StepReport& r, corofem_step_report* out) {
 
 corofem_gpu_buffer bufferOf(const GpuBuffer& b) {
   corofem_gpu_buffer out;
-  out.api = b.api == GpuApi::OpenCL ? COROFEM_GPU_OPENCL : b.api == GpuApi::Vulkan ? COROFEM_GPU_VULKAN : COROFEM_GPU_NONE;
+  out.api = b.api == GpuApi::OpenCL   ? COROFEM_GPU_OPENCL
+            : b.api == GpuApi::Vulkan ? COROFEM_GPU_VULKAN
+                                      : COROFEM_GPU_NONE;
   out.handle = b.handle;
   out.offset = b.offset;
   out.stride = b.stride;
@@ -108,7 +110,8 @@ corofem_status corofem_simulation_step_dt(corofem_simulation* simulation, double
 }
 
 corofem_status corofem_simulation_finished(const corofem_simulation* simulation, int* finished) {
-  return query("corofem_simulation_finished", simulation, finished, [](const Simulation& s) { return s.finished() ? 1 : 0; });
+  return query("corofem_simulation_finished", simulation, finished,
+               [](const Simulation& s) { return s.finished() ? 1 : 0; });
 }
 
 corofem_status corofem_simulation_steps_taken(const corofem_simulation* simulation, int* steps) {
@@ -142,7 +145,8 @@ corofem_status corofem_simulation_find_body(const corofem_simulation* simulation
       }
       names += (i ? ", \"" : "\"") + bodies[i].name + "\"";
     }
-    return Status(ErrorCode::BadInput, std::string(kFn) + ": no body is named \"" + name + "\"; the scene's bodies are " + names);
+    return Status(ErrorCode::BadInput,
+                  std::string(kFn) + ": no body is named \"" + name + "\"; the scene's bodies are " + names);
   });
 }
 
@@ -259,7 +263,8 @@ corofem_status corofem_simulation_read_surface(const corofem_simulation* simulat
     const bool readNormals = fits(normals, normals_capacity, size, needed, kFn, "normals", "floats");
     if (!readPositions) {
       if (readNormals)
-        detail::fail(ErrorCode::BadInput, kFn, ": normals are read together with the positions; pass an array for both");
+        detail::fail(ErrorCode::BadInput, kFn,
+                     ": normals are read together with the positions; pass an array for both");
       if (surface) return Status::ok();  // a size query
     }
     std::vector<double> p;

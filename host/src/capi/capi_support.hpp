@@ -97,7 +97,8 @@ void copyOut(const std::vector<T>& values, T* out, std::size_t capacity, std::si
 /// Copies text with its terminating NUL under the array rule (capacity in chars).
 inline void copyText(const std::string& text, char* out, std::size_t capacity, std::size_t* needed,
                      const char* function) {
-  if (fits(out, capacity, text.size() + 1, needed, function, "text", "chars")) std::memcpy(out, text.c_str(), text.size() + 1);
+  if (fits(out, capacity, text.size() + 1, needed, function, "text", "chars"))
+    std::memcpy(out, text.c_str(), text.size() + 1);
 }
 
 /// `count` node indices from the caller (count 0: none; NULL only then).
