@@ -1,7 +1,8 @@
 # Installs the library component of the build in BUILD into a fresh prefix, then configures, builds
 # and runs tests/package/consumer against it with find_package(corofem): the package config must
 # find every dependency the installed targets need. Run by CTest (tests/CMakeLists.txt):
-#   cmake -DBUILD=<build dir> -DSOURCE=<tests/package/consumer> -DWORK=<scratch dir> -P consumer_test.cmake
+#   cmake -DBUILD=<build dir> -DSOURCE=<tests/package/consumer> -DWORK=<scratch dir> [-DC_SHARED=1] -P consumer_test.cmake
+# (C_SHARED: the build made libcorofem_c, which the package must then carry.)
 foreach(var BUILD SOURCE WORK)
   if(NOT DEFINED ${var})
     message(FATAL_ERROR "consumer_test.cmake: -D${var}=... is required")
@@ -23,3 +24,10 @@ endif()
 run(${CMAKE_COMMAND} -S "${SOURCE}" -B "${WORK}/build" -DCMAKE_PREFIX_PATH=${WORK}/prefix -DCMAKE_BUILD_TYPE=Release)
 run(${CMAKE_COMMAND} --build "${WORK}/build")
 run("${WORK}/build/consumer")
+run("${WORK}/build/consumer_c")
+if(C_SHARED)  # the build made libcorofem_c: the package must carry it
+  if(NOT EXISTS "${WORK}/build/consumer_c_shared")
+    message(FATAL_ERROR "the installed package has no corofem::corofem_c, though the build made libcorofem_c")
+  endif()
+  run("${WORK}/build/consumer_c_shared")
+endif()

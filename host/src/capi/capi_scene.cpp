@@ -1,0 +1,161 @@
+// The C API's scenes (load, parse, an in-memory mesh for a body) and the creation and destruction
+// of simulations with their options (corofem.h, "scenes" and "creation").
+#include "capi/capi_support.hpp"
+
+#include <memory>
+
+namespace corofem::capi {
+namespace {
+
+std::vector<std::string> stringList(const char* const* strings, std::size_t count, const char* function,
+                                    const char* name) {
+  std::vector<std::string> out;
+  if (count == 0) return out;
+  require(strings, function, name, "pass an array of that many strings, or NULL with a count of 0");
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!strings[i])
+      detail::fail(ErrorCode::BadInput, function, ": ", name, "[", i, "] is NULL; each of the ", count,
+                   " entries must be a string");
+    out.emplace_back(strings[i]);
+  }
+  return out;
+}
+
+/// Hands a parsed scene to the caller as a new handle.
+Status giveScene(Result<Scene> parsed, corofem_scene** out) {
+  if (!parsed) return parsed.status();
+  *out = new corofem_scene{std::move(parsed).value()};
+  return Status::ok();
+}
+
+SimulationOptions optionsOf(const corofem_options& o, const char* function) {
+  SimulationOptions options;
+  options.devices = stringList(o.devices, o.device_count, function, "options->devices");
+  const corofem_external_device& d = o.device;
+  switch (d.api) {
+    case COROFEM_GPU_NONE: break;
+    case COROFEM_GPU_OPENCL: options.device.api = GpuApi::OpenCL; break;
+    case COROFEM_GPU_VULKAN: options.device.api = GpuApi::Vulkan; break;
+    default:
+      detail::fail(ErrorCode::BadInput, function, ": options->device.api is ", static_cast<int>(d.api),
+                   "; use COROFEM_GPU_NONE (no device lent) or COROFEM_GPU_OPENCL");
+  }
+  options.device.context = d.context;
+  options.device.queue = d.queue;
+  options.device.device = d.device;
+  return options;
+}
+
+}  // namespace
+}  // namespace corofem::capi
+
+using namespace corofem;
+using namespace corofem::capi;
+
+extern "C" {
+
+corofem_status corofem_scene_load(const char* path, const char* const* overrides, size_t override_count,
+                                  corofem_scene** scene) {
+  static constexpr const char* kFn = "corofem_scene_load";
+  return call(kFn, [&] {
+    require(path, kFn, "path", "pass the path of a JSON scene file");
+    require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
+    return giveScene(loadScene(path, stringList(overrides, override_count, kFn, "overrides")), scene);
+  });
+}
+
+corofem_status corofem_scene_parse(const char* json, const char* base_dir, const char* const* overrides,
+                                   size_t override_count, corofem_scene** scene) {
+  static constexpr const char* kFn = "corofem_scene_parse";
+  return call(kFn, [&] {
+    require(json, kFn, "json", "pass the scene's JSON text");
+    require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
+    const std::vector<std::string> sets = stringList(overrides, override_count, kFn, "overrides");
+    return giveScene(parseScene(json, base_dir ? base_dir : "", sets), scene);
+  });
+}
+
+void corofem_scene_destroy(corofem_scene* scene) { delete scene; }
+
+corofem_status corofem_scene_body_count(const corofem_scene* scene, int* count) {
+  static constexpr const char* kFn = "corofem_scene_body_count";
+  return call(kFn, [&] {
+    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
+    require(count, kFn, "count", "pass the address of an int");
+    *count = static_cast<int>(scene->scene.bodies.size());
+    return Status::ok();
+  });
+}
+
+corofem_status corofem_scene_set_step_count(corofem_scene* scene, int steps) {
+  static constexpr const char* kFn = "corofem_scene_set_step_count";
+  return call(kFn, [&] {
+    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
+    AnalysisDesc& analysis = scene->scene.analysis;
+    if (analysis.kind == AnalysisDesc::Kind::Static) {
+      if (steps < 1)
+        detail::fail(ErrorCode::BadInput, kFn, ": a static analysis takes >= 1 load increments, got ", steps);
+      analysis.statics.increments = steps;
+    } else {
+      if (steps < 0)
+        detail::fail(ErrorCode::BadInput, kFn, ": a dynamic analysis takes >= 0 steps (0: open-ended), got ", steps);
+      analysis.dynamics.steps = steps;
+    }
+    return Status::ok();
+  });
+}
+
+corofem_status corofem_scene_set_body_mesh(corofem_scene* scene, int body, const double* nodes, size_t node_count,
+                                           const uint32_t* tets, size_t tet_count) {
+  static constexpr const char* kFn = "corofem_scene_set_body_mesh";
+  return call(kFn, [&] {
+    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
+    std::vector<BodyDesc>& bodies = scene->scene.bodies;
+    if (body < 0 || static_cast<std::size_t>(body) >= bodies.size())
+      detail::fail(ErrorCode::BadInput, kFn, ": body index ", body, " is out of range: the scene has ", bodies.size(),
+                   " body(ies), numbered from 0");
+    if (node_count < 4 || tet_count < 1)
+      detail::fail(ErrorCode::BadInput, kFn, ": a mesh needs at least 4 nodes and 1 tetrahedron; got ", node_count,
+                   " and ", tet_count);
+    require(nodes, kFn, "nodes", "pass 3 * node_count coordinates (m)");
+    require(tets, kFn, "tets", "pass 4 * tet_count node indices (0-based)");
+    auto mesh = std::make_shared<TetMesh>();
+    mesh->nodes.assign(nodes, nodes + 3 * node_count);
+    mesh->tets.assign(tets, tets + 4 * tet_count);
+    MeshSourceDesc& source = bodies[static_cast<std::size_t>(body)].mesh;
+    source.file.clear();
+    source.box.reset();
+    source.mesh = std::move(mesh);
+    return Status::ok();
+  });
+}
+
+corofem_options corofem_default_options(void) {
+  corofem_options o;
+  o.devices = nullptr;
+  o.device_count = 0;
+  o.device.api = COROFEM_GPU_NONE;
+  o.device.context = o.device.queue = o.device.device = nullptr;
+  return o;
+}
+
+corofem_status corofem_simulation_create(const corofem_scene* scene, const corofem_options* options,
+                                         corofem_simulation** simulation) {
+  static constexpr const char* kFn = "corofem_simulation_create";
+  return call(kFn, [&] {
+    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
+    require(simulation, kFn, "simulation", "pass the address of a corofem_simulation* to receive the simulation");
+    const SimulationOptions o = options ? optionsOf(*options, kFn) : SimulationOptions{};
+    Result<Simulation> made = Simulation::create(scene->scene, o);
+    if (!made) return made.status();
+    *simulation = new corofem_simulation{std::move(made).value()};
+    return Status::ok();
+  });
+}
+
+void corofem_simulation_destroy(corofem_simulation* simulation) {
+  // ~Simulation does not throw (the C++ API's destructors are noexcept).
+  delete simulation;
+}
+
+}  // extern "C"
