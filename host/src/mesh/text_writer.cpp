@@ -4,6 +4,7 @@
 #include "util/error.hpp"
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 
@@ -45,6 +46,20 @@ std::string xmlEscape(std::string_view s) {
   return r;
 }
 
+namespace {
+
+/// Throws BadInput at the first non-finite value: "<what> <i / per> has a non-finite <x|y|z|...> ...".
+template <class T>
+void checkFinite(const std::vector<T>& v, std::size_t per, const char* what, const char* components,
+                 const std::string& path) {
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (!std::isfinite(v[i]))
+      detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", what, " ", i / per, " has a non-finite ",
+                   components[i % per], " value (", v[i], "); only finite values are written");
+}
+
+}  // namespace
+
 void checkWritable(const TetMesh& mesh, const std::string& path) {
   if (mesh.nodes.size() % 3 != 0 || mesh.tets.size() % 4 != 0)
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the mesh arrays are not whole (", mesh.nodes.size(),
@@ -57,6 +72,7 @@ void checkWritable(const TetMesh& mesh, const std::string& path) {
   if (!mesh.regions.empty() && mesh.regions.size() != mesh.tetCount())
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": the mesh has ", mesh.regions.size(), " regions for ",
                  mesh.tetCount(), " elements; give one per element or none");
+  checkFinite(mesh.nodes, 3, "node", "xyz", path);
 }
 
 void checkWritable(const SurfaceMesh& mesh, const std::string& path) {
@@ -71,6 +87,12 @@ void checkWritable(const SurfaceMesh& mesh, const std::string& path) {
   if (!mesh.texcoords.empty() && mesh.texcoords.size() != 2 * n)
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", mesh.texcoords.size(),
                  " texcoord values for ", n, " vertices; give 2 per vertex or none");
+  if (!mesh.normals.empty() && mesh.normals.size() != 3 * n)
+    detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", mesh.normals.size(), " normal values for ", n,
+                 " vertices; give 3 per vertex or none");
+  checkFinite(mesh.vertices, 3, "vertex", "xyz", path);
+  checkFinite(mesh.texcoords, 2, "texcoord of vertex", "uv", path);
+  checkFinite(mesh.normals, 3, "normal of vertex", "xyz", path);
 }
 
 void checkFields(const std::vector<MeshField>& fields, std::size_t nodes, std::size_t elements,
@@ -85,6 +107,11 @@ void checkFields(const std::vector<MeshField>& fields, std::size_t nodes, std::s
       detail::fail(ErrorCode::BadInput, "cannot write ", path, ": field '", f.name, "' has ", f.values.size(),
                    " values, expected ", f.components, " x ", count, (f.perElement ? " elements" : " nodes"), " = ",
                    count * std::size_t(f.components));
+    for (std::size_t i = 0; i < f.values.size(); ++i)
+      if (!std::isfinite(f.values[i]))
+        detail::fail(ErrorCode::BadInput, "cannot write ", path, ": field '", f.name, "' has a non-finite value (",
+                     f.values[i], ") at ", (f.perElement ? "element " : "node "), i / std::size_t(f.components),
+                     "; only finite values are written");
   }
 }
 
