@@ -6,10 +6,10 @@ set -euo pipefail
 
 packages=(
   cmake g++ make pkg-config
-  libeigen3-dev nlohmann-json3-dev
+  libeigen3-dev nlohmann-json3-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo
-  python3 python3-matplotlib python3-numpy
+  python3 python3-matplotlib python3-numpy python3-meshio
   clang-14 libclang-rt-14-dev
 )
 

@@ -33,8 +33,8 @@ TEST(SceneErrors, UnknownKeySuggestsTheNearest) {
 
 TEST(SceneErrors, UnknownKeyFarFromAnyListsTheValidKeys) {
   EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}], "output": {"zzzzzz": 1}})"),
-            "output.zzzzzz: unknown key; the keys allowed here are \"probes\", \"vtk\", \"vtk_every\" and "
-            "\"surface_obj\"");
+            "output.zzzzzz: unknown key; the keys allowed here are \"probes\", \"vtk\", \"vtk_every\", "
+            "\"surface_obj\", \"vtu_format\" and \"vtu_compression\"");
 }
 
 TEST(SceneErrors, KeyOfTheOtherAnalysisTypeSaysSo) {
@@ -56,6 +56,29 @@ TEST(SceneErrors, SurfaceLayoutNeedsASurfaceAndAKnownLayout) {
             "\"file.obj\" or remove \"surface_layout\"");
   EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}, "surface": "s.obj", "surface_layout": "split"}]})"),
             "bodies[0].surface_layout: unknown value \"split\"; valid values are \"interleaved\" or \"separate\"");
+}
+
+TEST(SceneErrors, VtuFormatAndCompressionValues) {
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}], "output": {"vtu_format": "binary"}})"),
+            "output.vtu_format: unknown value \"binary\"; valid values are \"ascii\", \"base64\" or \"raw\"");
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}], "output": {"vtu_compression": "zlip"}})"),
+            "output.vtu_compression: unknown value \"zlip\"; did you mean \"zlib\"? (valid: \"none\" or \"zlib\")");
+}
+
+TEST(SceneErrors, VtuCompressionNeedsABinaryFormat) {
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}], "output": {"vtu_compression": "zlib"}})"),
+            "output.vtu_compression: \"zlib\" compresses binary arrays only, and vtu_format is \"ascii\" (the "
+            "default); set vtu_format to \"base64\" or \"raw\", or use \"none\"");
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}], "output": {"vtu_format": "ascii", "vtu_compression": "zlib"}})"),
+            "output.vtu_compression: \"zlib\" compresses binary arrays only, and vtu_format is \"ascii\"; set "
+            "vtu_format to \"base64\" or \"raw\", or use \"none\"");
+}
+
+TEST(SceneErrors, VtuCompressionZlibInABuildWithoutZlib) {
+  if (vtuZlibAvailable()) GTEST_SKIP() << "this build has zlib; the refusal is for builds without it";
+  EXPECT_EQ(parseError(R"({"bodies": [{"mesh": {"box": {}}}], "output": {"vtu_format": "raw", "vtu_compression": "zlib"}})"),
+            "output.vtu_compression: \"zlib\" needs a corofem built with zlib, and this one was built without it; "
+            "install zlib1g-dev and rebuild, or use \"none\"");
 }
 
 TEST(SceneErrors, DuplicateKeyIsReportedWithItsPath) {

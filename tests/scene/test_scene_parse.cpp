@@ -70,6 +70,9 @@ TEST(SceneParse, MinimalSceneTakesEveryDefault) {
   EXPECT_EQ(s.output.vtk, d.output.vtk);
   EXPECT_EQ(s.output.vtkEvery, d.output.vtkEvery);
   EXPECT_EQ(s.output.surfaceObj, d.output.surfaceObj);
+  EXPECT_EQ(s.output.vtuFormat, d.output.vtuFormat);
+  EXPECT_EQ(s.output.vtuFormat, VtuFormat::Ascii);
+  EXPECT_EQ(s.output.vtuCompression, VtuCompression::None);
 }
 
 // Every key set to a value unlike its default, to show that each reaches its own struct member.
@@ -102,7 +105,7 @@ const char* kFullScene = R"({
              "preconditioner": "block_diagonal", "precision": "float", "rotation": "quaternion"},
   "output": {"probes": [{"name": "tip", "body": "beam", "nodes": {"list": [1, 2]}},
                         {"nodes": {"list": [0]}}],
-             "vtk": false, "vtk_every": 7, "surface_obj": true}
+             "vtk": false, "vtk_every": 7, "surface_obj": true, "vtu_format": "base64"}
 })";
 
 TEST(SceneParse, EveryKeyReachesItsField) {
@@ -192,6 +195,18 @@ TEST(SceneParse, EveryKeyReachesItsField) {
   EXPECT_FALSE(s.output.vtk);
   EXPECT_EQ(s.output.vtkEvery, 7);
   EXPECT_TRUE(s.output.surfaceObj);
+  EXPECT_EQ(s.output.vtuFormat, VtuFormat::Base64);
+}
+
+TEST(SceneParse, VtuFormatAndCompression) {
+  const std::string scene = R"({"bodies": [{"mesh": {"box": {}}}]})";
+  EXPECT_EQ(parseOk(scene, {"output.vtu_format=raw"}).output.vtuFormat, VtuFormat::Raw);
+  EXPECT_EQ(parseOk(scene, {"output.vtu_format=ascii"}).output.vtuFormat, VtuFormat::Ascii);
+  EXPECT_EQ(parseOk(scene, {"output.vtu_compression=none"}).output.vtuCompression, VtuCompression::None);
+  if (!vtuZlibAvailable()) GTEST_SKIP() << "this build has no zlib: \"zlib\" is refused (SceneErrors.VtuCompression*)";
+  const Scene z = parseOk(scene, {"output.vtu_format=base64", "output.vtu_compression=zlib"});
+  EXPECT_EQ(z.output.vtuFormat, VtuFormat::Base64);
+  EXPECT_EQ(z.output.vtuCompression, VtuCompression::Zlib);
 }
 
 TEST(SceneParse, StaticAnalysisFields) {

@@ -28,6 +28,10 @@ struct SurfaceMesh {
   std::vector<double> vertices;          ///< 3 per vertex
   std::vector<std::uint32_t> triangles;  ///< 3 per triangle, 0-based vertex indices
   std::vector<float> texcoords;          ///< 2 per vertex when the file has per-vertex UVs, else empty
+  /// 3 per vertex, unit length (0 0 0 for a vertex with no triangle), or empty: the smooth normals
+  /// of a deformed surface (Simulation::readSurface, deformSurface). Written by the OBJ (`vn`) and
+  /// .vtu ("Normals" point data) writers; the OBJ reader leaves it empty.
+  std::vector<float> normals;
 
   std::size_t vertexCount() const { return vertices.size() / 3; }
   std::size_t triangleCount() const { return triangles.size() / 3; }
@@ -67,12 +71,39 @@ struct MeshField {
   std::vector<double> values;///< components x (node or element count)
 };
 
-/// Writes a tet mesh; format from the extension: .vtu (VTK XML), .vtk (legacy 2.0 ASCII),
-/// .msh (Gmsh 2.2 ASCII), .mesh (Medit), .node (TetGen, with .ele beside it), .veg (Vega).
-Status writeTetMesh(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields = {});
+/// How a .vtu file (VTK XML) stores its data arrays. Every format holds the same values: binary
+/// arrays are little endian with UInt64 headers, read by ParaView, VTK and meshio.
+enum class VtuFormat {
+  Ascii,   ///< text (format="ascii"): shortest decimals that read back exactly; the largest files
+  Base64,  ///< binary, inline base64 (format="binary"): still well-formed XML
+  Raw,     ///< binary, in one appended raw section (format="appended", encoding="raw"): the smallest
+           ///< and fastest; not well-formed XML (VTK's own layout)
+};
 
-/// Writes a surface mesh (.obj, or .vtk/.vtu as a polygonal dataset).
-Status writeSurfaceMesh(const std::string& path, const SurfaceMesh& mesh);
+/// Compression of a binary .vtu's arrays.
+enum class VtuCompression {
+  None,
+  Zlib,  ///< vtkZLibDataCompressor in 32 KiB blocks; needs a build with zlib (vtuZlibAvailable())
+};
+
+/// Options of the .vtu writers (ignored by the other formats).
+struct VtuOptions {
+  VtuFormat format = VtuFormat::Ascii;                ///< how the arrays are stored
+  VtuCompression compression = VtuCompression::None;  ///< Zlib: only with Base64 or Raw
+};
+
+/// True when this build can write zlib-compressed .vtu files (zlib was found at build time).
+bool vtuZlibAvailable();
+
+/// Writes a tet mesh; format from the extension: .vtu (VTK XML, stored as `vtu` says), .vtk
+/// (legacy 2.0 ASCII), .msh (Gmsh 2.2 ASCII), .mesh (Medit), .node (TetGen, with .ele beside it),
+/// .veg (Vega). Non-finite coordinates or field values are refused (BadInput).
+Status writeTetMesh(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields = {},
+                    const VtuOptions& vtu = {});
+
+/// Writes a surface mesh (.obj, or .vtk/.vtu as a polygonal dataset), with its normals where it
+/// has them (.obj and .vtu). Non-finite coordinates, texcoords or normals are refused (BadInput).
+Status writeSurfaceMesh(const std::string& path, const SurfaceMesh& mesh, const VtuOptions& vtu = {});
 
 /// A ParaView `.pvd` time-series collection: add (time, file) entries, then write.
 class PvdSeries {

@@ -180,6 +180,11 @@ struct OutputDesc {
   int vtkEvery = 0;        ///< write a .vtu of every body every N steps (0 = only first and last)
   bool vtk = true;         ///< write the VTK series at all
   bool surfaceObj = false; ///< write deformed surfaces as OBJ (bodies with a surface)
+  /// How the .vtu files of the series store their arrays ("vtu_format": ascii, base64, raw).
+  VtuFormat vtuFormat = VtuFormat::Ascii;
+  /// Compression of binary .vtu arrays ("vtu_compression": none, zlib); zlib needs a build with
+  /// zlib (vtuZlibAvailable()) and a binary vtuFormat.
+  VtuCompression vtuCompression = VtuCompression::None;
 };
 
 struct Scene {

@@ -92,6 +92,10 @@ void checkWritable(const SurfaceMesh& mesh, const std::string& path) {
   if (!mesh.texcoords.empty() && mesh.texcoords.size() != 2 * n)
     detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", mesh.texcoords.size(),
                  " texcoord values for ", n, " vertices; give 2 per vertex or none");
+  if (!mesh.normals.empty() && mesh.normals.size() != 3 * n)
+    detail::fail(ErrorCode::BadInput, "cannot write ", path, ": ", mesh.normals.size(), " normal values for ", n,
+                 " vertices; give 3 per vertex or none");
+  checkFinite(mesh.normals.data(), mesh.normals.size(), 3, "vertex", "the normal", path);
 }
 
 void checkFields(const std::vector<MeshField>& fields, std::size_t nodes, std::size_t elements,

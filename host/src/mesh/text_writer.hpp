@@ -50,17 +50,19 @@ class TextWriter {
 /// XML attribute/text escaping (&, <, >, ").
 std::string xmlEscape(std::string_view s);
 
-/// Throws BadInput unless every element index is below the node count and regions are empty or one
-/// per element (what a writer needs to produce a valid file).
+/// Throws BadInput unless every element index is below the node count, regions are empty or one
+/// per element, and every coordinate (texcoord, normal) is finite: what a writer needs to produce a
+/// valid file.
 void checkWritable(const TetMesh& mesh, const std::string& path);
 void checkWritable(const SurfaceMesh& mesh, const std::string& path);
 
-/// Throws BadInput unless each field has components x (node or element count) values.
+/// Throws BadInput unless each field has components x (node or element count) values, all finite.
 void checkFields(const std::vector<MeshField>& fields, std::size_t nodes, std::size_t elements, const std::string& path);
 
 /// Writers behind writeTetMesh / writeSurfaceMesh (one file per format).
-void writeVtu(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields);
-void writeVtuSurface(const std::string& path, const SurfaceMesh& mesh);
+void writeVtu(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields,
+              const VtuOptions& options);
+void writeVtuSurface(const std::string& path, const SurfaceMesh& mesh, const VtuOptions& options);
 void writeVtkLegacy(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields);
 void writeVtkPolyData(const std::string& path, const SurfaceMesh& mesh);
 void writeGmsh22(const std::string& path, const TetMesh& mesh);

@@ -6,14 +6,15 @@
 
 namespace corofem {
 
-Status writeTetMesh(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields) {
+Status writeTetMesh(const std::string& path, const TetMesh& mesh, const std::vector<MeshField>& fields,
+                    const VtuOptions& vtu) {
   return detail::guard([&] {
     const std::string ext = mesh::lowerExtension(path);
     mesh::checkWritable(mesh, path);
     mesh::checkFields(fields, mesh.nodeCount(), mesh.tetCount(), path);
     const std::string stem = path.substr(0, path.size() - ext.size());
     if (ext == ".vtu") {
-      mesh::writeVtu(path, mesh, fields);
+      mesh::writeVtu(path, mesh, fields, vtu);
     } else if (ext == ".vtk") {
       mesh::writeVtkLegacy(path, mesh, fields);
     } else if (ext == ".msh") {
@@ -32,7 +33,7 @@ Status writeTetMesh(const std::string& path, const TetMesh& mesh, const std::vec
   });
 }
 
-Status writeSurfaceMesh(const std::string& path, const SurfaceMesh& mesh) {
+Status writeSurfaceMesh(const std::string& path, const SurfaceMesh& mesh, const VtuOptions& vtu) {
   return detail::guard([&] {
     const std::string ext = mesh::lowerExtension(path);
     mesh::checkWritable(mesh, path);
@@ -41,7 +42,7 @@ Status writeSurfaceMesh(const std::string& path, const SurfaceMesh& mesh) {
     } else if (ext == ".vtk") {
       mesh::writeVtkPolyData(path, mesh);
     } else if (ext == ".vtu") {
-      mesh::writeVtuSurface(path, mesh);
+      mesh::writeVtuSurface(path, mesh, vtu);
     } else {
       detail::fail(ErrorCode::BadInput, "cannot write surface mesh ", path, ": unknown extension '", ext,
                    "'; supported are .obj (Wavefront OBJ), .vtk (legacy VTK POLYDATA), .vtu (VTK XML)");

@@ -67,6 +67,15 @@ RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir
     if (!problem.empty())
       fail(ErrorCode::BadInput, "bodies[", b, "].name: the name \"", shorten(scene.bodies[b].name), "\" ", problem);
   }
+  if (scene.output.vtk && scene.output.vtuCompression == VtuCompression::Zlib) {
+    // A scene made in code skips the parser's checks: refuse here, before anything is written.
+    if (scene.output.vtuFormat == VtuFormat::Ascii)
+      fail(ErrorCode::BadInput, "output.vtu_compression: \"zlib\" compresses binary arrays only, and vtu_format is "
+           "\"ascii\"; set vtu_format to \"base64\" or \"raw\", or use \"none\"");
+    if (!vtuZlibAvailable())
+      fail(ErrorCode::BadInput, "output.vtu_compression: \"zlib\" needs a corofem built with zlib, and this one was "
+           "built without it; install zlib1g-dev and rebuild, or use \"none\"");
+  }
   std::error_code ec;
   fs::create_directories(dir_, ec);
   if (ec) fail(ErrorCode::IoError, "cannot create the output folder ", dir_, ": ", ec.message());
@@ -160,12 +169,14 @@ void RunOutputs::writeVtk(const Simulation& sim, int step, double time) {
   if (step == lastVtkStep_) return;
   lastVtkStep_ = step;
   std::vector<double> x, v;
+  const VtuOptions vtu{sim.scene().output.vtuFormat, sim.scene().output.vtuCompression};
   for (int b = 0; b < sim.bodyCount(); ++b) {
     const BodyDesc& body = sim.scene().bodies[static_cast<std::size_t>(b)];
     if (const SurfaceMesh* rest = sim.restSurface(b)) {
-      // The coupled render surface, recomputed from the deformed tetrahedra (paper Sec. 5).
+      // The coupled render surface, recomputed from the deformed tetrahedra (paper Sec. 5), with its
+      // smooth unit normals (OBJ vn, VTU "Normals").
       SurfaceMesh surface = *rest;
-      Status st = sim.readSurface(b, surface.vertices);
+      Status st = sim.readSurface(b, surface.vertices, &surface.normals);
       if (!st) fail(st.code(), st.message());
       char suffix[32];
       std::snprintf(suffix, sizeof suffix, "_surface_%06d", step);
@@ -175,7 +186,7 @@ void RunOutputs::writeVtk(const Simulation& sim, int step, double time) {
       }
       if (auto& series = surfaceSeries_[static_cast<std::size_t>(b)]) {
         const std::string name = body.name + suffix + ".vtu";
-        st = writeSurfaceMesh((fs::path(dir_) / "vtk" / name).string(), surface);
+        st = writeSurfaceMesh((fs::path(dir_) / "vtk" / name).string(), surface, vtu);
         if (!st) fail(st.code(), st.message());
         series->add(time, "vtk/" + name);
         st = series->write();
@@ -194,7 +205,7 @@ void RunOutputs::writeVtk(const Simulation& sim, int step, double time) {
       fields.push_back(MeshField{"velocity", 3, false, v});
     mesh.nodes = x;
     const std::string name = vtkName(body.name, step);
-    st = writeTetMesh((fs::path(dir_) / "vtk" / name).string(), mesh, fields);
+    st = writeTetMesh((fs::path(dir_) / "vtk" / name).string(), mesh, fields, vtu);
     if (!st) fail(st.code(), st.message());
     series_[static_cast<std::size_t>(b)]->add(time, "vtk/" + name);
     st = series_[static_cast<std::size_t>(b)]->write();

@@ -20,7 +20,8 @@ namespace corofem::detail {
 class RunOutputs {
  public:
   /// Creates `dir` and opens the outputs. Throws Error(BadInput) for a probe whose node set
-  /// selects nothing or names an unknown body; Error(IoError) when the folder cannot be written.
+  /// selects nothing or names an unknown body, or a zlib vtu_compression this build or the ascii
+  /// format cannot write (before creating anything); Error(IoError) when the folder cannot be written.
   RunOutputs(const Simulation& sim, const std::string& dir);
   ~RunOutputs();
 

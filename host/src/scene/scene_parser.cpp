@@ -61,6 +61,9 @@ const Choices<Precision> kPrecisions{{"double", Precision::Double},
                                      {"mixed", Precision::Mixed}};
 const Choices<SurfaceLayout> kSurfaceLayouts{{"interleaved", SurfaceLayout::Interleaved},
                                              {"separate", SurfaceLayout::Separate}};
+const Choices<VtuFormat> kVtuFormats{
+    {"ascii", VtuFormat::Ascii}, {"base64", VtuFormat::Base64}, {"raw", VtuFormat::Raw}};
+const Choices<VtuCompression> kVtuCompressions{{"none", VtuCompression::None}, {"zlib", VtuCompression::Zlib}};
 const Choices<Integrator> kIntegrators{{"newmark", Integrator::Newmark},
                                        {"backward_euler", Integrator::BackwardEuler},
                                        {"auto", Integrator::Auto}};
@@ -108,7 +111,8 @@ const std::vector<std::string> kSleepKeys{"velocity", "load_change", "steps"};
 const std::vector<std::string> kSolverKeys{"linear_solver", "tolerance",  "max_iterations", "check_every",
                                            "preconditioner", "precision", "rotation"};
 const std::vector<std::string> kBackendKeys{"kind", "device", "batch"};
-const std::vector<std::string> kOutputKeys{"probes", "vtk", "vtk_every", "surface_obj"};
+const std::vector<std::string> kOutputKeys{"probes", "vtk", "vtk_every", "surface_obj", "vtu_format",
+                                           "vtu_compression"};
 const std::vector<std::string> kProbeKeys{"name", "body", "nodes"};
 
 bool contains(const std::vector<std::string>& names, const std::string& name) {
@@ -570,6 +574,14 @@ OutputDesc parseOutput(const Reader& r, const json& j, const std::string& path) 
   o.read("vtk", out.vtk);
   o.read("vtk_every", out.vtkEvery, {nonNegative, "vtk_every >= 0"});
   o.read("surface_obj", out.surfaceObj);
+  o.read("vtu_format", out.vtuFormat, kVtuFormats);
+  o.read("vtu_compression", out.vtuCompression, kVtuCompressions);
+  if (out.vtuCompression == VtuCompression::Zlib && out.vtuFormat == VtuFormat::Ascii)
+    r.fail(o.at("vtu_compression"), "\"zlib\" compresses binary arrays only, and vtu_format is \"ascii\"",
+           o.get("vtu_format") ? "" : " (the default)", "; set vtu_format to \"base64\" or \"raw\", or use \"none\"");
+  if (out.vtuCompression == VtuCompression::Zlib && !vtuZlibAvailable())
+    r.fail(o.at("vtu_compression"), "\"zlib\" needs a corofem built with zlib, and this one was built without "
+           "it; install zlib1g-dev and rebuild, or use \"none\"");
   return out;
 }
 
