@@ -6,7 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash cmake/debian-deps.sh
-bash cmake/configure-build.sh --target corofem_cli
+bash cmake/configure-build.sh --target corofem_cli interactive
 scene=samples/fig8_beam/fig8_beam.json
 ./build/corofem run "$scene" --out out/fig8_corot
 ./build/corofem run "$scene" --out out/fig8_linear --set bodies.0.formulation=linear
@@ -30,6 +30,10 @@ if [ -f ../shared/data/meshes/sofa/liver.msh ]; then
   ./build/corofem run "$liver" --out out/coupled_liver --quiet
   /usr/bin/python3 samples/coupled_liver/plot_coupled.py --run out/coupled_liver --body liver --out out/coupled_liver.png
   /usr/bin/python3 -c "import json; s = json.load(open('out/coupled_liver/summary.json')); print('out/coupled_liver/summary.json: surface binding', s['bodies'][0]['surface'])"
+  # An application's frame loop (samples/interactive): the liver dragged by a handle at 90 Hz,
+  # pinned, released and pushed; its frames and per-frame times (median, 99th percentile).
+  ./build/interactive --out out/interactive
+  /usr/bin/python3 samples/interactive/plot_interactive.py out/interactive out/interactive.png
 else
-  echo "skipping the coupled-mesh sample: ../shared/data/meshes/sofa/liver.msh is absent"
+  echo "skipping the coupled-mesh and interactive samples: ../shared/data/meshes/sofa/liver.msh is absent"
 fi
