@@ -399,17 +399,17 @@ TEST(WriterErrors, NonFiniteValuesAreRefusedInEveryFormatAndNothingIsWritten) {
     const std::string path = (dir / (std::string("nan_") + f.name + ".vtu")).string();
     corofem::Status st = corofem::writeTetMesh(path, c.mesh, c.fields, f.options);
     EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput) << f.name;
-    EXPECT_TRUE(contains(st.message(), "node 2 has a non-finite y value (nan)")) << f.name;
+    EXPECT_TRUE(contains(st.message(), "the position of node 2 is nan (component 1)")) << f.name;
     c = tetCase();
     c.fields[1].values[5] = -INFINITY;
     st = corofem::writeTetMesh(path, c.mesh, c.fields, f.options);
     EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput) << f.name;
-    EXPECT_TRUE(contains(st.message(), "field 'von Mises' has a non-finite value (-inf) at element 5")) << f.name;
+    EXPECT_TRUE(contains(st.message(), "field 'von Mises' of element 5 is -inf")) << f.name;
     corofem::SurfaceMesh s = surfaceCase(false);
     s.normals[4] = NAN;
     st = corofem::writeSurfaceMesh(path, s, f.options);
     EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput) << f.name;
-    EXPECT_TRUE(contains(st.message(), "normal of vertex 1 has a non-finite y value")) << f.name;
+    EXPECT_TRUE(contains(st.message(), "the normal of vertex 1 is nan (component 1)")) << f.name;
     EXPECT_FALSE(fs::exists(path)) << f.name;
   }
   corofem::SurfaceMesh s = surfaceCase(true);
