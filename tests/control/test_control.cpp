@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <fstream>
 #include <numeric>
 #include <vector>
 
@@ -329,6 +330,57 @@ TEST_P(Control, BadNodesAndHandlesAreRefused) {
   Result<int> one = sim.addHandle(near);
   ASSERT_TRUE(one) << one.message();
   ASSERT_TRUE(sim.step(kH));
+}
+
+TEST_P(Control, AHandleOnASurfaceVertexMovesThatVertexExactly) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  const char* mesh = "../shared/data/meshes/sofa/liver.msh";
+  const char* surface = "../shared/data/meshes/sofa/liver-smooth.obj";
+  if (!std::ifstream(mesh) || !std::ifstream(surface)) GTEST_SKIP() << mesh << " or " << surface << " is absent";
+  BodyDesc body = makeBody(MeshSourceDesc{}, 3000, 0.45, 1.0);
+  body.mesh.file = mesh;
+  body.surface = surface;
+  NodeSetDesc clamp;
+  clamp.boxMin = {1.2, 0, -2};
+  clamp.boxMax = {2, 6, 3};
+  body.fixed.push_back(clamp);
+  Simulation sim = create(dynamicScene(GetParam(), body, kH, 0));
+  const int vertex = 100;
+  std::vector<double> rest;
+  ASSERT_TRUE(sim.readSurface(0, rest));
+  HandleDesc desc;
+  desc.surfaceVertex = vertex;
+  Result<int> handle = sim.addHandle(desc);
+  ASSERT_TRUE(handle) << handle.message();
+  // The handle holds the four nodes of the vertex's element (the binding bindSurface makes from
+  // the same meshes); their centroid c goes to the target, so the vertex moves by target - c.
+  Result<SurfaceBinding> binding = bindSurface(sim.restMesh(0), *sim.restSurface(0));
+  ASSERT_TRUE(binding) << binding.message();
+  double c[3] = {0, 0, 0};
+  for (std::size_t k = 0; k < 4; ++k)
+    for (std::size_t a = 0; a < 3; ++a)
+      c[a] += sim.restMesh(0).nodes[3 * binding->nodes[4 * vertex + k] + a] / 4.0;
+  // Device surfaces hold float positions (the liver spans about 6 units).
+  const double tolerance = GetParam().isOpenCL() ? 5e-5 : 1e-9;
+  for (int frame = 1; frame <= 10; ++frame) {
+    const double lift = 0.03 * frame;
+    const double target[3] = {c[0], c[1] + lift, c[2]};
+    ASSERT_TRUE(sim.moveHandle(handle.value(), target));
+    ASSERT_TRUE(sim.step(kH)) << "frame " << frame;
+    std::vector<double> now;
+    ASSERT_TRUE(sim.readSurface(0, now));
+    for (std::size_t a = 0; a < 3; ++a)
+      ASSERT_NEAR(now[3 * vertex + a], rest[3 * vertex + a] + (a == 1 ? lift : 0.0), tolerance)
+          << "frame " << frame << ", axis " << a;
+  }
+  // A vertex past the surface's, or a body without a surface, is refused.
+  HandleDesc past;
+  past.surfaceVertex = static_cast<int>(rest.size() / 3);
+  EXPECT_EQ(sim.addHandle(past).status().code(), ErrorCode::BadInput);
+  Simulation beam = create(beamScene(GetParam(), true, true));
+  HandleDesc none;
+  none.surfaceVertex = 0;
+  EXPECT_EQ(beam.addHandle(none).status().code(), ErrorCode::BadInput);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);

@@ -77,6 +77,10 @@ struct HandleDesc {
   std::vector<std::uint32_t> nodes;
   double point[3] = {0.0, 0.0, 0.0};  ///< (m)
   double radius = 0.0;                ///< (m), >= 0
+  /// >= 0 (with `nodes` empty): the render surface's vertex (restSurface(body)) the user picked; the
+  /// handle holds the four nodes of the element the vertex is bound to (paper Sec. 5), so the
+  /// vertex follows the handle exactly (its position is a fixed combination of theirs).
+  int surfaceVertex = -1;
 };
 
 /// A force an application applies to a body (Simulation::setForces), in N: at a node, or at a

@@ -138,6 +138,17 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
     Impl::Handle handle;
     handle.body = static_cast<std::size_t>(desc.body);
     handle.nodes = desc.nodes;
+    if (handle.nodes.empty() && desc.surfaceVertex >= 0) {
+      if (!b.binding)
+        detail::fail(ErrorCode::BadInput, "addHandle: body '", b.problem->name, "' has no render surface; pick nodes or "
+                     "a point instead of a surface vertex, or give the body a \"surface\"");
+      const std::size_t v = static_cast<std::size_t>(desc.surfaceVertex);
+      if (v >= b.binding->element.size())
+        detail::fail(ErrorCode::BadInput, "addHandle: surface vertex ", v, " is not one of body '", b.problem->name,
+                     "''s ", b.binding->element.size(), " surface vertices (numbered from 0)");
+      handle.nodes.assign(b.binding->nodes.begin() + static_cast<std::ptrdiff_t>(4 * v),
+                          b.binding->nodes.begin() + static_cast<std::ptrdiff_t>(4 * v + 4));
+    }
     if (handle.nodes.empty()) {
       if (!finite3(desc.point) || !(desc.radius >= 0.0) || !std::isfinite(desc.radius))
         detail::fail(ErrorCode::BadInput, "addHandle: the point must be finite and the radius a finite number >= 0 (m)");
