@@ -1,8 +1,8 @@
 // Regression tests of issue 27 (what fuzzing and fault injection found) for `corofem run` and
 // `corofem info`, end to end: a crash on malformed JSON, names that would write outside the output
 // folder, a full disk reported as success, files that are not regular files, unbounded messages,
-// probe names that broke probes.csv, NaN and infinity in probes.csv, uncapped substeps. Each test
-// names the item of the issue it covers.
+// probe names that broke probes.csv, NaN and infinity in probes.csv, uncapped substeps, a static
+// answer with inverted elements. Each test names the item of the issue it covers.
 #include "cli/cli_runner.hpp"
 #include "common/test_data.hpp"
 
@@ -214,6 +214,28 @@ TEST(Issue27Item9, MaxSubstepsBeyondTheCapIsExit2) {
                         " --set analysis.max_substeps=2147483647");
   EXPECT_EQ(r.exitCode, 2) << r.output;
   EXPECT_TRUE(has(r.output, "max_substeps <= 1024")) << r.output;
+}
+
+// ------------------------------------------------------------------ item 10
+TEST(Issue27Item10, AStaticAnswerWithInvertedElementsIsNotOk) {
+  // A St. Venant-Kirchhoff block whose top face is pushed through its bottom to its mirror image
+  // (tests/solve/test_solve_hardening.cpp): the increment "converged" inside out and the summary
+  // said "ok"; now the run fails (exit 3) and says how many elements are inverted and how badly.
+  const fs::path dir = corofem::test::tempDir();
+  const std::string scene = R"({"name": "mirror", "bodies": [{"name": "block",
+    "mesh": {"box": {"max": [0.2, 0.2, 0.1], "cells": [2, 2, 2]}}, "formulation": "stvk",
+    "fixed": [{"plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}}],
+    "loads": [{"type": "displacement", "vector": [0, 0, -0.2],
+               "nodes": {"plane": {"point": [0, 0, 0.1], "normal": [0, 0, 1]}}}]}],
+  "analysis": {"type": "static"}, "solver": {"linear_solver": "cholesky"}, "backend": "reference",
+  "output": {"vtk": false}})";
+  const auto r = runCli("run " + quoted(writeScene(dir, scene)) + " -q --out " + quoted(dir / "out"));
+  EXPECT_EQ(r.exitCode, 3) << r.output;
+  const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary.at("status"), "failed") << summary.dump(2);
+  const std::string error = summary.value("error", "");
+  EXPECT_TRUE(has(error, " of 40 elements inverted (det F <= 0; the lowest, -")) << error;
+  EXPECT_EQ(summary.at("steps_taken"), 0);
 }
 
 }  // namespace
