@@ -28,6 +28,13 @@ constexpr double kArmijo = 1e-4;
 constexpr int kMaxBacktracks = 6;
 /// Halvings of an increment tried before the step fails: down to 1/16 of it.
 constexpr int kMaxCuts = 4;
+/// Relative residuals above which a stalled Newton is not at the rounding floor of the force
+/// evaluation, about 100 times the largest floors measured: float ~1e-3 (a 0.4 m cantilever,
+/// E = 1e6 Pa, tests/extremes/test_incompressible.cpp), double 4e-9 (docs/examples/
+/// static_cantilever.json) and 5e-7 (the same moved 100 m from the origin: the floor grows with the
+/// coordinates' magnitude).
+constexpr double kRoundingFloorFloat = 1e-1;
+constexpr double kRoundingFloorDouble = 1e-5;
 
 struct SecantPair {
   Eigen::VectorXd s, y;  ///< step and change of residual, free dofs only
@@ -271,23 +278,37 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
              "'s energy stays finite for inverted elements, so past a limit point "
              "of the load path Newton can converge on such a branch; use the formulation \"neo_hookean\" (which "
              "refuses inverted elements) or \"corotational\", or keep the load below this increment's");
-      // A stall at the rounding floor: the corrections have shrunk to nothing while the residual
-      // stays well above the tolerance. More iterations or increments cannot help; it is what the
-      // float backends show (positions rounded to ulp of the body's size give f_int a noise of
-      // E ulp / element size; measured ~1e-3 relative on a 0.4 m cantilever, E = 1e6 Pa,
-      // tests/extremes/test_incompressible.cpp).
+      // A stall at the rounding floor of the force evaluation: the corrections have shrunk to
+      // nothing while the residual stays well above the tolerance, yet below what rounding can
+      // explain in the precision the forces were evaluated in (kRoundingFloorFloat / Double; the
+      // reference backend's is always double, as in schedule/plan.cpp, the others' the solver's).
+      // More iterations or increments cannot help. A larger stalled residual is no floor (a limit
+      // point of the load path, or the co-rotational tangent far beyond its range, stalls too).
+      const bool inDouble = body_.slot().current().backend == "reference" ||
+                            body_.slot().solver().precision == Precision::Double;
       const bool stalled = std::isfinite(last.relative) && last.relative > 10.0 * desc_.residualTolerance &&
-                           last.correction < 1e-3;
+                           last.correction < 1e-3 &&
+                           last.relative < (inDouble ? kRoundingFloorDouble : kRoundingFloorFloat);
       const std::string alsoInverted =
           inversion.empty() ? "" : " (a larger sub-increment " + inversion + ")";
+      if (stalled) {
+        const std::string precision =
+            inDouble ? "double precision"
+                     : "float precision (solver.precision \"" + std::string(toString(body_.slot().solver().precision)) + "\")";
+        char above[32];
+        std::snprintf(above, sizeof above, "%.0e", std::pow(10.0, std::ceil(std::log10(2.0 * last.relative))));
+        fail(ErrorCode::SolveFailed, where, last.failure, alsoInverted, ", ", cut,
+             ". The corrections have stalled while the residual has not: the residual is at the rounding floor of "
+             "the force evaluation in ", precision, " on '", body_.slot().device().deviceName(),
+             "' (it grows with the coordinates' magnitude), below which analysis.residual_tolerance = ",
+             sci(desc_.residualTolerance), " cannot be reached; ",
+             inDouble ? "use a residual_tolerance above the stalled residual (e.g. "
+                      : "use solver.precision \"double\" or a residual_tolerance above the stalled residual (e.g. ",
+             above, ")");
+      }
       fail(ErrorCode::SolveFailed, where, last.failure, alsoInverted, ", ", cut,
            "; try more increments (analysis.increments), a looser analysis.residual_tolerance or more "
-           "analysis.max_newton_iterations; check the constraints (is the body held?) and the material",
-           stalled ? ". The corrections have stalled while the residual has not: the residual is at the rounding "
-                     "floor of the force evaluation (typical of solver.precision \"float\", whose floor grows with "
-                     "the stiffness and the body's size); use \"double\" or a residual_tolerance "
-                     "above the stalled residual"
-                   : "");
+           "analysis.max_newton_iterations; check the constraints (is the body held?) and the material");
     }
     ++cuts;
     successes = 0;
