@@ -29,7 +29,7 @@ constexpr int kMaxBacktracks = 6;
 /// Halvings of an increment tried before the step fails: down to 1/16 of it.
 constexpr int kMaxCuts = 4;
 /// Relative residuals above which a stalled Newton is not at the rounding floor of the force
-/// evaluation, about 100 times the largest floors measured: float ~1e-3 (a 0.4 m cantilever,
+/// evaluation, 20 to 100 times the largest floors measured: float ~1e-3 (a 0.4 m cantilever,
 /// E = 1e6 Pa, tests/extremes/test_incompressible.cpp), double 4e-9 (docs/examples/
 /// static_cantilever.json) and 5e-7 (the same moved 100 m from the origin: the floor grows with the
 /// coordinates' magnitude).
