@@ -1,8 +1,9 @@
 // Regression tests of issue 27 (what fuzzing and fault injection found) for `corofem run` and
 // `corofem info`, end to end: a crash on malformed JSON, names that would write outside the output
 // folder, a full disk reported as success, files that are not regular files, unbounded messages,
-// probe names that broke probes.csv, NaN and infinity in probes.csv, uncapped substeps. Each test
-// names the item of the issue it covers.
+// probe names that broke probes.csv, NaN and infinity in probes.csv, uncapped substeps, a static
+// answer with inverted elements and unconverged runs reported as "ok". Each test names the item of
+// the issue it covers.
 #include "cli/cli_runner.hpp"
 #include "common/test_data.hpp"
 
@@ -10,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -127,12 +129,13 @@ TEST(Issue27Item3, AFullDiskUnderProbesCsvIsAnError) {
 
 TEST(Issue27Item3, AWriteThatFailsMidRunIsAnErrorAndTheSummarySaysSo) {
   // A file size limit of 4 KiB (SIGXFSZ ignored, so a write beyond it fails with EFBIG): probes.csv
-  // reaches it after about 40 rows, the rows before stay whole, and the summary (smaller) records
-  // the failure.
+  // reaches it after about 40 rows, the rows before stay whole, and the summary (about 2.2 KiB)
+  // records the failure. `ulimit -f` counts 512-byte blocks in popen's /bin/sh (POSIX, dash) and
+  // 1 KiB blocks in bash: 8 is 4 or 8 KiB, either way far below the 200 rows' 20 KiB.
   const fs::path dir = corofem::test::tempDir();
   const auto r = runCli("run " + quoted(writeScene(dir, tinyScene())) + " -q --out " + quoted(dir / "out") +
                             " --set analysis.steps=200 --set output.vtk=false",
-                        "trap '' XFSZ; ulimit -f 4;");
+                        "trap '' XFSZ; ulimit -f 8;");
   EXPECT_EQ(r.exitCode, 1) << r.output;
   EXPECT_TRUE(has(r.output, "probes.csv: " + std::string(std::strerror(EFBIG)))) << r.output;
   const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
@@ -214,6 +217,81 @@ TEST(Issue27Item9, MaxSubstepsBeyondTheCapIsExit2) {
                         " --set analysis.max_substeps=2147483647");
   EXPECT_EQ(r.exitCode, 2) << r.output;
   EXPECT_TRUE(has(r.output, "max_substeps <= 1024")) << r.output;
+}
+
+// ------------------------------------------------------------------ item 10
+TEST(Issue27Item10, AStaticAnswerWithInvertedElementsIsNotOk) {
+  // A St. Venant-Kirchhoff block whose top face is pushed through its bottom to its mirror image
+  // (tests/solve/test_solve_hardening.cpp): the increment "converged" inside out and the summary
+  // said "ok"; now the run fails (exit 3) and says how many elements are inverted and how badly.
+  const fs::path dir = corofem::test::tempDir();
+  const std::string scene = R"({"name": "mirror", "bodies": [{"name": "block",
+    "mesh": {"box": {"max": [0.2, 0.2, 0.1], "cells": [2, 2, 2]}}, "formulation": "stvk",
+    "fixed": [{"plane": {"point": [0, 0, 0], "normal": [0, 0, 1]}}],
+    "loads": [{"type": "displacement", "vector": [0, 0, -0.2],
+               "nodes": {"plane": {"point": [0, 0, 0.1], "normal": [0, 0, 1]}}}]}],
+  "analysis": {"type": "static"}, "solver": {"linear_solver": "cholesky"}, "backend": "reference",
+  "output": {"vtk": false}})";
+  const auto r = runCli("run " + quoted(writeScene(dir, scene)) + " -q --out " + quoted(dir / "out"));
+  EXPECT_EQ(r.exitCode, 3) << r.output;
+  const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary.at("status"), "failed") << summary.dump(2);
+  const std::string error = summary.value("error", "");
+  EXPECT_TRUE(has(error, " of 40 elements inverted (det F <= 0; the lowest, -")) << error;
+  EXPECT_EQ(summary.at("steps_taken"), 0);
+}
+
+// ------------------------------------------------------------------ item 12
+/// The 1 x 0.1 x 0.1 m beam of issue 29 (coarser), backward Euler at 1/60 s, three steps, PCG capped
+/// at `cap` iterations; failed steps retried in up to 8 substeps.
+std::string cappedBeam(int cap) {
+  return R"({"name": "capped", "bodies": [{"name": "beam",
+    "mesh": {"box": {"max": [1, 0.1, 0.1], "cells": [12, 2, 2]}},
+    "material": {"youngs_modulus": 1e6, "poisson_ratio": 0.3, "density": 1000},
+    "fixed": [{"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}}],
+    "loads": [{"type": "gravity", "vector": [0, -9.81, 0]}]}],
+  "analysis": {"integrator": "backward_euler", "time_step": 0.016666666666666666, "steps": 3, "max_substeps": 8},
+  "solver": {"max_iterations": )" + std::to_string(cap) + R"(, "tolerance": 1e-6}, "backend": "reference",
+  "output": {"vtk": false}})";
+}
+
+TEST(Issue27Item12, ARunWhoseSolvesDidNotConvergeIsNotPlainOk) {
+  const fs::path dir = corofem::test::tempDir();
+  const auto r = runCli("run " + quoted(writeScene(dir, cappedBeam(5))) + " --out " + quoted(dir / "out"));
+  ASSERT_EQ(r.exitCode, 0) << r.output;  // the run completed; exit 0 is documented for it
+  const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary.at("status"), "ok_unconverged") << summary.dump(2);
+  const auto& c = summary.at("convergence");
+  EXPECT_EQ(c.at("steps_unconverged"), 3) << c.dump();
+  EXPECT_EQ(c.at("steps_recorded"), 3) << c.dump();
+  EXPECT_EQ(c.at("first_unconverged_step"), 1) << c.dump();
+  EXPECT_GT(c.at("worst_unconverged_linear_residual").get<double>(), 1e-2) << c.dump();  // far from 1e-6
+  EXPECT_EQ(c.at("solver_max_iterations"), 5) << c.dump();
+  // The command says so, with the count, the worst residual and the fix; every step's line too.
+  EXPECT_TRUE(has(r.output, "warning: 3 of 3 steps finished with linear solves short of solver.tolerance = 1e-06"))
+      << r.output;
+  EXPECT_TRUE(has(r.output, "solver.max_iterations = 5): their answer is inexact")) << r.output;
+  EXPECT_TRUE(has(r.output, "step 3/3")) << r.output;
+  EXPECT_TRUE(has(r.output, "unconverged (linear residual ")) << r.output;
+  // probes.csv's column agrees.
+  const auto rows = lines(readFile(dir / "out" / "probes.csv"));
+  ASSERT_EQ(rows.size(), 5u);
+  const auto header = csvFields(rows[0]);
+  const std::size_t col = std::find(header.begin(), header.end(), "converged") - header.begin();
+  ASSERT_LT(col, header.size());
+  for (std::size_t i = 2; i < rows.size(); ++i) EXPECT_EQ(csvFields(rows[i]).at(col), "0") << rows[i];
+}
+
+TEST(Issue27Item12, AConvergedRunIsOkAndCountsNoUnconvergedStep) {
+  const fs::path dir = corofem::test::tempDir();
+  const auto r = runCli("run " + quoted(writeScene(dir, cappedBeam(1000))) + " -q --out " + quoted(dir / "out"));
+  ASSERT_EQ(r.exitCode, 0) << r.output;
+  const auto summary = nlohmann::json::parse(readFile(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary.at("status"), "ok") << summary.dump(2);
+  EXPECT_EQ(summary.at("convergence").at("steps_unconverged"), 0) << summary.dump(2);
+  EXPECT_TRUE(summary.at("convergence").at("first_unconverged_step").is_null()) << summary.dump(2);
+  EXPECT_LE(summary.at("convergence").at("worst_linear_residual").get<double>(), 1e-5) << summary.dump(2);
+  EXPECT_FALSE(has(r.output, "unconverged")) << r.output;
 }
 
 }  // namespace

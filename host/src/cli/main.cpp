@@ -7,7 +7,9 @@
 //   corofem warmup [SCENE] [--set ...]
 //
 // Exit status: 0 success, 2 bad input (message on stderr), 3 a solve failed (outputs written so
-// far stay readable), 1 anything else (device error, i/o error, internal error).
+// far stay readable), 1 anything else (device error, i/o error, internal error). A run whose steps
+// completed with linear solves short of the tolerance exits 0 with a warning, and its summary.json
+// says "ok_unconverged".
 #include "device/registry.hpp"
 #include "mesh/locality_order.hpp"
 #include "output/run_outputs.hpp"
@@ -71,7 +73,8 @@ void usage(std::ostream& os) {
         "      kernels in float and double on every OpenCL device), so that the first run of an\n"
         "      application does not wait for them. The cache: COROFEM_CACHE_DIR, else\n"
         "      $XDG_CACHE_HOME/corofem or ~/.cache/corofem.\n"
-        "exit status: 0 ok, 2 bad input, 3 solve failed, 1 other errors\n";
+        "exit status: 0 ok (summary.json \"status\": \"ok\", or \"ok_unconverged\" when linear solves\n"
+        "      stopped short of solver.tolerance), 2 bad input, 3 solve failed, 1 other errors\n";
 }
 
 bool isSurfacePath(const std::string& path) {
@@ -226,15 +229,20 @@ int cmdRun(const std::vector<std::string>& args) {
     // step number); summary.json says why the run stopped.
     if (!status) break;
     status = detail::guard([&] { outputs->record(sim.value(), r); });
-    if (!quiet && status && (r.step % every == 0 || sim->finished()))
+    if (!quiet && status && (r.step % every == 0 || sim->finished())) {
       std::cout << "  step " << r.step << "/" << sim->stepCount() << "  t=" << r.time
                 << "  newton=" << r.newtonIterations << "  pcg=" << r.linearIterations
-                << "  residual=" << r.residual << "  " << r.wallSeconds * 1e3 << " ms" << std::endl;
+                << "  residual=" << r.residual << "  " << r.wallSeconds * 1e3 << " ms";
+      if (!r.converged) std::cout << "  unconverged (linear residual " << r.linearResidual << ")";
+      std::cout << std::endl;
+    }
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   Status finished = detail::guard([&] { outputs->finish(sim.value(), status, wall); });
   const std::string nonFinite = outputs->nonFiniteNote();
   if (!nonFinite.empty()) std::cerr << "corofem: warning: " << nonFinite << '\n';
+  const std::string unconverged = outputs->convergenceNote(sim.value());
+  if (!unconverged.empty()) std::cerr << "corofem: warning: " << unconverged << '\n';
   if (!status) {
     if (!finished) report(finished);  // the summary was lost too: say so, then why the run stopped
     return report(status);

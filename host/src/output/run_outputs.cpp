@@ -218,7 +218,8 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
   const Scene& scene = sim.scene();
   json j;
   j["scene"] = scene.name;
-  j["status"] = status.isOk() ? "ok" : "failed";
+  const Convergence conv = convergence();
+  j["status"] = !status.isOk() ? "failed" : conv.unconverged > 0 ? "ok_unconverged" : "ok";
   if (!status.isOk()) {
     j["error"] = status.message();
     j["error_kind"] = toString(status.code());
@@ -255,6 +256,14 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
   j["wall_time_per_step_s"] = wall;
   j["linear_iterations"] = {{"total", linTotal}, {"median_per_step", median(linIters)}};
   j["newton_iterations"] = {{"total", newtonTotal}, {"median_per_step", median(newtonIters)}};
+  // Steps that completed with linear solves short of solver.tolerance (their answer is inexact).
+  j["convergence"] = {{"steps_unconverged", conv.unconverged},
+                      {"steps_recorded", reports_.size()},
+                      {"first_unconverged_step", conv.first > 0 ? json(conv.first) : json(nullptr)},
+                      {"worst_unconverged_linear_residual", conv.worstUnconverged},
+                      {"worst_linear_residual", conv.worst},
+                      {"solver_tolerance", scene.solver.tolerance},
+                      {"solver_max_iterations", scene.solver.maxIterations}};
 
   json bodies = json::array();
   for (int b = 0; b < sim.bodyCount(); ++b) {
@@ -310,6 +319,33 @@ void RunOutputs::finish(const Simulation& sim, const Status& status, double tota
   mesh::TextWriter out;
   out << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
   out.save((fs::path(dir_) / "summary.json").string());
+}
+
+RunOutputs::Convergence RunOutputs::convergence() const {
+  Convergence c;
+  for (const StepReport& r : reports_) {
+    c.worst = std::max(c.worst, r.linearResidual);
+    if (r.converged) continue;
+    if (c.unconverged++ == 0) c.first = r.step;
+    c.worstUnconverged = std::max(c.worstUnconverged, r.linearResidual);
+  }
+  return c;
+}
+
+std::string RunOutputs::convergenceNote(const Simulation& sim) const {
+  const Convergence c = convergence();
+  if (c.unconverged == 0) return "";
+  const SolverDesc& solver = sim.scene().solver;
+  char worst[32], tolerance[32];
+  std::snprintf(worst, sizeof worst, "%.2g", c.worstUnconverged);
+  std::snprintf(tolerance, sizeof tolerance, "%g", solver.tolerance);
+  const bool pcg = solver.linearSolver == LinearSolverKind::Pcg;
+  return std::to_string(c.unconverged) + " of " + std::to_string(reports_.size()) +
+         " steps finished with linear solves short of solver.tolerance = " + tolerance + " (the first: step " +
+         std::to_string(c.first) + "; the worst relative residual " + worst +
+         (pcg ? ", solver.max_iterations = " + std::to_string(solver.maxIterations) : std::string()) +
+         "): their answer is inexact, and summary.json says \"ok_unconverged\"; " +
+         (pcg ? "raise solver.max_iterations for converged solves" : "check the constraints and the material");
 }
 
 std::string RunOutputs::nonFiniteNote() const {

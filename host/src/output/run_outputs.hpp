@@ -4,7 +4,8 @@
 // every write is checked, so a write that fails (a full disk) is an IoError, never a silent loss.
 // Every file is inside the output folder: body names that would make a path are refused. No NaN
 // or infinity is written: probes.csv leaves such a cell empty and summary.json writes null, and
-// the summary counts them (nonFiniteNote()).
+// the summary counts them (nonFiniteNote()). Steps whose linear solves did not converge make the
+// summary's status "ok_unconverged" instead of "ok", counted under "convergence" (convergenceNote()).
 #pragma once
 
 #include <corofem/simulation.hpp>
@@ -37,6 +38,10 @@ class RunOutputs {
   /// ("2 values were not finite (the first: probes.csv step 0, elastic_energy = inf) ...").
   std::string nonFiniteNote() const;
 
+  /// "" when every step recorded converged (StepReport::converged); else how many did not, the
+  /// worst linear residual and the fix ("30 of 30 steps finished with linear solves short of ...").
+  std::string convergenceNote(const Simulation& sim) const;
+
  private:
   struct Probe {
     std::string name;
@@ -44,6 +49,16 @@ class RunOutputs {
     std::vector<std::uint32_t> nodes;
   };
   void writeVtk(const Simulation& sim, int step, double time);
+
+  /// The steps recorded whose linear solves did not all converge (dynamics; a static increment
+  /// that does not converge fails instead).
+  struct Convergence {
+    int unconverged = 0;            ///< steps with StepReport::converged false
+    int first = 0;                  ///< the first of them (0: none)
+    double worstUnconverged = 0.0;  ///< their largest linear residual
+    double worst = 0.0;             ///< the largest linear residual of every step recorded
+  };
+  Convergence convergence() const;
 
   std::string dir_;
   std::vector<Probe> probes_;

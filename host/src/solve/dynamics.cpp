@@ -524,9 +524,28 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       continue;
     }
     if (!a.allLinearConverged && a.evaluated && a.residualNorm > a.initialNorm && a.stats.residual > kBlowUpResidual) {
-      failHere(a, "blew up: the linear solve did not converge and the Newton residual grew from " +
-                      sci(a.initialNorm) + " N to " + sci(a.residualNorm) + " N (relative " + sci(a.initialRelative) +
-                      " to " + sci(a.stats.residual) + ")");
+      // What was seen, not a diagnosis: the relative residual may have stayed near 1 (a solve
+      // stopped far from its tolerance made no progress), or the state may be running away.
+      const SolverDesc& solver = slot_.solver();
+      const bool pcg = solver.linearSolver == LinearSolverKind::Pcg;
+      const std::string solves =
+          pcg ? "its linear solves stopped at solver.max_iterations = " + std::to_string(solver.maxIterations) +
+                    " with a relative residual up to " + sci(a.stats.linearResidual) + " (solver.tolerance " +
+                    sci(solver.tolerance) + ")"
+              : "its direct solves did not reach solver.tolerance = " + sci(solver.tolerance) +
+                    " (relative residual up to " + sci(a.stats.linearResidual) + ")";
+      const std::string fix =
+          pcg ? "raise solver.max_iterations until the solves converge, or try a smaller analysis.time_step (easier "
+                "systems)" + retryFix + "; a step whose solves still stop short of the tolerance completes inexact, "
+                "flagged unconverged (StepReport::converged, summary.json)"
+              : "try a smaller analysis.time_step" + retryFix + ", and check the constraints and the material";
+      if (a.failure.empty())
+        a.failure = failureText(a, "failed: " + solves + ", and the Newton residual grew from " + sci(a.initialNorm) +
+                                       " N to " + sci(a.residualNorm) + " N (relative " + sci(a.initialRelative) +
+                                       " to " + sci(a.stats.residual) +
+                                       ") instead of falling, so the step's answer cannot be trusted",
+                                fix);
+      a.running = false;
       continue;
     }
     a.stats.converged = a.allLinearConverged;

@@ -5,7 +5,10 @@
 #include "util/error.hpp"
 #include "util/format.hpp"
 
+#include <Eigen/LU>
+
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -25,11 +28,25 @@ constexpr double kArmijo = 1e-4;
 constexpr int kMaxBacktracks = 6;
 /// Halvings of an increment tried before the step fails: down to 1/16 of it.
 constexpr int kMaxCuts = 4;
+/// Relative residuals above which a stalled Newton is not at the rounding floor of the force
+/// evaluation, 20 to 100 times the largest floors measured: float ~1e-3 (a 0.4 m cantilever,
+/// E = 1e6 Pa, tests/extremes/test_incompressible.cpp), double 4e-9 (docs/examples/
+/// static_cantilever.json) and 5e-7 (the same moved 100 m from the origin: the floor grows with the
+/// coordinates' magnitude).
+constexpr double kRoundingFloorFloat = 1e-1;
+constexpr double kRoundingFloorDouble = 1e-5;
 
 struct SecantPair {
   Eigen::VectorXd s, y;  ///< step and change of residual, free dofs only
   double rho = 0;        ///< 1 / (y . s)
 };
+
+/// A load factor in a message ("0.9688").
+std::string formatFactor(double lambda) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.4g", lambda);
+  return buffer;
+}
 
 /// Thrown inside newton() to end an attempt that met a non-finite value (a cut-back may cure it).
 struct AttemptFailed {
@@ -89,6 +106,13 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
       const bool residualOk = relative <= desc_.residualTolerance;
       const bool displacementOk = iteration > 0 && dxNorm <= desc_.displacementTolerance * displacementScale;
       if (residualOk && (displacementOk || relative <= linearAcceptance)) {
+        if (isHyperelastic(problem_.formulation)) {
+          const std::string inverted = invertedElements(x);
+          if (!inverted.empty()) {
+            out.inverted = true;
+            throw AttemptFailed{"reached an equilibrium at load factor " + formatFactor(lambda) + " with " + inverted};
+          }
+        }
         out.converged = true;
         return out;
       }
@@ -175,6 +199,28 @@ StaticSolver::NewtonOutcome StaticSolver::newton(double lambda, const Eigen::Vec
   }
 }
 
+std::string StaticSolver::invertedElements(const Eigen::VectorXd& x) const {
+  const TetMesh& mesh = problem_.mesh;
+  std::size_t count = 0, worst = 0;
+  double lowest = INFINITY;
+  for (std::size_t e = 0; e < problem_.elements.size(); ++e) {
+    std::array<Vec3d, 4> nodes;
+    for (int k = 0; k < 4; ++k) nodes[k] = x.segment<3>(3 * static_cast<Eigen::Index>(mesh.tets[4 * e + k]));
+    const double J = deformationGradient(problem_.elements[e], nodes).determinant();
+    if (J > 0.0) continue;  // NaN counts as inverted
+    ++count;
+    if (!(J >= lowest)) {
+      lowest = J;
+      worst = e;
+    }
+  }
+  if (count == 0) return "";
+  char lowestText[32];
+  std::snprintf(lowestText, sizeof lowestText, "%.3g", lowest);
+  return std::to_string(count) + " of " + std::to_string(problem_.elements.size()) +
+         " elements inverted (det F <= 0; the lowest, " + lowestText + ", in element " + std::to_string(worst) + ")";
+}
+
 BodyStepStats StaticSolver::step(int increment, int incrementCount) {
   const double target = static_cast<double>(increment) / static_cast<double>(std::max(1, incrementCount));
   BodyStepStats stats;
@@ -186,6 +232,7 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
   double size = target - track.lambda;  // current sub-increment
   int cuts = 0, successes = 0;
   NewtonOutcome last;
+  std::string inversion;  ///< the first attempt's that reached an inverted equilibrium, if any
   while (track.lambda < target) {
     const bool reachesTarget = track.lambda + size >= target * (1.0 - 1e-12);
     const double lambda = reachesTarget ? target : track.lambda + size;
@@ -218,25 +265,50 @@ BodyStepStats StaticSolver::step(int increment, int incrementCount) {
       }
       continue;
     }
+    if (last.inverted && inversion.empty()) inversion = last.failure;
     if (cuts == kMaxCuts) {
       stats.converged = false;
       setDevicePositions(x_, true);  // the device goes back to the last converged state too
-      // A stall at the rounding floor: the corrections have shrunk to nothing while the residual
-      // stays well above the tolerance. More iterations or increments cannot help; it is what the
-      // float backends show (positions rounded to ulp of the body's size give f_int a noise of
-      // E ulp / element size; measured ~1e-3 relative on a 0.4 m cantilever, E = 1e6 Pa,
-      // tests/extremes/test_incompressible.cpp).
+      const std::string where = "body '" + problem_.name + "': static increment " + std::to_string(increment) + "/" +
+                                std::to_string(incrementCount) + " ";
+      const std::string cut = "even cut into sub-increments down to 1/" + std::to_string(1 << kMaxCuts) + " of it";
+      if (last.inverted)
+        fail(ErrorCode::SolveFailed, where, last.failure, ", ", cut, ": an inside-out state, not a physical answer. ",
+             problem_.formulation == Formulation::StVenantKirchhoff ? "St. Venant-Kirchhoff" : toString(problem_.formulation),
+             "'s energy stays finite for inverted elements, so past a limit point "
+             "of the load path Newton can converge on such a branch; use the formulation \"neo_hookean\" (which "
+             "refuses inverted elements) or \"corotational\", or keep the load below this increment's");
+      // A stall at the rounding floor of the force evaluation: the corrections have shrunk to
+      // nothing while the residual stays well above the tolerance, yet below what rounding can
+      // explain in the precision the forces were evaluated in (kRoundingFloorFloat / Double; the
+      // reference backend's is always double, as in schedule/plan.cpp, the others' the solver's).
+      // More iterations or increments cannot help. A larger stalled residual is no floor (a limit
+      // point of the load path, or the co-rotational tangent far beyond its range, stalls too).
+      const bool inDouble = body_.slot().current().backend == "reference" ||
+                            body_.slot().solver().precision == Precision::Double;
       const bool stalled = std::isfinite(last.relative) && last.relative > 10.0 * desc_.residualTolerance &&
-                           last.correction < 1e-3;
-      fail(ErrorCode::SolveFailed, "body '", problem_.name, "': static increment ", increment, "/", incrementCount,
-           " ", last.failure, ", even cut into sub-increments down to 1/", 1 << kMaxCuts,
-           " of it; try more increments (analysis.increments), a looser analysis.residual_tolerance or more "
-           "analysis.max_newton_iterations; check the constraints (is the body held?) and the material",
-           stalled ? ". The corrections have stalled while the residual has not: the residual is at the rounding "
-                     "floor of the force evaluation (typical of solver.precision \"float\", whose floor grows with "
-                     "the stiffness and the body's size); use \"double\" or a residual_tolerance "
-                     "above the stalled residual"
-                   : "");
+                           last.correction < 1e-3 &&
+                           last.relative < (inDouble ? kRoundingFloorDouble : kRoundingFloorFloat);
+      const std::string alsoInverted =
+          inversion.empty() ? "" : " (a larger sub-increment " + inversion + ")";
+      if (stalled) {
+        const std::string precision =
+            inDouble ? "double precision"
+                     : "float precision (solver.precision \"" + std::string(toString(body_.slot().solver().precision)) + "\")";
+        char above[32];
+        std::snprintf(above, sizeof above, "%.0e", std::pow(10.0, std::ceil(std::log10(2.0 * last.relative))));
+        fail(ErrorCode::SolveFailed, where, last.failure, alsoInverted, ", ", cut,
+             ". The corrections have stalled while the residual has not: the residual is at the rounding floor of "
+             "the force evaluation in ", precision, " on '", body_.slot().device().deviceName(),
+             "' (it grows with the coordinates' magnitude), below which analysis.residual_tolerance = ",
+             sci(desc_.residualTolerance), " cannot be reached; ",
+             inDouble ? "use a residual_tolerance above the stalled residual (e.g. "
+                      : "use solver.precision \"double\" or a residual_tolerance above the stalled residual (e.g. ",
+             above, ")");
+      }
+      fail(ErrorCode::SolveFailed, where, last.failure, alsoInverted, ", ", cut,
+           "; try more increments (analysis.increments), a looser analysis.residual_tolerance or more "
+           "analysis.max_newton_iterations; check the constraints (is the body held?) and the material");
     }
     ++cuts;
     successes = 0;

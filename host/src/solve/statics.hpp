@@ -136,6 +136,15 @@ class BodySolver {
 /// incrementation inside the user's increment). Every step() still ends at lambda = k / n; the
 /// report sums the Newton iterations of all attempts. Only when even 1/16 fails does the step throw.
 /// Every iteration's residual and step length go to the log at LogLevel::Debug.
+///
+/// Inverted equilibria: for the rigorous models (St. Venant-Kirchhoff, Neo-Hookean) a converged
+/// iterate counts only when every element keeps det F > 0. Neo-Hookean's forces refuse inversion
+/// already; St. Venant-Kirchhoff's energy stays finite at det F <= 0, and past a limit point of the
+/// load path Newton converges on a branch of inside-out elements (the pipe elbow of
+/// docs/tradeoff.md with 25 N increments, past ~1.54 kN). Such an attempt fails like a
+/// non-converged one (cut-back), and the step's message gives the count and the lowest det F.
+/// (Linear and co-rotational bodies are not checked: the co-rotational force pushes inverted
+/// elements back, tests/extremes/test_inversion.cpp.)
 class StaticSolver final : public BodySolver {
  public:
   StaticSolver(const Problem& problem, BodyView body, const StaticDesc& desc, const Log& log = Log::none());
@@ -148,8 +157,12 @@ class StaticSolver final : public BodySolver {
     bool converged = false;
     double relative = 0;     ///< final relative residual
     double correction = 0;   ///< last |dx| over the displacement scale
+    bool inverted = false;   ///< it reached an equilibrium with inverted elements (rigorous models)
     std::string failure;     ///< why it stopped, when not converged
   };
+  /// "" when no element is inverted at x (det F > 0 everywhere), else how many are and the worst
+  /// ("149 of 8161 elements inverted (det F <= 0; the lowest, -1.1, in element 1234)").
+  std::string invertedElements(const Eigen::VectorXd& x) const;
   /// Newton at load factor lambda from the starting guess x (prescribed values written), x left at
   /// the last iterate. Throws only for backend errors other than SolveFailed.
   NewtonOutcome newton(double lambda, const Eigen::VectorXd& fext, Eigen::VectorXd& x, BodyStepStats& stats);
