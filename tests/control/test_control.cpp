@@ -352,14 +352,8 @@ TEST_P(Control, AHandleOnASurfaceVertexMovesThatVertexExactly) {
   desc.surfaceVertex = vertex;
   Result<int> handle = sim.addHandle(desc);
   ASSERT_TRUE(handle) << handle.message();
-  // The handle holds the four nodes of the vertex's element (the binding bindSurface makes from
-  // the same meshes); their centroid c goes to the target, so the vertex moves by target - c.
-  Result<SurfaceBinding> binding = bindSurface(sim.restMesh(0), *sim.restSurface(0));
-  ASSERT_TRUE(binding) << binding.message();
-  double c[3] = {0, 0, 0};
-  for (std::size_t k = 0; k < 4; ++k)
-    for (std::size_t a = 0; a < 3; ++a)
-      c[a] += sim.restMesh(0).nodes[3 * binding->nodes[4 * vertex + k] + a] / 4.0;
+  // The handle holds the four nodes the vertex is bound to, and its target places the vertex.
+  const double c[3] = {rest[3 * vertex], rest[3 * vertex + 1], rest[3 * vertex + 2]};
   // Device surfaces hold float positions (the liver spans about 6 units).
   const double tolerance = GetParam().isOpenCL() ? 5e-5 : 1e-9;
   for (int frame = 1; frame <= 10; ++frame) {
@@ -383,10 +377,71 @@ TEST_P(Control, AHandleOnASurfaceVertexMovesThatVertexExactly) {
   EXPECT_EQ(beam.addHandle(none).status().code(), ErrorCode::BadInput);
 }
 
+TEST_P(Control, RemovingAHandleGivesItsNodesBackToWhatHeldThemBefore) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  const std::vector<std::uint32_t> clamp = nodesAt(sim.restMesh(0), 0, 0.0);
+  const std::vector<std::uint32_t> tip = nodesAt(sim.restMesh(0), 0, 0.5);
+  // Released supports, grabbed, then let go: they stay released (the body falls), not back on the clamp.
+  ASSERT_TRUE(sim.unpinNodes(0, clamp));
+  HandleDesc both;
+  both.nodes = clamp;
+  both.nodes.insert(both.nodes.end(), tip.begin(), tip.end());
+  Result<int> h = sim.addHandle(both);
+  ASSERT_TRUE(h);
+  for (int frame = 0; frame < 3; ++frame) ASSERT_TRUE(sim.step(kH));
+  // A pin on the tip while the handle holds it takes the tip over; removing the handle then leaves
+  // the tip pinned and the clamp nodes released.
+  ASSERT_TRUE(sim.pinNodes(0, tip));
+  ASSERT_TRUE(sim.removeHandle(h.value()));
+  const std::vector<double> x0 = positions(sim);
+  for (int frame = 0; frame < 6; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> x1 = positions(sim);
+  for (std::uint32_t n : tip)
+    for (std::size_t a = 0; a < 3; ++a) EXPECT_NEAR(x1[3 * n + a], x0[3 * n + a], 1e-12) << "tip node " << n;
+  for (std::uint32_t n : clamp) EXPECT_LT(x1[3 * n + 1], x0[3 * n + 1] - 1e-4) << "clamp node " << n << " snapped back";
+  // A handle that took nodes a pin held gives them back to the pin, where they are then.
+  HandleDesc grabTip;
+  grabTip.nodes = tip;
+  Result<int> h2 = sim.addHandle(grabTip);
+  ASSERT_TRUE(h2);
+  const double up[3] = {0.5, 0.08, 0.05};
+  ASSERT_TRUE(sim.moveHandle(h2.value(), up));
+  ASSERT_TRUE(sim.step(kH));
+  ASSERT_TRUE(sim.removeHandle(h2.value()));
+  const std::vector<double> x2 = positions(sim);
+  for (int frame = 0; frame < 4; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> x3 = positions(sim);
+  for (std::uint32_t n : tip)
+    for (std::size_t a = 0; a < 3; ++a) EXPECT_NEAR(x3[3 * n + a], x2[3 * n + a], 1e-12) << "re-pinned tip node " << n;
+}
+
+TEST_P(Control, AFailedStepRestartsTheFailedBodyAtRest) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  // Twins: one fails a step and goes on; the other is stopped by hand at the same state.
+  Simulation failing = create(beamScene(GetParam(), true, true)), twin = create(beamScene(GetParam(), true, true));
+  for (int frame = 0; frame < 4; ++frame) {
+    ASSERT_TRUE(failing.step(kH));
+    ASSERT_TRUE(twin.step(kH));
+  }
+  AppliedForce huge;
+  huge.node = static_cast<int>(nodesAt(failing.restMesh(0), 0, 0.5).front());  // a free node
+  huge.force[1] = 1e300;
+  ASSERT_TRUE(failing.setForces(0, {huge}));
+  ASSERT_EQ(failing.step(kH).code(), ErrorCode::SolveFailed);
+  ASSERT_TRUE(failing.setForces(0, {}));
+  ASSERT_TRUE(twin.setVelocities(0, std::vector<double>(positions(twin).size(), 0.0)));
+  ASSERT_TRUE(failing.step(kH));
+  ASSERT_TRUE(twin.step(kH));
+  const std::vector<double> a = positions(failing), b = positions(twin);
+  for (std::size_t d = 0; d < a.size(); ++d) ASSERT_EQ(a[d], b[d]) << "dof " << d;
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);
 
-/// Two copies of the beam in one batch (the OpenCL backend batches bodies that share a device),
-/// one held by a handle, one pushed: each steps as it does alone.
+/// Three copies of the beam in one batch (the OpenCL backend batches bodies that share a device):
+/// body 0 left alone, body 1 pinned at its tip and pushed, body 2 dragged by a handle; each steps as
+/// it does alone.
 TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
   const std::vector<BackendCase> cases = backendCases();
   const BackendCase* c = nullptr;
@@ -394,37 +449,41 @@ TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
     if (k.isOpenCL() && k.absent.empty() && !k.isFloat()) c = &k;
   if (!c) GTEST_SKIP() << "no OpenCL device with fp64 here: the batch runs on OpenCL devices";
   Scene one = beamScene(*c, true, true);
-  Scene two = one;
-  two.bodies.push_back(two.bodies[0]);
-  two.bodies[1].name = "second";
-  two.backend.batch = true;
-  Simulation batch = create(two);
+  Scene three = one;
+  for (const char* name : {"second", "third"}) {
+    three.bodies.push_back(one.bodies[0]);
+    three.bodies.back().name = name;
+  }
+  three.backend.batch = true;
+  Simulation batch = create(three);
   ASSERT_NE(batch.schedulerReport().find("batch"), std::string::npos);
-  Simulation alone0 = create(one), alone1 = create(one);
+  Simulation alone[3] = {create(one), create(one), create(one)};
   const std::vector<std::uint32_t> tip = nodesAt(batch.restMesh(0), 0, 0.5);
+  const std::vector<std::uint32_t> mid = nodesAt(batch.restMesh(0), 0, 0.25);
   HandleDesc desc;
+  desc.body = 2;
   desc.nodes = tip;
-  Result<int> hb = batch.addHandle(desc), ha = alone0.addHandle(desc);
+  Result<int> hb = batch.addHandle(desc);
+  desc.body = 0;
+  Result<int> ha = alone[2].addHandle(desc);
   ASSERT_TRUE(hb && ha);
   AppliedForce push;
-  push.node = static_cast<int>(tip.front());
+  push.node = static_cast<int>(mid.front());
   push.force[2] = 1.5;
-  desc.body = 1;
+  ASSERT_TRUE(batch.pinNodes(1, tip));
+  ASSERT_TRUE(alone[1].pinNodes(0, tip));
   ASSERT_TRUE(batch.setForces(1, {push}));
-  ASSERT_TRUE(alone1.setForces(0, {push}));
+  ASSERT_TRUE(alone[1].setForces(0, {push}));
   for (int frame = 1; frame <= 12; ++frame) {
     const double target[3] = {0.5, 0.05 + 0.004 * frame, 0.05};
     ASSERT_TRUE(batch.moveHandle(hb.value(), target));
-    ASSERT_TRUE(alone0.moveHandle(ha.value(), target));
+    ASSERT_TRUE(alone[2].moveHandle(ha.value(), target));
     ASSERT_TRUE(batch.step(kH));
-    ASSERT_TRUE(alone0.step(kH));
-    ASSERT_TRUE(alone1.step(kH));
+    for (Simulation& s : alone) ASSERT_TRUE(s.step(kH));
   }
-  const std::vector<double> b0 = positions(batch, 0), b1 = positions(batch, 1), a0 = positions(alone0),
-                            a1 = positions(alone1);
-  for (std::size_t d = 0; d < b0.size(); ++d) {
-    EXPECT_NEAR(b0[d], a0[d], 1e-9) << "body 0, dof " << d;
-    EXPECT_NEAR(b1[d], a1[d], 1e-9) << "body 1, dof " << d;
+  for (int body = 0; body < 3; ++body) {
+    const std::vector<double> b = positions(batch, body), a = positions(alone[body]);
+    for (std::size_t d = 0; d < b.size(); ++d) ASSERT_NEAR(b[d], a[d], 1e-9) << "body " << body << ", dof " << d;
   }
 }
 

@@ -78,8 +78,8 @@ struct HandleDesc {
   double point[3] = {0.0, 0.0, 0.0};  ///< (m)
   double radius = 0.0;                ///< (m), >= 0
   /// >= 0 (with `nodes` empty): the render surface's vertex (restSurface(body)) the user picked; the
-  /// handle holds the four nodes of the element the vertex is bound to (paper Sec. 5), so the
-  /// vertex follows the handle exactly (its position is a fixed combination of theirs).
+  /// handle holds the four nodes of the element the vertex is bound to (paper Sec. 5), and its
+  /// target places the vertex itself (moveHandle's c is the vertex): the vertex follows it exactly.
   int surfaceVertex = -1;
 };
 
@@ -132,7 +132,8 @@ class Simulation {
   /// g its position when grabbed and c the centroid of those positions, R the row-major 3x3
   /// rotation (nullptr: none). The target is where c goes (m).
   Status moveHandle(int handle, const double target[3], const double* rotation = nullptr);
-  /// Releases a handle's nodes (free again, or back to the scene's supports where it fixed them).
+  /// Releases a handle's nodes: each goes back to what held it before the handle took it (the
+  /// scene's support or its release, a pin at the node's position now, or an older handle).
   Status removeHandle(int handle);
   /// Pins nodes where they are now (3 dofs each) until unpinned.
   Status pinNodes(int body, const std::vector<std::uint32_t>& nodes);

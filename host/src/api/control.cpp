@@ -114,10 +114,13 @@ void Simulation::Impl::applyHolds(Group& g) {
 }
 
 void Simulation::Impl::placeHandle(int id, const double target[3], const double* rotation) {
-  const Handle& handle = handles.at(id);
+  Handle& handle = handles.at(id);
   Body& b = bodies[handle.body];
   Body::Hold& h = b.hold;
   const Mat3d R = rotation ? rotationOf(rotation, "moveHandle") : Mat3d::Identity();
+  for (int k = 0; k < 3; ++k) handle.target[k] = target[k];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) handle.rotation[3 * i + j] = R(i, j);
   const Vec3d c = vec3(handle.centroid), t = vec3(target);
   for (std::size_t k = 0; k < handle.nodes.size(); ++k) {
     const std::uint32_t n = handle.nodes[k];
@@ -149,6 +152,7 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
       handle.nodes.assign(b.binding->nodes.begin() + static_cast<std::ptrdiff_t>(4 * v),
                           b.binding->nodes.begin() + static_cast<std::ptrdiff_t>(4 * v + 4));
     }
+    const bool onVertex = desc.nodes.empty() && desc.surfaceVertex >= 0;
     if (handle.nodes.empty()) {
       if (!finite3(desc.point) || !(desc.radius >= 0.0) || !std::isfinite(desc.radius))
         detail::fail(ErrorCode::BadInput, "addHandle: the point must be finite and the radius a finite number >= 0 (m)");
@@ -176,11 +180,21 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
       c += g;
     }
     c /= static_cast<double>(handle.nodes.size());
+    if (onVertex) {
+      // The target places the vertex itself: x_v = sum w_k x_k, and the weights sum to 1.
+      c.setZero();
+      const std::size_t v = static_cast<std::size_t>(desc.surfaceVertex);
+      for (std::size_t k = 0; k < 4; ++k)
+        c += b.binding->weights[4 * v + k] * x.segment<3>(3 * static_cast<Eigen::Index>(b.binding->nodes[4 * v + k]));
+    }
     for (int k = 0; k < 3; ++k) handle.centroid[k] = c[k];
     const int id = s.nextHandle++;
     Impl::Body::Hold& h = b.hold;
     if (h.targets.size() == 0) h.targets = Eigen::VectorXd::Constant(x.size(), std::nan(""));
-    for (std::uint32_t n : handle.nodes) h.holder[n] = id;
+    for (std::uint32_t n : handle.nodes) {
+      handle.previous.push_back(h.holder[n]);
+      h.holder[n] = id;
+    }
     s.handles.emplace(id, std::move(handle));
     h.constraintsChanged = true;
     s.placeHandle(id, s.handles.at(id).centroid, nullptr);  // held where they are
@@ -208,12 +222,24 @@ Status Simulation::removeHandle(int handle) {
                    "; use an id addHandle returned and that was not removed");
     Impl::Body& b = s.bodies[it->second.body];
     Impl::Body::Hold& h = b.hold;
-    for (std::uint32_t n : it->second.nodes)
-      if (h.holder[n] == handle) {
-        h.holder[n] = Impl::Body::Hold::kScene;
-        h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)).setConstant(std::nan(""));
-      }
+    const Impl::Handle released = std::move(it->second);
     s.handles.erase(it);
+    // Each node the handle still holds goes back to what held it before: the scene (or its
+    // release), a pin (where the node is now), or an older handle that still exists.
+    const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
+    std::vector<int> regrab;
+    for (std::size_t k = 0; k < released.nodes.size(); ++k) {
+      const std::uint32_t n = released.nodes[k];
+      if (h.holder[n] != handle) continue;
+      int previous = released.previous[k];
+      if (previous > Impl::Body::Hold::kPinned && s.handles.count(previous) == 0) previous = Impl::Body::Hold::kScene;
+      h.holder[n] = previous;
+      const Eigen::Index d = 3 * static_cast<Eigen::Index>(n);
+      if (previous == Impl::Body::Hold::kPinned) h.targets.segment<3>(d) = x.segment<3>(d);
+      else h.targets.segment<3>(d).setConstant(std::nan(""));
+      if (previous > Impl::Body::Hold::kPinned) regrab.push_back(previous);
+    }
+    for (int older : regrab) s.placeHandle(older, s.handles.at(older).target, s.handles.at(older).rotation);
     h.constraintsChanged = h.controlsChanged = true;
     s.touched(b);
   });
@@ -264,6 +290,9 @@ Status Simulation::setForces(int body, const std::vector<AppliedForce>& forces) 
       const AppliedForce& a = forces[i];
       if (!finite3(a.force) || (a.node < 0 && !finite3(a.point)))
         detail::fail(ErrorCode::BadInput, "setForces: force ", i, " has a non-finite force or point");
+      if (a.node < -1)
+        detail::fail(ErrorCode::BadInput, "setForces: force ", i, " has node ", a.node,
+                     "; give a node index >= 0, or -1 for a force at its point");
       const Vec3d force = vec3(a.force);
       if (a.node >= 0) {
         checkNodes({static_cast<std::uint32_t>(a.node)}, mesh.nodeCount(), b.problem->name, "setForces");
@@ -318,6 +347,7 @@ Status Simulation::setPositions(int body, const std::vector<double>& positions) 
     detail::Driver& driver = s.driverOf(b);
     const Eigen::VectorXd x = Eigen::Map<const Eigen::VectorXd>(positions.data(), static_cast<Eigen::Index>(positions.size()));
     driver.setState(b.index, x, driver.velocities(b.index));
+    b.hold.restart = false;  // the application's state replaces the failure's restart
     s.touched(b);
   });
 }
@@ -329,6 +359,7 @@ Status Simulation::setVelocities(int body, const std::vector<double>& velocities
     detail::Driver& driver = s.driverOf(b);
     const Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(velocities.data(), static_cast<Eigen::Index>(velocities.size()));
     driver.setState(b.index, driver.positions(b.index), v);
+    b.hold.restart = false;
     s.touched(b);
   });
 }
@@ -339,6 +370,7 @@ Status Simulation::resetBody(int body) {
     Impl::Body& b = s.controlled(body, "resetBody");
     const Eigen::VectorXd& rest = b.problem->restPositions;
     s.driverOf(b).setState(b.index, rest, Eigen::VectorXd::Zero(rest.size()));
+    b.hold.restart = false;
     s.touched(b);
   });
 }
@@ -361,19 +393,30 @@ Status Simulation::teleport(int body, const double rotation[9], const double tra
     for (Eigen::Index n = 0; n + 2 < x.size(); n += 3) {
       x.segment<3>(n) = R * x.segment<3>(n) + t;
       v.segment<3>(n) = R * v.segment<3>(n);
-      if (h.targets.size() != 0 && !std::isnan(h.targets[n])) h.targets.segment<3>(n) = R * h.targets.segment<3>(n) + t;
     }
-    // The handles move with the body: their grab points and centroids.
+    driver.setState(b.index, x, v);  // throws (nothing changed) for a non-finite result
+    b.hold.restart = false;
+    // The holds move with the body: held targets, and the handles' grab points, centroids and targets.
+    for (Eigen::Index n = 0; n + 2 < x.size(); n += 3)
+      if (h.targets.size() != 0 && !std::isnan(h.targets[n])) h.targets.segment<3>(n) = R * h.targets.segment<3>(n) + t;
     for (auto& [id, handle] : s.handles) {
       if (handle.body != static_cast<std::size_t>(body)) continue;
       for (std::size_t k = 0; k < handle.nodes.size(); ++k) {
         const Vec3d g = R * Vec3d(handle.grabbed[3 * k], handle.grabbed[3 * k + 1], handle.grabbed[3 * k + 2]) + t;
         for (int c = 0; c < 3; ++c) handle.grabbed[3 * k + static_cast<std::size_t>(c)] = g[c];
       }
-      const Vec3d c = R * vec3(handle.centroid) + t;
-      for (int k = 0; k < 3; ++k) handle.centroid[k] = c[k];
+      const Vec3d c = R * vec3(handle.centroid) + t, target = R * vec3(handle.target) + t;
+      Mat3d last;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) last(i, j) = handle.rotation[3 * i + j];
+      const Mat3d rotated = R * last * R.transpose();  // the handle's rotation seen in the moved frame
+      for (int k = 0; k < 3; ++k) {
+        handle.centroid[k] = c[k];
+        handle.target[k] = target[k];
+      }
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) handle.rotation[3 * i + j] = rotated(i, j);
     }
-    driver.setState(b.index, x, v);
     h.controlsChanged = true;
     s.touched(b);
   });

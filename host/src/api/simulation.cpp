@@ -393,8 +393,10 @@ std::string Simulation::deviceName() const { return impl_->slotOf(impl_->bodies.
 Status warmUp(const Scene& scene, const SimulationOptions& options, double* seconds) {
   const auto start = std::chrono::steady_clock::now();
   Scene copy = scene;
-  if (copy.analysis.kind == AnalysisDesc::Kind::Dynamic && copy.analysis.dynamics.steps == 0)
+  if (copy.analysis.kind == AnalysisDesc::Kind::Dynamic && copy.analysis.dynamics.steps == 0) {
+    copy.analysis.dynamics.integrator = integratorOf(copy.analysis.dynamics);  // the scheme it will run
     copy.analysis.dynamics.steps = 1;
+  }
   Result<Simulation> sim = Simulation::create(copy, options);
   Status status = sim.status();
   if (sim) {

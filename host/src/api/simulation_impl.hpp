@@ -102,8 +102,12 @@ struct Simulation::Impl {
   struct Handle {
     std::size_t body = 0;
     std::vector<std::uint32_t> nodes;
+    std::vector<int> previous;    ///< per node: its holder before the handle took it (Hold::holder)
     std::vector<double> grabbed;  ///< 3 per node (m)
+    /// The point the target places: the grabbed nodes' centroid, or a surface vertex's position.
     double centroid[3] = {0, 0, 0};
+    double target[3] = {0, 0, 0};    ///< the last target (m)
+    double rotation[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< the last rotation, row-major
   };
   std::map<int, Handle> handles;
   int nextHandle = 1;

@@ -97,6 +97,7 @@ void DynamicsDriver::setState(std::size_t body, const Eigen::VectorXd& x, const 
 void DynamicsDriver::constraintsChanged(std::size_t body) {
   Body& b = bodies_.at(body);
   b.freeMask = bodyScale(*b.problem).freeMask;
+  b.v = (b.v.array() * b.freeMask).matrix();  // held dofs: their velocities follow from their targets
 }
 
 void DynamicsDriver::setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) {
@@ -272,6 +273,7 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, d
         // End time of substep k as start + k h / K, so that the step ends exactly at t_n + h.
         a.t1 = b.start.t + h * k / substeps;
         a.h = a.t1 - b.t;
+        a.fraction = static_cast<double>(k) / substeps;
         a.where = substeps == 1 ? where
                                 : where + ", substep " + std::to_string(k) + "/" + std::to_string(substeps);
       }
@@ -374,7 +376,9 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     p.applyPrescribed(w.target, a.t1, /*dynamic=*/true);
     if (b.heldTarget.size() == w.target.size())
       for (Eigen::Index d = 0; d < w.target.size(); ++d)
-        if (!std::isnan(b.heldTarget[d])) w.target[d] = b.heldTarget[d];
+        if (!std::isnan(b.heldTarget[d]))
+          w.target[d] = a.fraction == 1.0 ? b.heldTarget[d]
+                                          : b.start.x[d] + a.fraction * (b.heldTarget[d] - b.start.x[d]);
     externalForce(b, a.t1, w.fext);
     a.fextNorm = freeNorm(b, w.fext);
     const Eigen::Index n = b.x.size();

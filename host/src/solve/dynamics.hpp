@@ -132,6 +132,9 @@ class DynamicsDriver final : public Driver {
   struct Advance {
     std::size_t body = 0;
     double h = 0.0, t1 = 0.0;
+    /// How far through the whole step t1 is (1 but in substeps): the application's held targets
+    /// are reached in proportion, as the scene's prescribed ones follow their time.
+    double fraction = 1.0;
     std::string where;  ///< "time step 3/10", "time step 3/10, substep 2/4"
     double ka = 0.0, kx = 0.0, fextNorm = 0.0;
     double initialRelative = 0.0, initialNorm = 0.0, residualNorm = 0.0;
