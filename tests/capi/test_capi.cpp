@@ -417,6 +417,7 @@ TEST(CApi, EveryCallRefusesANullHandleByName) {
       {"corofem_scene_set_step_count", [&] { return corofem_scene_set_step_count(nullptr, 1); }},
       {"corofem_scene_set_body_mesh", [&] { return corofem_scene_set_body_mesh(nullptr, 0, &d, 4, &node, 1); }},
       {"corofem_simulation_create", [&] { return corofem_simulation_create(nullptr, nullptr, &sim); }},
+      {"corofem_warm_up", [&] { return corofem_warm_up(nullptr, nullptr, nullptr); }},
       {"corofem_simulation_step", [&] { return corofem_simulation_step(nullptr, &report); }},
       {"corofem_simulation_step_dt", [&] { return corofem_simulation_step_dt(nullptr, 0.01, &report); }},
       {"corofem_simulation_finished", [&] { return corofem_simulation_finished(nullptr, &i); }},
@@ -445,6 +446,8 @@ TEST(CApi, EveryCallRefusesANullHandleByName) {
        [&] { return corofem_simulation_add_handle_nodes(nullptr, 0, &node, 1, &i); }},
       {"corofem_simulation_add_handle_point",
        [&] { return corofem_simulation_add_handle_point(nullptr, 0, v3, 0.1, &i); }},
+      {"corofem_simulation_add_handle_surface_vertex",
+       [&] { return corofem_simulation_add_handle_surface_vertex(nullptr, 0, 0, &i); }},
       {"corofem_simulation_move_handle", [&] { return corofem_simulation_move_handle(nullptr, 1, v3, nullptr); }},
       {"corofem_simulation_remove_handle", [&] { return corofem_simulation_remove_handle(nullptr, 1); }},
       {"corofem_simulation_pin_nodes", [&] { return corofem_simulation_pin_nodes(nullptr, 0, &node, 1); }},
@@ -667,6 +670,45 @@ TEST(CApi, TheSharedLibraryExportsTheCApiAlone) {
   dlclose(lib);
 }
 #endif
+
+}  // namespace
+}  // namespace corofem::test
+
+namespace corofem::test {
+namespace {
+
+/// A handle on a render-surface vertex places that vertex on its target, as the C++ API does; a
+/// warm-up of the scene succeeds and says how long it took.
+TEST(CApi, ASurfaceVertexHandleAndAWarmUp) {
+  const std::string dir = tempDir().string();
+  writeBoxSurface(dir + "/box.obj", {0.02, 0.02, 0.02}, {0.48, 0.08, 0.08});
+  CScene scene;
+  C_OK(corofem_scene_parse(twoBodies("reference").c_str(), dir.c_str(), nullptr, 0, &scene.scene));
+  double seconds = -1.0;
+  C_OK(corofem_warm_up(scene.scene, nullptr, &seconds));
+  EXPECT_GE(seconds, 0.0);
+  CSim c;
+  C_OK(corofem_simulation_create(scene.scene, nullptr, &c.sim));
+  size_t vertices = 0, triangles = 0;
+  C_OK(corofem_simulation_surface_size(c.sim, 0, &vertices, &triangles));
+  ASSERT_GT(vertices, 3u);
+  std::vector<double> rest(3 * vertices);
+  size_t needed = 0;
+  C_OK(corofem_simulation_read_surface(c.sim, 0, rest.data(), rest.size(), nullptr, 0, &needed));
+  const int vertex = static_cast<int>(vertices - 1);
+  int h = 0;
+  C_OK(corofem_simulation_add_handle_surface_vertex(c.sim, 0, vertex, &h));
+  const double target[3] = {rest[3 * vertex], rest[3 * vertex + 1] + 0.01, rest[3 * vertex + 2]};
+  C_OK(corofem_simulation_move_handle(c.sim, h, target, nullptr));
+  corofem_step_report report{};
+  C_OK(corofem_simulation_step_dt(c.sim, 1.0 / 60.0, &report));
+  std::vector<double> now(3 * vertices);
+  C_OK(corofem_simulation_read_surface(c.sim, 0, now.data(), now.size(), nullptr, 0, &needed));
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(now[3 * vertex + a], target[a], 1e-9) << "axis " << a;
+  EXPECT_EQ(corofem_simulation_add_handle_surface_vertex(c.sim, 1, 0, &h), COROFEM_BAD_INPUT);  // no surface
+  EXPECT_NE(message().find("no render surface"), std::string::npos) << message();
+  EXPECT_EQ(corofem_simulation_add_handle_surface_vertex(c.sim, 0, -2, &h), COROFEM_BAD_INPUT);
+}
 
 }  // namespace
 }  // namespace corofem::test

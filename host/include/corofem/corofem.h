@@ -151,6 +151,11 @@ typedef struct corofem_simulation corofem_simulation;
  *  (corofem_simulation_destroy). */
 corofem_status corofem_simulation_create(const corofem_scene* scene, const corofem_options* options,
                                          corofem_simulation** simulation);
+/** Compiles and caches ahead of time what creating and stepping the scene compiles (the kernels of
+ *  its plan, the scheduler's calibration), so that a later corofem_simulation_create on this machine
+ *  does not wait for them (corofem::warmUp). `options` may be NULL; `*seconds` (if not NULL) gets
+ *  the time it took. */
+corofem_status corofem_warm_up(const corofem_scene* scene, const corofem_options* options, double* seconds);
 /** Frees a simulation and its device memory (NULL: nothing). */
 void corofem_simulation_destroy(corofem_simulation* simulation);
 
@@ -269,6 +274,10 @@ corofem_status corofem_simulation_add_handle_nodes(corofem_simulation* simulatio
  *  node nearest `point` when none is that near. */
 corofem_status corofem_simulation_add_handle_point(corofem_simulation* simulation, int body, const double point[3],
                                                    double radius, int* handle);
+/** Grabs the four nodes the body's render-surface vertex `vertex` is bound to; the handle's target
+ *  then places that vertex itself, which follows it exactly. */
+corofem_status corofem_simulation_add_handle_surface_vertex(corofem_simulation* simulation, int body, int vertex,
+                                                            int* handle);
 /** Moves a handle: each held node goes to target + R (g - c) at the end of the next step, g its
  *  position when grabbed, c the centroid of those positions; `target` is where c goes (m).
  *  `rotation`: 9 doubles row by row, or NULL for none. */

@@ -57,6 +57,24 @@ corofem_status corofem_simulation_add_handle_point(corofem_simulation* simulatio
   });
 }
 
+corofem_status corofem_simulation_add_handle_surface_vertex(corofem_simulation* simulation, int body, int vertex,
+                                                            int* handle) {
+  static constexpr const char* kFn = "corofem_simulation_add_handle_surface_vertex";
+  return call(kFn, [&] {
+    Simulation& sim = simulationOf(simulation, kFn);
+    require(handle, kFn, "handle", "pass the address of an int to receive the handle's id");
+    if (vertex < 0)
+      detail::fail(ErrorCode::BadInput, kFn, ": vertex ", vertex, " is negative; give a render-surface vertex index >= 0");
+    HandleDesc desc;
+    desc.body = body;
+    desc.surfaceVertex = vertex;
+    Result<int> id = sim.addHandle(desc);
+    if (!id) return id.status();
+    *handle = id.value();
+    return Status::ok();
+  });
+}
+
 corofem_status corofem_simulation_move_handle(corofem_simulation* simulation, int handle, const double target[3],
                                               const double* rotation) {
   static constexpr const char* kFn = "corofem_simulation_move_handle";

@@ -153,6 +153,18 @@ corofem_status corofem_simulation_create(const corofem_scene* scene, const corof
   });
 }
 
+corofem_status corofem_warm_up(const corofem_scene* scene, const corofem_options* options, double* seconds) {
+  static constexpr const char* kFn = "corofem_warm_up";
+  return call(kFn, [&] {
+    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
+    const SimulationOptions o = options ? optionsOf(*options, kFn) : SimulationOptions{};
+    double taken = 0.0;
+    const Status st = warmUp(scene->scene, o, &taken);
+    if (seconds) *seconds = taken;
+    return st;
+  });
+}
+
 void corofem_simulation_destroy(corofem_simulation* simulation) {
   // ~Simulation does not throw (the C++ API's destructors are noexcept).
   delete simulation;
