@@ -449,6 +449,7 @@ TEST(CApi, EveryCallRefusesANullHandleByName) {
       {"corofem_simulation_add_handle_surface_vertex",
        [&] { return corofem_simulation_add_handle_surface_vertex(nullptr, 0, 0, &i); }},
       {"corofem_simulation_move_handle", [&] { return corofem_simulation_move_handle(nullptr, 1, v3, nullptr); }},
+      {"corofem_simulation_set_material", [&] { return corofem_simulation_set_material(nullptr, 0, 1e6, 0.3, 0, 0); }},
       {"corofem_simulation_remove_handle", [&] { return corofem_simulation_remove_handle(nullptr, 1); }},
       {"corofem_simulation_pin_nodes", [&] { return corofem_simulation_pin_nodes(nullptr, 0, &node, 1); }},
       {"corofem_simulation_unpin_nodes", [&] { return corofem_simulation_unpin_nodes(nullptr, 0, &node, 1); }},
@@ -708,6 +709,11 @@ TEST(CApi, ASurfaceVertexHandleAndAWarmUp) {
   EXPECT_EQ(corofem_simulation_add_handle_surface_vertex(c.sim, 1, 0, &h), COROFEM_BAD_INPUT);  // no surface
   EXPECT_NE(message().find("no render surface"), std::string::npos) << message();
   EXPECT_EQ(corofem_simulation_add_handle_surface_vertex(c.sim, 0, -2, &h), COROFEM_BAD_INPUT);
+  // A material change: accepted in range, refused out of it with the C function's name.
+  C_OK(corofem_simulation_set_material(c.sim, 1, 2e6, 0.3, 1.0, 0.0));
+  C_OK(corofem_simulation_step_dt(c.sim, 1.0 / 60.0, &report));
+  EXPECT_EQ(corofem_simulation_set_material(c.sim, 1, 2e6, 0.7, 1.0, 0.0), COROFEM_BAD_INPUT);
+  EXPECT_EQ(message().rfind("corofem_simulation_set_material", 0), 0u) << message();
 }
 
 }  // namespace

@@ -437,6 +437,41 @@ TEST_P(Control, AFailedStepRestartsTheFailedBodyAtRest) {
   for (std::size_t d = 0; d < a.size(); ++d) ASSERT_EQ(a[d], b[d]) << "dof " << d;
 }
 
+TEST_P(Control, AStifferMaterialSagsLessAndMatchesTheSceneMaterial) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  // Changed before the first step, the material is the scene's own: the same steps to the bit.
+  Scene damped = beamScene(GetParam(), true, true);
+  damped.bodies[0].material.rayleighMass = 30.0;
+  Simulation changed = create(beamScene(GetParam(), true, true)), given = create(damped);
+  ASSERT_TRUE(changed.setMaterial(0, 1e6, 0.3, 30.0, 0.0));
+  for (int frame = 0; frame < 20; ++frame) {
+    ASSERT_TRUE(changed.step(kH));
+    ASSERT_TRUE(given.step(kH));
+  }
+  EXPECT_EQ(positions(changed), positions(given));
+  // Settled under gravity (mass damping 30 1/s), the tip sags as 1/E: four times stiffer, a quarter.
+  const std::vector<std::uint32_t> tip = nodesAt(changed.restMesh(0), 0, 0.5);
+  const auto sag = [&](const Simulation& sim) {
+    const std::vector<double> x = positions(sim);
+    double s = 0.0;
+    for (std::uint32_t n : tip) s += sim.restMesh(0).nodes[3 * n + 1] - x[3 * n + 1];
+    return s / static_cast<double>(tip.size());
+  };
+  for (int frame = 0; frame < 150; ++frame) ASSERT_TRUE(changed.step(kH));
+  const double soft = sag(changed);
+  ASSERT_TRUE(changed.setMaterial(0, 4e6, 0.3, 30.0, 0.0));
+  for (int frame = 0; frame < 150; ++frame) ASSERT_TRUE(changed.step(kH));
+  const double stiff = sag(changed);
+  EXPECT_GT(soft, 0.01);
+  EXPECT_NEAR(soft / stiff, 4.0, 0.4) << "sag " << soft << " m, then " << stiff << " m";
+  // Out of range is refused and changes nothing.
+  EXPECT_EQ(changed.setMaterial(0, -1.0, 0.3, 0.0, 0.0).code(), ErrorCode::BadInput);
+  EXPECT_EQ(changed.setMaterial(0, 1e6, 0.5, 0.0, 0.0).code(), ErrorCode::BadInput);
+  EXPECT_EQ(changed.setMaterial(0, 1e6, 0.3, -1.0, 0.0).code(), ErrorCode::BadInput);
+  ASSERT_TRUE(changed.step(kH));
+  EXPECT_NEAR(sag(changed), stiff, 1e-3 * stiff);
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);
 
 /// Three copies of the beam in one batch (the OpenCL backend batches bodies that share a device):

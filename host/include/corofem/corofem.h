@@ -303,6 +303,10 @@ typedef struct corofem_force {
  *  (forces may be NULL) removes them. */
 corofem_status corofem_simulation_set_forces(corofem_simulation* simulation, int body, const corofem_force* forces,
                                              size_t count);
+/** Changes a body's material from the next step: Young's modulus (Pa, > 0), Poisson's ratio
+ *  (-1 < nu < 0.5), Rayleigh damping alpha (1/s, >= 0) and beta (s, >= 0); its density stays. */
+corofem_status corofem_simulation_set_material(corofem_simulation* simulation, int body, double youngs_modulus,
+                                               double poisson_ratio, double rayleigh_mass, double rayleigh_stiffness);
 /** Replaces the gravity of every body (m/s^2; at once, no ramp). */
 corofem_status corofem_simulation_set_gravity(corofem_simulation* simulation, const double gravity[3]);
 /** Sets a body's node positions: `count` = 3 * node count doubles (m); velocities stay. Held nodes

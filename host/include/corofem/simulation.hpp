@@ -143,6 +143,10 @@ class Simulation {
   /// Replaces the forces the application applies to a body (added to the scene's loads); an empty
   /// list removes them.
   Status setForces(int body, const std::vector<AppliedForce>& forces);
+  /// Changes a body's material: Young's modulus (Pa, > 0), Poisson's ratio (-1 < nu < 0.5) and its
+  /// Rayleigh damping C = alpha M + beta K (alpha 1/s, beta s, >= 0); its density stays.
+  Status setMaterial(int body, double youngsModulus, double poissonRatio, double rayleighMass,
+                     double rayleighStiffness);
   /// Replaces the gravity of every body (m/s^2; acts at once, no ramp).
   Status setGravity(const double gravity[3]);
   /// Sets a body's node positions (3 per node, m); its velocities stay. Nodes held by the scene or

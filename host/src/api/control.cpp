@@ -98,10 +98,17 @@ void Simulation::Impl::applyHolds(Group& g) {
     g.slot->setConstraints(changed);
     for (std::size_t index : changed) g.driver->constraintsChanged(index);
   }
+  detail::BodySet stiffened;
+  for (std::size_t i : g.bodies)
+    if (bodies[i].hold.materialChanged) stiffened.push_back(bodies[i].index);
+  if (!stiffened.empty()) {
+    g.slot->setMaterial(stiffened);
+    for (std::size_t index : stiffened) g.driver->materialChanged(index);
+  }
   for (std::size_t i : g.bodies) {
     Body& b = bodies[i];
     Body::Hold& h = b.hold;
-    h.constraintsChanged = false;
+    h.constraintsChanged = h.materialChanged = false;
     if (h.controlsChanged) g.driver->setControls(b.index, h.targets, h.forces);
     h.controlsChanged = false;
     if (h.restart) {
@@ -321,6 +328,24 @@ Status Simulation::setForces(int body, const std::vector<AppliedForce>& forces) 
     }
     b.hold.forces = forces.empty() ? Eigen::VectorXd() : std::move(f);
     b.hold.controlsChanged = true;
+    s.touched(b);
+  });
+}
+
+Status Simulation::setMaterial(int body, double youngsModulus, double poissonRatio, double rayleighMass,
+                               double rayleighStiffness) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    Impl::Body& b = s.controlled(body, "setMaterial");
+    const detail::Lame lame = detail::lameFromYoungPoisson(youngsModulus, poissonRatio);  // BadInput when out of range
+    if (!(rayleighMass >= 0.0) || !(rayleighStiffness >= 0.0) || !std::isfinite(rayleighMass) ||
+        !std::isfinite(rayleighStiffness))
+      detail::fail(ErrorCode::BadInput, "setMaterial: the Rayleigh coefficients must be finite and >= 0 (got ",
+                   rayleighMass, " 1/s and ", rayleighStiffness, " s)");
+    b.problem->lame = lame;
+    b.problem->rayleighMass = rayleighMass;
+    b.problem->rayleighStiffness = rayleighStiffness;
+    b.hold.materialChanged = true;
     s.touched(b);
   });
 }

@@ -45,7 +45,7 @@ struct Simulation::Impl {
       std::vector<int> holder;          ///< per node: kScene, kReleased, kPinned or the handle's id
       Eigen::VectorXd targets;          ///< 3N: held dofs' targets, NaN elsewhere (empty: none yet)
       Eigen::VectorXd forces;           ///< 3N applied forces (empty: none)
-      bool constraintsChanged = false, controlsChanged = false;
+      bool constraintsChanged = false, controlsChanged = false, materialChanged = false;
       bool restart = false;  ///< the last step failed: the next starts from the positions at rest
     } hold;
     // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and

@@ -135,6 +135,15 @@ corofem_status corofem_simulation_set_gravity(corofem_simulation* simulation, co
   });
 }
 
+corofem_status corofem_simulation_set_material(corofem_simulation* simulation, int body, double youngs_modulus,
+                                               double poisson_ratio, double rayleigh_mass, double rayleigh_stiffness) {
+  static constexpr const char* kFn = "corofem_simulation_set_material";
+  return call(kFn, [&] {
+    Simulation& sim = simulationOf(simulation, kFn);
+    return sim.setMaterial(body, youngs_modulus, poisson_ratio, rayleigh_mass, rayleigh_stiffness);
+  });
+}
+
 corofem_status corofem_simulation_set_positions(corofem_simulation* simulation, int body, const double* positions,
                                                 size_t count) {
   static constexpr const char* kFn = "corofem_simulation_set_positions";

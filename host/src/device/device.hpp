@@ -150,6 +150,10 @@ class Device {
   /// the dof is constrained. Later solves project with it. A device that cannot change its
   /// constraints throws Error(DeviceError) (the slot then moves the bodies to the next candidate).
   virtual void setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained);
+  /// The bodies' material changed (an application stiffened or damped a body): `problems[i]`
+  /// carries body bodies[i]'s new Lame parameters and Rayleigh coefficients (nothing else of it is
+  /// read). A device that cannot change them throws Error(DeviceError).
+  virtual void setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems);
 
   // -- PCG building blocks (driven by solvePcg, solve/pcg.hpp): the single-reduction PCG of
   // kernels/opencl/pcg.cl on the projected system (constrained dofs: identity rows and columns,

@@ -154,6 +154,12 @@ void DeviceSlot::setConstraints(const BodySet& bodies) {
   withFailover("setConstraints", [&](Device& d) { d.setConstraints(bodies, masks); });
 }
 
+void DeviceSlot::setMaterial(const BodySet& bodies) {
+  std::vector<const Problem*> problems;
+  for (std::size_t b : bodies) problems.push_back(problems_.at(b));
+  withFailover("setMaterial", [&](Device& d) { d.setMaterial(bodies, problems); });
+}
+
 void DeviceSlot::internalForces(const BodySet& bodies, const Vectors& f) {
   guarded(SlotStats::InternalForces, bodies, [&](Device& d) { d.internalForces(bodies, f); });
 }

@@ -75,6 +75,9 @@ class DeviceSlot {
   /// The bodies' problems have new constrained dofs (Problem::constrained, changed by the caller):
   /// the device projects its later solves with them.
   void setConstraints(const BodySet& bodies);
+  /// The bodies' problems have a new material (Problem::lame, rayleighMass, rayleighStiffness,
+  /// changed by the caller): the device uses it from the next call.
+  void setMaterial(const BodySet& bodies);
   /// The linear solves of `bodies` as the solver asks for them: PCG for the set (solvePcg), or the
   /// device's direct solve body by body (Cholesky). Per-body failures in `solves[i].failure`.
   void solve(const BodySet& bodies, std::vector<PcgSolve>& solves);

@@ -32,6 +32,7 @@ class StaticsDriver final : public Driver {
     at(body).setInitialState(x, v);
   }
   void constraintsChanged(std::size_t) override { needsDynamics(); }
+  void materialChanged(std::size_t) override { needsDynamics(); }
   void setControls(std::size_t, const Eigen::VectorXd&, const Eigen::VectorXd&) override { needsDynamics(); }
   const Eigen::VectorXd& positions(std::size_t body) const override { return at(body).positions(); }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return at(body).velocities(); }

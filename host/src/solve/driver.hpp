@@ -55,6 +55,9 @@ class Driver {
   /// The body's Problem::constrained changed (the slot's device was told): the driver's free dofs
   /// follow it from the next step.
   virtual void constraintsChanged(std::size_t body) = 0;
+  /// The body's Problem material changed (the slot's device was told): its force scale and, at
+  /// the next step, its acceleration and energy budget are measured again.
+  virtual void materialChanged(std::size_t body) = 0;
   /// What an application holds the body by, from the next step until replaced: `targets` (3N, or
   /// empty for none) the positions of constrained dofs that replace the scene's (rest or
   /// prescribed) targets, NaN where the scene's apply; `forces` (3N, or empty) forces added to the

@@ -100,6 +100,13 @@ void DynamicsDriver::constraintsChanged(std::size_t body) {
   b.v = (b.v.array() * b.freeMask).matrix();  // held dofs: their velocities follow from their targets
 }
 
+void DynamicsDriver::materialChanged(std::size_t body) {
+  Body& b = bodies_.at(body);
+  b.forceFloor = bodyScale(*b.problem).forceFloor;
+  b.started = false;  // the elastic energy changed with the stiffness: the budget is measured again
+  b.deviceAtCommitted = false;
+}
+
 void DynamicsDriver::setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) {
   Body& b = bodies_.at(body);
   const Eigen::Index n = b.x.size();

@@ -85,6 +85,7 @@ class DynamicsDriver final : public Driver {
   void rollback(std::size_t body) override;
   void setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override;
   void constraintsChanged(std::size_t body) override;
+  void materialChanged(std::size_t body) override;
   void setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) override;
   const Eigen::VectorXd& positions(std::size_t body) const override { return bodies_.at(body).x; }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return bodies_.at(body).v; }

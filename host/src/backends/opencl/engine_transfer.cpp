@@ -180,6 +180,28 @@ void SegmentEngine::setConstraints(const BodySet& bodies, const std::vector<cons
   }
 }
 
+void SegmentEngine::setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems) {
+  if (problems.size() != bodies.size())
+    fail(ErrorCode::Internal, "OpenCL backend: ", problems.size(), " materials for ", bodies.size(), " bodies");
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    const std::size_t s = bodies[i];
+    BodySegment& sg = segs_.at(s);
+    const Problem& p = *problems[i];
+    sg.rayleighMass = p.rayleighMass;
+    sg.rayleighStiffness = p.rayleighStiffness;
+    segCoef_[kSegCoefCount * s + kCoefLambda] = p.lame.lambda;
+    segCoef_[kSegCoefCount * s + kCoefMu] = p.lame.mu;
+    // What was formed with the old material: the energy, A x of a warm start, the node blocks.
+    energyKnown_[s] = 0;
+    axReady_[s] = 0;
+    blocksStale_[s] = 1;
+  }
+  // The element kernels read lambda and mu from the coefficients buffer: upload them now (the solve
+  // coefficients that multiply them are formed again by the next setCoefficients).
+  coefDirty_ = true;
+  flushCoefficients();
+}
+
 void SegmentEngine::download(const ClBuffer& buf, double* dst, std::size_t begin, std::size_t count) {
   if (count == 0) return;
   staging_.resize(count * realSize_);

@@ -43,6 +43,9 @@ class OpenCLDevice final : public Device {
   void setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained) override {
     engine_.setConstraints(bodies, constrained);
   }
+  void setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems) override {
+    engine_.setMaterial(bodies, problems);
+  }
 
   std::vector<BodySet> pcgTiles(const BodySet& bodies) const override { return engine_.pcgTiles(bodies); }
   std::vector<PcgStart> pcgBegin(const BodySet& bodies, const std::vector<SystemCoeffs>& c, const ConstVectors& b,

@@ -82,6 +82,7 @@ class SegmentEngine {
   void apply(const BodySet& bodies, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p, const Vectors& y);
   void elasticEnergy(const BodySet& bodies, std::vector<double>& energy);
   void setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained);
+  void setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems);
   /// The bodies of a solve in tiles solved one after another (CPU devices, where a tile's working
   /// set fits the cache), or all at once.
   std::vector<BodySet> pcgTiles(const BodySet& bodies) const;

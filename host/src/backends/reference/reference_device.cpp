@@ -56,6 +56,17 @@ class ReferenceBody {
 
   const Problem& problem() const { return p_; }
 
+  /// A new material: the element stiffnesses K_e (linear, co-rotational) formed again.
+  void setMaterial(const Problem& p) {
+    p_.lame = p.lame;
+    p_.rayleighMass = p.rayleighMass;
+    p_.rayleighStiffness = p.rayleighStiffness;
+    if (!hyper_)
+      for (std::size_t e = 0; e < stiffness_.size(); ++e) stiffness_[e] = linearStiffness(p_.elements[e], p_.lame);
+    tangentsValid_ = false;
+    running_ = false;
+  }
+
   /// New constrained dofs: the free-dof pattern of A is built again (and the direct solve's
   /// analysis redone on its next use).
   void setConstraints(const std::vector<std::uint8_t>& constrained) {
@@ -443,6 +454,10 @@ class ReferenceDevice final : public Device {
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
     energy.resize(set.size());
     for (std::size_t i = 0; i < set.size(); ++i) energy[i] = at(set[i]).elasticEnergy();
+  }
+  void setMaterial(const BodySet& set, const std::vector<const Problem*>& problems) override {
+    check(set, problems.size());
+    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setMaterial(*problems[i]);
   }
   void setConstraints(const BodySet& set, const std::vector<const std::vector<std::uint8_t>*>& constrained) override {
     check(set, constrained.size());
