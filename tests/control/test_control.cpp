@@ -9,6 +9,7 @@
 #include <corofem/simulation.hpp>
 
 #include <Eigen/LU>
+#include <nlohmann/json.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -470,6 +471,77 @@ TEST_P(Control, AStifferMaterialSagsLessAndMatchesTheSceneMaterial) {
   EXPECT_EQ(changed.setMaterial(0, 1e6, 0.3, -1.0, 0.0).code(), ErrorCode::BadInput);
   ASSERT_TRUE(changed.step(kH));
   EXPECT_NEAR(sag(changed), stiff, 1e-3 * stiff);
+}
+
+TEST_P(Control, AnAddedBodyStepsAsInAFreshSimulationAndTheOthersGoOn) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Scene scene = beamScene(GetParam(), true, true);
+  scene.backend.batch = false;
+  BodyDesc added = scene.bodies[0];
+  added.name = "added";
+  added.mesh.translate = {0.0, 0.0, 1.0};
+  Simulation sim = create(scene), untouched = create(scene);
+  Scene alone = scene;
+  alone.bodies = {added};
+  Simulation fresh = create(alone);
+  for (int frame = 0; frame < 5; ++frame) {
+    ASSERT_TRUE(sim.step(kH));
+    ASSERT_TRUE(untouched.step(kH));
+  }
+  Result<int> index = sim.addBody(added);
+  ASSERT_TRUE(index) << index.message();
+  EXPECT_EQ(index.value(), 1);
+  EXPECT_EQ(sim.bodyCount(), 2);
+  for (int frame = 0; frame < 10; ++frame) {
+    ASSERT_TRUE(sim.step(kH));
+    ASSERT_TRUE(untouched.step(kH));
+    ASSERT_TRUE(fresh.step(kH));
+  }
+  EXPECT_EQ(positions(sim, 1), positions(fresh)) << "the added body differs from the same body alone";
+  EXPECT_EQ(positions(sim, 0), positions(untouched)) << "adding a body changed the other one";
+  // A second body of the same name, or one whose mesh cannot be read, is refused and changes nothing.
+  EXPECT_EQ(sim.addBody(added).status().code(), ErrorCode::BadInput);
+  BodyDesc broken = added;
+  broken.name = "broken";
+  broken.mesh = MeshSourceDesc{};
+  broken.mesh.file = "no/such/mesh.msh";
+  EXPECT_FALSE(sim.addBody(broken));
+  EXPECT_EQ(sim.bodyCount(), 2);
+  ASSERT_TRUE(sim.step(kH));
+}
+
+TEST_P(Control, ARemovedBodyTakesItsDeviceMemoryAndHandlesWithIt) {
+  COROFEM_SKIP_ABSENT(GetParam());
+  Scene scene = beamScene(GetParam(), true, true);
+  scene.backend.batch = false;
+  scene.bodies.push_back(scene.bodies[0]);
+  scene.bodies[1].name = "second";
+  scene.bodies[1].mesh.translate = {0.0, 0.0, 1.0};
+  Simulation sim = create(scene);
+  HandleDesc desc;
+  desc.nodes = nodesAt(sim.restMesh(0), 0, 0.5);
+  Result<int> handle = sim.addHandle(desc);
+  ASSERT_TRUE(handle);
+  for (int frame = 0; frame < 3; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> second = positions(sim, 1);
+  const auto deviceBytes = [](const Simulation& s) {
+    long long total = 0;
+    const nlohmann::json plan = nlohmann::json::parse(s.planReport());
+    for (const auto& b : plan["bodies"])
+      if (b.contains("device_bytes_allocated")) total += b["device_bytes_allocated"].get<long long>();
+    return total;
+  };
+  const long long before = deviceBytes(sim);
+  ASSERT_TRUE(sim.removeBody(0));
+  EXPECT_EQ(sim.bodyCount(), 1);
+  EXPECT_EQ(positions(sim, 0), second);  // the second body is body 0 now, where it was
+  if (GetParam().isOpenCL()) {
+    EXPECT_GT(before, 0);
+    EXPECT_LT(deviceBytes(sim), before) << "the removed body's device buffers were not freed";
+  }
+  EXPECT_EQ(sim.moveHandle(handle.value(), second.data()).code(), ErrorCode::BadInput);  // gone with its body
+  ASSERT_TRUE(sim.step(kH));
+  EXPECT_EQ(sim.removeBody(0).code(), ErrorCode::BadInput);  // the last body stays
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);

@@ -147,6 +147,16 @@ class Simulation {
   /// Rayleigh damping C = alpha M + beta K (alpha 1/s, beta s, >= 0); its density stays.
   Status setMaterial(int body, double youngsModulus, double poissonRatio, double rayleighMass,
                      double rayleighStiffness);
+  /// Adds a body to the live Simulation (its mesh, surface, material, supports and loads as a
+  /// scene body's; paths relative to the scene's folder). It runs in a group of its own, on the
+  /// device the scheduler gives it, from its rest state and its own time 0 (its loads' ramps start
+  /// now): it steps as the same body does in a fresh Simulation. The other bodies keep their state
+  /// and devices. Returns its index (bodyCount() - 1).
+  Result<int> addBody(const BodyDesc& body);
+  /// Removes a body with its handles and frees its device's memory; later bodies' indices move
+  /// down by one. BadInput for a body in a batch (sharing a device's buffers with others: create
+  /// the Simulation with "batch": false to remove bodies one by one) or the scene's last body.
+  Status removeBody(int body);
   /// Replaces the gravity of every body (m/s^2; acts at once, no ramp).
   Status setGravity(const double gravity[3]);
   /// Sets a body's node positions (3 per node, m); its velocities stay. Nodes held by the scene or

@@ -173,6 +173,23 @@ std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, const det
   return out;
 }
 
+Simulation::Impl::Body Simulation::Impl::makeBody(const BodyDesc& desc) const {
+  Body body;
+  Result<TetMesh> mesh = loadBodyMesh(desc, scene.baseDir, &body.report);
+  if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
+  body.mesh = std::move(mesh.value());
+  if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
+  body.separateStreams = desc.surfaceLayout == SurfaceLayout::Separate;
+  body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
+  // A static analysis never uses the mass (statics solve K_t du = r; gravity is rho g V / 4 per
+  // node, built from the density above): zero, the device backends allocate no mass buffer.
+  if (isStatic()) body.problem->lumpedMass.setZero();
+  // Where the body runs: the application's order, the explicit choice (scene / API, else
+  // COROFEM_DEVICE), or for "auto" the scheduler's calibrated (or cached) choice.
+  body.schedule = detail::scheduleBody(desc, *body.problem, scene, device, devices);
+  return body;
+}
+
 Result<Simulation> Simulation::create(const Scene& scene, const SimulationOptions& options) {
   return detail::guardResult<Simulation>([&]() {
     auto impl = std::make_unique<Impl>();
@@ -199,22 +216,7 @@ Result<Simulation> Simulation::create(const Scene& scene, const SimulationOption
     }
     if (scene.bodies.empty())
       detail::fail(ErrorCode::BadInput, "scene '", scene.name, "' has no bodies; add at least one to \"bodies\"");
-    for (const BodyDesc& desc : scene.bodies) {
-      Impl::Body body;
-      Result<TetMesh> mesh = loadBodyMesh(desc, scene.baseDir, &body.report);
-      if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
-      body.mesh = std::move(mesh.value());
-      if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
-      body.separateStreams = desc.surfaceLayout == SurfaceLayout::Separate;
-      body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
-      // A static analysis never uses the mass (statics solve K_t du = r; gravity is rho g V / 4 per
-      // node, built from the density above): zero, the device backends allocate no mass buffer.
-      if (scene.analysis.kind == AnalysisDesc::Kind::Static) body.problem->lumpedMass.setZero();
-      // Where the body runs: the application's order, the explicit choice (scene / API, else
-      // COROFEM_DEVICE), or for "auto" the scheduler's calibrated (or cached) choice.
-      body.schedule = detail::scheduleBody(desc, *body.problem, scene, impl->device, impl->devices);
-      impl->bodies.push_back(std::move(body));
-    }
+    for (const BodyDesc& desc : scene.bodies) impl->bodies.push_back(impl->makeBody(desc));
     impl->formGroups();
     // On a device: the surfaces' buffers and kernels now.
     for (Impl::Group& g : impl->groups) impl->ensureSurfaces(g);

@@ -126,6 +126,8 @@ struct Simulation::Impl {
   detail::DeviceSlot& slotOf(const Body& b) const { return *groups[b.group].slot; }
 
   // -- set-up (simulation.cpp)
+  /// A body of the scene: its mesh, surface, problem and schedule (not yet in a group).
+  Body makeBody(const BodyDesc& desc) const;
   /// The groups: batches of the bodies whose first candidate is the same device of a backend that
   /// batches (backend.batch on), each other body alone. A batch that cannot be made leaves its
   /// bodies unbatched, with the reason.
