@@ -18,7 +18,7 @@ cd "$(dirname "$0")/../.."
 root=$(pwd)
 
 seconds=10
-targets="gmsh medit vtk veg tetgen obj scene"
+targets="gmsh medit vtk veg tetgen obj scene capi_scene"
 build_only=0
 while (($#)); do
   case "$1" in
@@ -75,7 +75,7 @@ add_shared_seeds() {  # target corpus-dir
 }
 
 max_len_of() {
-  case "$1" in scene) echo 8192 ;; *) echo 65536 ;; esac
+  case "$1" in scene | capi_scene) echo 8192 ;; *) echo 65536 ;; esac
 }
 
 failed=()
@@ -83,7 +83,7 @@ summary=()
 for target in $targets; do
   binary="$build/fuzz_$target"
   if [[ ! -x "$binary" ]]; then
-    echo "run_fuzz.sh: no target '$target' (targets: gmsh medit vtk veg tetgen obj scene)" >&2
+    echo "run_fuzz.sh: no target '$target' (targets: gmsh medit vtk veg tetgen obj scene capi_scene)" >&2
     exit 2
   fi
   corpus="$build/corpus/$target"
@@ -91,7 +91,7 @@ for target in $targets; do
   mkdir -p "$corpus" "$artifacts" "$build/logs"
   cp tests/fuzz/corpus/"$target"/* "$corpus"/
   add_shared_seeds "$target" "$corpus"
-  if [[ "$target" == scene ]]; then
+  if [[ "$target" == scene || "$target" == capi_scene ]]; then
     for f in samples/*/*.json docs/examples/*.json; do [[ -f "$f" ]] && cp "$f" "$corpus/repo-$(basename "$f")"; done
   fi
   log="$build/logs/$target.log"

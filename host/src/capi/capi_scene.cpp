@@ -1,5 +1,6 @@
-// The C API's scenes (load, parse, an in-memory mesh for a body) and the creation and destruction
-// of simulations with their options (corofem.h, "scenes" and "creation").
+// The C API's scenes (corofem.h, "scenes"): load, parse, an in-memory mesh for a body. Creating
+// simulations from them is capi_create.cpp's (this file links without the solver: the fuzz target
+// tests/fuzz/targets/fuzz_capi_scene.cpp).
 #include "capi/capi_support.hpp"
 
 #include <memory>
@@ -7,43 +8,11 @@
 namespace corofem::capi {
 namespace {
 
-std::vector<std::string> stringList(const char* const* strings, std::size_t count, const char* function,
-                                    const char* name) {
-  std::vector<std::string> out;
-  if (count == 0) return out;
-  require(strings, function, name, "pass an array of that many strings, or NULL with a count of 0");
-  for (std::size_t i = 0; i < count; ++i) {
-    if (!strings[i])
-      detail::fail(ErrorCode::BadInput, function, ": ", name, "[", i, "] is NULL; each of the ", count,
-                   " entries must be a string");
-    out.emplace_back(strings[i]);
-  }
-  return out;
-}
-
 /// Hands a parsed scene to the caller as a new handle.
 Status giveScene(Result<Scene> parsed, corofem_scene** out) {
   if (!parsed) return parsed.status();
   *out = new corofem_scene{std::move(parsed).value()};
   return Status::ok();
-}
-
-SimulationOptions optionsOf(const corofem_options& o, const char* function) {
-  SimulationOptions options;
-  options.devices = stringList(o.devices, o.device_count, function, "options->devices");
-  const corofem_external_device& d = o.device;
-  switch (d.api) {
-    case COROFEM_GPU_NONE: break;
-    case COROFEM_GPU_OPENCL: options.device.api = GpuApi::OpenCL; break;
-    case COROFEM_GPU_VULKAN: options.device.api = GpuApi::Vulkan; break;
-    default:
-      detail::fail(ErrorCode::BadInput, function, ": options->device.api is ", static_cast<int>(d.api),
-                   "; use COROFEM_GPU_NONE (no device lent) or COROFEM_GPU_OPENCL");
-  }
-  options.device.context = d.context;
-  options.device.queue = d.queue;
-  options.device.device = d.device;
-  return options;
 }
 
 }  // namespace
@@ -137,37 +106,6 @@ corofem_options corofem_default_options(void) {
   o.device.api = COROFEM_GPU_NONE;
   o.device.context = o.device.queue = o.device.device = nullptr;
   return o;
-}
-
-corofem_status corofem_simulation_create(const corofem_scene* scene, const corofem_options* options,
-                                         corofem_simulation** simulation) {
-  static constexpr const char* kFn = "corofem_simulation_create";
-  return call(kFn, [&] {
-    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
-    require(simulation, kFn, "simulation", "pass the address of a corofem_simulation* to receive the simulation");
-    const SimulationOptions o = options ? optionsOf(*options, kFn) : SimulationOptions{};
-    Result<Simulation> made = Simulation::create(scene->scene, o);
-    if (!made) return made.status();
-    *simulation = new corofem_simulation{std::move(made).value()};
-    return Status::ok();
-  });
-}
-
-corofem_status corofem_warm_up(const corofem_scene* scene, const corofem_options* options, double* seconds) {
-  static constexpr const char* kFn = "corofem_warm_up";
-  return call(kFn, [&] {
-    require(scene, kFn, "scene", "pass a scene from corofem_scene_load or corofem_scene_parse");
-    const SimulationOptions o = options ? optionsOf(*options, kFn) : SimulationOptions{};
-    double taken = 0.0;
-    const Status st = warmUp(scene->scene, o, &taken);
-    if (seconds) *seconds = taken;
-    return st;
-  });
-}
-
-void corofem_simulation_destroy(corofem_simulation* simulation) {
-  // ~Simulation does not throw (the C++ API's destructors are noexcept).
-  delete simulation;
 }
 
 }  // extern "C"

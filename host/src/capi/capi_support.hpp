@@ -54,6 +54,21 @@ inline void require(const void* p, const char* function, const char* name, const
   if (!p) detail::fail(ErrorCode::BadInput, function, ": ", name, " is NULL; ", fix);
 }
 
+/// `count` C strings as a vector (NULL with a count of 0: none); a NULL entry is BadInput.
+inline std::vector<std::string> stringList(const char* const* strings, std::size_t count, const char* function,
+                                    const char* name) {
+  std::vector<std::string> out;
+  if (count == 0) return out;
+  require(strings, function, name, "pass an array of that many strings, or NULL with a count of 0");
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!strings[i])
+      detail::fail(ErrorCode::BadInput, function, ": ", name, "[", i, "] is NULL; each of the ", count,
+                   " entries must be a string");
+    out.emplace_back(strings[i]);
+  }
+  return out;
+}
+
 inline const Simulation& simulationOf(const corofem_simulation* s, const char* function) {
   require(s, function, "simulation", "pass the handle corofem_simulation_create gave");
   return s->simulation;
