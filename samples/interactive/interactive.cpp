@@ -1,8 +1,8 @@
 // An application's frame loop, headless (issue 25's sample): SOFA's liver (596 tets) with its
 // 2,194-vertex render surface, held at its right end by the scene; at 90 Hz the application grabs
 // the left lobe with a handle and drags it along a scripted path, pins it and lets go, pushes the
-// body with a force, and reads the deformed surface back every frame, as a renderer would. Only the
-// public API (corofem/corofem.hpp).
+// body with a force, adds a second body and removes it, and reads the deformed surface back every
+// frame, as a renderer would. Only the public API (corofem/corofem.hpp).
 //
 //   interactive [--out DIR] [--seconds S] [--backend auto|reference|opencl]
 //
@@ -105,7 +105,8 @@ int main(int argc, char** argv) {
   std::vector<float> normals;
   const long frames = std::lround(seconds * hz);
   long failed = 0;
-  bool pinned = false, released = false;
+  bool pinned = false, released = false, pushedDone = false, extraDone = false;
+  int extra = -1;  // the second body's index while it is there
   for (long f = 0; f < frames; ++f) {
     const double t = static_cast<double>(f) * dt;
     // The script: drag along a loop for 3 s; pin the lobe where it is (handle removed); release the
@@ -128,8 +129,34 @@ int main(int argc, char** argv) {
       push.force[1] = -0.02;
       sim.setForces(0, {push});
       released = true;
-    } else if (t >= 4.5 && released) {
+    } else if (t >= 4.5 && released && !pushedDone) {
       sim.setForces(0, {});
+      pushedDone = true;
+    }
+    // A second body arrives at 4.6 s (a small block dropped beside the liver) and leaves at 5.6 s.
+    if (t >= 4.6 && extra < 0 && !extraDone) {
+      corofem::BodyDesc block;
+      block.name = "block";
+      corofem::BoxSpec box;
+      box.min = {-2.5, 6.0, -0.5};
+      box.max = {-1.5, 6.5, 0.5};
+      box.cells = {4, 2, 4};
+      block.mesh.box = box;
+      block.material.youngsModulus = 3000;
+      block.material.poissonRatio = 0.3;
+      block.material.density = 1;
+      corofem::LoadDesc g;
+      g.kind = corofem::LoadDesc::Kind::Gravity;
+      g.vector = {0.0, -9.81, 0.0};
+      block.loads.push_back(g);
+      corofem::Result<int> added = sim.addBody(block);
+      if (!added) return fail("addBody", added.status());
+      extra = added.value();
+    } else if (t >= 5.6 && extra >= 0) {
+      const corofem::Status removed = sim.removeBody(extra);
+      if (!removed) return fail("removeBody", removed);
+      extra = -1;
+      extraDone = true;
     }
     corofem::StepReport report;
     const auto s0 = Clock::now();
