@@ -450,6 +450,8 @@ TEST(CApi, EveryCallRefusesANullHandleByName) {
        [&] { return corofem_simulation_add_handle_surface_vertex(nullptr, 0, 0, &i); }},
       {"corofem_simulation_move_handle", [&] { return corofem_simulation_move_handle(nullptr, 1, v3, nullptr); }},
       {"corofem_simulation_set_material", [&] { return corofem_simulation_set_material(nullptr, 0, 1e6, 0.3, 0, 0); }},
+      {"corofem_simulation_add_body", [&] { return corofem_simulation_add_body(nullptr, nullptr, 0, &i); }},
+      {"corofem_simulation_remove_body", [&] { return corofem_simulation_remove_body(nullptr, 0); }},
       {"corofem_simulation_remove_handle", [&] { return corofem_simulation_remove_handle(nullptr, 1); }},
       {"corofem_simulation_pin_nodes", [&] { return corofem_simulation_pin_nodes(nullptr, 0, &node, 1); }},
       {"corofem_simulation_unpin_nodes", [&] { return corofem_simulation_unpin_nodes(nullptr, 0, &node, 1); }},
@@ -709,6 +711,26 @@ TEST(CApi, ASurfaceVertexHandleAndAWarmUp) {
   EXPECT_EQ(corofem_simulation_add_handle_surface_vertex(c.sim, 1, 0, &h), COROFEM_BAD_INPUT);  // no surface
   EXPECT_NE(message().find("no render surface"), std::string::npos) << message();
   EXPECT_EQ(corofem_simulation_add_handle_surface_vertex(c.sim, 0, -2, &h), COROFEM_BAD_INPUT);
+  // A body added from a scene handle of one body steps; removed, the simulation goes on without it.
+  {
+    const std::string one = R"({"bodies": [{"name": "cube", "mesh": {"box": {"min": [2, 0, 0], "max": [2.1, 0.1, 0.1]}},
+        "loads": [{"type": "gravity"}]}]})";
+    CScene extra;
+    C_OK(corofem_scene_parse(one.c_str(), dir.c_str(), nullptr, 0, &extra.scene));
+    int index = -1;
+    C_OK(corofem_simulation_add_body(c.sim, extra.scene, 0, &index));
+    EXPECT_EQ(index, 2);
+    C_OK(corofem_simulation_step_dt(c.sim, 1.0 / 60.0, &report));
+    const std::vector<double> fallen = positionsC(c.sim, 2);
+    EXPECT_LT(fallen[1], 0.0);  // the cube fell under gravity
+    EXPECT_EQ(corofem_simulation_add_body(c.sim, extra.scene, 0, &index), COROFEM_BAD_INPUT);  // same name
+    EXPECT_EQ(corofem_simulation_add_body(c.sim, extra.scene, 1, &index), COROFEM_BAD_INPUT);  // no body 1
+    C_OK(corofem_simulation_remove_body(c.sim, 2));
+    int count = 0;
+    C_OK(corofem_simulation_body_count(c.sim, &count));
+    EXPECT_EQ(count, 2);
+    C_OK(corofem_simulation_step_dt(c.sim, 1.0 / 60.0, &report));
+  }
   // A material change: accepted in range, refused out of it with the C function's name.
   C_OK(corofem_simulation_set_material(c.sim, 1, 2e6, 0.3, 1.0, 0.0));
   C_OK(corofem_simulation_step_dt(c.sim, 1.0 / 60.0, &report));

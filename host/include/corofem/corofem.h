@@ -303,6 +303,17 @@ typedef struct corofem_force {
  *  (forces may be NULL) removes them. */
 corofem_status corofem_simulation_set_forces(corofem_simulation* simulation, int body, const corofem_force* forces,
                                              size_t count);
+/** Adds body `body` of `scene` (a scene handle from corofem_scene_parse or _load, e.g. the text of
+ *  one body, with an in-memory mesh from corofem_scene_set_body_mesh) to the live simulation: it
+ *  runs on a device of its own from its rest state and its own time 0, as in a fresh simulation;
+ *  the other bodies go on. File paths in it are relative to the simulation's scene folder. *index
+ *  receives its index (the body count - 1). Its name must differ from the others'. */
+corofem_status corofem_simulation_add_body(corofem_simulation* simulation, const corofem_scene* scene, int body,
+                                           int* index);
+/** Removes a body with its handles and frees its device memory; later bodies' indices move down by
+ *  one. COROFEM_BAD_INPUT for a body batched with others (create without batching to remove bodies)
+ *  or the last body. */
+corofem_status corofem_simulation_remove_body(corofem_simulation* simulation, int body);
 /** Changes a body's material from the next step: Young's modulus (Pa, > 0), Poisson's ratio
  *  (-1 < nu < 0.5), Rayleigh damping alpha (1/s, >= 0) and beta (s, >= 0); its density stays. */
 corofem_status corofem_simulation_set_material(corofem_simulation* simulation, int body, double youngs_modulus,

@@ -135,6 +135,29 @@ corofem_status corofem_simulation_set_gravity(corofem_simulation* simulation, co
   });
 }
 
+corofem_status corofem_simulation_add_body(corofem_simulation* simulation, const corofem_scene* scene, int body,
+                                           int* index) {
+  static constexpr const char* kFn = "corofem_simulation_add_body";
+  return call(kFn, [&] {
+    Simulation& sim = simulationOf(simulation, kFn);
+    require(scene, kFn, "scene", "pass a scene handle (corofem_scene_parse) holding the body to add");
+    require(index, kFn, "index", "pass the address of an int to receive the new body's index");
+    const std::vector<BodyDesc>& bodies = scene->scene.bodies;
+    if (body < 0 || static_cast<std::size_t>(body) >= bodies.size())
+      detail::fail(ErrorCode::BadInput, kFn, ": body ", body, " is out of range: the scene handle has ", bodies.size(),
+                   " body(ies), numbered from 0");
+    Result<int> added = sim.addBody(bodies[static_cast<std::size_t>(body)]);
+    if (!added) return added.status();
+    *index = added.value();
+    return Status::ok();
+  });
+}
+
+corofem_status corofem_simulation_remove_body(corofem_simulation* simulation, int body) {
+  static constexpr const char* kFn = "corofem_simulation_remove_body";
+  return call(kFn, [&] { return simulationOf(simulation, kFn).removeBody(body); });
+}
+
 corofem_status corofem_simulation_set_material(corofem_simulation* simulation, int body, double youngs_modulus,
                                                double poisson_ratio, double rayleigh_mass, double rayleigh_stiffness) {
   static constexpr const char* kFn = "corofem_simulation_set_material";
