@@ -68,6 +68,7 @@ Simulation::Impl::Body& Simulation::Impl::controlled(int index, const char* call
   if (h.holder.empty()) {
     h.scene = b.problem->constrained;
     h.holder.assign(b.mesh.nodeCount(), Body::Hold::kScene);
+    h.targets = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(h.scene.size()), std::nan(""));
   }
   return b;
 }
@@ -197,7 +198,6 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
     for (int k = 0; k < 3; ++k) handle.centroid[k] = c[k];
     const int id = s.nextHandle++;
     Impl::Body::Hold& h = b.hold;
-    if (h.targets.size() == 0) h.targets = Eigen::VectorXd::Constant(x.size(), std::nan(""));
     for (std::uint32_t n : handle.nodes) {
       handle.previous.push_back(h.holder[n]);
       h.holder[n] = id;
@@ -259,7 +259,6 @@ Status Simulation::pinNodes(int body, const std::vector<std::uint32_t>& nodes) {
     checkNodes(nodes, b.mesh.nodeCount(), b.problem->name, "pinNodes");
     const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
     Impl::Body::Hold& h = b.hold;
-    if (h.targets.size() == 0) h.targets = Eigen::VectorXd::Constant(x.size(), std::nan(""));
     for (std::uint32_t n : nodes) {
       h.holder[n] = Impl::Body::Hold::kPinned;
       const Eigen::Index d = 3 * static_cast<Eigen::Index>(n);
@@ -279,7 +278,7 @@ Status Simulation::unpinNodes(int body, const std::vector<std::uint32_t>& nodes)
     for (std::uint32_t n : nodes) {
       if (h.holder[n] > Impl::Body::Hold::kPinned) continue;  // a handle's
       h.holder[n] = Impl::Body::Hold::kReleased;
-      if (h.targets.size() != 0) h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)).setConstant(std::nan(""));
+      h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)).setConstant(std::nan(""));
     }
     h.constraintsChanged = h.controlsChanged = true;
     s.touched(b);
@@ -296,7 +295,8 @@ Status Simulation::setForces(int body, const std::vector<AppliedForce>& forces) 
     for (std::size_t i = 0; i < forces.size(); ++i) {
       const AppliedForce& a = forces[i];
       if (!finite3(a.force) || (a.node < 0 && !finite3(a.point)))
-        detail::fail(ErrorCode::BadInput, "setForces: force ", i, " has a non-finite force or point");
+        detail::fail(ErrorCode::BadInput, "setForces: force ", i, " has a non-finite force or point; give finite ",
+                     "numbers (N, m)");
       if (a.node < -1)
         detail::fail(ErrorCode::BadInput, "setForces: force ", i, " has node ", a.node,
                      "; give a node index >= 0, or -1 for a force at its point");
@@ -423,7 +423,7 @@ Status Simulation::teleport(int body, const double rotation[9], const double tra
     b.hold.restart = false;
     // The holds move with the body: held targets, and the handles' grab points, centroids and targets.
     for (Eigen::Index n = 0; n + 2 < x.size(); n += 3)
-      if (h.targets.size() != 0 && !std::isnan(h.targets[n])) h.targets.segment<3>(n) = R * h.targets.segment<3>(n) + t;
+      if (!std::isnan(h.targets[n])) h.targets.segment<3>(n) = R * h.targets.segment<3>(n) + t;
     for (auto& [id, handle] : s.handles) {
       if (handle.body != static_cast<std::size_t>(body)) continue;
       for (std::size_t k = 0; k < handle.nodes.size(); ++k) {

@@ -295,25 +295,21 @@ Status Simulation::step(StepReport* report) {
 }
 
 Status Simulation::step(double dt, StepReport* report) {
+  std::string refusal;
   if (impl_->isStatic()) {
-    if (report) {
-      *report = StepReport{};
-      report->converged = false;
-    }
-    return Status(ErrorCode::BadInput, "step(dt) takes a time step; this analysis is static (load increments): "
-                                       "call step() instead");
-  }
-  if (!(dt > 0.0 && std::isfinite(dt))) {
-    if (report) {
-      *report = StepReport{};
-      report->converged = false;
-      report->time = time();
-    }
+    refusal = "step(dt) takes a time step; this analysis is static (load increments): call step() instead";
+  } else if (!(dt > 0.0 && std::isfinite(dt))) {
     std::ostringstream os;
     os << "step(dt): the time step must be a finite number of seconds > 0, got " << dt;
-    return Status(ErrorCode::BadInput, os.str());
+    refusal = os.str();
   }
-  return stepWith(dt, report);
+  if (refusal.empty()) return stepWith(dt, report);
+  if (report) {  // no step taken
+    *report = StepReport{};
+    report->converged = false;
+    report->time = time();
+  }
+  return Status(ErrorCode::BadInput, refusal);
 }
 
 Status Simulation::stepWith(double h, StepReport* report) {

@@ -86,7 +86,8 @@ void DynamicsDriver::setState(std::size_t body, const Eigen::VectorXd& x, const 
     fail(ErrorCode::BadInput, "body '", b.problem->name, "': a state needs ", b.x.size(),
          " positions and velocities (3 per node), got ", x.size(), " and ", v.size());
   if (!x.allFinite() || !v.allFinite())
-    fail(ErrorCode::BadInput, "body '", b.problem->name, "': the positions or velocities are not finite");
+    fail(ErrorCode::BadInput, "body '", b.problem->name, "': the positions or velocities are not finite; give finite "
+         "numbers (m, m/s)");
   b.x = x;
   b.v = (v.array() * b.freeMask).matrix();
   b.started = false;  // the next step measures a and the energy budget from this state
