@@ -138,7 +138,8 @@ struct AnalysisDesc {
 };
 
 enum class LinearSolverKind { Pcg, Cholesky };  ///< Cholesky only on the reference backend
-enum class PreconditionerKind { None, Diagonal, BlockDiagonal };
+/// Amg: smoothed-aggregation multigrid over the rest operator, warped by node rotations (reference backend).
+enum class PreconditionerKind { None, Diagonal, BlockDiagonal, Amg };
 /// Floating-point precision of a device backend (the reference backend always computes in double).
 enum class Precision {
   Double,  ///< everything in double (needs cl_khr_fp64)

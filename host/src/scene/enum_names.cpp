@@ -52,6 +52,7 @@ const char* toString(PreconditionerKind p) {
     case PreconditionerKind::None: return "none";
     case PreconditionerKind::Diagonal: return "diagonal";
     case PreconditionerKind::BlockDiagonal: return "block_diagonal";
+    case PreconditionerKind::Amg: return "amg";
   }
   return "?";
 }

@@ -1,0 +1,353 @@
+// The warped smoothed-aggregation multigrid of precond/amg.hpp.
+#include "precond/amg.hpp"
+
+#include "util/error.hpp"
+
+#include <Eigen/QR>
+
+#include <algorithm>
+#include <cmath>
+
+namespace corofem::detail {
+
+namespace {
+
+/// Levels stop coarsening at this many dofs (the coarsest is factored) ...
+constexpr Eigen::Index kCoarsestDofs = 500;
+/// ... or when a level keeps more than this fraction of its finer level's dofs (aggregation stalls
+/// on the dense graphs of the coarsest levels), or after this many levels.
+constexpr double kStallRatio = 0.8;
+constexpr std::size_t kMaxLevels = 12;
+/// Chebyshev smoothing targets the eigenvalues of D^-1 A in [lambda_max / kChebyshevRange, lambda_max].
+constexpr double kChebyshevRange = 30.0;
+/// The power iteration's estimate of lambda_max is raised by this factor: Chebyshev amplifies any
+/// eigenvalue above its interval, and the current operator's spectrum differs a little from the
+/// rest operator's it is estimated on.
+constexpr double kLambdaMargin = 1.1;
+constexpr int kPowerIterations = 20;
+/// A QR column of an aggregate's near-null space is kept when |R_jj| exceeds this times the largest
+/// (an aggregate of one or two nodes spans fewer than six rigid modes).
+constexpr double kRankThreshold = 1e-8;
+
+Eigen::VectorXd inverseDiagonal(const AmgMatrix& A) {
+  Eigen::VectorXd d = A.diagonal();
+  for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = d[i] != 0.0 ? 1.0 / d[i] : 1.0;
+  return d;
+}
+
+/// lambda_max(D^-1 A) by power iteration on the similar D^-1/2 A D^-1/2, from a fixed start vector
+/// (the set-up is deterministic), times kLambdaMargin.
+double estimateLambdaMax(const AmgMatrix& A, const Eigen::VectorXd& diagInv) {
+  const Eigen::Index n = A.rows();
+  if (n == 0) return 1.0;
+  const Eigen::VectorXd s = diagInv.cwiseAbs().cwiseSqrt();
+  Eigen::VectorXd v(n);
+  for (Eigen::Index i = 0; i < n; ++i) v[i] = std::fmod(0.6180339887 * double(i + 1), 1.0) - 0.5;
+  v.normalize();
+  double lambda = 1.0;
+  for (int k = 0; k < kPowerIterations; ++k) {
+    const Eigen::VectorXd w = s.cwiseProduct(A * s.cwiseProduct(v));
+    lambda = v.dot(w);
+    const double norm = w.norm();
+    if (!(norm > 0.0) || !std::isfinite(norm)) break;
+    v = w / norm;
+  }
+  return std::isfinite(lambda) && lambda > 0.0 ? kLambdaMargin * lambda : 1.0;
+}
+
+/// Chebyshev smoothing of A x = b with D^-1 over [lambdaMax / kChebyshevRange, lambdaMax]:
+/// kChebyshevDegree applications of D^-1 (one product fewer from a zero start).
+template <class Apply>
+void chebyshev(const Apply& apply, const Eigen::VectorXd& diagInv, double lambdaMax, const Eigen::VectorXd& b,
+               Eigen::VectorXd& x, bool zeroStart) {
+  const double hi = lambdaMax, lo = lambdaMax / kChebyshevRange;
+  const double theta = 0.5 * (hi + lo), delta = 0.5 * (hi - lo), sigma = theta / delta;
+  double rho = 1.0 / sigma;
+  Eigen::VectorXd r, ad;
+  if (zeroStart) {
+    x.setZero(b.size());
+    r = b;
+  } else {
+    apply(x, ad);
+    r = b - ad;
+  }
+  Eigen::VectorXd d = diagInv.cwiseProduct(r) / theta;
+  for (int k = 1;; ++k) {
+    x += d;
+    if (k == WarpedAmg::kChebyshevDegree) break;
+    apply(d, ad);
+    r -= ad;
+    const double rhoNew = 1.0 / (2.0 * sigma - rho);
+    d = (rhoNew * rho) * d + (2.0 * rhoNew / delta) * diagInv.cwiseProduct(r);
+    rho = rhoNew;
+  }
+}
+
+/// Greedy aggregation of a graph (CSR: neighbours of vertex v in adj[start[v] .. start[v+1]]):
+/// each vertex whose neighbours are all free founds an aggregate with them; the vertices left join
+/// the aggregate most of their neighbours are in; isolated ones form their own. Returns the
+/// aggregate of each vertex and sets `count`.
+std::vector<int> aggregate(const std::vector<int>& start, const std::vector<int>& adj, int& count) {
+  const int n = static_cast<int>(start.size()) - 1;
+  std::vector<int> agg(static_cast<std::size_t>(n), -1);
+  count = 0;
+  for (int v = 0; v < n; ++v) {
+    if (agg[v] >= 0) continue;
+    bool free = true;
+    for (int k = start[v]; k < start[v + 1] && free; ++k) free = agg[adj[k]] < 0;
+    if (!free) continue;
+    agg[v] = count;
+    for (int k = start[v]; k < start[v + 1]; ++k) agg[adj[k]] = count;
+    ++count;
+  }
+  const std::vector<int> first = agg;  // the joins below look at the first pass's aggregates only
+  std::vector<int> votes;
+  for (int v = 0; v < n; ++v) {
+    if (first[v] >= 0) continue;
+    int best = -1, bestVotes = 0;
+    votes.clear();
+    for (int k = start[v]; k < start[v + 1]; ++k)
+      if (first[adj[k]] >= 0) votes.push_back(first[adj[k]]);
+    std::sort(votes.begin(), votes.end());
+    for (std::size_t i = 0; i < votes.size();) {
+      std::size_t j = i;
+      while (j < votes.size() && votes[j] == votes[i]) ++j;
+      if (static_cast<int>(j - i) > bestVotes) {
+        bestVotes = static_cast<int>(j - i);
+        best = votes[i];
+      }
+      i = j;
+    }
+    agg[v] = best >= 0 ? best : count++;
+  }
+  return agg;
+}
+
+}  // namespace
+
+void WarpedAmg::clear() {
+  levels_.clear();
+  freeDofs_.clear();
+  rotations_.clear();
+}
+
+void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+                      std::size_t nodeCount) {
+  clear();
+  const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs.size());
+  if (A0.rows() != nf || A0.cols() != nf || static_cast<std::size_t>(rest.size()) != 3 * nodeCount)
+    fail(ErrorCode::Internal, "WarpedAmg::build: an operator of ", A0.rows(), " x ", A0.cols(), " for ", nf,
+         " free dofs and ", rest.size(), " rest coordinates of ", nodeCount, " nodes");
+  freeDofs_ = freeDofs;
+  if (nf == 0) return;
+
+  // Level 0's vertices are the nodes with a free dof; `vertexStart` ranges their dofs (free indices
+  // are ascending in dof order, so a node's free dofs are consecutive).
+  std::vector<int> vertexOf(static_cast<std::size_t>(nf));
+  std::vector<int> vertexStart{0};
+  for (Eigen::Index i = 0; i < nf; ++i) {
+    if (i > 0 && freeDofs[i] / 3 != freeDofs[i - 1] / 3) vertexStart.push_back(static_cast<int>(i));
+    vertexOf[i] = static_cast<int>(vertexStart.size()) - 1;
+  }
+  vertexStart.push_back(static_cast<int>(nf));
+
+  // The rigid-body modes about the rest bounding box's centre.
+  Eigen::Vector3d lo = rest.segment<3>(0), hi = lo;
+  for (std::size_t n = 1; n < nodeCount; ++n) {
+    lo = lo.cwiseMin(rest.segment<3>(3 * n));
+    hi = hi.cwiseMax(rest.segment<3>(3 * n));
+  }
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(nf, 6);
+  for (Eigen::Index i = 0; i < nf; ++i) {
+    const Eigen::Index dof = freeDofs[i];
+    const int c = static_cast<int>(dof % 3);
+    const Eigen::Vector3d d = rest.segment<3>(3 * (dof / 3)) - centre;
+    B(i, c) = 1.0;
+    // Column 3 + k: the displacement e_k x d, component c: e_x x d = (0, -d_z, d_y),
+    // e_y x d = (d_z, 0, -d_x), e_z x d = (-d_y, d_x, 0).
+    const double rot[3][3] = {{0.0, -d[2], d[1]}, {d[2], 0.0, -d[0]}, {-d[1], d[0], 0.0}};
+    for (int k = 0; k < 3; ++k) B(i, 3 + k) = rot[k][c];
+  }
+
+  AmgLevel level;
+  level.A = A0;
+  for (;;) {
+    level.diagInv = inverseDiagonal(level.A);
+    level.lambdaMax = estimateLambdaMax(level.A, level.diagInv);
+    const Eigen::Index n = level.A.rows();
+    if (n <= kCoarsestDofs || levels_.size() + 1 >= kMaxLevels) break;
+
+    // The vertex graph of the level's operator.
+    const int nv = static_cast<int>(vertexStart.size()) - 1;
+    std::vector<int> start(static_cast<std::size_t>(nv) + 1, 0), adj;
+    {
+      std::vector<int> mark(static_cast<std::size_t>(nv), -1);
+      for (int v = 0; v < nv; ++v) {
+        mark[v] = v;  // no self loop
+        for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i)
+          for (AmgMatrix::InnerIterator it(level.A, i); it; ++it) {
+            const int u = vertexOf[static_cast<std::size_t>(it.col())];
+            if (mark[u] != v && it.value() != 0.0) {
+              mark[u] = v;
+              adj.push_back(u);
+            }
+          }
+        start[v + 1] = static_cast<int>(adj.size());
+      }
+    }
+    int aggregates = 0;
+    const std::vector<int> agg = aggregate(start, adj, aggregates);
+
+    // Tentative prolongator and the next level's near-null space, aggregate by aggregate.
+    std::vector<std::vector<int>> members(static_cast<std::size_t>(aggregates));
+    for (int v = 0; v < nv; ++v) members[agg[v]].push_back(v);
+    std::vector<Eigen::Triplet<double, int>> triplets;
+    std::vector<Eigen::MatrixXd> coarseB;
+    std::vector<int> coarseVertexStart{0};
+    int coarseDofs = 0;
+    for (int a = 0; a < aggregates; ++a) {
+      std::vector<int> rows;
+      for (int v : members[a])
+        for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i) rows.push_back(i);
+      Eigen::MatrixXd Ba(static_cast<Eigen::Index>(rows.size()), B.cols());
+      for (std::size_t k = 0; k < rows.size(); ++k) Ba.row(static_cast<Eigen::Index>(k)) = B.row(rows[k]);
+      Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Ba);
+      const Eigen::VectorXd rdiag = qr.matrixR().diagonal().cwiseAbs();
+      const double top = rdiag.size() > 0 ? rdiag.maxCoeff() : 0.0;
+      Eigen::Index rank = 0;
+      while (rank < rdiag.size() && rdiag[rank] > kRankThreshold * top && top > 0.0) ++rank;
+      if (rank == 0) continue;  // nothing of the near-null space lives here
+      const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(Ba.rows(), rank);
+      for (std::size_t k = 0; k < rows.size(); ++k)
+        for (Eigen::Index j = 0; j < rank; ++j)
+          triplets.emplace_back(rows[k], coarseDofs + static_cast<int>(j), Q(static_cast<Eigen::Index>(k), j));
+      coarseB.push_back(Q.transpose() * Ba);
+      coarseDofs += static_cast<int>(rank);
+      coarseVertexStart.push_back(coarseDofs);
+    }
+    if (coarseDofs == 0 || coarseDofs > kStallRatio * double(n)) break;
+    AmgMatrix tentative(n, coarseDofs);
+    tentative.setFromTriplets(triplets.begin(), triplets.end());
+
+    // P = (I - omega D^-1 A) P_t.
+    const double omega = 4.0 / (3.0 * level.lambdaMax);
+    AmgMatrix AP = level.A * tentative;
+    AmgMatrix P = tentative - AmgMatrix((omega * level.diagInv).asDiagonal() * AP);
+    P.prune(0.0);
+    AmgMatrix Pt = P.transpose();
+    AmgMatrix coarse = Pt * (level.A * P);
+    coarse = AmgMatrix(0.5 * (coarse + AmgMatrix(coarse.transpose())));
+    coarse.prune(0.0);
+
+    level.P = std::move(P);
+    level.Pt = std::move(Pt);
+    levels_.push_back(std::move(level));
+    level = AmgLevel{};
+    level.A = std::move(coarse);
+    B.resize(coarseDofs, 6);
+    for (std::size_t a = 0, at = 0; a < coarseB.size(); ++a) {
+      B.middleRows(static_cast<Eigen::Index>(at), coarseB[a].rows()) = coarseB[a];
+      at += static_cast<std::size_t>(coarseB[a].rows());
+    }
+    vertexStart = std::move(coarseVertexStart);
+    vertexOf.assign(static_cast<std::size_t>(coarseDofs), 0);
+    for (std::size_t v = 0; v + 1 < vertexStart.size(); ++v)
+      for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i) vertexOf[static_cast<std::size_t>(i)] = static_cast<int>(v);
+  }
+  // The coarsest level, factored; a relative shift keeps a singular one (a free-floating body in
+  // statics) from dividing by zero.
+  Eigen::SparseMatrix<double> coarsest = level.A;
+  const double shift = 1e-12 * (coarsest.rows() > 0 ? coarsest.diagonal().cwiseAbs().maxCoeff() : 0.0);
+  for (Eigen::Index i = 0; i < coarsest.rows(); ++i) coarsest.coeffRef(i, i) += shift;
+  coarsest_.compute(coarsest);
+  levels_.push_back(std::move(level));
+}
+
+void WarpedAmg::setRotations(std::vector<Mat3> nodeRotations) { rotations_ = std::move(nodeRotations); }
+
+std::vector<Eigen::Index> WarpedAmg::levelSizes() const {
+  std::vector<Eigen::Index> sizes;
+  for (const AmgLevel& l : levels_) sizes.push_back(l.A.rows());
+  return sizes;
+}
+
+void WarpedAmg::warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const {
+  out = v;
+  if (rotations_.empty()) return;
+  const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs_.size());
+  for (Eigen::Index i = 0; i < nf;) {
+    // The free dofs of one node: rotate its 3-vector (constrained components 0), keep the free ones.
+    const Eigen::Index node = freeDofs_[i] / 3;
+    Eigen::Index j = i;
+    Eigen::Vector3d u = Eigen::Vector3d::Zero();
+    while (j < nf && freeDofs_[j] / 3 == node) {
+      u[freeDofs_[j] % 3] = v[j];
+      ++j;
+    }
+    const Mat3& R = rotations_[static_cast<std::size_t>(node)];
+    const Eigen::Vector3d w = transpose ? Eigen::Vector3d(R.transpose() * u) : Eigen::Vector3d(R * u);
+    for (Eigen::Index k = i; k < j; ++k) out[k] = w[freeDofs_[k] % 3];
+    i = j;
+  }
+}
+
+void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& x, const AmgFineOperator* fine) const {
+  const AmgLevel& level = levels_[l];
+  if (l + 1 == levels_.size()) {
+    x = coarsest_.solve(b);
+    return;
+  }
+  const Eigen::VectorXd& diagInv = fine ? *fine->diagInv : level.diagInv;
+  auto apply = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) {
+    if (fine)
+      fine->apply(v, y);
+    else
+      y = level.A * v;
+  };
+  chebyshev(apply, diagInv, level.lambdaMax, b, x, true);
+  Eigen::VectorXd r;
+  apply(x, r);
+  r = b - r;
+  Eigen::VectorXd coarseB, coarseX, e;
+  if (fine) {
+    Eigen::VectorXd rr;
+    warp(r, rr, true);
+    coarseB = level.Pt * rr;
+  } else {
+    coarseB = level.Pt * r;
+  }
+  cycle(l + 1, coarseB, coarseX, nullptr);
+  if (fine) {
+    warp(level.P * coarseX, e, false);
+    x += e;
+  } else {
+    x += level.P * coarseX;
+  }
+  chebyshev(apply, diagInv, level.lambdaMax, b, x, false);
+}
+
+void WarpedAmg::apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
+  if (levels_.empty()) {
+    z = r;
+    return;
+  }
+  if (levels_.size() == 1) {  // small enough to be solved directly; the rest operator, warped
+    Eigen::VectorXd rr;
+    warp(r, rr, true);
+    warp(coarsest_.solve(rr), z, false);
+    return;
+  }
+  cycle(0, r, z, &fine);
+}
+
+std::vector<Mat3> nodeRotations(const std::vector<std::uint32_t>& tets, const std::vector<Mat3>& elementRotations,
+                                const std::vector<double>& elementVolumes, std::size_t nodeCount) {
+  std::vector<Mat3> sum(nodeCount, Mat3::Zero());
+  for (std::size_t e = 0; e < elementRotations.size(); ++e)
+    for (int k = 0; k < 4; ++k) sum[tets[4 * e + k]] += elementVolumes[e] * elementRotations[e];
+  for (Mat3& R : sum) R = R.isZero(0.0) ? Mat3::Identity() : polarRotation(R);
+  return sum;
+}
+
+}  // namespace corofem::detail

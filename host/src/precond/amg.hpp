@@ -1,0 +1,100 @@
+// Smoothed-aggregation algebraic multigrid for the co-rotational system, warped by node rotations
+// (the "amg" preconditioner of SolverDesc).
+//
+// Jacobi needs hundreds of PCG iterations on a slender body because the smooth, long-wave modes of
+// A = m M + s K_t (bending of the whole body) are barely touched by a diagonal. Multigrid corrects
+// them on coarser levels. The hierarchy is made once from the REST operator
+// A_0 = m M + s K_0 (K_0 = sum of the linear element stiffnesses), the way SOFA's and Courtecuisse
+// et al.'s warped preconditioners reuse a rest factorisation:
+//
+//   - aggregation: the nodes (level 0) or the aggregates (coarser levels) are grouped greedily, each
+//     aggregate a vertex and its unaggregated neighbours in the operator's graph;
+//   - near-null space B: the six rigid-body modes of the free dofs (three translations, three
+//     rotations about the aggregate's rest centroid); the tentative prolongator P_t holds, per
+//     aggregate, an orthonormal basis of B restricted to the aggregate's dofs (QR), and the coarse
+//     level's B is R of that QR;
+//   - smoothing of the prolongator: P = (I - omega D^-1 A) P_t, omega = 4 / (3 lambda_max(D^-1 A));
+//   - Galerkin coarse operators A_{l+1} = P_l^T A_l P_l, down to a few hundred dofs solved by a
+//     sparse LDL^T.
+//
+// Each solve applies one symmetric V-cycle: on level 0 Chebyshev smoothing with the CURRENT
+// operator (the device's own product and diagonal), the residual restricted through the rest
+// hierarchy in each node's rotated frame, r_c = P_0^T W^T r, and the correction prolonged back,
+// e = W P_0 e_c, where W = blockdiag(R_n) holds per-node rotations (the volume-weighted polar mean of
+// the rotations of the elements around each node). For A_t close to W A_0 W^T (the co-rotational
+// assumption) the coarse correction is the rest one seen rotated. The cycle is a fixed symmetric
+// positive definite operator within a solve (same Chebyshev polynomial before and after, exact
+// coarsest solve), as PCG requires.
+#pragma once
+
+#include "model/element.hpp"
+
+#include <Eigen/Core>
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+namespace corofem::detail {
+
+using AmgMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
+
+/// One level of the hierarchy below the finest (whose operator is the current one).
+struct AmgLevel {
+  AmgMatrix A;               ///< the level's rest operator (level 0: A_0 on the free dofs)
+  Eigen::VectorXd diagInv;   ///< 1 / diag(A) (1 where the diagonal is 0)
+  double lambdaMax = 1.0;    ///< an upper estimate of the largest eigenvalue of D^-1 A
+  AmgMatrix P;               ///< prolongation from the next level (rows: this level's dofs)
+  AmgMatrix Pt;              ///< P^T
+};
+
+/// The fine operator of a V-cycle: y = A x on the free dofs, with A's diagonal.
+struct AmgFineOperator {
+  std::function<void(const Eigen::VectorXd& x, Eigen::VectorXd& y)> apply;
+  const Eigen::VectorXd* diagInv = nullptr;
+};
+
+class WarpedAmg {
+ public:
+  /// Builds the hierarchy from the rest operator `A0` on the free dofs `freeDofs` (ascending dof
+  /// indices 3 n + c of a body with `nodeCount` nodes at rest positions `rest`, 3N entries).
+  /// Throws Error(Internal) for inconsistent sizes.
+  void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+             std::size_t nodeCount);
+  bool built() const { return !levels_.empty(); }
+  void clear();
+
+  /// The rotation of every node (nodeCount of them) for the next applications; without a call
+  /// (or with an empty vector) no warp: W = I.
+  void setRotations(std::vector<Mat3> nodeRotations);
+
+  /// z = M^-1 r on the free dofs: one V-cycle with `fine` as level 0's operator.
+  void apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
+
+  /// The levels' sizes (dofs), finest first, the coarsest (solved directly) last.
+  std::vector<Eigen::Index> levelSizes() const;
+
+  /// The Chebyshev polynomial's degree on every level (the number of D^-1 A applications of one
+  /// smoothing): 2, the fewest products per converged solve on the beams of bench/bench_precond.
+  static constexpr int kChebyshevDegree = 2;
+
+ private:
+  void cycle(std::size_t level, const Eigen::VectorXd& b, Eigen::VectorXd& x, const AmgFineOperator* fine) const;
+  void warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const;
+
+  std::vector<AmgLevel> levels_;  ///< levels_[0]: rest A_0; the last one is solved directly
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
+  std::vector<Eigen::Index> freeDofs_;
+  std::vector<Mat3> rotations_;  ///< per node, or empty
+};
+
+/// The node rotations of the warp: for node n, the rotation nearest to sum_e V_e R_e over the
+/// elements e around it (polar decomposition), `tets` 4 node indices per element.
+std::vector<Mat3> nodeRotations(const std::vector<std::uint32_t>& tets, const std::vector<Mat3>& elementRotations,
+                                const std::vector<double>& elementVolumes, std::size_t nodeCount);
+
+}  // namespace corofem::detail
