@@ -159,9 +159,10 @@ TEST(WarpedAmg, PartlyConstrainedNodesAndTinyBodies) {
   const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(f.A.rows()), 9);
   EXPECT_LE(pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return f.apply(r); }), 30);
 
-  // A body below the coarsest size is solved directly (warped): one iteration.
+  // A body below the coarsest size: smoothing above the direct solve of its rest operator.
   Fixture tiny(2, kBackwardEulerMass, Mat3::Identity());
-  EXPECT_EQ(tiny.amg.levelSizes().size(), 1u);
+  EXPECT_EQ(tiny.amg.levelSizes().size(), 2u);
+  EXPECT_EQ(tiny.amg.levelSizes()[0], tiny.amg.levelSizes()[1]);
   const Eigen::VectorXd bt = randomVector(static_cast<std::size_t>(tiny.A.rows()), 4);
   EXPECT_LE(pcgIterations(tiny.A, bt, [&](const Eigen::VectorXd& r) { return tiny.apply(r); }), 1);
 }

@@ -176,6 +176,23 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     level.diagInv = inverseDiagonal(level.A);
     level.lambdaMax = estimateLambdaMax(level.A, level.diagInv);
     const Eigen::Index n = level.A.rows();
+    // A body small enough to be solved directly (or one that does not coarsen) still gets one
+    // smoothed level above its direct solve (P = I), so that every body runs the same cycle:
+    // smoothing with the current operator, the rest operator's exact solve in the rotated frame.
+    auto directBelow = [&] {
+      AmgMatrix identity(n, n);
+      identity.setIdentity();
+      level.P = identity;
+      level.Pt = identity;
+      AmgMatrix copy = level.A;
+      levels_.push_back(std::move(level));
+      level = AmgLevel{};
+      level.A = std::move(copy);
+    };
+    if (levels_.empty() && n <= kCoarsestDofs) {
+      directBelow();
+      break;
+    }
     if (n <= kCoarsestDofs || levels_.size() + 1 >= kMaxLevels) break;
 
     // The vertex graph of the level's operator.
@@ -226,7 +243,10 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
       coarseDofs += static_cast<int>(rank);
       coarseVertexStart.push_back(coarseDofs);
     }
-    if (coarseDofs == 0 || coarseDofs > kStallRatio * double(n)) break;
+    if (coarseDofs == 0 || coarseDofs > kStallRatio * double(n)) {
+      if (levels_.empty()) directBelow();
+      break;
+    }
     AmgMatrix tentative(n, coarseDofs);
     tentative.setFromTriplets(triplets.begin(), triplets.end());
 
@@ -332,13 +352,43 @@ void WarpedAmg::apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eig
     z = r;
     return;
   }
-  if (levels_.size() == 1) {  // small enough to be solved directly; the rest operator, warped
-    Eigen::VectorXd rr;
-    warp(r, rr, true);
-    warp(coarsest_.solve(rr), z, false);
-    return;
-  }
   cycle(0, r, z, &fine);
+}
+
+AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
+                       double stiffScale) {
+  std::vector<int> index(p.dofCount(), -1);
+  for (std::size_t i = 0; i < freeDofs.size(); ++i) index[static_cast<std::size_t>(freeDofs[i])] = static_cast<int>(i);
+  std::vector<Eigen::Triplet<double, int>> triplets;
+  triplets.reserve(p.elements.size() * 144 + freeDofs.size());
+  for (std::size_t e = 0; e < p.elements.size(); ++e) {
+    const Mat12 K = linearStiffness(p.elements[e], p.lame);
+    for (int a = 0; a < 12; ++a) {
+      const int r = index[3 * p.mesh.tets[4 * e + a / 3] + a % 3];
+      if (r < 0) continue;
+      for (int b = 0; b < 12; ++b) {
+        const int c = index[3 * p.mesh.tets[4 * e + b / 3] + b % 3];
+        if (c >= 0) triplets.emplace_back(r, c, stiffScale * K(a, b));
+      }
+    }
+  }
+  for (std::size_t i = 0; i < freeDofs.size(); ++i)
+    triplets.emplace_back(static_cast<int>(i), static_cast<int>(i), massScale * p.lumpedMass[freeDofs[i]]);
+  const auto n = static_cast<Eigen::Index>(freeDofs.size());
+  AmgMatrix A(n, n);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  return A;
+}
+
+bool BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale) {
+  const double ratio = stiffScale != 0.0 ? massScale / stiffScale : INFINITY;
+  const bool near = std::isfinite(ratio) && std::isfinite(ratio_)
+                        ? (ratio == 0.0 ? ratio_ == 0.0 : ratio_ > 0.5 * ratio && ratio_ < 2.0 * ratio)
+                        : ratio == ratio_;
+  if (amg_.built() && near) return false;
+  amg_.build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount());
+  ratio_ = ratio;
+  return true;
 }
 
 std::vector<Mat3> nodeRotations(const std::vector<std::uint32_t>& tets, const std::vector<Mat3>& elementRotations,

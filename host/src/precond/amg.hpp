@@ -28,6 +28,7 @@
 #pragma once
 
 #include "model/element.hpp"
+#include "model/problem.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
@@ -77,6 +78,7 @@ class WarpedAmg {
 
   /// The levels' sizes (dofs), finest first, the coarsest (solved directly) last.
   std::vector<Eigen::Index> levelSizes() const;
+  const std::vector<AmgLevel>& levels() const { return levels_; }
 
   /// The Chebyshev polynomial's degree on every level (the number of D^-1 A applications of one
   /// smoothing): 2, the fewest products per converged solve on the beams of bench/bench_precond.
@@ -90,6 +92,28 @@ class WarpedAmg {
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
   std::vector<Eigen::Index> freeDofs_;
   std::vector<Mat3> rotations_;  ///< per node, or empty
+};
+
+/// The rest operator m M + s K_0 of a body on its free dofs (ascending dof indices): M lumped, K_0
+/// the sum of the linear element stiffnesses (the tangent of every formulation at rest).
+AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
+                       double stiffScale);
+
+/// A body's hierarchy with the coefficients it was made for: made again where the ratio m / s of a
+/// solve's operator moved by more than a factor of 2 from the one it was made with (a
+/// preconditioner made for a nearby ratio is still a good one, and a common scale of both does
+/// not matter to PCG), or after clear() (the constraints or the material changed).
+class BodyAmg {
+ public:
+  /// Makes the hierarchy where needed; returns whether it did.
+  bool ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale);
+  void clear() { amg_.clear(); }
+  WarpedAmg& amg() { return amg_; }
+  const WarpedAmg& amg() const { return amg_; }
+
+ private:
+  WarpedAmg amg_;
+  double ratio_ = 0.0;  ///< m / s of the operator amg_ was made from (infinite for s = 0)
 };
 
 /// The node rotations of the warp: for node n, the rotation nearest to sum_e V_e R_e over the

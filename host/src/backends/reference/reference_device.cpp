@@ -390,7 +390,7 @@ class ReferenceBody {
       case PreconditionerKind::Amg: {
         Eigen::VectorXd z;
         const AmgFineOperator fine{[this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A_ * v; }, &diagInverse_};
-        amg_.apply(fine, r, z);
+        amg_.amg().apply(fine, r, z);
         return z;
       }
     }
@@ -405,33 +405,10 @@ class ReferenceBody {
     }
   }
 
-  /// The multigrid hierarchy over the rest operator m M + s K_0 (K_0: the linear element
-  /// stiffnesses, the tangent of every formulation at rest), made again where the constraints or
-  /// the material changed, or where the ratio m / s moved by more than a factor of 2 from the one
-  /// it was made with (a preconditioner made for a nearby ratio is still a good one, and a scale
-  /// of both does not matter to PCG); then the node rotations of the current positions.
+  /// The multigrid hierarchy over the rest operator with A's coefficients (BodyAmg: made again
+  /// where they moved far), then the node rotations of the current positions.
   void formAmg(const SystemCoeffs& c) {
-    const double massScale = c.mass + c.damping * p_.rayleighMass;
-    const double stiffScale = c.stiffness + c.damping * p_.rayleighStiffness;
-    const double ratio = stiffScale != 0.0 ? massScale / stiffScale : INFINITY;
-    const bool near = std::isfinite(ratio) && std::isfinite(amgRatio_)
-                          ? (ratio == 0.0 ? amgRatio_ == 0.0 : amgRatio_ > 0.5 * ratio && amgRatio_ < 2.0 * ratio)
-                          : ratio == amgRatio_;
-    if (!amg_.built() || !near) {
-      SpMat rest = A_;
-      double* values = rest.valuePtr();
-      std::fill(values, values + rest.nonZeros(), 0.0);
-      for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-        const Mat12 K = hyper_ ? linearStiffness(p_.elements[e], p_.lame) : stiffness_[e];
-        const int* slots = &elementSlots_[e * 144];
-        for (int a = 0; a < 12; ++a)
-          for (int b = 0; b < 12; ++b)
-            if (slots[12 * a + b] >= 0) values[slots[12 * a + b]] += stiffScale * K(a, b);
-      }
-      for (std::size_t i = 0; i < freeDofs_.size(); ++i) values[diagSlot_[i]] += massScale * p_.lumpedMass[freeDofs_[i]];
-      amg_.build(AmgMatrix(rest), freeDofs_, p_.restPositions, p_.mesh.nodeCount());
-      amgRatio_ = ratio;
-    }
+    amg_.ensure(p_, freeDofs_, c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness);
     if (p_.formulation == Formulation::Linear) return;  // K_t = K_0: no warp
     std::vector<Mat3> elementRotations(p_.elements.size());
     std::vector<double> volumes(p_.elements.size());
@@ -439,7 +416,7 @@ class ReferenceBody {
       elementRotations[e] = hyper_ ? polarRotation(gradients_[e]) : rotations_[e];
       volumes[e] = p_.elements[e].volume;
     }
-    amg_.setRotations(nodeRotations(p_.mesh.tets, elementRotations, volumes, p_.mesh.nodeCount()));
+    amg_.amg().setRotations(nodeRotations(p_.mesh.tets, elementRotations, volumes, p_.mesh.nodeCount()));
   }
 
   /// The kernels' stop test after the set-up and every iteration (pcg.cl, update_scalars).
@@ -475,8 +452,7 @@ class ReferenceBody {
   // w = A u; its scalars and preconditioner.
   Eigen::VectorXd bf_, xf_, r_, u_, d_, ad_, w_, diagInverse_;
   BlockJacobiPreconditioner blocks_;
-  WarpedAmg amg_;
-  double amgRatio_ = 0.0;  ///< m / s of the operator amg_ was made from
+  BodyAmg amg_;
   PcgScalars sc_;
   double gamma_ = 0.0, alpha_ = 0.0, beta_ = 0.0, tol2_ = 0.0;
   int cap_ = 0;
