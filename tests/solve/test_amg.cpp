@@ -140,7 +140,9 @@ TEST(WarpedAmg, TheWarpKeepsARotatedBodyAsEasyAsAtRest) {
   const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(rest.A.rows()), 5);
   const int atRest = pcgIterations(rest.A, b, [&](const Eigen::VectorXd& r) { return rest.apply(r); });
   const int unwarped = pcgIterations(turned.A, b, [&](const Eigen::VectorXd& r) { return turned.apply(r); });
-  turned.amg.setRotations(std::vector<Mat3>(turned.p.mesh.nodeCount(), R));
+  Eigen::VectorXd x = turned.p.restPositions;
+  for (std::size_t n = 0; n < turned.p.mesh.nodeCount(); ++n) x.segment<3>(3 * n) = R * x.segment<3>(3 * n);
+  turned.amg.setPositions(x);
   const int warped = pcgIterations(turned.A, b, [&](const Eigen::VectorXd& r) { return turned.apply(r); });
   EXPECT_LE(warped, atRest + 3) << "at rest " << atRest << ", turned and warped " << warped;
   EXPECT_GT(unwarped, warped + 5) << "turned without the warp " << unwarped << ", with it " << warped;

@@ -127,6 +127,7 @@ std::vector<int> aggregate(const std::vector<int>& start, const std::vector<int>
 
 void WarpedAmg::clear() {
   levels_.clear();
+  aggregateNodes_.clear();
   freeDofs_.clear();
   rotations_.clear();
 }
@@ -139,6 +140,7 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     fail(ErrorCode::Internal, "WarpedAmg::build: an operator of ", A0.rows(), " x ", A0.cols(), " for ", nf,
          " free dofs and ", rest.size(), " rest coordinates of ", nodeCount, " nodes");
   freeDofs_ = freeDofs;
+  rest_ = rest;
   if (nf == 0) return;
 
   // Level 0's vertices are the nodes with a free dof; `vertexStart` ranges their dofs (free indices
@@ -180,6 +182,9 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     // smoothed level above its direct solve (P = I), so that every body runs the same cycle:
     // smoothing with the current operator, the rest operator's exact solve in the rotated frame.
     auto directBelow = [&] {
+      aggregateNodes_.assign(1, {});  // the whole body turns as one
+      for (std::size_t v = 0; v + 1 < vertexStart.size(); ++v)
+        aggregateNodes_[0].push_back(static_cast<std::uint32_t>(freeDofs[vertexStart[v]] / 3));
       AmgMatrix identity(n, n);
       identity.setIdentity();
       level.P = identity;
@@ -215,6 +220,11 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     }
     int aggregates = 0;
     const std::vector<int> agg = aggregate(start, adj, aggregates);
+    if (levels_.empty()) {  // level 0: the warp's aggregates of nodes
+      aggregateNodes_.assign(static_cast<std::size_t>(aggregates), {});
+      for (int v = 0; v < nv; ++v)
+        aggregateNodes_[agg[v]].push_back(static_cast<std::uint32_t>(freeDofs[vertexStart[v]] / 3));
+    }
 
     // Tentative prolongator and the next level's near-null space, aggregate by aggregate.
     std::vector<std::vector<int>> members(static_cast<std::size_t>(aggregates));
@@ -284,7 +294,22 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
   levels_.push_back(std::move(level));
 }
 
-void WarpedAmg::setRotations(std::vector<Mat3> nodeRotations) { rotations_ = std::move(nodeRotations); }
+void WarpedAmg::setPositions(const Eigen::VectorXd& x) {
+  rotations_.assign(static_cast<std::size_t>(rest_.size() / 3), Mat3::Identity());
+  for (const std::vector<std::uint32_t>& nodes : aggregateNodes_) {
+    Eigen::Vector3d cx = Eigen::Vector3d::Zero(), cX = Eigen::Vector3d::Zero();
+    for (std::uint32_t n : nodes) {
+      cx += x.segment<3>(3 * n);
+      cX += rest_.segment<3>(3 * n);
+    }
+    cx /= double(nodes.size());
+    cX /= double(nodes.size());
+    Mat3 A = Mat3::Zero();
+    for (std::uint32_t n : nodes) A += (x.segment<3>(3 * n) - cx) * (rest_.segment<3>(3 * n) - cX).transpose();
+    const Mat3 R = A.isZero(0.0) ? Mat3::Identity() : polarRotation(A);
+    for (std::uint32_t n : nodes) rotations_[n] = R;
+  }
+}
 
 std::vector<Eigen::Index> WarpedAmg::levelSizes() const {
   std::vector<Eigen::Index> sizes;
@@ -389,15 +414,6 @@ bool BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs
   amg_.build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount());
   ratio_ = ratio;
   return true;
-}
-
-std::vector<Mat3> nodeRotations(const std::vector<std::uint32_t>& tets, const std::vector<Mat3>& elementRotations,
-                                const std::vector<double>& elementVolumes, std::size_t nodeCount) {
-  std::vector<Mat3> sum(nodeCount, Mat3::Zero());
-  for (std::size_t e = 0; e < elementRotations.size(); ++e)
-    for (int k = 0; k < 4; ++k) sum[tets[4 * e + k]] += elementVolumes[e] * elementRotations[e];
-  for (Mat3& R : sum) R = R.isZero(0.0) ? Mat3::Identity() : polarRotation(R);
-  return sum;
 }
 
 }  // namespace corofem::detail

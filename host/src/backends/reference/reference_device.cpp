@@ -406,17 +406,10 @@ class ReferenceBody {
   }
 
   /// The multigrid hierarchy over the rest operator with A's coefficients (BodyAmg: made again
-  /// where they moved far), then the node rotations of the current positions.
+  /// where they moved far), then the warp of the current positions.
   void formAmg(const SystemCoeffs& c) {
     amg_.ensure(p_, freeDofs_, c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness);
-    if (p_.formulation == Formulation::Linear) return;  // K_t = K_0: no warp
-    std::vector<Mat3> elementRotations(p_.elements.size());
-    std::vector<double> volumes(p_.elements.size());
-    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-      elementRotations[e] = hyper_ ? polarRotation(gradients_[e]) : rotations_[e];
-      volumes[e] = p_.elements[e].volume;
-    }
-    amg_.amg().setRotations(nodeRotations(p_.mesh.tets, elementRotations, volumes, p_.mesh.nodeCount()));
+    if (p_.formulation != Formulation::Linear) amg_.amg().setPositions(x_);  // linear: K_t = K_0, no warp
   }
 
   /// The kernels' stop test after the set-up and every iteration (pcg.cl, update_scalars).
