@@ -32,7 +32,8 @@ TEST(EnumNames, SolverEnumerationsParseBack) {
   for (Precision p : {Precision::Double, Precision::Float, Precision::Mixed})
     EXPECT_EQ(parse("", std::string(R"(, "solver": {"precision": ")") + toString(p) + "\"}").solver.precision, p)
         << toString(p);
-  for (PreconditionerKind p : {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
+  for (PreconditionerKind p : {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal,
+                               PreconditionerKind::Amg})
     EXPECT_EQ(parse("", std::string(R"(, "solver": {"preconditioner": ")") + toString(p) + "\"}").solver.preconditioner, p)
         << toString(p);
 }

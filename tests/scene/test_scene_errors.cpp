@@ -229,8 +229,8 @@ TEST(SceneErrors, BadEnumValueSuggestsTheNearest) {
   EXPECT_EQ(overrideError({"backend=OpenCL"}),
             "backend: unknown value \"OpenCL\"; did you mean \"opencl\"? (valid: \"auto\", \"reference\" or \"opencl\")");
   EXPECT_CONTAINS(overrideError({"solver.preconditioner=jacobi"}),
-                  "solver.preconditioner: unknown value \"jacobi\"; valid values are \"none\", \"diagonal\" or "
-                  "\"block_diagonal\"");
+                  "solver.preconditioner: unknown value \"jacobi\"; valid values are \"none\", \"diagonal\", "
+                  "\"block_diagonal\" or \"amg\"");
   EXPECT_CONTAINS(overrideError({"solver.rotation=polr"}), "did you mean \"polar\"?");
   EXPECT_CONTAINS(overrideError({"solver.precision=single"}), "solver.precision: unknown value \"single\"");
   EXPECT_CONTAINS(overrideError({"solver.linear_solver=cg"}), "did you mean \"pcg\"?");
@@ -309,8 +309,14 @@ TEST(SceneErrors, ReferenceOnlyFeaturesOnOpenClAreRejected) {
             "use \"pcg\", or the backend \"reference\"");
   EXPECT_CONTAINS(overrideError({"backend.kind=opencl", "bodies.0.formulation=neo_hookean"}),
                   "bodies[0].formulation: \"neo_hookean\" runs only on the reference backend");
-  // On "auto" the choice is left to the backend selection.
+  // "amg" runs on the reference backend only until the OpenCL backend has it (then this check goes).
+  EXPECT_EQ(overrideError({"backend=opencl", "solver.preconditioner=amg"}),
+            "solver.preconditioner: \"amg\" runs only on the reference backend so far, and the backend is \"opencl\"; "
+            "use \"diagonal\", or the backend \"reference\"");
+  // On "auto" the choice is left to the backend selection (tests/schedule/test_scheduler.cpp).
   EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"solver.linear_solver=cholesky"}).isOk());
+  EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"solver.preconditioner=amg"}).isOk());
+  EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=reference", "solver.preconditioner=amg"}).isOk());
 }
 
 // ------------------------------------------------------------------ JSON syntax

@@ -235,6 +235,13 @@ TEST(SceneParse, EnumerationsAndShorthands) {
   const Scene qr = parseOk(test::kMinimalScene, {"solver.rotation=qr", "solver.precision=float"});
   EXPECT_EQ(qr.solver.rotation, RotationMethod::Qr);
   EXPECT_EQ(qr.solver.precision, Precision::Float);
+  for (const auto& [text, kind] : std::vector<std::pair<std::string, PreconditionerKind>>{
+           {"none", PreconditionerKind::None}, {"diagonal", PreconditionerKind::Diagonal},
+           {"block_diagonal", PreconditionerKind::BlockDiagonal}, {"amg", PreconditionerKind::Amg}})
+    EXPECT_EQ(parseOk(test::kMinimalScene, {"solver.preconditioner=" + text}).solver.preconditioner, kind) << text;
+  EXPECT_EQ(parseOk(R"({"bodies": [{"mesh": {"box": {}}}], "backend": "reference", "solver": {"preconditioner": "amg"}})")
+                .solver.preconditioner,
+            PreconditionerKind::Amg);
   // Integers may be written as integral floats (1e3).
   EXPECT_EQ(parseOk(test::kMinimalScene, {"solver.max_iterations=1e3"}).solver.maxIterations, 1000);
   EXPECT_EQ(parseOk(test::kMinimalScene, {"bodies.0.fixed=[{\"list\": [2.0, 1e1]}]"}).bodies[0].fixed[0].indices,
@@ -258,6 +265,10 @@ TEST(SceneParse, ToStringNamesMatchTheJsonValues) {
   EXPECT_STREQ(toString(BackendKind::Auto), "auto");
   EXPECT_STREQ(toString(BackendKind::Reference), "reference");
   EXPECT_STREQ(toString(BackendKind::OpenCL), "opencl");
+  EXPECT_STREQ(toString(PreconditionerKind::None), "none");
+  EXPECT_STREQ(toString(PreconditionerKind::Diagonal), "diagonal");
+  EXPECT_STREQ(toString(PreconditionerKind::BlockDiagonal), "block_diagonal");
+  EXPECT_STREQ(toString(PreconditionerKind::Amg), "amg");
   // And each name parses back to the same value.
   for (Formulation f : {Formulation::Linear, Formulation::Corotational, Formulation::StVenantKirchhoff,
                         Formulation::NeoHookean})
