@@ -1,0 +1,124 @@
+// The PCG preconditioners side by side on the "Vega beam" of issue 29, reference backend, through
+// the public Simulation API: bench/scenes/vega_beam.json (1 x 0.1 x 0.1 m, box cells 60 x 6 x 6,
+// 6 tets per cell = 12,960 tets, E = 1e6 Pa, nu = 0.3, rho = 1000, clamped at x = 0, gravity -z,
+// backward Euler at h = 1/60 s, one Newton iteration, PCG tolerance 1e-6, max_iterations 3000).
+//
+//   precondStep/<preconditioner>/tets_12960   for "diagonal", "block_diagonal" and "amg"
+//   precondStep/amg/tets_103680               cells 120 x 12 x 12; slow (about 0.6 s a step and a
+//                                             set-up of seconds), so it is registered only with
+//                                             the flag --large
+//
+// Each benchmark creates its Simulation and takes 3 warm-up steps outside the timed loop (the first
+// solve builds the preconditioner: amg's hierarchy), then times 30 steps (10 on the large beam)
+// from there; a repetition starts again from a fresh Simulation, so repetitions time the same steps.
+// Counters:
+//   ms/step          wall time of sim->step per timed step (the median is the _median aggregate of
+//                    --benchmark_repetitions)
+//   pcg/step         PCG iterations per timed step
+//   first_step_ms    the first warm-up step: the preconditioner's set-up plus a step
+//   unconverged      timed steps whose solves stopped at max_iterations (0 expected)
+//   tets
+//
+// From the repository root (a Release build):
+//
+//   build/bench/bench_precond --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
+//       --benchmark_out=precond.json --benchmark_out_format=json
+//   build/bench/bench_precond --large --benchmark_filter=tets_103680 --benchmark_repetitions=3
+//
+// Results: docs/performance.md, "Preconditioners (issue 29)".
+#include <corofem/scene.hpp>
+#include <corofem/simulation.hpp>
+
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <cstring>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace corofem;
+
+const std::string kScenePath = std::string(COROFEM_SOURCE_DIR) + "/bench/scenes/vega_beam.json";
+constexpr int kWarmupSteps = 3;
+
+void precondStep(benchmark::State& state, const std::string& preconditioner, const std::string& cells) {
+  // Open-ended in steps: the benchmark decides how many it takes. No probes (no output is written).
+  auto scene = loadScene(kScenePath, {"solver.preconditioner=" + preconditioner, "bodies.0.mesh.box.cells=" + cells,
+                                      "analysis.steps=1000000", "output.probes=[]"});
+  if (!scene) {
+    state.SkipWithError(scene.message().c_str());
+    return;
+  }
+  auto sim = Simulation::create(scene.value());
+  if (!sim) {
+    state.SkipWithError(sim.message().c_str());
+    return;
+  }
+  using Clock = std::chrono::steady_clock;
+  double firstStepMs = 0;
+  for (int i = 0; i < kWarmupSteps; ++i) {
+    const auto t0 = Clock::now();
+    Status st = sim->step();
+    if (i == 0) firstStepMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    if (!st) {
+      state.SkipWithError(st.message().c_str());
+      return;
+    }
+  }
+  double ms = 0, pcg = 0, unconverged = 0;
+  for (auto _ : state) {
+    StepReport r;
+    const auto t0 = Clock::now();
+    Status st = sim->step(&r);
+    ms += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    if (!st) {
+      state.SkipWithError(st.message().c_str());
+      return;
+    }
+    pcg += r.linearIterations;
+    unconverged += r.converged ? 0 : 1;
+  }
+  const double steps = static_cast<double>(state.iterations());
+  state.counters["ms/step"] = ms / steps;
+  state.counters["pcg/step"] = pcg / steps;
+  state.counters["first_step_ms"] = firstStepMs;
+  state.counters["unconverged"] = unconverged;
+  state.counters["tets"] = static_cast<double>(sim->restMesh(0).tetCount());
+}
+
+void registerAll(bool large) {
+  for (const char* p : {"diagonal", "block_diagonal", "amg"})
+    benchmark::RegisterBenchmark((std::string("precondStep/") + p + "/tets_12960").c_str(), precondStep, p,
+                                 std::string("[60,6,6]"))
+        ->Iterations(30)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+  if (large)
+    benchmark::RegisterBenchmark("precondStep/amg/tets_103680", precondStep, std::string("amg"),
+                                 std::string("[120,12,12]"))
+        ->Iterations(10)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // --large is ours: taken out before Google Benchmark reads the rest.
+  bool large = false;
+  std::vector<char*> args;
+  for (int i = 0; i < argc; ++i) {
+    if (i > 0 && std::strcmp(argv[i], "--large") == 0) large = true;
+    else args.push_back(argv[i]);
+  }
+  int n = static_cast<int>(args.size());
+  args.push_back(nullptr);
+  benchmark::Initialize(&n, args.data());
+  if (benchmark::ReportUnrecognizedArguments(n, args.data())) return 1;
+  registerAll(large);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
