@@ -75,6 +75,7 @@ struct Config {
   Work work;
   RotationMethod rotation = RotationMethod::Polar;
   Precision precision = Precision::Float;
+  PreconditionerKind preconditioner = PreconditionerKind::Diagonal;
 };
 
 /// Minimum bytes each kernel family must move per element (4-byte indices, r-byte reals, node
@@ -104,7 +105,7 @@ void runKernel(benchmark::State& state, Config c) {
   SolverDesc s;
   s.precision = c.precision;
   s.rotation = c.rotation;
-  s.preconditioner = PreconditionerKind::Diagonal;
+  s.preconditioner = c.preconditioner;
   s.tolerance = 1e-30;  // PCG: run exactly maxIterations
   s.maxIterations = 20;
   s.checkEvery = 1000;
@@ -145,6 +146,8 @@ void runKernel(benchmark::State& state, Config c) {
       benchmark::Counter::kIsRate);
   state.counters["bytes_per_element"] = bytesPerElement(c, p);
   state.SetLabel(b->deviceName());
+  if (c.work == Work::PcgIteration)
+    bench::printProfile(b->engine(), std::string(c.preconditioner == PreconditionerKind::Amg ? "pcg_iteration_amg/" : "pcg_iteration/") + c.size.label);
 }
 
 /// The 10k-element beam of the dynamic step benchmark (40 x 6 x 7 cells, 10,080 tets), clamped at x = 0.
@@ -243,6 +246,9 @@ int registerAll() {
       add(workName(Work::Product), {dev, size, Work::Product});
       if (devices[d].fp64) add("product_double", {dev, size, Work::Product, RotationMethod::Polar, Precision::Double});
       add(workName(Work::PcgIteration), {dev, size, Work::PcgIteration});
+      // An iteration with the multigrid's V-cycle (its bandwidth fraction counts the diagonal's bytes).
+      add("pcg_iteration_amg", {dev, size, Work::PcgIteration, RotationMethod::Polar, Precision::Float,
+                                PreconditionerKind::Amg});
       if (devices[d].fp64) {
         add("pcg_iteration_mixed", {dev, size, Work::PcgIteration, RotationMethod::Polar, Precision::Mixed});
         add("pcg_iteration_double", {dev, size, Work::PcgIteration, RotationMethod::Polar, Precision::Double});

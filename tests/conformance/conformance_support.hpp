@@ -433,7 +433,7 @@ class ConformanceBase : public testing::TestWithParam<ConformanceCase> {
   void expectSolveMatches(std::size_t i, const detail::SystemCoeffs& c, const Eigen::VectorXd& b,
                           const Eigen::VectorXd& x, const detail::LinearSolveStats& st, const Eigen::VectorXd& xRef,
                           const detail::LinearSolveStats& stRef, double tau, const std::string& what,
-                          const Eigen::VectorXd* x0 = nullptr) {
+                          const Eigen::VectorXd* x0 = nullptr, bool roundingSensitive = false) {
     const detail::Problem& p = problem(i);
     SCOPED_TRACE(what + ", body '" + p.name + "'");
     const Spectrum s = spectrum(reference(), i, c);
@@ -450,8 +450,15 @@ class ConformanceBase : public testing::TestWithParam<ConformanceCase> {
                 s.kappa());
     EXPECT_TRUE(stRef.converged) << "the reference must converge for the comparison to mean anything";
     EXPECT_EQ(st.converged, stRef.converged);
-    EXPECT_TRUE(iterationsClose(st.iterations, stRef.iterations, freeCount(p), s.kappa(), tau))
-        << st.iterations << " iterations, reference " << stRef.iterations;
+    // roundingSensitive: a preconditioner applied in float whose iterates depend more on its
+    // rounding than the diagonal's (the multigrid's cycle on a body it fits poorly): at most twice
+    // the reference's count and the margin.
+    if (roundingSensitive && !isDouble())
+      EXPECT_LE(st.iterations, 2 * stRef.iterations + 2.0 + stRef.iterations / 4.0)
+          << st.iterations << " iterations, reference " << stRef.iterations;
+    else
+      EXPECT_TRUE(iterationsClose(st.iterations, stRef.iterations, freeCount(p), s.kappa(), tau))
+          << st.iterations << " iterations, reference " << stRef.iterations;
     EXPECT_LE(res, resBound) << "the true residual of the device's x";
     EXPECT_NEAR(st.relativeResidual, res, reportBound) << "the residual the device reports";
     EXPECT_LE(relErr(x, xRef), xBound);

@@ -68,8 +68,12 @@ class ConformancePcg : public ConformanceBase {
     for (std::size_t i = 0; i < count(); ++i) {
       ASSERT_TRUE(got.solves[i].failure.empty()) << got.solves[i].failure;
       ASSERT_TRUE(want.solves[i].failure.empty()) << want.solves[i].failure;
+      // The multigrid in float on the slab (a light body held in x and y on one face, turned at
+      // random: its constraints do not turn with it, so the warped rest operator fits it poorly)
+      // took 116 iterations against the double reference's 67 at the float tolerance.
       expectSolveMatches(i, bodies()[i].solve, b[i], got.x[i], got.solves[i].stats, want.x[i], want.solves[i].stats,
-                         s.tolerance, std::string("preconditioner ") + toString(pc));
+                         s.tolerance, std::string("preconditioner ") + toString(pc), nullptr,
+                         pc == PreconditionerKind::Amg);
     }
   }
 };
@@ -82,6 +86,9 @@ TEST_P(ConformancePcg, EveryBodyMatchesTheReferenceWithTheDiagonal) {
 }
 TEST_P(ConformancePcg, EveryBodyMatchesTheReferenceWithNodeBlocks) {
   everyBodyMatches(PreconditionerKind::BlockDiagonal);
+}
+TEST_P(ConformancePcg, EveryBodyMatchesTheReferenceWithMultigrid) {
+  everyBodyMatches(PreconditionerKind::Amg);
 }
 
 TEST_P(ConformancePcg, SolveLinearOfOneBodyIsItsSolveInTheSet) {

@@ -266,8 +266,8 @@ class OpenCLBatch : public ::testing::TestWithParam<DeviceCase> {
     if (isDouble()) precisions.push_back(Precision::Mixed);  // float vectors, double sums
     std::vector<SolverDesc> out;
     for (Precision precision : precisions)
-      for (PreconditionerKind preconditioner :
-           {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal})
+      for (PreconditionerKind preconditioner : {PreconditionerKind::None, PreconditionerKind::Diagonal,
+                                                PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg})
         for (int cap : {1, 2, 7, 2000}) {
           SolverDesc s = solver();
           s.precision = precision;
@@ -675,14 +675,18 @@ TEST_P(OpenCLBatch, OneLaunchIterationsGiveTheLaunchedIterationsBits) {
       for (std::size_t i = 0; i < K; ++i) solveA.push_back(request(BatchOp::Solve, i, &rhs[i], &xa[i], dyn[i % 2]));
       const unsigned long long before = way.launches();
       runOk(*a, solveA);
-      if (cap > 1) EXPECT_EQ(way.launches(), before + 1) << way.name << ": one launch for the round's iterations";
+      // The multigrid's cycle runs between launched kernels: its rounds take no one-launch path,
+      // whatever the tuning asks (and give the launched bits).
+      const bool oneLaunch = s.preconditioner != PreconditionerKind::Amg;
+      if (cap > 1) EXPECT_EQ(way.launches(), before + (oneLaunch ? 1 : 0)) << way.name << ": one launch for the round's iterations";
       for (std::size_t i = 0; i < K; ++i) {
         SCOPED_TRACE(way.name + ", " + ps[i].name + ", " + describe(s));
         expectSameSolve(solveA[i], solveB[i], xa[i], xb[i]);
         if (cap < 2000) EXPECT_LE(solveA[i].stats.iterations, cap);
         else EXPECT_TRUE(solveA[i].stats.converged);
       }
-      if (cap < 2000) EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
+      if (cap < 2000 && (s.preconditioner != PreconditionerKind::Amg || cap < 4))  // amg: 4 iterations in float
+        EXPECT_EQ(solveA[0].stats.iterations, cap) << "the beam is meant to reach the cap";
     }
   }
 }
@@ -759,9 +763,11 @@ TEST_P(OpenCLBatch, PacksGiveTheOneWorkGroupIterationsBits) {
         }
         const unsigned long long packsBefore = packPcgLaunchCount(), lanesBefore = packPcgLaneCount();
         runOk(*a, solveA);
-        if (cap > 1) {
+        if (cap > 1 && s.preconditioner != PreconditionerKind::Amg) {  // amg: launched iterations only
           EXPECT_EQ(packPcgLaunchCount(), packsBefore + 1) << variant.name << ": the packs' iterations in one launch";
           EXPECT_EQ(packPcgLaneCount(), lanesBefore + packedLanes(copies)) << variant.name << ", round " << round;
+        } else if (s.preconditioner == PreconditionerKind::Amg) {
+          EXPECT_EQ(packPcgLaunchCount(), packsBefore) << variant.name << ": amg took the packs";
         }
         const unsigned long long noPacks = packPcgLaunchCount();
         runOk(*b, solveB);

@@ -309,10 +309,8 @@ TEST(SceneErrors, ReferenceOnlyFeaturesOnOpenClAreRejected) {
             "use \"pcg\", or the backend \"reference\"");
   EXPECT_CONTAINS(overrideError({"backend.kind=opencl", "bodies.0.formulation=neo_hookean"}),
                   "bodies[0].formulation: \"neo_hookean\" runs only on the reference backend");
-  // "amg" runs on the reference backend only until the OpenCL backend has it (then this check goes).
-  EXPECT_EQ(overrideError({"backend=opencl", "solver.preconditioner=amg"}),
-            "solver.preconditioner: \"amg\" runs only on the reference backend so far, and the backend is \"opencl\"; "
-            "use \"diagonal\", or the backend \"reference\"");
+  // "amg" runs on both backends.
+  EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=opencl", "solver.preconditioner=amg"}).isOk());
   // On "auto" the choice is left to the backend selection (tests/schedule/test_scheduler.cpp).
   EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"solver.linear_solver=cholesky"}).isOk());
   EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"solver.preconditioner=amg"}).isOk());

@@ -138,7 +138,7 @@ struct AnalysisDesc {
 };
 
 enum class LinearSolverKind { Pcg, Cholesky };  ///< Cholesky only on the reference backend
-/// Amg: smoothed-aggregation multigrid over the rest operator, warped by node rotations (reference backend).
+/// Amg: smoothed-aggregation multigrid over the rest operator, warped by the rotations of node aggregates.
 enum class PreconditionerKind { None, Diagonal, BlockDiagonal, Amg };
 /// Floating-point precision of a device backend (the reference backend always computes in double).
 enum class Precision {

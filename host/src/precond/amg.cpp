@@ -128,8 +128,9 @@ std::vector<int> aggregate(const std::vector<int>& start, const std::vector<int>
 void WarpedAmg::clear() {
   levels_.clear();
   aggregateNodes_.clear();
+  aggregateRotations_.clear();
+  nodeAggregate_.clear();
   freeDofs_.clear();
-  rotations_.clear();
 }
 
 void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
@@ -292,11 +293,13 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
   for (Eigen::Index i = 0; i < coarsest.rows(); ++i) coarsest.coeffRef(i, i) += shift;
   coarsest_.compute(coarsest);
   levels_.push_back(std::move(level));
+  nodeAggregate_ = nodeAggregates();
 }
 
 void WarpedAmg::setPositions(const Eigen::VectorXd& x) {
-  rotations_.assign(static_cast<std::size_t>(rest_.size() / 3), Mat3::Identity());
-  for (const std::vector<std::uint32_t>& nodes : aggregateNodes_) {
+  aggregateRotations_.resize(aggregateNodes_.size());
+  for (std::size_t a = 0; a < aggregateNodes_.size(); ++a) {
+    const std::vector<std::uint32_t>& nodes = aggregateNodes_[a];
     Eigen::Vector3d cx = Eigen::Vector3d::Zero(), cX = Eigen::Vector3d::Zero();
     for (std::uint32_t n : nodes) {
       cx += x.segment<3>(3 * n);
@@ -306,9 +309,21 @@ void WarpedAmg::setPositions(const Eigen::VectorXd& x) {
     cX /= double(nodes.size());
     Mat3 A = Mat3::Zero();
     for (std::uint32_t n : nodes) A += (x.segment<3>(3 * n) - cx) * (rest_.segment<3>(3 * n) - cX).transpose();
-    const Mat3 R = A.isZero(0.0) ? Mat3::Identity() : polarRotation(A);
-    for (std::uint32_t n : nodes) rotations_[n] = R;
+    aggregateRotations_[a] = A.isZero(0.0) ? Mat3::Identity() : polarRotation(A);
   }
+}
+
+std::vector<int> WarpedAmg::nodeAggregates() const {
+  std::vector<int> of(static_cast<std::size_t>(rest_.size() / 3), -1);
+  for (std::size_t a = 0; a < aggregateNodes_.size(); ++a)
+    for (std::uint32_t n : aggregateNodes_[a]) of[n] = static_cast<int>(a);
+  return of;
+}
+
+Eigen::MatrixXd WarpedAmg::coarsestInverse() const {
+  if (levels_.empty()) return {};
+  const Eigen::MatrixXd A = Eigen::MatrixXd(levels_.back().A);
+  return coarsest_.solve(Eigen::MatrixXd::Identity(A.rows(), A.cols()));
 }
 
 std::vector<Eigen::Index> WarpedAmg::levelSizes() const {
@@ -319,7 +334,7 @@ std::vector<Eigen::Index> WarpedAmg::levelSizes() const {
 
 void WarpedAmg::warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const {
   out = v;
-  if (rotations_.empty()) return;
+  if (aggregateRotations_.empty()) return;
   const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs_.size());
   for (Eigen::Index i = 0; i < nf;) {
     // The free dofs of one node: rotate its 3-vector (constrained components 0), keep the free ones.
@@ -330,9 +345,12 @@ void WarpedAmg::warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transp
       u[freeDofs_[j] % 3] = v[j];
       ++j;
     }
-    const Mat3& R = rotations_[static_cast<std::size_t>(node)];
-    const Eigen::Vector3d w = transpose ? Eigen::Vector3d(R.transpose() * u) : Eigen::Vector3d(R * u);
-    for (Eigen::Index k = i; k < j; ++k) out[k] = w[freeDofs_[k] % 3];
+    const int a = nodeAggregate_[static_cast<std::size_t>(node)];
+    if (a >= 0) {
+      const Mat3& R = aggregateRotations_[static_cast<std::size_t>(a)];
+      const Eigen::Vector3d w = transpose ? Eigen::Vector3d(R.transpose() * u) : Eigen::Vector3d(R * u);
+      for (Eigen::Index k = i; k < j; ++k) out[k] = w[freeDofs_[k] % 3];
+    }
     i = j;
   }
 }

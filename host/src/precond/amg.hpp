@@ -77,6 +77,14 @@ class WarpedAmg {
   /// now and at rest), given to its nodes. Without a call no warp: W = I.
   void setPositions(const Eigen::VectorXd& x);
 
+  /// The level-0 aggregate of each node (-1: none, all its dofs constrained) and each aggregate's
+  /// rotation as the last setPositions found it (empty before).
+  std::vector<int> nodeAggregates() const;
+  const std::vector<Mat3>& aggregateRotations() const { return aggregateRotations_; }
+  std::size_t aggregateCount() const { return aggregateNodes_.size(); }
+  /// The inverse of the coarsest level's operator as the cycle solves it (dense).
+  Eigen::MatrixXd coarsestInverse() const;
+
   /// z = M^-1 r on the free dofs: one V-cycle with `fine` as level 0's operator.
   void apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
 
@@ -95,8 +103,9 @@ class WarpedAmg {
   std::vector<AmgLevel> levels_;  ///< levels_[0]: rest A_0; the last one is solved directly
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
   std::vector<Eigen::Index> freeDofs_;
-  std::vector<Mat3> rotations_;  ///< per node (its aggregate's), or empty: no warp
   std::vector<std::vector<std::uint32_t>> aggregateNodes_;  ///< the nodes of each level-0 aggregate
+  std::vector<int> nodeAggregate_;        ///< per node: its aggregate, or -1
+  std::vector<Mat3> aggregateRotations_;  ///< per aggregate, or empty: no warp
   Eigen::VectorXd rest_;
 };
 

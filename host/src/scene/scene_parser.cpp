@@ -624,9 +624,6 @@ void checkConsistency(const Reader& r, const Scene& scene) {
     if (scene.solver.linearSolver == LinearSolverKind::Cholesky)
       r.fail("solver.linear_solver", "\"cholesky\" runs only on the reference backend, and the backend is \"opencl\"; "
              "use \"pcg\", or the backend \"reference\"");
-    if (scene.solver.preconditioner == PreconditionerKind::Amg)
-      r.fail("solver.preconditioner", "\"amg\" runs only on the reference backend so far, and the backend is "
-             "\"opencl\"; use \"diagonal\", or the backend \"reference\"");
     for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
       const Formulation f = scene.bodies[i].formulation;
       if (f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean)

@@ -30,9 +30,11 @@ std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; 
 }  // namespace
 
 CpuPcg::CpuPcg(SegmentEngine& engine) : e_(engine) {
-  group_ = e_.tuning_.groupPcg != 0;
-  team_ = e_.tuning_.teamPcg != 0;
-  packs_ = e_.tuning_.packPcg != 0;
+  // The "amg" cycle runs between the launched iterations' kernels (engine_amg.hpp): no one-launch PCG.
+  const bool launched = e_.precond_ == PreconditionerKind::Amg;
+  group_ = !launched && e_.tuning_.groupPcg != 0;
+  team_ = !launched && e_.tuning_.teamPcg != 0;
+  packs_ = !launched && e_.tuning_.packPcg != 0;
   packAlways_ = e_.tuning_.packPcg > 0;
   findPackMeshes();
 }

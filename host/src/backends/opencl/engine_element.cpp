@@ -3,6 +3,7 @@
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/segment_engine.hpp"
+#include "backends/opencl/engine_amg.hpp"
 
 #include "util/error.hpp"
 
@@ -32,6 +33,7 @@ V slice(const V& v, std::size_t at, std::size_t n) {
 
 void SegmentEngine::setPositions(const BodySet& bodies, const ConstVectors& x) {
   checkSizes(bodies, x, "the positions");
+  if (amg_) amg_->positionsSet(bodies, x);
   std::size_t at = 0;
   for (const BodySet& tile : tiles(bodies, tileBytes_)) {
     setPositionsTile(tile, slice(x, at, tile.size()));

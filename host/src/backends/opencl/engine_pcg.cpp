@@ -5,6 +5,7 @@
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/cpu_pcg.hpp"
+#include "backends/opencl/engine_amg.hpp"
 #include "backends/opencl/segment_engine.hpp"
 
 #include "util/error.hpp"
@@ -36,6 +37,7 @@ void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char
   // M^-1 of the coefficients is formed here too (pcg_init), stored for the iterations.
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
          b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
+  if (amg_) amg_->cycle(true);  // u = M^-1 r by the V-cycle, over pcg_init's diagonal one
   if (productFor) {  // the packs' bodies take w = A u and the first scalars in pcg_iterate_pack
     if (!anyFor) return;
     setActive(*productFor);
@@ -53,6 +55,7 @@ void SegmentEngine::pcgIteration(bool last) {
   // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta.
   // The iteration cap's last iteration has no successor: no w = A u, only gamma and r . r.
   launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, q_, minv_, p_, s_, x_, r_, z_, partials_);
+  if (amg_) amg_->cycle(false);  // u = M^-1 r by the V-cycle, over pcg_update's diagonal one
   if (last)
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceLast),
            SumReal{round_.tolerance * round_.tolerance});
@@ -67,6 +70,7 @@ void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) 
   std::fill(xKnown_.begin(), xKnown_.end(), 0);  // the iterations change x
   std::fill(axReady_.begin(), axReady_.end(), 0);
   round_.tolerance = solver_.tolerance;
+  if (amg_) amg_->prepare(allBodies(segs_.size()));
   pcgSetup(false, false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
   segInfoStale_ = true;  // the device may have stopped a segment: the next setActive uploads the table
@@ -207,6 +211,7 @@ std::vector<PcgStart> SegmentEngine::pcgBegin(const BodySet& bodies, const std::
   // The node blocks of the bodies rotated since they were formed, for pcg_init's M^-1 (the packs'
   // own with packFresh: theirs stay stale for a later solve outside a pack).
   refreshStaleBlocks(round_.packFresh ? unpackedOnly : active);
+  if (amg_) amg_->prepare(running);
   setActive(active);
   if (round_.packWhole) {
     // The packed bodies' segments stay inactive from here (pcgSetup made the unpacked ones the

@@ -2,6 +2,7 @@
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/segment_engine.hpp"
+#include "backends/opencl/engine_amg.hpp"
 
 #include "util/error.hpp"
 
@@ -28,6 +29,15 @@ void SegmentEngine::setArg(const ClKernel& k, cl_uint i, cl_uint v) { k.setArg(i
 
 void SegmentEngine::setArg(const ClKernel& k, cl_uint i, SumReal v) {
   if (sumSize_ == sizeof(double)) {
+    k.setArg(i, &v.value, sizeof(double), dev_);
+  } else {
+    const float f = static_cast<float>(v.value);
+    k.setArg(i, &f, sizeof(float), dev_);
+  }
+}
+
+void SegmentEngine::setArg(const ClKernel& k, cl_uint i, RealArg v) {
+  if (double_) {
     k.setArg(i, &v.value, sizeof(double), dev_);
   } else {
     const float f = static_cast<float>(v.value);
@@ -177,6 +187,7 @@ void SegmentEngine::setConstraints(const BodySet& bodies, const std::vector<cons
     xKnown_[bodies[i]] = 0;
     axReady_[bodies[i]] = 0;
     warmLast_[bodies[i]] = 0;
+    if (amg_) amg_->invalidate(bodies[i]);
   }
 }
 
@@ -195,6 +206,7 @@ void SegmentEngine::setMaterial(const BodySet& bodies, const std::vector<const P
     energyKnown_[s] = 0;
     axReady_[s] = 0;
     blocksStale_[s] = 1;
+    if (amg_) amg_->invalidate(s);
   }
   // The element kernels read lambda and mu from the coefficients buffer: upload them now (the solve
   // coefficients that multiply them are formed again by the next setCoefficients).

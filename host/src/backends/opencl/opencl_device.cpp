@@ -196,9 +196,6 @@ void registerOpenCLBackend() {
     if (s.linearSolver == LinearSolverKind::Cholesky)
       return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the "
              "solver \"pcg\"";
-    if (s.preconditioner == PreconditionerKind::Amg)
-      return "the \"amg\" preconditioner runs only on the reference backend so far; set \"backend\": \"reference\" "
-             "or the preconditioner \"diagonal\"";
     return "";
   };
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,

@@ -10,6 +10,7 @@
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/segment_engine.hpp"
+#include "backends/opencl/engine_amg.hpp"
 
 #include "backends/opencl/cpu_pcg.hpp"
 #include "util/error.hpp"
@@ -99,6 +100,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
          "body or batch fewer bodies per device");
 
   cpu_ = std::make_unique<CpuPcg>(*this);
+  if (precond_ == PreconditionerKind::Amg) amg_ = std::make_unique<EngineAmg>(*this);
   try {
     build(solver);
     allocate();
@@ -175,7 +177,10 @@ void SegmentEngine::build(const SolverDesc& solver) {
   if (solver.rotation == RotationMethod::Quaternion)
     options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(tuning_.quaternionIterations);
   if (precond_ == PreconditionerKind::BlockDiagonal) options_ += " -DCOROFEM_PRECOND_BLOCK";
-  else if (precond_ == PreconditionerKind::Diagonal) options_ += " -DCOROFEM_PRECOND_DIAG";
+  // amg: pcg_init forms the current diagonal inverse its smoothing uses (engine_amg.hpp).
+  else if (precond_ == PreconditionerKind::Diagonal || precond_ == PreconditionerKind::Amg)
+    options_ += " -DCOROFEM_PRECOND_DIAG";
+  if (amg_ && ctx_->info().fp64) options_ += " -DCOROFEM_AMG_COARSEST_DOUBLE";
   static const std::string source = cl::corofemProgramSource();
   build_ = cl::buildProgram(*ctx_, "corofem", source, options_);
   kRotations_.create(build_.program, "compute_rotations", dev_);
@@ -190,6 +195,7 @@ void SegmentEngine::build(const SolverDesc& solver) {
   kPcgUpdate_.create(build_.program, "pcg_update", dev_);
   kReduceFinish_.create(build_.program, "reduce_finish", dev_);
   cpu_->createKernels();
+  if (amg_) amg_->createKernels();
 }
 
 void SegmentEngine::allocate() {
@@ -371,6 +377,8 @@ std::vector<DeviceBuffer> SegmentEngine::buffers() const {
   std::vector<DeviceBuffer> out;
   for (const auto& [name, buffer] : list)
     if (buffer->get()) out.push_back({name, buffer->bytes()});
+  if (amg_)
+    for (DeviceBuffer& b : amg_->buffers()) out.push_back(std::move(b));
   return out;
 }
 

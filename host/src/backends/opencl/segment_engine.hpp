@@ -56,12 +56,14 @@ struct KernelProfile {
 };
 
 class CpuPcg;
+class EngineAmg;
 struct CpuPcgCounts;
 
 class SegmentEngine {
  public:
   friend struct SegmentEngineTestAccess;  // tests/common/opencl_test_access.hpp
   friend class CpuPcg;
+  friend class EngineAmg;
   /// All problems share the program (precision, rotation method, preconditioner of `solver`; the
   /// kernels' shapes and strategies of `tuning`, resolved for the device); each keeps its material,
   /// mass, Rayleigh damping, constraints and formulation (co-rotational or linear). Throws
@@ -143,6 +145,11 @@ class SegmentEngine {
     double value;
   };
   void setArg(const ClKernel& k, cl_uint i, SumReal v);
+  /// A kernel argument of type real (float, or double in double precision).
+  struct RealArg {
+    double value;
+  };
+  void setArg(const ClKernel& k, cl_uint i, RealArg v);
   template <class... Args>
   void launch(const ClKernel& kernel, Span span, const Args&... args) {
     if (activeLo_ >= activeHi_) return;  // no active segment
@@ -308,6 +315,7 @@ class SegmentEngine {
   std::size_t partialTotal_ = 0;
   bool hasMass_ = false;                 ///< some body has a nonzero lumped mass
   std::unique_ptr<CpuPcg> cpu_;          ///< the CPU devices' one-launch iterations (cpu_pcg.hpp)
+  std::unique_ptr<EngineAmg> amg_;       ///< the "amg" preconditioner's levels (engine_amg.hpp), or null
   std::vector<int> lastIterations_;      ///< per segment: iterations of its last solve
 
   std::vector<cl_uint> segInfo_;         ///< host copy of the device table (kSegInfoCount per segment)

@@ -1,0 +1,78 @@
+// The "amg" preconditioner on the OpenCL engine: each body's hierarchy made on the host
+// (precond/amg.hpp, the same as the reference backend's), its levels laid end to end over the
+// bodies in device buffers, and the V-cycle of kernels/opencl/amg.cl run between pcg_init or
+// pcg_update (which form r and the current diagonal inverse) and the product w = A u.
+//
+// Per PCG iteration: 5 products of the current operator (the PCG's own and 4 in the smoothing of
+// level 0), and per coarser level 6 sparse products and 5 vector kernels; the host reads nothing.
+// The host's work per solve: the hierarchy of a body where it has none for the solve's ratio of
+// mass to stiffness (BodyAmg), and the warp (one rotation per level-0 aggregate) where its
+// positions changed.
+#pragma once
+
+#ifdef COROFEM_WITH_OPENCL
+
+#include "backends/opencl/cl_objects.hpp"
+#include "device/device.hpp"
+#include "precond/amg.hpp"
+
+#include <memory>
+#include <vector>
+
+namespace corofem::detail {
+
+class SegmentEngine;
+
+class EngineAmg {
+ public:
+  explicit EngineAmg(SegmentEngine& engine);
+  void createKernels();
+  /// Keeps the bodies' positions for their next warp.
+  void positionsSet(const BodySet& bodies, const ConstVectors& x);
+  /// The body's constraints or material changed: its hierarchy is made again at its next solve.
+  void invalidate(std::size_t segment);
+  /// Before a solve of the running segments (their coefficients set): their hierarchies, the
+  /// device's levels where one changed, the warp where positions changed.
+  void prepare(const BodySet& running);
+  /// z_ = M^-1 r_ on the active segments with the partial sums pcg_update leaves (r . z, r . r),
+  /// and |free b|^2 from b_ with `setup` (pcg_init's).
+  void cycle(bool setup);
+  std::vector<DeviceBuffer> buffers() const;
+
+ private:
+  struct Csr {
+    std::unique_ptr<ClBuffer> start, cols, values;
+    std::size_t rows = 0;
+  };
+  /// Device level k >= 1: every body's hierarchy level k end to end.
+  struct Level {
+    std::size_t rows = 0;
+    Csr A, P, Pt, inverse;  ///< P: rows here, columns on level k + 1; inverse: the coarsest bodies'
+    std::unique_ptr<ClBuffer> dinv, b, x, res, d, t;
+  };
+  void upload();
+  void uploadWarp(const BodySet& running);
+  void coarse(std::size_t k);
+  void spmv(const Csr& m, const ClBuffer& x, const ClBuffer* b, cl_uint mode, const ClBuffer& y);
+  std::unique_ptr<ClBuffer> buffer(std::size_t bytes);
+  std::unique_ptr<ClBuffer> reals(const std::vector<double>& values);
+  /// `doubleValues`: the values in double whatever the engine's precision (the coarsest inverse).
+  void setRows(Csr& out, const AmgMatrix& m, bool doubleValues = false);
+
+  SegmentEngine& e_;
+  std::vector<BodyAmg> bodies_;           ///< per segment
+  std::vector<std::vector<Eigen::Index>> freeDofs_;  ///< per segment, in the problem's numbering
+  std::vector<Eigen::VectorXd> positions_;  ///< per segment: the last positions set
+  std::vector<char> warpStale_;
+  bool dirty_ = true;                     ///< the device levels lag the hierarchies
+  // Level 0 (device dofs), levels 1.. and the warp.
+  Csr P0_, Pt0_;
+  std::vector<Level> levels_;             ///< levels_[k - 1] is device level k
+  std::unique_ptr<ClBuffer> scale_, res0_, d0_, ad0_, e0_, nodeAggregate_, rotations_;
+  std::vector<std::size_t> aggregateBegin_;  ///< per segment: its first aggregate in rotations_
+  ClKernel kFineBegin_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarseAdd_, kCoarsest_;
+};
+
+}  // namespace corofem::detail
+
+#endif  // COROFEM_WITH_OPENCL
