@@ -396,6 +396,79 @@ TEST(CApi, TheOptionsAreChecked) {
   EXPECT_EQ(none.sim, nullptr);
 }
 
+/// The input limits (corofem_input_limits, corofem::InputLimits): the defaults are the C++ API's, a
+/// zeroed field takes its default, and each limit holds where the C++ one does, in the scene calls
+/// and in a simulation's options (creation and added bodies), with messages naming the C field.
+TEST(CApi, TheInputLimitsHoldAndCanBeRaised) {
+  const InputLimits cpp;
+  const corofem_input_limits defaults = corofem_default_input_limits();
+  EXPECT_EQ(defaults.max_input_bytes, cpp.maxInputBytes);
+  EXPECT_EQ(defaults.max_scene_bytes, cpp.maxSceneBytes);
+  EXPECT_EQ(defaults.max_box_tets, cpp.maxBoxTets);
+  const corofem_options options = corofem_default_options();
+  EXPECT_EQ(options.limits.max_input_bytes, cpp.maxInputBytes);
+  EXPECT_EQ(options.limits.max_scene_bytes, cpp.maxSceneBytes);
+  EXPECT_EQ(options.limits.max_box_tets, cpp.maxBoxTets);
+
+  const std::string dir = tempDir().string();
+  writeBoxSurface(dir + "/box.obj", {0.02, 0.02, 0.02}, {0.48, 0.08, 0.08});  // over 1 KiB
+  const std::string json = twoBodies("reference");  // boxes of 200 and 10 tetrahedra
+  // Parsing: a box over max_box_tets.
+  corofem_input_limits limits{};  // zeroed: the defaults
+  CScene scene;
+  C_OK(corofem_scene_parse_with_limits(json.c_str(), dir.c_str(), nullptr, 0, &limits, &scene.scene));
+  limits.max_box_tets = 199;
+  corofem_scene* refused = nullptr;
+  EXPECT_EQ(corofem_scene_parse_with_limits(json.c_str(), dir.c_str(), nullptr, 0, &limits, &refused),
+            COROFEM_BAD_INPUT);
+  EXPECT_EQ(refused, nullptr);
+  EXPECT_EQ(message().rfind("corofem_scene_parse_with_limits: ", 0), 0u) << message();
+  EXPECT_NE(message().find("give 200 tetrahedra, more than the limit of 199 (InputLimits::maxBoxTets)"),
+            std::string::npos)
+      << message();
+  EXPECT_NE(message().find("corofem_input_limits.max_box_tets"), std::string::npos) << message();
+  // Loading: a scene file over max_scene_bytes.
+  const std::string path = dir + "/scene.json";
+  std::ofstream(path) << json;
+  limits = corofem_input_limits{};
+  limits.max_scene_bytes = 100;
+  EXPECT_EQ(corofem_scene_load_with_limits(path.c_str(), nullptr, 0, &limits, &refused), COROFEM_BAD_INPUT);
+  EXPECT_NE(message().find("more than the limit of 100 bytes (InputLimits::maxSceneBytes)"), std::string::npos)
+      << message();
+  EXPECT_NE(message().find("corofem_input_limits.max_scene_bytes"), std::string::npos) << message();
+  limits.max_scene_bytes = 4096;
+  CScene loaded;
+  C_OK(corofem_scene_load_with_limits(path.c_str(), nullptr, 0, &limits, &loaded.scene));
+  CScene plain;
+  C_OK(corofem_scene_load(path.c_str(), nullptr, 0, &plain.scene));
+
+  // Creation: the render surface over max_input_bytes, then a box over max_box_tets.
+  corofem_options o = corofem_default_options();
+  o.limits.max_input_bytes = 100;
+  CSim sim;
+  EXPECT_EQ(corofem_simulation_create(scene.scene, &o, &sim.sim), COROFEM_BAD_INPUT);
+  EXPECT_NE(message().find("box.obj: it has "), std::string::npos) << message();
+  EXPECT_NE(message().find("more than the limit of 100 bytes (InputLimits::maxInputBytes)"), std::string::npos)
+      << message();
+  EXPECT_EQ(corofem_warm_up(scene.scene, &o, nullptr), COROFEM_BAD_INPUT);
+  o = corofem_options{};  // zeroed: no devices, no device lent, the default limits
+  o.limits.max_box_tets = 199;
+  EXPECT_EQ(corofem_simulation_create(scene.scene, &o, &sim.sim), COROFEM_BAD_INPUT);
+  EXPECT_NE(message().find("more than the limit of 199 (InputLimits::maxBoxTets)"), std::string::npos) << message();
+  EXPECT_EQ(sim.sim, nullptr);
+  o.limits.max_box_tets = 200;
+  C_OK(corofem_simulation_create(scene.scene, &o, &sim.sim));
+  // An added body: under the simulation's limits (a box of 5 x 10 x 1 cells: 250 tetrahedra).
+  const std::string one = R"({"bodies": [{"name": "slab", "mesh": {"box": {"min": [2, 0, 0], "max": [2.5, 1, 0.1],
+      "cells": [5, 10, 1]}}}]})";
+  CScene extra;
+  C_OK(corofem_scene_parse(one.c_str(), dir.c_str(), nullptr, 0, &extra.scene));
+  int index = -1;
+  EXPECT_EQ(corofem_simulation_add_body(sim.sim, extra.scene, 0, &index), COROFEM_BAD_INPUT);
+  EXPECT_NE(message().find("give 250 tetrahedra, more than the limit of 200"), std::string::npos) << message();
+  EXPECT_EQ(index, -1);
+}
+
 /// Every entry point with a NULL handle: BadInput, with a message that starts with its name.
 TEST(CApi, EveryCallRefusesANullHandleByName) {
   const double v3[3] = {0, 0, 0};
@@ -413,6 +486,10 @@ TEST(CApi, EveryCallRefusesANullHandleByName) {
   const std::vector<std::pair<std::string, std::function<corofem_status()>>> calls = {
       {"corofem_scene_load", [&] { return corofem_scene_load(nullptr, nullptr, 0, &scene); }},
       {"corofem_scene_parse", [&] { return corofem_scene_parse(nullptr, "", nullptr, 0, &scene); }},
+      {"corofem_scene_load_with_limits",
+       [&] { return corofem_scene_load_with_limits(nullptr, nullptr, 0, nullptr, &scene); }},
+      {"corofem_scene_parse_with_limits",
+       [&] { return corofem_scene_parse_with_limits(nullptr, "", nullptr, 0, nullptr, &scene); }},
       {"corofem_scene_body_count", [&] { return corofem_scene_body_count(nullptr, &i); }},
       {"corofem_scene_set_step_count", [&] { return corofem_scene_set_step_count(nullptr, 1); }},
       {"corofem_scene_set_body_mesh", [&] { return corofem_scene_set_body_mesh(nullptr, 0, &d, 4, &node, 1); }},

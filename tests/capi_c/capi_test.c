@@ -130,6 +130,21 @@ static void scene_errors(const char* scene_path) {
   FAILS(corofem_scene_load(scene_path, overrides, 1, &scene), COROFEM_BAD_INPUT, "youngs_modulus");
   CHECK(scene == NULL, "a failed load gave a scene");
   FAILS(corofem_scene_body_count(NULL, &count), COROFEM_BAD_INPUT, "scene is NULL");
+
+  /* The input limits: a scene file over max_scene_bytes is refused naming the limit; raised, it loads. */
+  {
+    corofem_input_limits limits = corofem_default_input_limits();
+    CHECK(limits.max_scene_bytes == 16u << 20, "the default max_scene_bytes is %llu",
+          (unsigned long long)limits.max_scene_bytes);
+    limits.max_scene_bytes = 10;
+    FAILS(corofem_scene_load_with_limits(scene_path, NULL, 0, &limits, &scene), COROFEM_BAD_INPUT,
+          "max_scene_bytes");
+    CHECK(scene == NULL, "a failed load gave a scene");
+    limits.max_scene_bytes = 1u << 20;
+    OK(corofem_scene_load_with_limits(scene_path, NULL, 0, &limits, &scene));
+    corofem_scene_destroy(scene);
+    scene = NULL;
+  }
   corofem_scene_destroy(NULL); /* nothing */
   corofem_simulation_destroy(NULL);
 }

@@ -169,6 +169,65 @@ TEST(Issue27Item4, InfoOnADirectoryOrAFifoIsBadInput) {
   EXPECT_TRUE(has(r.output, "is a FIFO")) << r.output;
 }
 
+/// The input limits (corofem::InputLimits) are the flags --max-input-bytes, --max-scene-bytes and
+/// --max-box-tets of every command: an input over one is exit 2 naming the limit and the flag, and
+/// the flag raises it.
+TEST(Issue27Item4, TheLimitFlagsSetTheInputLimits) {
+  const fs::path dir = corofem::test::tempDir();
+  std::ofstream(dir / "small.msh") << "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n"
+                                      "3 0 1 0\n4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n";
+  const std::string mesh = quoted(dir / "small.msh");  // 129 bytes
+  for (const std::string& command : {"info " + mesh, "convert " + mesh + " " + quoted(dir / "small.vtu")}) {
+    auto r = runCli(command + " --max-input-bytes 100");
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_TRUE(has(r.output, "small.msh: it has 129 bytes, more than the limit of 100 bytes "
+                              "(InputLimits::maxInputBytes)"))
+        << r.output;
+    EXPECT_TRUE(has(r.output, "--max-input-bytes, e.g. --max-input-bytes 4G")) << r.output;
+    r = runCli(command + " --max-input-bytes=1K");
+    EXPECT_EQ(r.exitCode, 0) << r.output;
+  }
+  auto r = runCli("info " + mesh + " --max-input-bytes lots");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "--max-input-bytes \"lots\" is not a limit")) << r.output;
+  r = runCli("info " + mesh + " --max-box-tets");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "--max-box-tets needs a value")) << r.output;
+
+  // run and warmup: the scene file, its box (2 x 1 x 1 cells: 10 tetrahedra) and its .bou file.
+  const std::string scene = quoted(writeScene(dir, tinyScene()));
+  const std::string out = " -q --out " + quoted(dir / "out");
+  for (const std::string& command : {"run " + scene + out, "warmup " + scene}) {
+    r = runCli(command + " --max-box-tets 9");
+    EXPECT_EQ(r.exitCode, 2) << r.output;
+    EXPECT_TRUE(has(r.output, "give 10 tetrahedra, more than the limit of 9 (InputLimits::maxBoxTets)")) << r.output;
+    EXPECT_TRUE(has(r.output, "--max-box-tets")) << r.output;
+  }
+  r = runCli("run " + scene + out + " --max-scene-bytes 100");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "bytes, more than the limit of 100 bytes (InputLimits::maxSceneBytes)")) << r.output;
+  EXPECT_TRUE(has(r.output, "--max-scene-bytes")) << r.output;
+  r = runCli("run " + scene + out + " --max-box-tets 10 --max-scene-bytes 1K --max-input-bytes 100");
+  EXPECT_EQ(r.exitCode, 0) << r.output;
+  // A .bou file is read by the simulation, under the flag too.
+  std::ofstream(dir / "fix.bou") << "1\n# " << std::string(200, 'x') << "\n";
+  std::string withBou = tinyScene();
+  const std::string plane = R"({"plane": {"point": [0, 0, 0], "normal": [1, 0, 0]}})";
+  withBou.replace(withBou.find(plane), plane.size(), R"({"bou": "fix.bou"})");
+  const std::string bouScene = quoted(writeScene(dir, withBou, "bou.json"));
+  r = runCli("run " + bouScene + out + " --max-input-bytes 100");
+  EXPECT_EQ(r.exitCode, 2) << r.output;
+  EXPECT_TRUE(has(r.output, "fix.bou")) << r.output;
+  EXPECT_TRUE(has(r.output, "more than the limit of 100 bytes (InputLimits::maxInputBytes)")) << r.output;
+  r = runCli("run " + bouScene + out + " --max-input-bytes 1K");
+  EXPECT_EQ(r.exitCode, 0) << r.output;
+  // --help documents the flags.
+  r = runCli("--help");
+  EXPECT_EQ(r.exitCode, 0);
+  for (const char* flag : {"--max-input-bytes SIZE", "--max-scene-bytes SIZE", "--max-box-tets COUNT"})
+    EXPECT_TRUE(has(r.output, flag)) << r.output;
+}
+
 // ------------------------------------------------------------------ item 5
 TEST(Issue27Item5, AHugeOverrideIsNotEchoedWhole) {
   const fs::path dir = corofem::test::tempDir();

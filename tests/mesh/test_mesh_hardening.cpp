@@ -5,7 +5,6 @@
 #include "mesh/mesh_test_util.hpp"
 
 #include <cerrno>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -20,29 +19,12 @@ using corofem::test::tempDir;
 using corofem::test::writeTemp;
 namespace fs = std::filesystem;
 
-/// Sets an environment variable for the test's duration.
-class ScopedEnv {
- public:
-  ScopedEnv(const char* name, const char* value) : name_(name) {
-    if (const char* old = std::getenv(name)) old_ = old, had_ = true;
-    ::setenv(name, value, 1);
-  }
-  ~ScopedEnv() {
-    if (had_) ::setenv(name_, old_.c_str(), 1);
-    else ::unsetenv(name_);
-  }
-
- private:
-  const char* name_;
-  std::string old_;
-  bool had_ = false;
-};
-
 const std::string kGmsh = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n"
                           "$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n";
 
-std::string tetFailure(const std::string& path, ErrorCode code = ErrorCode::BadInput) {
-  auto r = corofem::readTetMesh(path);
+std::string tetFailure(const std::string& path, ErrorCode code = ErrorCode::BadInput,
+                       const corofem::InputLimits& limits = {}) {
+  auto r = corofem::readTetMesh(path, nullptr, {}, limits);
   EXPECT_FALSE(r.isOk()) << path;
   EXPECT_EQ(r.status().code(), code) << r.message();
   return r.isOk() ? std::string() : r.message();
@@ -84,22 +66,42 @@ TEST(Issue27Item4, AFifoIsRefusedWithoutBlocking) {
 }
 
 TEST(Issue27Item4, TheInputSizeLimitHoldsAndCanBeRaised) {
-  const std::string path = writeTemp(tempDir(), "small.msh", kGmsh);  // 129 bytes
+  const fs::path dir = tempDir();
+  const std::string path = writeTemp(dir, "small.msh", kGmsh);  // 129 bytes
+  corofem::InputLimits limits;
+  EXPECT_EQ(limits.maxInputBytes, std::uint64_t(1) << 30);  // the defaults
+  EXPECT_EQ(limits.maxSceneBytes, std::uint64_t(16) << 20);
+  EXPECT_EQ(limits.maxBoxTets, 50'000'000u);
+  limits.maxInputBytes = 100;
   {
-    const ScopedEnv limit("COROFEM_MAX_INPUT_BYTES", "100");
-    const std::string msg = tetFailure(path);
-    EXPECT_TRUE(contains(msg, "small.msh: it has 129 bytes, more than the limit of 100 bytes"));
-    EXPECT_TRUE(contains(msg, "COROFEM_MAX_INPUT_BYTES=4G"));
+    const std::string msg = tetFailure(path, ErrorCode::BadInput, limits);
+    EXPECT_TRUE(
+        contains(msg, "small.msh: it has 129 bytes, more than the limit of 100 bytes (InputLimits::maxInputBytes)"))
+        << msg;
+    EXPECT_TRUE(contains(msg, "raise the limit: InputLimits::maxInputBytes (C API: "
+                              "corofem_input_limits.max_input_bytes; the corofem command: --max-input-bytes, "
+                              "e.g. --max-input-bytes 4G)"))
+        << msg;
   }
-  {
-    const ScopedEnv limit("COROFEM_MAX_INPUT_BYTES", "1K");
-    EXPECT_TRUE(corofem::readTetMesh(path).isOk());
-  }
-  {
-    const ScopedEnv limit("COROFEM_MAX_INPUT_BYTES", "lots");
-    EXPECT_TRUE(contains(tetFailure(path), "COROFEM_MAX_INPUT_BYTES=\"lots\" is not a limit"));
-  }
+  // Every reader: TetGen reads its two files under the limit, OBJ surfaces too.
+  writeTemp(dir, "t.node", "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n");
+  writeTemp(dir, "t.ele", "1 4 0\n1 1 2 3 4\n" + std::string(200, '#') + "\n");
+  limits.maxInputBytes = 100;
+  EXPECT_TRUE(contains(tetFailure((dir / "t.node").string(), ErrorCode::BadInput, limits), "t.ele: it has "));
+  const std::string obj = writeTemp(dir, "s.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n" + std::string(200, '#'));
+  auto surface = corofem::readSurfaceMesh(obj, nullptr, limits);
+  EXPECT_EQ(surface.status().code(), ErrorCode::BadInput) << surface.message();
+  EXPECT_TRUE(contains(surface.message(), "more than the limit of 100 bytes")) << surface.message();
+  limits.maxInputBytes = 1024;  // raised
+  EXPECT_TRUE(corofem::readTetMesh(path, nullptr, {}, limits).isOk());
+  EXPECT_TRUE(corofem::readTetMesh((dir / "t.node").string(), nullptr, {}, limits).isOk());
+  EXPECT_TRUE(corofem::readSurfaceMesh(obj, nullptr, limits).isOk());
   EXPECT_TRUE(corofem::readTetMesh(path).isOk());  // the default: 1 GiB
+  // At the limit exactly is allowed.
+  limits.maxInputBytes = 129;
+  EXPECT_TRUE(corofem::readTetMesh(path, nullptr, {}, limits).isOk());
+  limits.maxInputBytes = 128;
+  EXPECT_FALSE(corofem::readTetMesh(path, nullptr, {}, limits).isOk());
 }
 
 // ------------------------------------------------------------------ item 5: bounded messages
@@ -236,12 +238,18 @@ TEST(Issue27Item9, AHugeBoxIsBadInputNamingTheLimit) {
   ASSERT_FALSE(r.isOk());
   EXPECT_EQ(r.status().code(), ErrorCode::BadInput) << r.message();
   EXPECT_TRUE(contains(r.message(), "1000 x 1000 x 200 cells of 5 tetrahedra give 1000000000 tetrahedra, more "
-                                    "than the limit of 50000000 (COROFEM_MAX_BOX_TETS"));
-  const ScopedEnv limit("COROFEM_MAX_BOX_TETS", "100");
+                                    "than the limit of 50000000 (InputLimits::maxBoxTets, the default); use fewer "
+                                    "cells, or raise the limit if the machine has the memory: InputLimits::maxBoxTets "
+                                    "(C API: corofem_input_limits.max_box_tets; the corofem command: --max-box-tets"))
+      << r.message();
+  corofem::InputLimits limits;
+  limits.maxBoxTets = 100;
   spec.cells = {2, 2, 2};  // 40
-  EXPECT_TRUE(corofem::generateBox(spec).isOk());
+  EXPECT_TRUE(corofem::generateBox(spec, limits).isOk());
   spec.cells = {3, 3, 3};  // 135
-  EXPECT_TRUE(contains(corofem::generateBox(spec).message(), "more than the limit of 100"));
+  EXPECT_TRUE(
+      contains(corofem::generateBox(spec, limits).message(), "more than the limit of 100 (InputLimits::maxBoxTets)"));
+  EXPECT_TRUE(corofem::generateBox(spec).isOk());  // the default
 }
 
 }  // namespace

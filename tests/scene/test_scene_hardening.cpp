@@ -4,6 +4,8 @@
 // would break probes.csv. Each test names the item of the issue it covers.
 #include "scene/scene_test_util.hpp"
 
+#include <corofem/simulation.hpp>
+
 #include "common/test_data.hpp"
 
 #include <gtest/gtest.h>
@@ -140,8 +142,20 @@ TEST(Issue27Item9, MaxSubstepsHasAnUpperBound) {
 TEST(Issue27Item9, AHugeBoxIsBadInputAtItsKey) {
   const std::string msg = overrideError({"bodies.0.mesh.box.cells=[1000, 1000, 200]"});
   EXPECT_TRUE(has(msg, "bodies[0].mesh.box.cells: 1000 x 1000 x 200 cells of 5 tetrahedra give 1000000000 "
-                       "tetrahedra, more than the limit of 50000000"))
+                       "tetrahedra, more than the limit of 50000000 (InputLimits::maxBoxTets, the default)"))
       << msg;
+  EXPECT_TRUE(has(msg, "--max-box-tets")) << msg;
+  // InputLimits::maxBoxTets moves the limit both ways.
+  InputLimits limits;
+  limits.maxBoxTets = 2'000'000'000;
+  EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"bodies.0.mesh.box.cells=[1000, 1000, 200]"}, limits).isOk());
+  limits.maxBoxTets = 4;  // the unit box has 5
+  auto small = parseScene(test::kMinimalScene, "", {}, limits);
+  ASSERT_FALSE(small.isOk());
+  EXPECT_EQ(small.status().code(), ErrorCode::BadInput);
+  EXPECT_TRUE(has(small.message(), "bodies[0].mesh.box.cells: 1 x 1 x 1 cells of 5 tetrahedra give 5 tetrahedra, "
+                                   "more than the limit of 4 (InputLimits::maxBoxTets)"))
+      << small.message();
 }
 
 // ------------------------------------------------------------------ item 4: not regular files
@@ -171,7 +185,90 @@ TEST(Issue27Item4, ADeeplyNestedOrHugeSceneIsBadInputNotOutOfMemory) {
   auto scene = loadScene(path.string());
   ASSERT_FALSE(scene.isOk());
   EXPECT_EQ(scene.status().code(), ErrorCode::BadInput);
-  EXPECT_TRUE(has(scene.message(), "more than the limit of 16777216 bytes (COROFEM_MAX_INPUT_BYTES")) << scene.message();
+  EXPECT_TRUE(has(scene.message(), "more than the limit of 16777216 bytes (InputLimits::maxSceneBytes, the default)"))
+      << scene.message();
+  EXPECT_TRUE(has(scene.message(), "--max-scene-bytes")) << scene.message();
+  // Raised, the scene loads; the limit of the other inputs does not apply to scene files.
+  InputLimits limits;
+  limits.maxSceneBytes = 32 << 20;
+  limits.maxInputBytes = 100;
+  EXPECT_TRUE(loadScene(path.string(), {}, limits).isOk());
+  limits.maxSceneBytes = 17 << 20;  // exactly too small: the file has 17 MiB and 27 bytes
+  scene = loadScene(path.string(), {}, limits);
+  ASSERT_FALSE(scene.isOk());
+  EXPECT_TRUE(has(scene.message(), "more than the limit of 17825792 bytes (InputLimits::maxSceneBytes)"))
+      << scene.message();
+}
+
+/// The limits reach every file and box behind a scene: loadBodyMesh, resolveNodeSet, and a
+/// Simulation's (SimulationOptions::inputLimits) meshes, surfaces, .bou files and added bodies.
+TEST(Issue27Item4, TheInputLimitsReachEveryFileOfAScene) {
+  const fs::path dir = test::tempDir();
+  std::ofstream(dir / "tet.msh") << "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n"
+                                    "4 0 0 1\n$EndNodes\n$Elements\n1\n1 4 2 0 1 1 2 3 4\n$EndElements\n";  // 129 bytes
+  std::ofstream(dir / "fix.bou") << "1, 2\n# " << std::string(200, 'x') << "\n";
+  InputLimits tight;
+  tight.maxInputBytes = 100;
+  tight.maxBoxTets = 4;
+  InputLimits raised = tight;
+  raised.maxInputBytes = 1000;
+  raised.maxBoxTets = 5;
+
+  BodyDesc file;
+  file.mesh.file = "tet.msh";
+  MeshReadReport report;
+  auto mesh = loadBodyMesh(file, dir.string(), &report, tight);
+  ASSERT_FALSE(mesh.isOk());
+  EXPECT_TRUE(has(mesh.message(), "tet.msh: it has 129 bytes, more than the limit of 100 bytes")) << mesh.message();
+  EXPECT_TRUE(loadBodyMesh(file, dir.string(), &report, raised).isOk());
+  BodyDesc box;
+  box.mesh.box = BoxSpec{};  // 5 tetrahedra
+  mesh = loadBodyMesh(box, dir.string(), &report, tight);
+  ASSERT_FALSE(mesh.isOk());
+  EXPECT_TRUE(has(mesh.message(), "more than the limit of 4 (InputLimits::maxBoxTets)")) << mesh.message();
+  EXPECT_TRUE(loadBodyMesh(box, dir.string(), &report, raised).isOk());
+
+  NodeSetDesc bou;
+  bou.kind = NodeSetDesc::Kind::BouFile;
+  bou.bouFile = "fix.bou";
+  const TetMesh unit = generateBox(BoxSpec{}).value();
+  auto nodes = resolveNodeSet(bou, unit, dir.string(), tight);
+  ASSERT_FALSE(nodes.isOk());
+  EXPECT_TRUE(has(nodes.message(), "fix.bou")) << nodes.message();
+  EXPECT_TRUE(has(nodes.message(), "InputLimits::maxInputBytes")) << nodes.message();
+  EXPECT_TRUE(resolveNodeSet(bou, unit, dir.string(), raised).isOk());
+
+  // A Simulation reads its files under SimulationOptions::inputLimits.
+  Scene scene = test::parseOk(R"({"backend": "reference", "analysis": {"steps": 0},
+      "bodies": [{"name": "a", "mesh": {"box": {}}, "fixed": [{"bou": "fix.bou"}]}]})");
+  scene.baseDir = dir.string();
+  SimulationOptions options;
+  options.inputLimits = tight;
+  options.inputLimits.maxBoxTets = 5;  // the box passes; the .bou file does not
+  auto sim = Simulation::create(scene, options);
+  ASSERT_FALSE(sim.isOk());
+  EXPECT_TRUE(has(sim.message(), "fix.bou")) << sim.message();
+  EXPECT_TRUE(has(sim.message(), "more than the limit of 100 bytes (InputLimits::maxInputBytes)")) << sim.message();
+  options.inputLimits = tight;  // the box is refused first
+  sim = Simulation::create(scene, options);
+  ASSERT_FALSE(sim.isOk());
+  EXPECT_TRUE(has(sim.message(), "more than the limit of 4 (InputLimits::maxBoxTets)")) << sim.message();
+  options.inputLimits = raised;
+  sim = Simulation::create(scene, options);
+  ASSERT_TRUE(sim.isOk()) << sim.message();
+  // addBody: under the same limits.
+  BodyDesc added;
+  added.name = "b";
+  added.mesh.file = "tet.msh";
+  added.surface = "big.obj";
+  std::ofstream(dir / "big.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# " << std::string(1000, 'x') << "\n";
+  auto index = sim->addBody(added);
+  ASSERT_FALSE(index.isOk());
+  EXPECT_TRUE(has(index.message(), "big.obj: it has ")) << index.message();
+  EXPECT_TRUE(has(index.message(), "more than the limit of 1000 bytes (InputLimits::maxInputBytes)"))
+      << index.message();
+  added.surface.clear();
+  EXPECT_TRUE(sim->addBody(added).isOk());
 }
 
 TEST(Issue27Item4, ABouFileThatIsADeviceOrAFifoIsRefused) {

@@ -80,6 +80,20 @@ corofem_status corofem_last_status(void);
 /** Its message ("" after a success): valid until the next corofem call on this thread. */
 const char* corofem_last_error_message(void);
 
+/* ------------------------------------------------------------------ input limits */
+
+/** The largest inputs corofem reads or generates (corofem::InputLimits): a guard against a wrong
+ *  path or a corrupt file exhausting the memory. A file or box over a limit is COROFEM_BAD_INPUT
+ *  naming the limit. A field of 0 takes its default, so a zeroed struct is the defaults. */
+typedef struct corofem_input_limits {
+  uint64_t max_input_bytes; /**< bytes: the largest mesh, surface or .bou file read (default 1 GiB) */
+  uint64_t max_scene_bytes; /**< bytes: the largest scene file read (default 16 MiB) */
+  uint64_t max_box_tets;    /**< tetrahedra: the largest generated box, a scene's "box" mesh (default 50,000,000) */
+} corofem_input_limits;
+
+/** The default limits: 1 GiB (1073741824 bytes), 16 MiB (16777216 bytes), 50,000,000 tetrahedra. */
+corofem_input_limits corofem_default_input_limits(void);
+
 /* ------------------------------------------------------------------ scenes */
 
 /** A scene: what to simulate (docs/scene-format.md). */
@@ -94,6 +108,16 @@ corofem_status corofem_scene_load(const char* path, const char* const* overrides
  *  process's working folder). Otherwise as corofem_scene_load. */
 corofem_status corofem_scene_parse(const char* json, const char* base_dir, const char* const* overrides,
                                    size_t override_count, corofem_scene** scene);
+/** corofem_scene_load under `limits` (NULL: the defaults): the scene file at most
+ *  limits->max_scene_bytes, a "box" mesh at most limits->max_box_tets tetrahedra. The meshes and
+ *  other files the scene names are read by corofem_simulation_create, under its options' limits. */
+corofem_status corofem_scene_load_with_limits(const char* path, const char* const* overrides, size_t override_count,
+                                              const corofem_input_limits* limits, corofem_scene** scene);
+/** corofem_scene_parse under `limits` (NULL: the defaults): a "box" mesh at most
+ *  limits->max_box_tets tetrahedra. */
+corofem_status corofem_scene_parse_with_limits(const char* json, const char* base_dir, const char* const* overrides,
+                                               size_t override_count, const corofem_input_limits* limits,
+                                               corofem_scene** scene);
 /** Frees a scene (NULL: nothing). Simulations made from it keep their own copy. */
 void corofem_scene_destroy(corofem_scene* scene);
 corofem_status corofem_scene_body_count(const corofem_scene* scene, int* count);
@@ -138,9 +162,12 @@ typedef struct corofem_options {
   /** The application's OpenCL context, queue and device: every body runs there, the surfaces'
    *  buffers live in its context. */
   corofem_external_device device;
+  /** The largest mesh, surface and .bou files read and boxes generated (creation and
+   *  corofem_simulation_add_body; max_scene_bytes is not used here). Zeroed: the defaults. */
+  corofem_input_limits limits;
 } corofem_options;
 
-/** The default options: no device order, no device lent. */
+/** The default options: no device order, no device lent, the default input limits. */
 corofem_options corofem_default_options(void);
 
 /** A scene compiled for its backends, advanced step by step. */

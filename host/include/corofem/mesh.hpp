@@ -46,6 +46,26 @@ struct MeshReadReport {
   std::size_t splitPolygons = 0;                   ///< OBJ quads/polygons fan-split into triangles
 };
 
+/// The largest inputs corofem reads or generates: a guard against a wrong path or a corrupt or
+/// hostile file exhausting the memory. The defaults are far above anything corofem can simulate on
+/// one machine; raise a limit where the machine has the memory. Every loading call takes it
+/// (readTetMesh, readSurfaceMesh, generateBox, loadScene, parseScene, loadBodyMesh, resolveNodeSet,
+/// and SimulationOptions::inputLimits for the files a Simulation reads); the C API's counterpart is
+/// corofem_input_limits, the command's the flags --max-input-bytes, --max-scene-bytes and
+/// --max-box-tets. An input over a limit is BadInput naming the limit, its value and how to raise
+/// it; an input exactly at a limit is read.
+struct InputLimits {
+  /// Bytes: the largest mesh (every file of it: TetGen's .node and .ele each), surface (.obj) or
+  /// .bou file read. Default 1 GiB.
+  std::uint64_t maxInputBytes = std::uint64_t(1) << 30;
+  /// Bytes: the largest scene (JSON) file read. Default 16 MiB (scenes have a few KiB; the parsed
+  /// JSON takes many times the text's size).
+  std::uint64_t maxSceneBytes = std::uint64_t(16) << 20;
+  /// Tetrahedra: the largest box generateBox (and a scene's "box" mesh) makes. Default 50 million
+  /// (about 1 GB for the mesh alone, and far more to simulate it).
+  std::uint64_t maxBoxTets = 50'000'000;
+};
+
 /// Options of mesh validation on load.
 struct MeshValidation {
   /// An element whose volume is below this fraction of the mean element volume is an error
@@ -56,12 +76,14 @@ struct MeshValidation {
 
 /// Reads a tetrahedral mesh; the format is chosen from the extension (.msh Gmsh 1/2.2/4.1,
 /// .node/.ele TetGen given either file, .mesh Medit, .vtk legacy, .veg Vega). Errors name the file,
-/// line and element.
+/// line and element. A file larger than limits.maxInputBytes is refused (BadInput).
 Result<TetMesh> readTetMesh(const std::string& path, MeshReadReport* report = nullptr,
-                            const MeshValidation& validation = {});
+                            const MeshValidation& validation = {}, const InputLimits& limits = {});
 
 /// Reads a triangle surface mesh (.obj; also the boundary of any tet mesh format is NOT extracted).
-Result<SurfaceMesh> readSurfaceMesh(const std::string& path, MeshReadReport* report = nullptr);
+/// A file larger than limits.maxInputBytes is refused (BadInput).
+Result<SurfaceMesh> readSurfaceMesh(const std::string& path, MeshReadReport* report = nullptr,
+                                    const InputLimits& limits = {});
 
 /// Per-node or per-element data written alongside a mesh (VTK formats).
 struct MeshField {
@@ -126,7 +148,9 @@ struct BoxSpec {
   std::array<int, 3> cells{1, 1, 1};         ///< cells per axis, >= 1
   int tetsPerCell = 5;                        ///< 5 (alternating, conforming) or 6 (Kuhn split)
 };
-Result<TetMesh> generateBox(const BoxSpec& spec);
+/// Generates the box. More tetrahedra than limits.maxBoxTets (or more nodes than 32-bit indices
+/// reach) is BadInput.
+Result<TetMesh> generateBox(const BoxSpec& spec, const InputLimits& limits = {});
 
 /// Geometry and quality summary (the `corofem info` command).
 struct MeshInfo {

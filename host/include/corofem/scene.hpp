@@ -200,19 +200,27 @@ struct Scene {
 
 /// Parses a JSON scene. `overrides` are "key.path=value" strings (the --set option) applied to the
 /// JSON before validation; arrays are indexed by number ("bodies.0.material.youngs_modulus=1e6").
-/// Errors give the key's path, and for a misspelt key the nearest valid one.
+/// Errors give the key's path, and for a misspelt key the nearest valid one. A "box" mesh of more
+/// than limits.maxBoxTets tetrahedra is refused here already.
 Result<Scene> parseScene(const std::string& jsonText, const std::string& baseDir,
-                         const std::vector<std::string>& overrides = {});
-Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides = {});
+                         const std::vector<std::string>& overrides = {}, const InputLimits& limits = {});
+/// Reads the scene file at `path` (at most limits.maxSceneBytes) and parses it as parseScene does,
+/// relative paths in it taken from the file's folder. The limits apply to the scene file only: the
+/// meshes, surfaces and .bou files it names are read by Simulation::create, under
+/// SimulationOptions::inputLimits.
+Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides = {},
+                        const InputLimits& limits = {});
 
 /// The 0-based node indices a node set selects on a mesh (sorted, unique). An empty selection is
-/// an error naming the set, since it is almost always a typo in a coordinate.
+/// an error naming the set, since it is almost always a typo in a coordinate. A .bou file is read
+/// under limits.maxInputBytes.
 Result<std::vector<std::uint32_t>> resolveNodeSet(const NodeSetDesc& set, const TetMesh& mesh,
-                                                  const std::string& baseDir = "");
+                                                  const std::string& baseDir = "", const InputLimits& limits = {});
 
-/// Loads (or generates) a body's mesh, applying scale and translation.
-Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir,
-                             MeshReadReport* report = nullptr);
+/// Loads (or generates) a body's mesh, applying scale and translation, under `limits` (a mesh file:
+/// maxInputBytes; a box: maxBoxTets).
+Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, MeshReadReport* report = nullptr,
+                             const InputLimits& limits = {});
 
 /// The scene-file spelling of each enumerator ("corotational", "block_diagonal", ...). Safe to call
 /// during static initialisation (no dependence on other globals).

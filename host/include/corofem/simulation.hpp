@@ -65,6 +65,10 @@ struct SimulationOptions {
   /// the library's own (COROFEM_HOST_THREADS threads). The Simulation calls it only from inside its
   /// own calls (create, step, reads), on the thread that made them.
   TaskRunner tasks;
+  /// The largest mesh, surface and .bou files the Simulation reads and the largest boxes it
+  /// generates (create, addBody, warmUp); InputLimits' defaults unless raised. The scene file's
+  /// own limit is loadScene's.
+  InputLimits inputLimits;
 };
 
 /// What a handle holds (Simulation::addHandle): nodes of one body that an application moves as

@@ -19,10 +19,10 @@ namespace corofem {
 namespace {
 
 /// Reads the body's surface, moves it like the mesh (scale, then translate) and binds it.
-void attachSurface(const BodyDesc& desc, const std::string& baseDir, const TetMesh& mesh,
+void attachSurface(const BodyDesc& desc, const std::string& baseDir, const InputLimits& limits, const TetMesh& mesh,
                    std::unique_ptr<SurfaceMesh>& surface, std::unique_ptr<SurfaceBinding>& binding) {
   const std::string path = scene::resolveScenePath(baseDir, desc.surface);
-  Result<SurfaceMesh> read = readSurfaceMesh(path);
+  Result<SurfaceMesh> read = readSurfaceMesh(path, nullptr, limits);
   if (!read) detail::fail(read.status().code(), "body '", desc.name, "': surface: ", read.message());
   SurfaceMesh s = std::move(read.value());
   for (std::size_t i = 0; i < s.vertices.size(); ++i)
@@ -175,12 +175,14 @@ std::vector<detail::BodyOutcome> Simulation::Impl::stepGroup(Group& g, const det
 
 Simulation::Impl::Body Simulation::Impl::makeBody(const BodyDesc& desc) const {
   Body body;
-  Result<TetMesh> mesh = loadBodyMesh(desc, scene.baseDir, &body.report);
+  Result<TetMesh> mesh = loadBodyMesh(desc, scene.baseDir, &body.report, inputLimits);
   if (!mesh) throw detail::Error(mesh.status().code(), mesh.message());
   body.mesh = std::move(mesh.value());
-  if (!desc.surface.empty()) attachSurface(desc, scene.baseDir, body.mesh, body.surface, body.binding);
+  if (!desc.surface.empty())
+    attachSurface(desc, scene.baseDir, inputLimits, body.mesh, body.surface, body.binding);
   body.separateStreams = desc.surfaceLayout == SurfaceLayout::Separate;
-  body.problem = std::make_unique<detail::Problem>(detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir));
+  body.problem = std::make_unique<detail::Problem>(
+      detail::buildProblem(desc, body.mesh, scene.solver, scene.baseDir, inputLimits));
   // A static analysis never uses the mass (statics solve K_t du = r; gravity is rho g V / 4 per
   // node, built from the density above): zero, the device backends allocate no mass buffer.
   if (isStatic()) body.problem->lumpedMass.setZero();
@@ -202,6 +204,7 @@ Result<Simulation> Simulation::create(const Scene& scene, const SimulationOption
     impl->device.opencl = options.opencl;
     impl->device.external = options.device;
     impl->devices = options.devices;
+    impl->inputLimits = options.inputLimits;
     if (options.device) {
       // Every body on the application's device, the reference backend its fallback.
       const char* backend = options.device.api == GpuApi::OpenCL ? "opencl" : "vulkan";

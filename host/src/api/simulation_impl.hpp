@@ -92,6 +92,7 @@ struct Simulation::Impl {
   detail::DeviceOptions device;     ///< SimulationOptions::opencl, device
   detail::TaskRunnerFn tasks;       ///< SimulationOptions::tasks (empty: the library's pool)
   std::vector<std::string> devices; ///< SimulationOptions::devices
+  InputLimits inputLimits;          ///< SimulationOptions::inputLimits (create, addBody)
   std::vector<Body> bodies;
   std::vector<Group> groups;
   std::vector<Unbatched> unbatched;

@@ -20,6 +20,7 @@ SimulationOptions optionsOf(const corofem_options& o, const char* function) {
   options.device.context = d.context;
   options.device.queue = d.queue;
   options.device.device = d.device;
+  options.inputLimits = limitsOf(&o.limits);
   return options;
 }
 

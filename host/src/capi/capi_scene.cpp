@@ -15,6 +15,26 @@ Status giveScene(Result<Scene> parsed, corofem_scene** out) {
   return Status::ok();
 }
 
+corofem_status load(const char* kFn, const char* path, const char* const* overrides, size_t override_count,
+                    const corofem_input_limits* limits, corofem_scene** scene) {
+  return call(kFn, [&] {
+    require(path, kFn, "path", "pass the path of a JSON scene file");
+    require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
+    const std::vector<std::string> sets = stringList(overrides, override_count, kFn, "overrides");
+    return giveScene(loadScene(path, sets, limitsOf(limits)), scene);
+  });
+}
+
+corofem_status parse(const char* kFn, const char* json, const char* base_dir, const char* const* overrides,
+                     size_t override_count, const corofem_input_limits* limits, corofem_scene** scene) {
+  return call(kFn, [&] {
+    require(json, kFn, "json", "pass the scene's JSON text");
+    require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
+    const std::vector<std::string> sets = stringList(overrides, override_count, kFn, "overrides");
+    return giveScene(parseScene(json, base_dir ? base_dir : "", sets, limitsOf(limits)), scene);
+  });
+}
+
 }  // namespace
 }  // namespace corofem::capi
 
@@ -25,23 +45,23 @@ extern "C" {
 
 corofem_status corofem_scene_load(const char* path, const char* const* overrides, size_t override_count,
                                   corofem_scene** scene) {
-  static constexpr const char* kFn = "corofem_scene_load";
-  return call(kFn, [&] {
-    require(path, kFn, "path", "pass the path of a JSON scene file");
-    require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
-    return giveScene(loadScene(path, stringList(overrides, override_count, kFn, "overrides")), scene);
-  });
+  return load("corofem_scene_load", path, overrides, override_count, nullptr, scene);
+}
+
+corofem_status corofem_scene_load_with_limits(const char* path, const char* const* overrides, size_t override_count,
+                                              const corofem_input_limits* limits, corofem_scene** scene) {
+  return load("corofem_scene_load_with_limits", path, overrides, override_count, limits, scene);
 }
 
 corofem_status corofem_scene_parse(const char* json, const char* base_dir, const char* const* overrides,
                                    size_t override_count, corofem_scene** scene) {
-  static constexpr const char* kFn = "corofem_scene_parse";
-  return call(kFn, [&] {
-    require(json, kFn, "json", "pass the scene's JSON text");
-    require(scene, kFn, "scene", "pass the address of a corofem_scene* to receive the scene");
-    const std::vector<std::string> sets = stringList(overrides, override_count, kFn, "overrides");
-    return giveScene(parseScene(json, base_dir ? base_dir : "", sets), scene);
-  });
+  return parse("corofem_scene_parse", json, base_dir, overrides, override_count, nullptr, scene);
+}
+
+corofem_status corofem_scene_parse_with_limits(const char* json, const char* base_dir, const char* const* overrides,
+                                               size_t override_count, const corofem_input_limits* limits,
+                                               corofem_scene** scene) {
+  return parse("corofem_scene_parse_with_limits", json, base_dir, overrides, override_count, limits, scene);
 }
 
 void corofem_scene_destroy(corofem_scene* scene) { delete scene; }
@@ -105,7 +125,17 @@ corofem_options corofem_default_options(void) {
   o.device_count = 0;
   o.device.api = COROFEM_GPU_NONE;
   o.device.context = o.device.queue = o.device.device = nullptr;
+  o.limits = corofem_default_input_limits();
   return o;
+}
+
+corofem_input_limits corofem_default_input_limits(void) {
+  const InputLimits defaults;
+  corofem_input_limits l;
+  l.max_input_bytes = defaults.maxInputBytes;
+  l.max_scene_bytes = defaults.maxSceneBytes;
+  l.max_box_tets = defaults.maxBoxTets;
+  return l;
 }
 
 }  // extern "C"

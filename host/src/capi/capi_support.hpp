@@ -54,6 +54,16 @@ inline void require(const void* p, const char* function, const char* name, const
   if (!p) detail::fail(ErrorCode::BadInput, function, ": ", name, " is NULL; ", fix);
 }
 
+/// The C++ limits of the C API's (NULL: the defaults; a field of 0: its default).
+inline InputLimits limitsOf(const corofem_input_limits* limits) {
+  InputLimits out;
+  if (!limits) return out;
+  if (limits->max_input_bytes) out.maxInputBytes = limits->max_input_bytes;
+  if (limits->max_scene_bytes) out.maxSceneBytes = limits->max_scene_bytes;
+  if (limits->max_box_tets) out.maxBoxTets = limits->max_box_tets;
+  return out;
+}
+
 /// `count` C strings as a vector (NULL with a count of 0: none); a NULL entry is BadInput.
 inline std::vector<std::string> stringList(const char* const* strings, std::size_t count, const char* function,
                                     const char* name) {

@@ -6,11 +6,15 @@
 //   corofem convert IN OUT
 //   corofem warmup [SCENE] [--set ...]
 //
+// Every command takes the input limits (corofem::InputLimits): --max-input-bytes, --max-scene-bytes,
+// --max-box-tets.
+//
 // Exit status: 0 success, 2 bad input (message on stderr), 3 a solve failed (outputs written so
 // far stay readable), 1 anything else (device error, i/o error, internal error). A run whose steps
 // completed with linear solves short of the tolerance exits 0 with a warning, and its summary.json
 // says "ok_unconverged".
 #include "device/registry.hpp"
+#include "mesh/input_file.hpp"
 #include "mesh/locality_order.hpp"
 #include "output/run_outputs.hpp"
 #include "util/error.hpp"
@@ -73,8 +77,49 @@ void usage(std::ostream& os) {
         "      kernels in float and double on every OpenCL device), so that the first run of an\n"
         "      application does not wait for them. The cache: COROFEM_CACHE_DIR, else\n"
         "      $XDG_CACHE_HOME/corofem or ~/.cache/corofem.\n"
+        "limits (every command; a larger input is bad input naming the limit):\n"
+        "  --max-input-bytes SIZE   the largest mesh, surface or .bou file read (default 1G)\n"
+        "  --max-scene-bytes SIZE   the largest scene file read (default 16M)\n"
+        "  --max-box-tets COUNT     the largest generated box, in tetrahedra (default 50000000)\n"
+        "      A whole number > 0, optionally with K, M, G or T (powers of 1024), e.g.\n"
+        "      --max-input-bytes 4G --max-box-tets 100M; also --max-input-bytes=4G.\n"
         "exit status: 0 ok (summary.json \"status\": \"ok\", or \"ok_unconverged\" when linear solves\n"
         "      stopped short of solver.tolerance), 2 bad input, 3 solve failed, 1 other errors\n";
+}
+
+/// The input limits' flags (the fields of InputLimits).
+struct LimitFlag {
+  const mesh::LimitName& name;
+  std::uint64_t InputLimits::*field;
+};
+const LimitFlag kLimitFlags[] = {{mesh::kMaxInputBytes, &InputLimits::maxInputBytes},
+                                 {mesh::kMaxSceneBytes, &InputLimits::maxSceneBytes},
+                                 {mesh::kMaxBoxTets, &InputLimits::maxBoxTets}};
+constexpr const char* kLimitOptions = "--max-input-bytes SIZE, --max-scene-bytes SIZE, --max-box-tets COUNT";
+
+/// When args[i] is a limit flag ("--max-input-bytes 4G" or "--max-input-bytes=4G"), sets the limit
+/// (moving i to its value) and returns true; `error` then says what was wrong with the value, if
+/// anything. False for any other argument.
+bool limitFlag(const std::vector<std::string>& args, std::size_t& i, InputLimits& limits, Status& error) {
+  const std::string& a = args[i];
+  for (const LimitFlag& f : kLimitFlags) {
+    const std::string flag = f.name.flag;
+    std::string value;
+    if (a == flag) {
+      if (i + 1 >= args.size()) {
+        error = Status(ErrorCode::BadInput, flag + " needs a value, e.g. " + flag + " " + f.name.example);
+        return true;
+      }
+      value = args[++i];
+    } else if (a.rfind(flag + "=", 0) == 0) {
+      value = a.substr(flag.size() + 1);
+    } else {
+      continue;
+    }
+    error = detail::guard([&] { limits.*f.field = mesh::parseSize(value, flag, f.name.example); });
+    return true;
+  }
+  return false;
 }
 
 bool isSurfacePath(const std::string& path) {
@@ -159,9 +204,13 @@ int cmdRun(const std::vector<std::string>& args) {
   std::string scenePath, outDir;
   std::vector<std::string> overrides;
   bool quiet = false, plan = false, asJson = false;
+  InputLimits limits;
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
-    if (a == "--plan") {
+    Status limitError;
+    if (limitFlag(args, i, limits, limitError)) {
+      if (!limitError) return report(limitError);
+    } else if (a == "--plan") {
       plan = true;
     } else if (a == "--json") {
       asJson = true;
@@ -175,7 +224,9 @@ int cmdRun(const std::vector<std::string>& args) {
     } else if (a == "--quiet" || a == "-q") {
       quiet = true;
     } else if (!a.empty() && a[0] == '-') {
-      return report(Status(ErrorCode::BadInput, "run: unknown option " + a + " (options: --out DIR, --set key=value, --quiet, --plan, --json)"));
+      return report(Status(ErrorCode::BadInput, "run: unknown option " + a +
+                                                    " (options: --out DIR, --set key=value, --quiet, --plan, --json, " +
+                                                    kLimitOptions + ")"));
     } else if (scenePath.empty()) {
       scenePath = a;
     } else {
@@ -184,7 +235,7 @@ int cmdRun(const std::vector<std::string>& args) {
   }
   if (scenePath.empty()) return report(Status(ErrorCode::BadInput, "run: no scene file given; usage: corofem run SCENE.json"));
 
-  auto scene = loadScene(scenePath, overrides);
+  auto scene = loadScene(scenePath, overrides, limits);
   if (!scene) return report(scene.status());
   if (scene->analysis.kind == AnalysisDesc::Kind::Dynamic && scene->analysis.dynamics.steps == 0 && !plan)
     return report(Status(ErrorCode::BadInput, "run: scene '" + scene->name + "' is open-ended (analysis.steps = 0, "
@@ -192,14 +243,16 @@ int cmdRun(const std::vector<std::string>& args) {
                                               "--set analysis.steps=100"));
   if (outDir.empty()) outDir = (std::filesystem::path("out") / scene->name).string();
 
-  auto sim = Simulation::create(scene.value());
+  SimulationOptions options;
+  options.inputLimits = limits;
+  auto sim = Simulation::create(scene.value(), options);
   if (!sim) return report(sim.status());
   if (plan) return printPlan(sim.value(), asJson);
 
   const auto t0 = std::chrono::steady_clock::now();
   Status status;
   std::unique_ptr<detail::RunOutputs> outputs;
-  status = detail::guard([&] { outputs = std::make_unique<detail::RunOutputs>(sim.value(), outDir); });
+  status = detail::guard([&] { outputs = std::make_unique<detail::RunOutputs>(sim.value(), outDir, limits); });
   if (!status) return report(status);
   if (!quiet)
     std::cout << "corofem: scene '" << scene->name << "': " << sim->bodyCount() << " body(ies), backend "
@@ -256,18 +309,29 @@ int cmdRun(const std::vector<std::string>& args) {
 int cmdInfo(const std::vector<std::string>& args) {
   std::string path;
   bool asJson = false;
-  for (const std::string& a : args) {
-    if (a == "--json") asJson = true;
-    else if (!a.empty() && a[0] == '-') return report(Status(ErrorCode::BadInput, "info: unknown option " + a));
-    else if (path.empty()) path = a;
-    else return report(Status(ErrorCode::BadInput, "info: more than one mesh given"));
+  InputLimits limits;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    Status limitError;
+    if (limitFlag(args, i, limits, limitError)) {
+      if (!limitError) return report(limitError);
+    } else if (a == "--json") {
+      asJson = true;
+    } else if (!a.empty() && a[0] == '-') {
+      return report(Status(ErrorCode::BadInput,
+                           "info: unknown option " + a + " (options: --json, " + kLimitOptions + ")"));
+    } else if (path.empty()) {
+      path = a;
+    } else {
+      return report(Status(ErrorCode::BadInput, "info: more than one mesh given"));
+    }
   }
   if (path.empty()) return report(Status(ErrorCode::BadInput, "info: no mesh given; usage: corofem info MESH"));
 
   nlohmann::json j;
   MeshReadReport rep;
   if (isSurfacePath(path)) {
-    auto surf = readSurfaceMesh(path, &rep);
+    auto surf = readSurfaceMesh(path, &rep, limits);
     if (!surf) return report(surf.status());
     std::array<double, 3> lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
     for (std::size_t i = 0; i < surf->vertexCount(); ++i)
@@ -279,7 +343,7 @@ int cmdInfo(const std::vector<std::string>& args) {
          {"triangles", surf->triangleCount()}, {"split_polygons", rep.splitPolygons},
          {"bbox_min", lo}, {"bbox_max", hi}};
   } else {
-    auto mesh = readTetMesh(path, &rep);
+    auto mesh = readTetMesh(path, &rep, {}, limits);
     if (!mesh) return report(mesh.status());
     const MeshInfo info = computeMeshInfo(mesh.value());
     j = {{"file", path}, {"format", rep.format}, {"nodes", info.nodes}, {"tets", info.tets},
@@ -310,11 +374,24 @@ int cmdInfo(const std::vector<std::string>& args) {
 
 // ------------------------------------------------------------------------------------ convert
 int cmdConvert(const std::vector<std::string>& args) {
-  if (args.size() != 2) return report(Status(ErrorCode::BadInput, "convert: usage: corofem convert IN OUT"));
-  const std::string& in = args[0];
-  const std::string& out = args[1];
+  std::vector<std::string> paths;
+  InputLimits limits;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    Status limitError;
+    if (limitFlag(args, i, limits, limitError)) {
+      if (!limitError) return report(limitError);
+    } else if (args[i].size() > 1 && args[i][0] == '-') {
+      return report(Status(ErrorCode::BadInput,
+                           "convert: unknown option " + args[i] + " (options: " + kLimitOptions + ")"));
+    } else {
+      paths.push_back(args[i]);
+    }
+  }
+  if (paths.size() != 2) return report(Status(ErrorCode::BadInput, "convert: usage: corofem convert IN OUT"));
+  const std::string& in = paths[0];
+  const std::string& out = paths[1];
   if (isSurfacePath(in)) {
-    auto surf = readSurfaceMesh(in);
+    auto surf = readSurfaceMesh(in, nullptr, limits);
     if (!surf) return report(surf.status());
     Status st = writeSurfaceMesh(out, surf.value());
     if (!st) return report(st);
@@ -323,7 +400,7 @@ int cmdConvert(const std::vector<std::string>& args) {
     return kExitOk;
   }
   MeshReadReport rep;
-  auto mesh = readTetMesh(in, &rep);
+  auto mesh = readTetMesh(in, &rep, {}, limits);
   if (!mesh) return report(mesh.status());
   if (isSurfacePath(out))
     return report(Status(ErrorCode::BadInput, "convert: " + out + ": a tet mesh cannot be written as OBJ; use .vtu, .vtk, .msh, .mesh, .node or .veg"));
@@ -340,14 +417,19 @@ int cmdConvert(const std::vector<std::string>& args) {
 int cmdWarmup(const std::vector<std::string>& args) {
   std::string scenePath;
   std::vector<std::string> overrides;
+  SimulationOptions options;
   for (std::size_t i = 0; i < args.size(); ++i) {
-    if (args[i] == "--set") {
+    Status limitError;
+    if (limitFlag(args, i, options.inputLimits, limitError)) {
+      if (!limitError) return report(limitError);
+    } else if (args[i] == "--set") {
       if (i + 1 >= args.size()) return report(Status(ErrorCode::BadInput, "--set needs a value"));
       overrides.push_back(args[++i]);
     } else if (args[i].rfind("--set=", 0) == 0) {
       overrides.push_back(args[i].substr(6));
     } else if (!args[i].empty() && args[i][0] == '-') {
-      return report(Status(ErrorCode::BadInput, "warmup: unknown option " + args[i] + " (options: --set key=value)"));
+      return report(Status(ErrorCode::BadInput, "warmup: unknown option " + args[i] + " (options: --set key=value, " +
+                                                  kLimitOptions + ")"));
     } else if (scenePath.empty()) {
       scenePath = args[i];
     } else {
@@ -356,7 +438,7 @@ int cmdWarmup(const std::vector<std::string>& args) {
   }
   std::vector<std::pair<std::string, Scene>> scenes;
   if (!scenePath.empty()) {
-    auto scene = loadScene(scenePath, overrides);
+    auto scene = loadScene(scenePath, overrides, options.inputLimits);
     if (!scene) return report(scene.status());
     scenes.emplace_back(scene->name, scene.value());
   } else {
@@ -387,7 +469,7 @@ int cmdWarmup(const std::vector<std::string>& args) {
   int rc = kExitOk;
   for (const auto& [name, scene] : scenes) {
     double seconds = 0.0;
-    const Status st = warmUp(scene, {}, &seconds);
+    const Status st = warmUp(scene, options, &seconds);
     if (st) {
       std::cout << "corofem: warmup: " << name << ": compiled and cached in " << seconds << " s\n";
     } else {

@@ -16,24 +16,22 @@
 #include <corofem/mesh.hpp>
 
 #include <cmath>
-#include <cstdlib>
 #include <iomanip>
 #include <limits>
 #include <sstream>
 
 namespace corofem {
 
-std::string mesh::boxSizeProblem(const BoxSpec& spec) {
+std::string mesh::boxSizeProblem(const BoxSpec& spec, const InputLimits& limits) {
   const double nodes = double(spec.cells[0] + 1.0) * double(spec.cells[1] + 1.0) * double(spec.cells[2] + 1.0);
   const double tets = double(spec.cells[0]) * double(spec.cells[1]) * double(spec.cells[2]) * spec.tetsPerCell;
-  const std::uint64_t limit = limitFromEnvironment(kMaxBoxTetsVariable, kDefaultMaxBoxTets, "100M");
+  const std::uint64_t limit = limits.maxBoxTets;
   std::ostringstream os;
   os << spec.cells[0] << " x " << spec.cells[1] << " x " << spec.cells[2] << " cells of " << spec.tetsPerCell
      << " tetrahedra give " << std::setprecision(15) << tets << " tetrahedra";
   if (tets > double(limit)) {
-    os << ", more than the limit of " << limit << " (" << kMaxBoxTetsVariable << "; "
-       << (std::getenv(kMaxBoxTetsVariable) ? "set in the environment" : "the default is 50 million")
-       << "); use fewer cells, or raise the limit if the machine has the memory";
+    os << ", more than the limit of " << limit << " (" << limitInUse(kMaxBoxTets, limit)
+       << "); use fewer cells, or raise the limit if the machine has the memory: " << howToRaise(kMaxBoxTets);
     return os.str();
   }
   if (nodes >= double(std::numeric_limits<std::uint32_t>::max())) {
@@ -43,7 +41,7 @@ std::string mesh::boxSizeProblem(const BoxSpec& spec) {
   return "";
 }
 
-Result<TetMesh> generateBox(const BoxSpec& spec) {
+Result<TetMesh> generateBox(const BoxSpec& spec, const InputLimits& limits) {
   return detail::guardResult<TetMesh>([&] {
     static const char* kAxis[3] = {"x", "y", "z"};
     for (int a = 0; a < 3; ++a) {
@@ -56,7 +54,7 @@ Result<TetMesh> generateBox(const BoxSpec& spec) {
     if (spec.tetsPerCell != 5 && spec.tetsPerCell != 6)
       detail::fail(ErrorCode::BadInput, "box: tetsPerCell is ", spec.tetsPerCell,
                    "; use 5 (alternating split) or 6 (Kuhn split)");
-    const std::string tooLarge = mesh::boxSizeProblem(spec);
+    const std::string tooLarge = mesh::boxSizeProblem(spec, limits);
     if (!tooLarge.empty()) detail::fail(ErrorCode::BadInput, "box: ", tooLarge);
     const std::size_t nx = std::size_t(spec.cells[0]), ny = std::size_t(spec.cells[1]), nz = std::size_t(spec.cells[2]);
     const double nodes = double(nx + 1) * double(ny + 1) * double(nz + 1);

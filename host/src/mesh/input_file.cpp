@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
-#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <string_view>
@@ -43,22 +42,24 @@ const char* kindOf(mode_t mode) {
   return "not a regular file";
 }
 
-std::string limitText(std::uint64_t limit) {
-  return std::to_string(limit) + " bytes (" + kMaxInputBytesVariable + "; " +
-         (std::getenv(kMaxInputBytesVariable) ? "set in the environment" : "the default for this kind of file") + ")";
-}
-
-[[noreturn]] void failTooLarge(const std::string& name, std::uint64_t size, std::uint64_t limit) {
-  detail::fail(ErrorCode::BadInput, "cannot read ", name, ": it has ", size, " bytes, more than the limit of ",
-               limitText(limit), "; if the file is right, raise the limit, e.g. ", kMaxInputBytesVariable, "=4G");
+[[noreturn]] void failTooLarge(const std::string& name, const std::string& what, std::uint64_t limit,
+                               const LimitName& limitName) {
+  detail::fail(ErrorCode::BadInput, "cannot read ", name, ": ", what, " the limit of ", limit, " bytes (",
+               limitInUse(limitName, limit), "); if the file is right, raise the limit: ", howToRaise(limitName));
 }
 
 }  // namespace
 
-std::uint64_t limitFromEnvironment(const char* variable, std::uint64_t fallback, const char* example) {
-  const char* env = std::getenv(variable);
-  if (!env || !*env) return fallback;
-  const std::string_view text(env);
+std::string limitInUse(const LimitName& limit, std::uint64_t value) {
+  return std::string("InputLimits::") + limit.field + (value == limit.defaultValue ? ", the default" : "");
+}
+
+std::string howToRaise(const LimitName& limit) {
+  return std::string("InputLimits::") + limit.field + " (C API: corofem_input_limits." + limit.cField +
+         "; the corofem command: " + limit.flag + ", e.g. " + limit.flag + " " + limit.example + ")";
+}
+
+std::uint64_t parseSize(std::string_view text, const std::string& what, const char* example) {
   std::uint64_t value = 0;
   const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
   std::string_view suffix(ptr, static_cast<std::size_t>(text.data() + text.size() - ptr));
@@ -77,19 +78,16 @@ std::uint64_t limitFromEnvironment(const char* variable, std::uint64_t fallback,
   }
   if (ec != std::errc() || ptr == text.data() || shift < 0 || value == 0 ||
       value > (std::numeric_limits<std::uint64_t>::max() >> shift))
-    detail::fail(ErrorCode::BadInput, variable, "=\"", detail::shorten(text),
+    detail::fail(ErrorCode::BadInput, what, " \"", detail::shorten(text),
                  "\" is not a limit; give a whole number > 0, optionally with K, M, G or T (powers of 1024), e.g. ",
-                 variable, "=", example, ", or unset it for the default of ", fallback);
+                 what, " ", example);
   return value << shift;
 }
 
-std::uint64_t maxInputBytes(std::uint64_t fallback) {
-  return limitFromEnvironment(kMaxInputBytesVariable, fallback, "4G");
-}
-
 std::string readInputFile(const std::string& path, const std::string& name, const std::string& openHint,
-                          std::uint64_t defaultLimit) {
-  const std::uint64_t limit = maxInputBytes(defaultLimit);
+                          const InputLimits& limits, InputKind kind) {
+  const LimitName& limitName = kind == InputKind::Scene ? kMaxSceneBytes : kMaxInputBytes;
+  const std::uint64_t limit = kind == InputKind::Scene ? limits.maxSceneBytes : limits.maxInputBytes;
   // O_NONBLOCK: opening a FIFO without a writer would otherwise wait forever. Regular files ignore it.
   const Descriptor fd(::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY));
   if (fd.get() < 0) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", std::strerror(errno), openHint);
@@ -101,17 +99,17 @@ std::string readInputFile(const std::string& path, const std::string& name, cons
                  ", not a regular file; give the path of a file (corofem reads inputs from regular files only, "
                  "so save piped or generated data to a file first)");
   const auto size = static_cast<std::uint64_t>(st.st_size);
-  if (size > limit) failTooLarge(name, size, limit);
+  if (size > limit) failTooLarge(name, "it has " + std::to_string(size) + " bytes, more than", limit, limitName);
 
   std::string text(static_cast<std::size_t>(size), '\0');
   std::size_t got = 0;
   for (;;) {
     if (got == text.size()) {
       // At the size fstat gave: read on in case the file grew, but never past the limit.
-      if (got > limit)
-        detail::fail(ErrorCode::BadInput, "cannot read ", name, ": it grew, while being read, past the limit of ",
-                     limitText(limit), "; if the file is right, raise the limit, e.g. ", kMaxInputBytesVariable, "=4G");
-      text.resize(got + std::min<std::uint64_t>(std::uint64_t(1) << 16, limit + 1 - got));
+      if (got > limit) failTooLarge(name, "it grew, while being read, past", limit, limitName);
+      // Room for 64 KiB more, or for one byte past the limit (to see that the file passed it).
+      const std::uint64_t room = limit - got;
+      text.resize(got + static_cast<std::size_t>(room >= (std::uint64_t(1) << 16) ? std::uint64_t(1) << 16 : room + 1));
     }
     const ssize_t n = ::read(fd.get(), text.data() + got, text.size() - got);
     if (n < 0) {

@@ -29,15 +29,10 @@ struct ParsedTetMesh {
 TetMesh finalizeTetMesh(ParsedTetMesh&& parsed, const std::string& path, const MeshValidation& validation,
                         MeshReadReport* report);
 
-/// Environment variable that overrides the largest box the generator makes (tetrahedra).
-constexpr const char* kMaxBoxTetsVariable = "COROFEM_MAX_BOX_TETS";
-/// The default: 50 million tetrahedra (about 1 GB for the mesh alone, and far more to simulate it).
-constexpr std::uint64_t kDefaultMaxBoxTets = 50'000'000;
-
 /// What is wrong with the size of a box (BoxSpec with valid cells and tetsPerCell), or "": more
-/// tetrahedra than $COROFEM_MAX_BOX_TETS (default kDefaultMaxBoxTets), or more nodes than 32-bit
-/// indices reach. The text starts with the number of tetrahedra and names the limit and the fix.
-std::string boxSizeProblem(const BoxSpec& spec);
+/// tetrahedra than limits.maxBoxTets, or more nodes than 32-bit indices reach. The text starts with
+/// the number of tetrahedra and names the limit and the fix.
+std::string boxSizeProblem(const BoxSpec& spec, const InputLimits& limits);
 
 /// Reorients (swaps nodes 2 and 3 of) negatively oriented elements; returns how many. Used by
 /// finalizeTetMesh and the generators.

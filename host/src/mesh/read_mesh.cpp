@@ -16,23 +16,24 @@ std::string withExtension(const std::string& path, const char* ext) {
   return path.substr(0, path.size() - mesh::lowerExtension(path).size()) + ext;
 }
 
-TetMesh readTetMeshOrThrow(const std::string& path, MeshReadReport& report, const MeshValidation& validation) {
+TetMesh readTetMeshOrThrow(const std::string& path, MeshReadReport& report, const MeshValidation& validation,
+                           const InputLimits& limits) {
   const std::string ext = mesh::lowerExtension(path);
   mesh::ParsedTetMesh parsed;
   std::string messagePath = path;
   if (ext == ".msh") {
-    parsed = mesh::parseGmsh(mesh::readWholeFile(path), path, report);
+    parsed = mesh::parseGmsh(mesh::readWholeFile(path, limits), path, report);
   } else if (ext == ".node" || ext == ".ele") {
     const std::string nodePath = ext == ".node" ? path : withExtension(path, ".node");
     const std::string elePath = ext == ".ele" ? path : withExtension(path, ".ele");
-    parsed = mesh::parseTetGen(nodePath, elePath, report);
+    parsed = mesh::parseTetGen(nodePath, elePath, report, limits);
     messagePath = elePath;  // element errors are reported against the .ele file
   } else if (ext == ".mesh") {
-    parsed = mesh::parseMedit(mesh::readWholeFile(path), path, report);
+    parsed = mesh::parseMedit(mesh::readWholeFile(path, limits), path, report);
   } else if (ext == ".vtk") {
-    parsed = mesh::parseVtkLegacy(mesh::readWholeFile(path), path, report);
+    parsed = mesh::parseVtkLegacy(mesh::readWholeFile(path, limits), path, report);
   } else if (ext == ".veg") {
-    parsed = mesh::parseVeg(mesh::readWholeFile(path), path, report);
+    parsed = mesh::parseVeg(mesh::readWholeFile(path, limits), path, report);
   } else {
     detail::fail(ErrorCode::BadInput, "cannot read tetrahedral mesh ", path, ": unknown extension '", ext,
                  "'; supported are ", kTetExtensions);
@@ -42,23 +43,24 @@ TetMesh readTetMeshOrThrow(const std::string& path, MeshReadReport& report, cons
 
 }  // namespace
 
-Result<TetMesh> readTetMesh(const std::string& path, MeshReadReport* report, const MeshValidation& validation) {
+Result<TetMesh> readTetMesh(const std::string& path, MeshReadReport* report, const MeshValidation& validation,
+                            const InputLimits& limits) {
   return detail::guardResult<TetMesh>([&] {
     MeshReadReport local;
-    TetMesh mesh = readTetMeshOrThrow(path, local, validation);
+    TetMesh mesh = readTetMeshOrThrow(path, local, validation, limits);
     if (report) *report = std::move(local);
     return mesh;
   });
 }
 
-Result<SurfaceMesh> readSurfaceMesh(const std::string& path, MeshReadReport* report) {
+Result<SurfaceMesh> readSurfaceMesh(const std::string& path, MeshReadReport* report, const InputLimits& limits) {
   return detail::guardResult<SurfaceMesh>([&] {
     const std::string ext = mesh::lowerExtension(path);
     if (ext != ".obj")
       detail::fail(ErrorCode::BadInput, "cannot read surface mesh ", path, ": unknown extension '", ext,
                    "'; supported is .obj (Wavefront OBJ)");
     MeshReadReport local;
-    SurfaceMesh mesh = mesh::parseObj(mesh::readWholeFile(path), path, local);
+    SurfaceMesh mesh = mesh::parseObj(mesh::readWholeFile(path, limits), path, local);
     if (report) *report = std::move(local);
     return mesh;
   });

@@ -17,8 +17,10 @@ namespace corofem::mesh {
 ParsedTetMesh parseGmsh(const std::string& text, const std::string& path, MeshReadReport& report);
 
 /// TetGen .node + .ele (0- or 1-based, detected from the first node id; first element attribute ->
-/// regions). Reads the .node file first, so its errors come before a missing .ele.
-ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePath, MeshReadReport& report);
+/// regions). Reads the .node file first, so its errors come before a missing .ele; each file at most
+/// limits.maxInputBytes.
+ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePath, MeshReadReport& report,
+                          const InputLimits& limits);
 
 /// Medit .mesh (ASCII): Vertices and Tetrahedra (reference -> regions); other sections skipped.
 ParsedTetMesh parseMedit(const std::string& text, const std::string& path, MeshReadReport& report);

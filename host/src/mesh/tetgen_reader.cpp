@@ -9,10 +9,11 @@
 
 namespace corofem::mesh {
 
-ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePath, MeshReadReport& report) {
+ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePath, MeshReadReport& report,
+                          const InputLimits& limits) {
   ParsedTetMesh out;
   {
-    const std::string nodeText = readWholeFile(nodePath);
+    const std::string nodeText = readWholeFile(nodePath, limits);
     TextScanner sc(nodeText, nodePath);
     sc.setCommentChar('#');
     sc.setContext("the .node header");
@@ -47,7 +48,7 @@ ParsedTetMesh parseTetGen(const std::string& nodePath, const std::string& elePat
     }
   }
   {
-    const std::string eleText = readWholeFile(elePath);
+    const std::string eleText = readWholeFile(elePath, limits);
     TextScanner sc(eleText, elePath);
     sc.setCommentChar('#');
     sc.setContext("the .ele header");

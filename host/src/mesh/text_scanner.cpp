@@ -9,9 +9,9 @@
 
 namespace corofem::mesh {
 
-std::string readWholeFile(const std::string& path) {
+std::string readWholeFile(const std::string& path, const InputLimits& limits) {
   return readInputFile(path, "mesh file " + path,
-                       "; check the path (relative paths are taken from the working directory)");
+                       "; check the path (relative paths are taken from the working directory)", limits);
 }
 
 std::string lowerExtension(const std::string& path) {

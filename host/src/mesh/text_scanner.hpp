@@ -6,6 +6,8 @@
 
 #include "util/error.hpp"
 
+#include <corofem/mesh.hpp>
+
 #include <charconv>
 #include <cstddef>
 #include <cstdint>
@@ -15,9 +17,9 @@
 namespace corofem::mesh {
 
 /// Reads the whole mesh file into a string (readInputFile: regular files only, at most
-/// maxInputBytes()). Throws IoError naming the path when it cannot be read, BadInput when it is not
-/// a regular file or too large.
-std::string readWholeFile(const std::string& path);
+/// limits.maxInputBytes). Throws IoError naming the path when it cannot be read, BadInput when it is
+/// not a regular file or too large.
+std::string readWholeFile(const std::string& path, const InputLimits& limits);
 
 /// Lower-case extension with the dot (".msh"), or "" when the name has none.
 std::string lowerExtension(const std::string& path);

@@ -16,8 +16,8 @@ namespace {
 
 std::vector<std::uint32_t> resolveOrThrow(const BodyDesc& body, const std::string& what,
                                           const NodeSetDesc& set, const TetMesh& mesh,
-                                          const std::string& baseDir) {
-  Result<std::vector<std::uint32_t>> nodes = resolveNodeSet(set, mesh, baseDir);
+                                          const std::string& baseDir, const InputLimits& limits) {
+  Result<std::vector<std::uint32_t>> nodes = resolveNodeSet(set, mesh, baseDir, limits);
   if (!nodes) {
     fail(nodes.status().code() == ErrorCode::Ok ? ErrorCode::BadInput : nodes.status().code(), "body '",
          body.name, "': ", what, ": ", nodes.message());
@@ -61,7 +61,7 @@ void checkMesh(const BodyDesc& body, const TetMesh& mesh) {
 }  // namespace
 
 Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc& solver,
-                     const std::string& baseDir) {
+                     const std::string& baseDir, const InputLimits& limits) {
   checkMaterial(body);
   checkMesh(body, mesh);
 
@@ -131,7 +131,8 @@ Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc
   // (a node cannot be held at rest and dragged at once) and reported.
   std::vector<int> holder(nodeCount, 0);
   for (std::size_t s = 0; s < body.fixed.size(); ++s) {
-    const auto nodes = resolveOrThrow(body, "fixed node set " + std::to_string(s), body.fixed[s], mesh, baseDir);
+    const auto nodes =
+        resolveOrThrow(body, "fixed node set " + std::to_string(s), body.fixed[s], mesh, baseDir, limits);
     for (std::uint32_t n : nodes) {
       holder[n] = 1;
       p.constrained[3 * n] = p.constrained[3 * n + 1] = p.constrained[3 * n + 2] = 1;
@@ -153,7 +154,7 @@ Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc
         break;
       }
       case LoadDesc::Kind::Force: {
-        const auto nodes = resolveOrThrow(body, what + " (force)", load.nodes, mesh, baseDir);
+        const auto nodes = resolveOrThrow(body, what + " (force)", load.nodes, mesh, baseDir, limits);
         ExternalForce f{Eigen::VectorXd::Zero(n3), load.rampTime};
         const Vec3d share = v / static_cast<double>(nodes.size());  // total force spread equally
         for (std::uint32_t n : nodes) f.f.segment<3>(3 * n) += share;
@@ -161,7 +162,7 @@ Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc
         break;
       }
       case LoadDesc::Kind::Displacement: {
-        const auto nodes = resolveOrThrow(body, what + " (displacement)", load.nodes, mesh, baseDir);
+        const auto nodes = resolveOrThrow(body, what + " (displacement)", load.nodes, mesh, baseDir, limits);
         PrescribedDisplacement d;
         d.rampTime = load.rampTime;
         for (std::uint32_t n : nodes) {

@@ -66,7 +66,8 @@ Eigen::VectorXd gravityForce(const Problem& p, const double g[3]);
 
 /// Builds a body's problem (node sets resolved, loads assembled, elements set up). Throws
 /// Error(BadInput) with the body name and the element for a zero-volume element, bad material...
+/// .bou files of node sets are read under `limits`.
 Problem buildProblem(const BodyDesc& body, const TetMesh& mesh, const SolverDesc& solver,
-                     const std::string& baseDir);
+                     const std::string& baseDir, const InputLimits& limits = {});
 
 }  // namespace corofem::detail

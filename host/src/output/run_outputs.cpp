@@ -57,7 +57,7 @@ std::string vtkName(const std::string& body, int step) {
 
 }  // namespace
 
-RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir) {
+RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir, const InputLimits& limits) : dir_(dir) {
   const Scene& scene = sim.scene();
   // Body names become file names in the folder (<body>.pvd, vtk/<body>_000012.vtu): one such as
   // "../../x" or "/abs/path" would write outside it. loadScene refuses them; so does this, for a
@@ -88,7 +88,7 @@ RunOutputs::RunOutputs(const Simulation& sim, const std::string& dir) : dir_(dir
     if (!problem.empty())
       fail(ErrorCode::BadInput, "output.probes[", i, "].name: the name \"", shorten(probe.name), "\" ", problem);
     probe.body = findBody(sim, desc.body);
-    auto nodes = resolveNodeSet(desc.nodes, sim.restMesh(probe.body), scene.baseDir);
+    auto nodes = resolveNodeSet(desc.nodes, sim.restMesh(probe.body), scene.baseDir, limits);
     if (!nodes) fail(nodes.status().code(), "output.probes[", i, "] (\"", probe.name, "\"): ", nodes.message());
     probe.nodes = std::move(nodes.value());
     probes_.push_back(std::move(probe));

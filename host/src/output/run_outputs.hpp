@@ -23,7 +23,8 @@ class RunOutputs {
   /// Creates `dir` and opens the outputs. Throws Error(BadInput) for a probe whose node set
   /// selects nothing or names an unknown body, or a zlib vtu_compression this build or the ascii
   /// format cannot write (before creating anything); Error(IoError) when the folder cannot be written.
-  RunOutputs(const Simulation& sim, const std::string& dir);
+  /// A probe's .bou file is read under `limits` (the run's SimulationOptions::inputLimits).
+  RunOutputs(const Simulation& sim, const std::string& dir, const InputLimits& limits = {});
   ~RunOutputs();
 
   /// Records the state after a step (step 0 = the initial state, before any step).

@@ -66,7 +66,8 @@ Result<TetMesh> checkedMemoryMesh(const TetMesh& given, MeshReadReport* report) 
 
 }  // namespace
 
-Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, MeshReadReport* report) {
+Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, MeshReadReport* report,
+                             const InputLimits& limits) {
   const MeshSourceDesc& source = body.mesh;
   const std::string where = "body \"" + body.name + "\": ";
   const int sources = (source.box ? 1 : 0) + (source.file.empty() ? 0 : 1) + (source.mesh ? 1 : 0);
@@ -82,9 +83,10 @@ Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, M
     if (!std::isfinite(t))
       return Result<TetMesh>(ErrorCode::BadInput, where + "mesh translation must be finite");
 
-  Result<TetMesh> loaded = source.mesh ? checkedMemoryMesh(*source.mesh, report)
-                           : source.box ? generateBox(*source.box)
-                                        : readTetMesh(scene::resolveScenePath(baseDir, source.file), report);
+  Result<TetMesh> loaded =
+      source.mesh  ? checkedMemoryMesh(*source.mesh, report)
+      : source.box ? generateBox(*source.box, limits)
+                   : readTetMesh(scene::resolveScenePath(baseDir, source.file), report, {}, limits);
   if (!loaded) return Result<TetMesh>(loaded.status().code(), where + loaded.message());
   if (source.box && report) {
     *report = MeshReadReport{};

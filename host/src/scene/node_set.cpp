@@ -111,11 +111,13 @@ std::vector<std::uint32_t> selectList(const NodeSetDesc& set, const TetMesh& mes
 
 /// Vega .bou: 1-based node ids separated by commas and/or white space; lines whose first
 /// non-blank character is '#' are comments.
-std::vector<std::uint32_t> selectBou(const NodeSetDesc& set, const TetMesh& mesh, const std::string& baseDir) {
+std::vector<std::uint32_t> selectBou(const NodeSetDesc& set, const TetMesh& mesh, const std::string& baseDir,
+                                     const InputLimits& limits) {
   const std::string path = scene::resolveScenePath(baseDir, set.bouFile);
   const std::string text = mesh::readInputFile(
       path, "the .bou file \"" + path + "\"" +
-                (path == set.bouFile ? "" : " (\"" + set.bouFile + "\" relative to \"" + baseDir + "\")"));
+                (path == set.bouFile ? "" : " (\"" + set.bouFile + "\" relative to \"" + baseDir + "\")"),
+      "", limits);
   std::vector<std::uint32_t> selected;
   std::size_t lineNumber = 0;
   for (std::size_t start = 0; start < text.size();) {
@@ -155,7 +157,7 @@ std::vector<std::uint32_t> selectBou(const NodeSetDesc& set, const TetMesh& mesh
 }  // namespace
 
 Result<std::vector<std::uint32_t>> resolveNodeSet(const NodeSetDesc& set, const TetMesh& mesh,
-                                                  const std::string& baseDir) {
+                                                  const std::string& baseDir, const InputLimits& limits) {
   return detail::guardResult<std::vector<std::uint32_t>>([&] {
     if (mesh.nodeCount() == 0) detail::fail(ErrorCode::BadInput, describeSet(set), ": the mesh has no nodes");
     const Bounds bounds = boundsOf(mesh);
@@ -164,7 +166,7 @@ Result<std::vector<std::uint32_t>> resolveNodeSet(const NodeSetDesc& set, const 
       case NodeSetDesc::Kind::Box: selected = selectBox(set, mesh, bounds); break;
       case NodeSetDesc::Kind::Plane: selected = selectPlane(set, mesh, bounds); break;
       case NodeSetDesc::Kind::List: selected = selectList(set, mesh); break;
-      case NodeSetDesc::Kind::BouFile: selected = selectBou(set, mesh, baseDir); break;
+      case NodeSetDesc::Kind::BouFile: selected = selectBou(set, mesh, baseDir, limits); break;
     }
     std::sort(selected.begin(), selected.end());
     selected.erase(std::unique(selected.begin(), selected.end()), selected.end());

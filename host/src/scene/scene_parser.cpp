@@ -147,9 +147,11 @@ std::string describe(const json& value) {
 /// Reads and checks values; every failure throws BadInput with "<source>: <key path>: <problem>".
 class Reader {
  public:
-  explicit Reader(const std::string& source) : prefix_(source.empty() ? "" : source + ": ") {}
+  Reader(const std::string& source, const InputLimits& limits)
+      : prefix_(source.empty() ? "" : source + ": "), limits_(limits) {}
 
   const std::string& prefix() const { return prefix_; }
+  const InputLimits& limits() const { return limits_; }
 
   template <class... Parts>
   [[noreturn]] void fail(const std::string& path, const Parts&... parts) const {
@@ -235,6 +237,7 @@ class Reader {
 
  private:
   std::string prefix_;
+  InputLimits limits_;
 };
 
 /// An object at a key path, with readers that assign a field only when its key is present (so the
@@ -392,7 +395,7 @@ MeshSourceDesc parseMesh(const Reader& r, const json& j, const std::string& path
     }
     b.read("tets_per_cell", spec.tetsPerCell,
            {[](double x) { return x == 5 || x == 6; }, "tets_per_cell = 5 or 6"});
-    const std::string tooLarge = mesh::boxSizeProblem(spec);
+    const std::string tooLarge = mesh::boxSizeProblem(spec, r.limits());
     if (!tooLarge.empty()) r.fail(b.at("cells"), tooLarge);
     mesh.box = spec;
   }
@@ -656,8 +659,9 @@ Scene parseDocument(const Reader& r, const json& root, const std::string& defaul
 }
 
 Scene parseWithSource(const std::string& text, const std::string& baseDir, const std::vector<std::string>& overrides,
+                      const InputLimits& limits,
                       const std::string& source, const std::string& defaultName) {
-  const Reader r(source);
+  const Reader r(source, limits);
   json root = scene::parseJsonText(text, r.prefix());
   if (!overrides.empty()) {
     scene::expandShorthands(root);
@@ -671,19 +675,20 @@ Scene parseWithSource(const std::string& text, const std::string& baseDir, const
 }  // namespace
 
 Result<Scene> parseScene(const std::string& jsonText, const std::string& baseDir,
-                         const std::vector<std::string>& overrides) {
-  return detail::guardResult<Scene>([&] { return parseWithSource(jsonText, baseDir, overrides, "", ""); });
+                         const std::vector<std::string>& overrides, const InputLimits& limits) {
+  return detail::guardResult<Scene>([&] { return parseWithSource(jsonText, baseDir, overrides, limits, "", ""); });
 }
 
-Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides) {
+Result<Scene> loadScene(const std::string& path, const std::vector<std::string>& overrides,
+                        const InputLimits& limits) {
   return detail::guardResult<Scene>([&] {
     const std::string text =
-        mesh::readInputFile(path, "the scene file \"" + path + "\"", "", mesh::kDefaultMaxSceneBytes);
+        mesh::readInputFile(path, "the scene file \"" + path + "\"", "", limits, mesh::InputKind::Scene);
     const std::filesystem::path file(path);
     std::string baseDir = file.parent_path().string();
     if (baseDir.empty()) baseDir = ".";
     // The name defaults to the file stem ("fig8.json" -> "fig8").
-    return parseWithSource(text, baseDir, overrides, path, file.stem().string());
+    return parseWithSource(text, baseDir, overrides, limits, path, file.stem().string());
   });
 }
 

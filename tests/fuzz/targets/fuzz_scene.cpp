@@ -41,7 +41,7 @@ void checkNumbers(const Scene& scene) {
                       "an empty or non-finite box was accepted");
         fuzz::require(box.cells[a] >= 1, "a box with no cells was accepted");
       }
-      fuzz::require(mesh::boxSizeProblem(box).empty(), "a box over the limit was accepted");
+      fuzz::require(mesh::boxSizeProblem(box, InputLimits{}).empty(), "a box over the limit was accepted");
     }
   }
   const DynamicDesc& d = scene.analysis.dynamics;
