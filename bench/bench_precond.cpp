@@ -1,12 +1,16 @@
-// The PCG preconditioners side by side on the "Vega beam" of issue 29, reference backend, through
-// the public Simulation API: bench/scenes/vega_beam.json (1 x 0.1 x 0.1 m, box cells 60 x 6 x 6,
-// 6 tets per cell = 12,960 tets, E = 1e6 Pa, nu = 0.3, rho = 1000, clamped at x = 0, gravity -z,
-// backward Euler at h = 1/60 s, one Newton iteration, PCG tolerance 1e-6, max_iterations 3000).
+// The PCG preconditioners side by side on the "Vega beam" of issue 29, on the reference backend
+// and on the OpenCL backend in float (its first device), through the public Simulation API:
+// bench/scenes/vega_beam.json (1 x 0.1 x 0.1 m, box cells 60 x 6 x 6, 6 tets per cell = 12,960
+// tets, E = 1e6 Pa, nu = 0.3, rho = 1000, clamped at x = 0, gravity -z, backward Euler at h = 1/60 s,
+// one Newton iteration, PCG tolerance 1e-6, max_iterations 3000).
 //
-//   precondStep/<preconditioner>/tets_12960   for "diagonal", "block_diagonal" and "amg"
-//   precondStep/amg/tets_103680               cells 120 x 12 x 12; slow (about 0.6 s a step and a
-//                                             set-up of seconds), so it is registered only with
-//                                             the flag --large
+//   precondStep/<backend>/<preconditioner>/tets_12960   backend "reference" or "opencl_float";
+//                                                       "diagonal", "block_diagonal" and "amg"
+//   precondStep/<backend>/<preconditioner>/tets_103680  cells 120 x 12 x 12, "diagonal" and "amg";
+//                                                       slow (seconds a step on the reference, a
+//                                                       set-up of seconds), registered only with
+//                                                       the flag --large
+// (OpenCL variants skip with the reason where the build or the machine has no OpenCL device.)
 //
 // Each benchmark creates its Simulation and takes 3 warm-up steps outside the timed loop (the first
 // solve builds the preconditioner: amg's hierarchy), then times 30 steps (10 on the large beam)
@@ -24,6 +28,7 @@
 //   build/bench/bench_precond --benchmark_repetitions=5 --benchmark_report_aggregates_only=true \
 //       --benchmark_out=precond.json --benchmark_out_format=json
 //   build/bench/bench_precond --large --benchmark_filter=tets_103680 --benchmark_repetitions=3
+//   build/bench/bench_precond --benchmark_filter=opencl_float --benchmark_repetitions=5   (OpenCL only)
 //
 // Results: docs/performance.md, "Preconditioners (issue 29)".
 #include <corofem/scene.hpp>
@@ -43,10 +48,16 @@ using namespace corofem;
 const std::string kScenePath = std::string(COROFEM_SOURCE_DIR) + "/bench/scenes/vega_beam.json";
 constexpr int kWarmupSteps = 3;
 
-void precondStep(benchmark::State& state, const std::string& preconditioner, const std::string& cells) {
+void precondStep(benchmark::State& state, const std::string& backend, const std::string& preconditioner,
+                 const std::string& cells) {
   // Open-ended in steps: the benchmark decides how many it takes. No probes (no output is written).
-  auto scene = loadScene(kScenePath, {"solver.preconditioner=" + preconditioner, "bodies.0.mesh.box.cells=" + cells,
-                                      "analysis.steps=1000000", "output.probes=[]"});
+  std::vector<std::string> set = {"solver.preconditioner=" + preconditioner, "bodies.0.mesh.box.cells=" + cells,
+                                  "analysis.steps=1000000", "output.probes=[]"};
+  if (backend == "opencl_float") {
+    set.push_back("backend=opencl");
+    set.push_back("solver.precision=float");
+  }
+  auto scene = loadScene(kScenePath, set);
   if (!scene) {
     state.SkipWithError(scene.message().c_str());
     return;
@@ -89,18 +100,22 @@ void precondStep(benchmark::State& state, const std::string& preconditioner, con
 }
 
 void registerAll(bool large) {
-  for (const char* p : {"diagonal", "block_diagonal", "amg"})
-    benchmark::RegisterBenchmark((std::string("precondStep/") + p + "/tets_12960").c_str(), precondStep, p,
-                                 std::string("[60,6,6]"))
-        ->Iterations(30)
-        ->Unit(benchmark::kMillisecond)
-        ->UseRealTime();
-  if (large)
-    benchmark::RegisterBenchmark("precondStep/amg/tets_103680", precondStep, std::string("amg"),
-                                 std::string("[120,12,12]"))
-        ->Iterations(10)
-        ->Unit(benchmark::kMillisecond)
-        ->UseRealTime();
+  for (const char* b : {"reference", "opencl_float"}) {
+    const std::string backend = b;
+    for (const char* p : {"diagonal", "block_diagonal", "amg"})
+      benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_12960").c_str(), precondStep, backend,
+                                   std::string(p), std::string("[60,6,6]"))
+          ->Iterations(30)
+          ->Unit(benchmark::kMillisecond)
+          ->UseRealTime();
+    if (large)
+      for (const char* p : {"diagonal", "amg"})
+        benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_103680").c_str(), precondStep,
+                                     backend, std::string(p), std::string("[120,12,12]"))
+            ->Iterations(10)
+            ->Unit(benchmark::kMillisecond)
+            ->UseRealTime();
+  }
 }
 
 }  // namespace

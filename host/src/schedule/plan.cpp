@@ -70,6 +70,11 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const bool pcg = scene.solver.linearSolver == LinearSolverKind::Pcg;
   const bool precond = pcg && scene.solver.preconditioner != PreconditionerKind::None;
   const bool block = scene.solver.preconditioner == PreconditionerKind::BlockDiagonal;
+  const bool amg = pcg && scene.solver.preconditioner == PreconditionerKind::Amg;
+  // The multigrid's levels (precond/amg.hpp) per free dof of the body, as the Vega beam of
+  // bench_precond (12,960 tets) has them: P_0 and P_0^T 21 entries each, the level-1 operator 17,
+  // the coarser ones about 1; each entry a real and a 4-byte column (the coarsest inverse aside).
+  const double amgEntriesPerDof = 2 * 21 + 17 + 1;
   const Candidate& c = schedule.choice();
   const bool device = c.backend != "reference";
   const double r = device && scene.solver.precision == Precision::Float ? 4.0 : 8.0;
@@ -145,6 +150,10 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
       buffer("preconditioner_inverse", dv, (block ? 9 : 3) * N * r);
     }
     buffer("pcg_vectors (x b r u p w s)", dv, 7 * D * r);
+    if (amg) {
+      buffer("amg_levels (estimate: prolongations, coarse operators)", dv, amgEntriesPerDof * D * (r + 4));
+      buffer("amg_vectors (level 0 scratch)", dv, 4 * D * r);
+    }
     if (corot) kernels.push_back(std::string("compute_rotations (") + toString(problem.rotation) + ")");
     kernels.push_back("element_forces + gather_forces");
     kernels.push_back(dynamic ? (damping ? "element_product (M, C, K_t) + gather_product"
@@ -157,11 +166,16 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
                       "pcg_iterate_group, where bodies of one mesh take a vector lane each of a pack of 8: "
                       "pcg_iterate_pack; those of a round of fewer bodies than cores in one launch by a team "
                       "of work-groups per body: pcg_iterate_team)");
+    if (amg)
+      kernels.push_back("amg V-cycle per iteration: Chebyshev smoothing with 4 products (element_product + "
+                        "gather_product), amg_fine_*, amg_spmv on the coarse levels (the iterations are launched "
+                        "ones, not pcg_iterate_*)");
     if (batched)
       for (auto& k : kernels)
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";
     product = E * (16 + 34 * r) + 16 * E + 4 * (N + 1) + 12 * E * r + D * r * (3 + (dynamic ? 1 : 0));
     pcgIter = product + 11 * D * r + (precond ? (block ? 9 : 3) * N * r : 0);
+    if (amg) pcgIter += 4 * product + 12 * D * r + (amgEntriesPerDof + 3 * 17) * D * (r + 4);
     newtonFixed = (corot ? E * (16 + 22 * r) : 0) + 2 * product + 5 * D * r;
   } else {
     const double nnz = 9 * (N + 2 * static_cast<double>(edgeCount(problem.mesh)));
@@ -171,10 +185,12 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     if (hyper) buffer("deformation_gradients", h, 9 * E * 8);
     if (dynamic) buffer("lumped_mass", h, D * 8);
     buffer(pcg ? "cg_vectors" : "cholesky_factor (at least the matrix)", h, pcg ? 5 * D * 8 : nnz * 12);
+    if (amg) buffer("amg_levels (estimate: prolongations, coarse operators)", h, amgEntriesPerDof * D * 12);
     if (corot) kernels.push_back("polar decomposition per element (SVD)");
     kernels.push_back("element forces");
     kernels.push_back("sparse assembly of " + std::string(dynamic ? "M + C + K_t" : "K_t"));
-    kernels.push_back(pcg ? "Eigen ConjugateGradient" : "Eigen SimplicialLDLT");
+    kernels.push_back(pcg ? "single-reduction PCG" : "Eigen SimplicialLDLT");
+    if (amg) kernels.push_back("amg V-cycle per iteration (4 products of the assembled matrix, the coarse levels)");
     product = nnz * 12 + 4 * (D + 1) + 3 * D * 8;
     pcgIter = product + 10 * D * 8;
     newtonFixed = nnz * 8 + 144 * 8 * E + product;
