@@ -73,7 +73,7 @@ class ConformancePcg : public ConformanceBase {
       // took 116 iterations against the double reference's 67 at the float tolerance.
       expectSolveMatches(i, bodies()[i].solve, b[i], got.x[i], got.solves[i].stats, want.x[i], want.solves[i].stats,
                          s.tolerance, std::string("preconditioner ") + toString(pc), nullptr,
-                         pc == PreconditionerKind::Amg);
+                         pc == PreconditionerKind::Amg && problem(i).name == "slab");
     }
   }
 };

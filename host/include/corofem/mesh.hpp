@@ -54,6 +54,8 @@ struct MeshReadReport {
 /// corofem_input_limits, the command's the flags --max-input-bytes, --max-scene-bytes and
 /// --max-box-tets. An input over a limit is BadInput naming the limit, its value and how to raise
 /// it; an input exactly at a limit is read.
+/// A value is a hard limit: 0 refuses every input of its kind (the C API's corofem_input_limits,
+/// which C code often zero-fills, reads 0 as the default instead).
 struct InputLimits {
   /// Bytes: the largest mesh (every file of it: TetGen's .node and .ele each), surface (.obj) or
   /// .bou file read. Default 1 GiB.

@@ -12,11 +12,17 @@ namespace corofem::detail {
 
 namespace {
 
-/// Levels stop coarsening at this many dofs (the coarsest is factored) ...
+/// Levels stop coarsening at this many dofs (the coarsest is factored, and a device applies its
+/// dense inverse) ...
 constexpr Eigen::Index kCoarsestDofs = 500;
 /// ... or when a level keeps more than this fraction of its finer level's dofs (aggregation stalls
-/// on the dense graphs of the coarsest levels), or after this many levels.
+/// on the dense graphs of the coarsest levels) and has at most kMaxCoarsestDofs, or after this many
+/// levels. A body of at most kDirectDofs free dofs is not coarsened: its rest operator is the
+/// coarsest level (aggregating such small bodies gave far weaker cycles: 17 iterations instead of 2
+/// on the conformance suite's linear cube, and an indefinite one on its slab in float).
 constexpr double kStallRatio = 0.8;
+constexpr Eigen::Index kMaxCoarsestDofs = 2000;
+constexpr Eigen::Index kDirectDofs = kCoarsestDofs;
 constexpr std::size_t kMaxLevels = 12;
 /// Chebyshev smoothing targets the eigenvalues of D^-1 A in [lambda_max / kChebyshevRange, lambda_max].
 constexpr double kChebyshevRange = 30.0;
@@ -126,6 +132,7 @@ std::vector<int> aggregate(const std::vector<int>& start, const std::vector<int>
 }  // namespace
 
 void WarpedAmg::clear() {
+  made_ = false;
   levels_.clear();
   aggregateNodes_.clear();
   aggregateRotations_.clear();
@@ -142,6 +149,7 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
          " free dofs and ", rest.size(), " rest coordinates of ", nodeCount, " nodes");
   freeDofs_ = freeDofs;
   rest_ = rest;
+  made_ = true;
   if (nf == 0) return;
 
   // Level 0's vertices are the nodes with a free dof; `vertexStart` ranges their dofs (free indices
@@ -179,8 +187,8 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     level.diagInv = inverseDiagonal(level.A);
     level.lambdaMax = estimateLambdaMax(level.A, level.diagInv);
     const Eigen::Index n = level.A.rows();
-    // A body small enough to be solved directly (or one that does not coarsen) still gets one
-    // smoothed level above its direct solve (P = I), so that every body runs the same cycle:
+    // A body small enough to be solved directly (or one whose level 0 does not coarsen) still gets
+    // one smoothed level above its direct solve (P = I), so that every body runs the same cycle:
     // smoothing with the current operator, the rest operator's exact solve in the rotated frame.
     auto directBelow = [&] {
       aggregateNodes_.assign(1, {});  // the whole body turns as one
@@ -195,11 +203,11 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
       level = AmgLevel{};
       level.A = std::move(copy);
     };
-    if (levels_.empty() && n <= kCoarsestDofs) {
+    if (levels_.empty() && n <= kDirectDofs) {
       directBelow();
       break;
     }
-    if (n <= kCoarsestDofs || levels_.size() + 1 >= kMaxLevels) break;
+    if (!levels_.empty() && (n <= kCoarsestDofs || levels_.size() + 1 >= kMaxLevels)) break;
 
     // The vertex graph of the level's operator.
     const int nv = static_cast<int>(vertexStart.size()) - 1;
@@ -254,7 +262,8 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
       coarseDofs += static_cast<int>(rank);
       coarseVertexStart.push_back(coarseDofs);
     }
-    if (coarseDofs == 0 || coarseDofs > kStallRatio * double(n)) {
+    const bool stalled = coarseDofs == 0 || (coarseDofs > kStallRatio * double(n) && n <= kMaxCoarsestDofs);
+    if (stalled) {
       if (levels_.empty()) directBelow();
       break;
     }
@@ -292,6 +301,17 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
   const double shift = 1e-12 * (coarsest.rows() > 0 ? coarsest.diagonal().cwiseAbs().maxCoeff() : 0.0);
   for (Eigen::Index i = 0; i < coarsest.rows(); ++i) coarsest.coeffRef(i, i) += shift;
   coarsest_.compute(coarsest);
+  if (coarsest_.info() != Eigen::Success) {
+    // Not positive definite (a NaN material, or a coarsest level with a zero pivot): its diagonal
+    // instead, so that the cycle stays a symmetric positive operator (a weaker one).
+    Eigen::SparseMatrix<double> diagonal(coarsest.rows(), coarsest.cols());
+    diagonal.setIdentity();
+    for (Eigen::Index i = 0; i < coarsest.rows(); ++i) {
+      const double d = coarsest.coeff(i, i);
+      diagonal.coeffRef(i, i) = std::isfinite(d) && d > 0.0 ? d : 1.0;
+    }
+    coarsest_.compute(diagonal);
+  }
   levels_.push_back(std::move(level));
   nodeAggregate_ = nodeAggregates();
 }
@@ -322,8 +342,9 @@ std::vector<int> WarpedAmg::nodeAggregates() const {
 
 Eigen::MatrixXd WarpedAmg::coarsestInverse() const {
   if (levels_.empty()) return {};
-  const Eigen::MatrixXd A = Eigen::MatrixXd(levels_.back().A);
-  return coarsest_.solve(Eigen::MatrixXd::Identity(A.rows(), A.cols()));
+  const Eigen::Index n = levels_.back().A.rows();
+  const Eigen::MatrixXd inverse = coarsest_.solve(Eigen::MatrixXd::Identity(n, n));
+  return 0.5 * (inverse + inverse.transpose());  // symmetric to the last bit, as the cycle needs
 }
 
 std::vector<Eigen::Index> WarpedAmg::levelSizes() const {

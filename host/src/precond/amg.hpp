@@ -10,12 +10,12 @@
 //   - aggregation: the nodes (level 0) or the aggregates (coarser levels) are grouped greedily, each
 //     aggregate a vertex and its unaggregated neighbours in the operator's graph;
 //   - near-null space B: the six rigid-body modes of the free dofs (three translations, three
-//     rotations about the aggregate's rest centroid); the tentative prolongator P_t holds, per
+//     rotations about the body's rest bounding-box centre); the tentative prolongator P_t holds, per
 //     aggregate, an orthonormal basis of B restricted to the aggregate's dofs (QR), and the coarse
 //     level's B is R of that QR;
 //   - smoothing of the prolongator: P = (I - omega D^-1 A) P_t, omega = 4 / (3 lambda_max(D^-1 A));
-//   - Galerkin coarse operators A_{l+1} = P_l^T A_l P_l, down to a few hundred dofs solved by a
-//     sparse LDL^T.
+//   - Galerkin coarse operators A_{l+1} = P_l^T A_l P_l, down to a few hundred dofs solved exactly
+//     (a sparse LDL^T on the host, its dense inverse on a device).
 //
 // Each solve applies one symmetric V-cycle: on level 0 Chebyshev smoothing with the CURRENT
 // operator (the device's own product and diagonal), the residual restricted through the rest
@@ -51,7 +51,7 @@ using AmgMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
 struct AmgLevel {
   AmgMatrix A;               ///< the level's rest operator (level 0: A_0 on the free dofs)
   Eigen::VectorXd diagInv;   ///< 1 / diag(A) (1 where the diagonal is 0)
-  double lambdaMax = 1.0;    ///< an upper estimate of the largest eigenvalue of D^-1 A
+  double lambdaMax = 1.0;    ///< the largest eigenvalue of D^-1 A by 20 power steps, raised by 10 %
   AmgMatrix P;               ///< prolongation from the next level (rows: this level's dofs)
   AmgMatrix Pt;              ///< P^T
 };
@@ -69,7 +69,8 @@ class WarpedAmg {
   /// Throws Error(Internal) for inconsistent sizes.
   void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
              std::size_t nodeCount);
-  bool built() const { return !levels_.empty(); }
+  /// Whether build() ran since construction or clear() (a body without free dofs has no levels).
+  bool built() const { return made_; }
   void clear();
 
   /// The warp from the positions x (3N): each level-0 aggregate's rotation by shape matching
@@ -100,6 +101,7 @@ class WarpedAmg {
   void cycle(std::size_t level, const Eigen::VectorXd& b, Eigen::VectorXd& x, const AmgFineOperator* fine) const;
   void warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const;
 
+  bool made_ = false;
   std::vector<AmgLevel> levels_;  ///< levels_[0]: rest A_0; the last one is solved directly
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
   std::vector<Eigen::Index> freeDofs_;
@@ -116,8 +118,9 @@ AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDo
 
 /// A body's hierarchy with the coefficients it was made for: made again where the ratio m / s of a
 /// solve's operator moved by more than a factor of 2 from the one it was made with (a
-/// preconditioner made for a nearby ratio is still a good one, and a common scale of both does
-/// not matter to PCG), or after clear() (the constraints or the material changed).
+/// preconditioner made for a nearby ratio is still a good one; the integrators keep the mass
+/// coefficient at 1, so the ratio alone moves), or after clear() (the constraints or the material
+/// changed).
 class BodyAmg {
  public:
   /// Makes the hierarchy where needed; returns whether it did.

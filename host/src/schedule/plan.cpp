@@ -193,6 +193,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     if (amg) kernels.push_back("amg V-cycle per iteration (4 products of the assembled matrix, the coarse levels)");
     product = nnz * 12 + 4 * (D + 1) + 3 * D * 8;
     pcgIter = product + 10 * D * 8;
+    if (amg) pcgIter += 4 * product + 12 * D * 8 + (amgEntriesPerDof + 3 * 17) * D * 12;
     newtonFixed = nnz * 8 + 144 * 8 * E + product;
   }
   // Driver state on the host (BodySolver): committed and rollback copies.

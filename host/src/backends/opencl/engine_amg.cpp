@@ -206,6 +206,8 @@ void EngineAmg::upload() {
     setRows(L.P, matrix(p, rows[k], next));
     setRows(L.Pt, matrix(pt, next, rows[k]));
     setRows(L.inverse, matrix(inv, rows[k], rows[k]), e_.ctx_->info().fp64);
+    L.inverseEntries = inv.size();
+    L.smooths = !a.empty();
     L.dinv = reals(dinv);
     for (auto* v : {&L.b, &L.x, &L.res, &L.d, &L.t}) *v = buffer(std::max<std::size_t>(rows[k], 1) * e_.realSize_);
   }
@@ -228,7 +230,11 @@ void EngineAmg::upload() {
   scale_ = reals(scale);
   nodeAggregate_ = buffer(nodeAggregate.size() * sizeof(cl_int));
   e_.uploadRaw(*nodeAggregate_, nodeAggregate);
-  rotations_ = buffer(std::max<std::size_t>(9 * aggregateBegin_[K], 1) * e_.realSize_);
+  // Every aggregate at I until its body's positions give its rotation (a solve before any
+  // setPositions, or a body handed over by a failover without positions, runs unwarped).
+  std::vector<double> identity(std::max<std::size_t>(9 * aggregateBegin_[K], 9), 0.0);
+  for (std::size_t a = 0; 9 * a < identity.size(); ++a) identity[9 * a] = identity[9 * a + 4] = identity[9 * a + 8] = 1.0;
+  rotations_ = reals(identity);
   std::fill(warpStale_.begin(), warpStale_.end(), 1);
   dirty_ = false;
 }
@@ -266,6 +272,11 @@ void EngineAmg::coarse(std::size_t k) {
   const std::size_t wg = e_.wg_, global = (L.rows + wg - 1) / wg * wg;
   const bool deeper = k < levels_.size();
   using R = SegmentEngine::RealArg;
+  if (!L.smooths) {  // every body's coarsest level: its exact solve alone
+    e_.launchRange(kCoarsest_, 0, global, wg, cl_uint(L.rows), *L.inverse.start, *L.inverse.cols, *L.inverse.values,
+                   *L.b, *L.x);
+    return;
+  }
   // Pre-smoothing from 0.
   e_.launchRange(kCoarseBegin_, 0, global, wg, cl_uint(L.rows), *L.dinv, *L.b, *L.b, cl_uint(1), R{ch.invTheta}, *L.res,
                  *L.d, *L.x);
@@ -286,7 +297,7 @@ void EngineAmg::coarse(std::size_t k) {
   spmv(L.A, *L.d, nullptr, 0, *L.t);
   e_.launchRange(kCoarseStep_, 0, global, wg, cl_uint(L.rows), *L.dinv, *L.t, R{ch.c1}, R{ch.c2}, *L.res, *L.d, *L.x);
   // The bodies whose coarsest level this is: x = A^-1 b (only their rows).
-  if (L.inverse.rows > 0)
+  if (L.inverseEntries > 0)
     e_.launchRange(kCoarsest_, 0, global, wg, cl_uint(L.rows), *L.inverse.start, *L.inverse.cols, *L.inverse.values,
                    *L.b, *L.x);
 }

@@ -35,7 +35,8 @@ class EngineAmg {
   /// device's levels where one changed, the warp where positions changed.
   void prepare(const BodySet& running);
   /// z_ = M^-1 r_ on the active segments with the partial sums pcg_update leaves (r . z, r . r),
-  /// and |free b|^2 from b_ with `setup` (pcg_init's).
+  /// and |free b|^2 from b_ with `setup` (pcg_init's). The coarse levels run over every body's rows
+  /// (a stopped body's are scratch no active segment reads).
   void cycle(bool setup);
   std::vector<DeviceBuffer> buffers() const;
 
@@ -48,6 +49,8 @@ class EngineAmg {
   struct Level {
     std::size_t rows = 0;
     Csr A, P, Pt, inverse;  ///< P: rows here, columns on level k + 1; inverse: the coarsest bodies'
+    std::size_t inverseEntries = 0;
+    bool smooths = false;   ///< some body has a coarser level below this one
     std::unique_ptr<ClBuffer> dinv, b, x, res, d, t;
   };
   void upload();
