@@ -3,6 +3,7 @@
 
 #include "util/error.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/QR>
 
 #include <algorithm>
@@ -61,10 +62,30 @@ double estimateLambdaMax(const AmgMatrix& A, const Eigen::VectorXd& diagInv) {
   return std::isfinite(lambda) && lambda > 0.0 ? kLambdaMargin * lambda : 1.0;
 }
 
-/// Chebyshev smoothing of A x = b with D^-1 over [lambdaMax / kChebyshevRange, lambdaMax]:
-/// kChebyshevDegree applications of D^-1 (one product fewer from a zero start).
-template <class Apply>
-void chebyshev(const Apply& apply, const Eigen::VectorXd& diagInv, double lambdaMax, const Eigen::VectorXd& b,
+/// lambda_max(B^-1 A) for the symmetric positive definite block diagonal B of A's node blocks
+/// (Binv its inverse): power steps v <- B^-1 A v from a fixed start, the estimate the generalised
+/// Rayleigh quotient v.Av / v.Bv, times kLambdaMargin.
+double estimateBlockLambdaMax(const AmgMatrix& A, const AmgMatrix& B, const AmgMatrix& Binv) {
+  const Eigen::Index n = A.rows();
+  if (n == 0) return 1.0;
+  Eigen::VectorXd v(n);
+  for (Eigen::Index i = 0; i < n; ++i) v[i] = std::fmod(0.6180339887 * double(i + 1), 1.0) - 0.5;
+  double lambda = 1.0;
+  for (int k = 0; k < kPowerIterations; ++k) {
+    const Eigen::VectorXd w = A * v, z = Binv * w;
+    lambda = v.dot(w) / std::max(v.dot(B * v), 1e-300);
+    const double norm = z.norm();
+    if (!(norm > 0.0) || !std::isfinite(norm)) break;
+    v = z / norm;
+  }
+  return std::isfinite(lambda) && lambda > 0.0 ? kLambdaMargin * lambda : 1.0;
+}
+
+/// Chebyshev smoothing of A x = b with the inverse Dinv (diagonal or node blocks) over
+/// [lambdaMax / kChebyshevRange, lambdaMax]: kChebyshevDegree applications of Dinv (one product
+/// fewer from a zero start).
+template <class Apply, class Inverse>
+void chebyshev(const Apply& apply, const Inverse& inverse, double lambdaMax, const Eigen::VectorXd& b,
                Eigen::VectorXd& x, bool zeroStart) {
   const double hi = lambdaMax, lo = lambdaMax / kChebyshevRange;
   const double theta = 0.5 * (hi + lo), delta = 0.5 * (hi - lo), sigma = theta / delta;
@@ -77,14 +98,17 @@ void chebyshev(const Apply& apply, const Eigen::VectorXd& diagInv, double lambda
     apply(x, ad);
     r = b - ad;
   }
-  Eigen::VectorXd d = diagInv.cwiseProduct(r) / theta;
+  Eigen::VectorXd z;
+  inverse(r, z);
+  Eigen::VectorXd d = z / theta;
   for (int k = 1;; ++k) {
     x += d;
     if (k == WarpedAmg::kChebyshevDegree) break;
     apply(d, ad);
     r -= ad;
     const double rhoNew = 1.0 / (2.0 * sigma - rho);
-    d = (rhoNew * rho) * d + (2.0 * rhoNew / delta) * diagInv.cwiseProduct(r);
+    inverse(r, z);
+    d = (rhoNew * rho) * d + (2.0 * rhoNew / delta) * z;
     rho = rhoNew;
   }
 }
@@ -130,6 +154,33 @@ std::vector<int> aggregate(const std::vector<int>& start, const std::vector<int>
 }
 
 }  // namespace
+
+std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs) {
+  const Eigen::Index n = A.rows();
+  std::vector<Eigen::Triplet<double, int>> blocks, inverses;
+  for (Eigen::Index i = 0; i < n;) {
+    Eigen::Index j = i;
+    while (j < n && freeDofs[static_cast<std::size_t>(j)] / 3 == freeDofs[static_cast<std::size_t>(i)] / 3) ++j;
+    const Eigen::Index m = j - i;  // the node's free dofs [i, j)
+    Eigen::Matrix3d Bn = Eigen::Matrix3d::Identity();
+    for (Eigen::Index a = 0; a < m; ++a)
+      for (Eigen::Index b = 0; b < m; ++b) Bn(a, b) = A.coeff(i + a, i + b);
+    Eigen::Matrix3d inv = Eigen::Matrix3d::Identity();
+    const Eigen::LDLT<Eigen::Matrix3d> ldlt(Bn);
+    if (ldlt.info() == Eigen::Success && ldlt.isPositive()) inv = ldlt.solve(Eigen::Matrix3d::Identity());
+    inv = 0.5 * (inv + inv.transpose());
+    for (Eigen::Index a = 0; a < m; ++a)
+      for (Eigen::Index b = 0; b < m; ++b) {
+        blocks.emplace_back(static_cast<int>(i + a), static_cast<int>(i + b), Bn(a, b));
+        inverses.emplace_back(static_cast<int>(i + a), static_cast<int>(i + b), inv(a, b));
+      }
+    i = j;
+  }
+  AmgMatrix B(n, n), Binv(n, n);
+  B.setFromTriplets(blocks.begin(), blocks.end());
+  Binv.setFromTriplets(inverses.begin(), inverses.end());
+  return {std::move(B), std::move(Binv)};
+}
 
 void WarpedAmg::clear() {
   made_ = false;
@@ -181,6 +232,10 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     for (int k = 0; k < 3; ++k) B(i, 3 + k) = rot[k][c];
   }
 
+  {
+    const auto [B0, B0inv] = nodeBlocks(A0, freeDofs);
+    fineLambdaMax_ = estimateBlockLambdaMax(A0, B0, B0inv);
+  }
   AmgLevel level;
   level.A = A0;
   for (;;) {
@@ -382,14 +437,20 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
     x = coarsest_.solve(b);
     return;
   }
-  const Eigen::VectorXd& diagInv = fine ? *fine->diagInv : level.diagInv;
   auto apply = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) {
     if (fine)
       fine->apply(v, y);
     else
       y = level.A * v;
   };
-  chebyshev(apply, diagInv, level.lambdaMax, b, x, true);
+  auto inverse = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
+    if (fine)
+      fine->blockInverse(r, z);
+    else
+      z = level.diagInv.cwiseProduct(r);
+  };
+  const double lambdaMax = fine ? fineLambdaMax_ : level.lambdaMax;
+  chebyshev(apply, inverse, lambdaMax, b, x, true);
   Eigen::VectorXd r;
   apply(x, r);
   r = b - r;
@@ -408,7 +469,7 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
   } else {
     x += level.P * coarseX;
   }
-  chebyshev(apply, diagInv, level.lambdaMax, b, x, false);
+  chebyshev(apply, inverse, lambdaMax, b, x, false);
 }
 
 void WarpedAmg::apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eigen::VectorXd& z) const {

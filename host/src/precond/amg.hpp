@@ -18,16 +18,18 @@
 //     (a sparse LDL^T on the host, its dense inverse on a device).
 //
 // Each solve applies one symmetric V-cycle: on level 0 Chebyshev smoothing with the CURRENT
-// operator (the device's own product and diagonal), the residual restricted through the rest
+// operator (the device's own product) and its 3x3 node blocks B_t (block Jacobi: unlike a point
+// diagonal, the blocks turn with the nodes, so the rest bound on the spectrum of B^-1 A holds for
+// the turned body), the coarser levels with their point diagonals; the residual restricted through the rest
 // hierarchy in each node's rotated frame, r_c = P_0^T W^T r, and the correction prolonged back,
 // e = W P_0 e_c, where W = blockdiag(R_n) holds per-node rotations: the rotation of the node's
 // level-0 aggregate, by shape matching of its nodes (the rotation of the aggregate's current rigid
 // modes: P_t's columns turned with the aggregate). For A_t close to W A_0 W^T (the co-rotational
 // assumption) the coarse correction is the rest one seen rotated. (The polar mean of the element
-// rotations around each node gave 3 % fewer iterations on the beams of bench_precond; the aggregates'
-// need only the positions, a few hundred 3x3 polar decompositions and no element data.) The cycle is a fixed symmetric
-// positive definite operator within a solve (same Chebyshev polynomial before and after, exact
-// coarsest solve), as PCG requires.
+// rotations around each node gave 3 % fewer iterations on the beams of bench_precond; the
+// aggregates' need only the positions, a few hundred 3x3 polar decompositions and no element data.)
+// The cycle is a fixed symmetric operator within a solve (same Chebyshev polynomial before and
+// after, exact coarsest solve), positive definite while the Chebyshev bounds hold, as PCG requires.
 #pragma once
 
 #include "model/element.hpp"
@@ -41,6 +43,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace corofem::detail {
@@ -56,11 +59,16 @@ struct AmgLevel {
   AmgMatrix Pt;              ///< P^T
 };
 
-/// The fine operator of a V-cycle: y = A x on the free dofs, with A's diagonal.
+/// The fine operator of a V-cycle: y = A x on the free dofs, and z = B^-1 r with B the node blocks
+/// of A (each node's free dofs; nodeBlocks).
 struct AmgFineOperator {
   std::function<void(const Eigen::VectorXd& x, Eigen::VectorXd& y)> apply;
-  const Eigen::VectorXd* diagInv = nullptr;
+  std::function<void(const Eigen::VectorXd& r, Eigen::VectorXd& z)> blockInverse;
 };
+
+/// The node blocks B of A on the free dofs `freeDofs` (each node's free dofs, consecutive) and their
+/// inverses (a block that is not positive definite: I).
+std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs);
 
 class WarpedAmg {
  public:
@@ -89,6 +97,8 @@ class WarpedAmg {
   /// z = M^-1 r on the free dofs: one V-cycle with `fine` as level 0's operator.
   void apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
 
+  /// Level 0's Chebyshev bound on the spectrum of B^-1 A (B the node blocks).
+  double fineLambdaMax() const { return fineLambdaMax_; }
   /// The levels' sizes (dofs), finest first, the coarsest (solved directly) last.
   std::vector<Eigen::Index> levelSizes() const;
   const std::vector<AmgLevel>& levels() const { return levels_; }
@@ -102,6 +112,12 @@ class WarpedAmg {
   void warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const;
 
   bool made_ = false;
+  /// lambda_max(B_0^-1 A_0) of the rest operator and its node blocks, times 1.1: level 0's
+  /// Chebyshev bound. The node blocks turn with their node (B_t = R B_0 R^T where the elements
+  /// around it share its rotation), so the current operator's spectrum against its own blocks stays
+  /// the rest one's; a point diagonal does not turn, and on a bent slender bar D_t^-1 A_t outgrew
+  /// the rest bound, made the cycle indefinite and broke PCG down.
+  double fineLambdaMax_ = 1.0;
   std::vector<AmgLevel> levels_;  ///< levels_[0]: rest A_0; the last one is solved directly
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
   std::vector<Eigen::Index> freeDofs_;

@@ -48,6 +48,7 @@ void EngineAmg::createKernels() {
   kUnwarp_.create(program, "amg_fine_unwarp", e_.dev_);
   kWarpAdd_.create(program, "amg_fine_warp_add", e_.dev_);
   kSpmv_.create(program, "amg_spmv", e_.dev_);
+  kSpmvSlices_.create(program, "amg_spmv_slices", e_.dev_);
   kCoarseBegin_.create(program, "amg_coarse_begin", e_.dev_);
   kCoarseStep_.create(program, "amg_coarse_step", e_.dev_);
   kCoarseAdd_.create(program, "amg_coarse_add", e_.dev_);
@@ -108,15 +109,36 @@ void EngineAmg::prepare(const BodySet& running) {
 }
 
 void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool doubleValues) {
-  // m is row-major with the device's row and column numbering already.
-  std::vector<cl_uint> start(static_cast<std::size_t>(m.rows()) + 1), cols(static_cast<std::size_t>(m.nonZeros()));
-  std::vector<double> values(cols.size());
-  for (Eigen::Index i = 0; i <= m.rows(); ++i) start[static_cast<std::size_t>(i)] = static_cast<cl_uint>(m.outerIndexPtr()[i]);
-  for (std::size_t j = 0; j < cols.size(); ++j) {
-    cols[j] = static_cast<cl_uint>(m.innerIndexPtr()[j]);
-    values[j] = m.valuePtr()[j];
+  // m is row-major with the device's row and column numbering already: CSR for the coarsest
+  // inverse (doubleValues), sliced ELLPACK (amg_spmv) for the others.
+  const std::size_t rows = static_cast<std::size_t>(m.rows());
+  std::vector<cl_uint> start, cols;
+  std::vector<double> values;
+  if (doubleValues) {
+    start.resize(rows + 1);
+    for (std::size_t i = 0; i <= rows; ++i) start[i] = static_cast<cl_uint>(m.outerIndexPtr()[i]);
+    cols.assign(m.innerIndexPtr(), m.innerIndexPtr() + m.nonZeros());
+    values.assign(m.valuePtr(), m.valuePtr() + m.nonZeros());
+  } else {
+    const std::size_t slices = (rows + kSlice - 1) / kSlice;
+    start.assign(slices + 1, 0);
+    for (std::size_t s = 0; s < slices; ++s) {
+      std::size_t width = 0;
+      for (std::size_t i = kSlice * s; i < std::min(rows, kSlice * (s + 1)); ++i)
+        width = std::max<std::size_t>(width, static_cast<std::size_t>(m.outerIndexPtr()[i + 1] - m.outerIndexPtr()[i]));
+      start[s + 1] = static_cast<cl_uint>(start[s] + kSlice * width);
+    }
+    cols.assign(start[slices], 0);
+    values.assign(start[slices], 0.0);
+    for (std::size_t i = 0; i < rows; ++i) {
+      const std::size_t s = i / kSlice, lane = i % kSlice;
+      for (int j = m.outerIndexPtr()[i], k = 0; j < m.outerIndexPtr()[i + 1]; ++j, ++k) {
+        cols[start[s] + kSlice * static_cast<std::size_t>(k) + lane] = static_cast<cl_uint>(m.innerIndexPtr()[j]);
+        values[start[s] + kSlice * static_cast<std::size_t>(k) + lane] = m.valuePtr()[j];
+      }
+    }
   }
-  out.rows = static_cast<std::size_t>(m.rows());
+  out.rows = rows;
   out.start = buffer(start.size() * sizeof(cl_uint));
   e_.uploadRaw(*out.start, start);
   out.cols = buffer(std::max<std::size_t>(cols.size(), 1) * sizeof(cl_uint));
@@ -218,7 +240,7 @@ void EngineAmg::upload() {
   for (std::size_t s = 0; s < K; ++s) {
     const BodySegment& sg = e_.segs_[s];
     const WarpedAmg& amg = bodies_[s].amg();
-    if (!amg.levels().empty()) scale[s] = 1.0 / amg.levels()[0].lambdaMax;
+    if (amg.built()) scale[s] = 1.0 / amg.fineLambdaMax();
     aggregateBegin_[s + 1] = aggregateBegin_[s] + amg.aggregateCount();
     if (!sg.corotational || amg.levels().empty()) continue;  // linear bodies do not turn: no warp
     const std::vector<int> of = amg.nodeAggregates();
@@ -261,8 +283,11 @@ void EngineAmg::uploadWarp(const BodySet& running) {
 void EngineAmg::spmv(const Csr& m, const ClBuffer& x, const ClBuffer* b, cl_uint mode, const ClBuffer& y) {
   if (m.rows == 0) return;
   static const ClBuffer none;
-  const std::size_t wg = e_.wg_, global = (m.rows + wg - 1) / wg * wg;
-  e_.launchRange(kSpmv_, 0, global, wg, cl_uint(m.rows), *m.start, *m.cols, *m.values, x, b ? *b : none, mode, y);
+  // A work-item per slice on CPUs (vector code), per row on GPUs (engine: work-group trees).
+  const bool perSlice = !e_.treeReduce_;
+  const std::size_t items = perSlice ? (m.rows + kSlice - 1) / kSlice : m.rows;
+  const std::size_t wg = perSlice ? kSlice : e_.wg_, global = (items + wg - 1) / wg * wg;
+  e_.launchRange(perSlice ? kSpmvSlices_ : kSpmv_, 0, global, wg, cl_uint(m.rows), *m.start, *m.cols, *m.values, x, b ? *b : none, mode, y);
 }
 
 void EngineAmg::coarse(std::size_t k) {

@@ -41,10 +41,13 @@ class EngineAmg {
   std::vector<DeviceBuffer> buffers() const;
 
  private:
+  /// A level matrix on the device: sliced ELLPACK in slices of kSlice rows (amg_spmv), or CSR (the
+  /// coarsest inverse, amg_coarsest): `start` the slices' or the rows' first entries.
   struct Csr {
     std::unique_ptr<ClBuffer> start, cols, values;
     std::size_t rows = 0;
   };
+  static constexpr std::size_t kSlice = 16;  ///< kAmgSlice of kernels/opencl/amg.cl
   /// Device level k >= 1: every body's hierarchy level k end to end.
   struct Level {
     std::size_t rows = 0;
@@ -73,7 +76,7 @@ class EngineAmg {
   std::vector<Level> levels_;             ///< levels_[k - 1] is device level k
   std::unique_ptr<ClBuffer> scale_, res0_, d0_, ad0_, e0_, nodeAggregate_, rotations_;
   std::vector<std::size_t> aggregateBegin_;  ///< per segment: its first aggregate in rotations_
-  ClKernel kFineBegin_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarseAdd_, kCoarsest_;
+  ClKernel kFineBegin_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarseAdd_, kCoarsest_, kSpmvSlices_;
 };
 
 }  // namespace corofem::detail

@@ -176,9 +176,10 @@ void SegmentEngine::build(const SolverDesc& solver) {
   }
   if (solver.rotation == RotationMethod::Quaternion)
     options_ += " -DCOROFEM_QUAT_ITERS=" + std::to_string(tuning_.quaternionIterations);
-  if (precond_ == PreconditionerKind::BlockDiagonal) options_ += " -DCOROFEM_PRECOND_BLOCK";
-  // amg: pcg_init forms the current diagonal inverse its smoothing uses (engine_amg.hpp).
-  else if (precond_ == PreconditionerKind::Diagonal || precond_ == PreconditionerKind::Amg)
+  // amg: pcg_init forms the inverses of the current node blocks its smoothing uses (engine_amg.hpp).
+  if (precond_ == PreconditionerKind::BlockDiagonal || precond_ == PreconditionerKind::Amg)
+    options_ += " -DCOROFEM_PRECOND_BLOCK";
+  else if (precond_ == PreconditionerKind::Diagonal)
     options_ += " -DCOROFEM_PRECOND_DIAG";
   if (amg_ && ctx_->info().fp64) options_ += " -DCOROFEM_AMG_COARSEST_DOUBLE";
   static const std::string source = cl::corofemProgramSource();
@@ -340,8 +341,9 @@ void SegmentEngine::allocate() {
   upload(free_, freeMask.data(), 0, dofTotal);
   if (precond_ != PreconditionerKind::None) {
     // The block preconditioner reads 6 reals per node, the diagonal one 3 (precond.cl).
-    createReal(blocks_, (precond_ == PreconditionerKind::BlockDiagonal ? kNodeBlockComponents : 3) * nodeTotal_);
-    createReal(minv_, (precond_ == PreconditionerKind::BlockDiagonal ? 9 : 3) * nodeTotal_);
+    const bool nodeBlocks = precond_ == PreconditionerKind::BlockDiagonal || precond_ == PreconditionerKind::Amg;
+    createReal(blocks_, (nodeBlocks ? kNodeBlockComponents : 3) * nodeTotal_);
+    createReal(minv_, (nodeBlocks ? 9 : 3) * nodeTotal_);
   }
   for (ClBuffer* v : {&x_, &b_, &r_, &z_, &p_, &q_, &s_}) createReal(*v, dofTotal);
   // Partials: the PCG node kernels write sum_real triples; element_energy writes one real per

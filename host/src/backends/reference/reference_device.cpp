@@ -372,7 +372,7 @@ class ReferenceBody {
         formDiagonalInverse();
         break;
       case PreconditionerKind::Amg:
-        formDiagonalInverse();
+        amgBlocksInverse_ = nodeBlocks(AmgMatrix(A_), freeDofs_).second;  // level 0's smoother
         formAmg(c);
         break;
       case PreconditionerKind::BlockDiagonal:
@@ -389,7 +389,8 @@ class ReferenceBody {
       case PreconditionerKind::BlockDiagonal: return blocks_.solve(r);
       case PreconditionerKind::Amg: {
         Eigen::VectorXd z;
-        const AmgFineOperator fine{[this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A_ * v; }, &diagInverse_};
+        const AmgFineOperator fine{[this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A_ * v; },
+                                   [this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = amgBlocksInverse_ * v; }};
         amg_.amg().apply(fine, r, z);
         return z;
       }
@@ -446,6 +447,7 @@ class ReferenceBody {
   Eigen::VectorXd bf_, xf_, r_, u_, d_, ad_, w_, diagInverse_;
   BlockJacobiPreconditioner blocks_;
   BodyAmg amg_;
+  AmgMatrix amgBlocksInverse_;  ///< the inverses of A's node blocks (amg's smoother)
   PcgScalars sc_;
   double gamma_ = 0.0, alpha_ = 0.0, beta_ = 0.0, tol2_ = 0.0;
   int cap_ = 0;
