@@ -47,7 +47,8 @@ def label(r):
     if r["linear_solver"] == "cholesky":
         parts.append("cholesky")
     else:
-        parts.append({"none": "pcg", "diagonal": "pcg+diag", "block_diagonal": "pcg+block"}[r["preconditioner"]])
+        parts.append({"none": "pcg", "diagonal": "pcg+diag", "block_diagonal": "pcg+block",
+                      "amg": "pcg+amg"}[r["preconditioner"]])
         parts.append("tol=%g" % num(r["tolerance"]))
         if int(r["max_iterations"]) < 1000:
             parts.append("cap=%s" % r["max_iterations"])
@@ -81,9 +82,9 @@ def style(r):
     elif r["rotation"] != "polar":
         m = {"svd": "v", "quaternion": "^", "qr": "<"}[r["rotation"]]
     elif int(r["max_iterations"]) < 1000:
-        m = "s"
+        m = "p" if r["preconditioner"] == "amg" else "s"
     else:
-        m = {"none": "o", "diagonal": "D", "block_diagonal": "P"}[r["preconditioner"]]
+        m = {"none": "o", "diagonal": "D", "block_diagonal": "P", "amg": "h"}[r["preconditioner"]]
     return c, m
 
 
@@ -145,7 +146,9 @@ def main():
                    Line2D([], [], color="gray", marker="o", ls="", label="PCG, no precond."),
                    Line2D([], [], color="gray", marker="D", ls="", label="PCG + diagonal"),
                    Line2D([], [], color="gray", marker="P", ls="", label="PCG + block diagonal"),
-                   Line2D([], [], color="gray", marker="s", ls="", label="PCG iteration cap"),
+                   Line2D([], [], color="gray", marker="h", ls="", label="PCG + multigrid (amg)"),
+                   Line2D([], [], color="gray", marker="s", ls="", label="PCG iteration cap (block)"),
+                   Line2D([], [], color="gray", marker="p", ls="", label="PCG iteration cap (amg)"),
                    Line2D([], [], color="gray", marker="v", ls="", label="rotation svd"),
                    Line2D([], [], color="gray", marker="^", ls="", label="rotation quaternion"),
                    Line2D([], [], color="gray", marker="<", ls="", label="rotation qr"),

@@ -353,28 +353,30 @@ std::vector<Knobs> fullKnobs(bool quick, bool withOpenCL) {
   lin.formulation = Formulation::Linear;
   out.push_back(lin);
   const std::vector<PreconditionerKind> preconds = {PreconditionerKind::None, PreconditionerKind::Diagonal,
-                                                    PreconditionerKind::BlockDiagonal};
+                                                    PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg};
+  const std::vector<PreconditionerKind> quickPreconds = {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg};
   const std::vector<double> refTols = quick ? std::vector<double>{1e-2, 1e-4, 1e-8}
                                             : std::vector<double>{1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8};
-  for (auto pc : (quick ? std::vector<PreconditionerKind>{PreconditionerKind::BlockDiagonal} : preconds))
+  for (auto pc : (quick ? quickPreconds : preconds))
     for (double tol : refTols) {
       Knobs k;
       k.preconditioner = pc;
       k.tolerance = tol;
       out.push_back(k);
     }
-  for (int cap : (quick ? std::vector<int>{5, 20} : std::vector<int>{5, 10, 20, 50, 100})) {
-    Knobs k;
-    k.tolerance = 1e-10;  // the cap, not the tolerance, ends these solves
-    k.maxIterations = cap;
-    k.preconditioner = PreconditionerKind::BlockDiagonal;
-    out.push_back(k);
-  }
+  for (auto pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg})
+    for (int cap : (quick ? std::vector<int>{5, 20} : std::vector<int>{5, 10, 20, 50, 100})) {
+      Knobs k;
+      k.tolerance = 1e-10;  // the cap, not the tolerance, ends these solves
+      k.maxIterations = cap;
+      k.preconditioner = pc;
+      out.push_back(k);
+    }
   if (!withOpenCL) return out;
   const std::vector<double> clTols = quick ? std::vector<double>{1e-2, 1e-5} : std::vector<double>{1e-2, 1e-4, 1e-6};
   // Mixed: float vectors and products, PCG dot products and scalars in double.
   for (auto prec : {Precision::Float, Precision::Mixed, Precision::Double})
-    for (auto pc : (quick ? std::vector<PreconditionerKind>{PreconditionerKind::BlockDiagonal} : preconds))
+    for (auto pc : (quick ? quickPreconds : preconds))
       for (double tol : clTols) {
         Knobs k;
         k.backend = BackendKind::OpenCL;
@@ -394,15 +396,16 @@ std::vector<Knobs> fullKnobs(bool quick, bool withOpenCL) {
       k.tolerance = 1e-4;
       out.push_back(k);
     }
-  for (int cap : (quick ? std::vector<int>{10} : std::vector<int>{10, 30, 100})) {
-    Knobs k;
-    k.backend = BackendKind::OpenCL;
-    k.precision = Precision::Float;
-    k.preconditioner = PreconditionerKind::BlockDiagonal;
-    k.tolerance = 1e-10;
-    k.maxIterations = cap;
-    out.push_back(k);
-  }
+  for (auto pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg})
+    for (int cap : (quick ? std::vector<int>{10} : std::vector<int>{5, 10, 30, 100})) {
+      Knobs k;
+      k.backend = BackendKind::OpenCL;
+      k.precision = Precision::Float;
+      k.preconditioner = pc;
+      k.tolerance = 1e-10;
+      k.maxIterations = cap;
+      out.push_back(k);
+    }
   for (auto prec : {Precision::Float, Precision::Mixed, Precision::Double}) {
     Knobs k;
     k.backend = BackendKind::OpenCL;

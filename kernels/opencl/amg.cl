@@ -141,7 +141,10 @@ __kernel void amg_spmv(const uint rows, __global const uint* restrict slice, __g
   if (i >= rows) return;
   const uint s = i / kAmgSlice, begin = slice[s] + i % kAmgSlice, end = slice[s + 1];
   real sum = 0;
-  for (uint j = begin; j < end; j += kAmgSlice) sum += values[j] * x[cols[j]];
+  /* Padding (value 0) is skipped, not multiplied: its column belongs to another body, whose x may
+   * not be finite. */
+  for (uint j = begin; j < end; j += kAmgSlice)
+    if (values[j] != (real)0) sum += values[j] * x[cols[j]];
   y[i] = mode == 1u ? b[i] - sum : sum;
 }
 
@@ -156,7 +159,8 @@ __kernel void amg_spmv_slices(const uint rows, __global const uint* restrict sli
     const uint16 c = vload16(0, cols + j);
     const real16 xv = (real16)(x[c.s0], x[c.s1], x[c.s2], x[c.s3], x[c.s4], x[c.s5], x[c.s6], x[c.s7], x[c.s8],
                                x[c.s9], x[c.sa], x[c.sb], x[c.sc], x[c.sd], x[c.se], x[c.sf]);
-    sum += vload16(0, values + j) * xv;
+    const real16 v = vload16(0, values + j);
+    sum += select((real16)0, v * xv, isnotequal(v, (real16)0));  /* padding skipped (amg_spmv) */
   }
   real out[kAmgSlice];
   vstore16(sum, 0, out);

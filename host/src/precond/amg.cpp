@@ -3,7 +3,7 @@
 
 #include "util/error.hpp"
 
-#include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <Eigen/QR>
 
 #include <algorithm>
@@ -165,10 +165,18 @@ std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector
     Eigen::Matrix3d Bn = Eigen::Matrix3d::Identity();
     for (Eigen::Index a = 0; a < m; ++a)
       for (Eigen::Index b = 0; b < m; ++b) Bn(a, b) = A.coeff(i + a, i + b);
-    Eigen::Matrix3d inv = Eigen::Matrix3d::Identity();
-    const Eigen::LDLT<Eigen::Matrix3d> ldlt(Bn);
-    if (ldlt.info() == Eigen::Success && ldlt.isPositive()) inv = ldlt.solve(Eigen::Matrix3d::Identity());
-    inv = 0.5 * (inv + inv.transpose());
+    // As the device forms it (kernels/opencl/precond.cl, node_preconditioner): the inverse where
+    // the determinant and the diagonal are positive, else the diagonal's (1 where not positive);
+    // B is then the block that is inverted.
+    Eigen::Matrix3d inv;
+    if (Bn.determinant() > 0.0 && Bn.diagonal().minCoeff() > 0.0) {
+      inv = Bn.inverse();
+      inv = 0.5 * (inv + inv.transpose());
+    } else {
+      for (int k = 0; k < 3; ++k) Bn(k, k) = Bn(k, k) > 0.0 ? Bn(k, k) : 1.0;
+      Bn = Eigen::Matrix3d(Bn.diagonal().asDiagonal());
+      inv = Eigen::Matrix3d(Bn.diagonal().cwiseInverse().asDiagonal());
+    }
     for (Eigen::Index a = 0; a < m; ++a)
       for (Eigen::Index b = 0; b < m; ++b) {
         blocks.emplace_back(static_cast<int>(i + a), static_cast<int>(i + b), Bn(a, b));
@@ -192,7 +200,7 @@ void WarpedAmg::clear() {
 }
 
 void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
-                      std::size_t nodeCount) {
+                      std::size_t nodeCount, const AmgMatrix* bound) {
   clear();
   const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs.size());
   if (A0.rows() != nf || A0.cols() != nf || static_cast<std::size_t>(rest.size()) != 3 * nodeCount)
@@ -233,8 +241,9 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
   }
 
   {
-    const auto [B0, B0inv] = nodeBlocks(A0, freeDofs);
-    fineLambdaMax_ = estimateBlockLambdaMax(A0, B0, B0inv);
+    const AmgMatrix& Ab = bound ? *bound : A0;
+    const auto [B0, B0inv] = nodeBlocks(Ab, freeDofs);
+    fineLambdaMax_ = estimateBlockLambdaMax(Ab, B0, B0inv);
   }
   AmgLevel level;
   level.A = A0;
@@ -511,7 +520,10 @@ bool BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs
                         ? (ratio == 0.0 ? ratio_ == 0.0 : ratio_ > 0.5 * ratio && ratio_ < 2.0 * ratio)
                         : ratio == ratio_;
   if (amg_.built() && near) return false;
-  amg_.build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount());
+  // Level 0's Chebyshev bound from the operator with half the mass coefficient: the bound of the
+  // whole window of ratios this hierarchy serves (lambda_max(B^-1 A) does not grow with the mass).
+  const AmgMatrix bound = restOperator(p, freeDofs, 0.5 * massScale, stiffScale);
+  amg_.build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount(), &bound);
   ratio_ = ratio;
   return true;
 }

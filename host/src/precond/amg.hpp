@@ -67,16 +67,19 @@ struct AmgFineOperator {
 };
 
 /// The node blocks B of A on the free dofs `freeDofs` (each node's free dofs, consecutive) and their
-/// inverses (a block that is not positive definite: I).
+/// inverses; a block whose determinant or diagonal is not positive is replaced by its diagonal
+/// (1 where not positive), as the OpenCL device forms them.
 std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs);
 
 class WarpedAmg {
  public:
   /// Builds the hierarchy from the rest operator `A0` on the free dofs `freeDofs` (ascending dof
-  /// indices 3 n + c of a body with `nodeCount` nodes at rest positions `rest`, 3N entries).
-  /// Throws Error(Internal) for inconsistent sizes.
+  /// indices 3 n + c of a body with `nodeCount` nodes at rest positions `rest`, 3N entries);
+  /// level 0's Chebyshev bound from `bound` where given (an operator whose spectrum against its
+  /// node blocks bounds those the hierarchy will serve), else from A0. Throws Error(Internal) for
+  /// inconsistent sizes.
   void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
-             std::size_t nodeCount);
+             std::size_t nodeCount, const AmgMatrix* bound = nullptr);
   /// Whether build() ran since construction or clear() (a body without free dofs has no levels).
   bool built() const { return made_; }
   void clear();
@@ -112,7 +115,7 @@ class WarpedAmg {
   void warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const;
 
   bool made_ = false;
-  /// lambda_max(B_0^-1 A_0) of the rest operator and its node blocks, times 1.1: level 0's
+  /// lambda_max(B^-1 A) of the rest operator with half its mass coefficient, times 1.1: level 0's
   /// Chebyshev bound. The node blocks turn with their node (B_t = R B_0 R^T where the elements
   /// around it share its rotation), so the current operator's spectrum against its own blocks stays
   /// the rest one's; a point diagonal does not turn, and on a bent slender bar D_t^-1 A_t outgrew

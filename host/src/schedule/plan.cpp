@@ -69,8 +69,9 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const bool damping = dynamic && (problem.rayleighMass > 0 || problem.rayleighStiffness > 0);
   const bool pcg = scene.solver.linearSolver == LinearSolverKind::Pcg;
   const bool precond = pcg && scene.solver.preconditioner != PreconditionerKind::None;
-  const bool block = scene.solver.preconditioner == PreconditionerKind::BlockDiagonal;
   const bool amg = pcg && scene.solver.preconditioner == PreconditionerKind::Amg;
+  // amg smooths with the node blocks' inverses: the block preconditioner's data on a device.
+  const bool block = scene.solver.preconditioner == PreconditionerKind::BlockDiagonal || amg;
   // The multigrid's levels (precond/amg.hpp) per free dof of the body, as the Vega beam of
   // bench_precond (12,960 tets) has them: P_0 and P_0^T 21 entries each, the level-1 operator 17,
   // the coarser ones about 1; each entry a real and a 4-byte column (the coarsest inverse aside).

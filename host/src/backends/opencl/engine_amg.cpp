@@ -108,13 +108,13 @@ void EngineAmg::prepare(const BodySet& running) {
   uploadWarp(running);
 }
 
-void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool doubleValues) {
+void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool csr, bool doubleValues) {
   // m is row-major with the device's row and column numbering already: CSR for the coarsest
-  // inverse (doubleValues), sliced ELLPACK (amg_spmv) for the others.
+  // inverse (amg_coarsest), sliced ELLPACK (amg_spmv) for the others.
   const std::size_t rows = static_cast<std::size_t>(m.rows());
   std::vector<cl_uint> start, cols;
   std::vector<double> values;
-  if (doubleValues) {
+  if (csr) {
     start.resize(rows + 1);
     for (std::size_t i = 0; i <= rows; ++i) start[i] = static_cast<cl_uint>(m.outerIndexPtr()[i]);
     cols.assign(m.innerIndexPtr(), m.innerIndexPtr() + m.nonZeros());
@@ -227,7 +227,7 @@ void EngineAmg::upload() {
     setRows(L.A, matrix(a, rows[k], rows[k]));
     setRows(L.P, matrix(p, rows[k], next));
     setRows(L.Pt, matrix(pt, next, rows[k]));
-    setRows(L.inverse, matrix(inv, rows[k], rows[k]), e_.ctx_->info().fp64);
+    setRows(L.inverse, matrix(inv, rows[k], rows[k]), true, e_.ctx_->info().fp64);
     L.inverseEntries = inv.size();
     L.smooths = !a.empty();
     L.dinv = reals(dinv);

@@ -62,8 +62,9 @@ class EngineAmg {
   void spmv(const Csr& m, const ClBuffer& x, const ClBuffer* b, cl_uint mode, const ClBuffer& y);
   std::unique_ptr<ClBuffer> buffer(std::size_t bytes);
   std::unique_ptr<ClBuffer> reals(const std::vector<double>& values);
-  /// `doubleValues`: the values in double whatever the engine's precision (the coarsest inverse).
-  void setRows(Csr& out, const AmgMatrix& m, bool doubleValues = false);
+  /// `csr`: CSR (the coarsest inverse), else sliced ELLPACK; `doubleValues`: the values in double
+  /// whatever the engine's precision (the coarsest inverse where the device has fp64).
+  void setRows(Csr& out, const AmgMatrix& m, bool csr = false, bool doubleValues = false);
 
   SegmentEngine& e_;
   std::vector<BodyAmg> bodies_;           ///< per segment

@@ -37,7 +37,7 @@ void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char
   // M^-1 of the coefficients is formed here too (pcg_init), stored for the iterations.
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
          b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
-  if (amg_) amg_->cycle(true);  // u = M^-1 r by the V-cycle, over pcg_init's diagonal one
+  if (amg_) amg_->cycle(true);  // u = M^-1 r by the V-cycle, over pcg_init's node-block one
   if (productFor) {  // the packs' bodies take w = A u and the first scalars in pcg_iterate_pack
     if (!anyFor) return;
     setActive(*productFor);
@@ -55,7 +55,7 @@ void SegmentEngine::pcgIteration(bool last) {
   // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta.
   // The iteration cap's last iteration has no successor: no w = A u, only gamma and r . r.
   launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, q_, minv_, p_, s_, x_, r_, z_, partials_);
-  if (amg_) amg_->cycle(false);  // u = M^-1 r by the V-cycle, over pcg_update's diagonal one
+  if (amg_) amg_->cycle(false);  // u = M^-1 r by the V-cycle, over pcg_update's node-block one
   if (last)
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceLast),
            SumReal{round_.tolerance * round_.tolerance});
