@@ -204,4 +204,20 @@ TEST(WarpedAmg, TheReferenceBackendSolvesADeformedBeamInFewIterationsToTheSameAn
   EXPECT_LT((answer[1] - answer[0]).norm(), 1e-8 * answer[0].norm());
 }
 
+TEST(WarpedAmg, ABodyKeepsItsHierarchyWithinAFactorOfTwoAndTakesBackTheOneItReplaced) {
+  const Problem p = beam(20);
+  const std::vector<Eigen::Index> free = freeDofs(p);
+  BodyAmg body;
+  using Made = BodyAmg::Made;
+  EXPECT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), Made::Built);
+  EXPECT_EQ(body.ensure(p, free, 1.5 * kBackwardEulerMass, 1.0), Made::Kept);  // h a little shorter
+  EXPECT_EQ(body.ensure(p, free, 4.0 * kBackwardEulerMass, 1.0), Made::Built);  // a substep: h / 2
+  EXPECT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), Made::Switched);     // the next full step
+  EXPECT_EQ(body.ensure(p, free, 4.0 * kBackwardEulerMass, 1.0), Made::Switched);
+  EXPECT_EQ(body.ensure(p, free, 0.0, 1.0), Made::Built);  // statics
+  body.clear();
+  EXPECT_EQ(body.ensure(p, free, 0.0, 1.0), Made::Built);
+  EXPECT_FALSE(body.amg().levelSizes().empty());
+}
+
 }  // namespace

@@ -514,18 +514,30 @@ AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDo
   return A;
 }
 
-bool BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale) {
+BodyAmg::BodyAmg() : amg_(std::make_unique<WarpedAmg>()), spare_(std::make_unique<WarpedAmg>()) {}
+
+void BodyAmg::clear() {
+  amg_->clear();
+  spare_->clear();
+}
+
+BodyAmg::Made BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
+                              double stiffScale) {
   const double ratio = stiffScale != 0.0 ? massScale / stiffScale : INFINITY;
-  const bool near = std::isfinite(ratio) && std::isfinite(ratio_)
-                        ? (ratio == 0.0 ? ratio_ == 0.0 : ratio_ > 0.5 * ratio && ratio_ < 2.0 * ratio)
-                        : ratio == ratio_;
-  if (amg_.built() && near) return false;
+  auto near = [ratio](double made) {
+    return std::isfinite(ratio) && std::isfinite(made) ? (ratio == 0.0 ? made == 0.0 : made > 0.5 * ratio && made < 2.0 * ratio)
+                                                       : ratio == made;
+  };
+  if (amg_->built() && near(ratio_)) return Made::Kept;
+  std::swap(amg_, spare_);
+  std::swap(ratio_, spareRatio_);
+  if (amg_->built() && near(ratio_)) return Made::Switched;
   // Level 0's Chebyshev bound from the operator with half the mass coefficient: the bound of the
   // whole window of ratios this hierarchy serves (lambda_max(B^-1 A) does not grow with the mass).
   const AmgMatrix bound = restOperator(p, freeDofs, 0.5 * massScale, stiffScale);
-  amg_.build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount(), &bound);
+  amg_->build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount(), &bound);
   ratio_ = ratio;
-  return true;
+  return Made::Built;
 }
 
 }  // namespace corofem::detail

@@ -140,17 +140,25 @@ AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDo
 /// preconditioner made for a nearby ratio is still a good one; the integrators keep the mass
 /// coefficient at 1, so the ratio alone moves), or after clear() (the constraints or the material
 /// changed).
+///
+/// The hierarchy it replaces is kept as a spare and taken back where the ratio returns near its
+/// own: a step retried in substeps (h / 2, h / 4: the ratio 4x, 16x) and the next full step then
+/// cost one set-up each, not one per change.
 class BodyAmg {
  public:
-  /// Makes the hierarchy where needed; returns whether it did.
-  bool ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale);
-  void clear() { amg_.clear(); }
-  WarpedAmg& amg() { return amg_; }
-  const WarpedAmg& amg() const { return amg_; }
+  BodyAmg();
+  /// What ensure did.
+  enum class Made { Kept, Switched, Built };
+  /// Makes the hierarchy where needed, or takes back the spare. A caller that keeps data derived
+  /// from amg() (a device's copies, the warp) refreshes it unless Kept.
+  Made ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale);
+  void clear();
+  WarpedAmg& amg() { return *amg_; }
+  const WarpedAmg& amg() const { return *amg_; }
 
  private:
-  WarpedAmg amg_;
-  double ratio_ = 0.0;  ///< m / s of the operator amg_ was made from (infinite for s = 0)
+  std::unique_ptr<WarpedAmg> amg_, spare_;
+  double ratio_ = 0.0, spareRatio_ = 0.0;  ///< m / s each was made from (infinite for s = 0)
 };
 
 }  // namespace corofem::detail
