@@ -115,7 +115,7 @@ COROFEM_FN void pcg_update_nodes(uint first, uint last, real alpha, real beta, _
                                  __global const real* minv, __global real* p, __global real* sv, __global real* x,
                                  __global real* r, __global real* u, sum_real* sums) {
   sum_real ru = 0, rr = 0;
-#if COROFEM_CHUNK == 4 && !defined(COROFEM_PRECOND_BLOCK) && !defined(COROFEM_TREE_REDUCE)
+#if COROFEM_CHUNK == 4 && (!defined(COROFEM_PRECOND_BLOCK) || defined(COROFEM_AMG)) && !defined(COROFEM_TREE_REDUCE)
   /* A whole chunk (CPUs): its 12 dofs as three real4, so that the update compiles to vector code
    * (PoCL leaves the loop below scalar). The lane sums are added in a fixed order. */
   if (last == first + 4) {
@@ -129,7 +129,7 @@ COROFEM_FN void pcg_update_nodes(uint first, uint last, real alpha, real beta, _
       vstore4(vload4(0, x + d) + alpha * pd, 0, x + d);
       const real4 rd = vload4(0, r + d) - alpha * sd;
       vstore4(rd, 0, r + d);
-#if defined(COROFEM_PRECOND_DIAG)
+#if defined(COROFEM_PRECOND_DIAG) && !defined(COROFEM_AMG)
       const real4 ud = vload4(0, minv + d) * rd;
 #else
       const real4 ud = rd;
@@ -155,7 +155,11 @@ COROFEM_FN void pcg_update_nodes(uint first, uint last, real alpha, real beta, _
       rn[k] = r[d] - alpha * sd;
       r[d] = rn[k];
     }
+#ifdef COROFEM_AMG  /* the multigrid's cycle forms u after this kernel (engine_amg.hpp) */
+    for (int k = 0; k < 3; ++k) un[k] = rn[k];
+#else
     apply_preconditioner(n, minv, rn, un);
+#endif
     #pragma unroll
     for (int k = 0; k < 3; ++k) {
       u[3 * n + k] = un[k];

@@ -181,6 +181,7 @@ void SegmentEngine::build(const SolverDesc& solver) {
     options_ += " -DCOROFEM_PRECOND_BLOCK";
   else if (precond_ == PreconditionerKind::Diagonal)
     options_ += " -DCOROFEM_PRECOND_DIAG";
+  if (amg_) options_ += " -DCOROFEM_AMG";
   if (amg_ && ctx_->info().fp64) options_ += " -DCOROFEM_AMG_COARSEST_DOUBLE";
   static const std::string source = cl::corofemProgramSource();
   build_ = cl::buildProgram(*ctx_, "corofem", source, options_);
