@@ -155,7 +155,10 @@ std::vector<int> aggregate(const std::vector<int>& start, const std::vector<int>
 
 }  // namespace
 
-std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs) {
+namespace {
+
+template <class Matrix>
+std::pair<AmgMatrix, AmgMatrix> nodeBlocksOf(const Matrix& A, const std::vector<Eigen::Index>& freeDofs) {
   const Eigen::Index n = A.rows();
   std::vector<Eigen::Triplet<double, int>> blocks, inverses;
   for (Eigen::Index i = 0; i < n;) {
@@ -188,6 +191,16 @@ std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector
   B.setFromTriplets(blocks.begin(), blocks.end());
   Binv.setFromTriplets(inverses.begin(), inverses.end());
   return {std::move(B), std::move(Binv)};
+}
+
+}  // namespace
+
+std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs) {
+  return nodeBlocksOf(A, freeDofs);
+}
+
+std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const Eigen::SparseMatrix<double>& A, const std::vector<Eigen::Index>& freeDofs) {
+  return nodeBlocksOf(A, freeDofs);
 }
 
 void WarpedAmg::clear() {

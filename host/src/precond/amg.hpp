@@ -70,6 +70,8 @@ struct AmgFineOperator {
 /// inverses; a block whose determinant or diagonal is not positive is replaced by its diagonal
 /// (1 where not positive), as the OpenCL device forms them.
 std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs);
+/// The same of a column-major matrix (the reference backend's assembled one), without a copy.
+std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const Eigen::SparseMatrix<double>& A, const std::vector<Eigen::Index>& freeDofs);
 
 class WarpedAmg {
  public:

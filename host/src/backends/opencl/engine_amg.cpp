@@ -39,6 +39,7 @@ EngineAmg::EngineAmg(SegmentEngine& engine) : e_(engine), bodies_(engine.segs_.s
   freeDofs_.resize(K);
   positions_.resize(K);
   warpStale_.assign(K, 1);
+  freeKnown_.assign(K, 0);
 }
 
 void EngineAmg::createKernels() {
@@ -81,6 +82,7 @@ void EngineAmg::positionsSet(const BodySet& bodies, const ConstVectors& x) {
 
 void EngineAmg::invalidate(std::size_t s) {
   bodies_[s].clear();
+  freeKnown_[s] = 0;
   dirty_ = true;
 }
 
@@ -88,15 +90,13 @@ void EngineAmg::prepare(const BodySet& running) {
   for (std::size_t s : running) {
     const BodySegment& sg = e_.segs_[s];
     const Problem& p = *sg.problem;
-    // The free dofs in the problem's numbering (the segment keeps its mask in the device's).
-    std::vector<std::uint8_t> constrained(sg.dofs());
-    for (std::size_t d = 0; d < sg.dofs(); ++d) constrained[sg.hostDof(d)] = sg.constrained[d];
-    std::vector<Eigen::Index> free;
-    for (std::size_t d = 0; d < constrained.size(); ++d)
-      if (!constrained[d]) free.push_back(static_cast<Eigen::Index>(d));
-    if (free != freeDofs_[s]) {
-      freeDofs_[s] = std::move(free);
-      bodies_[s].clear();
+    if (!freeKnown_[s]) {  // the free dofs in the problem's numbering (the segment keeps its mask in the device's)
+      std::vector<std::uint8_t> constrained(sg.dofs());
+      for (std::size_t d = 0; d < sg.dofs(); ++d) constrained[sg.hostDof(d)] = sg.constrained[d];
+      freeDofs_[s].clear();
+      for (std::size_t d = 0; d < constrained.size(); ++d)
+        if (!constrained[d]) freeDofs_[s].push_back(static_cast<Eigen::Index>(d));
+      freeKnown_[s] = 1;
     }
     const double* coef = &e_.segCoef_[layout::kSegCoefCount * s];
     if (bodies_[s].ensure(p, freeDofs_[s], coef[layout::kCoefMass], coef[layout::kCoefStiff]) != BodyAmg::Made::Kept) {

@@ -69,6 +69,7 @@ class EngineAmg {
   SegmentEngine& e_;
   std::vector<BodyAmg> bodies_;           ///< per segment
   std::vector<std::vector<Eigen::Index>> freeDofs_;  ///< per segment, in the problem's numbering
+  std::vector<char> freeKnown_;           ///< per segment: freeDofs_ is its constraints' (invalidate clears it)
   std::vector<Eigen::VectorXd> positions_;  ///< per segment: the last positions set
   std::vector<char> warpStale_;
   bool dirty_ = true;                     ///< the device levels lag the hierarchies

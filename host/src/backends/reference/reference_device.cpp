@@ -372,7 +372,7 @@ class ReferenceBody {
         formDiagonalInverse();
         break;
       case PreconditionerKind::Amg:
-        amgBlocksInverse_ = nodeBlocks(AmgMatrix(A_), freeDofs_).second;  // level 0's smoother
+        amgBlocksInverse_ = nodeBlocks(A_, freeDofs_).second;  // level 0's smoother
         formAmg(c);
         break;
       case PreconditionerKind::BlockDiagonal:
