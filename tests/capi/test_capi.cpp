@@ -199,6 +199,9 @@ TEST(CApi, EveryControlCallLeavesTheStateTheCppApiLeaves) {
   C_OK(corofem_simulation_move_handle(c.sim, gc, pulled, nullptr));
   CPP_OK(cpp.moveHandle(gp.value(), pulled));
   stepBoth("a handle at a point");
+  C_OK(corofem_simulation_set_handle_stiffness(c.sim, gc, 300.0));
+  CPP_OK(cpp.setHandleStiffness(gp.value(), 300.0));
+  stepBoth("the point's handle made a spring");
 
   // Pins and forces at a node and at a point.
   C_OK(corofem_simulation_pin_nodes(c.sim, 0, middle.data(), middle.size()));
@@ -530,6 +533,8 @@ TEST(CApi, EveryCallRefusesANullHandleByName) {
       {"corofem_simulation_add_body", [&] { return corofem_simulation_add_body(nullptr, nullptr, 0, &i); }},
       {"corofem_simulation_remove_body", [&] { return corofem_simulation_remove_body(nullptr, 0); }},
       {"corofem_simulation_remove_handle", [&] { return corofem_simulation_remove_handle(nullptr, 1); }},
+      {"corofem_simulation_set_handle_stiffness",
+       [&] { return corofem_simulation_set_handle_stiffness(nullptr, 1, 1.0); }},
       {"corofem_simulation_pin_nodes", [&] { return corofem_simulation_pin_nodes(nullptr, 0, &node, 1); }},
       {"corofem_simulation_unpin_nodes", [&] { return corofem_simulation_unpin_nodes(nullptr, 0, &node, 1); }},
       {"corofem_simulation_set_forces", [&] { return corofem_simulation_set_forces(nullptr, 0, &force, 1); }},

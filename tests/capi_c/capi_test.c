@@ -270,6 +270,10 @@ static void hold_and_push(void) {
         CHECK(fabs(x[3 * i + (size_t)a] - target[a]) <= 1e-9, "the point handle's node %zu, axis %d: %.12f", i, a,
               x[3 * i + (size_t)a]);
   free(x);
+  /* Made a spring of 500 N/m, the handle no longer holds the node on the target exactly. */
+  OK(corofem_simulation_set_handle_stiffness(sim, handle, 500.0));
+  FAILS(corofem_simulation_set_handle_stiffness(sim, handle, -1.0), COROFEM_BAD_INPUT, "stiffness");
+  OK(corofem_simulation_step_dt(sim, kH, NULL));
   OK(corofem_simulation_remove_handle(sim, handle));
   FAILS(corofem_simulation_remove_handle(sim, handle), COROFEM_BAD_INPUT, "no handle");
 

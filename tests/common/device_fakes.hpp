@@ -35,6 +35,12 @@ class ForwardingDevice : public detail::Device {
   void setConstraints(const detail::BodySet& b, const std::vector<const std::vector<std::uint8_t>*>& c) override {
     inner_->setConstraints(b, c);
   }
+  void setMaterial(const detail::BodySet& b, const std::vector<const detail::Problem*>& p) override {
+    inner_->setMaterial(b, p);
+  }
+  void setSprings(const detail::BodySet& b, const std::vector<const detail::Problem*>& p) override {
+    inner_->setSprings(b, p);
+  }
   std::vector<detail::BodySet> pcgTiles(const detail::BodySet& b) const override { return inner_->pcgTiles(b); }
   std::vector<detail::PcgStart> pcgBegin(const detail::BodySet& bodies, const std::vector<detail::SystemCoeffs>& c,
                                          const detail::ConstVectors& b, const detail::ConstVectors& x, double tol,

@@ -130,6 +130,118 @@ TEST_P(ConformancePcg, MultigridFollowsChangedConstraints) {
   }
 }
 
+TEST_P(ConformancePcg, SpringsJoinTheProductsAndTheSolves) {
+  // An application's springs (spring handles: Problem::springStiffness S, A = m M + c C + s (K_t +
+  // S)) on a random third of the dofs of every body with mass, from 0 to 10 times the mass term:
+  // the products with the solves' coefficients and with a damping product's (s = 0: the OpenCL
+  // backend folds S into its mass buffer per ratio s / m, and must unfold it) match the reference's,
+  // the solves match it with every preconditioner on devices made with the springs already there
+  // (a failover) and on the fixture's told of them later, and removed they leave the plain product.
+  std::vector<detail::Problem> sprung;
+  for (std::size_t i = 0; i < count(); ++i) {
+    sprung.push_back(problem(i));
+    const detail::SystemCoeffs& c = bodies()[i].solve;
+    if (c.mass == 0.0) continue;  // static: run-time springs are a dynamic analysis's
+    const Eigen::VectorXd u = randomVector(problem(i).dofCount(), 700 + static_cast<unsigned>(i));
+    detail::Problem& p = sprung.back();
+    p.springStiffness = Eigen::VectorXd::Zero(u.size());
+    for (Eigen::Index d = 0; d < u.size(); ++d)
+      if (u[d] > 1.0 / 3.0) p.springStiffness[d] = 15.0 * (u[d] - 1.0 / 3.0) * c.mass * p.lumpedMass[d] / c.stiffness;
+  }
+  std::vector<const detail::Problem*> withSprings;
+  for (const detail::Problem& p : sprung) withSprings.push_back(&p);
+  const detail::BodySet all = detail::allBodies(count());
+  device().setSprings(all, withSprings);
+  reference().setSprings(all, withSprings);
+  const std::vector<Eigen::VectorXd> x = setRandomPositions(800);
+
+  auto productsMatch = [&](const char* what) {
+    for (const detail::SystemCoeffs damping : {detail::SystemCoeffs{0.0, 1.0, 0.0}, detail::SystemCoeffs{}}) {
+      for (int round = 0; round < 2; ++round) {  // the solves' coefficients, then the damping's, twice over
+        std::vector<Eigen::VectorXd> p(count()), y(count()), yRef(count());
+        detail::ConstVectors in;
+        detail::Vectors out, outRef;
+        std::vector<detail::SystemCoeffs> c;
+        for (std::size_t i = 0; i < count(); ++i) {
+          p[i] = randomVector(problem(i).dofCount(), 810 + static_cast<unsigned>(i + 10 * round));
+          in.push_back(&p[i]);
+          out.push_back(&y[i]);
+          outRef.push_back(&yRef[i]);
+          c.push_back(round == 0 ? bodies()[i].solve : damping);
+        }
+        device().apply(all, c, in, out);
+        reference().apply(all, c, in, outRef);
+        for (std::size_t i = 0; i < count(); ++i)
+          EXPECT_LE(maxRel(y[i], yRef[i]), productTolerance())
+              << what << ", " << problem(i).name << ", m " << c[i].mass << ", c " << c[i].damping << ", k "
+              << c[i].stiffness;
+      }
+    }
+  };
+  productsMatch("with springs");
+  // The products differ from those without springs (the test would mean nothing otherwise).
+  {
+    const std::unique_ptr<detail::Device> plain = makeReference(problemsOf(bodies()), solver());
+    detail::ConstVectors xs;
+    for (const Eigen::VectorXd& v : x) xs.push_back(&v);
+    plain->setPositions(all, xs);
+    const Eigen::VectorXd p = randomVector(problem(2).dofCount(), 830);
+    Eigen::VectorXd y, yPlain;
+    reference().apply({2}, {bodies()[2].solve}, {&p}, {&y});
+    plain->apply({2}, {bodies()[2].solve}, {&p}, {&yPlain});
+    EXPECT_GT(maxRel(y, yPlain), 0.1);
+  }
+
+  const std::vector<Eigen::VectorXd> b = rightHandSides(840);
+  for (PreconditionerKind pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Diagonal, PreconditionerKind::Amg}) {
+    const SolverDesc s = solver(pc);
+    std::unique_ptr<detail::Device> own, ownRef;
+    detail::Device* dev = &device();
+    detail::Device* ref = &reference();
+    if (pc != PreconditionerKind::BlockDiagonal) {  // made with the springs there (as a failover makes them)
+      own = makeDevice(withSprings, s);
+      ownRef = makeReference(withSprings, s);
+      dev = own.get();
+      ref = ownRef.get();
+      detail::ConstVectors xs;
+      for (const Eigen::VectorXd& v : x) xs.push_back(&v);
+      dev->setPositions(all, xs);
+      ref->setPositions(all, xs);
+    }
+    const SetSolve got = solveSet(*dev, all, b, zeros(), s, systems(all));
+    const SetSolve want = solveSet(*ref, all, b, zeros(), s, systems(all));
+    for (std::size_t i = 0; i < count(); ++i) {
+      ASSERT_TRUE(got.solves[i].failure.empty()) << got.solves[i].failure;
+      ASSERT_TRUE(want.solves[i].failure.empty()) << want.solves[i].failure;
+      expectSolveMatches(i, bodies()[i].solve, b[i], got.x[i], got.solves[i].stats, want.x[i], want.solves[i].stats,
+                         s.tolerance, std::string("springs, preconditioner ") + toString(pc), nullptr,
+                         pc == PreconditionerKind::Amg && problem(i).name == "slab");
+    }
+  }
+
+  // Removed: the plain products again.
+  std::vector<detail::Problem> unsprung(sprung);
+  std::vector<const detail::Problem*> without;
+  for (detail::Problem& p : unsprung) {
+    p.springStiffness.resize(0);
+    without.push_back(&p);
+  }
+  device().setSprings(all, without);
+  reference().setSprings(all, without);
+  productsMatch("springs removed");
+  {
+    const std::unique_ptr<detail::Device> plain = makeReference(problemsOf(bodies()), solver());
+    detail::ConstVectors xs;
+    for (const Eigen::VectorXd& v : x) xs.push_back(&v);
+    plain->setPositions(all, xs);
+    const Eigen::VectorXd p = randomVector(problem(2).dofCount(), 850);
+    Eigen::VectorXd y, yPlain;
+    device().apply({2}, {bodies()[2].solve}, {&p}, {&y});
+    plain->apply({2}, {bodies()[2].solve}, {&p}, {&yPlain});
+    EXPECT_LE(maxRel(y, yPlain), productTolerance());
+  }
+}
+
 TEST_P(ConformancePcg, SolveLinearOfOneBodyIsItsSolveInTheSet) {
   // solveLinear, one body at a time: the reference's answer within the bounds, and the same bits,
   // iterations and residual as the body's solve beside all the others (a body's PCG is its own:

@@ -544,10 +544,112 @@ TEST_P(Control, ARemovedBodyTakesItsDeviceMemoryAndHandlesWithIt) {
   EXPECT_EQ(sim.removeBody(0).code(), ErrorCode::BadInput);  // the last body stays
 }
 
+TEST_P(Control, ASpringHandlePullsWithStiffnessTimesItsStretch) {
+  // A free beam in no gravity, its tip nodes pulled 5 cm up at once by a spring handle of 200 N/m:
+  // the internal forces sum to zero, so the momentum changes by exactly the spring's force, which
+  // must be k times the stretch, the target minus the tip nodes' centroid (backward Euler: at the
+  // step's end positions), frame after frame while the beam swings up.
+  COROFEM_SKIP_ABSENT(GetParam());
+  Scene scene = beamScene(GetParam(), false, false);
+  scene.analysis.dynamics.newtonIterations = 6;
+  scene.analysis.dynamics.newtonTolerance = 1e-10;
+  Simulation sim = create(scene);
+  const std::vector<std::uint32_t> tip = nodesAt(sim.restMesh(0), 0, 0.5);
+  const double k = 200.0;
+  HandleDesc desc;
+  desc.nodes = tip;
+  desc.stiffness = k;
+  Result<int> handle = sim.addHandle(desc);
+  ASSERT_TRUE(handle) << handle.message();
+  const double target[3] = {0.5, 0.10, 0.05};  // the tip's centroid is at (0.5, 0.05, 0.05)
+  ASSERT_TRUE(sim.moveHandle(handle.value(), target));
+  std::array<double, 3> p = momentum(sim);
+  double largest = 0.0;
+  for (int frame = 1; frame <= 15; ++frame) {
+    ASSERT_TRUE(sim.step(kH)) << "frame " << frame;
+    const std::array<double, 3> next = momentum(sim);
+    const std::vector<double> x = positions(sim);
+    double centroid[3] = {0, 0, 0};
+    for (std::uint32_t n : tip)
+      for (int a = 0; a < 3; ++a) centroid[a] += x[3 * n + static_cast<std::size_t>(a)] / static_cast<double>(tip.size());
+    for (int a = 0; a < 3; ++a) {
+      const double force = k * (target[a] - centroid[a]);
+      const double dpdt = (next[static_cast<std::size_t>(a)] - p[static_cast<std::size_t>(a)]) / kH;
+      ASSERT_NEAR(dpdt, force, solveTolerance() * 10.0 + 1e-6) << "frame " << frame << ", axis " << a;
+      largest = std::max(largest, std::abs(force));
+    }
+    p = next;
+  }
+  EXPECT_GT(largest, 5.0);  // the spring did pull (10 N at the first frame's stretch)
+  // The tip rose towards the target, and the spring holds nothing: the nodes are not on it.
+  const std::vector<double> x = positions(sim);
+  EXPECT_GT(x[3 * tip[0] + 1], 0.06);
+  EXPECT_GT(std::abs(x[3 * tip[0] + 1] - (target[1] - 0.05 + sim.restMesh(0).nodes[3 * tip[0] + 1])), 1e-4);
+}
+
+TEST_P(Control, AStiffSpringHandleActsAsAHardOneAndTheyTurnIntoEachOther) {
+  // The clamped beam under gravity, its tip lifted 3 cm by a hard handle and, in a second
+  // Simulation, by a spring of 1e8 N/m (stable: springs are implicit): the beams agree to the
+  // spring's give, which falls as 1/k (on the reference: 5.6e-4 m at 1e6 N/m, 6.3e-5 m at 1e7, under
+  // 2e-5 m from 1e8 on). Then the spring is
+  // made hard (its nodes exactly on their targets) and the hard handle a spring (its nodes free:
+  // gravity pulls them off by force / k with a soft one).
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation hard = create(beamScene(GetParam(), true, true)), soft = create(beamScene(GetParam(), true, true));
+  const std::vector<std::uint32_t> tip = nodesAt(hard.restMesh(0), 0, 0.5);
+  HandleDesc desc;
+  desc.nodes = tip;
+  Result<int> hh = hard.addHandle(desc);
+  desc.stiffness = 1e8;
+  Result<int> sh = soft.addHandle(desc);
+  ASSERT_TRUE(hh && sh);
+  const std::vector<double> rest = positions(hard);
+  for (int frame = 1; frame <= 12; ++frame) {
+    const double target[3] = {0.5, 0.05 + 0.03 * std::min(1.0, frame / 6.0), 0.05};
+    ASSERT_TRUE(hard.moveHandle(hh.value(), target));
+    ASSERT_TRUE(soft.moveHandle(sh.value(), target));
+    ASSERT_TRUE(hard.step(kH)) << "frame " << frame;
+    ASSERT_TRUE(soft.step(kH)) << "frame " << frame;
+  }
+  std::vector<double> xh = positions(hard), xs = positions(soft);
+  double worst = 0.0;
+  for (std::size_t d = 0; d < xh.size(); ++d) worst = std::max(worst, std::abs(xh[d] - xs[d]));
+  EXPECT_LT(worst, 2e-5);
+  EXPECT_GT(std::abs(xs[3 * tip[0] + 1] - rest[3 * tip[0] + 1]), 0.029);  // it did lift
+
+  // The spring made hard: its nodes on the targets exactly. The hard one made a soft spring: off.
+  ASSERT_TRUE(soft.setHandleStiffness(sh.value(), 0.0));
+  ASSERT_TRUE(hard.setHandleStiffness(hh.value(), 50.0));
+  ASSERT_TRUE(soft.step(kH));
+  ASSERT_TRUE(hard.step(kH));
+  xh = positions(hard);
+  xs = positions(soft);
+  double onTarget = 0.0, off = 0.0;
+  for (std::uint32_t n : tip) {
+    onTarget = std::max(onTarget, std::abs(xs[3 * n + 1] - (rest[3 * n + 1] + 0.03)));
+    off = std::max(off, std::abs(xh[3 * n + 1] - (rest[3 * n + 1] + 0.03)));
+  }
+  EXPECT_LT(onTarget, 1e-9);
+  EXPECT_GT(off, 1e-4);
+
+  // Pins win over a spring on the same nodes; bad stiffnesses are refused.
+  ASSERT_TRUE(hard.pinNodes(0, tip));
+  const std::vector<double> pinned = positions(hard);
+  const double far[3] = {0.5, 0.5, 0.05};
+  ASSERT_TRUE(hard.moveHandle(hh.value(), far));
+  for (int frame = 0; frame < 3; ++frame) ASSERT_TRUE(hard.step(kH));
+  const std::vector<double> after = positions(hard);
+  for (std::uint32_t n : tip) EXPECT_NEAR(after[3 * n + 1], pinned[3 * n + 1], 1e-9);
+  EXPECT_EQ(hard.setHandleStiffness(hh.value(), -1.0).code(), ErrorCode::BadInput);
+  EXPECT_EQ(hard.setHandleStiffness(hh.value() + 100, 1.0).code(), ErrorCode::BadInput);
+  desc.stiffness = std::nan("");
+  EXPECT_EQ(hard.addHandle(desc).status().code(), ErrorCode::BadInput);
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);
 
 /// Three copies of the beam in one batch (the OpenCL backend batches bodies that share a device):
-/// body 0 left alone, body 1 pinned at its tip and pushed, body 2 dragged by a handle; each steps as
+/// body 0 pulled by a spring handle, body 1 pinned at its tip and pushed, body 2 dragged by a handle; each steps as
 /// it does alone.
 TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
   const std::vector<BackendCase> cases = backendCases();
@@ -574,6 +676,14 @@ TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
   desc.body = 0;
   Result<int> ha = alone[2].addHandle(desc);
   ASSERT_TRUE(hb && ha);
+  // Body 0 pulled sideways by a spring handle on its tip.
+  desc.stiffness = 80.0;
+  Result<int> sb = batch.addHandle(desc);
+  Result<int> sa = alone[0].addHandle(desc);
+  ASSERT_TRUE(sb && sa);
+  const double sideways[3] = {0.5, 0.05, 0.12};
+  ASSERT_TRUE(batch.moveHandle(sb.value(), sideways));
+  ASSERT_TRUE(alone[0].moveHandle(sa.value(), sideways));
   AppliedForce push;
   push.node = static_cast<int>(mid.front());
   push.force[2] = 1.5;

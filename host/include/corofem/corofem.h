@@ -312,6 +312,10 @@ corofem_status corofem_simulation_move_handle(corofem_simulation* simulation, in
                                               const double* rotation);
 /** Releases a handle's nodes (free again, or back to the scene's supports where it fixed them). */
 corofem_status corofem_simulation_remove_handle(corofem_simulation* simulation, int handle);
+/** Makes a handle a spring of `stiffness` N/m (> 0) that pulls its nodes towards the target and
+ *  holds none of them (node k by stiffness w_k, w_k = 1/n, or a surface vertex's weights: the whole
+ *  force is stiffness times the stretch), or a hard constraint again (0), from the next step on. */
+corofem_status corofem_simulation_set_handle_stiffness(corofem_simulation* simulation, int handle, double stiffness);
 /** Pins `count` nodes of a body where they are now until unpinned. */
 corofem_status corofem_simulation_pin_nodes(corofem_simulation* simulation, int body, const uint32_t* nodes,
                                             size_t count);

@@ -85,6 +85,14 @@ struct HandleDesc {
   /// handle holds the four nodes of the element the vertex is bound to (paper Sec. 5), and its
   /// target places the vertex itself (moveHandle's c is the vertex): the vertex follows it exactly.
   int surfaceVertex = -1;
+  /// 0 (the default): a hard constraint, the held nodes follow the target exactly. > 0: a spring of
+  /// this stiffness (N/m) that pulls the nodes towards the target and holds none of them: node k
+  /// by a zero-length spring of stiffness `stiffness` w_k to its place target + R (g_k - c), w_k
+  /// 1/n for n nodes or the surface vertex's barycentric weights (clamped to >= 0), so that the
+  /// handle's whole force is stiffness times its stretch, the target minus where c is now. Springs
+  /// are implicit (stable at any stiffness and time step) and undamped but for the integrator;
+  /// pins and hard handles on the same nodes win.
+  double stiffness = 0.0;
 };
 
 /// A force an application applies to a body (Simulation::setForces), in N: at a node, or at a
@@ -128,10 +136,14 @@ class Simulation {
   // -- Run-time control (dynamic analyses; BadInput on a static one). Each takes effect at the
   // next step and lasts until changed. Node indices are those of restMesh(body).
 
-  /// Grabs nodes of a body with a handle, a hard constraint: from the next step on, the held nodes
-  /// follow the handle's target exactly (their velocities follow from it). Returns the handle's
-  /// id (> 0). A node held by a newer handle or pin leaves the older one.
+  /// Grabs nodes of a body with a handle: a hard constraint (HandleDesc::stiffness 0), from the next
+  /// step on the held nodes follow the handle's target exactly (their velocities follow from it),
+  /// or a spring that pulls them towards it. Returns the handle's id (> 0). A node held by a newer
+  /// hard handle or pin leaves the older one.
   Result<int> addHandle(const HandleDesc& handle);
+  /// Makes a handle a spring of this stiffness (N/m, > 0) or a hard constraint (0) from the next
+  /// step on; its target and rotation stay.
+  Status setHandleStiffness(int handle, double stiffness);
   /// Moves a handle: each held node is placed at target + R (g - c) at the end of the next step,
   /// g its position when grabbed and c the centroid of those positions, R the row-major 3x3
   /// rotation (nullptr: none). The target is where c goes (m).

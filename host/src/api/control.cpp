@@ -99,18 +99,24 @@ void Simulation::Impl::applyHolds(Group& g) {
     g.slot->setConstraints(changed);
     for (std::size_t index : changed) g.driver->constraintsChanged(index);
   }
-  detail::BodySet stiffened;
-  for (std::size_t i : g.bodies)
+  detail::BodySet stiffened, sprung;
+  for (std::size_t i : g.bodies) {
     if (bodies[i].hold.materialChanged) stiffened.push_back(bodies[i].index);
+    if (bodies[i].hold.springsChanged) {
+      bodies[i].problem->springStiffness = bodies[i].hold.springStiffness;
+      sprung.push_back(bodies[i].index);
+    }
+  }
   if (!stiffened.empty()) {
     g.slot->setMaterial(stiffened);
     for (std::size_t index : stiffened) g.driver->materialChanged(index);
   }
+  if (!sprung.empty()) g.slot->setSprings(sprung);
   for (std::size_t i : g.bodies) {
     Body& b = bodies[i];
     Body::Hold& h = b.hold;
-    h.constraintsChanged = h.materialChanged = false;
-    if (h.controlsChanged) g.driver->setControls(b.index, h.targets, h.forces);
+    h.constraintsChanged = h.materialChanged = h.springsChanged = false;
+    if (h.controlsChanged) g.driver->setControls(b.index, detail::BodyControls{h.targets, h.forces, h.springTargets});
     h.controlsChanged = false;
     if (h.restart) {
       // The last step failed: this one starts from the last good positions at rest.
@@ -130,14 +136,89 @@ void Simulation::Impl::placeHandle(int id, const double target[3], const double*
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) handle.rotation[3 * i + j] = R(i, j);
   const Vec3d c = vec3(handle.centroid), t = vec3(target);
-  for (std::size_t k = 0; k < handle.nodes.size(); ++k) {
-    const std::uint32_t n = handle.nodes[k];
-    if (h.holder[n] != id) continue;  // taken by a newer handle or pin
-    const Vec3d g(handle.grabbed[3 * k], handle.grabbed[3 * k + 1], handle.grabbed[3 * k + 2]);
-    h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)) = t + R * (g - c);
+  if (handle.stiffness > 0.0) {
+    rebuildSprings(b);
+  } else {
+    for (std::size_t k = 0; k < handle.nodes.size(); ++k) {
+      const std::uint32_t n = handle.nodes[k];
+      if (h.holder[n] != id) continue;  // taken by a newer handle or pin
+      const Vec3d g(handle.grabbed[3 * k], handle.grabbed[3 * k + 1], handle.grabbed[3 * k + 2]);
+      h.targets.segment<3>(3 * static_cast<Eigen::Index>(n)) = t + R * (g - c);
+    }
   }
   h.controlsChanged = true;
   touched(b);
+}
+
+void Simulation::Impl::takeNodes(int id) {
+  Handle& handle = handles.at(id);
+  Body::Hold& h = bodies[handle.body].hold;
+  handle.previous.clear();
+  for (std::uint32_t n : handle.nodes) {
+    handle.previous.push_back(h.holder[n]);
+    h.holder[n] = id;
+  }
+  h.constraintsChanged = true;
+}
+
+void Simulation::Impl::releaseNodes(int id) {
+  // Each node the handle still holds goes back to what held it before: the scene (or its
+  // release), a pin (where the node is now), or an older handle that still exists.
+  const Handle& released = handles.at(id);
+  Body& b = bodies[released.body];
+  Body::Hold& h = b.hold;
+  const Eigen::VectorXd& x = driverOf(b).positions(b.index);
+  std::vector<int> regrab;
+  for (std::size_t k = 0; k < released.nodes.size() && k < released.previous.size(); ++k) {
+    const std::uint32_t n = released.nodes[k];
+    if (h.holder[n] != id) continue;
+    int previous = released.previous[k];
+    if (previous > Body::Hold::kPinned && (handles.count(previous) == 0 || previous == id)) previous = Body::Hold::kScene;
+    h.holder[n] = previous;
+    const Eigen::Index d = 3 * static_cast<Eigen::Index>(n);
+    if (previous == Body::Hold::kPinned) h.targets.segment<3>(d) = x.segment<3>(d);
+    else h.targets.segment<3>(d).setConstant(std::nan(""));
+    if (previous > Body::Hold::kPinned) regrab.push_back(previous);
+  }
+  for (int older : regrab) {
+    const Handle& o = handles.at(older);
+    placeHandle(older, o.target, o.rotation);
+  }
+  h.constraintsChanged = h.controlsChanged = true;
+}
+
+void Simulation::Impl::rebuildSprings(Body& b) {
+  Body::Hold& h = b.hold;
+  const Eigen::Index dofs = static_cast<Eigen::Index>(3 * b.mesh.nodeCount());
+  const std::size_t scene = static_cast<std::size_t>(&b - bodies.data());
+  Eigen::VectorXd k = Eigen::VectorXd::Zero(dofs), kt = Eigen::VectorXd::Zero(dofs);
+  bool any = false;
+  for (const auto& [id, handle] : handles) {
+    if (handle.body != scene || !(handle.stiffness > 0.0)) continue;
+    any = true;
+    Mat3d R;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) R(i, j) = handle.rotation[3 * i + j];
+    const Vec3d c = vec3(handle.centroid), t = vec3(handle.target);
+    for (std::size_t j = 0; j < handle.nodes.size(); ++j) {
+      const Eigen::Index d = 3 * static_cast<Eigen::Index>(handle.nodes[j]);
+      const Vec3d g(handle.grabbed[3 * j], handle.grabbed[3 * j + 1], handle.grabbed[3 * j + 2]);
+      const double kn = handle.stiffness * handle.weights[j];
+      k.segment<3>(d).array() += kn;
+      kt.segment<3>(d) += kn * (t + R * (g - c));
+    }
+  }
+  if (!any) {
+    h.springsChanged = h.springsChanged || h.springStiffness.size() != 0;
+    h.springStiffness.resize(0);
+    h.springTargets.resize(0);
+  } else {
+    // Where no spring pulls, the target is x's own (k = 0 there: never read).
+    h.springTargets = (k.array() > 0.0).select(kt.array() / k.array(), 0.0).matrix();
+    h.springsChanged = h.springsChanged || h.springStiffness.size() != k.size() || h.springStiffness != k;
+    h.springStiffness = std::move(k);
+  }
+  h.controlsChanged = true;
 }
 
 Result<int> Simulation::addHandle(const HandleDesc& desc) {
@@ -146,8 +227,12 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
     Impl::Body& b = s.controlled(desc.body, "addHandle");
     const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
     const std::size_t nodeCount = b.mesh.nodeCount();
+    if (!(desc.stiffness >= 0.0) || !std::isfinite(desc.stiffness))
+      detail::fail(ErrorCode::BadInput, "addHandle: the stiffness must be a finite number >= 0 (N/m; 0: a hard "
+                   "constraint), got ", desc.stiffness);
     Impl::Handle handle;
     handle.body = static_cast<std::size_t>(desc.body);
+    handle.stiffness = desc.stiffness;
     handle.nodes = desc.nodes;
     if (handle.nodes.empty() && desc.surfaceVertex >= 0) {
       if (!b.binding)
@@ -188,22 +273,26 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
       c += g;
     }
     c /= static_cast<double>(handle.nodes.size());
+    handle.weights.assign(handle.nodes.size(), 1.0 / static_cast<double>(handle.nodes.size()));
     if (onVertex) {
-      // The target places the vertex itself: x_v = sum w_k x_k, and the weights sum to 1.
+      // The target places the vertex itself: x_v = sum w_k x_k, and the weights sum to 1. A spring
+      // pulls each node by its weight's share, clamped to >= 0 (a vertex outside the mesh has
+      // negative ones): a rigid offset d of the element gives the force k d.
       c.setZero();
       const std::size_t v = static_cast<std::size_t>(desc.surfaceVertex);
-      for (std::size_t k = 0; k < 4; ++k)
-        c += b.binding->weights[4 * v + k] * x.segment<3>(3 * static_cast<Eigen::Index>(b.binding->nodes[4 * v + k]));
+      double sum = 0.0;
+      for (std::size_t k = 0; k < 4; ++k) {
+        const double w = b.binding->weights[4 * v + k];
+        c += w * x.segment<3>(3 * static_cast<Eigen::Index>(b.binding->nodes[4 * v + k]));
+        handle.weights[k] = std::max(0.0, w);
+        sum += handle.weights[k];
+      }
+      for (double& w : handle.weights) w = sum > 0.0 ? w / sum : 0.25;
     }
     for (int k = 0; k < 3; ++k) handle.centroid[k] = c[k];
     const int id = s.nextHandle++;
-    Impl::Body::Hold& h = b.hold;
-    for (std::uint32_t n : handle.nodes) {
-      handle.previous.push_back(h.holder[n]);
-      h.holder[n] = id;
-    }
     s.handles.emplace(id, std::move(handle));
-    h.constraintsChanged = true;
+    if (desc.stiffness == 0.0) s.takeNodes(id);
     s.placeHandle(id, s.handles.at(id).centroid, nullptr);  // held where they are
     return id;
   });
@@ -228,27 +317,31 @@ Status Simulation::removeHandle(int handle) {
       detail::fail(ErrorCode::BadInput, "removeHandle: there is no handle ", handle,
                    "; use an id addHandle returned and that was not removed");
     Impl::Body& b = s.bodies[it->second.body];
-    Impl::Body::Hold& h = b.hold;
-    const Impl::Handle released = std::move(it->second);
-    s.handles.erase(it);
-    // Each node the handle still holds goes back to what held it before: the scene (or its
-    // release), a pin (where the node is now), or an older handle that still exists.
-    const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
-    std::vector<int> regrab;
-    for (std::size_t k = 0; k < released.nodes.size(); ++k) {
-      const std::uint32_t n = released.nodes[k];
-      if (h.holder[n] != handle) continue;
-      int previous = released.previous[k];
-      if (previous > Impl::Body::Hold::kPinned && s.handles.count(previous) == 0) previous = Impl::Body::Hold::kScene;
-      h.holder[n] = previous;
-      const Eigen::Index d = 3 * static_cast<Eigen::Index>(n);
-      if (previous == Impl::Body::Hold::kPinned) h.targets.segment<3>(d) = x.segment<3>(d);
-      else h.targets.segment<3>(d).setConstant(std::nan(""));
-      if (previous > Impl::Body::Hold::kPinned) regrab.push_back(previous);
-    }
-    for (int older : regrab) s.placeHandle(older, s.handles.at(older).target, s.handles.at(older).rotation);
-    h.constraintsChanged = h.controlsChanged = true;
+    if (it->second.stiffness == 0.0) s.releaseNodes(handle);
+    s.handles.erase(handle);
+    s.rebuildSprings(b);
     s.touched(b);
+  });
+}
+
+Status Simulation::setHandleStiffness(int handle, double stiffness) {
+  return detail::guard([&] {
+    Impl& s = *impl_;
+    const auto it = s.handles.find(handle);
+    if (it == s.handles.end())
+      detail::fail(ErrorCode::BadInput, "setHandleStiffness: there is no handle ", handle,
+                   "; use an id addHandle returned and that was not removed");
+    if (!(stiffness >= 0.0) || !std::isfinite(stiffness))
+      detail::fail(ErrorCode::BadInput, "setHandleStiffness: the stiffness must be a finite number >= 0 (N/m; 0: a "
+                   "hard constraint), got ", stiffness);
+    Impl::Handle& h = it->second;
+    Impl::Body& b = s.bodies[h.body];
+    const bool wasHard = h.stiffness == 0.0;
+    if (wasHard && stiffness > 0.0) s.releaseNodes(handle);
+    h.stiffness = stiffness;
+    if (!wasHard && stiffness == 0.0) s.takeNodes(handle);
+    s.placeHandle(handle, h.target, h.rotation);
+    s.rebuildSprings(b);
   });
 }
 
@@ -442,6 +535,7 @@ Status Simulation::teleport(int body, const double rotation[9], const double tra
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) handle.rotation[3 * i + j] = rotated(i, j);
     }
+    s.rebuildSprings(b);
     h.controlsChanged = true;
     s.touched(b);
   });

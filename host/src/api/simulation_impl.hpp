@@ -45,7 +45,10 @@ struct Simulation::Impl {
       std::vector<int> holder;          ///< per node: kScene, kReleased, kPinned or the handle's id
       Eigen::VectorXd targets;          ///< 3N: held dofs' targets, NaN elsewhere (empty: none yet)
       Eigen::VectorXd forces;           ///< 3N applied forces (empty: none)
-      bool constraintsChanged = false, controlsChanged = false, materialChanged = false;
+      /// 3N: the spring handles' stiffness per dof (N/m) and where they pull it (m), combined over
+      /// the handles as sum k and sum k t / sum k; empty: none (rebuildSprings).
+      Eigen::VectorXd springStiffness, springTargets;
+      bool constraintsChanged = false, controlsChanged = false, materialChanged = false, springsChanged = false;
       bool restart = false;  ///< the last step failed: the next starts from the positions at rest
     } hold;
     // Sleep (analysis.sleep): quiet steps so far, whether the body sleeps, and the loads and
@@ -109,6 +112,10 @@ struct Simulation::Impl {
     double centroid[3] = {0, 0, 0};
     double target[3] = {0, 0, 0};    ///< the last target (m)
     double rotation[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< the last rotation, row-major
+    /// 0: a hard constraint (the handle holds its nodes: Hold::holder). > 0: a spring of this
+    /// stiffness (N/m) that holds nothing; node k's share of it is weights[k] (they sum to 1).
+    double stiffness = 0.0;
+    std::vector<double> weights;
   };
   std::map<int, Handle> handles;
   int nextHandle = 1;
@@ -150,6 +157,11 @@ struct Simulation::Impl {
   void touched(Body& b);
   /// Recomputes the targets of the nodes of handle `id` (target and rotation given).
   void placeHandle(int id, const double target[3], const double* rotation);
+  /// A hard handle takes its nodes from their holders (remembering them), or gives them back.
+  void takeNodes(int id);
+  void releaseNodes(int id);
+  /// The body's combined springs from its spring handles' stiffness, weights and targets.
+  void rebuildSprings(Body& b);
 
   // -- surfaces (surfaces.cpp)
   /// surfaceBuffer (normals false) or surfaceNormalBuffer (true) of a body: empty where there is none.

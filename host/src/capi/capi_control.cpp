@@ -90,6 +90,11 @@ corofem_status corofem_simulation_remove_handle(corofem_simulation* simulation, 
   return call(kFn, [&] { return simulationOf(simulation, kFn).removeHandle(handle); });
 }
 
+corofem_status corofem_simulation_set_handle_stiffness(corofem_simulation* simulation, int handle, double stiffness) {
+  static constexpr const char* kFn = "corofem_simulation_set_handle_stiffness";
+  return call(kFn, [&] { return simulationOf(simulation, kFn).setHandleStiffness(handle, stiffness); });
+}
+
 corofem_status corofem_simulation_pin_nodes(corofem_simulation* simulation, int body, const uint32_t* nodes,
                                             size_t count) {
   static constexpr const char* kFn = "corofem_simulation_pin_nodes";

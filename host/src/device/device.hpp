@@ -4,10 +4,11 @@
 // time integrators and the PCG loop itself (solve/pcg.hpp) are written once above it; a backend
 // only runs their steps.
 //
-// System matrices: A = mass * M + damping * C + stiffness * K_t, with M the lumped mass,
-// C = alpha M + beta K_t (Rayleigh, alpha/beta from each body's problem) and K_t the tangent
+// System matrices: A = mass * M + damping * C + stiffness * (K_t + S), with M the lumped mass,
+// C = alpha M + beta K_t (Rayleigh, alpha/beta from each body's problem), K_t the tangent
 // stiffness at the current positions (R K R^T summed over elements for the co-rotational
-// formulation, K for the linear one, the consistent tangent for the hyperelastic ones).
+// formulation, K for the linear one, the consistent tangent for the hyperelastic ones) and S the
+// diagonal of the application's springs (Problem::springStiffness; none: S = 0).
 //
 // Calls take a BodySet (indices into the device's bodies, strictly ascending) and one vector per
 // body of the set, in the set's order, 3N entries each in the problem's own node numbering.
@@ -154,6 +155,10 @@ class Device {
   /// carries body bodies[i]'s new Lame parameters and Rayleigh coefficients (nothing else of it is
   /// read). A device that cannot change them throws Error(DeviceError).
   virtual void setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems);
+  /// The bodies' springs changed (an application attached or released a spring handle):
+  /// `problems[i]->springStiffness` is body bodies[i]'s new S (nothing else of it is read). A
+  /// device that cannot change them throws Error(DeviceError).
+  virtual void setSprings(const BodySet& bodies, const std::vector<const Problem*>& problems);
 
   // -- PCG building blocks (driven by solvePcg, solve/pcg.hpp): the single-reduction PCG of
   // kernels/opencl/pcg.cl on the projected system (constrained dofs: identity rows and columns,

@@ -48,6 +48,10 @@ struct Problem {
   std::vector<PrescribedDisplacement> prescribed;
   std::vector<ExternalForce> forces;
   Eigen::VectorXd initialVelocity;   ///< 3N
+  /// 3N, N/m, or empty: zero-length springs an application attaches (spring handles), k_d on dof
+  /// d pulling it towards a target the driver holds. They add k_d to the diagonal of the
+  /// stiffness: A = m M + c C + s (K_t + diag k) (Device::apply; not damped by Rayleigh's beta).
+  Eigen::VectorXd springStiffness;
 
   std::size_t dofCount() const { return static_cast<std::size_t>(restPositions.size()); }
 

@@ -160,6 +160,12 @@ void DeviceSlot::setMaterial(const BodySet& bodies) {
   withFailover("setMaterial", [&](Device& d) { d.setMaterial(bodies, problems); });
 }
 
+void DeviceSlot::setSprings(const BodySet& bodies) {
+  std::vector<const Problem*> problems;
+  for (std::size_t b : bodies) problems.push_back(problems_.at(b));
+  withFailover("setSprings", [&](Device& d) { d.setSprings(bodies, problems); });
+}
+
 void DeviceSlot::internalForces(const BodySet& bodies, const Vectors& f) {
   guarded(SlotStats::InternalForces, bodies, [&](Device& d) { d.internalForces(bodies, f); });
 }

@@ -78,6 +78,8 @@ class DeviceSlot {
   /// The bodies' problems have a new material (Problem::lame, rayleighMass, rayleighStiffness,
   /// changed by the caller): the device uses it from the next call.
   void setMaterial(const BodySet& bodies);
+  /// The bodies' problems have new springs (Problem::springStiffness, changed by the caller).
+  void setSprings(const BodySet& bodies);
   /// The linear solves of `bodies` as the solver asks for them: PCG for the set (solvePcg), or the
   /// device's direct solve body by body (Cholesky). Per-body failures in `solves[i].failure`.
   void solve(const BodySet& bodies, std::vector<PcgSolve>& solves);

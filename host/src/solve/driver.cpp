@@ -33,7 +33,7 @@ class StaticsDriver final : public Driver {
   }
   void constraintsChanged(std::size_t) override { needsDynamics(); }
   void materialChanged(std::size_t) override { needsDynamics(); }
-  void setControls(std::size_t, const Eigen::VectorXd&, const Eigen::VectorXd&) override { needsDynamics(); }
+  void setControls(std::size_t, const BodyControls&) override { needsDynamics(); }
   const Eigen::VectorXd& positions(std::size_t body) const override { return at(body).positions(); }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return at(body).velocities(); }
   double externalWork(std::size_t body) const override { return at(body).externalWork(); }

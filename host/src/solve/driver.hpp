@@ -31,6 +31,18 @@ struct StepCall {
   double h = 0.0;  ///< dynamics: the step's length (s); statics ignore it
 };
 
+/// What an application holds a body by (Driver::setControls); each vector 3N, or empty for none.
+struct BodyControls {
+  /// Positions of constrained dofs that replace the scene's (rest or prescribed) targets (m); NaN
+  /// where the scene's apply.
+  Eigen::VectorXd targets;
+  /// Forces added to the scene's loads (N).
+  Eigen::VectorXd forces;
+  /// Where the springs of Problem::springStiffness pull each dof (m): the spring force on dof d is
+  /// k_d (springTargets_d - x_d); ignored where k_d = 0.
+  Eigen::VectorXd springTargets;
+};
+
 class Driver {
  public:
   virtual ~Driver() = default;
@@ -58,11 +70,8 @@ class Driver {
   /// The body's Problem material changed (the slot's device was told): its force scale and, at
   /// the next step, its acceleration and energy budget are measured again.
   virtual void materialChanged(std::size_t body) = 0;
-  /// What an application holds the body by, from the next step until replaced: `targets` (3N, or
-  /// empty for none) the positions of constrained dofs that replace the scene's (rest or
-  /// prescribed) targets, NaN where the scene's apply; `forces` (3N, or empty) forces added to the
-  /// scene's loads (N).
-  virtual void setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) = 0;
+  /// What an application holds the body by, from the next step until replaced.
+  virtual void setControls(std::size_t body, const BodyControls& controls) = 0;
 
   virtual const Eigen::VectorXd& positions(std::size_t body) const = 0;
   virtual const Eigen::VectorXd& velocities(std::size_t body) const = 0;

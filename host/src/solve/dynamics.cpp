@@ -108,19 +108,27 @@ void DynamicsDriver::materialChanged(std::size_t body) {
   b.deviceAtCommitted = false;
 }
 
-void DynamicsDriver::setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) {
+void DynamicsDriver::setControls(std::size_t body, const BodyControls& c) {
   Body& b = bodies_.at(body);
   const Eigen::Index n = b.x.size();
-  if ((targets.size() != 0 && targets.size() != n) || (forces.size() != 0 && forces.size() != n))
-    fail(ErrorCode::Internal, "body '", b.problem->name, "': controls of size ", targets.size(), " and ", forces.size(),
-         " for ", n, " dofs");
-  b.heldTarget = targets;
-  b.appliedForce = forces;
+  for (const Eigen::VectorXd* v : {&c.targets, &c.forces, &c.springTargets})
+    if (v->size() != 0 && v->size() != n)
+      fail(ErrorCode::Internal, "body '", b.problem->name, "': controls of size ", v->size(), " for ", n, " dofs");
+  b.heldTarget = c.targets;
+  b.appliedForce = c.forces;
+  b.springTarget = c.springTargets;
 }
 
 void DynamicsDriver::externalForce(const Body& b, double t, Eigen::VectorXd& f) const {
   b.problem->externalForce(t, /*dynamic=*/true, f);
   if (b.appliedForce.size() == f.size()) f += b.appliedForce;
+}
+
+void DynamicsDriver::addSpringForces(const Body& b, const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  const Eigen::VectorXd& k = b.problem->springStiffness;
+  if (k.size() != x.size() || b.springTarget.size() != x.size()) return;
+  for (Eigen::Index d = 0; d < x.size(); ++d)
+    if (k[d] != 0.0) f[d] += k[d] * (b.springTarget[d] - x[d]);
 }
 
 double DynamicsDriver::kineticEnergy(std::size_t body) const {
@@ -204,6 +212,7 @@ void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure
     const Problem& p = *b.problem;
     const Eigen::Index size = b.x.size();
     externalForce(b, b.t, b.fextPrev);
+    addSpringForces(b, b.x, b.fextPrev);
     b.a = Eigen::VectorXd::Zero(size);
     for (Eigen::Index d = 0; d < size; ++d) {
       const double m = p.lumpedMass.size() == size ? p.lumpedMass[d] : 0.0;
@@ -445,21 +454,27 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       auto& w = b.w;
       const Eigen::VectorXd& mass = b.problem->lumpedMass;
       const Eigen::Index n = b.x.size();
-      double maSq = 0.0, cvSq = 0.0, fintSq = 0.0, rSq = 0.0;
+      // The springs' S (x - t) joins f_int here (a zero vector's worth of work without springs).
+      const Eigen::VectorXd& ks = b.problem->springStiffness;
+      const bool springs = ks.size() == n && b.springTarget.size() == n;
+      double maSq = 0.0, cvSq = 0.0, fintSq = 0.0, springSq = 0.0, rSq = 0.0;
       bool finite = true;
       for (Eigen::Index d = 0; d < n; ++d) {
         const double ma = mass[d] * w.a[d];
-        const double rd = ma + w.cv[d] + w.fint[d] - w.fext[d];
+        const double spring = springs && ks[d] != 0.0 ? ks[d] * (w.x[d] - b.springTarget[d]) : 0.0;
+        const double rd = ma + w.cv[d] + w.fint[d] + spring - w.fext[d];
         w.r[d] = rd;
-        const double f = b.freeMask[d], maf = ma * f, cvf = w.cv[d] * f, fintf = w.fint[d] * f, rf = rd * f;
+        const double f = b.freeMask[d], maf = ma * f, cvf = w.cv[d] * f, fintf = w.fint[d] * f, sf = spring * f,
+                     rf = rd * f;
         maSq += maf * maf;
         cvSq += cvf * cvf;
         fintSq += fintf * fintf;
+        springSq += sf * sf;
         rSq += rf * rf;
         finite = finite && std::isfinite(w.x[d]) && std::isfinite(w.v[d]);
       }
-      const double scale =
-          std::max({std::sqrt(maSq), std::sqrt(cvSq), std::sqrt(fintSq), a.fextNorm, b.forceFloor});
+      const double scale = std::max(
+          {std::sqrt(maSq), std::sqrt(cvSq), std::sqrt(fintSq), std::sqrt(springSq), a.fextNorm, b.forceFloor});
       a.residualNorm = std::sqrt(rSq);
       const double relative = a.residualNorm / scale;
       if (!std::isfinite(relative) || !finite) {
@@ -597,6 +612,7 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     // The reactions are the constrained rows of the last residual, evaluated at the final v (or at
     // the predictor when Newton stopped there).
     w.reaction = (w.r.array() * (1.0 - b.freeMask)).matrix();
+    addSpringForces(b, w.x, w.fext);  // a load from here: its work, and f_n of the next step
     const Eigen::VectorXd& dx = w.cv;  // scratch: C v is not needed past the residual
     w.cv = w.x - b.x;
     const double supportWork = b.supportWork + 0.5 * (b.reactionPrev + w.reaction).dot(dx);
@@ -644,6 +660,7 @@ void DynamicsDriver::idleStep(std::size_t body, double h) {
   b.v.setZero();
   b.a.setZero();
   externalForce(b, b.t, b.fextPrev);
+  addSpringForces(b, b.x, b.fextPrev);
   std::swap(b.previous, b.start);
 }
 

@@ -23,6 +23,10 @@ namespace corofem::detail {
 /// ka M + C + kx K_t; times 1/ka this is A = M + (1/ka) C + (kx/ka) K_t, i.e. Newmark
 /// M + h gamma C + h^2 beta K_t and backward Euler M + h C + h^2 K_t, so each iteration solves
 /// A dv = -r / ka (SystemCoeffs{1, 1/ka, kx/ka}). C = alpha M + beta K_t at the current positions.
+/// An application's springs (spring handles: Problem::springStiffness S, setControls' targets t)
+/// add S (x - t) to r and kx S to its Jacobian: the device's A carries (kx/ka) S with K_t. Their
+/// force counts as a load (its work, the runaway guard's budget): a target the application drags
+/// gives the body energy as a moving support does.
 ///
 /// Constrained dofs: v is chosen so that x(v) lands on the target at t_{n+1} (rest position for
 /// fixed dofs, X + ramp * value for prescribed ones): v = (x_target - xb) / kx. The linear solves
@@ -86,7 +90,7 @@ class DynamicsDriver final : public Driver {
   void setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override;
   void constraintsChanged(std::size_t body) override;
   void materialChanged(std::size_t body) override;
-  void setControls(std::size_t body, const Eigen::VectorXd& targets, const Eigen::VectorXd& forces) override;
+  void setControls(std::size_t body, const BodyControls& controls) override;
   const Eigen::VectorXd& positions(std::size_t body) const override { return bodies_.at(body).x; }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return bodies_.at(body).v; }
   double externalWork(std::size_t body) const override { return bodies_.at(body).work; }
@@ -121,8 +125,8 @@ class DynamicsDriver final : public Driver {
     bool started = false;
     bool deviceAtCommitted = false;  ///< the device's positions equal x
     /// The application's hold (setControls): targets of constrained dofs (3N, NaN: the scene's
-    /// target) and added forces (3N); empty when none.
-    Eigen::VectorXd heldTarget, appliedForce;
+    /// target), added forces (3N) and the springs' targets (3N); empty when none.
+    Eigen::VectorXd heldTarget, appliedForce, springTarget;
     State start;                     ///< the state before the step in progress
     State previous;                  ///< the state before the last successful step
     struct Scratch {
@@ -169,6 +173,8 @@ class DynamicsDriver final : public Driver {
   void runAttempts(const BodySet& set, const std::string& where, double h, Attempts& at, std::vector<BodyOutcome>& out);
   /// f_ext of body b at time t: the scene's loads and the application's forces, into f.
   void externalForce(const Body& b, double t, Eigen::VectorXd& f) const;
+  /// Adds the application's spring forces at positions x, k_d (target_d - x_d), to f.
+  void addSpringForces(const Body& b, const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
   /// One step of the scheme for every Advance, from its body's committed state to t1 = t + h,
   /// committed in place on success (no rollback copy); a failure leaves the body's committed state
   /// as it was and says why in Advance::failure.

@@ -25,6 +25,11 @@ void Device::setMaterial(const BodySet& bodies, const std::vector<const Problem*
   fail(ErrorCode::DeviceError, "the ", name(), " backend cannot change a body's material at run time");
 }
 
+void Device::setSprings(const BodySet& bodies, const std::vector<const Problem*>&) {
+  if (bodies.empty()) return;
+  fail(ErrorCode::DeviceError, "the ", name(), " backend cannot attach springs to a body at run time");
+}
+
 BodySet allBodies(std::size_t n) {
   BodySet set(n);
   for (std::size_t i = 0; i < n; ++i) set[i] = i;

@@ -99,7 +99,7 @@ void EngineAmg::prepare(const BodySet& running) {
       freeKnown_[s] = 1;
     }
     const double* coef = &e_.segCoef_[layout::kSegCoefCount * s];
-    if (bodies_[s].ensure(p, freeDofs_[s], coef[layout::kCoefMass], coef[layout::kCoefStiff]) != BodyAmg::Made::Kept) {
+    if (bodies_[s].ensure(p, freeDofs_[s], e_.operatorMass_[s], coef[layout::kCoefStiff]) != BodyAmg::Made::Kept) {
       dirty_ = true;
       warpStale_[s] = 1;
     }

@@ -7,7 +7,9 @@
 #include "util/error.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
+#include <type_traits>
 
 namespace corofem::detail {
 
@@ -100,18 +102,69 @@ void SegmentEngine::setActive(const std::vector<char>& active) {
 }
 
 void SegmentEngine::setCoefficients(std::size_t s, const SystemCoeffs& c) {
-  // A = m M + c (alpha M + beta K^R) + k K^R = (m + c alpha) M + (k + c beta) K^R.
+  // A = m M + c (alpha M + beta K^R) + k (K^R + S) = (m + c alpha) M + (k + c beta) K^R + k S.
   const BodySegment& sg = segs_[s];
   const double massCoef = c.mass + c.damping * sg.rayleighMass;
   const double stiffCoef = c.stiffness + c.damping * sg.rayleighStiffness;
+  SpringFold fold;
+  double deviceMass = massCoef;
+  if (!springs_[s].empty() && c.stiffness != 0.0) {
+    fold.factor = massCoef != 0.0 ? c.stiffness / massCoef : c.stiffness;
+    fold.unitMass = massCoef == 0.0;
+    if (fold.unitMass) deviceMass = 1.0;
+  }
+  if (springFoldStale_[s] || !(fold == springFold_[s])) foldSprings(s, fold);
+  operatorMass_[s] = massCoef;
   double* coef = &segCoef_[kSegCoefCount * s];
-  const double next[4] = {stiffCoef * coef[kCoefLambda], stiffCoef * coef[kCoefMu], massCoef, stiffCoef};
+  const double next[4] = {stiffCoef * coef[kCoefLambda], stiffCoef * coef[kCoefMu], deviceMass, stiffCoef};
   double* slot[4] = {&coef[kCoefProdLambda], &coef[kCoefProdMu], &coef[kCoefMass], &coef[kCoefStiff]};
   for (int i = 0; i < 4; ++i)
     if (*slot[i] != next[i]) {
       *slot[i] = next[i];
       coefDirty_ = true;
     }
+}
+
+void SegmentEngine::foldSprings(std::size_t s, const SpringFold& fold) {
+  const BodySegment& sg = segs_[s];
+  if (!hasMass_)
+    fail(ErrorCode::DeviceError, "OpenCL backend: body '", sg.problem->name, "' has springs on a device with no mass "
+         "buffer (static bodies only); its product has no diagonal term to carry them");
+  const Eigen::VectorXd& mass = sg.problem->lumpedMass;
+  std::vector<unsigned char> bytes(sg.dofs() * realSize_);
+  detail::withReals(bytes.data(), double_, 0, [&](auto* out) {
+    using T = std::remove_pointer_t<decltype(out)>;
+    for (std::size_t d = 0; d < sg.dofs(); ++d) {
+      const double m = fold.unitMass ? 0.0 : mass[static_cast<Eigen::Index>(sg.hostDof(d))];
+      out[d] = static_cast<T>(fold.factor == 0.0 ? m : m + fold.factor * springs_[s][d]);
+    }
+  });
+  enqueueWrite(mass_, sg.dofBegin() * realSize_, std::move(bytes));
+  springFold_[s] = fold;
+  springFoldStale_[s] = 0;
+  axReady_[s] = 0;  // formed with the mass of before
+}
+
+void SegmentEngine::setSprings(const BodySet& bodies, const std::vector<const Problem*>& problems) {
+  if (problems.size() != bodies.size())
+    fail(ErrorCode::Internal, "OpenCL backend: ", problems.size(), " spring sets for ", bodies.size(), " bodies");
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    const std::size_t s = bodies[i];
+    const BodySegment& sg = segs_.at(s);
+    const Eigen::VectorXd& k = problems[i]->springStiffness;
+    if (k.size() != 0 && static_cast<std::size_t>(k.size()) != sg.dofs())
+      fail(ErrorCode::Internal, "OpenCL backend: body '", sg.problem->name, "' got ", k.size(),
+           " spring stiffnesses for ", sg.dofs(), " dofs");
+    std::vector<double> device;
+    if (k.size() != 0 && (k.array() != 0.0).any()) {
+      device.resize(sg.dofs());
+      for (std::size_t d = 0; d < sg.dofs(); ++d) device[d] = k[static_cast<Eigen::Index>(sg.hostDof(d))];
+    }
+    if (device.empty() && springs_[s].empty()) continue;
+    springs_[s] = std::move(device);
+    springFoldStale_[s] = 1;  // folded again by the next coefficients
+    axReady_[s] = 0;
+  }
 }
 
 void SegmentEngine::flushCoefficients() {

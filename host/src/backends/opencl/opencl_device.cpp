@@ -46,6 +46,9 @@ class OpenCLDevice final : public Device {
   void setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems) override {
     engine_.setMaterial(bodies, problems);
   }
+  void setSprings(const BodySet& bodies, const std::vector<const Problem*>& problems) override {
+    engine_.setSprings(bodies, problems);
+  }
 
   std::vector<BodySet> pcgTiles(const BodySet& bodies) const override { return engine_.pcgTiles(bodies); }
   std::vector<PcgStart> pcgBegin(const BodySet& bodies, const std::vector<SystemCoeffs>& c, const ConstVectors& b,

@@ -87,6 +87,10 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   const std::size_t nodeAlign = wg_ * chunk_;
   BodyLayout layout(problems, tuning_.localityOrder, elemAlign, nodeAlign, kElemOutComponents);
   segs_ = layout.segments;
+  springs_.resize(segs_.size());
+  springFold_.assign(segs_.size(), SpringFold{});  // mass_ holds M
+  springFoldStale_.assign(segs_.size(), 0);
+  operatorMass_.assign(segs_.size(), 0.0);
   stride_ = layout.elementTotal;
   nodeTotal_ = layout.nodeTotal;
   for (std::size_t s = 0; s < segs_.size(); ++s) {
@@ -117,6 +121,8 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   }
   // Past the uploads the device's numbering lives in the permutations: the caller's problems again.
   for (std::size_t s = 0; s < segs_.size(); ++s) segs_[s].problem = problems[s];
+  // A device made for bodies that have springs already (a failover) folds them at its first solve.
+  setSprings(allBodies(segs_.size()), problems);
 }
 
 SegmentEngine::~SegmentEngine() {

@@ -85,6 +85,7 @@ class SegmentEngine {
   void elasticEnergy(const BodySet& bodies, std::vector<double>& energy);
   void setConstraints(const BodySet& bodies, const std::vector<const std::vector<std::uint8_t>*>& constrained);
   void setMaterial(const BodySet& bodies, const std::vector<const Problem*>& problems);
+  void setSprings(const BodySet& bodies, const std::vector<const Problem*>& problems);
   /// The bodies of a solve in tiles solved one after another (CPU devices, where a tile's working
   /// set fits the cache), or all at once.
   std::vector<BodySet> pcgTiles(const BodySet& bodies) const;
@@ -346,6 +347,23 @@ class SegmentEngine {
   /// the rotations and x of now); cleared by anything that writes q_.
   std::vector<char> axReady_;
   std::vector<double> axCoef_;
+  /// The application's springs (Problem::springStiffness, N/m) per segment in the device's dof
+  /// order, empty for none. The kernels have no spring term of their own: A = m M + s K + s S has
+  /// S diagonal, so the segment's stretch of mass_ holds D = M + (s / m) S with the coefficient m
+  /// (or D = s S with the coefficient 1 where m = 0), m D = m M + s S. setCoefficients folds them
+  /// again when s / m changes (the time step, or a damping product's s = 0: D = M).
+  struct SpringFold {
+    double factor = 0.0;    ///< D = (unitMass ? 0 : M) + factor S
+    bool unitMass = false;  ///< the segment's mass coefficient is 1, not m (m = 0)
+    bool operator==(const SpringFold& o) const { return factor == o.factor && unitMass == o.unitMass; }
+  };
+  std::vector<std::vector<double>> springs_;
+  std::vector<SpringFold> springFold_;  ///< what mass_ holds per segment
+  std::vector<char> springFoldStale_;   ///< the springs changed since: fold again
+  /// Per segment, the system's m + c alpha of the last coefficients (segCoef_ holds the device's,
+  /// 1 where springs stand in for a zero mass term).
+  std::vector<double> operatorMass_;
+  void foldSprings(std::size_t s, const SpringFold& fold);
   std::vector<unsigned char> staging_;   ///< device-precision staging of other blocking reads
   std::deque<PendingWrite> writes_;      ///< non-blocking writes in flight, oldest first
 

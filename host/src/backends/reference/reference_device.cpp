@@ -69,6 +69,15 @@ class ReferenceBody {
     amg_.clear();
   }
 
+  /// New springs (Problem::springStiffness): the next assembly adds them.
+  void setSprings(const Problem& p) {
+    if (p.springStiffness.size() != 0 && static_cast<std::size_t>(p.springStiffness.size()) != p_.dofCount())
+      fail(ErrorCode::Internal, "reference backend: body '", p_.name, "' got ", p.springStiffness.size(),
+           " spring stiffnesses for ", p_.dofCount(), " dofs");
+    p_.springStiffness = p.springStiffness;
+    running_ = false;
+  }
+
   /// New constrained dofs: the free-dof pattern of A is built again (and the direct solve's
   /// analysis redone on its next use).
   void setConstraints(const std::vector<std::uint8_t>& constrained) {
@@ -115,6 +124,7 @@ class ReferenceBody {
     const double stiffScale = c.stiffness + c.damping * p_.rayleighStiffness;
     // y = (m + c alpha) M p + (k + c beta) K_t p, M lumped (diagonal), K_t by element loops.
     y = massScale * p_.lumpedMass.cwiseProduct(p);
+    if (c.stiffness != 0.0 && p_.springStiffness.size() == p.size()) y += c.stiffness * p_.springStiffness.cwiseProduct(p);
     if (stiffScale == 0.0) return;
     for (std::size_t e = 0; e < p_.elements.size(); ++e) {
       Vec12 pe;
@@ -346,7 +356,7 @@ class ReferenceBody {
         }
   }
 
-  /// A = (m + c alpha) M + (k + c beta) K_t restricted to the free dofs (x_c = 0).
+  /// A = (m + c alpha) M + (k + c beta) K_t + k S restricted to the free dofs (x_c = 0).
   void assemble(const SystemCoeffs& c) {
     ensureTangents();
     const double massScale = c.mass + c.damping * p_.rayleighMass;
@@ -360,6 +370,9 @@ class ReferenceBody {
           if (slots[12 * a + b] >= 0) values[slots[12 * a + b]] += stiffScale * tangents_[e](a, b);
     }
     for (std::size_t i = 0; i < freeDofs_.size(); ++i) values[diagSlot_[i]] += massScale * p_.lumpedMass[freeDofs_[i]];
+    if (c.stiffness != 0.0 && p_.springStiffness.size() != 0)
+      for (std::size_t i = 0; i < freeDofs_.size(); ++i)
+        values[diagSlot_[i]] += c.stiffness * p_.springStiffness[freeDofs_[i]];
   }
 
   /// M^-1 of the assembled A: none, its diagonal (1 where a diagonal entry is 0), its 3x3 node
@@ -486,6 +499,10 @@ class ReferenceDevice final : public Device {
   void setMaterial(const BodySet& set, const std::vector<const Problem*>& problems) override {
     check(set, problems.size());
     for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setMaterial(*problems[i]);
+  }
+  void setSprings(const BodySet& set, const std::vector<const Problem*>& problems) override {
+    check(set, problems.size());
+    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setSprings(*problems[i]);
   }
   void setConstraints(const BodySet& set, const std::vector<const std::vector<std::uint8_t>*>& constrained) override {
     check(set, constrained.size());
