@@ -198,6 +198,61 @@ TEST_P(Control, AppliedForcesChangeTheMomentumByForceTimesTime) {
   EXPECT_NEAR(momentum(sim)[1], p[1], solveTolerance() * 2.0 * t * 10);
 }
 
+TEST_P(Control, AForceAtAPointIsSpreadByTheContainingElementsWeights) {
+  // A force at the centroid of an element of the beam (bent by gravity first, so that the search
+  // runs on current positions, not the rest mesh's) acts as a quarter of it on each of that
+  // element's nodes; one at a node's position as the whole force on that node; one far outside the
+  // body on the nearest element's nodes (the momentum still changes by F t).
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation a = create(beamScene(GetParam(), true, true)), b = create(beamScene(GetParam(), true, true));
+  for (int frame = 0; frame < 5; ++frame) {
+    ASSERT_TRUE(a.step(kH));
+    ASSERT_TRUE(b.step(kH));
+  }
+  const TetMesh& mesh = a.restMesh(0);
+  const std::vector<double> x = positions(a);
+  const std::size_t element = mesh.tetCount() / 2 + 3, node = mesh.tets[4 * 7 + 2];
+  AppliedForce atCentroid, atNode;
+  atCentroid.force[1] = 4.0;
+  atCentroid.force[2] = -2.0;
+  for (int k = 0; k < 4; ++k)
+    for (int c = 0; c < 3; ++c) atCentroid.point[c] += 0.25 * x[3 * mesh.tets[4 * element + k] + static_cast<std::size_t>(c)];
+  for (int c = 0; c < 3; ++c) atNode.point[c] = x[3 * node + static_cast<std::size_t>(c)];
+  atNode.force[0] = 1.5;
+  std::vector<AppliedForce> spread;
+  for (int k = 0; k < 4; ++k) {
+    AppliedForce q;
+    q.node = static_cast<int>(mesh.tets[4 * element + k]);
+    q.force[1] = 1.0;
+    q.force[2] = -0.5;
+    spread.push_back(q);
+  }
+  AppliedForce whole;
+  whole.node = static_cast<int>(node);
+  whole.force[0] = 1.5;
+  spread.push_back(whole);
+  ASSERT_TRUE(a.setForces(0, {atCentroid, atNode}));
+  ASSERT_TRUE(b.setForces(0, spread));
+  for (int frame = 0; frame < 3; ++frame) {
+    ASSERT_TRUE(a.step(kH));
+    ASSERT_TRUE(b.step(kH));
+  }
+  const std::vector<double> xa = positions(a), xb = positions(b);
+  const double tolerance = GetParam().isFloat() ? 1e-6 : 1e-10;  // the weights 0.25 and 1 to rounding
+  for (std::size_t d = 0; d < xa.size(); ++d) ASSERT_NEAR(xa[d], xb[d], tolerance) << "dof " << d;
+
+  // Far outside a free body: still the whole force (clamped, normalised weights).
+  Simulation free = create(beamScene(GetParam(), false, false));
+  AppliedForce outside;
+  outside.point[0] = 2.0;
+  outside.point[1] = -1.0;
+  outside.point[2] = 0.3;
+  outside.force[1] = 3.0;
+  ASSERT_TRUE(free.setForces(0, {outside}));
+  for (int frame = 0; frame < 4; ++frame) ASSERT_TRUE(free.step(kH));
+  EXPECT_NEAR(momentum(free)[1], 3.0 * 4 * kH, solveTolerance() * 3.0 * 4 * kH * 10);
+}
+
 TEST_P(Control, TeleportMovesTheStateRigidly) {
   COROFEM_SKIP_ABSENT(GetParam());
   Simulation sim = create(beamScene(GetParam(), false, false));
@@ -649,9 +704,9 @@ TEST_P(Control, AStiffSpringHandleActsAsAHardOneAndTheyTurnIntoEachOther) {
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);
 
 /// Three copies of the beam in one batch (the OpenCL backend batches bodies that share a device):
-/// body 0 pulled by a spring handle, body 1 pinned at its tip and pushed, body 2 dragged by a handle; each steps as
-/// it does alone.
-TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
+/// body 0 pulled by a spring handle, body 1 pinned at its tip and pushed, body 2 dragged by a
+/// handle; each steps as it does alone, and goes on so when body 1 leaves the batch.
+TEST(ControlBatch, BodiesUnderControlInABatchStepAsAloneAndOneLeaves) {
   const std::vector<BackendCase> cases = backendCases();
   const BackendCase* c = nullptr;
   for (const BackendCase& k : cases)
@@ -702,6 +757,39 @@ TEST(ControlBatch, BodiesUnderControlInABatchStepAsAlone) {
     const std::vector<double> b = positions(batch, body), a = positions(alone[body]);
     for (std::size_t d = 0; d < b.size(); ++d) ASSERT_NEAR(b[d], a[d], 1e-9) << "body " << body << ", dof " << d;
   }
+
+  // The pinned, pushed body leaves the batch: the device is made again for the other two, with
+  // their springs and handles, and the plan's device bytes go down; they go on as alone.
+  const auto deviceBytes = [](const Simulation& s) {
+    long long total = 0;
+    const nlohmann::json plan = nlohmann::json::parse(s.planReport());
+    for (const auto& b : plan["batches"]) total += b["allocated_bytes"].get<long long>();
+    return total;
+  };
+  const long long before = deviceBytes(batch);
+  ASSERT_TRUE(batch.removeBody(1));
+  ASSERT_EQ(batch.bodyCount(), 2);
+  EXPECT_GT(before, 0);
+  EXPECT_LT(deviceBytes(batch), before) << "the removed body's device buffers were not freed";
+  EXPECT_EQ(positions(batch, 1), positions(alone[2]));  // the dragged body is body 1 now, where it was
+  const nlohmann::json batches = nlohmann::json::parse(batch.planReport())["batches"];
+  ASSERT_EQ(batches.size(), 1u);
+  EXPECT_EQ(batches[0]["active_bodies"], nlohmann::json({"body", "third"}));
+  for (int frame = 13; frame <= 20; ++frame) {
+    const double target[3] = {0.5, 0.05 + 0.004 * frame, 0.05};
+    ASSERT_TRUE(batch.moveHandle(hb.value(), target));
+    ASSERT_TRUE(alone[2].moveHandle(ha.value(), target));
+    ASSERT_TRUE(batch.step(kH));
+    ASSERT_TRUE(alone[0].step(kH));
+    ASSERT_TRUE(alone[2].step(kH));
+  }
+  for (int body = 0; body < 2; ++body) {
+    const std::vector<double> b = positions(batch, body), a = positions(alone[body == 0 ? 0 : 2]);
+    for (std::size_t d = 0; d < b.size(); ++d)
+      ASSERT_NEAR(b[d], a[d], 1e-9) << "after the removal, body " << body << ", dof " << d;
+  }
+  const std::vector<double> tipNow = positions(batch, 1);
+  EXPECT_NEAR(tipNow[3 * tip[0] + 1], batch.restMesh(1).nodes[3 * tip[0] + 1] + 0.004 * 20, 1e-9);
 }
 
 }  // namespace

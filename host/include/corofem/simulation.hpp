@@ -170,8 +170,9 @@ class Simulation {
   /// and devices. Returns its index (bodyCount() - 1).
   Result<int> addBody(const BodyDesc& body);
   /// Removes a body with its handles and frees its device's memory; later bodies' indices move
-  /// down by one. BadInput for a body in a batch (sharing a device's buffers with others: create
-  /// the Simulation with "batch": false to remove bodies one by one) or the scene's last body.
+  /// down by one. A body in a batch (sharing a device's buffers with others) leaves it: the batch's
+  /// device is made again for the others, which keep their state (a cost of about a Simulation's
+  /// creation for those bodies). BadInput for the scene's last body.
   Status removeBody(int body);
   /// Replaces the gravity of every body (m/s^2; acts at once, no ramp).
   Status setGravity(const double gravity[3]);

@@ -2,7 +2,8 @@
 // a group of its own, on the device the scheduler gives it, from its own rest state at its own
 // time zero: it steps exactly as the same body does in a fresh Simulation, and the other bodies keep
 // their state and their devices. A body is removed with its group when it runs alone; a body in a
-// batch shares its device's buffers with the others and is not removed (the call says so).
+// batch shares its device's buffers with the others, so the batch's device is made again without
+// it (DeviceSlot::removeBody) and the others go on with their state.
 #include "api/simulation_impl.hpp"
 
 #include "util/error.hpp"
@@ -41,25 +42,33 @@ Status Simulation::removeBody(int body) {
     Impl& s = *impl_;
     const Impl::Body& b = s.body(body);
     const std::size_t gi = b.group;
-    if (s.groups[gi].bodies.size() != 1)
-      detail::fail(ErrorCode::BadInput, "removeBody: body '", s.scene.bodies[static_cast<std::size_t>(body)].name,
-                   "' runs in a batch of ", s.groups[gi].bodies.size(),
-                   " bodies sharing one device's buffers; create the Simulation with \"backend\": {\"batch\": false} "
-                   "to remove bodies one by one");
     if (s.bodies.size() == 1)
       detail::fail(ErrorCode::BadInput, "removeBody: body '", s.scene.bodies.front().name,
                    "' is the scene's last; a Simulation keeps at least one body");
     const std::size_t removed = static_cast<std::size_t>(body);
+    const bool alone = s.groups[gi].bodies.size() == 1;
+    if (!alone) {
+      // A batch: its device is made again for the others, which keep their state (the slot gives
+      // the new device their positions; the driver keeps the rest). Nothing changed if it throws.
+      Impl::Group& g = s.groups[gi];
+      const std::size_t k = b.index;
+      g.slot->removeBody(k);
+      g.driver->removeBody(k);
+      g.bodies.erase(g.bodies.begin() + static_cast<std::ptrdiff_t>(k));
+      for (std::size_t j = k; j < g.bodies.size(); ++j) s.bodies[g.bodies[j]].index = j;
+      g.surfaces.clear();  // made again for the new device (its generation moved on)
+    }
     // Its handles go with it; the later bodies, groups and handles move down by one.
     for (auto it = s.handles.begin(); it != s.handles.end();)
       it = it->second.body == removed ? s.handles.erase(it) : std::next(it);
     for (auto& [id, handle] : s.handles)
       if (handle.body > removed) --handle.body;
-    s.groups.erase(s.groups.begin() + static_cast<std::ptrdiff_t>(gi));  // frees the device and its buffers
+    if (alone) s.groups.erase(s.groups.begin() + static_cast<std::ptrdiff_t>(gi));  // frees the device and its buffers
     s.bodies.erase(s.bodies.begin() + body);
     s.scene.bodies.erase(s.scene.bodies.begin() + body);
-    for (Impl::Body& other : s.bodies)
-      if (other.group > gi) --other.group;
+    if (alone)
+      for (Impl::Body& other : s.bodies)
+        if (other.group > gi) --other.group;
     const auto shift = [&](std::vector<std::size_t>& list) {
       for (std::size_t& i : list)
         if (i > removed) --i;

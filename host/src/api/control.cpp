@@ -7,6 +7,7 @@
 // scene's prescribed displacements.
 #include "api/simulation_impl.hpp"
 
+#include "embed/element_locator.hpp"
 #include "util/error.hpp"
 
 #include <Eigen/LU>
@@ -14,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 
 namespace corofem {
 
@@ -385,6 +387,11 @@ Status Simulation::setForces(int body, const std::vector<AppliedForce>& forces) 
     const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
     const TetMesh& mesh = b.problem->mesh;
     Eigen::VectorXd f = Eigen::VectorXd::Zero(x.size());
+    TetMesh deformed;
+    std::unique_ptr<detail::ElementLocator> locator;
+    std::vector<std::uint32_t> stamp;
+    std::uint32_t stampId = 0;
+    bool triedLocator = false;
     for (std::size_t i = 0; i < forces.size(); ++i) {
       const AppliedForce& a = forces[i];
       if (!finite3(a.force) || (a.node < 0 && !finite3(a.point)))
@@ -399,19 +406,46 @@ Status Simulation::setForces(int body, const std::vector<AppliedForce>& forces) 
         f.segment<3>(3 * static_cast<Eigen::Index>(a.node)) += force;
         continue;
       }
-      // The element containing the point at the current positions: the one whose smallest
-      // barycentric weight is largest (>= 0 inside); outside the body the nearest by that
-      // measure, its weights clamped to >= 0 and normalised.
+      // The element containing the point at the current positions, or outside the body the
+      // nearest one, its weights clamped to >= 0 and normalised: found through a grid of the
+      // deformed elements' boxes, made once per call (O(elements + forces)).
       const Vec3d p = vec3(a.point);
-      double best = -std::numeric_limits<double>::infinity();
+      if (!triedLocator) {
+        triedLocator = true;
+        deformed.nodes.assign(x.data(), x.data() + x.size());
+        deformed.tets = mesh.tets;
+        try {
+          locator = std::make_unique<detail::ElementLocator>(deformed, 0.0);
+        } catch (const detail::Error&) {
+          // A flat element at the current positions: every element is tried instead.
+        }
+      }
       Eigen::Vector4d weights(0.25, 0.25, 0.25, 0.25);
       std::size_t element = 0;
-      for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
-        const Eigen::Vector4d w = barycentric(mesh, x, e, p);
-        if (w.allFinite() && w.minCoeff() > best) {
-          best = w.minCoeff();
-          weights = w;
-          element = e;
+      std::uint32_t found = detail::ElementLocator::kNone;
+      if (locator) {
+        const detail::Point3 q{p[0], p[1], p[2]};
+        double w[4];
+        found = locator->findContaining(q, w);
+        if (found == detail::ElementLocator::kNone) {
+          if (stamp.empty()) stamp.assign(locator->elementCount(), 0u);
+          found = locator->findNearest(q, std::numeric_limits<double>::infinity(), stamp, stampId).element;
+          if (found != detail::ElementLocator::kNone) locator->barycentric(found, q, w);
+        }
+        if (found != detail::ElementLocator::kNone) {
+          element = found;
+          weights = Eigen::Vector4d(w[0], w[1], w[2], w[3]);
+        }
+      }
+      if (found == detail::ElementLocator::kNone) {
+        double best = -std::numeric_limits<double>::infinity();
+        for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
+          const Eigen::Vector4d w = barycentric(mesh, x, e, p);
+          if (w.allFinite() && w.minCoeff() > best) {
+            best = w.minCoeff();
+            weights = w;
+            element = e;
+          }
         }
       }
       weights = weights.cwiseMax(0.0);

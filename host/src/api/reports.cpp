@@ -32,7 +32,7 @@ json Simulation::Impl::batchJson(const Body& b) const {
   json names = json::array();
   for (std::size_t i : g.bodies) names.push_back(scene.bodies[i].name);
   // Active: the body still runs on the batch's device (a failover moves the whole batch off it).
-  return {{"group", b.group}, {"device", g.candidate}, {"bodies", names}, {"active", g.slot->generation() == 0}};
+  return {{"group", b.group}, {"device", g.candidate}, {"bodies", names}, {"active", g.slot->failovers() == 0}};
 }
 
 json Simulation::Impl::batchesJson() const {
@@ -42,7 +42,7 @@ json Simulation::Impl::batchesJson() const {
     json names = json::array(), active = json::array();
     for (std::size_t i : g.bodies) {
       names.push_back(scene.bodies[i].name);
-      if (g.slot->generation() == 0) active.push_back(scene.bodies[i].name);
+      if (g.slot->failovers() == 0) active.push_back(scene.bodies[i].name);
     }
     const detail::SlotStats& st = g.slot->stats();
     json byCall = json::object();
@@ -123,7 +123,7 @@ std::string Simulation::planReport() const {
     detail::BodySchedule now = b.schedule;  // after a fallback, the device in use
     now.order.insert(now.order.begin(), g.slot->current());
     std::vector<std::string> mates;
-    if (g.batch && g.slot->generation() == 0)
+    if (g.batch && g.slot->failovers() == 0)
       for (std::size_t k : g.bodies) mates.push_back(s.scene.bodies[k].name);
     json body = json::parse(detail::planJson(s.scene.bodies[i], *b.problem, s.scene, now, mates));
     // What the body's own device allocated, buffer by buffer (the estimate above is the model; a

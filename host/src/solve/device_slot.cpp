@@ -74,6 +74,7 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
       if (!known.empty()) next->setPositions(known, xs);
       device_ = std::move(next);
       ++generation_;
+      ++failovers_;
     } catch (const std::exception& e) {
       // Whatever keeps this candidate from taking the bodies (no device, an allocation, a tuning
       // it refuses): the next one is tried.
@@ -164,6 +165,32 @@ void DeviceSlot::setSprings(const BodySet& bodies) {
   std::vector<const Problem*> problems;
   for (std::size_t b : bodies) problems.push_back(problems_.at(b));
   withFailover("setSprings", [&](Device& d) { d.setSprings(bodies, problems); });
+}
+
+void DeviceSlot::removeBody(std::size_t body) {
+  if (body >= problems_.size() || problems_.size() < 2)
+    fail(ErrorCode::Internal, "removing body ", body, " of a device slot of ", problems_.size());
+  if (order_.empty() || exhausted_)
+    fail(ErrorCode::DeviceError, "body '", problems_[body]->name, "' cannot leave its device: ",
+         order_.empty() ? "the device was made by the caller" : "every device of its batch failed");
+  std::vector<const Problem*> problems = problems_;
+  std::vector<Eigen::VectorXd> lastX = lastX_;
+  problems.erase(problems.begin() + static_cast<std::ptrdiff_t>(body));
+  lastX.erase(lastX.begin() + static_cast<std::ptrdiff_t>(body));
+  std::unique_ptr<Device> next = makeDevice(problems, solver_, order_[index_], options_);
+  BodySet known;
+  ConstVectors xs;
+  for (std::size_t b = 0; b < lastX.size(); ++b)
+    if (lastX[b].size() > 0) {
+      known.push_back(b);
+      xs.push_back(&lastX[b]);
+    }
+  if (!known.empty()) next->setPositions(known, xs);
+  problems_ = std::move(problems);
+  lastX_ = std::move(lastX);
+  solveStart_.clear();
+  device_ = std::move(next);
+  ++generation_;  // surfaces made for the old device are made again
 }
 
 void DeviceSlot::internalForces(const BodySet& bodies, const Vectors& f) {

@@ -80,6 +80,12 @@ class DeviceSlot {
   void setMaterial(const BodySet& bodies);
   /// The bodies' problems have new springs (Problem::springStiffness, changed by the caller).
   void setSprings(const BodySet& bodies);
+  /// Removes body `body` (later bodies' indices move down by one): the device is made again on
+  /// the same candidate for the other bodies (their problems carry their constraints, material
+  /// and springs), given their last positions, and the old one with every buffer of the removed
+  /// body goes. Throws (with nothing changed) where the new device cannot be made, or Error(Internal)
+  /// for the slot's only body.
+  void removeBody(std::size_t body);
   /// The linear solves of `bodies` as the solver asks for them: PCG for the set (solvePcg), or the
   /// device's direct solve body by body (Cholesky). Per-body failures in `solves[i].failure`.
   void solve(const BodySet& bodies, std::vector<PcgSolve>& solves);
@@ -91,8 +97,11 @@ class DeviceSlot {
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }
   const std::vector<FallbackEvent>& events() const { return events_; }
-  /// Failovers so far (a surface made for the device of before must be made again).
+  /// Devices made since the first, by failovers and removed bodies (a surface made for the device
+  /// of before must be made again).
   std::size_t generation() const { return generation_; }
+  /// Failovers so far (0: the bodies run on the device they were scheduled on).
+  std::size_t failovers() const { return failovers_; }
 
   /// Starts a step: the calls until endStep() count in stats().byCall, with the host's waits
   /// between them (waitSeconds).
@@ -125,6 +134,7 @@ class DeviceSlot {
   std::vector<FallbackEvent> events_;
   std::string failures_;  ///< every device error so far (for the final message)
   std::size_t generation_ = 0;
+  std::size_t failovers_ = 0;
   SlotStats stats_;
   bool inStep_ = false;
   std::chrono::steady_clock::time_point lastEnd_;

@@ -34,6 +34,10 @@ class StaticsDriver final : public Driver {
   void constraintsChanged(std::size_t) override { needsDynamics(); }
   void materialChanged(std::size_t) override { needsDynamics(); }
   void setControls(std::size_t, const BodyControls&) override { needsDynamics(); }
+  void removeBody(std::size_t body) override {
+    solvers_.erase(solvers_.begin() + static_cast<std::ptrdiff_t>(body));
+    for (std::size_t k = body; k < solvers_.size(); ++k) solvers_[k]->moveTo(k);
+  }
   const Eigen::VectorXd& positions(std::size_t body) const override { return at(body).positions(); }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return at(body).velocities(); }
   double externalWork(std::size_t body) const override { return at(body).externalWork(); }

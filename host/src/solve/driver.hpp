@@ -72,6 +72,9 @@ class Driver {
   virtual void materialChanged(std::size_t body) = 0;
   /// What an application holds the body by, from the next step until replaced.
   virtual void setControls(std::size_t body, const BodyControls& controls) = 0;
+  /// Forgets body `body` (its slot removed it too): later bodies' indices move down by one, and
+  /// the others keep their state.
+  virtual void removeBody(std::size_t body) = 0;
 
   virtual const Eigen::VectorXd& positions(std::size_t body) const = 0;
   virtual const Eigen::VectorXd& velocities(std::size_t body) const = 0;

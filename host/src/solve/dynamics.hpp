@@ -91,6 +91,7 @@ class DynamicsDriver final : public Driver {
   void constraintsChanged(std::size_t body) override;
   void materialChanged(std::size_t body) override;
   void setControls(std::size_t body, const BodyControls& controls) override;
+  void removeBody(std::size_t body) override { bodies_.erase(bodies_.begin() + static_cast<std::ptrdiff_t>(body)); }
   const Eigen::VectorXd& positions(std::size_t body) const override { return bodies_.at(body).x; }
   const Eigen::VectorXd& velocities(std::size_t body) const override { return bodies_.at(body).v; }
   double externalWork(std::size_t body) const override { return bodies_.at(body).work; }

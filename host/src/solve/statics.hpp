@@ -79,6 +79,8 @@ class BodySolver {
   /// Makes the device's positions the committed ones (a driver may have evaluated trial positions
   /// last): then the device's buffers describe positions(). No-op when they already do.
   void syncDevicePositions();
+  /// The body is body `body` of its slot from now on (a body before it left the slot).
+  void moveTo(std::size_t body) { body_ = BodyView(body_.slot(), body); }
 
  protected:
   BodySolver(const Problem& problem, BodyView body, const Log& log);
