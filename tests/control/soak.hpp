@@ -65,15 +65,17 @@ struct SoakResult {
   long long failed = 0;       ///< steps whose status was not ok
   long long nonFinite = 0;    ///< reads with a non-finite position
   double largestMove = 0.0;   ///< largest distance of a node from its rest position (m)
+  double largestSpringMove = 0.0;  ///< the same while a spring handle held the body
   std::string firstFailure;   ///< the first failed step's message
 };
 
 /// Drags `sim`'s body 0 for `seconds` of simulated time at `hz`: the handle grabs the nodes within
 /// `grab` of `grabPoint`; every 0.2 to 0.8 s its target jumps to a random point within `reach` of
-/// where it was grabbed (the nodes follow within one frame: an abrupt drag), and every 10 s it lets
-/// go for 1 s and grabs again.
+/// where it was grabbed (a hard handle's nodes follow within one frame: an abrupt drag), and every
+/// 10 s it lets go for 1 s and grabs again, as a hard handle and as a spring of `spring` N/m in
+/// turns (`spring` 0: hard every time).
 inline SoakResult soak(Simulation& sim, double seconds, double hz, const double grabPoint[3], double grab,
-                       double reach, unsigned seed) {
+                       double reach, unsigned seed, double spring = 0.0) {
   SoakResult r;
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> unit(-1.0, 1.0), hold(0.2, 0.8);
@@ -82,6 +84,7 @@ inline SoakResult soak(Simulation& sim, double seconds, double hz, const double 
   desc.radius = grab;
   const std::vector<double>& rest = sim.restMesh(0).nodes;
   int handle = 0;
+  long long grabs = 0;
   double nextJump = 0.0, target[3] = {grabPoint[0], grabPoint[1], grabPoint[2]};
   const long long frames = static_cast<long long>(std::llround(seconds * hz));
   std::vector<double> x;
@@ -92,6 +95,7 @@ inline SoakResult soak(Simulation& sim, double seconds, double hz, const double 
       sim.removeHandle(handle);
       handle = 0;
     } else if (cycle < 9.0 && handle == 0) {  // grab again where the point is now
+      desc.stiffness = grabs++ % 2 == 1 ? spring : 0.0;
       Result<int> h = sim.addHandle(desc);
       if (h) handle = h.value();
       nextJump = t;
@@ -117,21 +121,25 @@ inline SoakResult soak(Simulation& sim, double seconds, double hz, const double 
           ++r.nonFinite;
           break;
         }
-        r.largestMove = std::max(r.largestMove, std::hypot(x[i] - rest[i], x[i + 1] - rest[i + 1], x[i + 2] - rest[i + 2]));
+        const double move = std::hypot(x[i] - rest[i], x[i + 1] - rest[i + 1], x[i + 2] - rest[i + 2]);
+        r.largestMove = std::max(r.largestMove, move);
+        if (handle != 0 && desc.stiffness > 0.0) r.largestSpringMove = std::max(r.largestSpringMove, move);
       }
     }
   }
   return r;
 }
 
-/// The grab point, radius and reach of each soak body.
+/// The grab point, radius, reach and spring handle's stiffness of each soak body (the spring: about
+/// ten times the force that bends the body's free end by its reach, so that it drags it as firmly
+/// as a hand, with a visible lag).
 struct SoakGrip {
   double point[3];
-  double grab, reach;
+  double grab, reach, spring;
 };
 inline SoakGrip soakGrip(const std::string& which) {
-  if (which == "liver") return SoakGrip{{-4.2, 2.5, 0.5}, 0.6, 1.5};
-  return SoakGrip{{0.8, 0.05, 0.05}, 0.02, 0.3};
+  if (which == "liver") return SoakGrip{{-4.2, 2.5, 0.5}, 0.6, 1.5, 2000.0};
+  return SoakGrip{{0.8, 0.05, 0.05}, 0.02, 0.3, 500.0};
 }
 
 }  // namespace corofem::test
