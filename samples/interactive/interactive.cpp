@@ -1,6 +1,7 @@
 // An application's frame loop, headless (issue 25's sample): SOFA's liver (596 tets) with its
 // 2,194-vertex render surface, held at its right end by the scene; at 90 Hz the application grabs
-// the left lobe with a handle and drags it along a scripted path, pins it and lets go, pushes the
+// the left lobe with a handle and drags it along a scripted path (held exactly, then by a spring),
+// pins it and lets go, pushes the
 // body with a force, adds a second body and removes it, and reads the deformed surface back every
 // frame, as a renderer would. Only the public API (corofem/corofem.hpp).
 //
@@ -105,13 +106,19 @@ int main(int argc, char** argv) {
   std::vector<float> normals;
   const long frames = std::lround(seconds * hz);
   long failed = 0;
-  bool pinned = false, released = false, pushedDone = false, extraDone = false;
+  bool softened = false, pinned = false, released = false, pushedDone = false, extraDone = false;
   int extra = -1;  // the second body's index while it is there
   for (long f = 0; f < frames; ++f) {
     const double t = static_cast<double>(f) * dt;
-    // The script: drag along a loop for 3 s; pin the lobe where it is (handle removed); release the
-    // pin at 4 s and push the lobe down with a 0.02 N force for 0.5 s; then let it swing.
+    // The script: drag along a loop for 3 s, the lobe held exactly for 1.5 s and then by a spring
+    // of 2000 N/m (it lags behind the target and swings); pin the lobe where it is (handle
+    // removed); release the pin at 4 s and push the lobe down with a 0.02 N force for 0.5 s; then
+    // let it swing.
     double target[3] = {grab[0], grab[1], grab[2]};
+    if (t >= 1.5 && !softened) {
+      sim.setHandleStiffness(handle.value(), 2000.0);
+      softened = true;
+    }
     if (t < 3.0) {
       const double a = 2.0 * M_PI * t / 3.0;
       target[0] += 0.6 * std::sin(a);
