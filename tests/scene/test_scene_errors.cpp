@@ -230,7 +230,7 @@ TEST(SceneErrors, BadEnumValueSuggestsTheNearest) {
             "backend: unknown value \"OpenCL\"; did you mean \"opencl\"? (valid: \"auto\", \"reference\" or \"opencl\")");
   EXPECT_CONTAINS(overrideError({"solver.preconditioner=jacobi"}),
                   "solver.preconditioner: unknown value \"jacobi\"; valid values are \"none\", \"diagonal\", "
-                  "\"block_diagonal\" or \"amg\"");
+                  "\"block_diagonal\", \"amg\" or \"auto\"");
   EXPECT_CONTAINS(overrideError({"solver.rotation=polr"}), "did you mean \"polar\"?");
   EXPECT_CONTAINS(overrideError({"solver.precision=single"}), "solver.precision: unknown value \"single\"");
   EXPECT_CONTAINS(overrideError({"solver.linear_solver=cg"}), "did you mean \"pcg\"?");

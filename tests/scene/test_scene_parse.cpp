@@ -237,8 +237,12 @@ TEST(SceneParse, EnumerationsAndShorthands) {
   EXPECT_EQ(qr.solver.precision, Precision::Float);
   for (const auto& [text, kind] : std::vector<std::pair<std::string, PreconditionerKind>>{
            {"none", PreconditionerKind::None}, {"diagonal", PreconditionerKind::Diagonal},
-           {"block_diagonal", PreconditionerKind::BlockDiagonal}, {"amg", PreconditionerKind::Amg}})
+           {"block_diagonal", PreconditionerKind::BlockDiagonal}, {"amg", PreconditionerKind::Amg},
+           {"auto", PreconditionerKind::Auto}})
     EXPECT_EQ(parseOk(test::kMinimalScene, {"solver.preconditioner=" + text}).solver.preconditioner, kind) << text;
+  // Not given: "auto" (preconditionerOf chooses per body).
+  EXPECT_EQ(parseOk(test::kMinimalScene).solver.preconditioner, PreconditionerKind::Auto);
+  EXPECT_EQ(SolverDesc{}.preconditioner, PreconditionerKind::Auto);
   EXPECT_EQ(parseOk(R"({"bodies": [{"mesh": {"box": {}}}], "backend": "reference", "solver": {"preconditioner": "amg"}})")
                 .solver.preconditioner,
             PreconditionerKind::Amg);
@@ -269,6 +273,7 @@ TEST(SceneParse, ToStringNamesMatchTheJsonValues) {
   EXPECT_STREQ(toString(PreconditionerKind::Diagonal), "diagonal");
   EXPECT_STREQ(toString(PreconditionerKind::BlockDiagonal), "block_diagonal");
   EXPECT_STREQ(toString(PreconditionerKind::Amg), "amg");
+  EXPECT_STREQ(toString(PreconditionerKind::Auto), "auto");
   // And each name parses back to the same value.
   for (Formulation f : {Formulation::Linear, Formulation::Corotational, Formulation::StVenantKirchhoff,
                         Formulation::NeoHookean})

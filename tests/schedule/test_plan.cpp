@@ -286,5 +286,72 @@ TEST(Plan, RunSummaryHasTheScheduler) {
   EXPECT_TRUE(s["fallbacks"].empty());
 }
 
+
+TEST(AutoPreconditioner, AmgForLargeCorotationalOrLinearBodiesDiagonalElsewhere) {
+  // The rule (docs/performance.md, "The default preconditioner"): measured faster from about 3,000
+  // elements on PoCL and on the reference backend alike; the rigorous models keep the diagonal.
+  SolverDesc s;
+  ASSERT_EQ(s.preconditioner, PreconditionerKind::Auto);
+  EXPECT_EQ(preconditionerOf(s, kAutoAmgElements, Formulation::Corotational), PreconditionerKind::Amg);
+  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::Linear), PreconditionerKind::Amg);
+  EXPECT_EQ(preconditionerOf(s, kAutoAmgElements - 1, Formulation::Corotational), PreconditionerKind::Diagonal);
+  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::NeoHookean), PreconditionerKind::Diagonal);
+  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::StVenantKirchhoff), PreconditionerKind::Diagonal);
+  s.preconditioner = PreconditionerKind::BlockDiagonal;  // a choice the scene makes stays
+  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::Corotational), PreconditionerKind::BlockDiagonal);
+
+  // A device of several bodies gets amg only where every body would alone.
+  detail::Problem big, small;
+  big.mesh.tets.resize(4 * kAutoAmgElements);
+  small.mesh.tets.resize(4 * 100);
+  EXPECT_EQ(detail::resolvedSolver(SolverDesc{}, {&big, &big}).preconditioner, PreconditionerKind::Amg);
+  EXPECT_EQ(detail::resolvedSolver(SolverDesc{}, {&big, &small}).preconditioner, PreconditionerKind::Diagonal);
+}
+
+TEST(AutoPreconditioner, ThePlanSaysWhatEachBodyGotAndBatchesDoNotMixThem) {
+  // Two small cantilevers and a large one on one (fake) device that batches: the small ones batch
+  // together with the diagonal, the large one runs alone with amg; each plan says which and that
+  // "auto" chose it.
+  std::vector<detail::BackendEntry> fakes;
+  fakes.push_back(fakeBackend("opencl", {fakeCandidate("opencl", "fake-gpu", "0", true)},
+                              [](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                                 const detail::Candidate&) { return detail::createReferenceDevice(problems, s); },
+                              /*batches=*/true));
+  HookScope scope(std::move(fakes));
+  Scene scene;
+  scene.analysis.kind = AnalysisDesc::Kind::Dynamic;
+  scene.analysis.dynamics.steps = 2;
+  for (const auto& [name, cells] : std::vector<std::pair<std::string, std::array<int, 3>>>{
+           {"small1", {12, 3, 3}}, {"large", {40, 4, 4}}, {"small2", {12, 3, 3}}}) {
+    BodyDesc b;
+    b.name = name;
+    BoxSpec box;
+    box.min = {0.0, 0.0, 0.0};
+    box.max = {1.0, 0.1, 0.1};
+    box.cells = cells;
+    b.mesh.box = box;
+    NodeSetDesc clamp;
+    clamp.boxMin = {-1e-9, -1.0, -1.0};
+    clamp.boxMax = {1e-9, 1.0, 1.0};
+    b.fixed.push_back(clamp);
+    scene.bodies.push_back(b);
+  }
+  scene.backend.minDeviceElements = 0;
+  SimulationOptions options;
+  options.devices = {"opencl"};
+  auto sim = Simulation::create(scene, options);
+  ASSERT_TRUE(sim) << sim.message();
+  const json plan = json::parse(sim->planReport());
+  ASSERT_EQ(plan["bodies"].size(), 3u);
+  for (const json& b : plan["bodies"]) {
+    const bool large = b["body"] == "large";
+    EXPECT_EQ(b["features"]["preconditioner"], large ? "amg" : "diagonal") << b.dump();
+    EXPECT_EQ(b["features"]["preconditioner_chosen_by"], "auto");
+  }
+  ASSERT_EQ(plan["batches"].size(), 1u) << plan["batches"].dump();
+  EXPECT_EQ(plan["batches"][0]["bodies"], json({"small1", "small2"}));
+  ASSERT_TRUE(sim->step());
+}
+
 }  // namespace
 }  // namespace corofem::test

@@ -176,8 +176,8 @@ TEST(Scheduler, CachedNumbersDecide) {
   int created = 0;
   HookScope scope(fakeDevices("", &created));
   nlohmann::json cache;
-  // Keys: backend|device|driver|analysis|precision|solver|size bucket|build.
-  const std::string tail = "|dynamic|double|pcg|log2e=8|build=" + detail::calibrationBuild();
+  // Keys: backend|device|driver|analysis|precision|solver|preconditioner|size bucket|build.
+  const std::string tail = "|dynamic|double|pcg|diagonal|log2e=8|build=" + detail::calibrationBuild();
   const std::string gpuKey = "opencl|fake-gpu|test" + tail, referenceKey = "reference|host (Eigen, double)|corofem" + tail;
   cache["version"] = 1;
   cache["entries"][gpuKey] = {{"ms_per_step", 0.5}};
@@ -217,10 +217,10 @@ TEST(Scheduler, ACacheOfAnotherBuildIsMeasuredAgain) {
     int created = 0;
     HookScope scope(fakeDevices("", &created));
     nlohmann::json cache;
-    const std::string tail = "|test|dynamic|double|pcg|log2e=8";
+    const std::string tail = "|test|dynamic|double|pcg|diagonal|log2e=8";
     cache["version"] = 1;
     cache["entries"]["opencl|fake-gpu" + tail + other] = {{"ms_per_step", 0.5}};
-    cache["entries"]["reference|host (Eigen, double)|corofem|dynamic|double|pcg|log2e=8" + other] = {{"ms_per_step", 7.0}};
+    cache["entries"]["reference|host (Eigen, double)|corofem|dynamic|double|pcg|diagonal|log2e=8" + other] = {{"ms_per_step", 7.0}};
     std::ofstream(scope.cacheDir() + "/scheduler.json") << cache.dump();
     auto sim = Simulation::create(calibrated(dynamicScene(boxBeam(), 2)));
     ASSERT_TRUE(sim) << sim.message();

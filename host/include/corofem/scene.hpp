@@ -139,7 +139,9 @@ struct AnalysisDesc {
 
 enum class LinearSolverKind { Pcg, Cholesky };  ///< Cholesky only on the reference backend
 /// Amg: smoothed-aggregation multigrid over the rest operator, warped by the rotations of node aggregates.
-enum class PreconditionerKind { None, Diagonal, BlockDiagonal, Amg };
+/// Auto (the default): per body, Amg where it was measured faster, Diagonal elsewhere
+/// (preconditionerOf).
+enum class PreconditionerKind { None, Diagonal, BlockDiagonal, Amg, Auto };
 /// Floating-point precision of a device backend (the reference backend always computes in double).
 enum class Precision {
   Double,  ///< everything in double (needs cl_khr_fp64)
@@ -153,10 +155,25 @@ struct SolverDesc {
   double tolerance = 1e-6;        ///< PCG relative residual |r| / |b|, > 0
   int maxIterations = 1000;       ///< PCG iteration cap, >= 1
   int checkEvery = 4;             ///< device backends: host read of the PCG state every k iterations (the device stops at convergence itself), >= 1
-  PreconditionerKind preconditioner = PreconditionerKind::Diagonal;
+  PreconditionerKind preconditioner = PreconditionerKind::Auto;
   Precision precision = Precision::Double;
   RotationMethod rotation = RotationMethod::Polar;
 };
+
+/// Bodies of at least this many elements get "amg" from "auto" (docs/performance.md, "The default
+/// preconditioner": on PoCL "amg" was slower below about 2,000 elements, where its cycle's launches
+/// cost more than the diagonal's extra iterations, and 1.7-3x faster from 3,840 up on slender bodies).
+constexpr std::size_t kAutoAmgElements = 3000;
+
+/// The preconditioner a body of `elements` tetrahedra and formulation `f` gets: the solver's, with
+/// Auto resolved to Amg for co-rotational and linear bodies of at least kAutoAmgElements elements
+/// (the rigorous hyperelastic models stiffen past the spectrum bound amg's smoothing is set from),
+/// Diagonal otherwise.
+inline PreconditionerKind preconditionerOf(const SolverDesc& s, std::size_t elements, Formulation f) {
+  if (s.preconditioner != PreconditionerKind::Auto) return s.preconditioner;
+  const bool corotationalOrLinear = f == Formulation::Corotational || f == Formulation::Linear;
+  return corotationalOrLinear && elements >= kAutoAmgElements ? PreconditionerKind::Amg : PreconditionerKind::Diagonal;
+}
 
 enum class BackendKind { Auto, Reference, OpenCL };
 

@@ -76,12 +76,17 @@ void Simulation::Impl::makeGroup(std::vector<std::size_t> members, bool batch) {
 void Simulation::Impl::formGroups() {
   std::vector<char> grouped(bodies.size(), 0);
   if (scene.backend.batch) {
-    std::map<std::string, std::vector<std::size_t>> byDevice;  // candidate label -> bodies, scene order
+    // (candidate label, preconditioner) -> bodies, scene order: a batch's bodies share their device's
+    // preconditioner, so "auto" batches those it gives the same one.
+    std::map<std::pair<std::string, PreconditionerKind>, std::vector<std::size_t>> byDevice;
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       const detail::Candidate& c = bodies[i].schedule.choice();
-      if (const auto entry = detail::findBackend(c.backend); entry && entry->batches) byDevice[c.label()].push_back(i);
+      const detail::Problem& p = *bodies[i].problem;
+      if (const auto entry = detail::findBackend(c.backend); entry && entry->batches)
+        byDevice[{c.label(), preconditionerOf(scene.solver, p.mesh.tetCount(), p.formulation)}].push_back(i);
     }
-    for (const auto& [label, members] : byDevice) {
+    for (const auto& [key, members] : byDevice) {
+      const std::string& label = key.first;
       if (members.size() < 2) continue;
       try {
         makeGroup(members, true);

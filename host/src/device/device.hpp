@@ -236,4 +236,17 @@ class Device {
 /// The set {0, ..., n - 1}.
 BodySet allBodies(std::size_t n);
 
+/// `solver` with its preconditioner "auto" resolved for a device of these bodies
+/// (preconditionerOf): Amg where every body would get it alone, else Diagonal. Every device and
+/// slot resolves it so (a batch's bodies share one preconditioner).
+inline SolverDesc resolvedSolver(SolverDesc solver, const std::vector<const Problem*>& problems) {
+  if (solver.preconditioner != PreconditionerKind::Auto) return solver;
+  PreconditionerKind kind = problems.empty() ? PreconditionerKind::Diagonal : PreconditionerKind::Amg;
+  for (const Problem* p : problems)
+    if (preconditionerOf(solver, p->mesh.tetCount(), p->formulation) != PreconditionerKind::Amg)
+      kind = PreconditionerKind::Diagonal;
+  solver.preconditioner = kind;
+  return solver;
+}
+
 }  // namespace corofem::detail

@@ -53,6 +53,7 @@ const char* toString(PreconditionerKind p) {
     case PreconditionerKind::Diagonal: return "diagonal";
     case PreconditionerKind::BlockDiagonal: return "block_diagonal";
     case PreconditionerKind::Amg: return "amg";
+    case PreconditionerKind::Auto: return "auto";
   }
   return "?";
 }

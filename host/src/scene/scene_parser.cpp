@@ -56,7 +56,8 @@ const Choices<LinearSolverKind> kLinearSolvers{{"pcg", LinearSolverKind::Pcg},
 const Choices<PreconditionerKind> kPreconditioners{{"none", PreconditionerKind::None},
                                                    {"diagonal", PreconditionerKind::Diagonal},
                                                    {"block_diagonal", PreconditionerKind::BlockDiagonal},
-                                                   {"amg", PreconditionerKind::Amg}};
+                                                   {"amg", PreconditionerKind::Amg},
+                                                   {"auto", PreconditionerKind::Auto}};
 const Choices<Precision> kPrecisions{{"double", Precision::Double},
                                      {"float", Precision::Float},
                                      {"mixed", Precision::Mixed}};

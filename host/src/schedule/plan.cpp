@@ -68,10 +68,11 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const bool hyper = problem.formulation == Formulation::StVenantKirchhoff || problem.formulation == Formulation::NeoHookean;
   const bool damping = dynamic && (problem.rayleighMass > 0 || problem.rayleighStiffness > 0);
   const bool pcg = scene.solver.linearSolver == LinearSolverKind::Pcg;
-  const bool precond = pcg && scene.solver.preconditioner != PreconditionerKind::None;
-  const bool amg = pcg && scene.solver.preconditioner == PreconditionerKind::Amg;
+  const PreconditionerKind preconditioner = preconditionerOf(scene.solver, problem.mesh.tetCount(), problem.formulation);
+  const bool precond = pcg && preconditioner != PreconditionerKind::None;
+  const bool amg = pcg && preconditioner == PreconditionerKind::Amg;
   // amg smooths with the node blocks' inverses: the block preconditioner's data on a device.
-  const bool block = scene.solver.preconditioner == PreconditionerKind::BlockDiagonal || amg;
+  const bool block = preconditioner == PreconditionerKind::BlockDiagonal || amg;
   // The multigrid's levels (precond/amg.hpp) per free dof of the body, as the Vega beam of
   // bench_precond (12,960 tets) has them: P_0 and P_0^T 21 entries each, the level-1 operator 17,
   // the coarser ones about 1; each entry a real and a 4-byte column (the coarsest inverse aside).
@@ -100,7 +101,10 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   f["analysis"] = dynamic ? "dynamic" : "static";
   if (dynamic) f["integrator"] = integratorOf(scene.analysis.dynamics) == Integrator::Newmark ? "newmark" : "backward_euler";
   f["linear_solver"] = pcg ? "pcg" : "cholesky";
-  if (pcg) f["preconditioner"] = toString(scene.solver.preconditioner);
+  if (pcg) {
+    f["preconditioner"] = toString(preconditioner);
+    if (scene.solver.preconditioner == PreconditionerKind::Auto) f["preconditioner_chosen_by"] = "auto";
+  }
   f["mass_terms"] = dynamic;
   f["damping"] = damping;
   f["surface_update"] = !desc.surface.empty();

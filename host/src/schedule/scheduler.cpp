@@ -43,12 +43,14 @@ std::string choicesText() {
 }
 
 // ------------------------------------------------------------------ cache
-std::string cacheKey(const Candidate& c, const Scene& scene, std::size_t elements) {
+std::string cacheKey(const Candidate& c, const Scene& scene, const Problem& problem) {
+  const std::size_t elements = problem.mesh.tetCount();
   std::ostringstream os;
   os << c.backend << '|' << c.device << '|' << c.driver << '|'
      << (scene.analysis.kind == AnalysisDesc::Kind::Static ? "static" : "dynamic") << '|'
      << (scene.solver.precision == Precision::Float ? "float" : "double") << '|'
-     << (scene.solver.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg") << "|log2e="
+     << (scene.solver.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg") << '|'
+     << toString(preconditionerOf(scene.solver, elements, problem.formulation)) << "|log2e="
      << sizeBucket(elements) << "|build=" << calibrationBuild();
   return os.str();
 }
@@ -291,7 +293,7 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
   for (const Candidate& c : candidates) {
     CandidateTiming t;
     t.candidate = c;
-    const std::string key = cacheKey(c, scene, elements);
+    const std::string key = cacheKey(c, scene, problem);
     const json& entries = cache["entries"];
     if (entries.contains(key)) {
       const json& e = entries[key];

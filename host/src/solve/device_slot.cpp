@@ -33,7 +33,8 @@ std::unique_ptr<Device> makeDevice(const std::vector<const Problem*>& problems, 
 
 DeviceSlot::DeviceSlot(std::vector<const Problem*> problems, const SolverDesc& solver, std::vector<Candidate> order,
                        bool fallbackAtCreate, const DeviceOptions& options, const Log& log)
-    : problems_(std::move(problems)), solver_(solver), options_(options), log_(log), order_(std::move(order)) {
+    : problems_(std::move(problems)), solver_(resolvedSolver(solver, problems_)), options_(options), log_(log),
+      order_(std::move(order)) {
   if (order_.empty() || problems_.empty()) fail(ErrorCode::Internal, "DeviceSlot: no candidate or no body");
   lastX_.resize(problems_.size());
   try {
@@ -49,6 +50,7 @@ DeviceSlot::DeviceSlot(std::unique_ptr<Device> device, const SolverDesc& solver,
     : solver_(solver), log_(log), device_(std::move(device)) {
   if (!device_ || device_->bodyCount() == 0) fail(ErrorCode::Internal, "DeviceSlot: no device or no body");
   for (std::size_t b = 0; b < device_->bodyCount(); ++b) problems_.push_back(&device_->problem(b));
+  solver_ = resolvedSolver(solver_, problems_);
   Candidate given;
   given.backend = device_->name();
   given.device = device_->deviceName();

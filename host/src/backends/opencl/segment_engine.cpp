@@ -40,7 +40,7 @@ bool hasNonzeroMass(const Problem& p) {
 
 SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const SolverDesc& solver,
                              std::shared_ptr<cl::Context> ctx, const OpenCLTuning& tuning)
-    : ctx_(std::move(ctx)), solver_(solver), precond_(solver.preconditioner) {
+    : ctx_(std::move(ctx)), solver_(resolvedSolver(solver, problems)), precond_(solver_.preconditioner) {
   dev_ = ctx_->deviceName();
   cl_command_queue_properties queueProps = 0;
   clGetCommandQueueInfo(ctx_->queue(), CL_QUEUE_PROPERTIES, sizeof(queueProps), &queueProps, nullptr);
@@ -106,7 +106,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
   cpu_ = std::make_unique<CpuPcg>(*this);
   if (precond_ == PreconditionerKind::Amg) amg_ = std::make_unique<EngineAmg>(*this);
   try {
-    build(solver);
+    build(solver_);
     allocate();
     setAllActive();
     refreshBlocks(false);

@@ -392,6 +392,8 @@ class ReferenceBody {
         blocks_.setBlocks(blockStarts_);
         blocks_.factorize(A_);
         break;
+      case PreconditionerKind::Auto:
+        fail(ErrorCode::Internal, "reference backend: the preconditioner \"auto\" reached a body unresolved");
     }
   }
 
@@ -407,6 +409,7 @@ class ReferenceBody {
         amg_.amg().apply(fine, r, z);
         return z;
       }
+      case PreconditionerKind::Auto: break;  // resolved before (formPreconditioner refuses it)
     }
     return r;
   }
@@ -470,7 +473,8 @@ class ReferenceBody {
 class ReferenceDevice final : public Device {
  public:
   ReferenceDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver) {
-    for (const Problem* p : problems) bodies_.push_back(std::make_unique<ReferenceBody>(*p, solver));
+    const SolverDesc resolved = resolvedSolver(solver, problems);
+    for (const Problem* p : problems) bodies_.push_back(std::make_unique<ReferenceBody>(*p, resolved));
   }
 
   std::string name() const override { return "reference"; }
