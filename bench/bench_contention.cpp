@@ -1,11 +1,13 @@
 // One body on an OpenCL CPU device (PoCL) while another process keeps a core busy, as inside a
 // renderer whose own threads are busy (issue 24). The body: a 1.2 x 0.1 x 0.1 m cantilever of
 // 72 x 6 x 6 cells x 5 tets = 12,960 elements (E = 1e6 Pa, nu = 0.3, rho = 1000), clamped at x = 0
-// under gravity; backward Euler, h = 1/60 s, PCG to 1e-6 with the block-diagonal preconditioner,
-// float, on the OpenCL backend with its default tuning. Counters: the median and the mean wall
-// time of a step (ms) over the timed steps, and PCG iterations per step.
+// under gravity; backward Euler, h = 1/60 s, PCG to 1e-6 with the library's default preconditioner
+// ("auto": "amg" for this body) unless --preconditioner names one, float, on the OpenCL backend with
+// its default tuning. Counters: the median and the mean wall time of a step (ms) over the timed
+// steps, and PCG iterations per step.
 //
-//   --busy_cpu=N   fork a process that spins on CPU N (pinned) for the whole run; -1 (default): none
+//   --busy_cpu=N           fork a process that spins on CPU N (pinned) for the whole run; -1 (default): none
+//   --preconditioner=NAME  auto (default), diagonal, block_diagonal (the measurements before "auto"), amg
 //
 // bench/contention.sh runs it in turns: default and PoCL on one thread (POCL_MAX_PTHREAD_COUNT=1,
 // which must be set before the process starts), each with and without the busy process, and says
@@ -35,6 +37,7 @@ namespace {
 using namespace corofem;
 
 int busyCpu = -1;
+PreconditionerKind preconditioner = PreconditionerKind::Auto;
 
 Scene beamScene() {
   BodyDesc body;
@@ -66,7 +69,7 @@ Scene beamScene() {
   s.analysis.dynamics.steps = 1 << 30;
   s.solver.precision = Precision::Float;
   s.solver.tolerance = 1e-6;
-  s.solver.preconditioner = PreconditionerKind::BlockDiagonal;
+  s.solver.preconditioner = preconditioner;
   s.backend.kind = BackendKind::OpenCL;
   return s;
 }
@@ -151,8 +154,25 @@ BENCHMARK(BM_BeamStep)->Iterations(20)->Unit(benchmark::kMillisecond)->UseRealTi
 int main(int argc, char** argv) {
   std::vector<char*> rest;
   for (int i = 0; i < argc; ++i) {
-    if (std::strncmp(argv[i], "--busy_cpu=", 11) == 0) busyCpu = std::atoi(argv[i] + 11);
-    else rest.push_back(argv[i]);
+    if (std::strncmp(argv[i], "--busy_cpu=", 11) == 0) {
+      busyCpu = std::atoi(argv[i] + 11);
+    } else if (std::strncmp(argv[i], "--preconditioner=", 17) == 0) {
+      const std::string name = argv[i] + 17;
+      bool known = false;
+      for (PreconditionerKind k : {PreconditionerKind::Auto, PreconditionerKind::Diagonal,
+                                   PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg})
+        if (name == toString(k)) {
+          preconditioner = k;
+          known = true;
+        }
+      if (!known) {
+        std::cerr << "bench_contention: --preconditioner must be auto, diagonal, block_diagonal or amg, got " << name
+                  << '\n';
+        return 2;
+      }
+    } else {
+      rest.push_back(argv[i]);
+    }
   }
   int count = static_cast<int>(rest.size());
   benchmark::Initialize(&count, rest.data());

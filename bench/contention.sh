@@ -6,7 +6,7 @@
 # busy core is no slower than PoCL on one thread with it (exit 1 if it is slower).
 #
 #   bench/contention.sh [build folder, default build] [output folder, default /tmp/corofem-contention]
-#   ROUNDS=3 by default.
+#   ROUNDS=3 by default; PRECONDITIONER=name (auto, the library's default, unless given).
 set -euo pipefail
 build=${1:-build}
 out=${2:-/tmp/corofem-contention}
@@ -18,7 +18,8 @@ configs=(default_quiet default_busy onethread_quiet onethread_busy)
 for ((r = 1; r <= rounds; ++r)); do
   for c in "${configs[@]}"; do
     env=()
-    args=(--benchmark_format=json --benchmark_out_format=json --benchmark_out="$out/${c}_round$r.json")
+    args=(--benchmark_format=json --benchmark_out_format=json --benchmark_out="$out/${c}_round$r.json"
+          --preconditioner="${PRECONDITIONER:-auto}")
     [[ $c == onethread_* ]] && env=(POCL_MAX_PTHREAD_COUNT=1)
     [[ $c == *_busy ]] && args+=(--busy_cpu=0)
     env "${env[@]}" "$bin" "${args[@]}" > /dev/null
