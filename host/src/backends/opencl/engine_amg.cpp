@@ -86,6 +86,8 @@ void EngineAmg::invalidate(std::size_t s) {
   dirty_ = true;
 }
 
+void EngineAmg::constraintsChanged(std::size_t s) { freeKnown_[s] = 0; }
+
 void EngineAmg::prepare(const BodySet& running) {
   for (std::size_t s : running) {
     const BodySegment& sg = e_.segs_[s];
@@ -167,13 +169,15 @@ void EngineAmg::upload() {
       const auto& levels = bodies_[s].amg().levels();
       if (k < levels.size()) rows[k] += static_cast<std::size_t>(levels[k].A.rows());
     }
-  // Body s's level-0 row i (its i-th free dof) is device dof dofBegin + device dof of freeDofs[i].
+  // Body s's level-0 row i (the i-th free dof its hierarchy was built on, a superset of those free
+  // now: the free mask zeroes the others) is device dof dofBegin + device dof of that dof.
   std::vector<std::vector<std::size_t>> fineRow(K);
   for (std::size_t s = 0; s < K; ++s) {
     const BodySegment& sg = e_.segs_[s];
     std::vector<std::size_t> deviceDof(sg.dofs());
     for (std::size_t d = 0; d < sg.dofs(); ++d) deviceDof[sg.hostDof(d)] = d;
-    for (Eigen::Index dof : freeDofs_[s]) fineRow[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
+    for (Eigen::Index dof : bodies_[s].amg().builtFreeDofs())
+      fineRow[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
   }
   using Triplets = std::vector<Eigen::Triplet<double, int>>;
   // row(k, s, i): the device row of body s's row i on level k.

@@ -29,8 +29,12 @@ class EngineAmg {
   void createKernels();
   /// Keeps the bodies' positions for their next warp.
   void positionsSet(const BodySet& bodies, const ConstVectors& x);
-  /// The body's constraints or material changed: its hierarchy is made again at its next solve.
+  /// The body's material changed: its hierarchy is made again at its next solve.
   void invalidate(std::size_t segment);
+  /// The segment's constraints changed: its free dofs are read again at the next prepare, and its
+  /// hierarchy kept where it serves them (BodyAmg::ensure; the device's level 0 is every dof, so
+  /// the free mask projects the cycle onto the new free dofs with nothing uploaded).
+  void constraintsChanged(std::size_t segment);
   /// Before a solve of the running segments (their coefficients set): their hierarchies, the
   /// device's levels where one changed, the warp where positions changed.
   void prepare(const BodySet& running);

@@ -240,7 +240,7 @@ void SegmentEngine::setConstraints(const BodySet& bodies, const std::vector<cons
     xKnown_[bodies[i]] = 0;
     axReady_[bodies[i]] = 0;
     warmLast_[bodies[i]] = 0;
-    if (amg_) amg_->invalidate(bodies[i]);
+    if (amg_) amg_->constraintsChanged(bodies[i]);
   }
 }
 

@@ -87,8 +87,7 @@ class ReferenceBody {
     p_.constrained = constrained;
     buildPattern();
     analyzed_ = false;
-    running_ = false;
-    amg_.clear();
+    running_ = false;  // the multigrid stays where it serves the new free dofs (BodyAmg::ensure)
   }
 
   void setPositions(const Eigen::VectorXd& x) {
