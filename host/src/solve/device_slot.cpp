@@ -29,6 +29,18 @@ std::unique_ptr<Device> makeDevice(const std::vector<const Problem*>& problems, 
   return backendOf(c)->create(problems, solver, c, options);
 }
 
+/// Gives a new device the bodies' last positions (those that have some).
+void givePositions(Device& device, const std::vector<Eigen::VectorXd>& lastX) {
+  BodySet known;
+  ConstVectors xs;
+  for (std::size_t b = 0; b < lastX.size(); ++b)
+    if (lastX[b].size() > 0) {
+      known.push_back(b);
+      xs.push_back(&lastX[b]);
+    }
+  if (!known.empty()) device.setPositions(known, xs);
+}
+
 }  // namespace
 
 DeviceSlot::DeviceSlot(std::vector<const Problem*> problems, const SolverDesc& solver, std::vector<Candidate> order,
@@ -66,14 +78,7 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
     ++index_;
     try {
       std::unique_ptr<Device> next = makeDevice(problems_, solver_, order_[index_], options_);
-      BodySet known;
-      ConstVectors xs;
-      for (std::size_t b = 0; b < lastX_.size(); ++b)
-        if (lastX_[b].size() > 0) {
-          known.push_back(b);
-          xs.push_back(&lastX_[b]);
-        }
-      if (!known.empty()) next->setPositions(known, xs);
+      givePositions(*next, lastX_);
       device_ = std::move(next);
       ++generation_;
       ++failovers_;
@@ -180,14 +185,7 @@ void DeviceSlot::removeBody(std::size_t body) {
   problems.erase(problems.begin() + static_cast<std::ptrdiff_t>(body));
   lastX.erase(lastX.begin() + static_cast<std::ptrdiff_t>(body));
   std::unique_ptr<Device> next = makeDevice(problems, solver_, order_[index_], options_);
-  BodySet known;
-  ConstVectors xs;
-  for (std::size_t b = 0; b < lastX.size(); ++b)
-    if (lastX[b].size() > 0) {
-      known.push_back(b);
-      xs.push_back(&lastX[b]);
-    }
-  if (!known.empty()) next->setPositions(known, xs);
+  givePositions(*next, lastX);
   problems_ = std::move(problems);
   lastX_ = std::move(lastX);
   solveStart_.clear();
