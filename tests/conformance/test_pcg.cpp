@@ -62,9 +62,16 @@ class ConformancePcg : public ConformanceBase {
     dev->setPositions(all, xs);
     ref->setPositions(all, xs);
     if (ref != &reference()) reference().setPositions(all, xs);  // expectSolveMatches's A (no preconditioner in it)
-    const std::vector<Eigen::VectorXd> b = rightHandSides(200);
-    const SetSolve got = solveSet(*dev, all, b, zeros(), s, systems(all));
-    const SetSolve want = solveSet(*ref, all, b, zeros(), s, systems(all));
+    setMatches(*dev, *ref, rightHandSides(200), s, "preconditioner ");
+  }
+
+  /// Every body solved at once from zero on `dev` and on `ref` with `s`, each matching (what: names
+  /// the case in failures, with the preconditioner's name).
+  void setMatches(detail::Device& dev, detail::Device& ref, const std::vector<Eigen::VectorXd>& b, const SolverDesc& s,
+                  const std::string& what) {
+    const detail::BodySet all = detail::allBodies(count());
+    const SetSolve got = solveSet(dev, all, b, zeros(), s, systems(all));
+    const SetSolve want = solveSet(ref, all, b, zeros(), s, systems(all));
     for (std::size_t i = 0; i < count(); ++i) {
       ASSERT_TRUE(got.solves[i].failure.empty()) << got.solves[i].failure;
       ASSERT_TRUE(want.solves[i].failure.empty()) << want.solves[i].failure;
@@ -72,8 +79,8 @@ class ConformancePcg : public ConformanceBase {
       // random: its constraints do not turn with it, so the warped rest operator fits it poorly)
       // took 116 iterations against the double reference's 67 at the float tolerance.
       expectSolveMatches(i, bodies()[i].solve, b[i], got.x[i], got.solves[i].stats, want.x[i], want.solves[i].stats,
-                         s.tolerance, std::string("preconditioner ") + toString(pc), nullptr,
-                         pc == PreconditionerKind::Amg && problem(i).name == "slab");
+                         s.tolerance, what + toString(s.preconditioner), nullptr,
+                         s.preconditioner == PreconditionerKind::Amg && problem(i).name == "slab");
     }
   }
 };
@@ -247,15 +254,7 @@ TEST_P(ConformancePcg, SpringsJoinTheProductsAndTheSolves) {
       dev->setPositions(all, xs);
       ref->setPositions(all, xs);
     }
-    const SetSolve got = solveSet(*dev, all, b, zeros(), s, systems(all));
-    const SetSolve want = solveSet(*ref, all, b, zeros(), s, systems(all));
-    for (std::size_t i = 0; i < count(); ++i) {
-      ASSERT_TRUE(got.solves[i].failure.empty()) << got.solves[i].failure;
-      ASSERT_TRUE(want.solves[i].failure.empty()) << want.solves[i].failure;
-      expectSolveMatches(i, bodies()[i].solve, b[i], got.x[i], got.solves[i].stats, want.x[i], want.solves[i].stats,
-                         s.tolerance, std::string("springs, preconditioner ") + toString(pc), nullptr,
-                         pc == PreconditionerKind::Amg && problem(i).name == "slab");
-    }
+    setMatches(*dev, *ref, b, s, "springs, preconditioner ");
   }
 
   // Removed: the plain products again.
