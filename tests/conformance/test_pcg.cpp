@@ -130,6 +130,15 @@ TEST_P(ConformancePcg, MultigridFollowsChangedConstraints) {
     }
     for (detail::Device* d : {dev.get(), ref.get(), &reference()}) d->setConstraints(all, masked);
   };
+  auto made = [](const detail::Device& d) {
+    for (const detail::DeviceCounter& c : d.counters())
+      if (c.name == "amg_hierarchies_made") return c.value;
+    ADD_FAILURE() << d.name() << " does not count its hierarchies (amg_hierarchies_made)";
+    return -1LL;
+  };
+  const long long devMade = made(*dev), refMade = made(*ref);
+  EXPECT_EQ(devMade, refMade);
+  EXPECT_GE(devMade, static_cast<long long>(count()) - 1);  // every body with free dofs has one
   pinLastNode(true);
   const std::vector<Eigen::VectorXd> b = rightHandSides(520);
   const SetSolve got = solveSet(*dev, all, b, zeros(), s, systems(all));
@@ -143,6 +152,8 @@ TEST_P(ConformancePcg, MultigridFollowsChangedConstraints) {
   }
   // The scene's constraints released, the pin kept: bodies that had some get free dofs their
   // hierarchy lacks. (expectSolveMatches reads the suite's constraints: the checks are here.)
+  EXPECT_EQ(made(*dev), devMade) << "a pin made a hierarchy again";
+  EXPECT_EQ(made(*ref), refMade);
   pinLastNode(false);
   const std::vector<std::vector<std::uint8_t>>& released = masks;
   const std::vector<Eigen::VectorXd> b2 = rightHandSides(530);
@@ -173,6 +184,8 @@ TEST_P(ConformancePcg, MultigridFollowsChangedConstraints) {
     }
     EXPECT_LE(std::sqrt(rr / bb), 20.0 * s.tolerance);
   }
+  EXPECT_GT(made(*dev), devMade) << "freed dofs and no new hierarchy";
+  EXPECT_EQ(made(*dev) - devMade, made(*ref) - refMade);
 }
 
 TEST_P(ConformancePcg, SpringsJoinTheProductsAndTheSolves) {

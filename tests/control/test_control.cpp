@@ -8,6 +8,7 @@
 
 #include <corofem/simulation.hpp>
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <nlohmann/json.hpp>
 #include <gtest/gtest.h>
@@ -201,8 +202,9 @@ TEST_P(Control, AppliedForcesChangeTheMomentumByForceTimesTime) {
 TEST_P(Control, AForceAtAPointIsSpreadByTheContainingElementsWeights) {
   // A force at the centroid of an element of the beam (bent by gravity first, so that the search
   // runs on current positions, not the rest mesh's) acts as a quarter of it on each of that
-  // element's nodes; one at a node's position as the whole force on that node; one far outside the
-  // body on the nearest element's nodes (the momentum still changes by F t).
+  // element's nodes; one at a node's position as the whole force on that node; one just outside a
+  // boundary face as a third on each of its nodes; one far outside the body on the nearest
+  // element's nodes (the momentum still changes by F t).
   COROFEM_SKIP_ABSENT(GetParam());
   Simulation a = create(beamScene(GetParam(), true, true)), b = create(beamScene(GetParam(), true, true));
   for (int frame = 0; frame < 5; ++frame) {
@@ -240,6 +242,53 @@ TEST_P(Control, AForceAtAPointIsSpreadByTheContainingElementsWeights) {
   const std::vector<double> xa = positions(a), xb = positions(b);
   const double tolerance = GetParam().isFloat() ? 1e-6 : 1e-10;  // the weights 0.25 and 1 to rounding
   for (std::size_t d = 0; d < xa.size(); ++d) ASSERT_NEAR(xa[d], xb[d], tolerance) << "dof " << d;
+
+  // Just outside a bottom face (1e-7 m below its centroid, at the current positions): the nearest
+  // element is the face's own, whose fourth weight clamps to 0: a third on each face node.
+  std::size_t faceElement = mesh.tetCount();
+  std::vector<std::uint32_t> face;
+  std::uint32_t apex = 0;
+  for (std::size_t e = mesh.tetCount() / 3; e < mesh.tetCount() && face.empty(); ++e) {
+    std::vector<std::uint32_t> bottom;
+    for (int k = 0; k < 4; ++k) {
+      const std::uint32_t n = mesh.tets[4 * e + static_cast<std::size_t>(k)];
+      if (std::abs(mesh.nodes[3 * n + 1]) < 1e-12) bottom.push_back(n);
+      else apex = n;
+    }
+    if (bottom.size() == 3) {
+      face = bottom;
+      faceElement = e;
+    }
+  }
+  ASSERT_EQ(face.size(), 3u) << "no element with a face on the bottom";
+  const std::vector<double> now = positions(a);
+  auto at = [&](std::uint32_t n) {
+    return Eigen::Vector3d(now[3 * n], now[3 * n + 1], now[3 * n + 2]);
+  };
+  const Eigen::Vector3d centroid = (at(face[0]) + at(face[1]) + at(face[2])) / 3.0;
+  Eigen::Vector3d normal = (at(face[1]) - at(face[0])).cross(at(face[2]) - at(face[0])).normalized();
+  if (normal.dot(at(apex) - centroid) > 0.0) normal = -normal;  // outwards
+  AppliedForce below;
+  for (int c = 0; c < 3; ++c) below.point[c] = centroid[c] + 1e-7 * normal[c];
+  below.force[0] = 0.9;
+  below.force[1] = -3.0;
+  std::vector<AppliedForce> thirds;
+  for (std::uint32_t n : face) {
+    AppliedForce q;
+    q.node = static_cast<int>(n);
+    q.force[0] = 0.3;
+    q.force[1] = -1.0;
+    thirds.push_back(q);
+  }
+  ASSERT_TRUE(a.setForces(0, {below}));
+  ASSERT_TRUE(b.setForces(0, thirds));
+  for (int frame = 0; frame < 3; ++frame) {
+    ASSERT_TRUE(a.step(kH));
+    ASSERT_TRUE(b.step(kH));
+  }
+  const std::vector<double> ya = positions(a), yb = positions(b);
+  for (std::size_t d = 0; d < ya.size(); ++d)
+    ASSERT_NEAR(ya[d], yb[d], tolerance) << "outside face of element " << faceElement << ", dof " << d;
 
   // Far outside a free body: still the whole force (clamped, normalised weights).
   Simulation free = create(beamScene(GetParam(), false, false));
@@ -701,6 +750,39 @@ TEST_P(Control, AStiffSpringHandleActsAsAHardOneAndTheyTurnIntoEachOther) {
   EXPECT_EQ(hard.addHandle(desc).status().code(), ErrorCode::BadInput);
 }
 
+TEST_P(Control, AHandleTurnedSpringGivesUpTheNodesNewerHandlesTookFromIt) {
+  // Hard handle A lifts the tip; hard handle B takes the same nodes; A becomes a spring; B goes:
+  // the nodes must be free (the scene does not hold the tip), not held at a target nobody sets
+  // (which would pull them back to rest), and stay free when A goes too.
+  COROFEM_SKIP_ABSENT(GetParam());
+  Simulation sim = create(beamScene(GetParam(), true, true));
+  const std::vector<std::uint32_t> tip = nodesAt(sim.restMesh(0), 0, 0.5);
+  HandleDesc desc;
+  desc.nodes = tip;
+  Result<int> a = sim.addHandle(desc);
+  ASSERT_TRUE(a);
+  const double up[3] = {0.5, 0.08, 0.05};
+  ASSERT_TRUE(sim.moveHandle(a.value(), up));
+  for (int frame = 0; frame < 3; ++frame) ASSERT_TRUE(sim.step(kH));
+  Result<int> b = sim.addHandle(desc);
+  ASSERT_TRUE(b);
+  ASSERT_TRUE(sim.setHandleStiffness(a.value(), 1.0));  // a weak spring: gravity wins
+  ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> held = positions(sim);
+  ASSERT_TRUE(sim.removeHandle(b.value()));
+  ASSERT_TRUE(sim.step(kH));
+  std::vector<double> x = positions(sim);
+  for (std::uint32_t n : tip) {
+    const std::size_t d = 3 * n + 1;
+    EXPECT_LT(x[d], held[d]) << "node " << n << " did not start to fall";
+    EXPECT_GT(x[d], held[d] - 0.01) << "node " << n << " jumped (towards rest?)";
+  }
+  ASSERT_TRUE(sim.removeHandle(a.value()));
+  for (int frame = 0; frame < 3; ++frame) ASSERT_TRUE(sim.step(kH));
+  const std::vector<double> later = positions(sim);
+  for (std::uint32_t n : tip) EXPECT_LT(later[3 * n + 1], x[3 * n + 1]) << "node " << n << " is held";
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, Control, ::testing::ValuesIn(backendCases()), caseName);
 
 /// Three copies of the beam in one batch (the OpenCL backend batches bodies that share a device):
@@ -790,6 +872,52 @@ TEST(ControlBatch, BodiesUnderControlInABatchStepAsAloneAndOneLeaves) {
   }
   const std::vector<double> tipNow = positions(batch, 1);
   EXPECT_NEAR(tipNow[3 * tip[0] + 1], batch.restMesh(1).nodes[3 * tip[0] + 1] + 0.004 * 20, 1e-9);
+}
+
+/// Removing batched bodies where a body's scene index is not its slot index: a large body first
+/// ("auto" gives it the multigrid, so it runs alone) and three small ones in a batch; the batch's
+/// first slot leaves twice, then the last member; the body left steps as it does alone.
+TEST(ControlBatch, BatchedBodiesLeaveOneByOneAndTheLastGoesOnAsAlone) {
+  const std::vector<BackendCase> cases = backendCases();
+  const BackendCase* c = nullptr;
+  for (const BackendCase& k : cases)
+    if (k.isOpenCL() && k.absent.empty() && !k.isFloat()) c = &k;
+  if (!c) GTEST_SKIP() << "no OpenCL device with fp64 here: the batch runs on OpenCL devices";
+  Scene one = beamScene(*c, true, true);
+  Scene scene = one;
+  scene.bodies[0] = makeBody(box({0, 0, 2}, {1.0, 0.1, 2.1}, {40, 4, 4}), 1e6, 0.3);
+  scene.bodies[0].name = "big";
+  scene.bodies[0].fixed.push_back(planeSet(0, 0.0));
+  for (const char* name : {"s0", "s1", "s2"}) {
+    scene.bodies.push_back(one.bodies[0]);
+    scene.bodies.back().name = name;
+  }
+  scene.backend.batch = true;
+  Simulation sim = create(scene);
+  const nlohmann::json batches = nlohmann::json::parse(sim.planReport())["batches"];
+  ASSERT_EQ(batches.size(), 1u);
+  ASSERT_EQ(batches[0]["bodies"], nlohmann::json({"s0", "s1", "s2"}));
+  Simulation alone = create(one);
+  auto steps = [&](int n) {
+    for (int k = 0; k < n; ++k) {
+      ASSERT_TRUE(sim.step(kH));
+      ASSERT_TRUE(alone.step(kH));
+    }
+  };
+  steps(3);
+  ASSERT_TRUE(sim.removeBody(1));  // s0: the batch's slot 0
+  steps(2);
+  ASSERT_TRUE(sim.removeBody(1));  // s1, now slot 0 too
+  ASSERT_EQ(sim.bodyCount(), 2);
+  EXPECT_EQ(sim.scene().bodies[1].name, "s2");
+  steps(3);
+  const std::vector<double> x = positions(sim, 1), xa = positions(alone);
+  for (std::size_t d = 0; d < x.size(); ++d) ASSERT_NEAR(x[d], xa[d], 1e-9) << "dof " << d;
+  ASSERT_TRUE(sim.removeBody(1));  // the batch's last member
+  ASSERT_EQ(sim.bodyCount(), 1);
+  EXPECT_EQ(sim.scene().bodies[0].name, "big");
+  ASSERT_TRUE(sim.step(kH));
+  EXPECT_EQ(sim.removeBody(0).code(), ErrorCode::BadInput);
 }
 
 }  // namespace

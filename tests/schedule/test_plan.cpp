@@ -350,6 +350,9 @@ TEST(AutoPreconditioner, ThePlanSaysWhatEachBodyGotAndBatchesDoNotMixThem) {
   }
   ASSERT_EQ(plan["batches"].size(), 1u) << plan["batches"].dump();
   EXPECT_EQ(plan["batches"][0]["bodies"], json({"small1", "small2"}));
+  ASSERT_EQ(plan["unbatched"].size(), 1u) << plan["unbatched"].dump();  // and says why the large one is not in it
+  EXPECT_EQ(plan["unbatched"][0]["bodies"], json({"large"}));
+  EXPECT_NE(plan["unbatched"][0]["reason"].get<std::string>().find("preconditioner \"amg\""), std::string::npos);
   ASSERT_TRUE(sim->step());
 }
 

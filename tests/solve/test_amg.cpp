@@ -223,8 +223,9 @@ TEST(WarpedAmg, ABodyKeepsItsHierarchyWithinAFactorOfTwoAndTakesBackTheOneItRepl
 TEST(WarpedAmg, AGrabKeepsTheHierarchyAndTheCycleServesTheFewerFreeDofs) {
   // The beam's hierarchy made for its clamp; then an application grabs the tip (its nodes
   // constrained): the hierarchy serves the fewer free dofs with no set-up, its cycle stays
-  // symmetric positive definite there and converges about as fast as one made for them. A released
-  // clamp frees dofs the hierarchy lacks: made again.
+  // symmetric positive definite there, and PCG converges with it within twice the iterations of one
+  // made for the grab (24 against 15 when written). A released clamp frees dofs the hierarchy
+  // lacks: made again.
   const Problem p = beam(30);
   const std::vector<Eigen::Index> before = freeDofs(p);
   Problem grabbed = p;
@@ -266,7 +267,7 @@ TEST(WarpedAmg, AGrabKeepsTheHierarchyAndTheCycleServesTheFewerFreeDofs) {
   };
   const Eigen::VectorXd b = randomVector(n, 21);
   const int keptIterations = pcgIterations(A, b, kept), madeIterations = pcgIterations(A, b, made);
-  EXPECT_LE(keptIterations, madeIterations + madeIterations / 2 + 2)
+  EXPECT_LE(keptIterations, 2 * madeIterations)
       << "kept " << keptIterations << ", made for the grab " << madeIterations;
   std::printf("[info] a grabbed tip: %d PCG iterations with the clamp's hierarchy, %d with one made for it\n",
               keptIterations, madeIterations);

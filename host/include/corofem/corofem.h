@@ -343,7 +343,8 @@ corofem_status corofem_simulation_add_body(corofem_simulation* simulation, const
                                            int* index);
 /** Removes a body with its handles and frees its device memory; later bodies' indices move down by
  *  one. A body batched with others leaves the batch: its device is made again for the others, which
- *  keep their state. COROFEM_BAD_INPUT for the last body. */
+ *  keep their state (their surface buffers are new ones: ask for them again). COROFEM_DEVICE_ERROR,
+ *  with nothing changed, where that device cannot be made; COROFEM_BAD_INPUT for the last body. */
 corofem_status corofem_simulation_remove_body(corofem_simulation* simulation, int body);
 /** Changes a body's material from the next step: Young's modulus (Pa, > 0), Poisson's ratio
  *  (-1 < nu < 0.5), Rayleigh damping alpha (1/s, >= 0) and beta (s, >= 0); its density stays. */

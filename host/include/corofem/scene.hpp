@@ -161,16 +161,18 @@ struct SolverDesc {
 };
 
 /// Bodies of at least this many elements get "amg" from "auto" (docs/performance.md, "The default
-/// preconditioner": on PoCL "amg" was slower below about 2,000 elements, where its cycle's launches
-/// cost more than the diagonal's extra iterations, and 1.7-3x faster from 3,840 up on slender bodies).
+/// preconditioner": on PoCL "amg" was 1.2x slower on a 1,620-tet beam and 2.5x slower on 20 batched
+/// 2,000-tet cantilevers, where its cycle's launches cost more than the diagonal's extra
+/// iterations, and 1.7-3x faster from 3,840 tets up on slender bodies).
 constexpr std::size_t kAutoAmgElements = 3000;
 
 /// The preconditioner a body of `elements` tetrahedra and formulation `f` gets: the solver's, with
 /// Auto resolved to Amg for co-rotational and linear bodies of at least kAutoAmgElements elements
-/// (the rigorous hyperelastic models stiffen past the spectrum bound amg's smoothing is set from),
-/// Diagonal otherwise.
+/// solved by PCG (the rigorous hyperelastic models stiffen past the spectrum bound amg's smoothing
+/// is set from), Diagonal otherwise.
 inline PreconditionerKind preconditionerOf(const SolverDesc& s, std::size_t elements, Formulation f) {
   if (s.preconditioner != PreconditionerKind::Auto) return s.preconditioner;
+  if (s.linearSolver != LinearSolverKind::Pcg) return PreconditionerKind::Diagonal;  // unused: one kind for all
   const bool corotationalOrLinear = f == Formulation::Corotational || f == Formulation::Linear;
   return corotationalOrLinear && elements >= kAutoAmgElements ? PreconditionerKind::Amg : PreconditionerKind::Diagonal;
 }

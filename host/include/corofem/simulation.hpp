@@ -172,7 +172,9 @@ class Simulation {
   /// Removes a body with its handles and frees its device's memory; later bodies' indices move
   /// down by one. A body in a batch (sharing a device's buffers with others) leaves it: the batch's
   /// device is made again for the others, which keep their state (a cost of about a Simulation's
-  /// creation for those bodies). BadInput for the scene's last body.
+  /// creation for those bodies; the old device lives until the new one holds them, so both fit in
+  /// memory at once; their surface buffers are new ones). DeviceError, with nothing changed, where
+  /// the new device cannot be made; BadInput for the scene's last body.
   Status removeBody(int body);
   /// Replaces the gravity of every body (m/s^2; acts at once, no ramp).
   Status setGravity(const double gravity[3]);
@@ -224,8 +226,9 @@ class Simulation {
   /// stepped since the last one and does not wait: work the application enqueues on that queue
   /// afterwards (SimulationOptions::device) sees the current surface; from another queue or API,
   /// call updateSurface() first. The buffer belongs to the Simulation and stays valid until it is
-  /// destroyed or the body moves to another device (a device failure); ask for it again after
-  /// step() rather than caching it.
+  /// destroyed, the body moves to another device (a device failure) or its batch's device is made
+  /// again (removeBody of another body of the batch); ask for it again after step() rather than
+  /// caching it.
   GpuBuffer surfaceBuffer(int body) const;
   /// With "surface_layout": "separate", the device buffer of the surface's unit normals, 3 float32
   /// per vertex, updated together with surfaceBuffer() (the same rules); empty for the interleaved

@@ -40,6 +40,13 @@ Mat3d rotationOf(const double* r, const char* call) {
   return R;
 }
 
+/// A handle's stiffness, checked: finite and >= 0 (N/m; 0: hard).
+void checkStiffness(double stiffness, const char* call) {
+  if (!(stiffness >= 0.0) || !std::isfinite(stiffness))
+    detail::fail(ErrorCode::BadInput, call, ": the stiffness must be a finite number >= 0 (N/m; 0: a hard constraint), "
+                 "got ", stiffness);
+}
+
 /// The node ids, checked against the body's node count.
 void checkNodes(const std::vector<std::uint32_t>& nodes, std::size_t nodeCount, const std::string& body,
                 const char* call) {
@@ -182,6 +189,17 @@ void Simulation::Impl::releaseNodes(int id) {
     else h.targets.segment<3>(d).setConstant(std::nan(""));
     if (previous > Body::Hold::kPinned) regrab.push_back(previous);
   }
+  // Newer handles that took nodes from this one will give them back to what held them before it:
+  // it holds no node from now on (it goes, or becomes a spring).
+  for (auto& [other, handle] : handles) {
+    if (other == id || handle.body != released.body) continue;
+    for (std::size_t j = 0; j < handle.previous.size(); ++j) {
+      if (handle.previous[j] != id) continue;
+      const auto k = std::find(released.nodes.begin(), released.nodes.end(), handle.nodes[j]) - released.nodes.begin();
+      handle.previous[j] = static_cast<std::size_t>(k) < released.previous.size() ? released.previous[static_cast<std::size_t>(k)]
+                                                                                    : Body::Hold::kScene;
+    }
+  }
   for (int older : regrab) {
     const Handle& o = handles.at(older);
     placeHandle(older, o.target, o.rotation);
@@ -229,9 +247,7 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
     Impl::Body& b = s.controlled(desc.body, "addHandle");
     const Eigen::VectorXd& x = s.driverOf(b).positions(b.index);
     const std::size_t nodeCount = b.mesh.nodeCount();
-    if (!(desc.stiffness >= 0.0) || !std::isfinite(desc.stiffness))
-      detail::fail(ErrorCode::BadInput, "addHandle: the stiffness must be a finite number >= 0 (N/m; 0: a hard "
-                   "constraint), got ", desc.stiffness);
+    checkStiffness(desc.stiffness, "addHandle");
     Impl::Handle handle;
     handle.body = static_cast<std::size_t>(desc.body);
     handle.stiffness = desc.stiffness;
@@ -333,9 +349,7 @@ Status Simulation::setHandleStiffness(int handle, double stiffness) {
     if (it == s.handles.end())
       detail::fail(ErrorCode::BadInput, "setHandleStiffness: there is no handle ", handle,
                    "; use an id addHandle returned and that was not removed");
-    if (!(stiffness >= 0.0) || !std::isfinite(stiffness))
-      detail::fail(ErrorCode::BadInput, "setHandleStiffness: the stiffness must be a finite number >= 0 (N/m; 0: a "
-                   "hard constraint), got ", stiffness);
+    checkStiffness(stiffness, "setHandleStiffness");
     Impl::Handle& h = it->second;
     Impl::Body& b = s.bodies[h.body];
     const bool wasHard = h.stiffness == 0.0;

@@ -83,11 +83,20 @@ void Simulation::Impl::formGroups() {
       const detail::Candidate& c = bodies[i].schedule.choice();
       const detail::Problem& p = *bodies[i].problem;
       if (const auto entry = detail::findBackend(c.backend); entry && entry->batches)
-        byDevice[{c.label(), preconditionerOf(scene.solver, p.mesh.tetCount(), p.formulation)}].push_back(i);
+        byDevice[{c.label(), detail::preconditionerOf(scene.solver, p)}].push_back(i);
     }
+    std::map<std::string, std::size_t> onDevice;  // candidate label -> its bodies, every preconditioner
+    for (const auto& [key, members] : byDevice) onDevice[key.first] += members.size();
     for (const auto& [key, members] : byDevice) {
       const std::string& label = key.first;
-      if (members.size() < 2) continue;
+      if (members.size() < 2) {
+        if (onDevice[label] > 1)
+          unbatched.push_back({members, label,
+                               std::string("its preconditioner \"") + toString(key.second) +
+                                   "\" (solver.preconditioner \"auto\" chose it for its size) is not the other bodies' "
+                                   "on this device, and a batch shares one"});
+        continue;
+      }
       try {
         makeGroup(members, true);
       } catch (const detail::Error& e) {

@@ -236,6 +236,11 @@ class Device {
 /// The set {0, ..., n - 1}.
 BodySet allBodies(std::size_t n);
 
+/// The preconditioner `solver` gives this body (preconditionerOf, corofem/scene.hpp).
+inline PreconditionerKind preconditionerOf(const SolverDesc& solver, const Problem& p) {
+  return corofem::preconditionerOf(solver, p.mesh.tetCount(), p.formulation);
+}
+
 /// `solver` with its preconditioner "auto" resolved for a device of these bodies
 /// (preconditionerOf): Amg where every body would get it alone, else Diagonal. Every device and
 /// slot resolves it so (a batch's bodies share one preconditioner).
@@ -243,7 +248,7 @@ inline SolverDesc resolvedSolver(SolverDesc solver, const std::vector<const Prob
   if (solver.preconditioner != PreconditionerKind::Auto) return solver;
   PreconditionerKind kind = problems.empty() ? PreconditionerKind::Diagonal : PreconditionerKind::Amg;
   for (const Problem* p : problems)
-    if (preconditionerOf(solver, p->mesh.tetCount(), p->formulation) != PreconditionerKind::Amg)
+    if (preconditionerOf(solver, *p) != PreconditionerKind::Amg)
       kind = PreconditionerKind::Diagonal;
   solver.preconditioner = kind;
   return solver;

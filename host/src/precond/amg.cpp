@@ -217,7 +217,8 @@ void WarpedAmg::setFreeDofs(const std::vector<Eigen::Index>& freeDofs) {
   if (!serves(freeDofs))
     fail(ErrorCode::Internal, "WarpedAmg::setFreeDofs: a free dof the hierarchy was not built on");
   activeRows_.clear();
-  if (freeDofs == freeDofs_) return;
+  restricted_ = freeDofs != freeDofs_;
+  if (!restricted_) return;
   std::size_t j = 0;
   for (Eigen::Index d : freeDofs) {
     while (freeDofs_[j] < d) ++j;
@@ -228,6 +229,7 @@ void WarpedAmg::setFreeDofs(const std::vector<Eigen::Index>& freeDofs) {
 void WarpedAmg::clear() {
   made_ = false;
   activeRows_.clear();
+  restricted_ = false;
   levels_.clear();
   aggregateNodes_.clear();
   aggregateRotations_.clear();
@@ -505,7 +507,7 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
     // hierarchy was built on (zero on those constrained since), and comes back on the active ones.
     Eigen::VectorXd rr, full;
     const Eigen::VectorXd* built = &r;
-    if (!activeRows_.empty()) {
+    if (restricted_) {
       full = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(freeDofs_.size()));
       for (std::size_t i = 0; i < activeRows_.size(); ++i) full[activeRows_[i]] = r[static_cast<Eigen::Index>(i)];
       built = &full;
@@ -518,7 +520,7 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
   cycle(l + 1, coarseB, coarseX, nullptr);
   if (fine) {
     warp(level.P * coarseX, e, false);
-    if (activeRows_.empty()) {
+    if (!restricted_) {
       x += e;
     } else {
       for (std::size_t i = 0; i < activeRows_.size(); ++i) x[static_cast<Eigen::Index>(i)] += e[activeRows_[i]];
@@ -591,6 +593,7 @@ BodyAmg::Made BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>&
   const AmgMatrix bound = restOperator(p, freeDofs, 0.5 * massScale, stiffScale);
   amg_->build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount(), &bound);
   ratio_ = ratio;
+  ++builds_;
   return Made::Built;
 }
 

@@ -138,8 +138,10 @@ class WarpedAmg {
   std::vector<AmgLevel> levels_;  ///< levels_[0]: rest A_0; the last one is solved directly
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
   std::vector<Eigen::Index> freeDofs_;
-  /// The free dofs the cycle runs on, as rows of freeDofs_ (setFreeDofs); empty: all of freeDofs_.
+  /// With restricted_, the free dofs the cycle runs on, as rows of freeDofs_ (setFreeDofs); else
+  /// it runs on all of freeDofs_.
   std::vector<Eigen::Index> activeRows_;
+  bool restricted_ = false;
   std::vector<std::vector<std::uint32_t>> aggregateNodes_;  ///< the nodes of each level-0 aggregate
   std::vector<int> nodeAggregate_;        ///< per node: its aggregate, or -1
   std::vector<Mat3> aggregateRotations_;  ///< per aggregate, or empty: no warp
@@ -170,12 +172,15 @@ class BodyAmg {
   /// from amg() (a device's copies, the warp) refreshes it unless Kept.
   Made ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale);
   void clear();
+  /// Hierarchies made so far (Made::Built).
+  long long builds() const { return builds_; }
   WarpedAmg& amg() { return *amg_; }
   const WarpedAmg& amg() const { return *amg_; }
 
  private:
   std::unique_ptr<WarpedAmg> amg_, spare_;
   double ratio_ = 0.0, spareRatio_ = 0.0;  ///< m / s each was made from (infinite for s = 0)
+  long long builds_ = 0;
 };
 
 }  // namespace corofem::detail

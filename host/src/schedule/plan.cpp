@@ -68,7 +68,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const bool hyper = problem.formulation == Formulation::StVenantKirchhoff || problem.formulation == Formulation::NeoHookean;
   const bool damping = dynamic && (problem.rayleighMass > 0 || problem.rayleighStiffness > 0);
   const bool pcg = scene.solver.linearSolver == LinearSolverKind::Pcg;
-  const PreconditionerKind preconditioner = preconditionerOf(scene.solver, problem.mesh.tetCount(), problem.formulation);
+  const PreconditionerKind preconditioner = preconditionerOf(scene.solver, problem);
   const bool precond = pcg && preconditioner != PreconditionerKind::None;
   const bool amg = pcg && preconditioner == PreconditionerKind::Amg;
   // amg smooths with the node blocks' inverses: the block preconditioner's data on a device.

@@ -50,7 +50,7 @@ std::string cacheKey(const Candidate& c, const Scene& scene, const Problem& prob
      << (scene.analysis.kind == AnalysisDesc::Kind::Static ? "static" : "dynamic") << '|'
      << (scene.solver.precision == Precision::Float ? "float" : "double") << '|'
      << (scene.solver.linearSolver == LinearSolverKind::Cholesky ? "cholesky" : "pcg") << '|'
-     << toString(preconditionerOf(scene.solver, elements, problem.formulation)) << "|log2e="
+     << toString(preconditionerOf(scene.solver, problem)) << "|log2e="
      << sizeBucket(elements) << "|build=" << calibrationBuild();
   return os.str();
 }

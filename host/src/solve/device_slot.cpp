@@ -68,6 +68,7 @@ DeviceSlot::DeviceSlot(std::unique_ptr<Device> device, const SolverDesc& solver,
   given.device = device_->deviceName();
   given.selector = "given";
   order_.push_back(given);
+  given_ = true;
   lastX_.resize(problems_.size());
 }
 
@@ -177,9 +178,9 @@ void DeviceSlot::setSprings(const BodySet& bodies) {
 void DeviceSlot::removeBody(std::size_t body) {
   if (body >= problems_.size() || problems_.size() < 2)
     fail(ErrorCode::Internal, "removing body ", body, " of a device slot of ", problems_.size());
-  if (order_.empty() || exhausted_)
+  if (given_ || exhausted_)
     fail(ErrorCode::DeviceError, "body '", problems_[body]->name, "' cannot leave its device: ",
-         order_.empty() ? "the device was made by the caller" : "every device of its batch failed");
+         given_ ? "the device was made by the caller" : "every device of its batch failed");
   std::vector<const Problem*> problems = problems_;
   std::vector<Eigen::VectorXd> lastX = lastX_;
   problems.erase(problems.begin() + static_cast<std::ptrdiff_t>(body));

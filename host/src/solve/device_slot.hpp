@@ -135,6 +135,7 @@ class DeviceSlot {
   std::string failures_;  ///< every device error so far (for the final message)
   std::size_t generation_ = 0;
   std::size_t failovers_ = 0;
+  bool given_ = false;  ///< the device was the caller's (no candidate to make another from)
   SlotStats stats_;
   bool inStep_ = false;
   std::chrono::steady_clock::time_point lastEnd_;

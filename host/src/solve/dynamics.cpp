@@ -125,10 +125,12 @@ void DynamicsDriver::externalForce(const Body& b, double t, Eigen::VectorXd& f) 
 }
 
 void DynamicsDriver::addSpringForces(const Body& b, const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  // Free dofs only: on a held dof the support's reaction takes the spring's pull (the residual's
+  // constrained rows hold it), and counting it as a load as well would count its work twice.
   const Eigen::VectorXd& k = b.problem->springStiffness;
   if (k.size() != x.size() || b.springTarget.size() != x.size()) return;
   for (Eigen::Index d = 0; d < x.size(); ++d)
-    if (k[d] != 0.0) f[d] += k[d] * (b.springTarget[d] - x[d]);
+    if (k[d] != 0.0 && b.freeMask[d] != 0.0) f[d] += k[d] * (b.springTarget[d] - x[d]);
 }
 
 double DynamicsDriver::kineticEnergy(std::size_t body) const {

@@ -174,7 +174,7 @@ class DynamicsDriver final : public Driver {
   void runAttempts(const BodySet& set, const std::string& where, double h, Attempts& at, std::vector<BodyOutcome>& out);
   /// f_ext of body b at time t: the scene's loads and the application's forces, into f.
   void externalForce(const Body& b, double t, Eigen::VectorXd& f) const;
-  /// Adds the application's spring forces at positions x, k_d (target_d - x_d), to f.
+  /// Adds the application's spring forces at positions x, k_d (target_d - x_d), to f on the free dofs.
   void addSpringForces(const Body& b, const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
   /// One step of the scheme for every Advance, from its body's committed state to t1 = t + h,
   /// committed in place on success (no rollback copy); a failure leaves the body's committed state

@@ -88,6 +88,12 @@ void EngineAmg::invalidate(std::size_t s) {
 
 void EngineAmg::constraintsChanged(std::size_t s) { freeKnown_[s] = 0; }
 
+long long EngineAmg::builds() const {
+  long long n = 0;
+  for (const BodyAmg& b : bodies_) n += b.builds();
+  return n;
+}
+
 void EngineAmg::prepare(const BodySet& running) {
   for (std::size_t s : running) {
     const BodySegment& sg = e_.segs_[s];

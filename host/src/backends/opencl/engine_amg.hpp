@@ -35,6 +35,8 @@ class EngineAmg {
   /// hierarchy kept where it serves them (BodyAmg::ensure; the device's level 0 is every dof, so
   /// the free mask projects the cycle onto the new free dofs with nothing uploaded).
   void constraintsChanged(std::size_t segment);
+  /// Hierarchies made so far, every body's.
+  long long builds() const;
   /// Before a solve of the running segments (their coefficients set): their hierarchies, the
   /// device's levels where one changed, the warp where positions changed.
   void prepare(const BodySet& running);

@@ -355,6 +355,8 @@ void SegmentEngine::pcgEnd(const std::vector<int>& iterations, const Vectors& xs
     if (round_.running[i]) getReals(xStage_.data(), segs_[round_.bodies[i]], *xs[i]);
 }
 
+long long SegmentEngine::amgBuilds() const { return amg_ ? amg_->builds() : 0; }
+
 }  // namespace corofem::detail
 
 #endif  // COROFEM_WITH_OPENCL

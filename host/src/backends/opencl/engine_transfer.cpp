@@ -113,7 +113,10 @@ void SegmentEngine::setCoefficients(std::size_t s, const SystemCoeffs& c) {
     fold.unitMass = massCoef == 0.0;
     if (fold.unitMass) deviceMass = 1.0;
   }
-  if (springFoldStale_[s] || !(fold == springFold_[s])) foldSprings(s, fold);
+  // With no mass term and no spring term (a damping product of beta alone) mass_ is multiplied by
+  // 0: whatever it holds serves, and the solves' fold stays (no upload a Newton iteration).
+  const bool unused = massCoef == 0.0 && c.stiffness == 0.0;
+  if (!unused && (springFoldStale_[s] || !(fold == springFold_[s]))) foldSprings(s, fold);
   operatorMass_[s] = massCoef;
   double* coef = &segCoef_[kSegCoefCount * s];
   const double next[4] = {stiffCoef * coef[kCoefLambda], stiffCoef * coef[kCoefMu], deviceMass, stiffCoef};

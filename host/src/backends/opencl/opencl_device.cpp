@@ -76,7 +76,8 @@ class OpenCLDevice final : public Device {
     return {{"pcg_group_launches", static_cast<long long>(c.groupLaunches)},
             {"pcg_team_launches", static_cast<long long>(c.teamLaunches)},
             {"pcg_pack_launches", static_cast<long long>(c.packLaunches)},
-            {"pcg_pack_lanes", static_cast<long long>(c.packLanes)}};
+            {"pcg_pack_lanes", static_cast<long long>(c.packLanes)},
+            {"amg_hierarchies_made", engine_.amgBuilds()}};
   }
   bool devicePositions(std::size_t body, DevicePositions& out) const override {
     if (body >= engine_.segmentCount()) return false;

@@ -118,6 +118,8 @@ class SegmentEngine {
   DevicePositions devicePositions(std::size_t s) const;
   /// The one-launch PCG iterations this engine ran (zeros on a GPU, which launches every iteration).
   CpuPcgCounts pcgCounts() const;
+  /// The "amg" hierarchies made so far (0 without the multigrid).
+  long long amgBuilds() const;
 
   // Device-only work on every segment (benchmarks), no transfers.
   void enqueueRotations();

@@ -69,6 +69,8 @@ class ReferenceBody {
     amg_.clear();
   }
 
+  long long amgBuilds() const { return amg_.builds(); }
+
   /// New springs (Problem::springStiffness): the next assembly adds them.
   void setSprings(const Problem& p) {
     if (p.springStiffness.size() != 0 && static_cast<std::size_t>(p.springStiffness.size()) != p_.dofCount())
@@ -502,6 +504,11 @@ class ReferenceDevice final : public Device {
   void setMaterial(const BodySet& set, const std::vector<const Problem*>& problems) override {
     check(set, problems.size());
     for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setMaterial(*problems[i]);
+  }
+  std::vector<DeviceCounter> counters() const override {
+    long long builds = 0;
+    for (const auto& b : bodies_) builds += b->amgBuilds();
+    return {{"amg_hierarchies_made", builds}};
   }
   void setSprings(const BodySet& set, const std::vector<const Problem*>& problems) override {
     check(set, problems.size());
