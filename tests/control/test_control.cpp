@@ -86,6 +86,14 @@ std::array<double, 3> momentum(const Simulation& sim, int body = 0) {
   return p;
 }
 
+/// Steps twins `frames` times each, in turns.
+void stepBoth(Simulation& a, Simulation& b, int frames) {
+  for (int frame = 0; frame < frames; ++frame) {
+    ASSERT_TRUE(a.step(kH)) << "frame " << frame;
+    ASSERT_TRUE(b.step(kH)) << "frame " << frame;
+  }
+}
+
 double totalMass(const Simulation& sim) {
   const BodyDesc& b = sim.scene().bodies[0];
   return b.material.density * 0.5 * 0.1 * 0.1;
@@ -207,10 +215,7 @@ TEST_P(Control, AForceAtAPointIsSpreadByTheContainingElementsWeights) {
   // element's nodes (the momentum still changes by F t).
   COROFEM_SKIP_ABSENT(GetParam());
   Simulation a = create(beamScene(GetParam(), true, true)), b = create(beamScene(GetParam(), true, true));
-  for (int frame = 0; frame < 5; ++frame) {
-    ASSERT_TRUE(a.step(kH));
-    ASSERT_TRUE(b.step(kH));
-  }
+  stepBoth(a, b, 5);
   const TetMesh& mesh = a.restMesh(0);
   const std::vector<double> x = positions(a);
   const std::size_t element = mesh.tetCount() / 2 + 3, node = mesh.tets[4 * 7 + 2];
@@ -235,10 +240,7 @@ TEST_P(Control, AForceAtAPointIsSpreadByTheContainingElementsWeights) {
   spread.push_back(whole);
   ASSERT_TRUE(a.setForces(0, {atCentroid, atNode}));
   ASSERT_TRUE(b.setForces(0, spread));
-  for (int frame = 0; frame < 3; ++frame) {
-    ASSERT_TRUE(a.step(kH));
-    ASSERT_TRUE(b.step(kH));
-  }
+  stepBoth(a, b, 3);
   const std::vector<double> xa = positions(a), xb = positions(b);
   const double tolerance = GetParam().isFloat() ? 1e-6 : 1e-10;  // the weights 0.25 and 1 to rounding
   for (std::size_t d = 0; d < xa.size(); ++d) ASSERT_NEAR(xa[d], xb[d], tolerance) << "dof " << d;
@@ -282,10 +284,7 @@ TEST_P(Control, AForceAtAPointIsSpreadByTheContainingElementsWeights) {
   }
   ASSERT_TRUE(a.setForces(0, {below}));
   ASSERT_TRUE(b.setForces(0, thirds));
-  for (int frame = 0; frame < 3; ++frame) {
-    ASSERT_TRUE(a.step(kH));
-    ASSERT_TRUE(b.step(kH));
-  }
+  stepBoth(a, b, 3);
   const std::vector<double> ya = positions(a), yb = positions(b);
   for (std::size_t d = 0; d < ya.size(); ++d)
     ASSERT_NEAR(ya[d], yb[d], tolerance) << "outside face of element " << faceElement << ", dof " << d;
@@ -525,10 +524,7 @@ TEST_P(Control, AFailedStepRestartsTheFailedBodyAtRest) {
   COROFEM_SKIP_ABSENT(GetParam());
   // Twins: one fails a step and goes on; the other is stopped by hand at the same state.
   Simulation failing = create(beamScene(GetParam(), true, true)), twin = create(beamScene(GetParam(), true, true));
-  for (int frame = 0; frame < 4; ++frame) {
-    ASSERT_TRUE(failing.step(kH));
-    ASSERT_TRUE(twin.step(kH));
-  }
+  stepBoth(failing, twin, 4);
   AppliedForce huge;
   huge.node = static_cast<int>(nodesAt(failing.restMesh(0), 0, 0.5).front());  // a free node
   huge.force[1] = 1e300;
@@ -549,10 +545,7 @@ TEST_P(Control, AStifferMaterialSagsLessAndMatchesTheSceneMaterial) {
   damped.bodies[0].material.rayleighMass = 30.0;
   Simulation changed = create(beamScene(GetParam(), true, true)), given = create(damped);
   ASSERT_TRUE(changed.setMaterial(0, 1e6, 0.3, 30.0, 0.0));
-  for (int frame = 0; frame < 20; ++frame) {
-    ASSERT_TRUE(changed.step(kH));
-    ASSERT_TRUE(given.step(kH));
-  }
+  stepBoth(changed, given, 20);
   EXPECT_EQ(positions(changed), positions(given));
   // Settled under gravity (mass damping 30 1/s), the tip sags as 1/E: four times stiffer, a quarter.
   const std::vector<std::uint32_t> tip = nodesAt(changed.restMesh(0), 0, 0.5);
@@ -588,10 +581,7 @@ TEST_P(Control, AnAddedBodyStepsAsInAFreshSimulationAndTheOthersGoOn) {
   Scene alone = scene;
   alone.bodies = {added};
   Simulation fresh = create(alone);
-  for (int frame = 0; frame < 5; ++frame) {
-    ASSERT_TRUE(sim.step(kH));
-    ASSERT_TRUE(untouched.step(kH));
-  }
+  stepBoth(sim, untouched, 5);
   Result<int> index = sim.addBody(added);
   ASSERT_TRUE(index) << index.message();
   EXPECT_EQ(index.value(), 1);
