@@ -10,6 +10,14 @@
 //                                                       slow (seconds a step on the reference, a
 //                                                       set-up of seconds), registered only with
 //                                                       the flag --large
+//   precondGrab/<backend>/amg/<kept|made>/tets_12960
+//                                                       the beam's tip grabbed by a hard handle after
+//                                                       the warm-up and lifted 2 cm: "kept" steps on
+//                                                       with the clamp's hierarchy (amg keeps it for
+//                                                       dofs it serves), "made" has one made for the
+//                                                       grab (setMaterial with the same material
+//                                                       forces it); grab_step_ms: the step after the
+//                                                       grab (with "made", the set-up)
 // (OpenCL variants skip with the reason where the build or the machine has no OpenCL device.)
 //
 // Each benchmark creates its Simulation and takes 3 warm-up steps outside the timed loop (the first
@@ -49,7 +57,7 @@ const std::string kScenePath = std::string(COROFEM_SOURCE_DIR) + "/bench/scenes/
 constexpr int kWarmupSteps = 3;
 
 void precondStep(benchmark::State& state, const std::string& backend, const std::string& preconditioner,
-                 const std::string& cells) {
+                 const std::string& cells, const std::string& grab) {
   // Open-ended in steps: the benchmark decides how many it takes. No probes (no output is written).
   std::vector<std::string> set = {"solver.preconditioner=" + preconditioner, "bodies.0.mesh.box.cells=" + cells,
                                   "analysis.steps=1000000", "output.probes=[]"};
@@ -73,6 +81,35 @@ void precondStep(benchmark::State& state, const std::string& backend, const std:
     const auto t0 = Clock::now();
     Status st = sim->step();
     if (i == 0) firstStepMs = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    if (!st) {
+      state.SkipWithError(st.message().c_str());
+      return;
+    }
+  }
+  if (!grab.empty()) {
+    const TetMesh& mesh = sim->restMesh(0);
+    HandleDesc tip;
+    for (std::size_t n = 0; n < mesh.nodeCount(); ++n)
+      if (mesh.nodes[3 * n] > 1.0 - 1e-9) tip.nodes.push_back(static_cast<std::uint32_t>(n));
+    Result<int> handle = sim->addHandle(tip);
+    if (!handle) {
+      state.SkipWithError(handle.message().c_str());
+      return;
+    }
+    std::vector<double> x;
+    sim->readPositions(0, x);
+    double target[3] = {0, 0, 0};
+    for (std::uint32_t n : tip.nodes)
+      for (int a = 0; a < 3; ++a) target[a] += x[3 * n + static_cast<std::size_t>(a)] / static_cast<double>(tip.nodes.size());
+    target[2] += 0.02;
+    sim->moveHandle(handle.value(), target);
+    if (grab == "made") {
+      const MaterialDesc& m = sim->scene().bodies[0].material;
+      sim->setMaterial(0, m.youngsModulus, m.poissonRatio, m.rayleighMass, m.rayleighStiffness);
+    }
+    const auto t0 = Clock::now();
+    const Status st = sim->step();
+    state.counters["grab_step_ms"] = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
     if (!st) {
       state.SkipWithError(st.message().c_str());
       return;
@@ -104,14 +141,20 @@ void registerAll(bool large) {
     const std::string backend = b;
     for (const char* p : {"diagonal", "block_diagonal", "amg"})
       benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_12960").c_str(), precondStep, backend,
-                                   std::string(p), std::string("[60,6,6]"))
+                                   std::string(p), std::string("[60,6,6]"), std::string())
+          ->Iterations(30)
+          ->Unit(benchmark::kMillisecond)
+          ->UseRealTime();
+    for (const char* grab : {"kept", "made"})
+      benchmark::RegisterBenchmark(("precondGrab/" + backend + "/amg/" + grab + "/tets_12960").c_str(), precondStep,
+                                   backend, std::string("amg"), std::string("[60,6,6]"), std::string(grab))
           ->Iterations(30)
           ->Unit(benchmark::kMillisecond)
           ->UseRealTime();
     if (large)
       for (const char* p : {"diagonal", "amg"})
         benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_103680").c_str(), precondStep,
-                                     backend, std::string(p), std::string("[120,12,12]"))
+                                     backend, std::string(p), std::string("[120,12,12]"), std::string())
             ->Iterations(10)
             ->Unit(benchmark::kMillisecond)
             ->UseRealTime();
