@@ -220,12 +220,11 @@ TEST(WarpedAmg, ABodyKeepsItsHierarchyWithinAFactorOfTwoAndTakesBackTheOneItRepl
   EXPECT_FALSE(body.amg().levelSizes().empty());
 }
 
-TEST(WarpedAmg, AGrabKeepsTheHierarchyAndTheCycleServesTheFewerFreeDofs) {
-  // The beam's hierarchy made for its clamp; then an application grabs the tip (its nodes
-  // constrained): the hierarchy serves the fewer free dofs with no set-up, its cycle stays
-  // symmetric positive definite there, and PCG converges with it within twice the iterations of one
-  // made for the grab (24 against 15 when written). A released clamp frees dofs the hierarchy
-  // lacks: made again.
+TEST(WarpedAmg, AGrabMakesAHierarchyAndTheReleaseTakesBackTheOneBefore) {
+  // The beam's hierarchy made for its clamp; an application grabs the tip (its nodes constrained):
+  // one is made for the new free dofs (keeping the clamp's restricted to them was tried: twice the
+  // PCG iterations, bench_precond's precondGrab at 0db57de), and the clamp's stays as the spare, so
+  // that the release takes it back with no set-up, and grabbing again takes back the grab's.
   const Problem p = beam(30);
   const std::vector<Eigen::Index> before = freeDofs(p);
   Problem grabbed = p;
@@ -237,51 +236,20 @@ TEST(WarpedAmg, AGrabKeepsTheHierarchyAndTheCycleServesTheFewerFreeDofs) {
   BodyAmg body;
   using Made = BodyAmg::Made;
   ASSERT_EQ(body.ensure(p, before, kBackwardEulerMass, 1.0), Made::Built);
-  EXPECT_TRUE(body.amg().serves(after));
-  EXPECT_EQ(body.ensure(grabbed, after, kBackwardEulerMass, 1.0), Made::Kept);
+  EXPECT_EQ(body.ensure(grabbed, after, kBackwardEulerMass, 1.0), Made::Built);
+  EXPECT_EQ(body.amg().builtFreeDofs(), after);
+  EXPECT_EQ(body.ensure(p, before, kBackwardEulerMass, 1.0), Made::Switched);  // released
   EXPECT_EQ(body.amg().builtFreeDofs(), before);
-
-  const AmgMatrix A = assembled(grabbed, kBackwardEulerMass, Mat3::Identity());
-  const AmgMatrix blocks = nodeBlocks(A, after).second;
-  AmgFineOperator fine;
-  fine.apply = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A * v; };
-  fine.blockInverse = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = blocks * v; };
-  auto kept = [&](const Eigen::VectorXd& r) {
-    Eigen::VectorXd z;
-    body.amg().apply(fine, r, z);
-    return z;
-  };
-  const auto n = static_cast<std::size_t>(A.rows());
-  for (unsigned seed = 1; seed <= 3; ++seed) {
-    const Eigen::VectorXd a = randomVector(n, seed), b = randomVector(n, seed + 10);
-    const Eigen::VectorXd Ma = kept(a), Mb = kept(b);
-    EXPECT_NEAR(a.dot(Mb), b.dot(Ma), 1e-10 * a.norm() * Mb.norm());
-    EXPECT_GT(a.dot(Ma), 0.0);
-  }
-  WarpedAmg fresh;
-  fresh.build(A, after, grabbed.restPositions, grabbed.mesh.nodeCount());
-  auto made = [&](const Eigen::VectorXd& r) {
-    Eigen::VectorXd z;
-    fresh.apply(fine, r, z);
-    return z;
-  };
-  const Eigen::VectorXd b = randomVector(n, 21);
-  const int keptIterations = pcgIterations(A, b, kept), madeIterations = pcgIterations(A, b, made);
-  EXPECT_LE(keptIterations, 2 * madeIterations)
-      << "kept " << keptIterations << ", made for the grab " << madeIterations;
-  std::printf("[info] a grabbed tip: %d PCG iterations with the clamp's hierarchy, %d with one made for it\n",
-              keptIterations, madeIterations);
-
-  // Released again: the same hierarchy, on all its rows.
-  EXPECT_EQ(body.ensure(p, before, kBackwardEulerMass, 1.0), Made::Kept);
-  // The clamp released (the tip still held): dofs it was not built on.
+  EXPECT_EQ(body.ensure(grabbed, after, kBackwardEulerMass, 1.0), Made::Switched);  // grabbed again
+  EXPECT_EQ(body.builds(), 2);
+  // The clamp released as well: free dofs neither hierarchy has.
   Problem loose = grabbed;
-  for (std::size_t n2 = 0; n2 < loose.mesh.nodeCount(); ++n2)
-    if (loose.mesh.nodes[3 * n2] < 1e-12)
-      for (int c = 0; c < 3; ++c) loose.constrained[3 * n2 + c] = 0;
-  EXPECT_FALSE(body.amg().serves(freeDofs(loose)));
+  for (std::size_t n = 0; n < loose.mesh.nodeCount(); ++n)
+    if (loose.mesh.nodes[3 * n] < 1e-12)
+      for (int c = 0; c < 3; ++c) loose.constrained[3 * n + c] = 0;
   EXPECT_EQ(body.ensure(loose, freeDofs(loose), kBackwardEulerMass, 1.0), Made::Built);
   EXPECT_EQ(body.amg().builtFreeDofs(), freeDofs(loose));
+  EXPECT_EQ(body.builds(), 3);
 }
 
 }  // namespace

@@ -203,33 +203,8 @@ std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const Eigen::SparseMatrix<double>& A,
   return nodeBlocksOf(A, freeDofs);
 }
 
-bool WarpedAmg::serves(const std::vector<Eigen::Index>& freeDofs) const {
-  if (!made_) return false;
-  std::size_t j = 0;
-  for (Eigen::Index d : freeDofs) {
-    while (j < freeDofs_.size() && freeDofs_[j] < d) ++j;
-    if (j == freeDofs_.size() || freeDofs_[j] != d) return false;
-  }
-  return true;
-}
-
-void WarpedAmg::setFreeDofs(const std::vector<Eigen::Index>& freeDofs) {
-  if (!serves(freeDofs))
-    fail(ErrorCode::Internal, "WarpedAmg::setFreeDofs: a free dof the hierarchy was not built on");
-  activeRows_.clear();
-  restricted_ = freeDofs != freeDofs_;
-  if (!restricted_) return;
-  std::size_t j = 0;
-  for (Eigen::Index d : freeDofs) {
-    while (freeDofs_[j] < d) ++j;
-    activeRows_.push_back(static_cast<Eigen::Index>(j));
-  }
-}
-
 void WarpedAmg::clear() {
   made_ = false;
-  activeRows_.clear();
-  restricted_ = false;
   levels_.clear();
   aggregateNodes_.clear();
   aggregateRotations_.clear();
@@ -503,16 +478,8 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
   r = b - r;
   Eigen::VectorXd coarseB, coarseX, e;
   if (fine) {
-    // Level 0 runs on the active free dofs: the coarse correction goes through the rows the
-    // hierarchy was built on (zero on those constrained since), and comes back on the active ones.
-    Eigen::VectorXd rr, full;
-    const Eigen::VectorXd* built = &r;
-    if (restricted_) {
-      full = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(freeDofs_.size()));
-      for (std::size_t i = 0; i < activeRows_.size(); ++i) full[activeRows_[i]] = r[static_cast<Eigen::Index>(i)];
-      built = &full;
-    }
-    warp(*built, rr, true);
+    Eigen::VectorXd rr;
+    warp(r, rr, true);
     coarseB = level.Pt * rr;
   } else {
     coarseB = level.Pt * r;
@@ -520,11 +487,7 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
   cycle(l + 1, coarseB, coarseX, nullptr);
   if (fine) {
     warp(level.P * coarseX, e, false);
-    if (!restricted_) {
-      x += e;
-    } else {
-      for (std::size_t i = 0; i < activeRows_.size(); ++i) x[static_cast<Eigen::Index>(i)] += e[activeRows_[i]];
-    }
+    x += e;
   } else {
     x += level.P * coarseX;
   }
@@ -578,16 +541,11 @@ BodyAmg::Made BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>&
     return std::isfinite(ratio) && std::isfinite(made) ? (ratio == 0.0 ? made == 0.0 : made > 0.5 * ratio && made < 2.0 * ratio)
                                                        : ratio == made;
   };
-  if (amg_->serves(freeDofs) && near(ratio_)) {
-    amg_->setFreeDofs(freeDofs);
-    return Made::Kept;
-  }
+  auto fits = [&](const WarpedAmg& a, double made) { return a.built() && a.builtFreeDofs() == freeDofs && near(made); };
+  if (fits(*amg_, ratio_)) return Made::Kept;
   std::swap(amg_, spare_);
   std::swap(ratio_, spareRatio_);
-  if (amg_->serves(freeDofs) && near(ratio_)) {
-    amg_->setFreeDofs(freeDofs);
-    return Made::Switched;
-  }
+  if (fits(*amg_, ratio_)) return Made::Switched;
   // Level 0's Chebyshev bound from the operator with half the mass coefficient: the bound of the
   // whole window of ratios this hierarchy serves (lambda_max(B^-1 A) does not grow with the mass).
   const AmgMatrix bound = restOperator(p, freeDofs, 0.5 * massScale, stiffScale);

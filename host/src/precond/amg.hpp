@@ -86,14 +86,6 @@ class WarpedAmg {
   bool built() const { return made_; }
   void clear();
 
-  /// Whether the hierarchy serves the free dofs `freeDofs` (ascending): every one of them was free
-  /// when it was built. An application that grabs or pins nodes only constrains more dofs, and the
-  /// hierarchy of before still gives a symmetric positive definite cycle on what is left (the
-  /// coarse correction restricted from and prolonged to the free dofs only; the smoothing bound
-  /// holds for a principal submatrix), so grabbing costs no set-up. A dof freed since needs a new one.
-  bool serves(const std::vector<Eigen::Index>& freeDofs) const;
-  /// Applies the cycle on these free dofs from now on (serves(freeDofs) must hold).
-  void setFreeDofs(const std::vector<Eigen::Index>& freeDofs);
   /// The free dofs it was built on (its level 0's rows).
   const std::vector<Eigen::Index>& builtFreeDofs() const { return freeDofs_; }
 
@@ -110,8 +102,7 @@ class WarpedAmg {
   /// The inverse of the coarsest level's operator as the cycle solves it (dense).
   Eigen::MatrixXd coarsestInverse() const;
 
-  /// z = M^-1 r on the free dofs (setFreeDofs', else those it was built on): one V-cycle with
-  /// `fine` as level 0's operator.
+  /// z = M^-1 r on the free dofs: one V-cycle with `fine` as level 0's operator.
   void apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
 
   /// Level 0's Chebyshev bound on the spectrum of B^-1 A (B the node blocks).
@@ -138,10 +129,6 @@ class WarpedAmg {
   std::vector<AmgLevel> levels_;  ///< levels_[0]: rest A_0; the last one is solved directly
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> coarsest_;
   std::vector<Eigen::Index> freeDofs_;
-  /// With restricted_, the free dofs the cycle runs on, as rows of freeDofs_ (setFreeDofs); else
-  /// it runs on all of freeDofs_.
-  std::vector<Eigen::Index> activeRows_;
-  bool restricted_ = false;
   std::vector<std::vector<std::uint32_t>> aggregateNodes_;  ///< the nodes of each level-0 aggregate
   std::vector<int> nodeAggregate_;        ///< per node: its aggregate, or -1
   std::vector<Mat3> aggregateRotations_;  ///< per aggregate, or empty: no warp
@@ -161,8 +148,11 @@ AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDo
 ///
 /// The hierarchy it replaces is kept as a spare and taken back where the ratio returns near its
 /// own: a step retried in substeps (h / 2, h / 4: the ratio 4x, 16x) and the next full step then
-/// cost one set-up each, not one per change. New constraints cost nothing where the hierarchy
-/// serves the new free dofs (WarpedAmg::serves: only more dofs constrained, as by a grab).
+/// cost one set-up each, not one per change. The same for constraints: a hierarchy serves the free
+/// dofs it was made for, so a hard grab costs one set-up and its release none (the spare).
+/// (Keeping the hierarchy of before for a grab, its cycle restricted to the fewer free dofs, was
+/// tried: 40 PCG iterations a step instead of 18 on the 12,960-tet beam with its tip held, twice
+/// the step time, where the set-up costs about four steps; bench_precond's precondGrab.)
 class BodyAmg {
  public:
   BodyAmg();

@@ -175,8 +175,8 @@ void EngineAmg::upload() {
       const auto& levels = bodies_[s].amg().levels();
       if (k < levels.size()) rows[k] += static_cast<std::size_t>(levels[k].A.rows());
     }
-  // Body s's level-0 row i (the i-th free dof its hierarchy was built on, a superset of those free
-  // now: the free mask zeroes the others) is device dof dofBegin + device dof of that dof.
+  // Body s's level-0 row i (the i-th free dof its hierarchy was built on) is device dof dofBegin +
+  // device dof of that dof.
   std::vector<std::vector<std::size_t>> fineRow(K);
   for (std::size_t s = 0; s < K; ++s) {
     const BodySegment& sg = e_.segs_[s];

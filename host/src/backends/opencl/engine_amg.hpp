@@ -31,9 +31,8 @@ class EngineAmg {
   void positionsSet(const BodySet& bodies, const ConstVectors& x);
   /// The body's material changed: its hierarchy is made again at its next solve.
   void invalidate(std::size_t segment);
-  /// The segment's constraints changed: its free dofs are read again at the next prepare, and its
-  /// hierarchy kept where it serves them (BodyAmg::ensure; the device's level 0 is every dof, so
-  /// the free mask projects the cycle onto the new free dofs with nothing uploaded).
+  /// The segment's constraints changed: its free dofs are read again at the next prepare, where
+  /// BodyAmg::ensure takes back a hierarchy made for exactly them (the spare) or makes one.
   void constraintsChanged(std::size_t segment);
   /// Hierarchies made so far, every body's.
   long long builds() const;

@@ -89,7 +89,7 @@ class ReferenceBody {
     p_.constrained = constrained;
     buildPattern();
     analyzed_ = false;
-    running_ = false;  // the multigrid stays where it serves the new free dofs (BodyAmg::ensure)
+    running_ = false;  // the multigrid follows at the next solve (BodyAmg::ensure: the spare, or a new one)
   }
 
   void setPositions(const Eigen::VectorXd& x) {
