@@ -4,6 +4,7 @@
 
 #include "backends/reference/reference_device.hpp"
 #include "common/morton.hpp"
+#include "common/test_problems.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -287,25 +288,38 @@ TEST(Plan, RunSummaryHasTheScheduler) {
 }
 
 
-TEST(AutoPreconditioner, AmgForLargeCorotationalOrLinearBodiesDiagonalElsewhere) {
-  // The rule (docs/performance.md, "The default preconditioner"): measured faster from about 3,000
-  // elements on PoCL and on the reference backend alike; the rigorous models keep the diagonal.
+TEST(AutoPreconditioner, AmgForLargeSlenderCorotationalOrLinearBodiesDiagonalElsewhere) {
+  // The rule (docs/performance.md, "The default preconditioner"): amg measured faster from about
+  // 3,000 elements on slender bodies, slower on compact ones (the Armadillo, 3.8) and on small
+  // ones; the rigorous models keep the diagonal.
   SolverDesc s;
   ASSERT_EQ(s.preconditioner, PreconditionerKind::Auto);
-  EXPECT_EQ(preconditionerOf(s, kAutoAmgElements, Formulation::Corotational), PreconditionerKind::Amg);
-  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::Linear), PreconditionerKind::Amg);
-  EXPECT_EQ(preconditionerOf(s, kAutoAmgElements - 1, Formulation::Corotational), PreconditionerKind::Diagonal);
-  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::NeoHookean), PreconditionerKind::Diagonal);
-  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::StVenantKirchhoff), PreconditionerKind::Diagonal);
+  const double beam = 10.0, armadillo = 3.8;
+  EXPECT_EQ(preconditionerOf(s, kAutoAmgElements, kAutoAmgSlenderness, Formulation::Corotational), PreconditionerKind::Amg);
+  EXPECT_EQ(preconditionerOf(s, 12960, beam, Formulation::Linear), PreconditionerKind::Amg);
+  EXPECT_EQ(preconditionerOf(s, kAutoAmgElements - 1, beam, Formulation::Corotational), PreconditionerKind::Diagonal);
+  EXPECT_EQ(preconditionerOf(s, 54985, armadillo, Formulation::Corotational), PreconditionerKind::Diagonal);
+  EXPECT_EQ(preconditionerOf(s, 12960, beam, Formulation::NeoHookean), PreconditionerKind::Diagonal);
+  EXPECT_EQ(preconditionerOf(s, 12960, beam, Formulation::StVenantKirchhoff), PreconditionerKind::Diagonal);
+  s.linearSolver = LinearSolverKind::Cholesky;
+  EXPECT_EQ(preconditionerOf(s, 12960, beam, Formulation::Corotational), PreconditionerKind::Diagonal);
+  s.linearSolver = LinearSolverKind::Pcg;
   s.preconditioner = PreconditionerKind::BlockDiagonal;  // a choice the scene makes stays
-  EXPECT_EQ(preconditionerOf(s, 12960, Formulation::Corotational), PreconditionerKind::BlockDiagonal);
+  EXPECT_EQ(preconditionerOf(s, 12960, beam, Formulation::Corotational), PreconditionerKind::BlockDiagonal);
 
+  // Slenderness from the rest mesh: L / sqrt(V / L) of a 1 x 0.1 x 0.1 beam is 10, of a cube 1.
+  const detail::Problem longBeam = makeProblem(boxMesh(40, 4, 4, 1.0 / 40, 0.1 / 4, 0.1 / 4));  // cell sizes
+  const detail::Problem cube = makeProblem(boxMesh(16, 16, 16, 0.1, 0.1, 0.1));
+  const detail::Problem small = makeProblem(boxMesh(10, 2, 2, 1.0 / 10, 0.1 / 2, 0.1 / 2));
+  EXPECT_NEAR(detail::slendernessOf(longBeam), 10.0, 1e-9);
+  EXPECT_NEAR(detail::slendernessOf(cube), 1.0, 1e-9);
+  ASSERT_GE(longBeam.mesh.tetCount(), kAutoAmgElements);
+  ASSERT_GE(cube.mesh.tetCount(), kAutoAmgElements);
+  EXPECT_EQ(detail::preconditionerOf(SolverDesc{}, longBeam), PreconditionerKind::Amg);
+  EXPECT_EQ(detail::preconditionerOf(SolverDesc{}, cube), PreconditionerKind::Diagonal);
   // A device of several bodies gets amg only where every body would alone.
-  detail::Problem big, small;
-  big.mesh.tets.resize(4 * kAutoAmgElements);
-  small.mesh.tets.resize(4 * 100);
-  EXPECT_EQ(detail::resolvedSolver(SolverDesc{}, {&big, &big}).preconditioner, PreconditionerKind::Amg);
-  EXPECT_EQ(detail::resolvedSolver(SolverDesc{}, {&big, &small}).preconditioner, PreconditionerKind::Diagonal);
+  EXPECT_EQ(detail::resolvedSolver(SolverDesc{}, {&longBeam, &longBeam}).preconditioner, PreconditionerKind::Amg);
+  EXPECT_EQ(detail::resolvedSolver(SolverDesc{}, {&longBeam, &small}).preconditioner, PreconditionerKind::Diagonal);
 }
 
 TEST(AutoPreconditioner, ThePlanSaysWhatEachBodyGotAndBatchesDoNotMixThem) {

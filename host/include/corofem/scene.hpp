@@ -160,21 +160,31 @@ struct SolverDesc {
   RotationMethod rotation = RotationMethod::Polar;
 };
 
-/// Bodies of at least this many elements get "amg" from "auto" (docs/performance.md, "The default
-/// preconditioner": on PoCL "amg" was 1.2x slower on a 1,620-tet beam and 2.5x slower on 20 batched
-/// 2,000-tet cantilevers, where its cycle's launches cost more than the diagonal's extra
-/// iterations, and 1.7-3x faster from 3,840 tets up on slender bodies).
+/// "auto" gives "amg" to bodies of at least this many elements ... (docs/performance.md, "The
+/// default preconditioner": on PoCL "amg" was 1.2x slower on a 1,620-tet beam and 2.5x slower on
+/// 20 batched 2,000-tet cantilevers, where its cycle's launches cost more than the diagonal's extra
+/// iterations, and 1.7-3x faster from 3,840 tets up on slender beams) ...
 constexpr std::size_t kAutoAmgElements = 3000;
+/// ... that are at least this slender: the longest extent L of the rest bounding box over the
+/// side sqrt(V / L) of the square section a body of volume V would have over that length. The
+/// diagonal preconditioner needs hundreds of iterations for the long, soft bending of a slender
+/// body (a 1 x 0.1 x 0.1 m beam: 10; "amg" 2.5x faster at 12,960 tets) and a few tens for a compact
+/// one, where "amg" does not pay (the 54,985-tet Armadillo, 3.8: "amg" 2.5x slower at tolerance
+/// 1e-4; a cube, 1: even).
+constexpr double kAutoAmgSlenderness = 6.0;
 
-/// The preconditioner a body of `elements` tetrahedra and formulation `f` gets: the solver's, with
-/// Auto resolved to Amg for co-rotational and linear bodies of at least kAutoAmgElements elements
-/// solved by PCG (the rigorous hyperelastic models stiffen past the spectrum bound amg's smoothing
-/// is set from), Diagonal otherwise.
-inline PreconditionerKind preconditionerOf(const SolverDesc& s, std::size_t elements, Formulation f) {
+/// The preconditioner a body of `elements` tetrahedra, slenderness `slenderness` (as above) and
+/// formulation `f` gets: the solver's, with Auto resolved to Amg for co-rotational and linear
+/// bodies solved by PCG with at least kAutoAmgElements elements and kAutoAmgSlenderness (the
+/// rigorous hyperelastic models stiffen past the spectrum bound amg's smoothing is set from),
+/// Diagonal otherwise.
+inline PreconditionerKind preconditionerOf(const SolverDesc& s, std::size_t elements, double slenderness, Formulation f) {
   if (s.preconditioner != PreconditionerKind::Auto) return s.preconditioner;
   if (s.linearSolver != LinearSolverKind::Pcg) return PreconditionerKind::Diagonal;  // unused: one kind for all
   const bool corotationalOrLinear = f == Formulation::Corotational || f == Formulation::Linear;
-  return corotationalOrLinear && elements >= kAutoAmgElements ? PreconditionerKind::Amg : PreconditionerKind::Diagonal;
+  return corotationalOrLinear && elements >= kAutoAmgElements && slenderness >= kAutoAmgSlenderness
+             ? PreconditionerKind::Amg
+             : PreconditionerKind::Diagonal;
 }
 
 enum class BackendKind { Auto, Reference, OpenCL };

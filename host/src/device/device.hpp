@@ -236,9 +236,14 @@ class Device {
 /// The set {0, ..., n - 1}.
 BodySet allBodies(std::size_t n);
 
+/// The body's slenderness as preconditionerOf (corofem/scene.hpp) measures it: the longest extent L
+/// of its rest bounding box over sqrt(V / L), V its rest volume; 0 for a body without volume.
+double slendernessOf(const Problem& p);
+
 /// The preconditioner `solver` gives this body (preconditionerOf, corofem/scene.hpp).
 inline PreconditionerKind preconditionerOf(const SolverDesc& solver, const Problem& p) {
-  return corofem::preconditionerOf(solver, p.mesh.tetCount(), p.formulation);
+  if (solver.preconditioner != PreconditionerKind::Auto) return solver.preconditioner;
+  return corofem::preconditionerOf(solver, p.mesh.tetCount(), slendernessOf(p), p.formulation);
 }
 
 /// `solver` with its preconditioner "auto" resolved for a device of these bodies

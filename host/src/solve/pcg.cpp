@@ -30,6 +30,23 @@ void Device::setSprings(const BodySet& bodies, const std::vector<const Problem*>
   fail(ErrorCode::DeviceError, "the ", name(), " backend cannot attach springs to a body at run time");
 }
 
+double slendernessOf(const Problem& p) {
+  const Eigen::Index n = p.restPositions.size() / 3;
+  if (n == 0) return 0.0;
+  double extent = 0.0;
+  for (Eigen::Index a = 0; a < 3; ++a) {
+    double lo = p.restPositions[a], hi = lo;
+    for (Eigen::Index i = 1; i < n; ++i) {
+      lo = std::min(lo, p.restPositions[3 * i + a]);
+      hi = std::max(hi, p.restPositions[3 * i + a]);
+    }
+    extent = std::max(extent, hi - lo);
+  }
+  double volume = 0.0;
+  for (const ElementRest& e : p.elements) volume += e.volume;
+  return volume > 0.0 && extent > 0.0 ? extent / std::sqrt(volume / extent) : 0.0;
+}
+
 BodySet allBodies(std::size_t n) {
   BodySet set(n);
   for (std::size_t i = 0; i < n; ++i) set[i] = i;
