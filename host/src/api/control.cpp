@@ -28,11 +28,17 @@ Vec3d vec3(const double v[3]) { return Vec3d(v[0], v[1], v[2]); }
 
 bool finite3(const double v[3]) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
+/// 9 doubles read and written row by row as a 3x3 matrix (the API's rotations, Handle::rotation).
+using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+Mat3d matrixOf(const double* r) { return Eigen::Map<const RowMajor3>(r); }
+void store(const Mat3d& R, double* r) {
+  Eigen::Map<RowMajor3> out(r);
+  out = R;
+}
+
 /// R from 9 row-major doubles, checked to be a rotation (orthonormal, det +1, to 1e-6).
 Mat3d rotationOf(const double* r, const char* call) {
-  Mat3d R;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) R(i, j) = r[3 * i + j];
+  const Mat3d R = matrixOf(r);
   if (!R.allFinite() || (R.transpose() * R - Mat3d::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
       std::abs(R.determinant() - 1.0) > 1e-6)
     detail::fail(ErrorCode::BadInput, call, ": the rotation is not one (R^T R = I and det R = 1 to 1e-6 are needed); "
@@ -142,8 +148,7 @@ void Simulation::Impl::placeHandle(int id, const double target[3], const double*
   Body::Hold& h = b.hold;
   const Mat3d R = rotation ? rotationOf(rotation, "moveHandle") : Mat3d::Identity();
   for (int k = 0; k < 3; ++k) handle.target[k] = target[k];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) handle.rotation[3 * i + j] = R(i, j);
+  store(R, handle.rotation);
   const Vec3d c = vec3(handle.centroid), t = vec3(target);
   if (handle.stiffness > 0.0) {
     rebuildSprings(b);
@@ -157,6 +162,14 @@ void Simulation::Impl::placeHandle(int id, const double target[3], const double*
   }
   h.controlsChanged = true;
   touched(b);
+}
+
+Simulation::Impl::Handle& Simulation::Impl::handleFor(int id, const char* call) {
+  const auto it = handles.find(id);
+  if (it == handles.end())
+    detail::fail(ErrorCode::BadInput, call, ": there is no handle ", id,
+                 "; use an id addHandle returned and that was not removed");
+  return it->second;
 }
 
 void Simulation::Impl::takeNodes(int id) {
@@ -216,9 +229,7 @@ void Simulation::Impl::rebuildSprings(Body& b) {
   for (const auto& [id, handle] : handles) {
     if (handle.body != scene || !(handle.stiffness > 0.0)) continue;
     any = true;
-    Mat3d R;
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) R(i, j) = handle.rotation[3 * i + j];
+    const Mat3d R = matrixOf(handle.rotation);
     const Vec3d c = vec3(handle.centroid), t = vec3(handle.target);
     for (std::size_t j = 0; j < handle.nodes.size(); ++j) {
       const Eigen::Index d = 3 * static_cast<Eigen::Index>(handle.nodes[j]);
@@ -319,9 +330,7 @@ Result<int> Simulation::addHandle(const HandleDesc& desc) {
 Status Simulation::moveHandle(int handle, const double target[3], const double* rotation) {
   return detail::guard([&] {
     Impl& s = *impl_;
-    if (s.handles.count(handle) == 0)
-      detail::fail(ErrorCode::BadInput, "moveHandle: there is no handle ", handle,
-                   "; use an id addHandle returned and that was not removed");
+    (void)s.handleFor(handle, "moveHandle");
     if (!finite3(target)) detail::fail(ErrorCode::BadInput, "moveHandle: the target must be finite (m)");
     s.placeHandle(handle, target, rotation);
   });
@@ -330,14 +339,12 @@ Status Simulation::moveHandle(int handle, const double target[3], const double* 
 Status Simulation::removeHandle(int handle) {
   return detail::guard([&] {
     Impl& s = *impl_;
-    const auto it = s.handles.find(handle);
-    if (it == s.handles.end())
-      detail::fail(ErrorCode::BadInput, "removeHandle: there is no handle ", handle,
-                   "; use an id addHandle returned and that was not removed");
-    Impl::Body& b = s.bodies[it->second.body];
-    if (it->second.stiffness == 0.0) s.releaseNodes(handle);
+    const Impl::Handle& h = s.handleFor(handle, "removeHandle");
+    Impl::Body& b = s.bodies[h.body];
+    const bool spring = h.stiffness > 0.0;
+    if (!spring) s.releaseNodes(handle);
     s.handles.erase(handle);
-    s.rebuildSprings(b);
+    if (spring) s.rebuildSprings(b);
     s.touched(b);
   });
 }
@@ -345,19 +352,15 @@ Status Simulation::removeHandle(int handle) {
 Status Simulation::setHandleStiffness(int handle, double stiffness) {
   return detail::guard([&] {
     Impl& s = *impl_;
-    const auto it = s.handles.find(handle);
-    if (it == s.handles.end())
-      detail::fail(ErrorCode::BadInput, "setHandleStiffness: there is no handle ", handle,
-                   "; use an id addHandle returned and that was not removed");
+    Impl::Handle& h = s.handleFor(handle, "setHandleStiffness");
     checkStiffness(stiffness, "setHandleStiffness");
-    Impl::Handle& h = it->second;
     Impl::Body& b = s.bodies[h.body];
     const bool wasHard = h.stiffness == 0.0;
     if (wasHard && stiffness > 0.0) s.releaseNodes(handle);
     h.stiffness = stiffness;
     if (!wasHard && stiffness == 0.0) s.takeNodes(handle);
-    s.placeHandle(handle, h.target, h.rotation);
-    s.rebuildSprings(b);
+    s.placeHandle(handle, h.target, h.rotation);  // a spring's: rebuildSprings
+    if (!wasHard && stiffness == 0.0) s.rebuildSprings(b);  // a spring no more
   });
 }
 
@@ -572,16 +575,12 @@ Status Simulation::teleport(int body, const double rotation[9], const double tra
         for (int c = 0; c < 3; ++c) handle.grabbed[3 * k + static_cast<std::size_t>(c)] = g[c];
       }
       const Vec3d c = R * vec3(handle.centroid) + t, target = R * vec3(handle.target) + t;
-      Mat3d last;
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) last(i, j) = handle.rotation[3 * i + j];
-      const Mat3d rotated = R * last * R.transpose();  // the handle's rotation seen in the moved frame
+      const Mat3d rotated = R * matrixOf(handle.rotation) * R.transpose();  // the handle's rotation seen in the moved frame
       for (int k = 0; k < 3; ++k) {
         handle.centroid[k] = c[k];
         handle.target[k] = target[k];
       }
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) handle.rotation[3 * i + j] = rotated(i, j);
+      store(rotated, handle.rotation);
     }
     s.rebuildSprings(b);
     h.controlsChanged = true;

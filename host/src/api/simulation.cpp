@@ -93,8 +93,9 @@ void Simulation::Impl::formGroups() {
         if (onDevice[label] > 1)
           unbatched.push_back({members, label,
                                std::string("its preconditioner \"") + toString(key.second) +
-                                   "\" (solver.preconditioner \"auto\" chose it for its size) is not the other bodies' "
-                                   "on this device, and a batch shares one"});
+                                   "\" (solver.preconditioner \"auto\" chose it for its size and shape) is not the other "
+                                   "bodies' on this device, and a batch shares one; name one preconditioner in "
+                                   "the scene to batch them all"});
         continue;
       }
       try {

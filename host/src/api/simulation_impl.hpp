@@ -157,6 +157,8 @@ struct Simulation::Impl {
   void touched(Body& b);
   /// Recomputes the targets of the nodes of handle `id` (target and rotation given).
   void placeHandle(int id, const double target[3], const double* rotation);
+  /// Handle `id`, or BadInput naming `call` where there is none.
+  Handle& handleFor(int id, const char* call);
   /// A hard handle takes its nodes from their holders (remembering them), or gives them back.
   void takeNodes(int id);
   void releaseNodes(int id);

@@ -180,7 +180,9 @@ void DeviceSlot::removeBody(std::size_t body) {
     fail(ErrorCode::Internal, "removing body ", body, " of a device slot of ", problems_.size());
   if (given_ || exhausted_)
     fail(ErrorCode::DeviceError, "body '", problems_[body]->name, "' cannot leave its device: ",
-         given_ ? "the device was made by the caller" : "every device of its batch failed");
+         given_ ? "the device was made by the caller, and no other can be made for the bodies that stay; create the "
+                  "Simulation again without the body"
+                : "every device of its batch failed; create the Simulation again (after fixing the devices) to go on");
   std::vector<const Problem*> problems = problems_;
   std::vector<Eigen::VectorXd> lastX = lastX_;
   problems.erase(problems.begin() + static_cast<std::ptrdiff_t>(body));
