@@ -1,5 +1,6 @@
-/* Device data layout of the OpenCL backend, shared by the host (C++) and the kernels (OpenCL C)
- * so that the two cannot drift. Everything per element is stored structure-of-arrays with a
+/* Device data layout of the device backends, shared by the host (C++), the OpenCL kernels (OpenCL C)
+ * and the Vulkan shaders (GLSL, which define COROFEM_GLSL before including it) so that they cannot
+ * drift. Everything per element is stored structure-of-arrays with a
  * padded stride S (a multiple of COROFEM_STRIDE_ALIGN >= element count): component k of element e
  * lives at k * S + e, so that consecutive work-items read consecutive addresses (coalesced on a
  * GPU, vectorised across work-items by PoCL on a CPU).
@@ -46,6 +47,9 @@ typedef real4 sum_real4;
 /* Helper functions: `static inline`, so that no external definition is ever needed (C99 inline
  * semantics would leave an undefined symbol wherever a compiler declines to inline). */
 #define COROFEM_FN static inline
+#elif defined(COROFEM_GLSL)
+/* Every constant here is unsigned. */
+#define COROFEM_CONSTANT(type, name, value) const uint name = value
 #else
 #define COROFEM_CONSTANT(type, name, value) static const type name = value
 #endif
@@ -90,6 +94,8 @@ COROFEM_CONSTANT(unsigned, kScalarBb, 5);       /* b . b (free dofs)            
 COROFEM_CONSTANT(unsigned, kScalarBreakdown, 6);/* 1 when p . A p <= 0 was met         */
 COROFEM_CONSTANT(unsigned, kScalarIterations, 7);/* iterations done (counted on the device) */
 COROFEM_CONSTANT(unsigned, kScalarStop, 8);     /* why the segment stopped: kStop*     */
+COROFEM_CONSTANT(unsigned, kScalarTol2, 9);     /* tolerance^2 of the solve (the Vulkan shaders read it
+                                                   here; the OpenCL kernels take it as an argument) */
 COROFEM_CONSTANT(unsigned, kScalarCount, 12);
 /* Values of kScalarStop: reduce_finish tests every iteration and makes a stopped segment inactive
  * (segInfo), so that the iterations the host has already enqueued return at once for it. */
@@ -151,6 +157,8 @@ COROFEM_CONSTANT(unsigned, kCoefProdLambda, 2);  /* (k + c beta) lambda (element
 COROFEM_CONSTANT(unsigned, kCoefProdMu, 3);      /* (k + c beta) mu                               */
 COROFEM_CONSTANT(unsigned, kCoefMass, 4);        /* m + c alpha                                   */
 COROFEM_CONSTANT(unsigned, kCoefStiff, 5);       /* k + c beta                                    */
+COROFEM_CONSTANT(unsigned, kCoefSpring, 6);      /* k: the springs' coefficient (Vulkan; OpenCL folds
+                                                    the springs into the mass)                     */
 COROFEM_CONSTANT(unsigned, kSegCoefCount, 8);
 
 /* ---------------------------------------------------------------- packs of bodies (pcg_pack.cl) */

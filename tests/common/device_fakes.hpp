@@ -217,6 +217,10 @@ class ScopedBackend {
       : name_(entry.name), previous_(detail::findBackend(entry.name)) {
     detail::registerBackend(std::move(entry));
   }
+  /// Hides the backend `name` for the scope (registered again at its end).
+  explicit ScopedBackend(const std::string& name) : name_(name), previous_(detail::findBackend(name)) {
+    detail::unregisterBackend(name);
+  }
   ~ScopedBackend() {
     if (previous_) detail::registerBackend(*previous_);
     else detail::unregisterBackend(name_);

@@ -368,6 +368,16 @@ class ConformanceBase : public testing::TestWithParam<ConformanceCase> {
     if (!found) c = entry->resolve(GetParam().selector);
     return entry->create(problems, s, c, options());
   }
+  /// Why the backend under test refuses some body of the suite with `s` ("" where it takes them
+  /// all, as its registry entry says): a solver setting a backend does not offer (the Vulkan
+  /// backend's multigrid) is a skip naming the reason, not a failure.
+  static std::string refusal(const SolverDesc& s) {
+    const auto entry = detail::findBackend(GetParam().backend);
+    if (!entry || !entry->refuses) return "";
+    for (const Body& b : suiteBodies())
+      if (std::string why = entry->refuses(b.problem, s); !why.empty()) return why;
+    return "";
+  }
   static std::unique_ptr<detail::Device> makeReference(const std::vector<const detail::Problem*>& problems,
                                                        const SolverDesc& s) {
     const auto entry = detail::findBackend("reference");

@@ -227,7 +227,7 @@ TEST(SceneErrors, BadEnumValueSuggestsTheNearest) {
             "analysis.integrator: unknown value \"backward-euler\"; did you mean \"backward_euler\"? (valid: "
             "\"newmark\", \"backward_euler\" or \"auto\")");
   EXPECT_EQ(overrideError({"backend=OpenCL"}),
-            "backend: unknown value \"OpenCL\"; did you mean \"opencl\"? (valid: \"auto\", \"reference\" or \"opencl\")");
+            "backend: unknown value \"OpenCL\"; did you mean \"opencl\"? (valid: \"auto\", \"reference\", \"opencl\" or \"vulkan\")");
   EXPECT_CONTAINS(overrideError({"solver.preconditioner=jacobi"}),
                   "solver.preconditioner: unknown value \"jacobi\"; valid values are \"none\", \"diagonal\", "
                   "\"block_diagonal\", \"amg\" or \"auto\"");

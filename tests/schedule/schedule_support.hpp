@@ -12,6 +12,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <string>
 #include <vector>
@@ -79,10 +80,19 @@ class HookScope {
     cacheDir_ = tempDir().string();
     setenv("COROFEM_CACHE_DIR", cacheDir_.c_str(), 1);
     unsetenv("COROFEM_DEVICE");
+    // With fakes, they and the reference backend are the only ones (a real Vulkan or OpenCL backend
+    // not replaced would add its candidates to the fakes').
+    if (!backends.empty())
+      for (const detail::BackendEntry& e : detail::registeredBackends()) {
+        const bool replaced = std::any_of(backends.begin(), backends.end(),
+                                          [&](const detail::BackendEntry& f) { return f.name == e.name; });
+        if (!replaced && e.name != "reference") hidden_.push_back(std::make_unique<ScopedBackend>(e.name));
+      }
     for (detail::BackendEntry& e : backends) registered_.push_back(std::make_unique<ScopedBackend>(std::move(e)));
   }
   ~HookScope() {
     registered_.clear();
+    hidden_.clear();
     unsetenv("COROFEM_CACHE_DIR");
     unsetenv("COROFEM_DEVICE");
   }
@@ -90,7 +100,7 @@ class HookScope {
 
  private:
   std::string cacheDir_;
-  std::vector<std::unique_ptr<ScopedBackend>> registered_;
+  std::vector<std::unique_ptr<ScopedBackend>> registered_, hidden_;
 };
 
 /// Runs a simulation to its end; returns the final positions of body 0 (empty on failure).

@@ -56,11 +56,11 @@ TEST(DeviceSpec, EnvironmentOverridesAutoAndABadValueIsBadInput) {
   EXPECT_EQ(rep["choice"], "reference");
   EXPECT_NE(rep["reason"].get<std::string>().find("COROFEM_DEVICE"), std::string::npos) << rep.dump();
 
-  setenv("COROFEM_DEVICE", "vulkan", 1);
+  setenv("COROFEM_DEVICE", "cuda", 1);
   auto bad = Simulation::create(scene);
   ASSERT_FALSE(bad);
   EXPECT_EQ(bad.status().code(), ErrorCode::BadInput);
-  EXPECT_NE(bad.message().find("vulkan"), std::string::npos) << bad.message();
+  EXPECT_NE(bad.message().find("cuda"), std::string::npos) << bad.message();
 
   // The scene's explicit choice wins over the environment.
   scene.backend.kind = BackendKind::Reference;

@@ -187,7 +187,7 @@ inline PreconditionerKind preconditionerOf(const SolverDesc& s, std::size_t elem
              : PreconditionerKind::Diagonal;
 }
 
-enum class BackendKind { Auto, Reference, OpenCL };
+enum class BackendKind { Auto, Reference, OpenCL, Vulkan };
 
 struct BackendDesc {
   BackendKind kind = BackendKind::Auto;

@@ -6,10 +6,12 @@ namespace corofem::detail {
 
 void registerReferenceBackend();  // backends/reference/reference_device.cpp
 void registerOpenCLBackend();     // backends/opencl/opencl_device.cpp, or opencl_unavailable.cpp
+void registerVulkanBackend();     // backends/vulkan/vulkan_device.cpp, or vulkan_unavailable.cpp
 
 void registerBuiltinBackends() {
   registerReferenceBackend();
   registerOpenCLBackend();
+  registerVulkanBackend();
 }
 
 }  // namespace corofem::detail

@@ -29,6 +29,7 @@ const char* toString(BackendKind b) {
     case BackendKind::Auto: return "auto";
     case BackendKind::Reference: return "reference";
     case BackendKind::OpenCL: return "opencl";
+    case BackendKind::Vulkan: return "vulkan";
   }
   return "?";
 }

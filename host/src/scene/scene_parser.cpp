@@ -50,7 +50,8 @@ const Choices<RotationMethod> kRotations{{"polar", RotationMethod::Polar},
                                          {"quaternion", RotationMethod::Quaternion},
                                          {"qr", RotationMethod::Qr}};
 const Choices<BackendKind> kBackends{
-    {"auto", BackendKind::Auto}, {"reference", BackendKind::Reference}, {"opencl", BackendKind::OpenCL}};
+    {"auto", BackendKind::Auto}, {"reference", BackendKind::Reference}, {"opencl", BackendKind::OpenCL},
+    {"vulkan", BackendKind::Vulkan}};
 const Choices<LinearSolverKind> kLinearSolvers{{"pcg", LinearSolverKind::Pcg},
                                                {"cholesky", LinearSolverKind::Cholesky}};
 const Choices<PreconditionerKind> kPreconditioners{{"none", PreconditionerKind::None},
@@ -624,15 +625,16 @@ void checkConsistency(const Reader& r, const Scene& scene) {
              quotedList(bodyNames, " and "));
     }
   }
-  if (scene.backend.kind == BackendKind::OpenCL) {
+  if (scene.backend.kind == BackendKind::OpenCL || scene.backend.kind == BackendKind::Vulkan) {
+    const std::string backend = toString(scene.backend.kind);
     if (scene.solver.linearSolver == LinearSolverKind::Cholesky)
-      r.fail("solver.linear_solver", "\"cholesky\" runs only on the reference backend, and the backend is \"opencl\"; "
-             "use \"pcg\", or the backend \"reference\"");
+      r.fail("solver.linear_solver", "\"cholesky\" runs only on the reference backend, and the backend is \"", backend,
+             "\"; use \"pcg\", or the backend \"reference\"");
     for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
       const Formulation f = scene.bodies[i].formulation;
       if (f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean)
         r.fail(childPath(indexPath("bodies", i), "formulation"), "\"", toString(f),
-               "\" runs only on the reference backend, and the backend is \"opencl\"; use \"corotational\" or "
+               "\" runs only on the reference backend, and the backend is \"", backend, "\"; use \"corotational\" or "
                "\"linear\", or the backend \"reference\"");
     }
   }

@@ -1,0 +1,72 @@
+// The embedded SPIR-V (shaders.hpp). The .inc files are glslc's C initializer lists.
+#include "backends/vulkan/shaders.hpp"
+
+#include <initializer_list>
+
+namespace corofem::detail::vk {
+
+namespace {
+
+// clang-format off
+const std::uint32_t kRotationsFloat[] =
+#include "rotations_float.inc"
+;
+const std::uint32_t kRotationsDouble[] =
+#include "rotations_double.inc"
+;
+const std::uint32_t kElementFloat[] =
+#include "element_float.inc"
+;
+const std::uint32_t kElementDouble[] =
+#include "element_double.inc"
+;
+const std::uint32_t kGatherFloat[] =
+#include "gather_float.inc"
+;
+const std::uint32_t kGatherDouble[] =
+#include "gather_double.inc"
+;
+const std::uint32_t kPcgFloat[] =
+#include "pcg_float.inc"
+;
+const std::uint32_t kPcgDouble[] =
+#include "pcg_double.inc"
+;
+const std::uint32_t kReduceFloat[] =
+#include "reduce_float.inc"
+;
+const std::uint32_t kReduceDouble[] =
+#include "reduce_double.inc"
+;
+// clang-format on
+
+template <std::size_t N>
+Spirv of(const std::uint32_t (&words)[N]) {
+  return {words, sizeof(words)};
+}
+
+}  // namespace
+
+Spirv shaderCode(Shader shader, bool isDouble) {
+  switch (shader) {
+    case Shader::Rotations: return isDouble ? of(kRotationsDouble) : of(kRotationsFloat);
+    case Shader::Element: return isDouble ? of(kElementDouble) : of(kElementFloat);
+    case Shader::Gather: return isDouble ? of(kGatherDouble) : of(kGatherFloat);
+    case Shader::Pcg: return isDouble ? of(kPcgDouble) : of(kPcgFloat);
+    case Shader::Reduce: return isDouble ? of(kReduceDouble) : of(kReduceFloat);
+  }
+  return {};
+}
+
+std::uint64_t shaderHash() {
+  std::uint64_t h = 1469598103934665603ull;
+  for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce})
+    for (bool d : {false, true}) {
+      const Spirv code = shaderCode(s, d);
+      const unsigned char* bytes = reinterpret_cast<const unsigned char*>(code.words);
+      for (std::size_t i = 0; i < code.bytes; ++i) h = (h ^ bytes[i]) * 1099511628211ull;
+    }
+  return h;
+}
+
+}  // namespace corofem::detail::vk

@@ -1,0 +1,143 @@
+// The Vulkan objects the backend needs, each owned once: the instance (shared by every device of
+// the process), a logical device with one compute queue, buffers, the compute pipelines of the
+// embedded shaders over one descriptor-set layout, and a ring of command buffers with their fences.
+// Every failed Vulkan call throws Error(DeviceError) naming the call and the VkResult.
+#pragma once
+
+#include <vulkan/vulkan.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::detail::vk {
+
+/// A zeroed Vulkan structure of type `type` (sType set).
+template <class T>
+T made(VkStructureType type) {
+  T v{};
+  v.sType = type;
+  return v;
+}
+
+/// Throws Error(DeviceError) "Vulkan: <what> failed (<result>)" unless r is VK_SUCCESS.
+void check(VkResult r, const char* what);
+
+/// A physical device that can run the backend (a compute queue, storage buffers).
+struct PhysicalDevice {
+  VkPhysicalDevice handle = VK_NULL_HANDLE;
+  std::string name;
+  std::string driver;  ///< "<vendor id>:<driver version>" (part of the calibration cache's key)
+  bool gpu = false;    ///< integrated, discrete or virtual GPU (not a CPU device such as lavapipe)
+  bool float64 = false;
+  std::uint32_t queueFamily = 0;
+  VkPhysicalDeviceLimits limits{};
+};
+
+/// The process's Vulkan instance and its usable devices, made at the first call. Throws
+/// Error(DeviceError) where there is no Vulkan driver.
+class Instance {
+ public:
+  static std::shared_ptr<Instance> shared();
+  ~Instance();
+  Instance(const Instance&) = delete;
+  Instance& operator=(const Instance&) = delete;
+  VkInstance handle() const { return instance_; }
+  const std::vector<PhysicalDevice>& devices() const { return devices_; }
+
+ private:
+  Instance();
+  VkInstance instance_ = VK_NULL_HANDLE;
+  std::vector<PhysicalDevice> devices_;
+};
+
+class Context;
+
+/// A VkBuffer with its own memory; host-visible buffers stay mapped.
+class Buffer {
+ public:
+  Buffer() = default;
+  Buffer(Context& ctx, std::size_t bytes, bool host);
+  ~Buffer();
+  Buffer(Buffer&& o) noexcept { *this = std::move(o); }
+  Buffer& operator=(Buffer&& o) noexcept;
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+  VkBuffer handle() const { return buffer_; }
+  std::size_t bytes() const { return bytes_; }
+  unsigned char* mapped() const { return mapped_; }
+
+ private:
+  void release();
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkBuffer buffer_ = VK_NULL_HANDLE;
+  VkDeviceMemory memory_ = VK_NULL_HANDLE;
+  std::size_t bytes_ = 0;
+  unsigned char* mapped_ = nullptr;
+};
+
+/// A logical device on one physical device with one compute queue, the pipelines of the shaders,
+/// and the ring of command buffers.
+class Context {
+ public:
+  /// `float64`: the device enables shaderFloat64 and builds the double shaders (the float ones
+  /// otherwise). `bindings`: the storage buffers of the one descriptor-set layout.
+  Context(std::shared_ptr<Instance> instance, std::size_t index, bool float64, std::uint32_t bindings,
+          std::uint32_t pushBytes);
+  ~Context();
+  Context(const Context&) = delete;
+  Context& operator=(const Context&) = delete;
+
+  const PhysicalDevice& physical() const { return physical_; }
+  VkDevice device() const { return device_; }
+  std::uint32_t memoryType(std::uint32_t typeBits, bool host) const;
+
+  /// A compute pipeline from SPIR-V words over the shared layout.
+  VkPipeline pipeline(const std::uint32_t* words, std::size_t bytes, const char* name);
+  /// A descriptor set of the shared layout with buffers[i] at binding i.
+  VkDescriptorSet descriptorSet(const std::vector<const Buffer*>& buffers);
+  VkPipelineLayout pipelineLayout() const { return pipelineLayout_; }
+
+  /// A command buffer of the ring, begun (waits for the ring's oldest when all are in flight).
+  VkCommandBuffer begin();
+  /// Submits the command buffer begin() gave; returns its submission number.
+  std::uint64_t submit();
+  /// Waits for submission `id` (and so for every one before it).
+  void wait(std::uint64_t id);
+  void waitAll();
+  std::uint64_t lastSubmission() const { return submitted_; }
+
+ private:
+  struct Slot {
+    VkCommandBuffer cb = VK_NULL_HANDLE;
+    VkFence fence = VK_NULL_HANDLE;
+    std::uint64_t id = 0;
+    bool busy = false;
+  };
+  void waitSlot(Slot& s);
+
+  std::shared_ptr<Instance> instance_;
+  PhysicalDevice physical_;
+  VkPhysicalDeviceMemoryProperties memory_{};
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  VkDescriptorSetLayout setLayout_ = VK_NULL_HANDLE;
+  VkPipelineLayout pipelineLayout_ = VK_NULL_HANDLE;
+  VkDescriptorPool pool_ = VK_NULL_HANDLE;
+  std::uint32_t bindings_ = 0;
+  std::vector<VkPipeline> pipelines_;
+  VkCommandPool commandPool_ = VK_NULL_HANDLE;
+  std::vector<Slot> ring_;
+  std::size_t next_ = 0;
+  Slot* recording_ = nullptr;
+  std::uint64_t submitted_ = 0;
+};
+
+/// Every earlier command's memory writes made visible to every later command.
+void fullBarrier(VkCommandBuffer cb);
+/// Transfer writes made visible to the host (after a copy into a host buffer).
+void hostReadBarrier(VkCommandBuffer cb);
+
+}  // namespace corofem::detail::vk

@@ -1,0 +1,78 @@
+/* What every corofem compute shader shares: the precision, the buffers (one descriptor set, the
+ * same bindings in every shader, so one pipeline layout serves them all and a descriptor set is
+ * written once per device), the push constants, and the segment lookups. The data layout is
+ * kernels/shared/corofem_layout.h, the same as the OpenCL kernels' with one element per invocation
+ * (COROFEM_VEC = 1: element outputs are 12 contiguous reals per element) and work-groups of
+ * COROFEM_WG = 64 invocations.
+ *
+ * Built twice by glslc (cmake/CompileShaders.cmake): float, and with -DCOROFEM_DOUBLE double (the
+ * device needs shaderFloat64). */
+#extension GL_GOOGLE_include_directive : require
+#ifdef COROFEM_DOUBLE
+#extension GL_ARB_gpu_shader_fp64 : require
+#define real double
+#define REAL_EPS 2.220446049250313e-16LF
+#define REAL_TINY 1e-280LF
+#else
+#define real float
+#define REAL_EPS 1.1920929e-07
+#define REAL_TINY 1e-30
+#endif
+
+#define COROFEM_GLSL 1
+#include "../shared/corofem_layout.h"
+
+layout(local_size_x = 64) in;
+#define WG 64u
+
+/* Bindings (set 0); the host's VulkanBinding enumerates the same numbers. */
+layout(std430, binding = 0) buffer SegInfo { uint segInfo[]; };
+layout(std430, binding = 1) readonly buffer SegCoef { real segCoef[]; };
+layout(std430, binding = 2) readonly buffer ElemSeg { uint elemSeg[]; };
+layout(std430, binding = 3) readonly buffer NodeSeg { uint nodeSeg[]; };
+layout(std430, binding = 4) readonly buffer Corners { uint corners[]; };  /* node of corner c of e at c S + e */
+layout(std430, binding = 5) readonly buffer Geom { real geom[]; };        /* grad N_1..3, volume (k S + e) */
+layout(std430, binding = 6) buffer RotGrad { real rotGrad[]; };           /* a_i = R grad N_i (k S + e) */
+layout(std430, binding = 7) readonly buffer Pos { real pos[]; };          /* positions minus the centroid */
+layout(std430, binding = 8) buffer ElemOut { real elemOut[]; };           /* 12 per element */
+layout(std430, binding = 9) readonly buffer GatherStart { uint gatherStart[]; };
+layout(std430, binding = 10) readonly buffer GatherEntry { uint gatherEntry[]; }; /* 12 e + 3 c */
+layout(std430, binding = 11) readonly buffer Mass { real mass[]; };       /* lumped mass per dof */
+layout(std430, binding = 12) readonly buffer Free { real freeDof[]; };    /* 1 free, 0 constrained */
+layout(std430, binding = 13) buffer Blocks { real blocks[]; };            /* 6 per node: xx yy zz xy xz yz */
+layout(std430, binding = 14) buffer Minv { real minv[]; };                /* 9 per node */
+layout(std430, binding = 15) readonly buffer VecIn { real vin[]; };       /* a product's p */
+layout(std430, binding = 16) buffer VecOut { real vout[]; };              /* a product's y, the forces */
+layout(std430, binding = 17) readonly buffer VecB { real bvec[]; };
+layout(std430, binding = 18) buffer VecX { real xvec[]; };
+layout(std430, binding = 19) buffer VecR { real rvec[]; };
+layout(std430, binding = 20) buffer VecU { real uvec[]; };
+layout(std430, binding = 21) buffer VecP { real pvec[]; };
+layout(std430, binding = 22) buffer VecS { real svec[]; };
+layout(std430, binding = 23) buffer VecW { real wvec[]; };
+layout(std430, binding = 24) buffer Partials { real partials[]; };        /* 3 per node work-group */
+layout(std430, binding = 25) buffer PartialsW { real partialsW[]; };
+layout(std430, binding = 26) buffer Scalars { real scalars[]; };          /* kScalarCount per segment */
+layout(std430, binding = 27) buffer Energy { real energy[]; };            /* per element */
+layout(std430, binding = 28) buffer Quat { real quat[]; };                /* 4 per element (k S + e) */
+layout(std430, binding = 29) buffer Rot { real rot[]; };                  /* R row-major (k S + e) */
+layout(std430, binding = 30) readonly buffer Spring { real spring[]; };   /* spring stiffness per dof */
+
+layout(push_constant) uniform Push {
+  uint S;         /* element stride */
+  uint mode;      /* what the shader computes (each shader's kMode*) */
+  uint flags;     /* kFlag* */
+  uint precond;   /* 0 none, 1 diagonal, 2 3x3 blocks */
+  uint rotation;  /* 0 polar, 1 svd, 2 quaternion, 3 qr */
+} pc;
+
+const uint kFlagProject = 1u;       /* products: y = 0 on constrained dofs */
+const uint kFlagMass = 2u;          /* some body has mass (the mass buffer is read) */
+const uint kFlagZeroStart = 4u;     /* pcg set-up: x = 0 (q is not read) */
+const uint kFlagWriteCorners = 8u;  /* rotations: sqrt(V) a_c into elemOut */
+const uint kFlagWriteR = 16u;       /* rotations: R into rot */
+const uint kFlagSprings = 32u;      /* some body has springs (the spring buffer is read) */
+
+uint seg_info(uint s, uint k) { return segInfo[kSegInfoCount * s + k]; }
+real seg_coef(uint s, uint k) { return segCoef[kSegCoefCount * s + k]; }
+bool has_flag(uint f) { return (pc.flags & f) != 0u; }
