@@ -459,7 +459,7 @@ TEST_P(Control, AHandleOnASurfaceVertexMovesThatVertexExactly) {
   // The handle holds the four nodes the vertex is bound to, and its target places the vertex.
   const double c[3] = {rest[3 * vertex], rest[3 * vertex + 1], rest[3 * vertex + 2]};
   // Device surfaces hold float positions (the liver spans about 6 units).
-  const double tolerance = GetParam().isOpenCL() ? 5e-5 : 1e-9;
+  const double tolerance = GetParam().isDevice() ? 5e-5 : 1e-9;
   for (int frame = 1; frame <= 10; ++frame) {
     const double lift = 0.03 * frame;
     const double target[3] = {c[0], c[1] + lift, c[2]};
@@ -629,7 +629,7 @@ TEST_P(Control, ARemovedBodyTakesItsDeviceMemoryAndHandlesWithIt) {
   ASSERT_TRUE(sim.removeBody(0));
   EXPECT_EQ(sim.bodyCount(), 1);
   EXPECT_EQ(positions(sim, 0), second);  // the second body is body 0 now, where it was
-  if (GetParam().isOpenCL()) {
+  if (GetParam().isDevice()) {
     EXPECT_GT(before, 0);
     EXPECT_LT(deviceBytes(sim), before) << "the removed body's device buffers were not freed";
   }
@@ -782,7 +782,7 @@ TEST(ControlBatch, BodiesUnderControlInABatchStepAsAloneAndOneLeaves) {
   const std::vector<BackendCase> cases = backendCases();
   const BackendCase* c = nullptr;
   for (const BackendCase& k : cases)
-    if (k.isOpenCL() && k.absent.empty() && !k.isFloat()) c = &k;
+    if (k.kind == BackendKind::OpenCL && k.absent.empty() && !k.isFloat()) c = &k;
   if (!c) GTEST_SKIP() << "no OpenCL device with fp64 here: the batch runs on OpenCL devices";
   Scene one = beamScene(*c, true, true);
   Scene three = one;
@@ -871,7 +871,7 @@ TEST(ControlBatch, BatchedBodiesLeaveOneByOneAndTheLastGoesOnAsAlone) {
   const std::vector<BackendCase> cases = backendCases();
   const BackendCase* c = nullptr;
   for (const BackendCase& k : cases)
-    if (k.isOpenCL() && k.absent.empty() && !k.isFloat()) c = &k;
+    if (k.kind == BackendKind::OpenCL && k.absent.empty() && !k.isFloat()) c = &k;
   if (!c) GTEST_SKIP() << "no OpenCL device with fp64 here: the batch runs on OpenCL devices";
   Scene one = beamScene(*c, true, true);
   Scene scene = one;

@@ -35,22 +35,25 @@ struct BackendCase {
   std::string name;  ///< test-name suffix
   BackendKind kind = BackendKind::Reference;
   Precision precision = Precision::Double;
-  std::string device;  ///< OpenCL device selector (its index in cl::listDevices())
+  std::string device;  ///< the device's selector (OpenCL: its index in cl::listDevices(); Vulkan: the candidate's)
   std::string absent;  ///< non-empty: why this case cannot run here (the test skips with it)
 
-  bool isFloat() const { return kind == BackendKind::OpenCL && precision == Precision::Float; }
-  bool isOpenCL() const { return kind == BackendKind::OpenCL; }
+  bool isFloat() const { return isDevice() && precision == Precision::Float; }
+  /// A device backend (OpenCL, Vulkan): its rotation methods are its own (the reference's is SVD polar).
+  bool isDevice() const { return kind != BackendKind::Reference; }
   std::string describe() const {
-    return kind == BackendKind::Reference ? "reference (double)"
-                                          : "opencl device " + device + (isFloat() ? " (float)" : " (double)");
+    return kind == BackendKind::Reference
+               ? "reference (double)"
+               : std::string(toString(kind)) + " device " + device + (isFloat() ? " (float)" : " (double)");
   }
 };
 
 /// How GoogleTest (and so CTest's test list) prints a case: what it runs on, not its bytes.
 inline void PrintTo(const BackendCase& c, std::ostream* os) { *os << c.describe(); }
 
-/// Reference, then OpenCL double and float on every device. A case that cannot run (library built
-/// without OpenCL, no device, no fp64) stays in the list with the reason, so that the skip shows.
+/// Reference, then OpenCL and Vulkan, double and float, on every device. A case that cannot run
+/// (library built without OpenCL, no device, no fp64) stays in the list with the reason, so that the
+/// skip shows.
 inline std::vector<BackendCase> backendCases() {
   std::vector<BackendCase> out;
   out.push_back({"reference", BackendKind::Reference, Precision::Double, "", ""});
@@ -71,6 +74,19 @@ inline std::vector<BackendCase> backendCases() {
   out.push_back({"opencl_not_built", BackendKind::OpenCL, Precision::Double, "",
                  "the library was built without the OpenCL backend (configure with -DCOROFEM_WITH_OPENCL=ON)"});
 #endif
+  std::vector<detail::Candidate> vulkan;
+  if (const auto entry = detail::findBackend("vulkan")) vulkan = entry->candidates();
+  for (const detail::Candidate& d : vulkan) {
+    std::string clean;
+    for (char c : d.device) clean += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+    const std::string base = "vulkan_dev" + d.selector + "_" + clean.substr(0, 20);
+    out.push_back({base + "_double", BackendKind::Vulkan, Precision::Double, d.selector, ""});
+    out.push_back({base + "_float", BackendKind::Vulkan, Precision::Float, d.selector, ""});
+  }
+  if (vulkan.empty())
+    out.push_back({"vulkan_no_device", BackendKind::Vulkan, Precision::Double, "",
+                   "no Vulkan device here (a build without the Vulkan backend, or no driver: install "
+                   "mesa-vulkan-drivers for the lavapipe CPU device)"});
   return out;
 }
 

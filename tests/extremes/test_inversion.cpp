@@ -33,7 +33,7 @@ void PrintTo(const InversionCase& c, std::ostream* os) { *os << c.backend.descri
 std::vector<InversionCase> inversionCases() {
   std::vector<InversionCase> out;
   for (const BackendCase& c : backendCases()) {
-    if (!c.isOpenCL()) {
+    if (!c.isDevice()) {
       out.push_back({c, RotationMethod::Svd, true});  // the reference ignores the choice: SVD polar
       continue;
     }

@@ -121,7 +121,7 @@ void PrintTo(const RotationCase& c, std::ostream* os) { *os << c.backend.describ
 std::vector<RotationCase> rotationCases() {
   std::vector<RotationCase> out;
   for (const BackendCase& c : backendCases()) {
-    if (!c.isOpenCL()) {
+    if (!c.isDevice()) {
       out.push_back({c, RotationMethod::Svd});
       continue;
     }
