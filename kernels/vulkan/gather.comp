@@ -13,23 +13,22 @@
  *                  mu |a_c|^2 I), from the sqrt(V) a_c of element.comp's kModeCorners
  * Sums per work-group are fixed-order trees in shared memory, one triple per work-group. */
 #include "common.glsl"
+#include "ops.glsl"
 
 const uint kModeSum = 0u, kModeProduct = 1u, kModeResidual = 2u, kModeBlocks = 3u;
-
-shared real s0[64], s1[64], s2[64];
 
 void main() {
   const uint n = gl_GlobalInvocationID.x, lid = gl_LocalInvocationID.x, g = gl_WorkGroupID.x;
   const uint s = nodeSeg[g];
   if (seg_info(s, kSegActive) == 0u) return;  /* the whole work-group (segments are whole groups) */
   const bool real_node = n < seg_info(s, kSegNodeEnd);
-  const uint begin = real_node ? gatherStart[n] : 0u, end = real_node ? gatherStart[n + 1u] : 0u;
 
   if (pc.mode == kModeBlocks) {
     if (!real_node) return;
     const real lambda = seg_coef(s, kCoefLambda), mu = seg_coef(s, kCoefMu), lm = lambda + mu;
     real b[6] = real[6](real(0), real(0), real(0), real(0), real(0), real(0));
-    for (uint j = begin; j < end; ++j) {
+    const uint end = gatherStart[n + 1u];
+    for (uint j = gatherStart[n]; j < end; ++j) {
       const uint at = gatherEntry[j];
       const real ax = elemOut[at], ay = elemOut[at + 1u], az = elemOut[at + 2u];
       const real iso = mu * (ax * ax + ay * ay + az * az);
@@ -43,37 +42,24 @@ void main() {
     for (uint k = 0u; k < 6u; ++k) blocks[6u * n + k] = b[k];
     return;
   }
-
-  real acc[3] = real[3](real(0), real(0), real(0));
-  for (uint j = begin; j < end; ++j) {
-    const uint at = gatherEntry[j];
-    acc[0] += elemOut[at];
-    acc[1] += elemOut[at + 1u];
-    acc[2] += elemOut[at + 2u];
-  }
   if (pc.mode == kModeSum) {
-    if (real_node)
-      for (uint k = 0u; k < 3u; ++k) vout[3u * n + k] = acc[k];
+    if (!real_node) return;
+    real acc[3];
+    gather_node(n, acc);
+    for (uint k = 0u; k < 3u; ++k) vout[3u * n + k] = acc[k];
     return;
   }
 
-  /* products: A p = massCoef M p + acc + k S p */
-  const real massCoef = seg_coef(s, kCoefMass), springCoef = seg_coef(s, kCoefSpring);
   real t0 = real(0), t1 = real(0), t2 = real(0);
   if (real_node) {
-    for (uint k = 0u; k < 3u; ++k) {
-      const uint d = 3u * n + k;
-      const real pd = vin[d];
-      real yd = acc[k];
-      if (has_flag(kFlagMass)) yd = massCoef * mass[d] * pd + yd;
-      if (has_flag(kFlagSprings)) yd += springCoef * spring[d] * pd;
-      if (pc.mode == kModeProduct) {
-        if (has_flag(kFlagProject)) yd *= freeDof[d];
-        vout[d] = yd;
-        t0 += pd * yd;
-      } else {  /* kModeResidual */
-        yd *= freeDof[d];
-        const real bd = freeDof[d] * bvec[d], rd = bd - yd;
+    if (pc.mode == kModeProduct) {
+      t0 = gather_product_node(n, s);
+    } else {  /* kModeResidual: vout = free b - A x */
+      real y[3];
+      product_node(n, s, y);
+      for (uint k = 0u; k < 3u; ++k) {
+        const uint d = 3u * n + k;
+        const real bd = freeDof[d] * bvec[d], rd = bd - y[k] * freeDof[d];
         vout[d] = rd;
         t1 += rd * rd;
         t2 += bd * bd;
@@ -83,15 +69,8 @@ void main() {
   s0[lid] = t0;
   s1[lid] = t1;
   s2[lid] = t2;
-  barrier();
-  for (uint h = WG / 2u; h > 0u; h >>= 1u) {
-    if (lid < h) {
-      s0[lid] += s0[lid + h];
-      s1[lid] += s1[lid + h];
-      s2[lid] += s2[lid + h];
-    }
-    barrier();
-  }
+  s3[lid] = real(0);
+  tree4();
   if (lid == 0u) {
     if (pc.mode == kModeProduct) {
       partialsW[3u * g] = s0[0];

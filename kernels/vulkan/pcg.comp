@@ -11,10 +11,9 @@
  * A (massCoef M + k (blocks of R K R^T) + k S, constrained rows and columns replaced by the
  * identity; a non-positive pivot falls back to 1). */
 #include "common.glsl"
+#include "ops.glsl"
 
 const uint kModeInit = 0u, kModeUpdate = 1u;
-
-shared real s0[64], s1[64], s2[64];
 
 /* node_preconditioner of precond.cl, with the springs on the diagonal: the inverse of node n's
  * block into m (row-major 3x3; the diagonal preconditioner: the diagonal only). */
@@ -53,27 +52,14 @@ void node_inverse(uint n, uint s, out real m[9]) {
   for (uint k = 0u; k < 3u; ++k) m[4u * k] = f[k] * (d[k] > real(0) ? real(1) / d[k] : real(1));
 }
 
-/* z = M^-1 r for node n from its stored inverse (the identity without a preconditioner, projected). */
-void apply_inverse(in real m[9], in real r[3], out real z[3]) {
-  if (pc.precond == 2u) {
-    z[0] = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];
-    z[1] = m[3] * r[0] + m[4] * r[1] + m[5] * r[2];
-    z[2] = m[6] * r[0] + m[7] * r[1] + m[8] * r[2];
-  } else {
-    z[0] = m[0] * r[0];
-    z[1] = m[4] * r[1];
-    z[2] = m[8] * r[2];
-  }
-}
-
 void main() {
   const uint n = gl_GlobalInvocationID.x, lid = gl_LocalInvocationID.x, g = gl_WorkGroupID.x;
   const uint s = nodeSeg[g];
   if (seg_info(s, kSegActive) == 0u) return;  /* the whole work-group */
   real ru = real(0), rr = real(0), bb = real(0);
   if (n < seg_info(s, kSegNodeEnd)) {
-    real m[9];
     if (pc.mode == kModeInit) {
+      real m[9];
       if (pc.precond == 0u) {
         for (int k = 0; k < 9; ++k) m[k] = real(0);
         for (uint k = 0u; k < 3u; ++k) m[4u * k] = freeDof[3u * n + k];
@@ -81,53 +67,35 @@ void main() {
         node_inverse(n, s, m);
       }
       for (uint k = 0u; k < 9u; ++k) minv[9u * n + k] = m[k];
-    } else {
-      for (uint k = 0u; k < 9u; ++k) m[k] = minv[9u * n + k];
-    }
-    real rn[3], un[3];
-    if (pc.mode == kModeInit) {
+      real rn[3], un[3];
       for (uint k = 0u; k < 3u; ++k) {
         const uint d = 3u * n + k;
         const real bd = freeDof[d] * bvec[d];
         rn[k] = has_flag(kFlagZeroStart) ? bd : bd - freeDof[d] * svec[d];
         bb += bd * bd;
       }
-    } else {
-      const real alpha = scalars[kScalarCount * s + kScalarAlpha], beta = scalars[kScalarCount * s + kScalarBeta];
+      apply_inverse(m, rn, un);
       for (uint k = 0u; k < 3u; ++k) {
         const uint d = 3u * n + k;
-        const real pd = uvec[d] + beta * pvec[d], sd = wvec[d] + beta * svec[d];
-        pvec[d] = pd;
-        svec[d] = sd;
-        xvec[d] += alpha * pd;
-        rn[k] = rvec[d] - alpha * sd;
-      }
-    }
-    apply_inverse(m, rn, un);
-    for (uint k = 0u; k < 3u; ++k) {
-      const uint d = 3u * n + k;
-      rvec[d] = rn[k];
-      uvec[d] = un[k];
-      if (pc.mode == kModeInit) {
+        rvec[d] = rn[k];
+        uvec[d] = un[k];
         pvec[d] = real(0);
         svec[d] = real(0);
+        ru += rn[k] * un[k];
+        rr += rn[k] * rn[k];
       }
-      ru += rn[k] * un[k];
-      rr += rn[k] * rn[k];
+    } else {
+      real sums[2];
+      pcg_update_node(n, scalars[kScalarCount * s + kScalarAlpha], scalars[kScalarCount * s + kScalarBeta], sums);
+      ru = sums[0];
+      rr = sums[1];
     }
   }
   s0[lid] = ru;
   s1[lid] = rr;
   s2[lid] = bb;
-  barrier();
-  for (uint h = WG / 2u; h > 0u; h >>= 1u) {
-    if (lid < h) {
-      s0[lid] += s0[lid + h];
-      s1[lid] += s1[lid + h];
-      s2[lid] += s2[lid + h];
-    }
-    barrier();
-  }
+  s3[lid] = real(0);
+  tree4();
   if (lid == 0u) {
     partials[3u * g] = s0[0];
     partials[3u * g + 1u] = s1[0];

@@ -351,6 +351,7 @@ class ConformanceBase : public testing::TestWithParam<ConformanceCase> {
   static detail::DeviceOptions options() {
     detail::DeviceOptions o;
     o.opencl = morton();
+    o.vulkan.localityOrder = o.opencl.localityOrder;
     return o;
   }
   /// A device of the case holding `problems`, made by the registry entry's create.

@@ -50,6 +50,7 @@ struct EnergyReport {
 struct SimulationOptions {
   LogDesc log;          ///< where the library's messages go (none: dropped)
   OpenCLTuning opencl;  ///< the OpenCL backend's kernels and strategies (automatic by default)
+  VulkanTuning vulkan;  ///< the Vulkan backend's strategies (automatic by default)
   /// Where every body runs, in order of preference, each "<backend>" or "<backend>:<device>"
   /// ("opencl:1", "opencl:pthread", "reference", or a backend the application registered); a
   /// device that fails (at creation too) hands its bodies to the next, and the reference backend

@@ -80,4 +80,18 @@ struct OpenCLTuning {
   int flushDenormals = -1;
 };
 
+
+/// The Vulkan backend's strategies (host/src/backends/vulkan/). Like OpenCLTuning, none of it
+/// changes the mathematics: both PCG paths run the same phases in the same order.
+struct VulkanTuning {
+  /// Bodies of at most this many nodes run their PCG iterations in one dispatch, a work-group per
+  /// body meeting at barriers (kernels/vulkan/pcg_group.comp); larger ones take a dispatch per
+  /// phase (an update, the product's element and node passes, the scalars: four an iteration).
+  /// 0 = every body on CPU devices (lavapipe: a dispatch costs more than a small body's phase),
+  /// 2,048 on GPUs (a guess: not yet measured on one); -1 = never.
+  long long groupPcgNodes = 0;
+  /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
+  int localityOrder = -1;
+};
+
 }  // namespace corofem

@@ -217,6 +217,7 @@ Result<Simulation> Simulation::create(const Scene& scene, const SimulationOption
     if (const std::string problem = detail::hostThreadsProblem(); !problem.empty())
       impl->log(LogLevel::Warning, problem);
     impl->device.opencl = options.opencl;
+    impl->device.vulkan = options.vulkan;
     impl->device.external = options.device;
     impl->devices = options.devices;
     impl->inputLimits = options.inputLimits;

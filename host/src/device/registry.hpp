@@ -20,6 +20,7 @@ namespace corofem::detail {
 /// What the devices get beyond the scene (SimulationOptions).
 struct DeviceOptions {
   OpenCLTuning opencl;
+  VulkanTuning vulkan;
   /// The application's device; a backend of its API makes it the device of the selector
   /// kExternalSelector.
   ExternalDevice external;

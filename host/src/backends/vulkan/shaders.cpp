@@ -38,6 +38,12 @@ const std::uint32_t kReduceFloat[] =
 const std::uint32_t kReduceDouble[] =
 #include "reduce_double.inc"
 ;
+const std::uint32_t kPcgGroupFloat[] =
+#include "pcg_group_float.inc"
+;
+const std::uint32_t kPcgGroupDouble[] =
+#include "pcg_group_double.inc"
+;
 // clang-format on
 
 template <std::size_t N>
@@ -54,13 +60,14 @@ Spirv shaderCode(Shader shader, bool isDouble) {
     case Shader::Gather: return isDouble ? of(kGatherDouble) : of(kGatherFloat);
     case Shader::Pcg: return isDouble ? of(kPcgDouble) : of(kPcgFloat);
     case Shader::Reduce: return isDouble ? of(kReduceDouble) : of(kReduceFloat);
+    case Shader::PcgGroup: return isDouble ? of(kPcgGroupDouble) : of(kPcgGroupFloat);
   }
   return {};
 }
 
 std::uint64_t shaderHash() {
   std::uint64_t h = 1469598103934665603ull;
-  for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce})
+  for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup})
     for (bool d : {false, true}) {
       const Spirv code = shaderCode(s, d);
       const unsigned char* bytes = reinterpret_cast<const unsigned char*>(code.words);

@@ -50,7 +50,7 @@ struct Push {
   std::uint32_t S = 0, mode = 0, flags = 0, precond = 0, rotation = 0;
 };
 
-constexpr std::uint32_t kFlagProject = 1, kFlagMass = 2, kFlagZeroStart = 4, kFlagSprings = 32;
+constexpr std::uint32_t kFlagProject = 1, kFlagMass = 2, kFlagZeroStart = 4, kFlagSprings = 32, kFlagCapLast = 64;
 constexpr std::uint32_t kWg = 64;
 constexpr std::uint32_t kElementForces = 0, kElementProduct = 1, kElementCorners = 2;
 constexpr std::uint32_t kGatherSum = 0, kGatherProduct = 1, kGatherResidual = 2, kGatherBlocks = 3;
@@ -78,8 +78,9 @@ std::uint32_t preconditionerCode(PreconditionerKind k) {
 
 class VulkanDevice final : public Device {
  public:
-  VulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver, std::size_t index)
-      : solver_(resolvedSolver(solver, problems)), layout_(problems, -1, kWg, kWg, 12) {
+  VulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver, std::size_t index,
+               const VulkanTuning& tuning)
+      : solver_(resolvedSolver(solver, problems)), layout_(problems, tuning.localityOrder, kWg, kWg, 12) {
     if (solver_.preconditioner == PreconditionerKind::Amg)
       fail(ErrorCode::BadInput, "the vulkan backend has no multigrid preconditioner yet; set solver.preconditioner "
            "to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend");
@@ -97,6 +98,19 @@ class VulkanDevice final : public Device {
       fail(ErrorCode::DeviceError, "Vulkan: '", pd.name, "' has no shaderFloat64 (double in shaders); set "
            "solver.precision to \"float\"");
     ctx_ = std::make_unique<vk::Context>(instance, index, isDouble_, kBindingCount, sizeof(Push));
+    // The PCG path (VulkanTuning::groupPcgNodes): whole iterations in one dispatch where every body is
+    // small enough.
+    const long long groupNodes = tuning.groupPcgNodes != 0 ? tuning.groupPcgNodes : pd.gpu ? 2048 : -2;
+    std::size_t largest = 0;
+    for (const BodySegment& sg : layout_.segments) largest = std::max(largest, sg.nodes);
+    groupPcg_ = groupNodes == -2 || (groupNodes > 0 && largest <= static_cast<std::size_t>(groupNodes));
+    // A dispatch of pcg_group runs at most kGroupChunkBudget passes over 64 nodes per work-group (two
+    // an iteration per 64 nodes of its body): lavapipe (Mesa 22.3) silently ended work-groups after
+    // about 1,500 such passes in one dispatch (a body of 1,331 nodes after 72 iterations, of 3,751
+    // after 26: test_vulkan_paths), and a GPU driver's watchdog ends long dispatches too.
+    constexpr std::size_t kGroupChunkBudget = 256;
+    const std::size_t chunks = 2 * ((largest + kWg - 1) / kWg) + 1;
+    groupIterationsPerDispatch_ = static_cast<int>(std::max<std::size_t>(1, kGroupChunkBudget / chunks));
     build();
   }
 
@@ -352,14 +366,28 @@ class VulkanDevice final : public Device {
     if (k <= 0) return;
     VkCommandBuffer cb = ctx_->begin();
     Push push = basePush();
-    for (int it = 0; it < k; ++it) {
-      ++enqueued_;
-      const bool last = enqueued_ == cap_;
-      push.mode = kPcgUpdate;
-      dispatch(cb, pcg_, pcgSet_, push, nodeGroups());
-      if (!last) recordProduct(cb, push);
-      push.mode = last ? kReduceLast : kReduceStep;
-      dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
+    if (groupPcg_) {  // k iterations of every body, in as few dispatches as the work bound allows
+      for (int done = 0; done < k;) {
+        const int now = std::min(k - done, groupIterationsPerDispatch_);
+        done += now;
+        enqueued_ += now;
+        Push p = push;
+        p.mode = static_cast<std::uint32_t>(now);
+        p.flags |= kFlagProject | (enqueued_ == cap_ ? kFlagCapLast : 0u);
+        dispatch(cb, pcgGroup_, pcgSet_, p, static_cast<std::uint32_t>(bodyCount()));
+        ++groupDispatches_;
+      }
+    } else {
+      phaseDispatches_ += 4LL * k;
+      for (int it = 0; it < k; ++it) {
+        ++enqueued_;
+        const bool last = enqueued_ == cap_;
+        push.mode = kPcgUpdate;
+        dispatch(cb, pcg_, pcgSet_, push, nodeGroups());
+        if (!last) recordProduct(cb, push);
+        push.mode = last ? kReduceLast : kReduceStep;
+        dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
+      }
     }
     ctx_->submit();
   }
@@ -437,6 +465,10 @@ class VulkanDevice final : public Device {
   }
 
   // ---------------------------------------------------------------------------- what it holds
+
+  std::vector<DeviceCounter> counters() const override {
+    return {{"pcg_group_dispatches", groupDispatches_}, {"pcg_phase_dispatches", phaseDispatches_}};
+  }
 
   std::vector<DeviceBuffer> buffers() const override {
     std::vector<DeviceBuffer> out;
@@ -797,6 +829,7 @@ class VulkanDevice final : public Device {
     gather_ = pipeline(vk::Shader::Gather, "gather.comp");
     pcg_ = pipeline(vk::Shader::Pcg, "pcg.comp");
     reduce_ = pipeline(vk::Shader::Reduce, "reduce.comp");
+    pcgGroup_ = pipeline(vk::Shader::PcgGroup, "pcg_group.comp");
     auto set = [&](const vk::Buffer& in, const vk::Buffer& out) {
       std::vector<const vk::Buffer*> b(kBindingCount);
       for (std::uint32_t i = 0; i < kBindingCount; ++i) b[i] = &owned_[i];
@@ -824,7 +857,7 @@ class VulkanDevice final : public Device {
   vk::Buffer pin_, yout_, up_, down_;
   std::size_t scalarsOffset_ = 0;  ///< bytes: where the scalar reads start in down_
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
-             reduce_ = VK_NULL_HANDLE;
+             reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE;
   VkDescriptorSet apply_ = VK_NULL_HANDLE, pcgSet_ = VK_NULL_HANDLE, setup_ = VK_NULL_HANDLE;
 
   std::vector<std::uint32_t> segInfo_;                    ///< the segment table, every body inactive
@@ -832,6 +865,9 @@ class VulkanDevice final : public Device {
   std::vector<std::vector<std::uint8_t>> constrainedHost_;  ///< per body, in the problem's numbering
   std::vector<double> free_, spring_;                     ///< per device dof
   bool hasMass_ = false, hasSprings_ = false;
+  bool groupPcg_ = false;  ///< PCG iterations in one dispatch, a work-group per body (pcg_group.comp)
+  int groupIterationsPerDispatch_ = 1;                   ///< pcg_group's iterations in one dispatch
+  long long groupDispatches_ = 0, phaseDispatches_ = 0;  ///< PCG iteration dispatches of each path
   std::uint64_t stagingUse_ = 0;  ///< the last submission reading up_ (0: none pending)
 
   BodySet solve_;
@@ -925,12 +961,12 @@ void registerVulkanBackend() {
     return "";
   };
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
-                const DeviceOptions&) -> std::unique_ptr<Device> {
+                const DeviceOptions& options) -> std::unique_ptr<Device> {
     if (c.selector == kExternalSelector)
       fail(ErrorCode::NotCompiledIn, "SimulationOptions::device: this build's Vulkan backend cannot adopt the "
            "application's VkDevice yet (it makes its own); leave SimulationOptions::device empty, or lend an OpenCL "
            "device");
-    return std::make_unique<VulkanDevice>(problems, solver, deviceIndex(c.selector));
+    return std::make_unique<VulkanDevice>(problems, solver, deviceIndex(c.selector), options.vulkan);
   };
   e.buildId = [] {
     std::ostringstream hex;
