@@ -175,9 +175,12 @@ void quat_to_matrix(in real q[4], out real R[9]) {
   R[8] = real(1) - real(2) * (x * x + y * y);
 }
 
-/* sin(h) and cos(h) for |h| <= pi in the shader's precision (GLSL has sin and cos in float only):
- * h reduced by halving to below 1/4, the Taylor series to h^17 there, doubled back up. */
+/* sin(h) and cos(h) in the shader's precision (GLSL has sin and cos in float only): h reduced to
+ * [-pi, pi] (the step's angle is unbounded where F is inverted or flat: |tr R^T F| ~ 0), halved to
+ * below 1/4, the Taylor series to h^17 there, doubled back up. Bounded for every finite h. */
 void sin_cos(real h, out real sn, out real cs) {
+  const real twoPi = real(6.283185307179586476925286766559);
+  h -= twoPi * floor(h / twoPi + real(0.5));
   int halvings = 0;
   while (abs(h) > real(0.25) && halvings < 8) {
     h *= real(0.5);

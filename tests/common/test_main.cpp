@@ -13,16 +13,18 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i)
     if (std::strcmp(argv[i], "--corofem_morton") == 0) corofem::test::mortonEverywhere() = true;
   if (corofem::test::mortonEverywhere())
-    if (auto opencl = corofem::detail::findBackend("opencl")) {
-      corofem::detail::BackendEntry e = *opencl;
-      e.create = [inner = opencl->create](const std::vector<const corofem::detail::Problem*>& problems,
-                                          const corofem::SolverDesc& solver, const corofem::detail::Candidate& c,
-                                          const corofem::detail::DeviceOptions& options) {
-        corofem::detail::DeviceOptions o = options;
-        o.opencl = corofem::test::morton(o.opencl);
-        return inner(problems, solver, c, o);
-      };
-      corofem::detail::registerBackend(std::move(e));
-    }
+    for (const char* name : {"opencl", "vulkan"})
+      if (auto backend = corofem::detail::findBackend(name)) {
+        corofem::detail::BackendEntry e = *backend;
+        e.create = [inner = backend->create](const std::vector<const corofem::detail::Problem*>& problems,
+                                             const corofem::SolverDesc& solver, const corofem::detail::Candidate& c,
+                                             const corofem::detail::DeviceOptions& options) {
+          corofem::detail::DeviceOptions o = options;
+          o.opencl = corofem::test::morton(o.opencl);
+          if (o.vulkan.localityOrder < 0) o.vulkan.localityOrder = o.opencl.localityOrder;
+          return inner(problems, solver, c, o);
+        };
+        corofem::detail::registerBackend(std::move(e));
+      }
   return RUN_ALL_TESTS();
 }

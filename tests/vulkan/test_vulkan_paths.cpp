@@ -1,8 +1,8 @@
 // The Vulkan backend's two PCG paths (VulkanTuning::groupPcgNodes): a dispatch per phase (update,
 // the product's element and node passes, the scalars) and whole iterations in one dispatch, a
 // work-group per body (kernels/vulkan/pcg_group.comp). The conformance suite checks the default
-// path of each device against the reference (on lavapipe, a CPU device: the one-dispatch path);
-// here the other path is held to it on every Vulkan device, in double and float, for every
+// path against the reference (its bodies are small: the one-dispatch path); here the other path is
+// held to it on every Vulkan device, in double and float, for every
 // preconditioner the backend has, on the conformance suite's seven bodies solved together: the
 // same phases in the same order give the same iteration counts and answers.
 #include "conformance/conformance_support.hpp"

@@ -86,9 +86,10 @@ struct OpenCLTuning {
 struct VulkanTuning {
   /// Bodies of at most this many nodes run their PCG iterations in one dispatch, a work-group per
   /// body meeting at barriers (kernels/vulkan/pcg_group.comp); larger ones take a dispatch per
-  /// phase (an update, the product's element and node passes, the scalars: four an iteration).
-  /// 0 = every body on CPU devices (lavapipe: a dispatch costs more than a small body's phase),
-  /// 2,048 on GPUs (a guess: not yet measured on one); -1 = never.
+  /// phase (an update, the product's element and node passes, the scalars: four an iteration), which
+  /// spreads a body over the device. 0 = 2,048 (on lavapipe, a step of a 270-node block: 8.5 ms in
+  /// one dispatch against 10.0 ms per phase; of a 2,100-node block: 55 against 35 ms; not yet
+  /// measured on a GPU: docs/performance.md); -1 = never.
   long long groupPcgNodes = 0;
   /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
   int localityOrder = -1;

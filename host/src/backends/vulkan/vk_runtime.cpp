@@ -109,15 +109,18 @@ Buffer::Buffer(Context& ctx, std::size_t bytes, bool host) : device_(ctx.device(
   auto alloc = made<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
   alloc.allocationSize = req.size;
   alloc.memoryTypeIndex = ctx.memoryType(req.memoryTypeBits, host);
-  const VkResult r = vkAllocateMemory(device_, &alloc, nullptr, &memory_);
-  if (r != VK_SUCCESS) {
+  // On a failure the buffer and its memory go before the throw (no destructor runs).
+  auto checked = [&](VkResult r, const char* what) {
+    if (r == VK_SUCCESS) return;
     release();
-    check(r, host ? "vkAllocateMemory (host-visible)" : "vkAllocateMemory (device-local)");
-  }
-  check(vkBindBufferMemory(device_, buffer_, memory_, 0), "vkBindBufferMemory");
+    check(r, what);
+  };
+  checked(vkAllocateMemory(device_, &alloc, nullptr, &memory_),
+          host ? "vkAllocateMemory (host-visible)" : "vkAllocateMemory (device-local)");
+  checked(vkBindBufferMemory(device_, buffer_, memory_, 0), "vkBindBufferMemory");
   if (host) {
     void* p = nullptr;
-    check(vkMapMemory(device_, memory_, 0, VK_WHOLE_SIZE, 0, &p), "vkMapMemory");
+    checked(vkMapMemory(device_, memory_, 0, VK_WHOLE_SIZE, 0, &p), "vkMapMemory");
     mapped_ = static_cast<unsigned char*>(p);
     std::memset(mapped_, 0, bytes_);
   }
@@ -171,6 +174,16 @@ Context::Context(std::shared_ptr<Instance> instance, std::size_t index, bool flo
   info.pQueueCreateInfos = &queue;
   info.pEnabledFeatures = &features;
   check(vkCreateDevice(physical_.handle, &info, nullptr, &device_), "vkCreateDevice");
+  try {
+    makeObjects(pushBytes);
+  } catch (...) {
+    destroy();  // no destructor runs for a constructor that throws
+    throw;
+  }
+}
+
+void Context::makeObjects(std::uint32_t pushBytes) {
+  const std::uint32_t bindings = bindings_;
   vkGetDeviceQueue(device_, physical_.queueFamily, 0, &queue_);
 
   std::vector<VkDescriptorSetLayoutBinding> b(bindings);
@@ -215,7 +228,9 @@ Context::Context(std::shared_ptr<Instance> instance, std::size_t index, bool flo
   }
 }
 
-Context::~Context() {
+Context::~Context() { destroy(); }
+
+void Context::destroy() {
   if (!device_) return;
   vkDeviceWaitIdle(device_);
   for (Slot& s : ring_)
@@ -226,6 +241,7 @@ Context::~Context() {
   if (pipelineLayout_) vkDestroyPipelineLayout(device_, pipelineLayout_, nullptr);
   if (setLayout_) vkDestroyDescriptorSetLayout(device_, setLayout_, nullptr);
   vkDestroyDevice(device_, nullptr);
+  device_ = VK_NULL_HANDLE;
 }
 
 std::uint32_t Context::memoryType(std::uint32_t typeBits, bool host) const {

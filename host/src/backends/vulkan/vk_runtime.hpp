@@ -117,6 +117,8 @@ class Context {
     bool busy = false;
   };
   void waitSlot(Slot& s);
+  void makeObjects(std::uint32_t pushBytes);  ///< everything but the VkDevice
+  void destroy();
 
   std::shared_ptr<Instance> instance_;
   PhysicalDevice physical_;

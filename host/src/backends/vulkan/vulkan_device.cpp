@@ -76,17 +76,41 @@ std::uint32_t preconditionerCode(PreconditionerKind k) {
   }
 }
 
+/// Why the backend cannot run a body with these settings ("" where it can); the registry entry's
+/// `refuses` and the device's constructor both ask it.
+std::string refusalOf(const Problem& p, const SolverDesc& s) {
+  if (isHyperelastic(p.formulation))
+    return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
+           "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
+  if (s.linearSolver == LinearSolverKind::Cholesky)
+    return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the solver "
+           "\"pcg\"";
+  if (s.precision == Precision::Mixed)
+    return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
+           "\"double\"";
+  if (preconditionerOf(s, p) == PreconditionerKind::Amg)
+    return std::string("the vulkan backend has no multigrid preconditioner yet (") +
+           (s.preconditioner == PreconditionerKind::Auto ? "\"auto\" picks amg for this slender body" : "\"amg\" asked for") +
+           "); set solver.preconditioner to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend";
+  return "";
+}
+
+/// The mean of x's nodes (3N entries), subtracted from the positions the device holds.
+void centroidOf(const Eigen::VectorXd& x, std::size_t nodes, double* c) {
+  for (int k = 0; k < 3; ++k) {
+    double sum = 0;
+    for (std::size_t n = 0; n < nodes; ++n) sum += x[static_cast<Eigen::Index>(3 * n + k)];
+    c[k] = nodes ? sum / static_cast<double>(nodes) : 0.0;
+  }
+}
+
 class VulkanDevice final : public Device {
  public:
   VulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver, std::size_t index,
                const VulkanTuning& tuning)
       : solver_(resolvedSolver(solver, problems)), layout_(problems, tuning.localityOrder, kWg, kWg, 12) {
-    if (solver_.preconditioner == PreconditionerKind::Amg)
-      fail(ErrorCode::BadInput, "the vulkan backend has no multigrid preconditioner yet; set solver.preconditioner "
-           "to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend");
-    if (solver_.precision == Precision::Mixed)
-      fail(ErrorCode::BadInput, "the vulkan backend runs in float or double, not mixed precision; set "
-           "solver.precision to \"float\" or \"double\"");
+    for (const Problem* p : problems)
+      if (const std::string why = refusalOf(*p, solver_); !why.empty()) fail(ErrorCode::BadInput, "body '", p->name, "': ", why);
     isDouble_ = solver_.precision == Precision::Double;
     rs_ = isDouble_ ? sizeof(double) : sizeof(float);
     auto instance = vk::Instance::shared();
@@ -100,16 +124,18 @@ class VulkanDevice final : public Device {
     ctx_ = std::make_unique<vk::Context>(instance, index, isDouble_, kBindingCount, sizeof(Push));
     // The PCG path (VulkanTuning::groupPcgNodes): whole iterations in one dispatch where every body is
     // small enough.
-    const long long groupNodes = tuning.groupPcgNodes != 0 ? tuning.groupPcgNodes : pd.gpu ? 2048 : -2;
+    // The PCG path for every body of the device (VulkanTuning::groupPcgNodes, from its largest body).
+    // A dispatch of pcg_group runs at most kGroupChunkBudget passes over 64 nodes per work-group
+    // (two an iteration per 64 nodes of its body, and one for the sums): lavapipe (Mesa 22.3)
+    // silently ended work-groups after about 3,000 such passes in one dispatch (a body of 1,331
+    // nodes after 72 iterations, of 3,751 after 26: test_vulkan_paths), and a GPU driver's watchdog
+    // ends long dispatches too. A body whose one iteration exceeds it takes the per-phase path.
+    constexpr std::size_t kGroupChunkBudget = 256;
+    const long long groupNodes = tuning.groupPcgNodes != 0 ? tuning.groupPcgNodes : 2048;
     std::size_t largest = 0;
     for (const BodySegment& sg : layout_.segments) largest = std::max(largest, sg.nodes);
-    groupPcg_ = groupNodes == -2 || (groupNodes > 0 && largest <= static_cast<std::size_t>(groupNodes));
-    // A dispatch of pcg_group runs at most kGroupChunkBudget passes over 64 nodes per work-group (two
-    // an iteration per 64 nodes of its body): lavapipe (Mesa 22.3) silently ended work-groups after
-    // about 1,500 such passes in one dispatch (a body of 1,331 nodes after 72 iterations, of 3,751
-    // after 26: test_vulkan_paths), and a GPU driver's watchdog ends long dispatches too.
-    constexpr std::size_t kGroupChunkBudget = 256;
     const std::size_t chunks = 2 * ((largest + kWg - 1) / kWg) + 1;
+    groupPcg_ = groupNodes > 0 && largest <= static_cast<std::size_t>(groupNodes) && chunks <= kGroupChunkBudget;
     groupIterationsPerDispatch_ = static_cast<int>(std::max<std::size_t>(1, kGroupChunkBudget / chunks));
     build();
   }
@@ -130,17 +156,13 @@ class VulkanDevice final : public Device {
 
   void setPositions(const BodySet& set, const ConstVectors& x) override {
     checkSet(set, x.size(), "positions");
+    for (std::size_t i = 0; i < set.size(); ++i) checkSize(segment(set[i]), *x[i], "positions");
     waitStaging();
     VkCommandBuffer cb = ctx_->begin();
     for (std::size_t i = 0; i < set.size(); ++i) {
       BodySegment& sg = layout_.segments[set[i]];
       const Eigen::VectorXd& xi = *x[i];
-      checkSize(sg, xi, "positions");
-      for (int k = 0; k < 3; ++k) {  // the centroid keeps float's x - c small (the forces read differences only)
-        double c = 0;
-        for (std::size_t n = 0; n < sg.nodes; ++n) c += xi[static_cast<Eigen::Index>(3 * n + k)];
-        sg.centroid[k] = sg.nodes ? c / static_cast<double>(sg.nodes) : 0.0;
-      }
+      centroidOf(xi, sg.nodes, sg.centroid);  // keeps float's x - c small (the forces read differences only)
       putReals(up_.mapped(), isDouble_, sg.dofBegin(), sg.dofs(), kChunk,
                [&](std::size_t d) { return xi[static_cast<Eigen::Index>(sg.hostDof(d))] - sg.centroid[d % 3]; });
       copy(cb, up_, sg.dofBegin() * rs_, buffer(kPos), sg.dofBegin() * rs_, sg.dofs() * rs_);
@@ -182,12 +204,12 @@ class VulkanDevice final : public Device {
     checkSet(set, p.size(), "products");
     checkSet(set, y.size(), "products");
     checkSet(set, coeffs.size(), "products");
+    for (std::size_t i = 0; i < set.size(); ++i) checkSize(segment(set[i]), *p[i], "a product's input");
     waitStaging();
     VkCommandBuffer cb = ctx_->begin();
     std::vector<SystemCoeffs> all(bodyCount());
     for (std::size_t i = 0; i < set.size(); ++i) {
       const BodySegment& sg = segment(set[i]);
-      checkSize(sg, *p[i], "a product's input");
       putReals(up_.mapped(), isDouble_, sg.dofBegin(), sg.dofs(), kChunk,
                [&](std::size_t d) { return (*p[i])[static_cast<Eigen::Index>(sg.hostDof(d))]; });
       copy(cb, up_, sg.dofBegin() * rs_, pin_, sg.dofBegin() * rs_, sg.dofs() * rs_);
@@ -208,6 +230,7 @@ class VulkanDevice final : public Device {
   }
 
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
+    checkSet(set, set.size(), "energies");
     VkCommandBuffer cb = ctx_->begin();
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
@@ -273,6 +296,7 @@ class VulkanDevice final : public Device {
     checkSet(set, b.size(), "right-hand sides");
     checkSet(set, x.size(), "starting vectors");
     checkSet(set, coeffs.size(), "coefficients");
+    for (std::size_t i = 0; i < set.size(); ++i) checkSize(segment(set[i]), *b[i], "a right-hand side");
     solve_ = set;
     cap_ = std::max(0, maxIterations);
     enqueued_ = 0;
@@ -290,15 +314,15 @@ class VulkanDevice final : public Device {
       const BodySegment& sg = segment(set[i]);
       const Eigen::VectorXd& bi = *b[i];
       const Eigen::VectorXd& xi = *x[i];
-      checkSize(sg, bi, "a right-hand side");
       const std::vector<std::uint8_t>& fixed = constrainedHost_[set[i]];
-      double bb = 0;
+      double bb = 0;  // of b as the device holds it (in float, entries below its range are 0)
       bool inRange = true;
       for (std::size_t d = 0; d < sg.dofs(); ++d)
         if (!fixed[d]) {
-          const double v = bi[static_cast<Eigen::Index>(d)];
+          const double given = bi[static_cast<Eigen::Index>(d)];
+          const double v = isDouble_ ? given : static_cast<double>(static_cast<float>(given));
           bb += v * v;
-          inRange = inRange && std::abs(v) <= maxReal;
+          inRange = inRange && std::abs(given) <= maxReal;
         }
       if (!std::isfinite(bb) || !inRange) {
         started_[i] = PcgStart::NonFiniteRhs;
@@ -378,7 +402,8 @@ class VulkanDevice final : public Device {
         ++groupDispatches_;
       }
     } else {
-      phaseDispatches_ += 4LL * k;
+      const int last = enqueued_ + k == cap_ ? 1 : 0;  // the cap's last iteration: an update and the scalars
+      phaseDispatches_ += 4LL * (k - last) + 2LL * last;
       for (int it = 0; it < k; ++it) {
         ++enqueued_;
         const bool last = enqueued_ == cap_;
@@ -730,11 +755,7 @@ class VulkanDevice final : public Device {
       const bool hasMass = static_cast<std::size_t>(p.lumpedMass.size()) == sg.dofs();
       hasMass_ = hasMass_ || hasMass;
       // Until the first setPositions the body is at rest (R = I: the rotated gradients are the gradients).
-      for (int k = 0; k < 3; ++k) {
-        double c = 0;
-        for (std::size_t n = 0; n < sg.nodes; ++n) c += p.restPositions[static_cast<Eigen::Index>(3 * n + k)];
-        layout_.segments[b].centroid[k] = sg.nodes ? c / static_cast<double>(sg.nodes) : 0.0;
-      }
+      centroidOf(p.restPositions, sg.nodes, layout_.segments[b].centroid);
       for (std::size_t d = 0; d < sg.dofs(); ++d) {
         rest[sg.dofBegin() + d] = p.restPositions[static_cast<Eigen::Index>(d)] - sg.centroid[d % 3];
         mass[sg.dofBegin() + d] = hasMass ? p.lumpedMass[static_cast<Eigen::Index>(d)] : 0.0;
@@ -890,7 +911,11 @@ std::size_t deviceIndex(const std::string& selector) {
   if (devices.empty())
     fail(ErrorCode::DeviceError, "Vulkan: no device can run corofem's shaders here (a compute queue and 31 storage "
          "buffers per stage are needed); install mesa-vulkan-drivers for the lavapipe CPU device");
-  if (selector.empty()) return 0;
+  if (selector.empty()) {  // the first GPU, else the first device (a loader may list lavapipe first)
+    for (std::size_t i = 0; i < devices.size(); ++i)
+      if (devices[i].gpu) return i;
+    return 0;
+  }
   if (std::all_of(selector.begin(), selector.end(), [](unsigned char c) { return std::isdigit(c) != 0; })) {
     const std::size_t i = std::stoul(selector);
     if (i < devices.size()) return i;
@@ -944,22 +969,7 @@ void registerVulkanBackend() {
     }
     return candidateOf(deviceIndex(selector));
   };
-  e.refuses = [](const Problem& p, const SolverDesc& s) -> std::string {
-    if (isHyperelastic(p.formulation))
-      return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
-             "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
-    if (s.linearSolver == LinearSolverKind::Cholesky)
-      return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the "
-             "solver \"pcg\"";
-    if (s.precision == Precision::Mixed)
-      return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
-             "\"double\"";
-    if (preconditionerOf(s, p) == PreconditionerKind::Amg)
-      return std::string("the vulkan backend has no multigrid preconditioner yet (") +
-             (s.preconditioner == PreconditionerKind::Auto ? "\"auto\" picks amg for this slender body" : "\"amg\" asked for") +
-             "); set solver.preconditioner to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend";
-    return "";
-  };
+  e.refuses = refusalOf;
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
                 const DeviceOptions& options) -> std::unique_ptr<Device> {
     if (c.selector == kExternalSelector)
