@@ -188,15 +188,8 @@ class VulkanDevice final : public Device {
     VkCommandBuffer cb = ctx_->begin();
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
-    Push push = basePush();
-    push.mode = kElementForces;
-    dispatch(cb, element_, apply_, push, elementGroups());
-    push.mode = kGatherSum;
-    dispatch(cb, gather_, apply_, push, nodeGroups());
-    for (std::size_t b : set) copy(cb, yout_, segment(b).dofBegin() * rs_, down_, segment(b).dofBegin() * rs_, segment(b).dofs() * rs_);
-    vk::hostReadBarrier(cb);
-    ctx_->wait(ctx_->submit());
-    for (std::size_t i = 0; i < set.size(); ++i) getReals(down_.mapped(), isDouble_, segment(set[i]), kChunk, *f[i]);
+    recordPasses(cb, kElementForces, kGatherSum);
+    readOutputs(cb, set, f);
   }
 
   void apply(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
@@ -217,16 +210,8 @@ class VulkanDevice final : public Device {
     }
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, all);
-    Push push = basePush();
-    push.mode = kElementProduct;
-    dispatch(cb, element_, apply_, push, elementGroups());
-    push.mode = kGatherProduct;
-    dispatch(cb, gather_, apply_, push, nodeGroups());
-    for (std::size_t b : set) copy(cb, yout_, segment(b).dofBegin() * rs_, down_, segment(b).dofBegin() * rs_, segment(b).dofs() * rs_);
-    vk::hostReadBarrier(cb);
-    stagingUse_ = ctx_->submit();
-    ctx_->wait(stagingUse_);
-    for (std::size_t i = 0; i < set.size(); ++i) getReals(down_.mapped(), isDouble_, segment(set[i]), kChunk, *y[i]);
+    recordPasses(cb, kElementProduct, kGatherProduct);
+    readOutputs(cb, set, y);  // waits: the staging buffer is free again
   }
 
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
@@ -559,6 +544,27 @@ class VulkanDevice final : public Device {
     vkCmdPushConstants(cb, ctx_->pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(Push), &push);
     vkCmdDispatch(cb, groups, 1, 1);
     vk::fullBarrier(cb);
+  }
+
+  /// An element pass and a node pass on the apply set (the product's input pin_, output yout_).
+  void recordPasses(VkCommandBuffer cb, std::uint32_t elementMode, std::uint32_t gatherMode) const {
+    Push push = basePush();
+    push.mode = elementMode;
+    dispatch(cb, element_, apply_, push, elementGroups());
+    push.mode = gatherMode;
+    dispatch(cb, gather_, apply_, push, nodeGroups());
+  }
+
+  /// Submits cb with the copies of yout_'s entries of the set's bodies, waits, and converts them
+  /// into `out` (one vector per body of the set, in the problem's numbering).
+  void readOutputs(VkCommandBuffer cb, const BodySet& set, const Vectors& out) {
+    for (std::size_t b : set) {
+      const std::size_t at = segment(b).dofBegin() * rs_;
+      copy(cb, yout_, at, down_, at, segment(b).dofs() * rs_);
+    }
+    vk::hostReadBarrier(cb);
+    ctx_->wait(ctx_->submit());
+    for (std::size_t i = 0; i < set.size(); ++i) getReals(down_.mapped(), isDouble_, segment(set[i]), kChunk, *out[i]);
   }
 
   /// w = A u (projected) and its partial sums u . w.
