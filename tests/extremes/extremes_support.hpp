@@ -51,6 +51,13 @@ struct BackendCase {
 /// How GoogleTest (and so CTest's test list) prints a case: what it runs on, not its bytes.
 inline void PrintTo(const BackendCase& c, std::ostream* os) { *os << c.describe(); }
 
+/// "<backend>_dev<selector>_<the device's name, 20 characters as an identifier>": a case name's stem.
+inline std::string caseBase(const std::string& backend, const std::string& selector, const std::string& device) {
+  std::string clean;
+  for (char c : device.substr(0, 20)) clean += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+  return backend + "_dev" + selector + "_" + clean;
+}
+
 /// Reference, then OpenCL and Vulkan, double and float, on every device. A case that cannot run
 /// (library built without OpenCL, no device, no fp64) stays in the list with the reason, so that the
 /// skip shows.
@@ -60,9 +67,7 @@ inline std::vector<BackendCase> backendCases() {
 #ifdef COROFEM_WITH_OPENCL
   const auto devices = detail::cl::listDevices();
   for (std::size_t i = 0; i < devices.size(); ++i) {
-    std::string clean;
-    for (char c : devices[i].name) clean += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
-    const std::string base = "opencl_dev" + std::to_string(i) + "_" + clean.substr(0, 20);
+    const std::string base = caseBase("opencl", std::to_string(i), devices[i].name);
     out.push_back({base + "_double", BackendKind::OpenCL, Precision::Double, std::to_string(i),
                    devices[i].fp64 ? "" : "device '" + devices[i].name + "' has no fp64 (cl_khr_fp64)"});
     out.push_back({base + "_float", BackendKind::OpenCL, Precision::Float, std::to_string(i), ""});
@@ -77,9 +82,7 @@ inline std::vector<BackendCase> backendCases() {
   std::vector<detail::Candidate> vulkan;
   if (const auto entry = detail::findBackend("vulkan")) vulkan = entry->candidates();
   for (const detail::Candidate& d : vulkan) {
-    std::string clean;
-    for (char c : d.device) clean += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
-    const std::string base = "vulkan_dev" + d.selector + "_" + clean.substr(0, 20);
+    const std::string base = caseBase("vulkan", d.selector, d.device);
     out.push_back({base + "_double", BackendKind::Vulkan, Precision::Double, d.selector, ""});
     out.push_back({base + "_float", BackendKind::Vulkan, Precision::Float, d.selector, ""});
   }

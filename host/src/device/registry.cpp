@@ -3,6 +3,8 @@
 
 #include "util/error.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <mutex>
 
 namespace corofem::detail {
@@ -45,6 +47,27 @@ Registry& ready() {
 std::string Candidate::label() const {
   if (backend == "reference" && (device.empty() || device == referenceCandidate().device)) return "reference";
   return backend + ":" + selector + " (" + device + ")";
+}
+
+std::size_t selectDeviceIndex(const std::vector<std::string>& names, const std::vector<bool>& gpu,
+                              const std::string& selector) {
+  if (selector.empty()) {
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (i < gpu.size() && gpu[i]) return i;
+    return names.empty() ? names.size() : 0;
+  }
+  if (std::all_of(selector.begin(), selector.end(), [](unsigned char c) { return std::isdigit(c) != 0; })) {
+    const unsigned long index = selector.size() > 9 ? names.size() : std::stoul(selector);
+    return index < names.size() ? index : names.size();
+  }
+  auto lower = [](std::string s) {
+    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return s;
+  };
+  const std::string want = lower(selector);
+  for (std::size_t i = 0; i < names.size(); ++i)
+    if (lower(names[i]).find(want) != std::string::npos) return i;
+  return names.size();
 }
 
 Candidate referenceCandidate() {

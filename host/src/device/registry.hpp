@@ -79,6 +79,13 @@ std::shared_ptr<const BackendEntry> backendOf(const Candidate& c);
 /// The reference backend's one candidate.
 Candidate referenceCandidate();
 
+/// The device a selector names among a backend's devices (names[i], gpu[i]: device i's name and
+/// whether it is a GPU), the rule every device backend's selector follows: "" the first GPU, else
+/// the first device; digits an index; anything else the first device whose name contains it,
+/// whatever the case. names.size() where none matches (the caller's error lists its devices).
+std::size_t selectDeviceIndex(const std::vector<std::string>& names, const std::vector<bool>& gpu,
+                              const std::string& selector);
+
 /// Registers the backends compiled into this library (backends/builtin_backends.cpp).
 void registerBuiltinBackends();
 

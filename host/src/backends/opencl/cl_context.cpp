@@ -1,6 +1,8 @@
 // Device discovery, selection and context ownership (cl_context.hpp).
 #include "backends/opencl/cl_context.hpp"
 
+#include "device/registry.hpp"
+
 #include "util/error.hpp"
 
 #include <algorithm>
@@ -27,11 +29,6 @@ std::string platformString(cl_platform_id platform, cl_platform_info what) {
   std::string s(size, '\0');
   if (clGetPlatformInfo(platform, what, size, s.data(), nullptr) != CL_SUCCESS) return {};
   while (!s.empty() && (s.back() == '\0' || s.back() == ' ')) s.pop_back();
-  return s;
-}
-
-std::string lower(std::string s) {
-  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
   return s;
 }
 
@@ -98,21 +95,13 @@ DeviceInfo selectDevice(const std::string& selector) {
   if (devices.empty())
     fail(ErrorCode::DeviceError, "no OpenCL device found (no platform reports a device); install a "
                                  "GPU driver or pocl-opencl-icd, or use \"backend\": \"reference\"");
-  if (selector.empty()) {
-    for (const DeviceInfo& d : devices)
-      if (d.gpu) return d;
-    return devices.front();
+  std::vector<std::string> names;
+  std::vector<bool> gpu;
+  for (const DeviceInfo& d : devices) {
+    names.push_back(d.name);
+    gpu.push_back(d.gpu);
   }
-  const bool numeric = std::all_of(selector.begin(), selector.end(),
-                                   [](unsigned char c) { return std::isdigit(c) != 0; });
-  if (numeric) {
-    const unsigned long index = std::stoul(selector);
-    if (index < devices.size()) return devices[index];
-  } else {
-    const std::string want = lower(selector);
-    for (const DeviceInfo& d : devices)
-      if (lower(d.name).find(want) != std::string::npos) return d;
-  }
+  if (const std::size_t i = selectDeviceIndex(names, gpu, selector); i < devices.size()) return devices[i];
   fail(ErrorCode::DeviceError, "OpenCL device selector '", selector,
        "' matches no device; give an index or a part of a name from this list:\n",
        describeDevices(devices));

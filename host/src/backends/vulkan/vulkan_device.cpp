@@ -12,6 +12,7 @@
 // VkDevice, the multigrid preconditioner.
 #include "backends/vulkan/shaders.hpp"
 #include "backends/vulkan/vk_runtime.hpp"
+#include "backends/vulkan/vulkan_device.hpp"
 #include "device/body_layout.hpp"
 #include "device/registry.hpp"
 #include "util/error.hpp"
@@ -19,12 +20,10 @@
 #include "../../../../kernels/shared/corofem_layout.h"
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <deque>
 #include <limits>
-#include <sstream>
 
 namespace corofem::detail {
 
@@ -76,25 +75,6 @@ std::uint32_t preconditionerCode(PreconditionerKind k) {
   }
 }
 
-/// Why the backend cannot run a body with these settings ("" where it can); the registry entry's
-/// `refuses` and the device's constructor both ask it.
-std::string refusalOf(const Problem& p, const SolverDesc& s) {
-  if (isHyperelastic(p.formulation))
-    return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
-           "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
-  if (s.linearSolver == LinearSolverKind::Cholesky)
-    return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the solver "
-           "\"pcg\"";
-  if (s.precision == Precision::Mixed)
-    return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
-           "\"double\"";
-  if (preconditionerOf(s, p) == PreconditionerKind::Amg)
-    return std::string("the vulkan backend has no multigrid preconditioner yet (") +
-           (s.preconditioner == PreconditionerKind::Auto ? "\"auto\" picks amg for this slender body" : "\"amg\" asked for") +
-           "); set solver.preconditioner to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend";
-  return "";
-}
-
 /// The mean of x's nodes (3N entries), subtracted from the positions the device holds.
 void centroidOf(const Eigen::VectorXd& x, std::size_t nodes, double* c) {
   for (int k = 0; k < 3; ++k) {
@@ -110,7 +90,7 @@ class VulkanDevice final : public Device {
                const VulkanTuning& tuning)
       : solver_(resolvedSolver(solver, problems)), layout_(problems, tuning.localityOrder, kWg, kWg, 12) {
     for (const Problem* p : problems)
-      if (const std::string why = refusalOf(*p, solver_); !why.empty()) fail(ErrorCode::BadInput, "body '", p->name, "': ", why);
+      if (const std::string why = vulkanRefusal(*p, solver_); !why.empty()) fail(ErrorCode::BadInput, "body '", p->name, "': ", why);
     isDouble_ = solver_.precision == Precision::Double;
     rs_ = isDouble_ ? sizeof(double) : sizeof(float);
     auto instance = vk::Instance::shared();
@@ -906,90 +886,11 @@ class VulkanDevice final : public Device {
   std::vector<char> residualFor_;
 };
 
-std::size_t deviceIndex(const std::string& selector) {
-  const auto instance = vk::Instance::shared();
-  const auto& devices = instance->devices();
-  auto list = [&] {
-    std::ostringstream os;
-    for (std::size_t i = 0; i < devices.size(); ++i) os << (i ? ", " : "") << i << " (" << devices[i].name << ")";
-    return devices.empty() ? std::string("none") : os.str();
-  };
-  if (devices.empty())
-    fail(ErrorCode::DeviceError, "Vulkan: no device can run corofem's shaders here (a compute queue and 31 storage "
-         "buffers per stage are needed); install mesa-vulkan-drivers for the lavapipe CPU device");
-  if (selector.empty()) {  // the first GPU, else the first device (a loader may list lavapipe first)
-    for (std::size_t i = 0; i < devices.size(); ++i)
-      if (devices[i].gpu) return i;
-    return 0;
-  }
-  if (std::all_of(selector.begin(), selector.end(), [](unsigned char c) { return std::isdigit(c) != 0; })) {
-    const std::size_t i = std::stoul(selector);
-    if (i < devices.size()) return i;
-    fail(ErrorCode::DeviceError, "Vulkan: there is no device ", selector, "; the devices are ", list());
-  }
-  auto lower = [](std::string s) {
-    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    return s;
-  };
-  for (std::size_t i = 0; i < devices.size(); ++i)
-    if (lower(devices[i].name).find(lower(selector)) != std::string::npos) return i;
-  fail(ErrorCode::DeviceError, "Vulkan: no device matches \"", selector, "\"; the devices are ", list());
-}
-
-Candidate candidateOf(std::size_t index) {
-  const auto instance = vk::Instance::shared();
-  const vk::PhysicalDevice& d = instance->devices()[index];
-  Candidate c;
-  c.backend = "vulkan";
-  c.device = d.name;
-  c.selector = std::to_string(index);
-  c.driver = d.driver;
-  c.gpu = d.gpu;
-  return c;
-}
-
 }  // namespace
 
-void registerVulkanBackend() {
-  BackendEntry e;
-  e.name = "vulkan";
-  e.batches = true;
-  e.candidates = [] {
-    std::vector<Candidate> out;
-    try {
-      const auto instance = vk::Instance::shared();
-      for (std::size_t i = 0; i < instance->devices().size(); ++i) out.push_back(candidateOf(i));
-    } catch (const Error&) {
-      // no Vulkan driver here: no candidate (the scheduler goes on with the others)
-    }
-    return out;
-  };
-  e.resolve = [](const std::string& selector) {
-    if (selector == kExternalSelector) {  // made (and refused) by create, so that the choice is not skipped
-      Candidate c;
-      c.backend = "vulkan";
-      c.device = "the application's Vulkan device";
-      c.selector = kExternalSelector;
-      c.driver = "external";
-      return c;
-    }
-    return candidateOf(deviceIndex(selector));
-  };
-  e.refuses = refusalOf;
-  e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
-                const DeviceOptions& options) -> std::unique_ptr<Device> {
-    if (c.selector == kExternalSelector)
-      fail(ErrorCode::NotCompiledIn, "SimulationOptions::device: this build's Vulkan backend cannot adopt the "
-           "application's VkDevice yet (it makes its own); leave SimulationOptions::device empty, or lend an OpenCL "
-           "device");
-    return std::make_unique<VulkanDevice>(problems, solver, deviceIndex(c.selector), options.vulkan);
-  };
-  e.buildId = [] {
-    std::ostringstream hex;
-    hex << "shaders " << std::hex << vk::shaderHash();
-    return hex.str();
-  };
-  registerBackend(std::move(e));
+std::unique_ptr<Device> createVulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                           std::size_t index, const VulkanTuning& tuning) {
+  return std::make_unique<VulkanDevice>(problems, solver, index, tuning);
 }
 
 }  // namespace corofem::detail

@@ -1,0 +1,111 @@
+// The "vulkan" entry of the backend registry (device/registry.hpp): the devices the Vulkan
+// instance lists, the selector's rule (selectDeviceIndex), what the backend refuses, and its build
+// id (the embedded shaders' hash) for the calibration cache.
+#include "backends/vulkan/shaders.hpp"
+#include "backends/vulkan/vk_runtime.hpp"
+#include "backends/vulkan/vulkan_device.hpp"
+#include "device/registry.hpp"
+#include "util/error.hpp"
+
+#include <sstream>
+
+namespace corofem::detail {
+
+std::string vulkanRefusal(const Problem& p, const SolverDesc& s) {
+  if (isHyperelastic(p.formulation))
+    return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
+           "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
+  if (s.linearSolver == LinearSolverKind::Cholesky)
+    return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the solver "
+           "\"pcg\"";
+  if (s.precision == Precision::Mixed)
+    return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
+           "\"double\"";
+  if (preconditionerOf(s, p) == PreconditionerKind::Amg)
+    return std::string("the vulkan backend has no multigrid preconditioner yet (") +
+           (s.preconditioner == PreconditionerKind::Auto ? "\"auto\" picks amg for this slender body" : "\"amg\" asked for") +
+           "); set solver.preconditioner to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend";
+  return "";
+}
+
+namespace {
+
+std::size_t deviceIndex(const std::string& selector) {
+  const auto instance = vk::Instance::shared();
+  const auto& devices = instance->devices();
+  auto list = [&] {
+    std::ostringstream os;
+    for (std::size_t i = 0; i < devices.size(); ++i) os << (i ? ", " : "") << i << " (" << devices[i].name << ")";
+    return devices.empty() ? std::string("none") : os.str();
+  };
+  if (devices.empty())
+    fail(ErrorCode::DeviceError, "Vulkan: no device can run corofem's shaders here (a compute queue and 31 storage "
+         "buffers per stage are needed); install mesa-vulkan-drivers for the lavapipe CPU device");
+  std::vector<std::string> names;
+  std::vector<bool> gpu;
+  for (const vk::PhysicalDevice& d : devices) {
+    names.push_back(d.name);
+    gpu.push_back(d.gpu);
+  }
+  if (const std::size_t i = selectDeviceIndex(names, gpu, selector); i < devices.size()) return i;
+  fail(ErrorCode::DeviceError, "Vulkan device selector '", selector, "' matches no device; give an index or a part "
+       "of a name of: ", list());
+}
+
+Candidate candidateOf(std::size_t index) {
+  const auto instance = vk::Instance::shared();
+  const vk::PhysicalDevice& d = instance->devices()[index];
+  Candidate c;
+  c.backend = "vulkan";
+  c.device = d.name;
+  c.selector = std::to_string(index);
+  c.driver = d.driver;
+  c.gpu = d.gpu;
+  return c;
+}
+
+}  // namespace
+
+void registerVulkanBackend() {
+  BackendEntry e;
+  e.name = "vulkan";
+  e.batches = true;
+  e.candidates = [] {
+    std::vector<Candidate> out;
+    try {
+      const auto instance = vk::Instance::shared();
+      for (std::size_t i = 0; i < instance->devices().size(); ++i) out.push_back(candidateOf(i));
+    } catch (const Error&) {
+      // no Vulkan driver here: no candidate (the scheduler goes on with the others)
+    }
+    return out;
+  };
+  e.resolve = [](const std::string& selector) {
+    if (selector == kExternalSelector) {  // made (and refused) by create, so that the choice is not skipped
+      Candidate c;
+      c.backend = "vulkan";
+      c.device = "the application's Vulkan device";
+      c.selector = kExternalSelector;
+      c.driver = "external";
+      return c;
+    }
+    return candidateOf(deviceIndex(selector));
+  };
+  e.refuses = vulkanRefusal;
+  e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
+                const DeviceOptions& options) -> std::unique_ptr<Device> {
+    if (c.selector == kExternalSelector)
+      fail(ErrorCode::NotCompiledIn, "SimulationOptions::device: this build's Vulkan backend cannot adopt the "
+           "application's VkDevice yet (it makes its own); leave SimulationOptions::device empty, or lend an OpenCL "
+           "device");
+    return createVulkanDevice(problems, solver, deviceIndex(c.selector), options.vulkan);
+  };
+  e.buildId = [] {
+    std::ostringstream hex;
+    hex << "shaders " << std::hex << vk::shaderHash();
+    return hex.str();
+  };
+  registerBackend(std::move(e));
+}
+
+}  // namespace corofem::detail
