@@ -70,6 +70,17 @@ std::size_t selectDeviceIndex(const std::vector<std::string>& names, const std::
   return names.size();
 }
 
+BackendEntry unavailableBackend(const std::string& name, const std::string& why) {
+  BackendEntry e;
+  e.name = name;
+  e.candidates = [] { return std::vector<Candidate>{}; };
+  e.resolve = [why](const std::string&) -> Candidate { fail(ErrorCode::NotCompiledIn, why); };
+  e.refuses = [why](const Problem&, const SolverDesc&) -> std::string { fail(ErrorCode::NotCompiledIn, why); };
+  e.create = [why](const std::vector<const Problem*>&, const SolverDesc&, const Candidate&,
+                   const DeviceOptions&) -> std::unique_ptr<Device> { fail(ErrorCode::NotCompiledIn, why); };
+  return e;
+}
+
 Candidate referenceCandidate() {
   Candidate c;
   c.backend = "reference";

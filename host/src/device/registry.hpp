@@ -86,6 +86,10 @@ Candidate referenceCandidate();
 std::size_t selectDeviceIndex(const std::vector<std::string>& names, const std::vector<bool>& gpu,
                               const std::string& selector);
 
+/// The entry of a backend this build leaves out: no device, and every other call throws
+/// Error(NotCompiledIn) with `why` (which names the fix). backends/<name>_unavailable.cpp register it.
+BackendEntry unavailableBackend(const std::string& name, const std::string& why);
+
 /// Registers the backends compiled into this library (backends/builtin_backends.cpp).
 void registerBuiltinBackends();
 
