@@ -139,17 +139,24 @@ corofem_status corofem_scene_set_body_mesh(corofem_scene* scene, int body, const
 typedef enum corofem_gpu_api {
   COROFEM_GPU_NONE = 0,   /**< no handle */
   COROFEM_GPU_OPENCL = 1, /**< cl_mem, cl_context, cl_command_queue, cl_device_id */
-  COROFEM_GPU_VULKAN = 2  /**< VkBuffer, VkDevice, ... (the Vulkan backend, not written yet) */
+  COROFEM_GPU_VULKAN = 2  /**< VkBuffer, VkInstance, VkPhysicalDevice, VkDevice, VkQueue */
 } corofem_gpu_api;
 
-/** The application's own device, lent to corofem (corofem::ExternalDevice): with api
- *  COROFEM_GPU_OPENCL, its cl_context, an in-order cl_command_queue on it and that queue's
- *  cl_device_id, all three. corofem retains them while it uses them and never destroys them. */
+/** The application's own device, lent to corofem (corofem::ExternalDevice), which uses it while it
+ *  lives and never destroys it. COROFEM_GPU_OPENCL: its cl_context, an in-order cl_command_queue on
+ *  it and that queue's cl_device_id, all three (retained while used). COROFEM_GPU_VULKAN: instance,
+ *  physical_device, device, a queue of family queue_family that supports compute, and
+ *  shader_float64 = 1 when the device was created with that feature (double precision needs it);
+ *  no other thread may submit to that queue during a corofem call. */
 typedef struct corofem_external_device {
   corofem_gpu_api api; /**< COROFEM_GPU_NONE: none lent (the default) */
-  void* context;
-  void* queue;
-  void* device;
+  void* context;       /**< OpenCL: cl_context */
+  void* queue;         /**< OpenCL: cl_command_queue; Vulkan: VkQueue */
+  void* device;        /**< OpenCL: cl_device_id; Vulkan: VkDevice */
+  void* instance;        /**< Vulkan: VkInstance */
+  void* physical_device; /**< Vulkan: VkPhysicalDevice */
+  uint32_t queue_family; /**< Vulkan: the family of queue */
+  int shader_float64;    /**< Vulkan: 1 when device has shaderFloat64 enabled */
 } corofem_external_device;
 
 /** What an application adds to a scene at creation (corofem::SimulationOptions). */
@@ -159,8 +166,8 @@ typedef struct corofem_options {
    *  resort. NULL with 0 (the default): the scene's "backend" decides. */
   const char* const* devices;
   size_t device_count;
-  /** The application's OpenCL context, queue and device: every body runs there, the surfaces'
-   *  buffers live in its context. */
+  /** The application's OpenCL or Vulkan device: every body runs there, the surfaces' buffers live
+   *  on it. */
   corofem_external_device device;
   /** The largest mesh, surface and .bou files read and boxes generated (creation and
    *  corofem_simulation_add_body; max_scene_bytes is not used here). Zeroed: the defaults. */

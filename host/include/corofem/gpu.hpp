@@ -34,16 +34,31 @@ struct GpuBuffer {
   explicit operator bool() const { return handle != 0; }
 };
 
-/// Device objects that an application owns and lends to corofem, which retains them (OpenCL) for as
-/// long as it uses them and never destroys them; the application keeps them alive meanwhile.
+/// Device objects that an application owns and lends to corofem, which uses them for as long as it
+/// lives and never destroys them; the application keeps them alive meanwhile.
+///
+/// OpenCL (api = GpuApi::OpenCL): `context`, an in-order `queue` on it and that queue's `device`
+/// (a cl_context, cl_command_queue and cl_device_id, all three, retained while used). corofem's
+/// buffers and kernels then live in the application's context, so that its output buffers can be
+/// shared with the application's own work on the queue.
+///
+/// Vulkan (api = GpuApi::Vulkan): `instance`, `physicalDevice`, `device` (a VkInstance,
+/// VkPhysicalDevice and VkDevice) and a `queue` (VkQueue) of family `queueFamily` that supports
+/// compute; `context` is not used. corofem's buffers, pipelines and command buffers then live on the
+/// application's device, so a renderer draws the surfaces (Simulation::surfaceBuffer) from
+/// corofem's VkBuffers directly. corofem submits to the queue only from inside its own calls; Vulkan
+/// asks that no other thread submit to the same queue meanwhile (the application's lock, if it
+/// shares the queue between threads). The device needs no extension; `shaderFloat64` says whether
+/// it was created with that feature enabled, which double precision needs (Vulkan cannot be asked).
 struct ExternalDevice {
   GpuApi api = GpuApi::None;  ///< None: none lent
-  /// OpenCL: the cl_context, an in-order cl_command_queue on it and that queue's cl_device_id (all
-  /// three). corofem's buffers and kernels then live in the application's context, so that its
-  /// output buffers can be shared with the application's own work on the queue.
-  void* context = nullptr;
-  void* queue = nullptr;
-  void* device = nullptr;
+  void* context = nullptr;    ///< OpenCL: cl_context
+  void* queue = nullptr;      ///< OpenCL: cl_command_queue; Vulkan: VkQueue
+  void* device = nullptr;     ///< OpenCL: cl_device_id; Vulkan: VkDevice
+  void* instance = nullptr;        ///< Vulkan: VkInstance
+  void* physicalDevice = nullptr;  ///< Vulkan: VkPhysicalDevice
+  std::uint32_t queueFamily = 0;   ///< Vulkan: the family of `queue`
+  bool shaderFloat64 = false;      ///< Vulkan: `device` has the shaderFloat64 feature enabled
   explicit operator bool() const { return api != GpuApi::None; }
 };
 

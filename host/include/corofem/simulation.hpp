@@ -56,10 +56,11 @@ struct SimulationOptions {
   /// device that fails (at creation too) hands its bodies to the next, and the reference backend
   /// is always the last. Empty (the default): the scene's "backend" decides (scheduler).
   std::vector<std::string> devices;
-  /// The application's own device (its OpenCL context, queue and device): every body runs there,
-  /// the reference backend its fallback (as devices = {"opencl:external"}), and the surfaces'
-  /// buffers (surfaceBuffer) live in the application's context. None (the default): corofem makes
-  /// its own.
+  /// The application's own device (ExternalDevice: an OpenCL context, queue and device, or a
+  /// Vulkan instance, physical device, device and queue): every body runs there, the reference
+  /// backend its fallback (as devices = {"opencl:external"} or {"vulkan:external"}), and the
+  /// surfaces' buffers (surfaceBuffer) live on it, for the application's renderer to draw from.
+  /// None (the default): corofem makes its own.
   ExternalDevice device;
   /// Where the host's work between device calls runs (per-body passes over a batch's bodies, passes
   /// over large node vectors): the application's task system. Empty (the default): a small pool of
@@ -208,25 +209,31 @@ class Simulation {
   /// The deformed surface at the current state: 3 doubles per vertex and, when `normals` is given,
   /// smooth unit normals (3 floats per vertex). BadInput for a body without a surface.
   ///
-  /// On a body that runs on a device with surfaces (the OpenCL backend) the surface is computed on
+  /// On a body that runs on a device with surfaces (the OpenCL and Vulkan backends) the surface is computed on
   /// the device, from the device's own node positions (no host round trip of the tet nodes; see
   /// surfaceBuffer), and this call is the explicit read-back: the positions are then float-rounded
   /// (the device buffer holds floats). On the reference backend it is computed on the host
   /// (deformSurface).
   Status readSurface(int body, std::vector<double>& positions, std::vector<float>* normals = nullptr) const;
   /// The device buffer of the deformed surface when the body has a surface and runs on a device
-  /// that computes it (GpuApi::OpenCL: the handle is a cl_mem), else an empty GpuBuffer (no
+  /// that computes it (GpuApi::OpenCL: the handle is a cl_mem; GpuApi::Vulkan: a VkBuffer made with
+  /// vertex-buffer usage, to bind at `offset`), else an empty GpuBuffer (no
   /// surface, the reference backend, or an update that could not be enqueued). Layout
   /// (BodyDesc::surfaceLayout, scene key "surface_layout"): interleaved (the default), per vertex 6
   /// float32 -- position x, y, z then unit normal x, y, z -- a 24-byte stride; separate, the
   /// positions only, 3 float32 per vertex (a 12-byte stride), the normals in surfaceNormalBuffer().
   /// Vertices in the order of restSurface(body). On a batch (backend.batch) the surfaces of the
   /// batch's bodies with one layout are one set of buffers and launches: each body's buffer is its
-  /// region (an OpenCL sub-buffer) of the shared output, and bringing one body's surface up to date
+  /// region of the shared output (OpenCL: a sub-buffer; Vulkan: the shared VkBuffer from `offset`),
+  /// and bringing one body's surface up to date
   /// updates them all. The call enqueues the update on the device's in-order queue when the body
   /// stepped since the last one and does not wait: work the application enqueues on that queue
-  /// afterwards (SimulationOptions::device) sees the current surface; from another queue or API,
-  /// call updateSurface() first. The buffer belongs to the Simulation and stays valid until it is
+  /// afterwards (SimulationOptions::device) sees the current surface. On Vulkan the update is
+  /// submitted to the device's queue and ends with a pipeline barrier from its compute writes to
+  /// every later command's vertex input, vertex and compute shader reads and transfers, so the
+  /// application's later submissions to the queue it lent (SimulationOptions::device) draw the
+  /// current surface with no semaphore or wait. From another queue or API, call updateSurface()
+  /// first. The buffer belongs to the Simulation and stays valid until it is
   /// destroyed, the body moves to another device (a device failure) or its batch's device is made
   /// again (removeBody of another body of the batch); ask for it again after step() rather than
   /// caching it.

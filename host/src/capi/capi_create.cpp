@@ -15,11 +15,15 @@ SimulationOptions optionsOf(const corofem_options& o, const char* function) {
     case COROFEM_GPU_VULKAN: options.device.api = GpuApi::Vulkan; break;
     default:
       detail::fail(ErrorCode::BadInput, function, ": options->device.api is ", static_cast<int>(d.api),
-                   "; use COROFEM_GPU_NONE (no device lent) or COROFEM_GPU_OPENCL");
+                   "; use COROFEM_GPU_NONE (no device lent), COROFEM_GPU_OPENCL or COROFEM_GPU_VULKAN");
   }
   options.device.context = d.context;
   options.device.queue = d.queue;
   options.device.device = d.device;
+  options.device.instance = d.instance;
+  options.device.physicalDevice = d.physical_device;
+  options.device.queueFamily = d.queue_family;
+  options.device.shaderFloat64 = d.shader_float64 != 0;
   options.inputLimits = limitsOf(&o.limits);
   return options;
 }

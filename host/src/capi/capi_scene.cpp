@@ -125,6 +125,9 @@ corofem_options corofem_default_options(void) {
   o.device_count = 0;
   o.device.api = COROFEM_GPU_NONE;
   o.device.context = o.device.queue = o.device.device = nullptr;
+  o.device.instance = o.device.physical_device = nullptr;
+  o.device.queue_family = 0;
+  o.device.shader_float64 = 0;
   o.limits = corofem_default_input_limits();
   return o;
 }

@@ -7,6 +7,7 @@
 
 #include <corofem/embed.hpp>
 
+#include "embed/one_ring.hpp"
 #include "util/error.hpp"
 
 #include "backends/opencl/cl_check.hpp"
@@ -53,6 +54,7 @@ extern const std::size_t corofem_opencl_sources_count;
 namespace {
 
 using detail::fail;
+using detail::oneRing;
 using detail::cl::checkCl;
 
 /// The surface program: the shared layout header(s), then surface_update.cl (the rest of the
@@ -84,75 +86,6 @@ struct KernelRelease {
 };
 using Mem = std::unique_ptr<_cl_mem, MemRelease>;
 using Kernel = std::unique_ptr<_cl_kernel, KernelRelease>;
-
-/// The one-ring of vertex v as surface_normals reads it (surface_update.cl): a sequence r_0..r_{L-1}
-/// such that n_v = sum_i (x_{r_i} - x_v) x (x_{r_{i+1 mod L}} - x_v) is the sum of the face vectors of
-/// v's triangles. Each triangle (a, b, c) at v gives the pair (p, q) that follows v in its cyclic
-/// order ((b, c) at a, (c, a) at b, (a, b) at c). Pairs are chained where one's q is the next one's
-/// p (a fan); a vertex whose pairs form one closed fan gets just the fan, rotated to start at its
-/// smallest index (so that on a mesh numbered row by row the slots of consecutive vertices are
-/// consecutive vertices: one vector load in the kernel); otherwise each fan is followed by v itself
-/// (terms with v are exactly 0), a closed one after repeating its first vertex. Degenerate triangles
-/// (a repeated index, face vector exactly 0 on the host too) are left out. Deterministic: fans are
-/// started at open ends first, then in the binding's (ascending) triangle order.
-void oneRing(const SurfaceBinding& b, std::uint32_t v, std::vector<std::pair<std::uint32_t, std::uint32_t>>& pairs,
-             std::vector<std::uint32_t>& out) {
-  pairs.clear();
-  out.clear();
-  for (std::uint32_t q = b.vertexTriangleOffsets[v]; q < b.vertexTriangleOffsets[v + 1]; ++q) {
-    const std::uint32_t* t = &b.triangles[3 * static_cast<std::size_t>(b.vertexTriangles[q])];
-    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) continue;
-    if (t[0] == v) pairs.emplace_back(t[1], t[2]);
-    else if (t[1] == v) pairs.emplace_back(t[2], t[0]);
-    else pairs.emplace_back(t[0], t[1]);
-  }
-  const std::size_t d = pairs.size();
-  if (d == 0) return;
-  // Pairs sorted by their first vertex (then by position): the successor of a fan's last vertex is
-  // the first unused pair starting there.
-  std::vector<std::uint32_t> byFirst(d), seconds(d);
-  for (std::size_t i = 0; i < d; ++i) byFirst[i] = static_cast<std::uint32_t>(i), seconds[i] = pairs[i].second;
-  std::sort(byFirst.begin(), byFirst.end(), [&](std::uint32_t i, std::uint32_t j) {
-    return pairs[i].first != pairs[j].first ? pairs[i].first < pairs[j].first : i < j;
-  });
-  std::sort(seconds.begin(), seconds.end());
-  std::vector<char> used(d, 0);
-  auto successor = [&](std::uint32_t vertex) -> std::size_t {
-    auto it = std::lower_bound(byFirst.begin(), byFirst.end(), vertex,
-                               [&](std::uint32_t i, std::uint32_t key) { return pairs[i].first < key; });
-    for (; it != byFirst.end() && pairs[*it].first == vertex; ++it)
-      if (!used[*it]) return *it;
-    return d;
-  };
-  std::vector<std::vector<std::uint32_t>> fans;
-  std::vector<char> closed;
-  auto walk = [&](std::size_t start) {
-    std::vector<std::uint32_t> fan{pairs[start].first, pairs[start].second};
-    used[start] = 1;
-    for (std::size_t next = successor(fan.back()); next < d; next = successor(fan.back())) {
-      used[next] = 1;
-      fan.push_back(pairs[next].second);
-    }
-    const bool isClosed = fan.size() > 2 && fan.back() == fan.front();
-    if (isClosed) fan.pop_back();
-    fans.push_back(std::move(fan));
-    closed.push_back(isClosed);
-  };
-  for (std::size_t i = 0; i < d; ++i)  // open ends: no pair ends where this one starts
-    if (!used[i] && !std::binary_search(seconds.begin(), seconds.end(), pairs[i].first)) walk(i);
-  for (std::size_t i = 0; i < d; ++i)
-    if (!used[i]) walk(i);
-  if (fans.size() == 1 && closed[0]) {
-    out = std::move(fans[0]);
-    std::rotate(out.begin(), std::min_element(out.begin(), out.end()), out.end());
-    return;
-  }
-  for (std::size_t f = 0; f < fans.size(); ++f) {
-    out.insert(out.end(), fans[f].begin(), fans[f].end());
-    if (closed[f]) out.push_back(fans[f].front());
-    out.push_back(v);
-  }
-}
 
 /// The streams' stride: the vertex count rounded up to whole blocks of every vector width.
 std::size_t paddedVertexCount(std::size_t n) { return (n + 63) / 64 * 64; }

@@ -44,6 +44,12 @@ const std::uint32_t kPcgGroupFloat[] =
 const std::uint32_t kPcgGroupDouble[] =
 #include "pcg_group_double.inc"
 ;
+const std::uint32_t kSurfaceFloat[] =
+#include "surface_float.inc"
+;
+const std::uint32_t kSurfaceDouble[] =
+#include "surface_double.inc"
+;
 // clang-format on
 
 template <std::size_t N>
@@ -61,13 +67,15 @@ Spirv shaderCode(Shader shader, bool isDouble) {
     case Shader::Pcg: return isDouble ? of(kPcgDouble) : of(kPcgFloat);
     case Shader::Reduce: return isDouble ? of(kReduceDouble) : of(kReduceFloat);
     case Shader::PcgGroup: return isDouble ? of(kPcgGroupDouble) : of(kPcgGroupFloat);
+    case Shader::Surface: return isDouble ? of(kSurfaceDouble) : of(kSurfaceFloat);
   }
   return {};
 }
 
 std::uint64_t shaderHash() {
   std::uint64_t h = 1469598103934665603ull;
-  for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup})
+  for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup,
+                   Shader::Surface})
     for (bool d : {false, true}) {
       const Spirv code = shaderCode(s, d);
       const unsigned char* bytes = reinterpret_cast<const unsigned char*>(code.words);

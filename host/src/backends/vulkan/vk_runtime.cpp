@@ -38,6 +38,34 @@ void check(VkResult r, const char* what) {
 
 // ------------------------------------------------------------------------------------ Instance
 
+PhysicalDevice describe(VkPhysicalDevice h, bool* usable) {
+  VkPhysicalDeviceProperties props;
+  vkGetPhysicalDeviceProperties(h, &props);
+  VkPhysicalDeviceFeatures features;
+  vkGetPhysicalDeviceFeatures(h, &features);
+  std::uint32_t families = 0;
+  vkGetPhysicalDeviceQueueFamilyProperties(h, &families, nullptr);
+  std::vector<VkQueueFamilyProperties> fam(families);
+  vkGetPhysicalDeviceQueueFamilyProperties(h, &families, fam.data());
+  PhysicalDevice d;
+  d.handle = h;
+  d.name = props.deviceName;
+  d.driver = std::to_string(props.vendorID) + ":" + std::to_string(props.driverVersion);
+  d.gpu = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU ||
+          props.deviceType == VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU ||
+          props.deviceType == VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU;
+  d.float64 = features.shaderFloat64 == VK_TRUE;
+  d.limits = props.limits;
+  bool found = false;
+  for (std::uint32_t f = 0; f < families && !found; ++f)
+    if (fam[f].queueFlags & VK_QUEUE_COMPUTE_BIT) {
+      d.queueFamily = f;
+      found = true;
+    }
+  if (usable) *usable = found && props.limits.maxPerStageDescriptorStorageBuffers >= 31;
+  return d;
+}
+
 std::shared_ptr<Instance> Instance::shared() {
   static std::mutex mutex;
   static std::weak_ptr<Instance> cached;
@@ -64,30 +92,9 @@ Instance::Instance() {
   std::vector<VkPhysicalDevice> all(count);
   if (count) vkEnumeratePhysicalDevices(instance_, &count, all.data());
   for (VkPhysicalDevice h : all) {
-    VkPhysicalDeviceProperties props;
-    vkGetPhysicalDeviceProperties(h, &props);
-    VkPhysicalDeviceFeatures features;
-    vkGetPhysicalDeviceFeatures(h, &features);
-    std::uint32_t families = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(h, &families, nullptr);
-    std::vector<VkQueueFamilyProperties> fam(families);
-    vkGetPhysicalDeviceQueueFamilyProperties(h, &families, fam.data());
-    PhysicalDevice d;
-    d.handle = h;
-    d.name = props.deviceName;
-    d.driver = std::to_string(props.vendorID) + ":" + std::to_string(props.driverVersion);
-    d.gpu = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU ||
-            props.deviceType == VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU ||
-            props.deviceType == VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU;
-    d.float64 = features.shaderFloat64 == VK_TRUE;
-    d.limits = props.limits;
-    bool found = false;
-    for (std::uint32_t f = 0; f < families && !found; ++f)
-      if (fam[f].queueFlags & VK_QUEUE_COMPUTE_BIT) {
-        d.queueFamily = f;
-        found = true;
-      }
-    if (found && props.limits.maxPerStageDescriptorStorageBuffers >= 31) devices_.push_back(d);
+    bool usable = false;
+    PhysicalDevice d = describe(h, &usable);
+    if (usable) devices_.push_back(d);
   }
 }
 
@@ -97,11 +104,12 @@ Instance::~Instance() {
 
 // ------------------------------------------------------------------------------------ Buffer
 
-Buffer::Buffer(Context& ctx, std::size_t bytes, bool host) : device_(ctx.device()) {
+Buffer::Buffer(Context& ctx, std::size_t bytes, bool host, VkBufferUsageFlags usage) : device_(ctx.device()) {
   bytes_ = std::max<std::size_t>(bytes, 16);
   auto info = made<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
   info.size = bytes_;
-  info.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+  info.usage = usage | VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+               VK_BUFFER_USAGE_TRANSFER_DST_BIT;
   info.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
   check(vkCreateBuffer(device_, &info, nullptr, &buffer_), "vkCreateBuffer");
   VkMemoryRequirements req;
@@ -182,9 +190,53 @@ Context::Context(std::shared_ptr<Instance> instance, std::size_t index, bool flo
   }
 }
 
+Context::Context(const ExternalDevice& external, bool float64, std::uint32_t bindings, std::uint32_t pushBytes)
+    : ownsDevice_(false), bindings_(bindings) {
+  auto missing = [](const char* what, const char* fix) {
+    fail(ErrorCode::BadInput, "SimulationOptions::device (Vulkan): ", what, " is null; ", fix);
+  };
+  if (!external.instance) missing("instance", "give the VkInstance the device was made on");
+  if (!external.physicalDevice) missing("physicalDevice", "give the VkPhysicalDevice of the device");
+  if (!external.device) missing("device", "give the application's VkDevice");
+  if (!external.queue) missing("queue", "give a VkQueue of the device whose family supports compute");
+  physical_ = describe(static_cast<VkPhysicalDevice>(external.physicalDevice));
+  std::uint32_t families = 0;
+  vkGetPhysicalDeviceQueueFamilyProperties(physical_.handle, &families, nullptr);
+  std::vector<VkQueueFamilyProperties> fam(families);
+  vkGetPhysicalDeviceQueueFamilyProperties(physical_.handle, &families, fam.data());
+  if (external.queueFamily >= families || !(fam[external.queueFamily].queueFlags & VK_QUEUE_COMPUTE_BIT))
+    fail(ErrorCode::BadInput, "SimulationOptions::device (Vulkan): queue family ", external.queueFamily, " of '",
+         physical_.name, "' ", external.queueFamily >= families ? "does not exist" : "has no compute",
+         "; lend a queue of a family with VK_QUEUE_COMPUTE_BIT (", families, " families)");
+  if (physical_.limits.maxPerStageDescriptorStorageBuffers < 31)
+    fail(ErrorCode::DeviceError, "Vulkan: '", physical_.name, "' binds ",
+         physical_.limits.maxPerStageDescriptorStorageBuffers, " storage buffers per stage; corofem's shaders need 31");
+  if (float64 && !external.shaderFloat64)
+    fail(ErrorCode::BadInput, "SimulationOptions::device (Vulkan): double precision needs the shaderFloat64 feature; ",
+         physical_.float64 ? "create the device with it enabled and set ExternalDevice::shaderFloat64"
+                           : std::string("'") + physical_.name + "' has none: set solver.precision to \"float\"");
+  physical_.queueFamily = external.queueFamily;
+  vkGetPhysicalDeviceMemoryProperties(physical_.handle, &memory_);
+  device_ = static_cast<VkDevice>(external.device);
+  queue_ = static_cast<VkQueue>(external.queue);
+  try {
+    makeObjects(pushBytes);
+  } catch (...) {
+    destroy();
+    throw;
+  }
+}
+
 void Context::makeObjects(std::uint32_t pushBytes) {
   const std::uint32_t bindings = bindings_;
-  vkGetDeviceQueue(device_, physical_.queueFamily, 0, &queue_);
+  if (!queue_) vkGetDeviceQueue(device_, physical_.queueFamily, 0, &queue_);
+  {
+    std::uint32_t families = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(physical_.handle, &families, nullptr);
+    std::vector<VkQueueFamilyProperties> fam(families);
+    vkGetPhysicalDeviceQueueFamilyProperties(physical_.handle, &families, fam.data());
+    graphics_ = physical_.queueFamily < families && (fam[physical_.queueFamily].queueFlags & VK_QUEUE_GRAPHICS_BIT);
+  }
 
   std::vector<VkDescriptorSetLayoutBinding> b(bindings);
   for (std::uint32_t i = 0; i < bindings; ++i) {
@@ -204,9 +256,10 @@ void Context::makeObjects(std::uint32_t pushBytes) {
   layoutInfo.pushConstantRangeCount = 1;
   layoutInfo.pPushConstantRanges = &push;
   check(vkCreatePipelineLayout(device_, &layoutInfo, nullptr, &pipelineLayout_), "vkCreatePipelineLayout");
-  constexpr std::uint32_t kSets = 8;
+  constexpr std::uint32_t kSets = 64;  // a device's three, and its surfaces' (one per set of surfaces)
   VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, bindings * kSets};
   auto poolInfo = made<VkDescriptorPoolCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO);
+  poolInfo.flags = VK_DESCRIPTOR_POOL_CREATE_FREE_DESCRIPTOR_SET_BIT;
   poolInfo.maxSets = kSets;
   poolInfo.poolSizeCount = 1;
   poolInfo.pPoolSizes = &size;
@@ -232,7 +285,9 @@ Context::~Context() { destroy(); }
 
 void Context::destroy() {
   if (!device_) return;
-  vkDeviceWaitIdle(device_);
+  // Waits for its own submissions only (an application's device may be busy with its own work).
+  for (Slot& s : ring_)
+    if (s.busy && s.fence) vkWaitForFences(device_, 1, &s.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max());
   for (Slot& s : ring_)
     if (s.fence) vkDestroyFence(device_, s.fence, nullptr);
   if (commandPool_) vkDestroyCommandPool(device_, commandPool_, nullptr);
@@ -240,7 +295,7 @@ void Context::destroy() {
   if (pool_) vkDestroyDescriptorPool(device_, pool_, nullptr);
   if (pipelineLayout_) vkDestroyPipelineLayout(device_, pipelineLayout_, nullptr);
   if (setLayout_) vkDestroyDescriptorSetLayout(device_, setLayout_, nullptr);
-  vkDestroyDevice(device_, nullptr);
+  if (ownsDevice_) vkDestroyDevice(device_, nullptr);
   device_ = VK_NULL_HANDLE;
 }
 
@@ -306,6 +361,10 @@ VkDescriptorSet Context::descriptorSet(const std::vector<const Buffer*>& buffers
   return set;
 }
 
+void Context::freeDescriptorSet(VkDescriptorSet set) {
+  if (set) vkFreeDescriptorSets(device_, pool_, 1, &set);
+}
+
 void Context::waitSlot(Slot& s) {
   if (!s.busy) return;
   check(vkWaitForFences(device_, 1, &s.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()), "vkWaitForFences");
@@ -363,6 +422,28 @@ void hostReadBarrier(VkCommandBuffer cb) {
   m.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
   vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                        VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &m, 0, nullptr, 0, nullptr);
+}
+
+void renderBarrier(VkCommandBuffer cb, bool graphics) {
+  auto m = made<VkMemoryBarrier>(VK_STRUCTURE_TYPE_MEMORY_BARRIER);
+  m.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  m.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
+  VkPipelineStageFlags dst = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
+  if (graphics) {
+    m.dstAccessMask |= VK_ACCESS_VERTEX_ATTRIBUTE_READ_BIT;
+    dst |= VK_PIPELINE_STAGE_VERTEX_INPUT_BIT | VK_PIPELINE_STAGE_VERTEX_SHADER_BIT;
+  }
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, dst, 0, 1, &m, 0, nullptr, 0, nullptr);
+}
+
+void uploadOnce(Context& ctx, const Buffer& to, const void* data, std::size_t bytes) {
+  if (bytes == 0) return;
+  Buffer staging(ctx, bytes, true);
+  std::memcpy(staging.mapped(), data, bytes);
+  VkCommandBuffer cb = ctx.begin();
+  VkBufferCopy region{0, 0, bytes};
+  vkCmdCopyBuffer(cb, staging.handle(), to.handle(), 1, &region);
+  ctx.wait(ctx.submit());
 }
 
 }  // namespace corofem::detail::vk

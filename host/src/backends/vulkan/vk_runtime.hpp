@@ -4,6 +4,8 @@
 // Every failed Vulkan call throws Error(DeviceError) naming the call and the VkResult.
 #pragma once
 
+#include <corofem/gpu.hpp>
+
 #include <vulkan/vulkan.h>
 
 #include <cstddef>
@@ -36,6 +38,10 @@ struct PhysicalDevice {
   VkPhysicalDeviceLimits limits{};
 };
 
+/// What corofem needs to know of a physical device; `found` false where it has no compute queue or
+/// too few storage buffers per stage (the family is then meaningless).
+PhysicalDevice describe(VkPhysicalDevice handle, bool* usable = nullptr);
+
 /// The process's Vulkan instance and its usable devices, made at the first call. Throws
 /// Error(DeviceError) where there is no Vulkan driver.
 class Instance {
@@ -59,7 +65,9 @@ class Context;
 class Buffer {
  public:
   Buffer() = default;
-  Buffer(Context& ctx, std::size_t bytes, bool host);
+  /// `usage`: beyond storage and transfers (VK_BUFFER_USAGE_VERTEX_BUFFER_BIT for what a renderer
+  /// draws from).
+  Buffer(Context& ctx, std::size_t bytes, bool host, VkBufferUsageFlags usage = 0);
   ~Buffer();
   Buffer(Buffer&& o) noexcept { *this = std::move(o); }
   Buffer& operator=(Buffer&& o) noexcept;
@@ -79,13 +87,18 @@ class Buffer {
 };
 
 /// A logical device on one physical device with one compute queue, the pipelines of the shaders,
-/// and the ring of command buffers.
+/// and the ring of command buffers. Either its own device (made and destroyed here) or an
+/// application's (ExternalDevice: used, never destroyed).
 class Context {
  public:
-  /// `float64`: the device enables shaderFloat64 and builds the double shaders (the float ones
-  /// otherwise). `bindings`: the storage buffers of the one descriptor-set layout.
+  /// Its own device on instance device `index`. `float64`: the device enables shaderFloat64 (the
+  /// double shaders need it). `bindings`: the storage buffers of the one descriptor-set layout.
   Context(std::shared_ptr<Instance> instance, std::size_t index, bool float64, std::uint32_t bindings,
           std::uint32_t pushBytes);
+  /// The application's device and queue (GpuApi::Vulkan). Throws Error(BadInput) naming what is
+  /// missing or wrong in `external` (a null handle, a queue family without compute, float64 asked
+  /// of a device without shaderFloat64 enabled).
+  Context(const ExternalDevice& external, bool float64, std::uint32_t bindings, std::uint32_t pushBytes);
   ~Context();
   Context(const Context&) = delete;
   Context& operator=(const Context&) = delete;
@@ -96,8 +109,10 @@ class Context {
 
   /// A compute pipeline from SPIR-V words over the shared layout.
   VkPipeline pipeline(const std::uint32_t* words, std::size_t bytes, const char* name);
-  /// A descriptor set of the shared layout with buffers[i] at binding i.
+  /// A descriptor set of the shared layout with buffers[i] at binding i (freed with the context, or
+  /// by freeDescriptorSet).
   VkDescriptorSet descriptorSet(const std::vector<const Buffer*>& buffers);
+  void freeDescriptorSet(VkDescriptorSet set);
   VkPipelineLayout pipelineLayout() const { return pipelineLayout_; }
 
   /// A command buffer of the ring, begun (waits for the ring's oldest when all are in flight).
@@ -108,6 +123,8 @@ class Context {
   void wait(std::uint64_t id);
   void waitAll();
   std::uint64_t lastSubmission() const { return submitted_; }
+  /// Whether its queue's family does graphics (a renderer may draw on the same queue).
+  bool graphicsQueue() const { return graphics_; }
 
  private:
   struct Slot {
@@ -120,7 +137,8 @@ class Context {
   void makeObjects(std::uint32_t pushBytes);  ///< everything but the VkDevice
   void destroy();
 
-  std::shared_ptr<Instance> instance_;
+  std::shared_ptr<Instance> instance_;  ///< null on an application's device
+  bool ownsDevice_ = true;
   PhysicalDevice physical_;
   VkPhysicalDeviceMemoryProperties memory_{};
   VkDevice device_ = VK_NULL_HANDLE;
@@ -135,11 +153,18 @@ class Context {
   std::size_t next_ = 0;
   Slot* recording_ = nullptr;
   std::uint64_t submitted_ = 0;
+  bool graphics_ = false;
 };
 
 /// Every earlier command's memory writes made visible to every later command.
 void fullBarrier(VkCommandBuffer cb);
 /// Transfer writes made visible to the host (after a copy into a host buffer).
 void hostReadBarrier(VkCommandBuffer cb);
+/// Compute shaders' writes made visible to every later command on the queue that reads them as
+/// vertices, in shaders or by copies (a renderer's draw on the same queue, in a later submission
+/// too); the graphics stages only where `graphics` (the queue's family does graphics).
+void renderBarrier(VkCommandBuffer cb, bool graphics);
+/// Copies `bytes` from the host into `to` at offset 0 through a temporary staging buffer, and waits.
+void uploadOnce(Context& ctx, const Buffer& to, const void* data, std::size_t bytes);
 
 }  // namespace corofem::detail::vk

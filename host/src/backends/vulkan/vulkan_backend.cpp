@@ -81,7 +81,7 @@ void registerVulkanBackend() {
     return out;
   };
   e.resolve = [](const std::string& selector) {
-    if (selector == kExternalSelector) {  // made (and refused) by create, so that the choice is not skipped
+    if (selector == kExternalSelector) {  // the handles come with create (DeviceOptions::external)
       Candidate c;
       c.backend = "vulkan";
       c.device = "the application's Vulkan device";
@@ -94,10 +94,12 @@ void registerVulkanBackend() {
   e.refuses = vulkanRefusal;
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
                 const DeviceOptions& options) -> std::unique_ptr<Device> {
-    if (c.selector == kExternalSelector)
-      fail(ErrorCode::NotCompiledIn, "SimulationOptions::device: this build's Vulkan backend cannot adopt the "
-           "application's VkDevice yet (it makes its own); leave SimulationOptions::device empty, or lend an OpenCL "
-           "device");
+    if (c.selector == kExternalSelector) {
+      if (options.external.api != GpuApi::Vulkan)
+        fail(ErrorCode::BadInput, "device 'vulkan:external' needs SimulationOptions::device with the application's "
+             "Vulkan handles (api GpuApi::Vulkan)");
+      return createVulkanDevice(problems, solver, options.external, options.vulkan);
+    }
     return createVulkanDevice(problems, solver, deviceIndex(c.selector), options.vulkan);
   };
   e.buildId = [] {

@@ -7,12 +7,15 @@
 // recorded n at a time with the scalars and stop flags on the device (reduce.comp), and read back
 // without blocking (pcgRead), as the PCG driver of solve/pcg.cpp expects.
 //
+// The device runs on a VkDevice of its own or on the application's (ExternalDevice), and updates
+// the bodies' render surfaces there (vulkan_surfaces.cpp) into VkBuffers a renderer draws from.
+//
 // Not here yet (the Vulkan issue's later steps): the whole step as one recorded command buffer
-// replayed every frame, the surface in a VkBuffer for a renderer, adopting an application's
-// VkDevice, the multigrid preconditioner.
+// replayed every frame, the multigrid preconditioner.
 #include "backends/vulkan/shaders.hpp"
 #include "backends/vulkan/vk_runtime.hpp"
 #include "backends/vulkan/vulkan_device.hpp"
+#include "backends/vulkan/vulkan_surfaces.hpp"
 #include "device/body_layout.hpp"
 #include "device/registry.hpp"
 #include "util/error.hpp"
@@ -23,6 +26,7 @@
 #include <cmath>
 #include <cstring>
 #include <deque>
+#include <functional>
 #include <limits>
 
 namespace corofem::detail {
@@ -86,22 +90,16 @@ void centroidOf(const Eigen::VectorXd& x, std::size_t nodes, double* c) {
 
 class VulkanDevice final : public Device {
  public:
-  VulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver, std::size_t index,
+  /// `makeContext(float64)`: the Vulkan device the bodies run on (its own or an application's).
+  VulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+               const std::function<std::shared_ptr<vk::Context>(bool float64)>& makeContext,
                const VulkanTuning& tuning)
       : solver_(resolvedSolver(solver, problems)), layout_(problems, tuning.localityOrder, kWg, kWg, 12) {
     for (const Problem* p : problems)
       if (const std::string why = vulkanRefusal(*p, solver_); !why.empty()) fail(ErrorCode::BadInput, "body '", p->name, "': ", why);
     isDouble_ = solver_.precision == Precision::Double;
     rs_ = isDouble_ ? sizeof(double) : sizeof(float);
-    auto instance = vk::Instance::shared();
-    if (index >= instance->devices().size())
-      fail(ErrorCode::DeviceError, "Vulkan: device ", index, " does not exist (", instance->devices().size(),
-           " usable here)");
-    const vk::PhysicalDevice& pd = instance->devices()[index];
-    if (isDouble_ && !pd.float64)
-      fail(ErrorCode::DeviceError, "Vulkan: '", pd.name, "' has no shaderFloat64 (double in shaders); set "
-           "solver.precision to \"float\"");
-    ctx_ = std::make_unique<vk::Context>(instance, index, isDouble_, kBindingCount, sizeof(Push));
+    ctx_ = makeContext(isDouble_);
     // The PCG path (VulkanTuning::groupPcgNodes): whole iterations in one dispatch where every body is
     // small enough.
     // The PCG path for every body of the device (VulkanTuning::groupPcgNodes, from its largest body).
@@ -131,6 +129,22 @@ class VulkanDevice final : public Device {
   std::string deviceName() const override { return ctx_->physical().name; }
   std::size_t bodyCount() const override { return layout_.segments.size(); }
   const Problem& problem(std::size_t body) const override { return *segment(body).problem; }
+
+  // ---------------------------------------------------------------------------- render surfaces
+
+  std::unique_ptr<DeviceSurfaces> createSurfaces(const std::vector<SurfaceMember>& members,
+                                                 bool separateStreams) override {
+    if (!surface_) {
+      const vk::Spirv code = vk::shaderCode(vk::Shader::Surface, isDouble_);
+      surface_ = ctx_->pipeline(code.words, code.bytes, "surface.comp");
+    }
+    std::vector<VulkanSurfaceBody> bodies;
+    for (const SurfaceMember& m : members) {
+      const BodySegment& sg = segment(m.body);
+      bodies.push_back({sg.nodeBegin, &sg.deviceNode, sg.centroid});
+    }
+    return createVulkanSurfaces({ctx_, &owned_[kPos], surface_, isDouble_}, members, bodies, separateStreams);
+  }
 
   // ---------------------------------------------------------------------------- element operations
 
@@ -859,12 +873,14 @@ class VulkanDevice final : public Device {
   BodyLayout layout_;
   bool isDouble_ = true;
   std::size_t rs_ = sizeof(double);
-  std::unique_ptr<vk::Context> ctx_;  // first member with Vulkan objects: destroyed after the buffers
+  /// First member with Vulkan objects: released after the buffers (the surfaces share it, so it
+  /// outlives a device whose surfaces are still held).
+  std::shared_ptr<vk::Context> ctx_;
   std::vector<vk::Buffer> owned_;
   vk::Buffer pin_, yout_, up_, down_;
   std::size_t scalarsOffset_ = 0;  ///< bytes: where the scalar reads start in down_
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
-             reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE;
+             reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE, surface_ = VK_NULL_HANDLE;
   VkDescriptorSet apply_ = VK_NULL_HANDLE, pcgSet_ = VK_NULL_HANDLE, setup_ = VK_NULL_HANDLE;
 
   std::vector<std::uint32_t> segInfo_;                    ///< the segment table, every body inactive
@@ -890,7 +906,26 @@ class VulkanDevice final : public Device {
 
 std::unique_ptr<Device> createVulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
                                            std::size_t index, const VulkanTuning& tuning) {
-  return std::make_unique<VulkanDevice>(problems, solver, index, tuning);
+  auto make = [index](bool float64) {
+    auto instance = vk::Instance::shared();
+    if (index >= instance->devices().size())
+      fail(ErrorCode::DeviceError, "Vulkan: device ", index, " does not exist (", instance->devices().size(),
+           " usable here)");
+    const vk::PhysicalDevice& pd = instance->devices()[index];
+    if (float64 && !pd.float64)
+      fail(ErrorCode::DeviceError, "Vulkan: '", pd.name, "' has no shaderFloat64 (double in shaders); set "
+           "solver.precision to \"float\"");
+    return std::make_shared<vk::Context>(instance, index, float64, kBindingCount, sizeof(Push));
+  };
+  return std::make_unique<VulkanDevice>(problems, solver, make, tuning);
+}
+
+std::unique_ptr<Device> createVulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                           const ExternalDevice& external, const VulkanTuning& tuning) {
+  auto make = [&external](bool float64) {
+    return std::make_shared<vk::Context>(external, float64, kBindingCount, sizeof(Push));
+  };
+  return std::make_unique<VulkanDevice>(problems, solver, make, tuning);
 }
 
 }  // namespace corofem::detail

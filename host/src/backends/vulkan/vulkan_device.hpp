@@ -3,6 +3,7 @@
 
 #include "device/device.hpp"
 
+#include <corofem/gpu.hpp>
 #include <corofem/tuning.hpp>
 
 #include <cstddef>
@@ -17,6 +18,11 @@ namespace corofem::detail {
 /// cannot be used (no shaderFloat64 for double, buffers beyond its limits, a failed Vulkan call).
 std::unique_ptr<Device> createVulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
                                            std::size_t index, const VulkanTuning& tuning);
+
+/// A device on the application's Vulkan device (SimulationOptions::device). Throws as above, and
+/// Error(BadInput) for handles that cannot be used (vk::Context).
+std::unique_ptr<Device> createVulkanDevice(const std::vector<const Problem*>& problems, const SolverDesc& solver,
+                                           const ExternalDevice& external, const VulkanTuning& tuning);
 
 /// Why the backend cannot run a body with these settings ("" where it can), naming the fix: the
 /// registry entry's `refuses`, and the device's constructor.

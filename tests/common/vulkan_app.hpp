@@ -1,0 +1,172 @@
+// An application's own Vulkan device, as a renderer makes it, for the tests that lend it to corofem
+// (corofem::ExternalDevice) and then read corofem's surface buffers the way a renderer would: on the
+// same queue, in a later submission, with no other synchronisation (Simulation::surfaceBuffer).
+#pragma once
+
+#include <corofem/gpu.hpp>
+
+#include <vulkan/vulkan.h>
+
+#include <cstdint>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace corofem::test {
+
+class VulkanApp {
+ public:
+  /// The first physical device with a queue family doing graphics and compute (lavapipe in CI).
+  /// `float64`: enables shaderFloat64 where the device has it. ok() is false where there is none.
+  explicit VulkanApp(bool float64) {
+    VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
+    app.pApplicationName = "corofem test application";
+    app.apiVersion = VK_API_VERSION_1_1;
+    VkInstanceCreateInfo ii{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+    ii.pApplicationInfo = &app;
+    if (vkCreateInstance(&ii, nullptr, &instance) != VK_SUCCESS) {
+      why = "no Vulkan instance (no driver)";
+      return;
+    }
+    std::uint32_t count = 0;
+    vkEnumeratePhysicalDevices(instance, &count, nullptr);
+    std::vector<VkPhysicalDevice> all(count);
+    if (count) vkEnumeratePhysicalDevices(instance, &count, all.data());
+    for (VkPhysicalDevice pd : all) {
+      std::uint32_t n = 0;
+      vkGetPhysicalDeviceQueueFamilyProperties(pd, &n, nullptr);
+      std::vector<VkQueueFamilyProperties> fam(n);
+      vkGetPhysicalDeviceQueueFamilyProperties(pd, &n, fam.data());
+      for (std::uint32_t f = 0; f < n && !physical; ++f)
+        if ((fam[f].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (fam[f].queueFlags & VK_QUEUE_COMPUTE_BIT)) {
+          physical = pd;
+          family = f;
+        }
+      if (physical) break;
+    }
+    if (!physical) {
+      why = "no Vulkan device with a graphics and compute queue";
+      return;
+    }
+    VkPhysicalDeviceFeatures has{};
+    vkGetPhysicalDeviceFeatures(physical, &has);
+    VkPhysicalDeviceFeatures enabled{};
+    hasFloat64 = float64 && has.shaderFloat64 == VK_TRUE;
+    enabled.shaderFloat64 = hasFloat64 ? VK_TRUE : VK_FALSE;
+    const float priority = 1.0f;
+    VkDeviceQueueCreateInfo qi{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+    qi.queueFamilyIndex = family;
+    qi.queueCount = 1;
+    qi.pQueuePriorities = &priority;
+    VkDeviceCreateInfo di{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+    di.queueCreateInfoCount = 1;
+    di.pQueueCreateInfos = &qi;
+    di.pEnabledFeatures = &enabled;
+    if (vkCreateDevice(physical, &di, nullptr, &device) != VK_SUCCESS) {
+      why = "vkCreateDevice failed";
+      return;
+    }
+    vkGetDeviceQueue(device, family, 0, &queue);
+    VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+    pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    pi.queueFamilyIndex = family;
+    vkCreateCommandPool(device, &pi, nullptr, &pool);
+  }
+  ~VulkanApp() {
+    if (device) {
+      vkDeviceWaitIdle(device);
+      if (pool) vkDestroyCommandPool(device, pool, nullptr);
+      vkDestroyDevice(device, nullptr);
+    }
+    if (instance) vkDestroyInstance(instance, nullptr);
+  }
+  VulkanApp(const VulkanApp&) = delete;
+  VulkanApp& operator=(const VulkanApp&) = delete;
+
+  bool ok() const { return device != VK_NULL_HANDLE; }
+
+  /// The handles as corofem takes them.
+  ExternalDevice external() const {
+    ExternalDevice e;
+    e.api = GpuApi::Vulkan;
+    e.instance = instance;
+    e.physicalDevice = physical;
+    e.device = device;
+    e.queue = queue;
+    e.queueFamily = family;
+    e.shaderFloat64 = hasFloat64;
+    return e;
+  }
+
+  /// `b`'s region as floats, copied on this queue after everything submitted to it (a renderer's
+  /// read: corofem's update ends with a barrier to every later command on the queue), waited for
+  /// with a fence of the application's own.
+  std::vector<float> read(const GpuBuffer& b) {
+    if (b.api != GpuApi::Vulkan || !b) throw std::runtime_error("not a Vulkan buffer");
+    VkBuffer host = VK_NULL_HANDLE;
+    VkDeviceMemory memory = VK_NULL_HANDLE;
+    VkBufferCreateInfo bi{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+    bi.size = b.bytes;
+    bi.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+    vkCreateBuffer(device, &bi, nullptr, &host);
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(device, host, &req);
+    VkPhysicalDeviceMemoryProperties props;
+    vkGetPhysicalDeviceMemoryProperties(physical, &props);
+    VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    ai.allocationSize = req.size;
+    const VkMemoryPropertyFlags need = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    for (std::uint32_t i = 0; i < props.memoryTypeCount; ++i)
+      if ((req.memoryTypeBits & (1u << i)) && (props.memoryTypes[i].propertyFlags & need) == need) {
+        ai.memoryTypeIndex = i;
+        break;
+      }
+    vkAllocateMemory(device, &ai, nullptr, &memory);
+    vkBindBufferMemory(device, host, memory, 0);
+    VkCommandBuffer cb = VK_NULL_HANDLE;
+    VkCommandBufferAllocateInfo ca{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    ca.commandPool = pool;
+    ca.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    ca.commandBufferCount = 1;
+    vkAllocateCommandBuffers(device, &ca, &cb);
+    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    vkBeginCommandBuffer(cb, &begin);
+    VkBufferCopy region{b.offset, 0, b.bytes};
+    vkCmdCopyBuffer(cb, reinterpret_cast<VkBuffer>(b.handle), host, 1, &region);
+    VkMemoryBarrier m{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+    m.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    m.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &m, 0, nullptr, 0, nullptr);
+    vkEndCommandBuffer(cb);
+    VkFence fence = VK_NULL_HANDLE;
+    VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    vkCreateFence(device, &fi, nullptr, &fence);
+    VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cb;
+    vkQueueSubmit(queue, 1, &si, fence);
+    vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX);
+    std::vector<float> out(b.bytes / sizeof(float));
+    void* p = nullptr;
+    vkMapMemory(device, memory, 0, b.bytes, 0, &p);
+    std::memcpy(out.data(), p, b.bytes);
+    vkUnmapMemory(device, memory);
+    vkDestroyFence(device, fence, nullptr);
+    vkFreeCommandBuffers(device, pool, 1, &cb);
+    vkDestroyBuffer(device, host, nullptr);
+    vkFreeMemory(device, memory, nullptr);
+    return out;
+  }
+
+  VkInstance instance = VK_NULL_HANDLE;
+  VkPhysicalDevice physical = VK_NULL_HANDLE;
+  VkDevice device = VK_NULL_HANDLE;
+  VkQueue queue = VK_NULL_HANDLE;
+  VkCommandPool pool = VK_NULL_HANDLE;
+  std::uint32_t family = 0;
+  bool hasFloat64 = false;
+  std::string why;  ///< why ok() is false
+};
+
+}  // namespace corofem::test
