@@ -2,11 +2,16 @@
 # The main job: installs what is missing, builds corofem, runs the paper's Fig. 8 beam headless with
 # the co-rotational and the linear formulation, and draws both shapes and the tip displacement.
 # Outputs: out/fig8_corot/, out/fig8_linear/ (probes.csv, VTK series, summary.json) and
-# out/fig8_beam.png.
+# out/fig8_beam.png; with ../shared/data, the coupled liver, the interactive frame loop and the renderer
+# (out/renderer/, out/renderer.png, out/renderer.gif).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash cmake/debian-deps.sh
 bash cmake/configure-build.sh --target corofem_cli interactive
+# The renderer sample needs the Vulkan backend and zlib (both installed above).
+if grep -q '^COROFEM_WITH_VULKAN:BOOL=ON' build/CMakeCache.txt && grep -q '^COROFEM_WITH_ZLIB:BOOL=ON' build/CMakeCache.txt; then
+  cmake --build build -j"$(nproc)" --target renderer
+fi
 scene=samples/fig8_beam/fig8_beam.json
 ./build/corofem run "$scene" --out out/fig8_corot
 ./build/corofem run "$scene" --out out/fig8_linear --set bodies.0.formulation=linear
@@ -34,6 +39,27 @@ if [ -f ../shared/data/meshes/sofa/liver.msh ]; then
   # pinned, released and pushed; its frames and per-frame times (median, 99th percentile).
   ./build/interactive --out out/interactive
   /usr/bin/python3 samples/interactive/plot_interactive.py out/interactive out/interactive.png
+  # A renderer that lends its VkDevice to corofem and draws the liver straight from corofem's surface
+  # buffer each frame (samples/renderer): PNG frames, checked against the surface's projection.
+  if [ -x build/renderer ]; then
+    LP_NUM_THREADS="${LP_NUM_THREADS:-0}" ./build/renderer --out out/renderer --png-every 5
+    /usr/bin/python3 - <<'PY' || echo "out/renderer.png and .gif not made (Debian's Python lacks Pillow)"
+import glob
+from PIL import Image
+names = sorted(glob.glob("out/renderer/frame_*.png"))
+frames = [Image.open(f) for f in names]
+# A strip of three frames at half size (the README's picture), and the animation in real time.
+picks = [frames[len(frames) * k // 4 - 1] for k in (1, 2, 3)]
+w, h = picks[0].width // 2, picks[0].height // 2
+strip = Image.new("RGB", (3 * w, h))
+for i, f in enumerate(picks):
+    strip.paste(f.convert("RGB").resize((w, h), Image.LANCZOS), (i * w, 0))
+strip.save("out/renderer.png")
+gif = [f.convert("P", palette=Image.ADAPTIVE) for f in frames]
+gif[0].save("out/renderer.gif", save_all=True, append_images=gif[1:], duration=83, loop=0)  # every 5th frame of 60 Hz
+print(f"out/renderer.png: frames {', '.join(n[-8:-4] for n in [names[len(names) * k // 4 - 1] for k in (1, 2, 3)])}; out/renderer.gif: {len(frames)} frames")
+PY
+  fi
 else
   echo "skipping the coupled-mesh and interactive samples: ../shared/data/meshes/sofa/liver.msh is absent"
 fi

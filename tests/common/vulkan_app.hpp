@@ -15,15 +15,23 @@
 
 namespace corofem::test {
 
+/// A zeroed Vulkan structure with its sType set.
+template <class T>
+T info(VkStructureType type) {
+  T v{};
+  v.sType = type;
+  return v;
+}
+
 class VulkanApp {
  public:
   /// The first physical device with a queue family doing graphics and compute (lavapipe in CI).
   /// `float64`: enables shaderFloat64 where the device has it. ok() is false where there is none.
   explicit VulkanApp(bool float64) {
-    VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
+    auto app = info<VkApplicationInfo>(VK_STRUCTURE_TYPE_APPLICATION_INFO);
     app.pApplicationName = "corofem test application";
     app.apiVersion = VK_API_VERSION_1_1;
-    VkInstanceCreateInfo ii{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+    auto ii = info<VkInstanceCreateInfo>(VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO);
     ii.pApplicationInfo = &app;
     if (vkCreateInstance(&ii, nullptr, &instance) != VK_SUCCESS) {
       why = "no Vulkan instance (no driver)";
@@ -55,11 +63,11 @@ class VulkanApp {
     hasFloat64 = float64 && has.shaderFloat64 == VK_TRUE;
     enabled.shaderFloat64 = hasFloat64 ? VK_TRUE : VK_FALSE;
     const float priority = 1.0f;
-    VkDeviceQueueCreateInfo qi{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+    auto qi = info<VkDeviceQueueCreateInfo>(VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO);
     qi.queueFamilyIndex = family;
     qi.queueCount = 1;
     qi.pQueuePriorities = &priority;
-    VkDeviceCreateInfo di{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+    auto di = info<VkDeviceCreateInfo>(VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO);
     di.queueCreateInfoCount = 1;
     di.pQueueCreateInfos = &qi;
     di.pEnabledFeatures = &enabled;
@@ -68,7 +76,7 @@ class VulkanApp {
       return;
     }
     vkGetDeviceQueue(device, family, 0, &queue);
-    VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+    auto pi = info<VkCommandPoolCreateInfo>(VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO);
     pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
     pi.queueFamilyIndex = family;
     vkCreateCommandPool(device, &pi, nullptr, &pool);
@@ -106,7 +114,7 @@ class VulkanApp {
     if (b.api != GpuApi::Vulkan || !b) throw std::runtime_error("not a Vulkan buffer");
     VkBuffer host = VK_NULL_HANDLE;
     VkDeviceMemory memory = VK_NULL_HANDLE;
-    VkBufferCreateInfo bi{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+    auto bi = info<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
     bi.size = b.bytes;
     bi.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
     vkCreateBuffer(device, &bi, nullptr, &host);
@@ -114,7 +122,7 @@ class VulkanApp {
     vkGetBufferMemoryRequirements(device, host, &req);
     VkPhysicalDeviceMemoryProperties props;
     vkGetPhysicalDeviceMemoryProperties(physical, &props);
-    VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    auto ai = info<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
     ai.allocationSize = req.size;
     const VkMemoryPropertyFlags need = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     for (std::uint32_t i = 0; i < props.memoryTypeCount; ++i)
@@ -125,24 +133,24 @@ class VulkanApp {
     vkAllocateMemory(device, &ai, nullptr, &memory);
     vkBindBufferMemory(device, host, memory, 0);
     VkCommandBuffer cb = VK_NULL_HANDLE;
-    VkCommandBufferAllocateInfo ca{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    auto ca = info<VkCommandBufferAllocateInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO);
     ca.commandPool = pool;
     ca.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
     ca.commandBufferCount = 1;
     vkAllocateCommandBuffers(device, &ca, &cb);
-    VkCommandBufferBeginInfo begin{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    auto begin = info<VkCommandBufferBeginInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO);
     vkBeginCommandBuffer(cb, &begin);
     VkBufferCopy region{b.offset, 0, b.bytes};
     vkCmdCopyBuffer(cb, reinterpret_cast<VkBuffer>(b.handle), host, 1, &region);
-    VkMemoryBarrier m{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+    auto m = info<VkMemoryBarrier>(VK_STRUCTURE_TYPE_MEMORY_BARRIER);
     m.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
     m.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
     vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &m, 0, nullptr, 0, nullptr);
     vkEndCommandBuffer(cb);
     VkFence fence = VK_NULL_HANDLE;
-    VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    auto fi = info<VkFenceCreateInfo>(VK_STRUCTURE_TYPE_FENCE_CREATE_INFO);
     vkCreateFence(device, &fi, nullptr, &fence);
-    VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    auto si = info<VkSubmitInfo>(VK_STRUCTURE_TYPE_SUBMIT_INFO);
     si.commandBufferCount = 1;
     si.pCommandBuffers = &cb;
     vkQueueSubmit(queue, 1, &si, fence);

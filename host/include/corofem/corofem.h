@@ -67,7 +67,7 @@ typedef enum corofem_status {
   COROFEM_OK = 0,
   COROFEM_BAD_INPUT = 1,       /**< malformed file or text, invalid value, NULL pointer, small array */
   COROFEM_SOLVE_FAILED = 2,    /**< a solve did not converge or the state became non-finite */
-  COROFEM_DEVICE_ERROR = 3,    /**< an OpenCL (or other backend) call failed */
+  COROFEM_DEVICE_ERROR = 3,    /**< an OpenCL or Vulkan call failed */
   COROFEM_NOT_COMPILED_IN = 4, /**< the backend or feature was not built into this library */
   COROFEM_IO_ERROR = 5,        /**< a file could not be opened, read or written */
   COROFEM_INTERNAL = 6         /**< a bug in corofem: please report it */
@@ -262,7 +262,7 @@ corofem_status corofem_simulation_read_surface_triangles(const corofem_simulatio
                                                          uint32_t* triangles, size_t capacity, size_t* needed);
 /** The deformed surface at the current state: 3 doubles per vertex (m) into `positions` and, when
  *  `normals` is not NULL, the smooth unit normals, 3 floats per vertex; both need 3 * vertex count
- *  elements (*needed). On a device that computes surfaces (OpenCL) this is the explicit read-back
+ *  elements (*needed). On a device that computes surfaces (OpenCL, Vulkan) this is the explicit read-back
  *  of the device's buffer (positions float-rounded). COROFEM_BAD_INPUT for a body without a
  *  surface. */
 corofem_status corofem_simulation_read_surface(const corofem_simulation* simulation, int body, double* positions,
@@ -273,7 +273,7 @@ corofem_status corofem_simulation_read_surface(const corofem_simulation* simulat
  *  offset + v * stride of the buffer `handle`. */
 typedef struct corofem_gpu_buffer {
   corofem_gpu_api api; /**< COROFEM_GPU_NONE: no buffer */
-  uint64_t handle;     /**< OpenCL: the cl_mem, as an integer; 0: none */
+  uint64_t handle;     /**< OpenCL: the cl_mem, as an integer; Vulkan: the VkBuffer; 0: none */
   size_t offset;       /**< bytes from the buffer's start to the first vertex */
   size_t stride;       /**< bytes from one vertex to the next */
   size_t bytes;        /**< bytes of the region: vertex count * stride */
@@ -284,7 +284,8 @@ typedef struct corofem_gpu_buffer {
  *  "separate" 3 float32 of position (12 bytes). An empty buffer (api COROFEM_GPU_NONE, handle 0)
  *  where the body has no surface or its surface is computed on the host (the reference backend).
  *  Enqueues the update on the device's queue and does not wait (corofem_simulation_update_surface
- *  waits). The buffer belongs to the simulation: ask again after each step rather than keep it. */
+ *  waits); on Vulkan the update ends with a barrier to every later command of that queue, so a draw
+ *  the application submits to the queue it lent afterwards sees the current surface. The buffer belongs to the simulation: ask again after each step rather than keep it. */
 corofem_status corofem_simulation_surface_buffer(const corofem_simulation* simulation, int body,
                                                  corofem_gpu_buffer* buffer);
 /** With "surface_layout": "separate", the buffer of the unit normals (3 float32 per vertex); else
@@ -379,7 +380,7 @@ corofem_status corofem_simulation_teleport(corofem_simulation* simulation, int b
 /** "reference", "opencl". */
 corofem_status corofem_simulation_backend_name(const corofem_simulation* simulation, char* text, size_t capacity,
                                                size_t* needed);
-/** e.g. "host (Eigen, double)" or the OpenCL device's name. */
+/** e.g. "host (Eigen, double)" or the OpenCL or Vulkan device's name. */
 corofem_status corofem_simulation_device_name(const corofem_simulation* simulation, char* text, size_t capacity,
                                               size_t* needed);
 /** Where the bodies run and why, as JSON text (Simulation::schedulerReport). */
