@@ -367,6 +367,7 @@ void Context::freeDescriptorSet(VkDescriptorSet set) {
 
 void Context::waitSlot(Slot& s) {
   if (!s.busy) return;
+  if (vkGetFenceStatus(device_, s.fence) == VK_NOT_READY) ++blockingWaits_;
   check(vkWaitForFences(device_, 1, &s.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()), "vkWaitForFences");
   s.busy = false;
 }

@@ -123,6 +123,8 @@ class Context {
   void wait(std::uint64_t id);
   void waitAll();
   std::uint64_t lastSubmission() const { return submitted_; }
+  /// Waits on the host that found work still running (each a host round trip that stalled).
+  std::uint64_t blockingWaits() const { return blockingWaits_; }
   /// Whether its queue's family does graphics (a renderer may draw on the same queue).
   bool graphicsQueue() const { return graphics_; }
 
@@ -153,6 +155,7 @@ class Context {
   std::size_t next_ = 0;
   Slot* recording_ = nullptr;
   std::uint64_t submitted_ = 0;
+  std::uint64_t blockingWaits_ = 0;
   bool graphics_ = false;
 };
 

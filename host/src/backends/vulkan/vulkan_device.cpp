@@ -471,7 +471,11 @@ class VulkanDevice final : public Device {
   // ---------------------------------------------------------------------------- what it holds
 
   std::vector<DeviceCounter> counters() const override {
-    return {{"pcg_group_dispatches", groupDispatches_}, {"pcg_phase_dispatches", phaseDispatches_}};
+    // Submissions and the host waits that stalled on them: the host round trips of the steps so far.
+    return {{"pcg_group_dispatches", groupDispatches_},
+            {"pcg_phase_dispatches", phaseDispatches_},
+            {"submissions", static_cast<long long>(ctx_->lastSubmission())},
+            {"blocking_waits", static_cast<long long>(ctx_->blockingWaits())}};
   }
 
   std::vector<DeviceBuffer> buffers() const override {

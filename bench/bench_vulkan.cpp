@@ -1,0 +1,282 @@
+// Vulkan backend benchmarks on every Vulkan device (lavapipe here; a GPU where there is one), on
+// generated boxes of ~1k, 10k, 100k and 1M elements (6 tets per cell), float:
+//
+//   step/<device>/<size>        a whole dynamic step as an application runs it (Simulation::step:
+//                               one Newton iteration, exactly 20 PCG iterations, diagonal
+//                               preconditioner, transfers included), with the host's CPU time per
+//                               step (the calling thread's: what the step costs the application's
+//                               frame besides waiting) and the submissions and stalled host waits
+//                               per step (the backend's device counters).
+//   pcg_iterations/<device>/<size>  20 PCG iterations on the device and one read of the scalars
+//                               (the host round trip the driver makes every `checkEvery`), with the
+//                               bytes an iteration must move at least (product and vector updates)
+//                               over the copy bandwidth measured in the same run: the fraction of
+//                               the memory's rate the iterations reach.
+//   copy/<device>               the yardstick: vkCmdCopyBuffer between two device buffers (64 MiB
+//                               on CPU devices, 512 MiB on GPUs), bytes read + written per second.
+//
+//   ./build/bench/bench_vulkan --benchmark_format=json [--benchmark_filter=-/1M]   (skip the 1M box)
+//
+// lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
+#include <benchmark/benchmark.h>
+
+#ifdef COROFEM_WITH_VULKAN
+
+#include <corofem/simulation.hpp>
+
+#include "backends/vulkan/vk_runtime.hpp"
+#include "common/test_problems.hpp"
+#include "device/registry.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <ctime>
+#include <map>
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace corofem {
+namespace {
+
+struct BoxSize {
+  const char* label;
+  int nx, ny, nz;  ///< cells; 6 tets per cell
+};
+constexpr BoxSize kSizes[] = {{"1k", 10, 4, 4}, {"10k", 20, 9, 9}, {"100k", 40, 20, 21}, {"1M", 80, 45, 46}};
+
+std::size_t copyBytes(std::size_t index) {
+  return (detail::vk::Instance::shared()->devices()[index].gpu ? std::size_t{512} : std::size_t{64}) << 20;
+}
+
+/// The calling thread's CPU time (s): the host's own work, not the device's threads (lavapipe) nor
+/// the time the thread sleeps waiting for the device.
+double threadSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+/// Copies between two device buffers (64 MiB on CPU devices, 512 MiB on GPUs) on Vulkan device
+/// `index`, each waited for: `fn(seconds)` per copy after a warm-up one.
+template <class Fn>
+void copies(std::size_t index, int count, Fn&& fn) {
+  auto instance = detail::vk::Instance::shared();
+  detail::vk::Context ctx(instance, index, false, 31, 20);
+  const std::size_t bytes = copyBytes(index);
+  detail::vk::Buffer a(ctx, bytes, false), b(ctx, bytes, false);
+  for (int rep = 0; rep <= count; ++rep) {
+    const auto t0 = std::chrono::steady_clock::now();
+    VkCommandBuffer cb = ctx.begin();
+    VkBufferCopy region{0, 0, bytes};
+    vkCmdCopyBuffer(cb, a.handle(), b.handle(), 1, &region);
+    ctx.wait(ctx.submit());
+    if (rep > 0) fn(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+}
+
+/// Bytes per second of vkCmdCopyBuffer (read + write): the median of 9 copies, measured right after
+/// the benchmark that reports it (the machine is shared: both measurements under the same load).
+double copyBandwidth(std::size_t index) {
+  std::vector<double> times;
+  copies(index, 9, [&](double t) { times.push_back(t); });
+  std::sort(times.begin(), times.end());
+  return 2.0 * static_cast<double>(copyBytes(index)) / times[times.size() / 2];
+}
+
+void copy(benchmark::State& state, std::size_t index) {
+  for (auto _ : state) copies(index, 1, [&](double t) { state.SetIterationTime(t); });
+  state.SetBytesProcessed(static_cast<std::int64_t>(2 * copyBytes(index)) * state.iterations());
+}
+
+/// The box clamped at x = 0, E = 1e5 Pa, nu = 0.4, 1000 kg/m^3, cells of 5 cm.
+detail::Problem boxProblem(const BoxSize& size) {
+  detail::Problem p = test::makeProblem(test::boxMesh(size.nx, size.ny, size.nz, 0.05, 0.05, 0.05), 1e5, 0.4, 1000.0);
+  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
+    if (p.mesh.nodes[3 * n] < 1e-9)
+      for (int k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;
+  return p;
+}
+
+/// Bytes a PCG iteration must move per element at least, in float (4-byte indices and reals; node
+/// data amortised by nodes / elements): the element pass reads 4 corners, 10 geometry reals and the
+/// 12 corner values and writes its 12-vector; the gather reads 4 entries and those 12 reals back;
+/// per node the product reads mass and p and writes y, and the update reads and writes the PCG
+/// vectors (x, r, u, p, s, w, M^-1: about 12 node vectors).
+double iterationBytesPerElement(const detail::Problem& p) {
+  const double r = 4.0, nodesPerElement = static_cast<double>(p.mesh.nodeCount()) / static_cast<double>(p.mesh.tetCount());
+  return 16 + r * (10 + 12 + 12) + 16 + r * 12 + nodesPerElement * r * (9 + 3 * 12);
+}
+
+void pcgIterations(benchmark::State& state, std::size_t index, BoxSize size) {
+  const detail::Problem p = boxProblem(size);
+  SolverDesc s;
+  s.precision = Precision::Float;
+  s.preconditioner = PreconditionerKind::Diagonal;
+  const auto entry = detail::findBackend("vulkan");
+  std::unique_ptr<detail::Device> dev;
+  try {
+    dev = entry->create({&p}, s, entry->resolve(std::to_string(index)), {});
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+    return;
+  }
+  const detail::BodySet one{0};
+  const Eigen::VectorXd x = p.restPositions;
+  dev->setPositions(one, {&x});
+  Eigen::VectorXd b = test::randomVector(p.dofCount(), 7), x0 = Eigen::VectorXd::Zero(b.size()), out = x0;
+  const std::vector<detail::SystemCoeffs> coeffs{{3600.0, 0.0, 1.0}};
+  std::vector<detail::PcgScalars> scalars;
+  const std::vector<char> running{1};
+  auto begin = [&] { dev->pcgBegin(one, coeffs, {&b}, {&x0}, 1e-30, 1 << 30); };
+  begin();
+  for (auto _ : state) {
+    dev->pcgIterate(20, running);
+    dev->pcgTake(dev->pcgRead(), scalars);
+    if (scalars[0].stop != detail::PcgStop::Running) {  // converged or broke down: start again, untimed
+      state.PauseTiming();
+      std::vector<detail::PcgScalars> residual;
+      dev->pcgEnd({scalars[0].iterations}, {&out}, residual);
+      begin();
+      state.ResumeTiming();
+    }
+  }
+  const double elements = static_cast<double>(p.mesh.tetCount()), iterations = 20.0 * static_cast<double>(state.iterations());
+  const double bw = copyBandwidth(index);
+  state.counters["elements"] = elements;
+  state.counters["elements_per_s"] = benchmark::Counter(elements * iterations, benchmark::Counter::kIsRate);
+  state.counters["bytes_per_element"] = iterationBytesPerElement(p);
+  state.counters["copy_GBps"] = bw / 1e9;
+  state.counters["bandwidth_fraction"] =
+      benchmark::Counter(elements * iterations * iterationBytesPerElement(p) / bw, benchmark::Counter::kIsRate);
+  state.SetLabel(dev->deviceName());
+}
+
+/// The box as a scene (one Newton iteration of dissipative Newmark, exactly 20 PCG iterations,
+/// diagonal preconditioner, float) on Vulkan device `index`.
+Scene boxScene(const BoxSize& size, std::size_t index) {
+  Scene s;
+  s.name = "bench_vulkan_box";
+  BodyDesc b;
+  b.name = "box";
+  BoxSpec box;
+  box.max = {0.05 * size.nx, 0.05 * size.ny, 0.05 * size.nz};
+  box.cells = {size.nx, size.ny, size.nz};
+  box.tetsPerCell = 6;
+  b.mesh.box = box;
+  b.material.youngsModulus = 1e5;
+  b.material.poissonRatio = 0.4;
+  b.material.density = 1000;
+  b.material.rayleighMass = 5.0;
+  NodeSetDesc clamp;
+  clamp.kind = NodeSetDesc::Kind::Plane;
+  clamp.planePoint = {0, 0, 0};
+  clamp.planeNormal = {1, 0, 0};
+  clamp.planeTolerance = 1e-9;
+  b.fixed.push_back(clamp);
+  LoadDesc g;
+  g.kind = LoadDesc::Kind::Gravity;
+  g.vector = {0, -9.81, 0};
+  b.loads.push_back(g);
+  s.bodies.push_back(b);
+  s.analysis.kind = AnalysisDesc::Kind::Dynamic;
+  s.analysis.dynamics.timeStep = 1.0 / 60.0;
+  s.analysis.dynamics.steps = 0;
+  s.analysis.dynamics.newtonIterations = 1;
+  s.analysis.dynamics.newmarkGamma = 0.6;
+  s.analysis.dynamics.newmarkBeta = 0.3025;
+  s.solver.tolerance = 1e-30;
+  s.solver.maxIterations = 20;
+  s.solver.checkEvery = 20;
+  s.solver.preconditioner = PreconditionerKind::Diagonal;
+  s.solver.precision = Precision::Float;
+  s.backend.kind = BackendKind::Vulkan;
+  s.backend.device = std::to_string(index);
+  return s;
+}
+
+/// A counter of the simulation's devices (the scheduler report's "device_counters", summed).
+long long deviceCounter(const Simulation& sim, const char* name) {
+  const nlohmann::json report = nlohmann::json::parse(sim.schedulerReport());
+  return report.value("device_counters", nlohmann::json::object()).value(name, 0LL);
+}
+
+void step(benchmark::State& state, std::size_t index, BoxSize size) {
+  const Scene scene = boxScene(size, index);
+  std::optional<Simulation> sim;
+  auto fresh = [&]() -> bool {
+    auto created = Simulation::create(scene);
+    if (!created) {
+      state.SkipWithError(created.message().c_str());
+      return false;
+    }
+    sim.emplace(std::move(created.value()));
+    for (int i = 0; i < 2; ++i) sim->step();  // warm-up: first allocations and uploads
+    return true;
+  };
+  if (!fresh()) return;
+  // Steps per simulation: the first steps of the motion, where 20 iterations keep the solve sound
+  // (bench_backends measured the energy guard stopping the 100k block after 26 float steps).
+  constexpr int kSteps = 20;
+  double host = 0;
+  long long submissions = 0, waits = 0, counted = 0;
+  long long submittedBefore = deviceCounter(*sim, "submissions"), waitsBefore = deviceCounter(*sim, "blocking_waits");
+  for (auto _ : state) {
+    if (sim->stepsTaken() >= kSteps) {
+      state.PauseTiming();
+      submissions += deviceCounter(*sim, "submissions") - submittedBefore;
+      waits += deviceCounter(*sim, "blocking_waits") - waitsBefore;
+      const bool ok = fresh();
+      submittedBefore = deviceCounter(*sim, "submissions");
+      waitsBefore = deviceCounter(*sim, "blocking_waits");
+      state.ResumeTiming();
+      if (!ok) return;
+    }
+    const double t0 = threadSeconds();
+    const Status st = sim->step();
+    host += threadSeconds() - t0;
+    ++counted;
+    if (!st) {
+      state.SkipWithError(st.message().c_str());
+      return;
+    }
+  }
+  submissions += deviceCounter(*sim, "submissions") - submittedBefore;
+  waits += deviceCounter(*sim, "blocking_waits") - waitsBefore;
+  const double n = static_cast<double>(std::max<long long>(counted, 1));
+  state.counters["elements"] = static_cast<double>(sim->restMesh(0).tetCount());
+  state.counters["host_ms_per_step"] = 1e3 * host / n;
+  state.counters["submissions_per_step"] = static_cast<double>(submissions) / n;
+  state.counters["blocking_waits_per_step"] = static_cast<double>(waits) / n;
+  state.SetLabel(sim->backendName() + " on " + sim->deviceName());
+}
+
+int registerAll() {
+  std::vector<detail::Candidate> devices;
+  if (const auto entry = detail::findBackend("vulkan")) devices = entry->candidates();
+  for (std::size_t i = 0; i < devices.size(); ++i) {
+    const std::string dev = std::to_string(i);
+    benchmark::RegisterBenchmark(("copy/" + dev).c_str(), copy, i)->UseManualTime()->MinTime(0.5)->Unit(benchmark::kMillisecond);
+    for (const BoxSize& size : kSizes) {
+      benchmark::RegisterBenchmark(("pcg_iterations/" + dev + "/" + size.label).c_str(), pcgIterations, i, size)
+          ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
+      benchmark::RegisterBenchmark(("step/" + dev + "/" + size.label).c_str(), step, i, size)
+          ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
+    }
+  }
+  return 0;
+}
+
+const int kRegistered = registerAll();
+
+}  // namespace
+}  // namespace corofem
+
+#endif  // COROFEM_WITH_VULKAN
+
+BENCHMARK_MAIN();
