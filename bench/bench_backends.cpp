@@ -10,6 +10,8 @@
 //       --benchmark_format=json > bench_backends.json
 #include <corofem/corofem.hpp>
 
+#include "bench_scenes.hpp"
+
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -37,27 +39,9 @@ const Size kSizes[] = {
 Scene beamScene(const Size& size, BackendKind backend, Precision precision) {
   Scene s;
   s.name = "bench_beam";
-  BodyDesc b;
-  b.name = "beam";
-  BoxSpec box;
-  box.max = {0.4, 0.2, 0.2};  // 0.4 m x 0.2 m x 0.2 m block at every resolution
-  box.cells = size.cells;
-  box.tetsPerCell = 6;
-  b.mesh.box = box;
-  b.material.youngsModulus = 1e5;  // soft rubber
+  // A 0.4 m x 0.2 m x 0.2 m block at every resolution, soft rubber.
+  BodyDesc b = bench::clampedBox("beam", {0.4, 0.2, 0.2}, size.cells, 6, 1e5, 0.3, 1000);
   b.material.rayleighMass = 5.0;  // damped, so thousands of timed steps settle instead of swinging
-  b.material.poissonRatio = 0.3;
-  b.material.density = 1000;
-  NodeSetDesc clamp;
-  clamp.kind = NodeSetDesc::Kind::Plane;
-  clamp.planePoint = {0, 0, 0};
-  clamp.planeNormal = {1, 0, 0};
-  clamp.planeTolerance = 1e-9;
-  b.fixed.push_back(clamp);
-  LoadDesc g;
-  g.kind = LoadDesc::Kind::Gravity;
-  g.vector = {0, -9.81, 0};
-  b.loads.push_back(g);
   s.bodies.push_back(b);
   s.analysis.kind = AnalysisDesc::Kind::Dynamic;
   s.analysis.dynamics.timeStep = 1.0 / 60.0;

@@ -37,6 +37,8 @@
 
 #include "embed/embed_test_util.hpp"
 
+#include "bench_scenes.hpp"
+
 #include <benchmark/benchmark.h>
 
 #include <nlohmann/json.hpp>
@@ -71,30 +73,14 @@ enum Set { kOneMaterial = 0, kMaterials = 1, kMeshes = 2 };
 /// middle of the range), which isolates the launch sharing from the spread of PCG counts.
 BodyDesc body(int i, int set) {
   const bool varied = set == kMaterials;
-  BodyDesc b;
-  b.name = "body" + std::to_string(i);
-  BoxSpec box;
-  box.max = {1.0, 0.2, 0.25};
-  box.cells = {20, 4, 5};
-  if (set == kMeshes) box.cells = {8 + (kBodies - 1 - i) * 36 / (kBodies - 1), 4, 5};  // the largest first
-  box.tetsPerCell = 5;
-  b.mesh.box = box;
-  b.mesh.translate = {0.0, 0.0, 0.5 * i};
+  const std::array<int, 3> cells{set == kMeshes ? 8 + (kBodies - 1 - i) * 36 / (kBodies - 1) : 20, 4, 5};  // the largest first
   const double f = varied ? static_cast<double>(i) / (kBodies - 1) : 0.5;  // 0 .. 1 over the bodies
-  b.material.youngsModulus = 2e5 * std::pow(10.0, f);        // 2e5 .. 2e6 Pa
-  b.material.poissonRatio = varied ? 0.25 + 0.2 * static_cast<double>((i * 37) % kBodies) / kBodies : 0.35;
-  b.material.density = varied ? 800 + 400 * static_cast<double>((i * 61) % kBodies) / kBodies : 1000;
+  BodyDesc b = bench::clampedBox("body" + std::to_string(i), {1.0, 0.2, 0.25}, cells, 5,
+                                 2e5 * std::pow(10.0, f),  // 2e5 .. 2e6 Pa
+                                 varied ? 0.25 + 0.2 * static_cast<double>((i * 37) % kBodies) / kBodies : 0.35,
+                                 varied ? 800 + 400 * static_cast<double>((i * 61) % kBodies) / kBodies : 1000);
+  b.mesh.translate = {0.0, 0.0, 0.5 * i};
   b.material.rayleighMass = varied && i % 3 == 0 ? 2.0 : 0.0;
-  NodeSetDesc clamp;
-  clamp.kind = NodeSetDesc::Kind::Plane;
-  clamp.planePoint = {0, 0, 0};
-  clamp.planeNormal = {1, 0, 0};
-  clamp.planeTolerance = 1e-9;
-  b.fixed.push_back(clamp);
-  LoadDesc g;
-  g.kind = LoadDesc::Kind::Gravity;
-  g.vector = {0, -9.81, 0};
-  b.loads.push_back(g);
   return b;
 }
 

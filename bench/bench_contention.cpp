@@ -15,6 +15,8 @@
 #include <corofem/scene.hpp>
 #include <corofem/simulation.hpp>
 
+#include "bench_scenes.hpp"
+
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
@@ -40,26 +42,7 @@ int busyCpu = -1;
 PreconditionerKind preconditioner = PreconditionerKind::Auto;
 
 Scene beamScene() {
-  BodyDesc body;
-  body.name = "beam";
-  BoxSpec box;
-  box.max = {1.2, 0.1, 0.1};
-  box.cells = {72, 6, 6};
-  box.tetsPerCell = 5;
-  body.mesh.box = box;
-  body.material.youngsModulus = 1e6;
-  body.material.poissonRatio = 0.3;
-  body.material.density = 1000;
-  NodeSetDesc clamp;
-  clamp.kind = NodeSetDesc::Kind::Plane;
-  clamp.planePoint = {0, 0, 0};
-  clamp.planeNormal = {1, 0, 0};
-  clamp.planeTolerance = 1e-9;
-  body.fixed.push_back(clamp);
-  LoadDesc g;
-  g.kind = LoadDesc::Kind::Gravity;
-  g.vector = {0, -9.81, 0};
-  body.loads.push_back(g);
+  const BodyDesc body = bench::clampedBox("beam", {1.2, 0.1, 0.1}, {72, 6, 6}, 5, 1e6, 0.3, 1000);
   Scene s;
   s.name = "contention";
   s.bodies.push_back(body);

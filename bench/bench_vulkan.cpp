@@ -18,6 +18,8 @@
 //   ./build/bench/bench_vulkan --benchmark_format=json [--benchmark_filter=-/1M]   (skip the 1M box)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
+#include "bench_scenes.hpp"
+
 #include <benchmark/benchmark.h>
 
 #ifdef COROFEM_WITH_VULKAN
@@ -162,27 +164,9 @@ void pcgIterations(benchmark::State& state, std::size_t index, BoxSize size) {
 Scene boxScene(const BoxSize& size, std::size_t index) {
   Scene s;
   s.name = "bench_vulkan_box";
-  BodyDesc b;
-  b.name = "box";
-  BoxSpec box;
-  box.max = {0.05 * size.nx, 0.05 * size.ny, 0.05 * size.nz};
-  box.cells = {size.nx, size.ny, size.nz};
-  box.tetsPerCell = 6;
-  b.mesh.box = box;
-  b.material.youngsModulus = 1e5;
-  b.material.poissonRatio = 0.4;
-  b.material.density = 1000;
+  BodyDesc b = bench::clampedBox("box", {0.05 * size.nx, 0.05 * size.ny, 0.05 * size.nz}, {size.nx, size.ny, size.nz},
+                                 6, 1e5, 0.4, 1000);
   b.material.rayleighMass = 5.0;
-  NodeSetDesc clamp;
-  clamp.kind = NodeSetDesc::Kind::Plane;
-  clamp.planePoint = {0, 0, 0};
-  clamp.planeNormal = {1, 0, 0};
-  clamp.planeTolerance = 1e-9;
-  b.fixed.push_back(clamp);
-  LoadDesc g;
-  g.kind = LoadDesc::Kind::Gravity;
-  g.vector = {0, -9.81, 0};
-  b.loads.push_back(g);
   s.bodies.push_back(b);
   s.analysis.kind = AnalysisDesc::Kind::Dynamic;
   s.analysis.dynamics.timeStep = 1.0 / 60.0;

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs, with apt-get, the Debian 12 packages corofem needs that are missing (the Vulkan loader,
-# headers and glslc build the Vulkan backend; mesa-vulkan-drivers is lavapipe, its CPU device). Run as root
+# headers and glslc build the Vulkan backend; mesa-vulkan-drivers is lavapipe, its CPU device; the Khronos
+# validation layers check the Vulkan tests that run on an application-made device). Run as root
 # (or with sudo available). Installs nothing when everything is already there. clang-14 and its
 # runtime (libFuzzer, the sanitizers) build the fuzz targets (tests/fuzz/run_fuzz.sh).
 set -euo pipefail
@@ -10,7 +11,7 @@ packages=(
   libeigen3-dev nlohmann-json3-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo
-  libvulkan-dev glslc mesa-vulkan-drivers
+  libvulkan-dev glslc mesa-vulkan-drivers vulkan-validationlayers
   python3 python3-matplotlib python3-numpy python3-meshio
   clang-14 libclang-rt-14-dev
 )

@@ -23,9 +23,11 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -555,7 +557,7 @@ struct Renderer {
 };
 
 int usage() {
-  std::cerr << "usage: renderer [--out DIR] [--frames N] [--png-every K] [--width W] [--height H]\n";
+  std::cerr << "usage: renderer [--out DIR] [--frames N >= 1] [--png-every K >= 1] [--width 16..8192] [--height 16..8192]\n";
   return 2;
 }
 
@@ -563,18 +565,31 @@ int run(int argc, char** argv) {
   std::string out = "out/renderer";
   long frames = 120, pngEvery = 20;
   std::uint32_t width = 640, height = 480;
+  // A whole number in [lo, hi], or false.
+  auto number = [](const std::string& text, long lo, long hi, long& out) {
+    char* end = nullptr;
+    errno = 0;
+    const long v = std::strtol(text.c_str(), &end, 10);
+    if (text.empty() || *end != '\0' || errno != 0 || v < lo || v > hi) return false;
+    out = v;
+    return true;
+  };
+  long w = width, h = height;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) return usage();
     const std::string v = argv[++i];
+    bool ok = true;
     if (a == "--out") out = v;
-    else if (a == "--frames") frames = std::atol(v.c_str());
-    else if (a == "--png-every") pngEvery = std::atol(v.c_str());
-    else if (a == "--width") width = static_cast<std::uint32_t>(std::atol(v.c_str()));
-    else if (a == "--height") height = static_cast<std::uint32_t>(std::atol(v.c_str()));
-    else return usage();
+    else if (a == "--frames") ok = number(v, 1, 1000000, frames);
+    else if (a == "--png-every") ok = number(v, 1, 1000000, pngEvery);
+    else if (a == "--width") ok = number(v, 16, 8192, w);
+    else if (a == "--height") ok = number(v, 16, 8192, h);
+    else ok = false;
+    if (!ok) return usage();
   }
-  if (frames < 1 || pngEvery < 1 || width < 16 || height < 16 || width > 8192 || height > 8192) return usage();
+  width = static_cast<std::uint32_t>(w);
+  height = static_cast<std::uint32_t>(h);
   if (!std::ifstream("../shared/data/meshes/sofa/liver.msh")) {
     std::cerr << "renderer: ../shared/data/meshes/sofa/liver.msh is absent (run from the project root, with the "
                  "shared data folder beside it); skipping\n";

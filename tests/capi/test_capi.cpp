@@ -15,6 +15,9 @@
 #ifdef COROFEM_WITH_OPENCL
 #include "backends/opencl/cl_context.hpp"
 #endif
+#ifdef COROFEM_WITH_VULKAN
+#include "common/vulkan_app.hpp"
+#endif
 #ifdef COROFEM_C_LIBRARY
 #include <dlfcn.h>
 #endif
@@ -711,6 +714,75 @@ TEST(CApi, TheApplicationsOpenCLContextHoldsTheSurfaceBuffer) {
   }
   clReleaseCommandQueue(queue);
   clReleaseContext(context);
+}
+#endif
+
+#ifdef COROFEM_WITH_VULKAN
+/// corofem_external_device with COROFEM_GPU_VULKAN: the bodies run on the application's VkDevice, the
+/// same states as the C++ API given the same handles, and the surface buffer is a VkBuffer of that
+/// device that the application reads on its queue: the numbers corofem_simulation_read_surface gives.
+TEST(CApi, TheApplicationsVulkanDeviceHoldsTheSurfaceBuffer) {
+  test::VulkanApp app(false);
+  if (!app.ok()) GTEST_SKIP() << app.why;
+  const std::string dir = tempDir().string();
+  writeBoxSurface(dir + "/box.obj", {0.02, 0.02, 0.02}, {0.48, 0.08, 0.08});
+  std::string json = twoBodies("vulkan");
+  const std::string solver = R"("solver": {)";
+  json.replace(json.find(solver), solver.size(), R"("solver": {"precision": "float", "preconditioner": "diagonal", )");
+  json.replace(json.find("1e-10"), 5, "1e-6");
+  corofem_options o = corofem_default_options();
+  o.device.api = COROFEM_GPU_VULKAN;
+  o.device.instance = app.instance;
+  o.device.physical_device = app.physical;
+  o.device.device = app.device;
+  o.device.queue = app.queue;
+  o.device.queue_family = app.family;
+  CSim c = createC(json, dir, &o);
+  ASSERT_NE(c.sim, nullptr);
+  SimulationOptions lent;
+  lent.device = app.external();
+  Simulation cpp = createCpp(json, dir, lent);
+  char backend[32];
+  C_OK(corofem_simulation_backend_name(c.sim, backend, sizeof backend, nullptr));
+  EXPECT_STREQ(backend, "vulkan");
+  for (int k = 0; k < 3; ++k) {
+    C_OK(corofem_simulation_step(c.sim, nullptr));
+    CPP_OK(cpp.step());
+  }
+  std::vector<double> x;
+  CPP_OK(cpp.readPositions(0, x));
+  EXPECT_EQ(positionsC(c.sim, 0), x);
+  corofem_gpu_buffer b{};
+  C_OK(corofem_simulation_surface_buffer(c.sim, 0, &b));
+  std::size_t vertices = 0, triangles = 0;
+  C_OK(corofem_simulation_surface_size(c.sim, 0, &vertices, &triangles));
+  EXPECT_EQ(b.api, COROFEM_GPU_VULKAN);
+  ASSERT_NE(b.handle, 0u);
+  EXPECT_EQ(b.stride, 24u);
+  EXPECT_EQ(b.bytes, vertices * 24);
+  GpuBuffer g;
+  g.api = GpuApi::Vulkan;
+  g.handle = b.handle;
+  g.offset = b.offset;
+  g.stride = b.stride;
+  g.bytes = b.bytes;
+  const std::vector<float> drawn = app.read(g);
+  std::vector<double> p(3 * vertices);
+  std::vector<float> n(3 * vertices);
+  C_OK(corofem_simulation_read_surface(c.sim, 0, p.data(), p.size(), n.data(), n.size(), nullptr));
+  ASSERT_EQ(drawn.size(), 6 * vertices);
+  for (std::size_t v = 0; v < vertices; ++v)
+    for (std::size_t a = 0; a < 3; ++a) {
+      EXPECT_EQ(double{drawn[6 * v + a]}, p[3 * v + a]) << "vertex " << v;
+      EXPECT_EQ(drawn[6 * v + 3 + a], n[3 * v + a]) << "vertex " << v;
+    }
+  // A handle the C layer does not pass on is refused by name.
+  o.device.physical_device = nullptr;
+  CScene scene;
+  CSim none;
+  C_OK(corofem_scene_parse(json.c_str(), dir.c_str(), nullptr, 0, &scene.scene));
+  EXPECT_EQ(corofem_simulation_create(scene.scene, &o, &none.sim), COROFEM_BAD_INPUT);
+  EXPECT_NE(message().find("physicalDevice is null"), std::string::npos) << message();
 }
 #endif
 

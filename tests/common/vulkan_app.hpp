@@ -27,15 +27,42 @@ class VulkanApp {
  public:
   /// The first physical device with a queue family doing graphics and compute (lavapipe in CI).
   /// `float64`: enables shaderFloat64 where the device has it. ok() is false where there is none.
+  /// Where Khronos' validation layer is installed (Debian: vulkan-validationlayers), the instance
+  /// runs under it with synchronisation validation, and every error or warning it reports about
+  /// the application's or corofem's commands on this device lands in messages().
   explicit VulkanApp(bool float64) {
     auto app = info<VkApplicationInfo>(VK_STRUCTURE_TYPE_APPLICATION_INFO);
     app.pApplicationName = "corofem test application";
     app.apiVersion = VK_API_VERSION_1_1;
     auto ii = info<VkInstanceCreateInfo>(VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO);
     ii.pApplicationInfo = &app;
+    const char* layer = "VK_LAYER_KHRONOS_validation";
+    const char* extension = VK_EXT_DEBUG_UTILS_EXTENSION_NAME;
+    const VkValidationFeatureEnableEXT sync = VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT;
+    auto features = info<VkValidationFeaturesEXT>(VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT);
+    features.enabledValidationFeatureCount = 1;
+    features.pEnabledValidationFeatures = &sync;
+    if (hasValidationLayer()) {
+      ii.enabledLayerCount = 1;
+      ii.ppEnabledLayerNames = &layer;
+      ii.enabledExtensionCount = 1;
+      ii.ppEnabledExtensionNames = &extension;
+      ii.pNext = &features;
+      validated = true;
+    }
     if (vkCreateInstance(&ii, nullptr, &instance) != VK_SUCCESS) {
       why = "no Vulkan instance (no driver)";
       return;
+    }
+    if (validated) {
+      auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
+          vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT"));
+      auto mi = info<VkDebugUtilsMessengerCreateInfoEXT>(VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT);
+      mi.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+      mi.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
+      mi.pfnUserCallback = &VulkanApp::onMessage;
+      mi.pUserData = &messages_;
+      if (!create || create(instance, &mi, nullptr, &messenger) != VK_SUCCESS) validated = false;
     }
     std::uint32_t count = 0;
     vkEnumeratePhysicalDevices(instance, &count, nullptr);
@@ -79,7 +106,7 @@ class VulkanApp {
     auto pi = info<VkCommandPoolCreateInfo>(VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO);
     pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
     pi.queueFamilyIndex = family;
-    vkCreateCommandPool(device, &pi, nullptr, &pool);
+    if (vkCreateCommandPool(device, &pi, nullptr, &pool) != VK_SUCCESS) why = "vkCreateCommandPool failed";
   }
   ~VulkanApp() {
     if (device) {
@@ -87,12 +114,20 @@ class VulkanApp {
       if (pool) vkDestroyCommandPool(device, pool, nullptr);
       vkDestroyDevice(device, nullptr);
     }
+    if (messenger) {
+      auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
+          vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
+      if (destroy) destroy(instance, messenger, nullptr);
+    }
     if (instance) vkDestroyInstance(instance, nullptr);
   }
+
+  /// The validation layer's messages so far (empty without the layer: validated is then false).
+  const std::vector<std::string>& messages() const { return messages_; }
   VulkanApp(const VulkanApp&) = delete;
   VulkanApp& operator=(const VulkanApp&) = delete;
 
-  bool ok() const { return device != VK_NULL_HANDLE; }
+  bool ok() const { return device != VK_NULL_HANDLE && pool != VK_NULL_HANDLE; }
 
   /// The handles as corofem takes them.
   ExternalDevice external() const {
@@ -107,6 +142,10 @@ class VulkanApp {
     return e;
   }
 
+  static void need(VkResult r, const char* what) {
+    if (r != VK_SUCCESS) throw std::runtime_error(std::string(what) + " failed (" + std::to_string(r) + ")");
+  }
+
   /// `b`'s region as floats, copied on this queue after everything submitted to it (a renderer's
   /// read: corofem's update ends with a barrier to every later command on the queue), waited for
   /// with a fence of the application's own.
@@ -117,27 +156,27 @@ class VulkanApp {
     auto bi = info<VkBufferCreateInfo>(VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO);
     bi.size = b.bytes;
     bi.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
-    vkCreateBuffer(device, &bi, nullptr, &host);
+    need(vkCreateBuffer(device, &bi, nullptr, &host), "vkCreateBuffer");
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(device, host, &req);
     VkPhysicalDeviceMemoryProperties props;
     vkGetPhysicalDeviceMemoryProperties(physical, &props);
     auto ai = info<VkMemoryAllocateInfo>(VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO);
     ai.allocationSize = req.size;
-    const VkMemoryPropertyFlags need = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    const VkMemoryPropertyFlags wanted = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     for (std::uint32_t i = 0; i < props.memoryTypeCount; ++i)
-      if ((req.memoryTypeBits & (1u << i)) && (props.memoryTypes[i].propertyFlags & need) == need) {
+      if ((req.memoryTypeBits & (1u << i)) && (props.memoryTypes[i].propertyFlags & wanted) == wanted) {
         ai.memoryTypeIndex = i;
         break;
       }
-    vkAllocateMemory(device, &ai, nullptr, &memory);
-    vkBindBufferMemory(device, host, memory, 0);
+    need(vkAllocateMemory(device, &ai, nullptr, &memory), "vkAllocateMemory");
+    need(vkBindBufferMemory(device, host, memory, 0), "vkBindBufferMemory");
     VkCommandBuffer cb = VK_NULL_HANDLE;
     auto ca = info<VkCommandBufferAllocateInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO);
     ca.commandPool = pool;
     ca.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
     ca.commandBufferCount = 1;
-    vkAllocateCommandBuffers(device, &ca, &cb);
+    need(vkAllocateCommandBuffers(device, &ca, &cb), "vkAllocateCommandBuffers");
     auto begin = info<VkCommandBufferBeginInfo>(VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO);
     vkBeginCommandBuffer(cb, &begin);
     VkBufferCopy region{b.offset, 0, b.bytes};
@@ -149,15 +188,15 @@ class VulkanApp {
     vkEndCommandBuffer(cb);
     VkFence fence = VK_NULL_HANDLE;
     auto fi = info<VkFenceCreateInfo>(VK_STRUCTURE_TYPE_FENCE_CREATE_INFO);
-    vkCreateFence(device, &fi, nullptr, &fence);
+    need(vkCreateFence(device, &fi, nullptr, &fence), "vkCreateFence");
     auto si = info<VkSubmitInfo>(VK_STRUCTURE_TYPE_SUBMIT_INFO);
     si.commandBufferCount = 1;
     si.pCommandBuffers = &cb;
-    vkQueueSubmit(queue, 1, &si, fence);
-    vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX);
+    need(vkQueueSubmit(queue, 1, &si, fence), "vkQueueSubmit");
+    need(vkWaitForFences(device, 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
     std::vector<float> out(b.bytes / sizeof(float));
     void* p = nullptr;
-    vkMapMemory(device, memory, 0, b.bytes, 0, &p);
+    need(vkMapMemory(device, memory, 0, b.bytes, 0, &p), "vkMapMemory");
     std::memcpy(out.data(), p, b.bytes);
     vkUnmapMemory(device, memory);
     vkDestroyFence(device, fence, nullptr);
@@ -174,7 +213,27 @@ class VulkanApp {
   VkCommandPool pool = VK_NULL_HANDLE;
   std::uint32_t family = 0;
   bool hasFloat64 = false;
+  bool validated = false;  ///< the validation layer watches this device
   std::string why;  ///< why ok() is false
+
+ private:
+  static bool hasValidationLayer() {
+    std::uint32_t n = 0;
+    vkEnumerateInstanceLayerProperties(&n, nullptr);
+    std::vector<VkLayerProperties> layers(n);
+    if (n) vkEnumerateInstanceLayerProperties(&n, layers.data());
+    for (const VkLayerProperties& l : layers)
+      if (std::string(l.layerName) == "VK_LAYER_KHRONOS_validation") return true;
+    return false;
+  }
+  static VKAPI_ATTR VkBool32 VKAPI_CALL onMessage(VkDebugUtilsMessageSeverityFlagBitsEXT,
+                                                 VkDebugUtilsMessageTypeFlagsEXT,
+                                                 const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
+    static_cast<std::vector<std::string>*>(user)->push_back(data && data->pMessage ? data->pMessage : "(no text)");
+    return VK_FALSE;
+  }
+  VkDebugUtilsMessengerEXT messenger = VK_NULL_HANDLE;
+  std::vector<std::string> messages_;
 };
 
 }  // namespace corofem::test

@@ -201,6 +201,11 @@ TEST_P(VulkanSurfaces, OnTheApplicationsDeviceTheRendererReadsTheCurrentSurfaceO
     }
   }
   expectTheHostsSurface(sim.value(), 1, isDouble());
+  sim = Result<Simulation>(ErrorCode::Internal, "destroyed");  // corofem's objects go before the checks
+  // Where the validation layer is installed, it saw no misuse of the device, corofem's or ours.
+  EXPECT_TRUE(app.messages().empty()) << app.messages().size() << " validation messages, the first: "
+                                      << app.messages().front();
+  std::printf("[ vulkan   ] validation layer: %s\n", app.validated ? "on" : "absent (Debian: vulkan-validationlayers)");
 }
 
 INSTANTIATE_TEST_SUITE_P(Precisions, VulkanSurfaces, ::testing::Values(Precision::Float, Precision::Double),
@@ -224,6 +229,12 @@ TEST(VulkanExternalDevice, BadHandlesAreRefusedByName) {
   ExternalDevice e = app.external();
   e.instance = nullptr;
   refused(e, "instance is null");
+  e = app.external();
+  e.physicalDevice = nullptr;
+  refused(e, "physicalDevice is null");
+  e = app.external();
+  e.device = nullptr;
+  refused(e, "device is null");
   e = app.external();
   e.queue = nullptr;
   refused(e, "queue is null");

@@ -145,9 +145,10 @@ typedef enum corofem_gpu_api {
 /** The application's own device, lent to corofem (corofem::ExternalDevice), which uses it while it
  *  lives and never destroys it. COROFEM_GPU_OPENCL: its cl_context, an in-order cl_command_queue on
  *  it and that queue's cl_device_id, all three (retained while used). COROFEM_GPU_VULKAN: instance,
- *  physical_device, device, a queue of family queue_family that supports compute, and
- *  shader_float64 = 1 when the device was created with that feature (double precision needs it);
- *  no other thread may submit to that queue during a corofem call. */
+ *  physical_device, device (Vulkan 1.1 or later), a queue of family queue_family that supports
+ *  compute, and shader_float64 = 1 when the device was created with that feature (double precision
+ *  needs it); no other thread may submit to that queue during a corofem call, and the application
+ *  waits for its own work reading corofem's buffers before destroying the simulation. */
 typedef struct corofem_external_device {
   corofem_gpu_api api; /**< COROFEM_GPU_NONE: none lent (the default) */
   void* context;       /**< OpenCL: cl_context */
@@ -284,8 +285,9 @@ typedef struct corofem_gpu_buffer {
  *  "separate" 3 float32 of position (12 bytes). An empty buffer (api COROFEM_GPU_NONE, handle 0)
  *  where the body has no surface or its surface is computed on the host (the reference backend).
  *  Enqueues the update on the device's queue and does not wait (corofem_simulation_update_surface
- *  waits); on Vulkan the update ends with a barrier to every later command of that queue, so a draw
- *  the application submits to the queue it lent afterwards sees the current surface. The buffer belongs to the simulation: ask again after each step rather than keep it. */
+ *  waits); on Vulkan the update ends with a barrier to every read of every later command on that
+ *  queue, so a draw the application submits to the queue it lent afterwards sees the current
+ *  surface. The buffer belongs to the simulation: ask again after each step rather than keep it. */
 corofem_status corofem_simulation_surface_buffer(const corofem_simulation* simulation, int body,
                                                  corofem_gpu_buffer* buffer);
 /** With "surface_layout": "separate", the buffer of the unit normals (3 float32 per vertex); else

@@ -48,8 +48,12 @@ struct GpuBuffer {
 /// application's device, so a renderer draws the surfaces (Simulation::surfaceBuffer) from
 /// corofem's VkBuffers directly. corofem submits to the queue only from inside its own calls; Vulkan
 /// asks that no other thread submit to the same queue meanwhile (the application's lock, if it
-/// shares the queue between threads). The device needs no extension; `shaderFloat64` says whether
-/// it was created with that feature enabled, which double precision needs (Vulkan cannot be asked).
+/// shares the queue between threads). The device needs Vulkan 1.1 (the instance created with
+/// apiVersion 1.1 or later) and no extension; `shaderFloat64` says whether it was created with that
+/// feature enabled, which double precision needs (Vulkan cannot be asked). corofem's buffers are
+/// exclusive to the lent queue's family. The application waits for its own submissions that read
+/// corofem's buffers before destroying the Simulation or removing a body of a batch (corofem waits
+/// only for its own work).
 struct ExternalDevice {
   GpuApi api = GpuApi::None;  ///< None: none lent
   void* context = nullptr;    ///< OpenCL: cl_context

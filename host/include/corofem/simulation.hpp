@@ -230,10 +230,11 @@ class Simulation {
   /// stepped since the last one and does not wait: work the application enqueues on that queue
   /// afterwards (SimulationOptions::device) sees the current surface. On Vulkan the update is
   /// submitted to the device's queue and ends with a pipeline barrier from its compute writes to
-  /// every later command's vertex input, vertex and compute shader reads and transfers, so the
-  /// application's later submissions to the queue it lent (SimulationOptions::device) draw the
-  /// current surface with no semaphore or wait. From another queue or API, call updateSurface()
-  /// first. The buffer belongs to the Simulation and stays valid until it is
+  /// every read of every later command on that queue, so the application's later submissions to
+  /// the queue it lent (SimulationOptions::device) draw the current surface with no semaphore or
+  /// wait, and corofem's next update waits for them on the device. From another queue (of the same
+  /// family on Vulkan) or API, call updateSurface() first, and finish reading before the next
+  /// step's surface is asked for. The buffer belongs to the Simulation and stays valid until it is
   /// destroyed, the body moves to another device (a device failure) or its batch's device is made
   /// again (removeBody of another body of the batch); ask for it again after step() rather than
   /// caching it.

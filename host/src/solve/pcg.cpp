@@ -147,8 +147,9 @@ void solveTile(Device& device, const BodySet& bodies, const std::vector<PcgSolve
     if (enqueued >= cap && !residualQueued && enqueued > 0) queueResidual();
     collect();
     const bool any = std::any_of(iterating.begin(), iterating.end(), [](char c) { return c != 0; });
-    if (!any || reads.empty()) break;  // all stopped, or the read after the last allowed iteration was taken
+    if (!any) break;  // all stopped
     if (enqueued < cap) enqueueChunk();
+    else if (reads.empty()) break;  // the read after the last allowed iteration was taken
   }
   std::vector<int> iterations(n, 0);
   for (std::size_t i = 0; i < n; ++i) {

@@ -56,13 +56,15 @@ PhysicalDevice describe(VkPhysicalDevice h, bool* usable) {
           props.deviceType == VK_PHYSICAL_DEVICE_TYPE_VIRTUAL_GPU;
   d.float64 = features.shaderFloat64 == VK_TRUE;
   d.limits = props.limits;
+  d.apiVersion = props.apiVersion;
   bool found = false;
   for (std::uint32_t f = 0; f < families && !found; ++f)
     if (fam[f].queueFlags & VK_QUEUE_COMPUTE_BIT) {
       d.queueFamily = f;
       found = true;
     }
-  if (usable) *usable = found && props.limits.maxPerStageDescriptorStorageBuffers >= 31;
+  if (usable)
+    *usable = found && props.limits.maxPerStageDescriptorStorageBuffers >= 31 && props.apiVersion >= VK_API_VERSION_1_1;
   return d;
 }
 
@@ -208,6 +210,11 @@ Context::Context(const ExternalDevice& external, bool float64, std::uint32_t bin
     fail(ErrorCode::BadInput, "SimulationOptions::device (Vulkan): queue family ", external.queueFamily, " of '",
          physical_.name, "' ", external.queueFamily >= families ? "does not exist" : "has no compute",
          "; lend a queue of a family with VK_QUEUE_COMPUTE_BIT (", families, " families)");
+  if (physical_.apiVersion < VK_API_VERSION_1_1)
+    fail(ErrorCode::BadInput, "SimulationOptions::device (Vulkan): '", physical_.name, "' offers Vulkan ",
+         VK_API_VERSION_MAJOR(physical_.apiVersion), ".", VK_API_VERSION_MINOR(physical_.apiVersion),
+         "; corofem's shaders need Vulkan 1.1 (SPIR-V 1.3): lend a device that offers 1.1 or later, made on an "
+         "instance created with apiVersion 1.1 or later");
   if (physical_.limits.maxPerStageDescriptorStorageBuffers < 31)
     fail(ErrorCode::DeviceError, "Vulkan: '", physical_.name, "' binds ",
          physical_.limits.maxPerStageDescriptorStorageBuffers, " storage buffers per stage; corofem's shaders need 31");
@@ -230,13 +237,6 @@ Context::Context(const ExternalDevice& external, bool float64, std::uint32_t bin
 void Context::makeObjects(std::uint32_t pushBytes) {
   const std::uint32_t bindings = bindings_;
   if (!queue_) vkGetDeviceQueue(device_, physical_.queueFamily, 0, &queue_);
-  {
-    std::uint32_t families = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_.handle, &families, nullptr);
-    std::vector<VkQueueFamilyProperties> fam(families);
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_.handle, &families, fam.data());
-    graphics_ = physical_.queueFamily < families && (fam[physical_.queueFamily].queueFlags & VK_QUEUE_GRAPHICS_BIT);
-  }
 
   std::vector<VkDescriptorSetLayoutBinding> b(bindings);
   for (std::uint32_t i = 0; i < bindings; ++i) {
@@ -367,7 +367,6 @@ void Context::freeDescriptorSet(VkDescriptorSet set) {
 
 void Context::waitSlot(Slot& s) {
   if (!s.busy) return;
-  if (vkGetFenceStatus(device_, s.fence) == VK_NOT_READY) ++blockingWaits_;
   check(vkWaitForFences(device_, 1, &s.fence, VK_TRUE, std::numeric_limits<std::uint64_t>::max()), "vkWaitForFences");
   s.busy = false;
 }
@@ -376,6 +375,7 @@ VkCommandBuffer Context::begin() {
   if (recording_) fail(ErrorCode::Internal, "Vulkan: a command buffer is already being recorded");
   Slot& s = ring_[next_];
   next_ = (next_ + 1) % ring_.size();
+  if (s.busy && vkGetFenceStatus(device_, s.fence) == VK_NOT_READY) ++blockingWaits_;  // the ring is full
   waitSlot(s);
   check(vkResetFences(device_, 1, &s.fence), "vkResetFences");
   check(vkResetCommandBuffer(s.cb, 0), "vkResetCommandBuffer");
@@ -402,9 +402,14 @@ std::uint64_t Context::submit() {
 }
 
 void Context::wait(std::uint64_t id) {
-  // Submissions on one queue complete in order: waiting for every busy slot up to id covers it.
+  // Every busy slot up to id; the host stalled once if any of them was still running.
+  bool stalled = false;
   for (Slot& s : ring_)
-    if (s.busy && s.id <= id) waitSlot(s);
+    if (s.busy && s.id <= id) {
+      stalled = stalled || vkGetFenceStatus(device_, s.fence) == VK_NOT_READY;
+      waitSlot(s);
+    }
+  if (stalled) ++blockingWaits_;
 }
 
 void Context::waitAll() { wait(submitted_); }
@@ -425,16 +430,12 @@ void hostReadBarrier(VkCommandBuffer cb) {
                        VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &m, 0, nullptr, 0, nullptr);
 }
 
-void renderBarrier(VkCommandBuffer cb, bool graphics) {
+void renderBarrier(VkCommandBuffer cb) {
   auto m = made<VkMemoryBarrier>(VK_STRUCTURE_TYPE_MEMORY_BARRIER);
   m.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
-  m.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_TRANSFER_READ_BIT;
-  VkPipelineStageFlags dst = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | VK_PIPELINE_STAGE_TRANSFER_BIT;
-  if (graphics) {
-    m.dstAccessMask |= VK_ACCESS_VERTEX_ATTRIBUTE_READ_BIT;
-    dst |= VK_PIPELINE_STAGE_VERTEX_INPUT_BIT | VK_PIPELINE_STAGE_VERTEX_SHADER_BIT;
-  }
-  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, dst, 0, 1, &m, 0, nullptr, 0, nullptr);
+  m.dstAccessMask = VK_ACCESS_MEMORY_READ_BIT;
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_ALL_COMMANDS_BIT, 0, 1, &m, 0,
+                       nullptr, 0, nullptr);
 }
 
 void uploadOnce(Context& ctx, const Buffer& to, const void* data, std::size_t bytes) {

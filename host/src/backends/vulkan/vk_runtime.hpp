@@ -35,11 +35,12 @@ struct PhysicalDevice {
   bool gpu = false;    ///< integrated, discrete or virtual GPU (not a CPU device such as lavapipe)
   bool float64 = false;
   std::uint32_t queueFamily = 0;
+  std::uint32_t apiVersion = 0;  ///< the Vulkan version the device offers
   VkPhysicalDeviceLimits limits{};
 };
 
-/// What corofem needs to know of a physical device; `found` false where it has no compute queue or
-/// too few storage buffers per stage (the family is then meaningless).
+/// What corofem needs to know of a physical device; `*usable` false where it has no compute queue,
+/// too few storage buffers per stage or Vulkan older than 1.1 (the shaders' SPIR-V 1.3).
 PhysicalDevice describe(VkPhysicalDevice handle, bool* usable = nullptr);
 
 /// The process's Vulkan instance and its usable devices, made at the first call. Throws
@@ -125,8 +126,6 @@ class Context {
   std::uint64_t lastSubmission() const { return submitted_; }
   /// Waits on the host that found work still running (each a host round trip that stalled).
   std::uint64_t blockingWaits() const { return blockingWaits_; }
-  /// Whether its queue's family does graphics (a renderer may draw on the same queue).
-  bool graphicsQueue() const { return graphics_; }
 
  private:
   struct Slot {
@@ -156,17 +155,15 @@ class Context {
   Slot* recording_ = nullptr;
   std::uint64_t submitted_ = 0;
   std::uint64_t blockingWaits_ = 0;
-  bool graphics_ = false;
 };
 
 /// Every earlier command's memory writes made visible to every later command.
 void fullBarrier(VkCommandBuffer cb);
 /// Transfer writes made visible to the host (after a copy into a host buffer).
 void hostReadBarrier(VkCommandBuffer cb);
-/// Compute shaders' writes made visible to every later command on the queue that reads them as
-/// vertices, in shaders or by copies (a renderer's draw on the same queue, in a later submission
-/// too); the graphics stages only where `graphics` (the queue's family does graphics).
-void renderBarrier(VkCommandBuffer cb, bool graphics);
+/// Compute shaders' writes made visible to every later command on the queue, in every stage and
+/// for every kind of read (a renderer's draw on the same queue, in a later submission too).
+void renderBarrier(VkCommandBuffer cb);
 /// Copies `bytes` from the host into `to` at offset 0 through a temporary staging buffer, and waits.
 void uploadOnce(Context& ctx, const Buffer& to, const void* data, std::size_t bytes);
 

@@ -155,6 +155,7 @@ class VulkanDevice final : public Device {
     VkCommandBuffer cb = ctx_->begin();
     for (std::size_t i = 0; i < set.size(); ++i) {
       BodySegment& sg = layout_.segments[set[i]];
+      energyFresh_[set[i]] = 0;
       const Eigen::VectorXd& xi = *x[i];
       centroidOf(xi, sg.nodes, sg.centroid);  // keeps float's x - c small (the forces read differences only)
       putReals(up_.mapped(), isDouble_, sg.dofBegin(), sg.dofs(), kChunk,
@@ -183,7 +184,16 @@ class VulkanDevice final : public Device {
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
     recordPasses(cb, kElementForces, kGatherSum);
+    // The forces' element pass wrote each element's strain energy too: read with the forces, it
+    // answers elasticEnergy at these positions with no further round trip (the drivers ask for both).
+    for (std::size_t b : set)
+      copy(cb, buffer(kEnergy), segment(b).elemBegin * rs_, down_, energyOffset_ + segment(b).elemBegin * rs_,
+           segment(b).elems * rs_);
     readOutputs(cb, set, f);
+    for (std::size_t b : set) {
+      energyHost_[b] = energySum(down_.mapped() + energyOffset_, segment(b));
+      energyFresh_[b] = 1;
+    }
   }
 
   void apply(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
@@ -210,24 +220,34 @@ class VulkanDevice final : public Device {
 
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
     checkSet(set, set.size(), "energies");
+    energy.assign(set.size(), 0.0);
+    if (std::all_of(set.begin(), set.end(), [&](std::size_t b) { return energyFresh_[b] != 0; })) {
+      for (std::size_t i = 0; i < set.size(); ++i) energy[i] = energyHost_[set[i]];
+      return;
+    }
     VkCommandBuffer cb = ctx_->begin();
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
     Push push = basePush();
     push.mode = kElementForces;
     dispatch(cb, element_, apply_, push, elementGroups());
-    copy(cb, buffer(kEnergy), 0, down_, 0, layout_.elementTotal * rs_);
+    copy(cb, buffer(kEnergy), 0, down_, energyOffset_, layout_.elementTotal * rs_);
     vk::hostReadBarrier(cb);
     ctx_->wait(ctx_->submit());
-    energy.assign(set.size(), 0.0);
     for (std::size_t i = 0; i < set.size(); ++i) {
-      const BodySegment& sg = segment(set[i]);
-      double sum = 0;
-      withReals(static_cast<const unsigned char*>(down_.mapped()), isDouble_, sg.elemBegin, [&](const auto* e) {
-        for (std::size_t k = 0; k < sg.elems; ++k) sum += static_cast<double>(e[k]);
-      });
-      energy[i] = sum;
+      energyHost_[set[i]] = energy[i] = energySum(down_.mapped() + energyOffset_, segment(set[i]));
+      energyFresh_[set[i]] = 1;
     }
+  }
+
+  /// A body's strain energy: the sum of its elements' in `elements` (every element of the device,
+  /// as the energy buffer holds them), in element order.
+  double energySum(const unsigned char* elements, const BodySegment& sg) const {
+    double sum = 0;
+    withReals(elements, isDouble_, sg.elemBegin, [&](const auto* e) {
+      for (std::size_t k = 0; k < sg.elems; ++k) sum += static_cast<double>(e[k]);
+    });
+    return sum;
   }
 
   void setConstraints(const BodySet& set, const std::vector<const std::vector<std::uint8_t>*>& constrained) override {
@@ -250,6 +270,7 @@ class VulkanDevice final : public Device {
     for (std::size_t i = 0; i < set.size(); ++i) {
       BodySegment& sg = layout_.segments[set[i]];
       lame_[set[i]] = problems[i]->lame;
+      energyFresh_[set[i]] = 0;  // the energy is the Lame parameters' too
       sg.rayleighMass = problems[i]->rayleighMass;
       sg.rayleighStiffness = problems[i]->rayleighStiffness;
     }
@@ -822,7 +843,10 @@ class VulkanDevice final : public Device {
     yout_ = reals(3 * N);
     up_ = vk::Buffer(*ctx_, 2 * 3 * N * rs_, true);
     scalarsOffset_ = std::max(3 * N, E) * rs_;
-    down_ = vk::Buffer(*ctx_, scalarsOffset_ + (kReadSlots + 1) * scalarsBytes(), true);
+    energyOffset_ = scalarsOffset_ + (kReadSlots + 1) * scalarsBytes();
+    down_ = vk::Buffer(*ctx_, energyOffset_ + E * rs_, true);
+    energyHost_.assign(B, 0.0);
+    energyFresh_.assign(B, 0);
 
     uploadVector(owned_[kSegInfo], segInfo_);
     uploadVector(owned_[kElemSeg], elemSeg);
@@ -883,6 +907,9 @@ class VulkanDevice final : public Device {
   std::vector<vk::Buffer> owned_;
   vk::Buffer pin_, yout_, up_, down_;
   std::size_t scalarsOffset_ = 0;  ///< bytes: where the scalar reads start in down_
+  std::size_t energyOffset_ = 0;   ///< bytes: where the element energies are read to in down_
+  std::vector<double> energyHost_;  ///< per body: its strain energy as last read
+  std::vector<char> energyFresh_;   ///< per body: energyHost_ is at the positions and material set
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
              reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE, surface_ = VK_NULL_HANDLE;
   VkDescriptorSet apply_ = VK_NULL_HANDLE, pcgSet_ = VK_NULL_HANDLE, setup_ = VK_NULL_HANDLE;

@@ -7,6 +7,7 @@
 #include "embed/one_ring.hpp"
 #include "util/error.hpp"
 
+#include <algorithm>
 #include <cstring>
 
 namespace corofem::detail {
@@ -56,11 +57,18 @@ class VulkanSurfaces final : public DeviceSurfaces {
       }
       vertices_ += b.vertexCount();
     }
-    const std::size_t lim = ctx.physical().limits.maxStorageBufferRange;
+    // What the device cannot bind or dispatch is a DeviceError: the Simulation then computes these
+    // surfaces on the host (or each body's on its own).
+    const VkPhysicalDeviceLimits& limits = ctx.physical().limits;
     const std::size_t outBytes = vertices_ * (separate_ ? 3 : 6) * sizeof(float);
-    if (std::max(outBytes, 4 * vertices_ * rs) > lim || vertices_ >= (std::size_t{1} << 31))
-      fail(ErrorCode::DeviceError, "Vulkan: ", vertices_, " surface vertices need more than the ", lim,
-           "-byte buffers '", ctx.physical().name, "' binds (maxStorageBufferRange)");
+    const std::size_t largest = std::max({outBytes, 4 * vertices_ * rs, 4 * vertices_ * sizeof(std::uint32_t),
+                                          ringEntry.size() * sizeof(std::uint32_t), 6 * members.size() * rs});
+    if (largest > limits.maxStorageBufferRange || vertices_ >= (std::size_t{1} << 31) || ringEntry.size() >= (std::size_t{1} << 32))
+      fail(ErrorCode::DeviceError, "Vulkan: ", vertices_, " surface vertices need a ", largest, "-byte buffer; '",
+           ctx.physical().name, "' binds at most ", limits.maxStorageBufferRange, " bytes (maxStorageBufferRange)");
+    if ((vertices_ + 63) / 64 > limits.maxComputeWorkGroupCount[0])
+      fail(ErrorCode::DeviceError, "Vulkan: ", vertices_, " surface vertices need ", (vertices_ + 63) / 64,
+           " work-groups; '", ctx.physical().name, "' dispatches at most ", limits.maxComputeWorkGroupCount[0]);
     auto uints = [&](const std::vector<std::uint32_t>& v) {
       vk::Buffer b(ctx, v.size() * sizeof(std::uint32_t), false);
       vk::uploadOnce(ctx, b, v.data(), v.size() * sizeof(std::uint32_t));
@@ -113,7 +121,9 @@ class VulkanSurfaces final : public DeviceSurfaces {
     std::vector<unsigned char> bytes(offsets.size() * rs);
     putReals(bytes.data(), src_.isDouble, 0, offsets.size(), offsets.size() + 1, [&](std::size_t i) { return offsets[i]; });
     VkCommandBuffer cb = ctx.begin();
-    vkCmdUpdateBuffer(cb, buffers_[kMemberOffsets].handle(), 0, bytes.size(), bytes.data());
+    for (std::size_t at = 0; at < bytes.size(); at += 65536)  // vkCmdUpdateBuffer's limit per call
+      vkCmdUpdateBuffer(cb, buffers_[kMemberOffsets].handle(), at, std::min<std::size_t>(65536, bytes.size() - at),
+                        bytes.data() + at);
     vk::fullBarrier(cb);
     SurfacePush push;
     push.vertices = static_cast<std::uint32_t>(vertices_);
@@ -127,7 +137,7 @@ class VulkanSurfaces final : public DeviceSurfaces {
       vkCmdDispatch(cb, groups, 1, 1);
       if (mode == 0) vk::fullBarrier(cb);
     }
-    vk::renderBarrier(cb, ctx.graphicsQueue());
+    vk::renderBarrier(cb);
     submission_ = ctx.submit();
   }
 
