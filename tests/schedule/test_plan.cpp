@@ -101,6 +101,27 @@ TEST(Plan, DampedSceneListsTheDampingTerm) {
   }
 }
 
+/// A body on the Vulkan backend: the plan names the backend's shaders (its registry entry's passes),
+/// with the product's terms of the scene, and none of the OpenCL kernels.
+TEST(Plan, AVulkanBodyListsItsShaders) {
+  bool vulkan = false;
+  for (const detail::Candidate& c : detail::listCandidates()) vulkan = vulkan || c.backend == "vulkan";
+  if (!vulkan) GTEST_SKIP() << "no Vulkan device here";
+  BodyDesc body = boxBeam();
+  body.material.rayleighMass = 0.5;
+  Scene scene = dynamicScene(body, 2);
+  scene.backend.kind = BackendKind::Vulkan;
+  scene.solver.preconditioner = PreconditionerKind::BlockDiagonal;
+  auto sim = Simulation::create(scene);
+  ASSERT_TRUE(sim) << sim.message();
+  const json kernels = json::parse(sim->planReport())["bodies"][0]["kernels"];
+  EXPECT_TRUE(anyContains(kernels, "rotations.comp (polar)")) << kernels;
+  EXPECT_TRUE(anyContains(kernels, "product of M, C, K_t")) << kernels;
+  EXPECT_TRUE(anyContains(kernels, "3x3 blocks")) << kernels;
+  EXPECT_FALSE(anyContains(kernels, "pcg_iterate")) << kernels;
+  EXPECT_FALSE(anyContains(kernels, "compute_rotations")) << kernels;
+}
+
 TEST(Plan, SizesFollowTheModel) {
   // 400 elements, 21 x 3 x 3 = 189 nodes. On the device in double: element nodes 16 B/element,
   // positions 3 x 189 x 8 B; in float the reals halve.

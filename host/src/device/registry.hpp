@@ -40,6 +40,15 @@ struct Candidate {
   std::string label() const;
 };
 
+/// What a body's step needs of a device, for the plan's list of passes (`corofem run --plan`).
+struct PlanPasses {
+  bool corotational = false;
+  RotationMethod rotation = RotationMethod::Polar;
+  bool dynamic = false, damping = false;
+  PreconditionerKind preconditioner = PreconditionerKind::None;  ///< as resolved for the body
+  bool batched = false;  ///< in a batch: the passes are shared with its other bodies
+};
+
 struct BackendEntry {
   std::string name;  ///< "reference", "opencl": what scenes, COROFEM_DEVICE and the reports call it
   /// The devices of this backend on this machine, in the order they are tried (empty: none).
@@ -61,6 +70,9 @@ struct BackendEntry {
   std::function<std::string()> buildId;
   /// Bodies scheduled on one of its devices share its buffers and launches (BackendDesc::batch).
   bool batches = false;
+  /// The passes a step of such a body runs on the backend's devices, named as its kernels or
+  /// shaders, for the plan; null: the plan names them generically.
+  std::function<std::vector<std::string>(const PlanPasses& step)> passes;
 };
 
 /// Registers a backend (replacing one of the same name, a built-in one too: the built-in ones are

@@ -32,6 +32,7 @@
 //   Upper bound per step = Newton iterations (dynamics: the scene's count; statics: the cap) x
 //   (Newton iteration + PCG iteration cap x PCG iteration). Real steps stop PCG far earlier; the
 //   per-iteration figures are the useful ones.
+#include "device/registry.hpp"
 #include "schedule/scheduler.hpp"
 
 #include <nlohmann/json.hpp>
@@ -159,22 +160,23 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
       buffer("amg_levels (estimate: prolongations, coarse operators)", dv, amgEntriesPerDof * D * (r + 4));
       buffer("amg_vectors (level 0 scratch)", dv, 4 * D * r);
     }
-    if (corot) kernels.push_back(std::string("compute_rotations (") + toString(problem.rotation) + ")");
-    kernels.push_back("element_forces + gather_forces");
-    kernels.push_back(dynamic ? (damping ? "element_product (M, C, K_t) + gather_product"
-                                         : "element_product (M, K_t) + gather_product")
-                              : "element_product (K_t) + gather_product");
-    kernels.push_back(std::string("pcg_init") +
-                      (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
-                      ", pcg_update, reduce_finish (single-reduction PCG; on a CPU device the iterations "
-                      "of a round of small bodies, or of as many bodies as cores, run in one launch: "
-                      "pcg_iterate_group, where bodies of one mesh take a vector lane each of a pack of 8: "
-                      "pcg_iterate_pack; those of a round of fewer bodies than cores in one launch by a team "
-                      "of work-groups per body: pcg_iterate_team)");
-    if (amg)
-      kernels.push_back("amg V-cycle per iteration: Chebyshev smoothing with 4 products (element_product + "
-                        "gather_product), amg_fine_*, amg_spmv on the coarse levels (the iterations are launched "
-                        "ones, not pcg_iterate_*)");
+    // The backend names its own passes (BackendEntry::passes); else they are named generically.
+    PlanPasses step;
+    step.corotational = corot;
+    step.rotation = problem.rotation;
+    step.dynamic = dynamic;
+    step.damping = damping;
+    step.preconditioner = pcg ? preconditioner : PreconditionerKind::None;
+    step.batched = batched;
+    const auto entry = findBackend(c.backend);
+    if (entry && entry->passes) {
+      for (const std::string& k : entry->passes(step)) kernels.push_back(k);
+    } else {
+      if (corot) kernels.push_back(std::string("rotations (") + toString(problem.rotation) + ")");
+      kernels.push_back("internal forces");
+      kernels.push_back("matrix-free product of A");
+      kernels.push_back("single-reduction PCG");
+    }
     if (batched)
       for (auto& k : kernels)
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";
@@ -205,7 +207,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   buffer("state: positions (+ rollback)", "host", 2 * D * 8);
   if (dynamic) buffer("state: velocities, accelerations (+ rollback)", "host", 4 * D * 8);
   if (!desc.surface.empty())
-    kernels.push_back(device ? std::string("surface_positions + surface_normals (on the device, ") +
+    kernels.push_back(device ? std::string("surface positions + normals (on the device, ") +
                                    toString(desc.surfaceLayout) + " output; see \"surface\")"
                              : std::string("surface update (barycentric, host, on request)"));
   j["kernels"] = kernels;

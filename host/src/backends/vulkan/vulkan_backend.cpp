@@ -70,6 +70,22 @@ void registerVulkanBackend() {
   BackendEntry e;
   e.name = "vulkan";
   e.batches = true;
+  e.passes = [](const PlanPasses& step) {
+    const bool precond = step.preconditioner != PreconditionerKind::None;
+    std::vector<std::string> k;
+    if (step.corotational) k.push_back(std::string("rotations.comp (") + toString(step.rotation) + ")");
+    k.push_back("element.comp + gather.comp (forces and element energies)");
+    k.push_back(std::string("element.comp + gather.comp (product of ") +
+                (step.dynamic ? (step.damping ? "M, C, K_t" : "M, K_t") : "K_t") + ")");
+    k.push_back(std::string("pcg.comp") +
+                (precond ? (step.preconditioner == PreconditionerKind::BlockDiagonal ? " (forms M^-1: 3x3 blocks)"
+                                                                                       : " (forms M^-1: diagonal)")
+                         : "") +
+                " + reduce.comp (single-reduction PCG, scalars and stop flags on the device); bodies up to "
+                "VulkanTuning::groupPcgNodes nodes run whole iterations in one pcg_group.comp dispatch, a "
+                "work-group per body");
+    return k;
+  };
   e.candidates = [] {
     std::vector<Candidate> out;
     try {
