@@ -11,11 +11,12 @@ cd "$root"
 ex=$(git rev-parse --git-path info/exclude); mkdir -p "$(dirname "$ex")"
 grep -qx "/.gpu/" "$ex" 2>/dev/null || echo "/.gpu/" >> "$ex"
 rm -rf .gpu && mkdir -p .gpu/bin .gpu/lib
-for b in build/tests/test_* build/bench/bench_* build/corofem; do
+for b in build/tests/test_* build/bench/bench_* build/corofem build/renderer; do
   [[ -x $b && -f $b ]] || continue
   strip -o ".gpu/bin/$(basename "$b")" "$b"
 done
-for lib in libOpenCL.so.1 libbenchmark.so.1debian; do
+# The Vulkan loader too: a CUDA image may have NVIDIA's Vulkan driver but no loader.
+for lib in libOpenCL.so.1 libbenchmark.so.1debian libvulkan.so.1; do
   cp -L "$(ldconfig -p | awk -v l="$lib" '$1 == l {print $NF; exit}')" .gpu/lib/
 done
 if [[ -d ../shared/data ]]; then

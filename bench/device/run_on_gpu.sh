@@ -2,8 +2,9 @@
 # Runs on the lent GPU machine (see pack.sh): points the carried OpenCL ICD loader at NVIDIA's
 # OpenCL driver, runs every test binary (each OpenCL test runs on every device present, here the
 # GPU) and the OpenCL benchmarks, and leaves logs and JSON in $OUT. STAGES (default
-# "probe tests bench") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
-# narrows it), profile (bench_opencl --profile on the 10k and 1M steps), ab (the dynamic steps of
+# "probe tests bench vulkan") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
+# narrows it), vulkan (bench_vulkan on the GPU, VULKAN_FILTER narrows it, and the renderer sample's
+# frames on the GPU's own VkDevice), profile (bench_opencl --profile on the 10k and 1M steps), ab (the dynamic steps of
 # the bench_opencl binaries named in AB, in turns), tuningab (bench_opencl under each tuning in
 # TUNINGAB, in turns: space-separated --tuning values such as "groupPcg=0 groupPcg=1,workGroupSize=128";
 # "-" for the defaults), sweep (work-group sizes), more (bench_backends,
@@ -16,7 +17,7 @@ set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/logs
-stages=${STAGES:-probe tests bench}
+stages=${STAGES:-probe tests bench vulkan}
 has() { [[ " $stages " == *" $1 "* ]]; }
 export LD_LIBRARY_PATH=$g/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 export COROFEM_DATA_DIR=$g/data COROFEM_CACHE_DIR=/tmp/corofem-cache  # built kernels (and calibrations) there
@@ -28,6 +29,9 @@ if [[ $root != /work/main ]] && { [[ ! -e /work/main ]] || [[ -L /work/main ]]; 
 icd=$(find /usr/local/nvidia /usr/lib /usr/lib64 /usr/local/cuda* -name 'libnvidia-opencl.so.1' 2>/dev/null | head -1)
 mkdir -p /tmp/icd && echo "${icd:-libnvidia-opencl.so.1}" > /tmp/icd/nvidia.icd
 export OCL_ICD_VENDORS=/tmp/icd OCL_ICD_FILENAMES=${icd:-libnvidia-opencl.so.1}
+# NVIDIA's Vulkan driver, for the carried loader (the device tool's README: where the image keeps it).
+vkicd=$(find /usr/local/nvidia /usr/share/vulkan /etc/vulkan -name 'nvidia_icd*.json' 2>/dev/null | head -1)
+[[ -n $vkicd ]] && export VK_DRIVER_FILES=$vkicd VK_ICD_FILENAMES=$vkicd
 
 if has probe; then
   {
@@ -35,6 +39,8 @@ if has probe; then
     grep PRETTY /etc/os-release; ldd --version | head -1; nproc
     echo "NVIDIA OpenCL driver: ${icd:-not found}"
     ls /etc/OpenCL/vendors 2>&1
+    echo "NVIDIA Vulkan driver: ${vkicd:-not found}"
+    "$g/bin/bench_vulkan" --benchmark_list_tests=true 2>&1 | head -3 || true
     "$g/bin/bench_opencl" --benchmark_list_tests=true 2>&1 | grep -E "dynamic_step_10k|device" || true
   } 2>&1 | tee "$OUT/probe.log"
 fi
@@ -141,5 +147,16 @@ if has meshorder; then
     --benchmark_out="$OUT/bench_mesh_order.json" --benchmark_out_format=json > /tmp/logs/bench_mesh_order.txt 2>&1)
   echo "bench_mesh_order exit $?"
   grep -h median /tmp/logs/bench_mesh_order.txt | cut -c1-150
+fi
+if has vulkan; then  # the Vulkan backend on the GPU: its benchmark, then the renderer sample's frames
+  timeout 300 "$B/bench_vulkan" --benchmark_filter="${VULKAN_FILTER:-.}" --benchmark_repetitions=3 \
+    --benchmark_report_aggregates_only=true --benchmark_out="$OUT/bench_vulkan.json" --benchmark_out_format=json \
+    > /tmp/logs/bench_vulkan.txt 2>&1
+  echo "bench_vulkan exit $?"
+  grep -h median /tmp/logs/bench_vulkan.txt | cut -c1-200
+  if [[ -x $B/renderer ]]; then
+    (cd "$root" && timeout 120 "$B/renderer" --out "$OUT/renderer" --png-every 40 > /tmp/logs/renderer.txt 2>&1)
+    echo "renderer exit $?"; cat /tmp/logs/renderer.txt
+  fi
 fi
 tar -C /tmp -czf "$OUT/logs.tar.gz" logs
