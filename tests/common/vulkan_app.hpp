@@ -50,7 +50,14 @@ class VulkanApp {
       ii.pNext = &features;
       validated = true;
     }
-    if (vkCreateInstance(&ii, nullptr, &instance) != VK_SUCCESS) {
+    VkResult made = vkCreateInstance(&ii, nullptr, &instance);
+    if (made != VK_SUCCESS && validated) {  // the layer is listed but cannot be loaded: go on without it
+      validated = false;
+      ii.enabledLayerCount = ii.enabledExtensionCount = 0;
+      ii.pNext = nullptr;
+      made = vkCreateInstance(&ii, nullptr, &instance);
+    }
+    if (made != VK_SUCCESS) {
       why = "no Vulkan instance (no driver)";
       return;
     }

@@ -197,6 +197,47 @@ TEST_P(ConformanceElements, BeforeAnyPositionsEveryBodyIsAtRest) {
   }
 }
 
+TEST_P(ConformanceElements, TheEnergyFollowsThePositionsAndTheMaterial) {
+  // A device may keep what a pass computed for later calls (the Vulkan backend on a CPU device
+  // reads the energies with the forces): the energy asked for first, after the forces, after a
+  // change of material and after new positions is the reference's each time.
+  const detail::BodySet all = detail::allBodies(count());
+  auto expectEnergies = [&](const char* when) {
+    std::vector<double> got, want;
+    device().elasticEnergy(all, got);
+    reference().elasticEnergy(all, want);
+    ASSERT_EQ(got.size(), count());
+    for (std::size_t i = 0; i < count(); ++i)
+      EXPECT_NEAR(got[i], want[i], opTolerance() * std::abs(want[i])) << when << ", " << problem(i).name;
+  };
+  setRandomPositions(60);
+  expectEnergies("asked for first");
+  std::vector<Eigen::VectorXd> f(count()), g(count());
+  detail::Vectors fs, gs;
+  for (std::size_t i = 0; i < count(); ++i) {
+    fs.push_back(&f[i]);
+    gs.push_back(&g[i]);
+  }
+  device().internalForces(all, fs);
+  reference().internalForces(all, gs);
+  expectEnergies("after the forces");
+  std::vector<detail::Problem> stiffer;
+  for (std::size_t i = 0; i < count(); ++i) {
+    stiffer.push_back(problem(i));
+    stiffer.back().lame.lambda *= 2.5;
+    stiffer.back().lame.mu *= 2.5;
+  }
+  std::vector<const detail::Problem*> ps;
+  for (const detail::Problem& p : stiffer) ps.push_back(&p);
+  device().setMaterial(all, ps);
+  reference().setMaterial(all, ps);
+  expectEnergies("after a stiffer material");
+  setRandomPositions(61);
+  device().internalForces(all, fs);
+  reference().internalForces(all, gs);
+  expectEnergies("at new positions");
+}
+
 COROFEM_CONFORMANCE_SUITE(ConformanceElements);
 
 // The cases the suite runs, from the registry; one clear skip where there are none. Each names

@@ -112,6 +112,7 @@ TEST(Plan, AVulkanBodyListsItsShaders) {
   Scene scene = dynamicScene(body, 2);
   scene.backend.kind = BackendKind::Vulkan;
   scene.solver.preconditioner = PreconditionerKind::BlockDiagonal;
+  scene.solver.precision = Precision::Float;  // every Vulkan device has float
   auto sim = Simulation::create(scene);
   ASSERT_TRUE(sim) << sim.message();
   const json kernels = json::parse(sim->planReport())["bodies"][0]["kernels"];

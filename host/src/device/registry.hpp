@@ -46,7 +46,6 @@ struct PlanPasses {
   RotationMethod rotation = RotationMethod::Polar;
   bool dynamic = false, damping = false;
   PreconditionerKind preconditioner = PreconditionerKind::None;  ///< as resolved for the body
-  bool batched = false;  ///< in a batch: the passes are shared with its other bodies
 };
 
 struct BackendEntry {

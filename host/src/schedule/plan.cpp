@@ -167,14 +167,14 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     step.dynamic = dynamic;
     step.damping = damping;
     step.preconditioner = pcg ? preconditioner : PreconditionerKind::None;
-    step.batched = batched;
     const auto entry = findBackend(c.backend);
     if (entry && entry->passes) {
       for (const std::string& k : entry->passes(step)) kernels.push_back(k);
     } else {
       if (corot) kernels.push_back(std::string("rotations (") + toString(problem.rotation) + ")");
       kernels.push_back("internal forces");
-      kernels.push_back("matrix-free product of A");
+      kernels.push_back(std::string("matrix-free product of ") +
+                        (dynamic ? (damping ? "M, C, K_t" : "M, K_t") : "K_t"));
       kernels.push_back("single-reduction PCG");
     }
     if (batched)

@@ -39,8 +39,8 @@ std::size_t deviceIndex(const std::string& selector) {
     return devices.empty() ? std::string("none") : os.str();
   };
   if (devices.empty())
-    fail(ErrorCode::DeviceError, "Vulkan: no device can run corofem's shaders here (a compute queue and 31 storage "
-         "buffers per stage are needed); install mesa-vulkan-drivers for the lavapipe CPU device");
+    fail(ErrorCode::DeviceError, "Vulkan: no device can run corofem's shaders here (Vulkan 1.1, a compute queue and 31 "
+         "storage buffers per stage are needed); install mesa-vulkan-drivers for the lavapipe CPU device");
   std::vector<std::string> names;
   std::vector<bool> gpu;
   for (const vk::PhysicalDevice& d : devices) {

@@ -184,16 +184,22 @@ class VulkanDevice final : public Device {
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
     recordPasses(cb, kElementForces, kGatherSum);
-    // The forces' element pass wrote each element's strain energy too: read with the forces, it
-    // answers elasticEnergy at these positions with no further round trip (the drivers ask for both).
-    for (std::size_t b : set)
-      copy(cb, buffer(kEnergy), segment(b).elemBegin * rs_, down_, energyOffset_ + segment(b).elemBegin * rs_,
-           segment(b).elems * rs_);
+    // The forces' element pass wrote each element's strain energy too. On a CPU device (lavapipe)
+    // they are read with the forces, which answers an elasticEnergy at these positions (the drivers
+    // ask for it after the step's last forces) with no further round trip; on a GPU, whose host
+    // round trip is cheaper than E reals over the bus every Newton iteration, they are read only
+    // when asked for (as the OpenCL backend decides, segment_engine.cpp's energyWithForces_).
+    const bool withEnergies = !ctx_->physical().gpu;
+    if (withEnergies)
+      for (std::size_t b : set)
+        copy(cb, buffer(kEnergy), segment(b).elemBegin * rs_, down_, energyOffset_ + segment(b).elemBegin * rs_,
+             segment(b).elems * rs_);
     readOutputs(cb, set, f);
-    for (std::size_t b : set) {
-      energyHost_[b] = energySum(down_.mapped() + energyOffset_, segment(b));
-      energyFresh_[b] = 1;
-    }
+    if (withEnergies)
+      for (std::size_t b : set) {
+        energyHost_[b] = energySum(down_.mapped() + energyOffset_, segment(b));
+        energyFresh_[b] = 1;
+      }
   }
 
   void apply(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
@@ -842,7 +848,7 @@ class VulkanDevice final : public Device {
     pin_ = reals(3 * N);
     yout_ = reals(3 * N);
     up_ = vk::Buffer(*ctx_, 2 * 3 * N * rs_, true);
-    scalarsOffset_ = std::max(3 * N, E) * rs_;
+    scalarsOffset_ = 3 * N * rs_;  // after the node vectors read back (forces, x)
     energyOffset_ = scalarsOffset_ + (kReadSlots + 1) * scalarsBytes();
     down_ = vk::Buffer(*ctx_, energyOffset_ + E * rs_, true);
     energyHost_.assign(B, 0.0);
