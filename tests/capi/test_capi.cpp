@@ -8,6 +8,7 @@
 #include <corofem/corofem.h>
 #include <corofem/simulation.hpp>
 
+#include "common/box_surface.hpp"
 #include "common/test_data.hpp"
 
 #include <gtest/gtest.h>
@@ -39,28 +40,7 @@ namespace {
 
 /// The closed surface of the box [lo, hi] as an OBJ: each face 2 x 2 quads, split in triangles.
 void writeBoxSurface(const std::string& path, const std::array<double, 3>& lo, const std::array<double, 3>& hi) {
-  SurfaceMesh s;
-  const int m = 2;
-  for (int axis = 0; axis < 3; ++axis)
-    for (int side = 0; side < 2; ++side) {
-      const int u = (axis + 1) % 3, w = (axis + 2) % 3;
-      const auto base = static_cast<std::uint32_t>(s.vertexCount());
-      for (int j = 0; j <= m; ++j)
-        for (int i = 0; i <= m; ++i) {
-          double p[3];
-          p[axis] = side ? hi[axis] : lo[axis];
-          p[u] = lo[u] + (hi[u] - lo[u]) * i / m;
-          p[w] = lo[w] + (hi[w] - lo[w]) * j / m;
-          s.vertices.insert(s.vertices.end(), {p[0], p[1], p[2]});
-        }
-      for (std::uint32_t j = 0; j < m; ++j)
-        for (std::uint32_t i = 0; i < m; ++i) {
-          const std::uint32_t a = base + j * (m + 1) + i, b = a + 1, c = a + (m + 1), d = c + 1;
-          if (side) s.triangles.insert(s.triangles.end(), {a, b, d, a, d, c});
-          else s.triangles.insert(s.triangles.end(), {a, d, b, a, c, d});
-        }
-    }
-  ASSERT_TRUE(writeSurfaceMesh(path, s));
+  ASSERT_TRUE(writeSurfaceMesh(path, boxSurface(lo, hi, 2)));
 }
 
 /// Two bodies at 60 Hz, backward Euler: a clamped beam under gravity with a render surface
