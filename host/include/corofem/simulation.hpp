@@ -217,7 +217,8 @@ class Simulation {
   Status readSurface(int body, std::vector<double>& positions, std::vector<float>* normals = nullptr) const;
   /// The device buffer of the deformed surface when the body has a surface and runs on a device
   /// that computes it (GpuApi::OpenCL: the handle is a cl_mem; GpuApi::Vulkan: a VkBuffer made with
-  /// vertex-buffer usage, to bind at `offset`), else an empty GpuBuffer (no
+  /// vertex-buffer usage, to bind at `offset`, on the VkDevice the body runs on: drawable by the
+  /// application when it lent that device, SimulationOptions::device), else an empty GpuBuffer (no
   /// surface, the reference backend, or an update that could not be enqueued). Layout
   /// (BodyDesc::surfaceLayout, scene key "surface_layout"): interleaved (the default), per vertex 6
   /// float32 -- position x, y, z then unit normal x, y, z -- a 24-byte stride; separate, the
