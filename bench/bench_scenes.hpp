@@ -35,4 +35,24 @@ inline BodyDesc clampedBox(const std::string& name, const std::array<double, 3>&
   return b;
 }
 
+/// The timed step of the step benchmarks, set on `s`: dynamics at 60 Hz, one Newton iteration of
+/// dissipative Newmark, exactly 20 PCG iterations (tolerance 1e-30, cap 20, read once) with the
+/// diagonal preconditioner, so that every backend does the same work. `steps` 0: open-ended.
+/// Dissipative Newmark (gamma 0.6, beta (gamma + 1/2)^2 / 4): the average-acceleration default
+/// with one linearised iteration gains energy on a swinging co-rotational beam within ~80 steps
+/// (the energy guard stops it), and a benchmark must time thousands of steps.
+inline void twentyIterationSteps(Scene& s, int steps, Precision precision) {
+  s.analysis.kind = AnalysisDesc::Kind::Dynamic;
+  s.analysis.dynamics.timeStep = 1.0 / 60.0;
+  s.analysis.dynamics.steps = steps;
+  s.analysis.dynamics.newtonIterations = 1;
+  s.analysis.dynamics.newmarkGamma = 0.6;
+  s.analysis.dynamics.newmarkBeta = 0.3025;
+  s.solver.tolerance = 1e-30;
+  s.solver.maxIterations = 20;
+  s.solver.checkEvery = 20;
+  s.solver.preconditioner = PreconditionerKind::Diagonal;
+  s.solver.precision = precision;
+}
+
 }  // namespace corofem::bench

@@ -168,17 +168,7 @@ Scene boxScene(const BoxSize& size, std::size_t index) {
                                  6, 1e5, 0.4, 1000);
   b.material.rayleighMass = 5.0;
   s.bodies.push_back(b);
-  s.analysis.kind = AnalysisDesc::Kind::Dynamic;
-  s.analysis.dynamics.timeStep = 1.0 / 60.0;
-  s.analysis.dynamics.steps = 0;
-  s.analysis.dynamics.newtonIterations = 1;
-  s.analysis.dynamics.newmarkGamma = 0.6;
-  s.analysis.dynamics.newmarkBeta = 0.3025;
-  s.solver.tolerance = 1e-30;
-  s.solver.maxIterations = 20;
-  s.solver.checkEvery = 20;
-  s.solver.preconditioner = PreconditionerKind::Diagonal;
-  s.solver.precision = Precision::Float;
+  bench::twentyIterationSteps(s, 0, Precision::Float);
   s.backend.kind = BackendKind::Vulkan;
   s.backend.device = std::to_string(index);
   return s;

@@ -190,10 +190,16 @@ class VulkanDevice final : public Device {
     // round trip is cheaper than E reals over the bus every Newton iteration, they are read only
     // when asked for (as the OpenCL backend decides, segment_engine.cpp's energyWithForces_).
     const bool withEnergies = !ctx_->physical().gpu;
-    if (withEnergies)
-      for (std::size_t b : set)
-        copy(cb, buffer(kEnergy), segment(b).elemBegin * rs_, down_, energyOffset_ + segment(b).elemBegin * rs_,
-             segment(b).elems * rs_);
+    if (withEnergies) {
+      std::vector<VkBufferCopy> regions;
+      for (std::size_t b : set) {
+        const std::size_t at = segment(b).elemBegin * rs_;
+        if (segment(b).elems) regions.push_back({at, energyOffset_ + at, segment(b).elems * rs_});
+      }
+      if (!regions.empty())
+        vkCmdCopyBuffer(cb, buffer(kEnergy).handle(), down_.handle(), static_cast<std::uint32_t>(regions.size()),
+                        regions.data());
+    }
     readOutputs(cb, set, f);
     if (withEnergies)
       for (std::size_t b : set) {
