@@ -34,13 +34,7 @@ struct Chebyshev {
 
 }  // namespace
 
-EngineAmg::EngineAmg(SegmentEngine& engine) : e_(engine), bodies_(engine.segs_.size()) {
-  const std::size_t K = e_.segs_.size();
-  freeDofs_.resize(K);
-  positions_.resize(K);
-  warpStale_.assign(K, 1);
-  freeKnown_.assign(K, 0);
-}
+EngineAmg::EngineAmg(SegmentEngine& engine) : e_(engine), host_(engine.segs_) {}
 
 void EngineAmg::createKernels() {
   const cl_program program = e_.build_.program;
@@ -73,79 +67,38 @@ std::unique_ptr<ClBuffer> EngineAmg::reals(const std::vector<double>& values) {
   return b;
 }
 
-void EngineAmg::positionsSet(const BodySet& bodies, const ConstVectors& x) {
-  for (std::size_t i = 0; i < bodies.size(); ++i) {
-    positions_[bodies[i]] = *x[i];
-    warpStale_[bodies[i]] = 1;
-  }
-}
+void EngineAmg::positionsSet(const BodySet& bodies, const ConstVectors& x) { host_.positionsSet(bodies, x); }
 
-void EngineAmg::invalidate(std::size_t s) {
-  bodies_[s].clear();
-  freeKnown_[s] = 0;
-  dirty_ = true;
-}
+void EngineAmg::invalidate(std::size_t s) { host_.invalidate(s); }
 
-void EngineAmg::constraintsChanged(std::size_t s) { freeKnown_[s] = 0; }
+void EngineAmg::constraintsChanged(std::size_t s) { host_.constraintsChanged(s); }
 
-long long EngineAmg::builds() const {
-  long long n = 0;
-  for (const BodyAmg& b : bodies_) n += b.builds();
-  return n;
-}
+long long EngineAmg::builds() const { return host_.builds(); }
 
 void EngineAmg::prepare(const BodySet& running) {
-  for (std::size_t s : running) {
-    const BodySegment& sg = e_.segs_[s];
-    const Problem& p = *sg.problem;
-    if (!freeKnown_[s]) {  // the free dofs in the problem's numbering (the segment keeps its mask in the device's)
-      std::vector<std::uint8_t> constrained(sg.dofs());
-      for (std::size_t d = 0; d < sg.dofs(); ++d) constrained[sg.hostDof(d)] = sg.constrained[d];
-      freeDofs_[s].clear();
-      for (std::size_t d = 0; d < constrained.size(); ++d)
-        if (!constrained[d]) freeDofs_[s].push_back(static_cast<Eigen::Index>(d));
-      freeKnown_[s] = 1;
-    }
-    const double* coef = &e_.segCoef_[layout::kSegCoefCount * s];
-    if (bodies_[s].ensure(p, freeDofs_[s], e_.operatorMass_[s], coef[layout::kCoefStiff]) != BodyAmg::Made::Kept) {
-      dirty_ = true;
-      warpStale_[s] = 1;
-    }
-  }
-  if (dirty_) upload();
+  std::vector<std::pair<double, double>> coefficients;
+  for (std::size_t s : running)
+    coefficients.emplace_back(e_.operatorMass_[s], e_.segCoef_[layout::kSegCoefCount * s + layout::kCoefStiff]);
+  if (host_.prepare(running, coefficients)) upload();
   uploadWarp(running);
 }
 
 void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool csr, bool doubleValues) {
   // m is row-major with the device's row and column numbering already: CSR for the coarsest
   // inverse (amg_coarsest), sliced ELLPACK (amg_spmv) for the others.
-  const std::size_t rows = static_cast<std::size_t>(m.rows());
   std::vector<cl_uint> start, cols;
   std::vector<double> values;
   if (csr) {
-    start.resize(rows + 1);
-    for (std::size_t i = 0; i <= rows; ++i) start[i] = static_cast<cl_uint>(m.outerIndexPtr()[i]);
+    start.assign(m.outerIndexPtr(), m.outerIndexPtr() + m.rows() + 1);
     cols.assign(m.innerIndexPtr(), m.innerIndexPtr() + m.nonZeros());
     values.assign(m.valuePtr(), m.valuePtr() + m.nonZeros());
   } else {
-    const std::size_t slices = (rows + kSlice - 1) / kSlice;
-    start.assign(slices + 1, 0);
-    for (std::size_t s = 0; s < slices; ++s) {
-      std::size_t width = 0;
-      for (std::size_t i = kSlice * s; i < std::min(rows, kSlice * (s + 1)); ++i)
-        width = std::max<std::size_t>(width, static_cast<std::size_t>(m.outerIndexPtr()[i + 1] - m.outerIndexPtr()[i]));
-      start[s + 1] = static_cast<cl_uint>(start[s] + kSlice * width);
-    }
-    cols.assign(start[slices], 0);
-    values.assign(start[slices], 0.0);
-    for (std::size_t i = 0; i < rows; ++i) {
-      const std::size_t s = i / kSlice, lane = i % kSlice;
-      for (int j = m.outerIndexPtr()[i], k = 0; j < m.outerIndexPtr()[i + 1]; ++j, ++k) {
-        cols[start[s] + kSlice * static_cast<std::size_t>(k) + lane] = static_cast<cl_uint>(m.innerIndexPtr()[j]);
-        values[start[s] + kSlice * static_cast<std::size_t>(k) + lane] = m.valuePtr()[j];
-      }
-    }
+    SlicedEll ell = slicedEll(m, kSlice);
+    start = std::move(ell.start);
+    cols = std::move(ell.cols);
+    values = std::move(ell.values);
   }
+  const std::size_t rows = static_cast<std::size_t>(m.rows());
   out.rows = rows;
   out.start = buffer(start.size() * sizeof(cl_uint));
   e_.uploadRaw(*out.start, start);
@@ -161,133 +114,43 @@ void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool csr, bool doubleValue
 }
 
 void EngineAmg::upload() {
-  // Every body's levels end to end: body s's rows of device level k from offset[k][s]. Level 0 is
-  // the device's dof numbering (3 per node, padding and constrained dofs included).
-  const std::size_t K = e_.segs_.size();
-  std::size_t depth = 1;
-  for (const BodyAmg& b : bodies_) depth = std::max(depth, b.amg().levels().size());
-  std::vector<std::vector<std::size_t>> offset(depth, std::vector<std::size_t>(K, 0));
-  std::vector<std::size_t> rows(depth, 0);
-  rows[0] = 3 * e_.nodeTotal_;
-  for (std::size_t k = 1; k < depth; ++k)
-    for (std::size_t s = 0; s < K; ++s) {
-      offset[k][s] = rows[k];
-      const auto& levels = bodies_[s].amg().levels();
-      if (k < levels.size()) rows[k] += static_cast<std::size_t>(levels[k].A.rows());
-    }
-  // Body s's level-0 row i (the i-th free dof its hierarchy was built on) is device dof dofBegin +
-  // device dof of that dof.
-  std::vector<std::vector<std::size_t>> fineRow(K);
-  for (std::size_t s = 0; s < K; ++s) {
-    const BodySegment& sg = e_.segs_[s];
-    std::vector<std::size_t> deviceDof(sg.dofs());
-    for (std::size_t d = 0; d < sg.dofs(); ++d) deviceDof[sg.hostDof(d)] = d;
-    for (Eigen::Index dof : bodies_[s].amg().builtFreeDofs())
-      fineRow[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
-  }
-  using Triplets = std::vector<Eigen::Triplet<double, int>>;
-  // row(k, s, i): the device row of body s's row i on level k.
-  auto row = [&](std::size_t k, std::size_t s, Eigen::Index i) {
-    return static_cast<int>(k == 0 ? fineRow[s][static_cast<std::size_t>(i)] : offset[k][s] + static_cast<std::size_t>(i));
-  };
-  auto add = [&](Triplets& t, const AmgMatrix& m, std::size_t rk, std::size_t ck, std::size_t s) {
-    for (Eigen::Index i = 0; i < m.outerSize(); ++i)
-      for (AmgMatrix::InnerIterator it(m, i); it; ++it) t.emplace_back(row(rk, s, i), row(ck, s, it.col()), it.value());
-  };
-  auto matrix = [&](const Triplets& t, std::size_t r, std::size_t c) {
-    AmgMatrix m(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c));
-    m.setFromTriplets(t.begin(), t.end());
-    return m;
-  };
+  const DeviceAmgLayout layout = host_.layout(e_.nodeTotal_);
+  setRows(P0_, layout.P0);
+  setRows(Pt0_, layout.Pt0);
   levels_.clear();
-  levels_.resize(depth - 1);
-  {
-    Triplets p, pt;
-    for (std::size_t s = 0; s < K; ++s) {
-      const auto& levels = bodies_[s].amg().levels();
-      if (levels.size() < 2) continue;
-      add(p, levels[0].P, 0, 1, s);
-      add(pt, levels[0].Pt, 1, 0, s);
-    }
-    setRows(P0_, matrix(p, rows[0], depth > 1 ? rows[1] : 0));
-    setRows(Pt0_, matrix(pt, depth > 1 ? rows[1] : 0, rows[0]));
+  levels_.resize(layout.levels.size());
+  for (std::size_t k = 0; k < layout.levels.size(); ++k) {
+    const DeviceAmgLevel& from = layout.levels[k];
+    Level& L = levels_[k];
+    L.rows = from.rows;
+    setRows(L.A, from.A);
+    setRows(L.P, from.P);
+    setRows(L.Pt, from.Pt);
+    setRows(L.inverse, from.inverse, true, e_.ctx_->info().fp64);
+    L.inverseEntries = from.inverseEntries;
+    L.smooths = from.smooths;
+    L.dinv = reals(from.dinv);
+    for (auto* v : {&L.b, &L.x, &L.res, &L.d, &L.t}) *v = buffer(std::max<std::size_t>(from.rows, 1) * e_.realSize_);
   }
-  for (std::size_t k = 1; k < depth; ++k) {
-    Level& L = levels_[k - 1];
-    L.rows = rows[k];
-    Triplets a, p, pt, inv;
-    std::vector<double> dinv(rows[k], 0.0);
-    for (std::size_t s = 0; s < K; ++s) {
-      const auto& levels = bodies_[s].amg().levels();
-      if (k >= levels.size()) continue;
-      if (k + 1 == levels.size()) {  // the body's coarsest: its dense inverse, no smoothing
-        const Eigen::MatrixXd M = bodies_[s].amg().coarsestInverse();
-        for (Eigen::Index i = 0; i < M.rows(); ++i)
-          for (Eigen::Index j = 0; j < M.cols(); ++j) inv.emplace_back(row(k, s, i), row(k, s, j), M(i, j));
-        continue;
-      }
-      const AmgLevel& level = levels[k];
-      add(a, level.A, k, k, s);
-      add(p, level.P, k, k + 1, s);
-      add(pt, level.Pt, k + 1, k, s);
-      for (Eigen::Index i = 0; i < level.A.rows(); ++i)
-        dinv[static_cast<std::size_t>(row(k, s, i))] = level.diagInv[i] / level.lambdaMax;
-    }
-    const std::size_t next = k + 1 < depth ? rows[k + 1] : 0;
-    setRows(L.A, matrix(a, rows[k], rows[k]));
-    setRows(L.P, matrix(p, rows[k], next));
-    setRows(L.Pt, matrix(pt, next, rows[k]));
-    setRows(L.inverse, matrix(inv, rows[k], rows[k]), true, e_.ctx_->info().fp64);
-    L.inverseEntries = inv.size();
-    L.smooths = !a.empty();
-    L.dinv = reals(dinv);
-    for (auto* v : {&L.b, &L.x, &L.res, &L.d, &L.t}) *v = buffer(std::max<std::size_t>(rows[k], 1) * e_.realSize_);
-  }
-  // The fine level's 1 / lambda_max per segment; the warp's node table.
-  std::vector<double> scale(K, 1.0);
-  std::vector<cl_int> nodeAggregate(e_.nodeTotal_, -1);
-  aggregateBegin_.assign(K + 1, 0);
-  for (std::size_t s = 0; s < K; ++s) {
-    const BodySegment& sg = e_.segs_[s];
-    const WarpedAmg& amg = bodies_[s].amg();
-    if (amg.built()) scale[s] = 1.0 / amg.fineLambdaMax();
-    aggregateBegin_[s + 1] = aggregateBegin_[s] + amg.aggregateCount();
-    if (!sg.corotational || amg.levels().empty()) continue;  // linear bodies do not turn: no warp
-    const std::vector<int> of = amg.nodeAggregates();
-    for (std::size_t d = 0; d < sg.nodes; ++d) {
-      const int a = of[sg.hostDof(3 * d) / 3];
-      if (a >= 0) nodeAggregate[sg.nodeBegin + d] = static_cast<cl_int>(aggregateBegin_[s] + static_cast<std::size_t>(a));
-    }
-  }
-  scale_ = reals(scale);
+  scale_ = reals(layout.scale);
+  std::vector<cl_int> nodeAggregate(layout.nodeAggregate.begin(), layout.nodeAggregate.end());
   nodeAggregate_ = buffer(nodeAggregate.size() * sizeof(cl_int));
   e_.uploadRaw(*nodeAggregate_, nodeAggregate);
   // Every aggregate at I until its body's positions give its rotation (a solve before any
   // setPositions, or a body handed over by a failover without positions, runs unwarped).
-  std::vector<double> identity(std::max<std::size_t>(9 * aggregateBegin_[K], 9), 0.0);
+  std::vector<double> identity(std::max<std::size_t>(9 * layout.aggregates, 9), 0.0);
   for (std::size_t a = 0; 9 * a < identity.size(); ++a) identity[9 * a] = identity[9 * a + 4] = identity[9 * a + 8] = 1.0;
   rotations_ = reals(identity);
-  std::fill(warpStale_.begin(), warpStale_.end(), 1);
-  dirty_ = false;
 }
 
 void EngineAmg::uploadWarp(const BodySet& running) {
-  for (std::size_t s : running) {
-    if (!warpStale_[s] || !e_.segs_[s].corotational || positions_[s].size() == 0) continue;
-    WarpedAmg& amg = bodies_[s].amg();
-    amg.setPositions(positions_[s]);
-    const std::vector<Mat3>& R = amg.aggregateRotations();
-    std::vector<double> values(9 * R.size());
-    for (std::size_t a = 0; a < R.size(); ++a)
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) values[9 * a + static_cast<std::size_t>(3 * i + j)] = R[a](i, j);
+  host_.warps(running, [&](std::size_t first, const std::vector<double>& values) {
     std::vector<unsigned char> bytes(values.size() * e_.realSize_);
     withReals(bytes.data(), e_.double_, 0, [&](auto* out) {
       for (std::size_t i = 0; i < values.size(); ++i) out[i] = static_cast<std::remove_pointer_t<decltype(out)>>(values[i]);
     });
-    e_.enqueueWrite(*rotations_, 9 * aggregateBegin_[s] * e_.realSize_, std::move(bytes));
-    warpStale_[s] = 0;
-  }
+    e_.enqueueWrite(*rotations_, 9 * first * e_.realSize_, std::move(bytes));
+  });
 }
 
 void EngineAmg::spmv(const Csr& m, const ClBuffer& x, const ClBuffer* b, cl_uint mode, const ClBuffer& y) {

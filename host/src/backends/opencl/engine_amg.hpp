@@ -13,8 +13,7 @@
 #ifdef COROFEM_WITH_OPENCL
 
 #include "backends/opencl/cl_objects.hpp"
-#include "device/device.hpp"
-#include "precond/amg.hpp"
+#include "device/device_amg.hpp"
 
 #include <memory>
 #include <vector>
@@ -72,17 +71,11 @@ class EngineAmg {
   void setRows(Csr& out, const AmgMatrix& m, bool csr = false, bool doubleValues = false);
 
   SegmentEngine& e_;
-  std::vector<BodyAmg> bodies_;           ///< per segment
-  std::vector<std::vector<Eigen::Index>> freeDofs_;  ///< per segment, in the problem's numbering
-  std::vector<char> freeKnown_;           ///< per segment: freeDofs_ is its constraints' (invalidate clears it)
-  std::vector<Eigen::VectorXd> positions_;  ///< per segment: the last positions set
-  std::vector<char> warpStale_;
-  bool dirty_ = true;                     ///< the device levels lag the hierarchies
+  DeviceAmg host_;                        ///< the hierarchies and their layout
   // Level 0 (device dofs), levels 1.. and the warp.
   Csr P0_, Pt0_;
   std::vector<Level> levels_;             ///< levels_[k - 1] is device level k
   std::unique_ptr<ClBuffer> scale_, res0_, d0_, ad0_, e0_, nodeAggregate_, rotations_;
-  std::vector<std::size_t> aggregateBegin_;  ///< per segment: its first aggregate in rotations_
   ClKernel kFineBegin_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarseAdd_, kCoarsest_, kSpmvSlices_;
 };
 

@@ -1,0 +1,204 @@
+// The "amg" preconditioner's host side on a device backend (device_amg.hpp).
+#include "device/device_amg.hpp"
+
+#include "util/error.hpp"
+
+#include <algorithm>
+
+namespace corofem::detail {
+
+SlicedEll slicedEll(const AmgMatrix& m, std::size_t slice) {
+  SlicedEll out;
+  const std::size_t rows = static_cast<std::size_t>(m.rows());
+  const std::size_t slices = (rows + slice - 1) / slice;
+  out.rows = rows;
+  out.start.assign(slices + 1, 0);
+  for (std::size_t s = 0; s < slices; ++s) {
+    std::size_t width = 0;
+    for (std::size_t i = slice * s; i < std::min(rows, slice * (s + 1)); ++i)
+      width = std::max<std::size_t>(width, static_cast<std::size_t>(m.outerIndexPtr()[i + 1] - m.outerIndexPtr()[i]));
+    out.start[s + 1] = static_cast<std::uint32_t>(out.start[s] + slice * width);
+  }
+  out.cols.assign(out.start[slices], 0);
+  out.values.assign(out.start[slices], 0.0);
+  for (std::size_t i = 0; i < rows; ++i) {
+    const std::size_t s = i / slice, lane = i % slice;
+    for (int j = m.outerIndexPtr()[i], k = 0; j < m.outerIndexPtr()[i + 1]; ++j, ++k) {
+      const std::size_t at = out.start[s] + slice * static_cast<std::size_t>(k) + lane;
+      out.cols[at] = static_cast<std::uint32_t>(m.innerIndexPtr()[j]);
+      out.values[at] = m.valuePtr()[j];
+    }
+  }
+  return out;
+}
+
+DeviceAmg::DeviceAmg(const std::vector<BodySegment>& segments)
+    : segs_(segments),
+      bodies_(segments.size()),
+      freeDofs_(segments.size()),
+      freeKnown_(segments.size(), 0),
+      positions_(segments.size()),
+      warpStale_(segments.size(), 1),
+      aggregateBegin_(segments.size() + 1, 0) {}
+
+void DeviceAmg::positionsSet(const BodySet& bodies, const ConstVectors& x) {
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    positions_[bodies[i]] = *x[i];
+    warpStale_[bodies[i]] = 1;
+  }
+}
+
+void DeviceAmg::invalidate(std::size_t s) {
+  bodies_[s].clear();
+  freeKnown_[s] = 0;
+  dirty_ = true;
+}
+
+void DeviceAmg::constraintsChanged(std::size_t s) { freeKnown_[s] = 0; }
+
+long long DeviceAmg::builds() const {
+  long long n = 0;
+  for (const BodyAmg& b : bodies_) n += b.builds();
+  return n;
+}
+
+bool DeviceAmg::prepare(const BodySet& running, const std::vector<std::pair<double, double>>& coefficients) {
+  if (coefficients.size() != running.size())
+    fail(ErrorCode::Internal, "amg: ", coefficients.size(), " coefficients for ", running.size(), " bodies");
+  for (std::size_t i = 0; i < running.size(); ++i) {
+    const std::size_t s = running[i];
+    const BodySegment& sg = segs_[s];
+    if (!freeKnown_[s]) {  // the free dofs in the problem's numbering (the segment keeps its mask in the device's)
+      std::vector<std::uint8_t> constrained(sg.dofs());
+      for (std::size_t d = 0; d < sg.dofs(); ++d) constrained[sg.hostDof(d)] = sg.constrained[d];
+      freeDofs_[s].clear();
+      for (std::size_t d = 0; d < constrained.size(); ++d)
+        if (!constrained[d]) freeDofs_[s].push_back(static_cast<Eigen::Index>(d));
+      freeKnown_[s] = 1;
+    }
+    if (bodies_[s].ensure(*sg.problem, freeDofs_[s], coefficients[i].first, coefficients[i].second) !=
+        BodyAmg::Made::Kept) {
+      dirty_ = true;
+      warpStale_[s] = 1;
+    }
+  }
+  return dirty_;
+}
+
+DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
+  // Body s's rows of device level k from offset[k][s].
+  const std::size_t K = segs_.size();
+  std::size_t depth = 1;
+  for (const BodyAmg& b : bodies_) depth = std::max(depth, b.amg().levels().size());
+  std::vector<std::vector<std::size_t>> offset(depth, std::vector<std::size_t>(K, 0));
+  std::vector<std::size_t> rows(depth, 0);
+  rows[0] = 3 * nodeTotal;
+  for (std::size_t k = 1; k < depth; ++k)
+    for (std::size_t s = 0; s < K; ++s) {
+      offset[k][s] = rows[k];
+      const auto& levels = bodies_[s].amg().levels();
+      if (k < levels.size()) rows[k] += static_cast<std::size_t>(levels[k].A.rows());
+    }
+  // Body s's level-0 row i (the i-th free dof its hierarchy was built on) is device dof dofBegin +
+  // device dof of that dof.
+  std::vector<std::vector<std::size_t>> fineRow(K);
+  for (std::size_t s = 0; s < K; ++s) {
+    const BodySegment& sg = segs_[s];
+    std::vector<std::size_t> deviceDof(sg.dofs());
+    for (std::size_t d = 0; d < sg.dofs(); ++d) deviceDof[sg.hostDof(d)] = d;
+    for (Eigen::Index dof : bodies_[s].amg().builtFreeDofs())
+      fineRow[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
+  }
+  using Triplets = std::vector<Eigen::Triplet<double, int>>;
+  auto row = [&](std::size_t k, std::size_t s, Eigen::Index i) {
+    return static_cast<int>(k == 0 ? fineRow[s][static_cast<std::size_t>(i)] : offset[k][s] + static_cast<std::size_t>(i));
+  };
+  auto add = [&](Triplets& t, const AmgMatrix& m, std::size_t rk, std::size_t ck, std::size_t s) {
+    for (Eigen::Index i = 0; i < m.outerSize(); ++i)
+      for (AmgMatrix::InnerIterator it(m, i); it; ++it) t.emplace_back(row(rk, s, i), row(ck, s, it.col()), it.value());
+  };
+  auto matrix = [&](const Triplets& t, std::size_t r, std::size_t c) {
+    AmgMatrix m(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c));
+    m.setFromTriplets(t.begin(), t.end());
+    return m;
+  };
+  DeviceAmgLayout out;
+  out.levels.resize(depth - 1);
+  {
+    Triplets p, pt;
+    for (std::size_t s = 0; s < K; ++s) {
+      const auto& levels = bodies_[s].amg().levels();
+      if (levels.size() < 2) continue;
+      add(p, levels[0].P, 0, 1, s);
+      add(pt, levels[0].Pt, 1, 0, s);
+    }
+    out.P0 = matrix(p, rows[0], depth > 1 ? rows[1] : 0);
+    out.Pt0 = matrix(pt, depth > 1 ? rows[1] : 0, rows[0]);
+  }
+  for (std::size_t k = 1; k < depth; ++k) {
+    DeviceAmgLevel& L = out.levels[k - 1];
+    L.rows = rows[k];
+    L.dinv.assign(rows[k], 0.0);
+    Triplets a, p, pt, inv;
+    for (std::size_t s = 0; s < K; ++s) {
+      const auto& levels = bodies_[s].amg().levels();
+      if (k >= levels.size()) continue;
+      if (k + 1 == levels.size()) {  // the body's coarsest: its dense inverse, no smoothing
+        const Eigen::MatrixXd M = bodies_[s].amg().coarsestInverse();
+        for (Eigen::Index i = 0; i < M.rows(); ++i)
+          for (Eigen::Index j = 0; j < M.cols(); ++j) inv.emplace_back(row(k, s, i), row(k, s, j), M(i, j));
+        continue;
+      }
+      const AmgLevel& level = levels[k];
+      add(a, level.A, k, k, s);
+      add(p, level.P, k, k + 1, s);
+      add(pt, level.Pt, k + 1, k, s);
+      for (Eigen::Index i = 0; i < level.A.rows(); ++i)
+        L.dinv[static_cast<std::size_t>(row(k, s, i))] = level.diagInv[i] / level.lambdaMax;
+    }
+    const std::size_t next = k + 1 < depth ? rows[k + 1] : 0;
+    L.A = matrix(a, rows[k], rows[k]);
+    L.P = matrix(p, rows[k], next);
+    L.Pt = matrix(pt, next, rows[k]);
+    L.inverse = matrix(inv, rows[k], rows[k]);
+    L.inverseEntries = inv.size();
+    L.smooths = !a.empty();
+  }
+  // Level 0's 1 / lambda_max per segment; the warp's node table.
+  out.scale.assign(K, 1.0);
+  out.nodeAggregate.assign(nodeTotal, -1);
+  aggregateBegin_.assign(K + 1, 0);
+  for (std::size_t s = 0; s < K; ++s) {
+    const BodySegment& sg = segs_[s];
+    const WarpedAmg& amg = bodies_[s].amg();
+    if (amg.built()) out.scale[s] = 1.0 / amg.fineLambdaMax();
+    aggregateBegin_[s + 1] = aggregateBegin_[s] + amg.aggregateCount();
+    if (!sg.corotational || amg.levels().empty()) continue;  // linear bodies do not turn: no warp
+    const std::vector<int> of = amg.nodeAggregates();
+    for (std::size_t d = 0; d < sg.nodes; ++d) {
+      const int a = of[sg.hostDof(3 * d) / 3];
+      if (a >= 0) out.nodeAggregate[sg.nodeBegin + d] = static_cast<std::int32_t>(aggregateBegin_[s] + static_cast<std::size_t>(a));
+    }
+  }
+  out.aggregates = aggregateBegin_[K];
+  std::fill(warpStale_.begin(), warpStale_.end(), 1);
+  dirty_ = false;
+  return out;
+}
+
+void DeviceAmg::warps(const BodySet& running, const std::function<void(std::size_t, const std::vector<double>&)>& fn) {
+  for (std::size_t s : running) {
+    if (!warpStale_[s] || !segs_[s].corotational || positions_[s].size() == 0) continue;
+    WarpedAmg& amg = bodies_[s].amg();
+    amg.setPositions(positions_[s]);
+    const std::vector<Mat3>& R = amg.aggregateRotations();
+    std::vector<double> values(9 * R.size());
+    for (std::size_t a = 0; a < R.size(); ++a)
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) values[9 * a + static_cast<std::size_t>(3 * i + j)] = R[a](i, j);
+    if (!values.empty()) fn(aggregateBegin_[s], values);
+    warpStale_[s] = 0;
+  }
+}
+
+}  // namespace corofem::detail
