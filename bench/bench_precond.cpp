@@ -1,10 +1,12 @@
 // The PCG preconditioners side by side on the "Vega beam" of issue 29, on the reference backend
-// and on the OpenCL backend in float (its first device), through the public Simulation API:
+// and on the OpenCL and Vulkan backends in float (their first devices), through the public
+// Simulation API:
 // bench/scenes/vega_beam.json (1 x 0.1 x 0.1 m, box cells 60 x 6 x 6, 6 tets per cell = 12,960
 // tets, E = 1e6 Pa, nu = 0.3, rho = 1000, clamped at x = 0, gravity -z, backward Euler at h = 1/60 s,
 // one Newton iteration, PCG tolerance 1e-6, max_iterations 3000).
 //
-//   precondStep/<backend>/<preconditioner>/tets_12960   backend "reference" or "opencl_float";
+//   precondStep/<backend>/<preconditioner>/tets_12960   backend "reference", "opencl_float" or
+//                                                       "vulkan_float";
 //                                                       "diagonal", "block_diagonal" and "amg"
 //   precondStep/<backend>/<preconditioner>/tets_103680  cells 120 x 12 x 12, "diagonal" and "amg";
 //                                                       slow (seconds a step on the reference, a
@@ -17,7 +19,7 @@
 //                                                       release_step_ms (the spare taken back). At
 //                                                       0db57de it compared a hierarchy kept through
 //                                                       the grab ("kept") with one made for it.
-// (OpenCL variants skip with the reason where the build or the machine has no OpenCL device.)
+// (OpenCL and Vulkan variants skip with the reason where the build or the machine has no such device.)
 //
 // Each benchmark creates its Simulation and takes 3 warm-up steps outside the timed loop (the first
 // solve builds the preconditioner: amg's hierarchy), then times 30 steps (10 on the large beam)
@@ -60,8 +62,8 @@ void precondStep(benchmark::State& state, const std::string& backend, const std:
   // Open-ended in steps: the benchmark decides how many it takes. No probes (no output is written).
   std::vector<std::string> set = {"solver.preconditioner=" + preconditioner, "bodies.0.mesh.box.cells=" + cells,
                                   "analysis.steps=1000000", "output.probes=[]"};
-  if (backend == "opencl_float") {
-    set.push_back("backend=opencl");
+  if (const std::size_t at = backend.find("_float"); at != std::string::npos) {  // "opencl_float", "vulkan_float"
+    set.push_back("backend=" + backend.substr(0, at));
     set.push_back("solver.precision=float");
   }
   auto scene = loadScene(kScenePath, set);
@@ -141,7 +143,7 @@ void precondStep(benchmark::State& state, const std::string& backend, const std:
 }
 
 void registerAll(bool large) {
-  for (const char* b : {"reference", "opencl_float"}) {
+  for (const char* b : {"reference", "opencl_float", "vulkan_float"}) {
     const std::string backend = b;
     for (const char* p : {"diagonal", "block_diagonal", "amg"})
       benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_12960").c_str(), precondStep, backend,

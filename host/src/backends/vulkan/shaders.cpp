@@ -50,6 +50,12 @@ const std::uint32_t kSurfaceFloat[] =
 const std::uint32_t kSurfaceDouble[] =
 #include "surface_double.inc"
 ;
+const std::uint32_t kAmgFloat[] =
+#include "amg_float.inc"
+;
+const std::uint32_t kAmgDouble[] =
+#include "amg_double.inc"
+;
 // clang-format on
 
 template <std::size_t N>
@@ -68,6 +74,7 @@ Spirv shaderCode(Shader shader, bool isDouble) {
     case Shader::Reduce: return isDouble ? of(kReduceDouble) : of(kReduceFloat);
     case Shader::PcgGroup: return isDouble ? of(kPcgGroupDouble) : of(kPcgGroupFloat);
     case Shader::Surface: return isDouble ? of(kSurfaceDouble) : of(kSurfaceFloat);
+    case Shader::Amg: return isDouble ? of(kAmgDouble) : of(kAmgFloat);
   }
   return {};
 }
@@ -75,7 +82,7 @@ Spirv shaderCode(Shader shader, bool isDouble) {
 std::uint64_t shaderHash() {
   std::uint64_t h = 1469598103934665603ull;
   for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup,
-                   Shader::Surface})
+                   Shader::Surface, Shader::Amg})
     for (bool d : {false, true}) {
       const Spirv code = shaderCode(s, d);
       const unsigned char* bytes = reinterpret_cast<const unsigned char*>(code.words);

@@ -21,10 +21,6 @@ std::string vulkanRefusal(const Problem& p, const SolverDesc& s) {
   if (s.precision == Precision::Mixed)
     return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
            "\"double\"";
-  if (preconditionerOf(s, p) == PreconditionerKind::Amg)
-    return std::string("the vulkan backend has no multigrid preconditioner yet (") +
-           (s.preconditioner == PreconditionerKind::Auto ? "\"auto\" picks amg for this slender body" : "\"amg\" asked for") +
-           "); set solver.preconditioner to \"diagonal\" or \"block_diagonal\", or use the opencl or reference backend";
   return "";
 }
 
@@ -72,18 +68,22 @@ void registerVulkanBackend() {
   e.batches = true;
   e.passes = [](const PlanPasses& step) {
     const bool precond = step.preconditioner != PreconditionerKind::None;
+    const bool amg = step.preconditioner == PreconditionerKind::Amg;
+    const bool block = step.preconditioner == PreconditionerKind::BlockDiagonal || amg;
     std::vector<std::string> k;
     if (step.corotational) k.push_back(std::string("rotations.comp (") + toString(step.rotation) + ")");
     k.push_back("element.comp + gather.comp (forces and element energies)");
     k.push_back(std::string("element.comp + gather.comp (product of ") +
                 (step.dynamic ? (step.damping ? "M, C, K_t" : "M, K_t") : "K_t") + ")");
     k.push_back(std::string("pcg.comp") +
-                (precond ? (step.preconditioner == PreconditionerKind::BlockDiagonal ? " (forms M^-1: 3x3 blocks)"
-                                                                                       : " (forms M^-1: diagonal)")
-                         : "") +
-                " + reduce.comp (single-reduction PCG, scalars and stop flags on the device); bodies up to "
-                "VulkanTuning::groupPcgNodes nodes run whole iterations in one pcg_group.comp dispatch, a "
-                "work-group per body");
+                (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
+                " + reduce.comp (single-reduction PCG, scalars and stop flags on the device)" +
+                (amg ? "" : "; bodies up to VulkanTuning::groupPcgNodes nodes run whole iterations in one "
+                            "pcg_group.comp dispatch, a work-group per body"));
+    if (amg)
+      k.push_back("amg.comp V-cycle per iteration: Chebyshev smoothing with 4 products (element.comp + "
+                  "gather.comp), level-0 passes and sliced-ELLPACK products on the coarse levels (the "
+                  "iterations dispatched phase by phase, not in pcg_group.comp)");
     return k;
   };
   e.candidates = [] {

@@ -10,10 +10,12 @@
 // The device runs on a VkDevice of its own or on the application's (ExternalDevice), and updates
 // the bodies' render surfaces there (vulkan_surfaces.cpp) into VkBuffers a renderer draws from.
 //
-// Not here yet (the Vulkan issue's later steps): the whole step as one recorded command buffer
-// replayed every frame, the multigrid preconditioner.
+// The "amg" preconditioner's V-cycle is vulkan_amg.cpp's, recorded between pcg.comp's pass and the
+// product. Not here yet (the Vulkan issue's later step): the whole step as one recorded command
+// buffer replayed every frame.
 #include "backends/vulkan/shaders.hpp"
 #include "backends/vulkan/vk_runtime.hpp"
+#include "backends/vulkan/vulkan_amg.hpp"
 #include "backends/vulkan/vulkan_device.hpp"
 #include "backends/vulkan/vulkan_surfaces.hpp"
 #include "device/body_layout.hpp"
@@ -48,10 +50,8 @@ const char* const kBindingNames[kBindingCount] = {
     "PCG partial sums", "PCG partial sums (u.w)", "PCG scalars", "element energies", "quaternions",
     "rotations", "spring stiffness"};
 
-/// common.glsl's push constants.
-struct Push {
-  std::uint32_t S = 0, mode = 0, flags = 0, precond = 0, rotation = 0;
-};
+/// common.glsl's push constants (and amg.comp's after them).
+using Push = VulkanPush;
 
 constexpr std::uint32_t kFlagProject = 1, kFlagMass = 2, kFlagZeroStart = 4, kFlagSprings = 32, kFlagCapLast = 64;
 constexpr std::uint32_t kWg = 64;
@@ -75,6 +75,7 @@ std::uint32_t preconditionerCode(PreconditionerKind k) {
   switch (k) {
     case PreconditionerKind::None: return 0;
     case PreconditionerKind::BlockDiagonal: return 2;
+    case PreconditionerKind::Amg: return 2;  // pcg.comp forms the node blocks' inverses the V-cycle smooths with
     default: return 1;
   }
 }
@@ -113,9 +114,24 @@ class VulkanDevice final : public Device {
     std::size_t largest = 0;
     for (const BodySegment& sg : layout_.segments) largest = std::max(largest, sg.nodes);
     const std::size_t chunks = 2 * ((largest + kWg - 1) / kWg) + 1;
-    groupPcg_ = groupNodes > 0 && largest <= static_cast<std::size_t>(groupNodes) && chunks <= kGroupChunkBudget;
+    // The multigrid's V-cycle runs between an iteration's passes: no whole iterations in one dispatch.
+    groupPcg_ = groupNodes > 0 && largest <= static_cast<std::size_t>(groupNodes) && chunks <= kGroupChunkBudget &&
+                solver_.preconditioner != PreconditionerKind::Amg;
     groupIterationsPerDispatch_ = static_cast<int>(std::max<std::size_t>(1, kGroupChunkBudget / chunks));
     build();
+    if (solver_.preconditioner == PreconditionerKind::Amg) {
+      VulkanAmgHost host;
+      host.ctx = ctx_;
+      host.isDouble = isDouble_;
+      host.segments = &layout_.segments;
+      host.nodeTotal = layout_.nodeTotal;
+      host.shared = &owned_;
+      host.productSet = [this](const vk::Buffer& in, const vk::Buffer& out) { return productSet(in, out); };
+      host.product = [this](VkCommandBuffer cb, VkDescriptorSet set) { recordProduct(cb, basePush(), set); };
+      host.dispatch = [this](VkCommandBuffer cb, VkPipeline p, VkDescriptorSet set, const Push& push,
+                             std::uint32_t groups) { dispatch(cb, p, set, push, groups); };
+      amg_ = std::make_unique<VulkanAmg>(std::move(host));
+    }
   }
 
   ~VulkanDevice() override {
@@ -162,6 +178,7 @@ class VulkanDevice final : public Device {
                [&](std::size_t d) { return xi[static_cast<Eigen::Index>(sg.hostDof(d))] - sg.centroid[d % 3]; });
       copy(cb, up_, sg.dofBegin() * rs_, buffer(kPos), sg.dofBegin() * rs_, sg.dofs() * rs_);
     }
+    if (amg_) amg_->positionsSet(set, x);
     vk::fullBarrier(cb);
     // The rotations, one pass per rotation method among the set's co-rotational bodies.
     for (RotationMethod m : {RotationMethod::Polar, RotationMethod::Svd, RotationMethod::Quaternion, RotationMethod::Qr}) {
@@ -273,6 +290,7 @@ class VulkanDevice final : public Device {
       constrainedHost_[set[i]] = c;
       for (std::size_t d = 0; d < sg.dofs(); ++d) sg.constrained[d] = c[sg.hostDof(d)];
       for (std::size_t d = 0; d < sg.dofs(); ++d) free_[sg.dofBegin() + d] = sg.constrained[d] ? 0.0 : 1.0;
+      if (amg_) amg_->constraintsChanged(set[i]);
     }
     uploadReals(buffer(kFree), free_);
   }
@@ -285,6 +303,7 @@ class VulkanDevice final : public Device {
       energyFresh_[set[i]] = 0;  // the energy is the Lame parameters' too
       sg.rayleighMass = problems[i]->rayleighMass;
       sg.rayleighStiffness = problems[i]->rayleighStiffness;
+      if (amg_) amg_->invalidate(set[i]);
     }
   }
 
@@ -321,7 +340,9 @@ class VulkanDevice final : public Device {
     std::vector<char> active(bodyCount(), 0);
     bool zeroStart = true, any = false;
     const double maxReal = isDouble_ ? std::numeric_limits<double>::max() : std::numeric_limits<float>::max();
-    VkCommandBuffer cb = ctx_->begin();
+    std::vector<VkBufferCopy> toB, toX;  // from the staging buffer
+    BodySet running;
+    std::vector<std::pair<double, double>> amgCoefficients;  // (mass, stiffness) of each running body's A
     for (std::size_t i = 0; i < set.size(); ++i) {
       const BodySegment& sg = segment(set[i]);
       const Eigen::VectorXd& bi = *b[i];
@@ -357,16 +378,21 @@ class VulkanDevice final : public Device {
       });
       putReals(up_.mapped(), isDouble_, xOffset + sg.dofBegin(), sg.dofs(), kChunk,
                [&](std::size_t d) { return start(sg.hostDof(d)); });
-      copy(cb, up_, sg.dofBegin() * rs_, buffer(kVecB), sg.dofBegin() * rs_, sg.dofs() * rs_);
-      copy(cb, up_, (xOffset + sg.dofBegin()) * rs_, buffer(kVecX), sg.dofBegin() * rs_, sg.dofs() * rs_);
+      toB.push_back({sg.dofBegin() * rs_, sg.dofBegin() * rs_, sg.dofs() * rs_});
+      toX.push_back({(xOffset + sg.dofBegin()) * rs_, sg.dofBegin() * rs_, sg.dofs() * rs_});
       active[set[i]] = any = true;
       all[set[i]] = coeffs[i];
+      running.push_back(set[i]);
+      amgCoefficients.emplace_back(coeffs[i].mass + coeffs[i].damping * sg.rayleighMass,
+                                   coeffs[i].stiffness + coeffs[i].damping * sg.rayleighStiffness);
     }
     solveCoeffs_ = all;
-    if (!any) {
-      ctx_->wait(ctx_->submit());
-      return started_;
-    }
+    if (!any) return started_;
+    if (amg_) amg_->prepare(running, amgCoefficients);  // the hierarchies (host work, uploads) before recording
+    VkCommandBuffer cb = ctx_->begin();
+    vkCmdCopyBuffer(cb, up_.handle(), buffer(kVecB).handle(), static_cast<std::uint32_t>(toB.size()), toB.data());
+    vkCmdCopyBuffer(cb, up_.handle(), buffer(kVecX).handle(), static_cast<std::uint32_t>(toX.size()), toX.data());
+    if (amg_) amg_->recordWarps(cb, running);
     std::vector<double> sc(kScalarCount * bodyCount(), 0.0);
     for (std::size_t body = 0; body < bodyCount(); ++body) sc[kScalarCount * body + kScalarTol2] = tolerance * tolerance;
     updateReals(cb, buffer(kScalars), sc);
@@ -389,7 +415,8 @@ class VulkanDevice final : public Device {
     if (zeroStart) push.flags |= kFlagZeroStart;
     dispatch(cb, pcg_, pcgSet_, push, nodeGroups());
     push.flags &= ~kFlagZeroStart;
-    recordProduct(cb, push);
+    if (amg_) amg_->recordCycle(cb, true);  // u = M^-1 r by the V-cycle, over pcg.comp's node-block one
+    recordProduct(cb, push, pcgSet_);
     push.mode = kReduceInit;
     dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
     stagingUse_ = ctx_->submit();
@@ -421,7 +448,9 @@ class VulkanDevice final : public Device {
         const bool last = enqueued_ == cap_;
         push.mode = kPcgUpdate;
         dispatch(cb, pcg_, pcgSet_, push, nodeGroups());
-        if (!last) recordProduct(cb, push);
+        // The cap's last iteration needs r . r alone (the stop test), not u: no V-cycle.
+        if (!last && amg_) amg_->recordCycle(cb, false);
+        if (!last) recordProduct(cb, push, pcgSet_);
         push.mode = last ? kReduceLast : kReduceStep;
         dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
       }
@@ -508,7 +537,8 @@ class VulkanDevice final : public Device {
     return {{"pcg_group_dispatches", groupDispatches_},
             {"pcg_phase_dispatches", phaseDispatches_},
             {"submissions", static_cast<long long>(ctx_->lastSubmission())},
-            {"blocking_waits", static_cast<long long>(ctx_->blockingWaits())}};
+            {"blocking_waits", static_cast<long long>(ctx_->blockingWaits())},
+            {"amg_hierarchies_made", amg_ ? amg_->builds() : 0}};
   }
 
   std::vector<DeviceBuffer> buffers() const override {
@@ -519,6 +549,8 @@ class VulkanDevice final : public Device {
     out.push_back({"product output", yout_.bytes()});
     out.push_back({"staging (host to device)", up_.bytes()});
     out.push_back({"staging (device to host)", down_.bytes()});
+    if (amg_)
+      for (DeviceBuffer& b : amg_->buffers()) out.push_back(std::move(b));
     return out;
   }
 
@@ -598,13 +630,14 @@ class VulkanDevice final : public Device {
     for (std::size_t i = 0; i < set.size(); ++i) getReals(down_.mapped(), isDouble_, segment(set[i]), kChunk, *out[i]);
   }
 
-  /// w = A u (projected) and its partial sums u . w.
-  void recordProduct(VkCommandBuffer cb, Push push) const {
+  /// y = A p (projected) and its partial sums p . y, p and y the product input and output of `set`
+  /// (pcgSet_: w = A u).
+  void recordProduct(VkCommandBuffer cb, Push push, VkDescriptorSet set) const {
     push.flags |= kFlagProject;
     push.mode = kElementProduct;
-    dispatch(cb, element_, pcgSet_, push, elementGroups());
+    dispatch(cb, element_, set, push, elementGroups());
     push.mode = kGatherProduct;
-    dispatch(cb, gather_, pcgSet_, push, nodeGroups());
+    dispatch(cb, gather_, set, push, nodeGroups());
   }
 
   static void copy(VkCommandBuffer cb, const vk::Buffer& from, std::size_t fromOffset, const vk::Buffer& to,
@@ -891,16 +924,18 @@ class VulkanDevice final : public Device {
     pcg_ = pipeline(vk::Shader::Pcg, "pcg.comp");
     reduce_ = pipeline(vk::Shader::Reduce, "reduce.comp");
     pcgGroup_ = pipeline(vk::Shader::PcgGroup, "pcg_group.comp");
-    auto set = [&](const vk::Buffer& in, const vk::Buffer& out) {
-      std::vector<const vk::Buffer*> b(kBindingCount);
-      for (std::uint32_t i = 0; i < kBindingCount; ++i) b[i] = &owned_[i];
-      b[kVecIn] = &in;
-      b[kVecOut] = &out;
-      return ctx_->descriptorSet(b);
-    };
-    apply_ = set(pin_, yout_);
-    pcgSet_ = set(owned_[kVecU], owned_[kVecW]);
-    setup_ = set(owned_[kVecX], owned_[kVecS]);
+    apply_ = productSet(pin_, yout_);
+    pcgSet_ = productSet(owned_[kVecU], owned_[kVecW]);
+    setup_ = productSet(owned_[kVecX], owned_[kVecS]);
+  }
+
+  /// A descriptor set of every binding with a product's input `in` and output `out`.
+  VkDescriptorSet productSet(const vk::Buffer& in, const vk::Buffer& out) {
+    std::vector<const vk::Buffer*> b(kBindingCount);
+    for (std::uint32_t i = 0; i < kBindingCount; ++i) b[i] = &owned_[i];
+    b[kVecIn] = &in;
+    b[kVecOut] = &out;
+    return ctx_->descriptorSet(b);
   }
 
   void zero(const vk::Buffer& b) {
@@ -943,6 +978,7 @@ class VulkanDevice final : public Device {
   std::deque<Read> reads_;
   PcgTicket nextTicket_ = 0;
   std::vector<char> residualFor_;
+  std::unique_ptr<VulkanAmg> amg_;  ///< the "amg" preconditioner's levels and V-cycle (else null)
 };
 
 }  // namespace
