@@ -55,7 +55,9 @@ void SegmentEngine::pcgIteration(bool last) {
   // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = M^-1 r; w = A u; alpha, beta.
   // The iteration cap's last iteration has no successor: no w = A u, only gamma and r . r.
   launch(kPcgUpdate_, Span::NodeChunks, nodeSeg_, segInfoBuf_, scalars_, q_, minv_, p_, s_, x_, r_, z_, partials_);
-  if (amg_) amg_->cycle(false);  // u = M^-1 r by the V-cycle, over pcg_update's node-block one
+  // u = M^-1 r by the V-cycle, over pcg_update's node-block one. The cap's last iteration needs r . r
+  // alone (the stop test), not u: no cycle.
+  if (amg_ && !last) amg_->cycle(false);
   if (last)
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceLast),
            SumReal{round_.tolerance * round_.tolerance});
