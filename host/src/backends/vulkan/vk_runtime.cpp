@@ -372,7 +372,10 @@ void Context::waitSlot(Slot& s) {
 }
 
 VkCommandBuffer Context::begin() {
-  if (recording_) fail(ErrorCode::Internal, "Vulkan: a command buffer is already being recorded");
+  if (recording_) {  // left open by an earlier caller: after its commands
+    fullBarrier(recording_->cb);
+    return recording_->cb;
+  }
   Slot& s = ring_[next_];
   next_ = (next_ + 1) % ring_.size();
   if (s.busy && vkGetFenceStatus(device_, s.fence) == VK_NOT_READY) ++blockingWaits_;  // the ring is full

@@ -116,10 +116,18 @@ class Context {
   void freeDescriptorSet(VkDescriptorSet set);
   VkPipelineLayout pipelineLayout() const { return pipelineLayout_; }
 
-  /// A command buffer of the ring, begun (waits for the ring's oldest when all are in flight).
+  /// The open command buffer: the one an earlier begin() gave and nobody submitted yet (its commands
+  /// first, then a full barrier), or a new one of the ring (waits for the ring's oldest when all
+  /// are in flight). A caller that records work no one waits for yet may leave it open: the next
+  /// submit, whoever calls it, takes it along.
   VkCommandBuffer begin();
-  /// Submits the command buffer begin() gave; returns its submission number.
+  /// Whether a command buffer is open.
+  bool recording() const { return recording_ != nullptr; }
+  /// Submits the open command buffer; returns its submission number.
   std::uint64_t submit();
+  /// Submits the open command buffer if there is one; returns the newest submission number (every
+  /// command recorded so far is in it or before it).
+  std::uint64_t flush() { return recording_ ? submit() : submitted_; }
   /// Waits for submission `id` (and so for every one before it).
   void wait(std::uint64_t id);
   void waitAll();

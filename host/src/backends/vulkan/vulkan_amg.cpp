@@ -138,7 +138,7 @@ void VulkanAmg::upload() {
     });
     return bytes;
   };
-  ctx.waitAll();  // the buffers replaced may still be read by recorded work
+  ctx.wait(ctx.flush());  // the buffers replaced may still be read by recorded work
   const std::vector<unsigned char> val = reals(p.val), inv = reals(p.inv);
   idx_ = vk::Buffer(ctx, std::max<std::size_t>(p.idx.size(), 1) * sizeof(std::uint32_t), false);
   val_ = vk::Buffer(ctx, val.size(), false);

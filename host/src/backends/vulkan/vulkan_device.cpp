@@ -48,7 +48,7 @@ void VulkanDevice::setPositions(const BodySet& set, const ConstVectors& x) {
     push.rotation = rotationCode(m);
     dispatch(cb, rotations_, apply_, push, elementGroups());
   }
-  stagingUse_ = ctx_->submit();
+  stagingUse_ = kOpenCommands;  // left open: the forces' read, or the next read, submits it
 }
 
 void VulkanDevice::internalForces(const BodySet& set, const Vectors& f) {

@@ -293,6 +293,7 @@ class VulkanDevice final : public Device {
   // -- transfers
 
   void waitStaging() {
+    if (stagingUse_ == kOpenCommands) stagingUse_ = ctx_->flush();
     if (stagingUse_) ctx_->wait(stagingUse_);
     stagingUse_ = 0;
   }
@@ -368,7 +369,10 @@ class VulkanDevice final : public Device {
   bool groupPcg_ = false;  ///< PCG iterations in one dispatch, a work-group per body (pcg_group.comp)
   int groupIterationsPerDispatch_ = 1;                   ///< pcg_group's iterations in one dispatch
   long long groupDispatches_ = 0, phaseDispatches_ = 0;  ///< PCG iteration dispatches of each path
-  std::uint64_t stagingUse_ = 0;  ///< the last submission reading up_ (0: none pending)
+  /// The last submission reading up_ (0: none pending; kOpenCommands: the open command buffer, or
+  /// a submission since: Context::flush gives it).
+  std::uint64_t stagingUse_ = 0;
+  static constexpr std::uint64_t kOpenCommands = ~std::uint64_t{0};
 
   BodySet solve_;
   std::vector<SystemCoeffs> solveCoeffs_;  ///< per body of the device (the solve's; others unused)

@@ -104,7 +104,7 @@ std::vector<PcgStart> VulkanDevice::pcgBegin(const BodySet& set, const std::vect
   recordProduct(cb, push, pcgSet_);
   push.mode = kReduceInit;
   dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
-  stagingUse_ = ctx_->submit();
+  stagingUse_ = kOpenCommands;  // left open: the first read of the scalars submits it
   return started_;
 }
 
@@ -140,7 +140,7 @@ void VulkanDevice::pcgIterate(int n, const std::vector<char>&) {
       dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
     }
   }
-  ctx_->submit();
+  // Left open: the read of the scalars that follows submits the chunk with it.
 }
 
 PcgTicket VulkanDevice::pcgRead() {
@@ -183,7 +183,7 @@ void VulkanDevice::pcgResidual(const std::vector<char>& bodies) {
   dispatch(cb, gather_, setup_, push, nodeGroups());
   push.mode = kReduceResidual;
   dispatch(cb, reduce_, setup_, push, static_cast<std::uint32_t>(bodyCount()));
-  ctx_->submit();
+  // Left open: pcgEnd's read submits it.
 }
 
 void VulkanDevice::pcgEnd(const std::vector<int>&, const Vectors& x, std::vector<PcgScalars>& residual) {
