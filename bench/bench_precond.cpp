@@ -47,6 +47,7 @@
 
 #include <chrono>
 #include <cstring>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -54,7 +55,12 @@ namespace {
 
 using namespace corofem;
 
-const std::string kScenePath = std::string(COROFEM_SOURCE_DIR) + "/bench/scenes/vega_beam.json";
+/// The scene in the source tree it was built from, or under the working directory (a binary carried
+/// to another machine and run from the project's root there).
+std::string scenePath() {
+  const std::string built = std::string(COROFEM_SOURCE_DIR) + "/bench/scenes/vega_beam.json";
+  return std::ifstream(built) ? built : std::string("bench/scenes/vega_beam.json");
+}
 constexpr int kWarmupSteps = 3;
 
 void precondStep(benchmark::State& state, const std::string& backend, const std::string& preconditioner,
@@ -66,7 +72,7 @@ void precondStep(benchmark::State& state, const std::string& backend, const std:
     set.push_back("backend=" + backend.substr(0, at));
     set.push_back("solver.precision=float");
   }
-  auto scene = loadScene(kScenePath, set);
+  auto scene = loadScene(scenePath(), set);
   if (!scene) {
     state.SkipWithError(scene.message().c_str());
     return;

@@ -9,7 +9,8 @@
 # TUNINGAB, in turns: space-separated --tuning values such as "groupPcg=0 groupPcg=1,workGroupSize=128";
 # "-" for the defaults), sweep (work-group sizes), more (bench_backends,
 # bench_embed, bench_batch), batch (bench_batch alone; BATCH_FILTER), meshorder (bench_mesh_order: real meshes in their files' numbering and
-# in the device's Morton order). The tests stage also runs five suites again with the Morton order
+# in the device's Morton order), precond (bench_precond: issue 29's 12,960-tet beam with the diagonal and the
+# multigrid, OpenCL and Vulkan in float; PRECOND_FILTER narrows it). The tests stage also runs five suites again with the Morton order
 # forced on every body (the test binaries' --corofem_morton flag), as CTest does, at the same time; TEST_TIMEOUT and
 # MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, and test_opencl runs in OPENCL_SHARDS
 # (6) gtest shards in each numbering.
@@ -17,7 +18,7 @@ set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/logs
-stages=${STAGES:-probe tests bench vulkan}
+stages=${STAGES:-probe tests bench vulkan precond}
 has() { [[ " $stages " == *" $1 "* ]]; }
 export LD_LIBRARY_PATH=$g/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}
 export COROFEM_DATA_DIR=$g/data COROFEM_CACHE_DIR=/tmp/corofem-cache  # built kernels (and calibrations) there
@@ -158,5 +159,13 @@ if has vulkan; then  # the Vulkan backend on the GPU: its benchmark, then the re
     (cd "$root" && timeout 120 "$B/renderer" --out "$OUT/renderer" --png-every 40 > /tmp/logs/renderer.txt 2>&1)
     echo "renderer exit $?"; cat /tmp/logs/renderer.txt
   fi
+fi
+if has precond; then  # the preconditioners per converged step on the GPU (issue 29's beam, both APIs)
+  (cd "$root" && timeout 240 "$B/bench_precond" \
+    --benchmark_filter="${PRECOND_FILTER:-precondStep/(opencl|vulkan)_float/(diagonal|amg)/}" \
+    --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
+    --benchmark_out="$OUT/bench_precond.json" --benchmark_out_format=json > /tmp/logs/bench_precond.txt 2>&1)
+  echo "bench_precond exit $?"
+  grep -h median /tmp/logs/bench_precond.txt | cut -c1-200
 fi
 tar -C /tmp -czf "$OUT/logs.tar.gz" logs
