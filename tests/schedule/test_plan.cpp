@@ -121,6 +121,25 @@ TEST(Plan, AVulkanBodyListsItsShaders) {
   EXPECT_TRUE(anyContains(kernels, "3x3 blocks")) << kernels;
   EXPECT_FALSE(anyContains(kernels, "pcg_iterate")) << kernels;
   EXPECT_FALSE(anyContains(kernels, "compute_rotations")) << kernels;
+  // Its buffers are the Vulkan device's (its registry entry's), in float: 7 PCG vectors of 3 N reals.
+  const json body0 = json::parse(sim->planReport())["bodies"][0];
+  const long long nodes = body0["nodes"].get<long long>();
+  bool corners = false, pcgVectors = false;
+  for (const json& b : body0["buffers"]) {
+    corners = corners || b["name"] == "element_corners";
+    if (b["name"] == "pcg_vectors (b x r u p s w)") pcgVectors = b["bytes"].get<long long>() == 7 * 3 * nodes * 4;
+    EXPECT_NE(b["name"], "element_nodes") << "the OpenCL layout's name";
+  }
+  EXPECT_TRUE(corners && pcgVectors) << body0["buffers"];
+  // With the multigrid: its shader and its buffers.
+  scene.solver.preconditioner = PreconditionerKind::Amg;
+  auto amg = Simulation::create(scene);
+  ASSERT_TRUE(amg) << amg.message();
+  const json amgBody = json::parse(amg->planReport())["bodies"][0];
+  EXPECT_TRUE(anyContains(amgBody["kernels"], "amg.comp")) << amgBody["kernels"];
+  bool amgBuffers = false;
+  for (const json& b : amgBody["buffers"]) amgBuffers = amgBuffers || b["name"] == "amg level-0 vectors";
+  EXPECT_TRUE(amgBuffers) << amgBody["buffers"];
 }
 
 TEST(Plan, SizesFollowTheModel) {

@@ -48,6 +48,19 @@ struct PlanPasses {
   PreconditionerKind preconditioner = PreconditionerKind::None;  ///< as resolved for the body
 };
 
+/// A body's sizes for the plan's list of device buffers.
+struct PlanSizes {
+  double elements = 0, nodes = 0;
+  double realBytes = 8;          ///< 4 in float, 8 in double
+  double amgEntriesPerDof = 0;   ///< the multigrid's level entries per dof (the plan's estimate)
+};
+
+/// One device buffer of a body's share, for the plan.
+struct PlanBuffer {
+  std::string name;
+  double bytes = 0;
+};
+
 struct BackendEntry {
   std::string name;  ///< "reference", "opencl": what scenes, COROFEM_DEVICE and the reports call it
   /// The devices of this backend on this machine, in the order they are tried (empty: none).
@@ -72,6 +85,9 @@ struct BackendEntry {
   /// The passes a step of such a body runs on the backend's devices, named as its kernels or
   /// shaders, for the plan; null: the plan names them generically.
   std::function<std::vector<std::string>(const PlanPasses& step)> passes;
+  /// The device buffers such a body takes on the backend's devices (its share of a batch's), for
+  /// the plan; null: the plan lists those of the OpenCL backend's layout.
+  std::function<std::vector<PlanBuffer>(const PlanPasses& step, const PlanSizes& sizes)> buffers;
 };
 
 /// Registers a backend (replacing one of the same name, a built-in one too: the built-in ones are

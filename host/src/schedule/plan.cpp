@@ -12,7 +12,8 @@
 //   preconditioner blocks    PCG with a preconditioner
 //   surface update           bodies with a render surface
 //
-// Buffer layout of the OpenCL backend (sizes from kernels/shared/corofem_layout.h: 4 node indices,
+// Device buffers: the backend's own list where its registry entry gives one (BackendEntry::buffers:
+// the Vulkan backend), else the buffer layout of the OpenCL backend (sizes from kernels/shared/corofem_layout.h: 4 node indices,
 // 10 geometry reals (9 gradients + volume), 9 rotated-gradient reals (co-rotational), 9 rotation
 // and 4 quaternion reals (Quaternion method), 12 element-output reals per element; 6 node-block
 // reals per node) and of the
@@ -133,7 +134,18 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     buffers.push_back({{"name", name}, {"where", where}, {"bytes", static_cast<long long>(bytes)}});
   };
   double product = 0, pcgIter = 0, newtonFixed = 0;
-  if (device) {
+  // The backend names its own passes and buffers (BackendEntry::passes, ::buffers); else they are
+  // named generically, the buffers as the OpenCL backend lays them out.
+  PlanPasses step;
+  step.corotational = corot;
+  step.rotation = problem.rotation;
+  step.dynamic = dynamic;
+  step.damping = damping;
+  step.preconditioner = pcg ? preconditioner : PreconditionerKind::None;
+  const std::shared_ptr<const BackendEntry> entry = device ? findBackend(c.backend) : nullptr;
+  if (device && entry && entry->buffers) {
+    for (const PlanBuffer& b : entry->buffers(step, PlanSizes{E, N, r, amgEntriesPerDof})) buffer(b.name, "device", b.bytes);
+  } else if (device) {
     const std::string dv = "device";
     buffer("element_nodes", dv, 16 * E);
     buffer("element_geometry", dv, 10 * E * r);
@@ -160,14 +172,8 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
       buffer("amg_levels (estimate: prolongations, coarse operators)", dv, amgEntriesPerDof * D * (r + 4));
       buffer("amg_vectors (level 0 scratch)", dv, 4 * D * r);
     }
-    // The backend names its own passes (BackendEntry::passes); else they are named generically.
-    PlanPasses step;
-    step.corotational = corot;
-    step.rotation = problem.rotation;
-    step.dynamic = dynamic;
-    step.damping = damping;
-    step.preconditioner = pcg ? preconditioner : PreconditionerKind::None;
-    const auto entry = findBackend(c.backend);
+  }
+  if (device) {
     if (entry && entry->passes) {
       for (const std::string& k : entry->passes(step)) kernels.push_back(k);
     } else {

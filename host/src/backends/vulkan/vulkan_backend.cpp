@@ -86,6 +86,29 @@ void registerVulkanBackend() {
                   "iterations dispatched phase by phase, not in pcg_group.comp)");
     return k;
   };
+  e.buffers = [](const PlanPasses& step, const PlanSizes& z) {
+    // vulkan_build.cpp's buffers, this body's share (padding aside).
+    const double E = z.elements, N = z.nodes, D = 3 * N, r = z.realBytes;
+    std::vector<PlanBuffer> b = {
+        {"element_corners", 16 * E},
+        {"element_geometry", 10 * E * r},
+        {"rotated_gradients", 9 * E * r},
+        {"element_output", 12 * E * r},
+        {"element_energies", E * r},
+        {"gather_lists", 4 * (N + 1) + 16 * E},
+        {"positions", D * r},
+        {"lumped_mass, free_mask, spring_stiffness", 3 * D * r},
+        {"node_blocks, preconditioner_inverse", 15 * N * r},
+        {"pcg_vectors (b x r u p s w)", 7 * D * r},
+        {"product input and output", 2 * D * r},
+        {"staging (host-visible: up, down)", 3 * D * r + E * r}};
+    if (step.corotational && step.rotation == RotationMethod::Quaternion) b.push_back({"quaternions", 4 * E * r});
+    if (step.preconditioner == PreconditionerKind::Amg) {
+      b.push_back({"amg levels (estimate: prolongations, coarse operators)", z.amgEntriesPerDof * D * (r + 4)});
+      b.push_back({"amg level-0 vectors", 3 * D * r});
+    }
+    return b;
+  };
   e.candidates = [] {
     std::vector<Candidate> out;
     try {
