@@ -1,6 +1,8 @@
 /* What every corofem compute shader shares: the precision, the buffers (one descriptor set, the
  * same bindings in every shader, so one pipeline layout serves them all; a device writes three
- * descriptor sets once, which differ in the product's input and output), the push constants, and the segment lookups. The data layout is
+ * descriptor sets once, which differ in the product's input and output, and amg.comp's own
+ * bindings take some of the numbers for the multigrid's buffers), the push constants, and the
+ * segment lookups. The data layout is
  * kernels/shared/corofem_layout.h, the same as the OpenCL kernels' with one element per invocation
  * (COROFEM_VEC = 1: element outputs are 12 contiguous reals per element) and work-groups of
  * COROFEM_WG = 64 invocations.
@@ -22,7 +24,7 @@ layout(local_size_x = 64) in;
 #define COROFEM_COHERENT
 #endif
 
-/* Bindings (set 0); the host's Binding enum (vulkan_device.cpp) lists the same numbers. */
+/* Bindings (set 0); the host's Binding enum (vulkan_device_impl.hpp) lists the same numbers. */
 layout(std430, binding = 0) COROFEM_COHERENT buffer SegInfo { uint segInfo[]; };
 layout(std430, binding = 1) readonly COROFEM_COHERENT buffer SegCoef { real segCoef[]; };
 layout(std430, binding = 2) readonly COROFEM_COHERENT buffer ElemSeg { uint elemSeg[]; };

@@ -181,9 +181,12 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
     }
   }
   out.aggregates = aggregateBegin_[K];
+  return out;
+}
+
+void DeviceAmg::layoutUploaded() {
   std::fill(warpStale_.begin(), warpStale_.end(), 1);
   dirty_ = false;
-  return out;
 }
 
 void DeviceAmg::warps(const BodySet& running, const std::function<void(std::size_t, const std::vector<double>&)>& fn) {

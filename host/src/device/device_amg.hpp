@@ -79,9 +79,12 @@ class DeviceAmg {
   /// m M + s K of running[i]: makes or takes back their hierarchies. Returns whether the layout
   /// changed since the last layout() (the device uploads layout() again).
   bool prepare(const BodySet& running, const std::vector<std::pair<double, double>>& coefficients);
-  /// Every body's levels end to end over `nodeTotal` device nodes. Every co-rotational body's warp
-  /// is due again (warps()): until then each aggregate is the identity.
+  /// Every body's levels end to end over `nodeTotal` device nodes.
   DeviceAmgLayout layout(std::size_t nodeTotal);
+  /// The device holds layout()'s levels now (called once its upload succeeded; until then prepare
+  /// keeps saying the layout changed). Every co-rotational body's warp is due again (warps()): the
+  /// device's aggregates start at the identity.
+  void layoutUploaded();
   /// For each body of `running` whose positions changed since its last warp (co-rotational, with
   /// positions set): its aggregates' rotations by shape matching, as fn(first aggregate, 9 reals
   /// per aggregate, row-major).

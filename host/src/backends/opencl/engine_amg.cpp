@@ -141,6 +141,7 @@ void EngineAmg::upload() {
   std::vector<double> identity(std::max<std::size_t>(9 * layout.aggregates, 9), 0.0);
   for (std::size_t a = 0; 9 * a < identity.size(); ++a) identity[9 * a] = identity[9 * a + 4] = identity[9 * a + 8] = 1.0;
   rotations_ = reals(identity);
+  host_.layoutUploaded();
 }
 
 void EngineAmg::uploadWarp(const BodySet& running) {

@@ -256,7 +256,7 @@ void Context::makeObjects(std::uint32_t pushBytes) {
   layoutInfo.pushConstantRangeCount = 1;
   layoutInfo.pPushConstantRanges = &push;
   check(vkCreatePipelineLayout(device_, &layoutInfo, nullptr, &pipelineLayout_), "vkCreatePipelineLayout");
-  constexpr std::uint32_t kSets = 64;  // a device's three, and its surfaces' (one per set of surfaces)
+  constexpr std::uint32_t kSets = 64;  // a device's three (six with amg), and its surfaces' (one per set of surfaces)
   VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, bindings * kSets};
   auto poolInfo = made<VkDescriptorPoolCreateInfo>(VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO);
   poolInfo.flags = VK_DESCRIPTOR_POOL_CREATE_FREE_DESCRIPTOR_SET_BIT;
@@ -388,6 +388,12 @@ VkCommandBuffer Context::begin() {
   fullBarrier(s.cb);  // after every command of the earlier submissions
   recording_ = &s;
   return s.cb;
+}
+
+void Context::discard() {
+  if (!recording_) return;
+  check(vkEndCommandBuffer(recording_->cb), "vkEndCommandBuffer");
+  recording_ = nullptr;  // its slot is reset when the ring comes back to it
 }
 
 std::uint64_t Context::submit() {

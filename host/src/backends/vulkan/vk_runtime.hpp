@@ -128,6 +128,9 @@ class Context {
   /// Submits the open command buffer if there is one; returns the newest submission number (every
   /// command recorded so far is in it or before it).
   std::uint64_t flush() { return recording_ ? submit() : submitted_; }
+  /// Drops the open command buffer's commands unsubmitted (their owner is going away: what they
+  /// would compute has no reader).
+  void discard();
   /// Waits for submission `id` (and so for every one before it).
   void wait(std::uint64_t id);
   void waitAll();

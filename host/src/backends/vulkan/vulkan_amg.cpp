@@ -17,6 +17,8 @@ constexpr std::uint32_t kFineBegin = 0, kFineStep = 1, kUnwarp = 2, kWarpAdd = 3
                         kCoarseStep = 6, kCoarseAdd = 7, kCoarsest = 8;
 constexpr std::uint32_t kZero = 1, kLast = 2, kSetup = 4, kResidual = 8;
 constexpr std::size_t kSlice = 16;  ///< amg.comp's slice of 16 rows
+// amg.comp's Chebyshev constants are those of degree 2 over [1/30, 1] (engine_amg.cpp's Chebyshev).
+static_assert(WarpedAmg::kChebyshevDegree == 2, "amg.comp runs one Chebyshev step after its begin");
 constexpr std::uint32_t kWg = 64;
 
 // The shared layout's bindings the multigrid's descriptor set replaces (amg.comp).
@@ -56,7 +58,7 @@ VulkanAmg::VulkanAmg(VulkanAmgHost host) : host_(std::move(host)), amg_(*host_.s
     ctx.wait(ctx.submit());
   }
   productD_ = host_.productSet(d0_, ad0_);
-  productU_ = host_.productSet((*host_.shared)[20], ad0_);  // u (common.glsl's binding 20)
+  productU_ = host_.productSet(*host_.u, ad0_);
 }
 
 VulkanAmg::~VulkanAmg() {
@@ -131,6 +133,17 @@ void VulkanAmg::upload() {
   for (std::int32_t a : layout.nodeAggregate) p.idx.push_back(static_cast<std::uint32_t>(a));
 
   vk::Context& ctx = *host_.ctx;
+  // The device's limits: every buffer bound whole, the largest dispatch (P0's rows, 3 per node).
+  const VkPhysicalDeviceLimits& lim = ctx.physical().limits;
+  const std::size_t largest = std::max({p.idx.size() * sizeof(std::uint32_t), p.val.size() * rs_, p.inv.size() * rs_,
+                                        vecEntries * rs_});
+  if (largest > lim.maxStorageBufferRange)
+    fail(ErrorCode::DeviceError, "Vulkan: the multigrid's levels of these bodies need a ", largest, "-byte buffer; '",
+         ctx.physical().name, "' binds at most ", lim.maxStorageBufferRange, " bytes (maxStorageBufferRange): use "
+         "fewer elements per device, the preconditioner \"diagonal\", or the opencl backend");
+  if (groupsOf(3 * host_.nodeTotal) > lim.maxComputeWorkGroupCount[0])
+    fail(ErrorCode::DeviceError, "Vulkan: the multigrid's finest products need ", groupsOf(3 * host_.nodeTotal),
+         " work-groups; '", ctx.physical().name, "' allows ", lim.maxComputeWorkGroupCount[0], " per dispatch");
   auto reals = [&](const std::vector<double>& v) {
     std::vector<unsigned char> bytes(std::max<std::size_t>(v.size(), 1) * rs_, 0);
     withReals(bytes.data(), host_.isDouble, 0, [&](auto* out) {
@@ -163,6 +176,7 @@ void VulkanAmg::upload() {
   b[kBindD0] = &d0_;
   b[kBindAd0] = &ad0_;
   set_ = ctx.descriptorSet(b);
+  amg_.layoutUploaded();
 }
 
 void VulkanAmg::recordWarps(VkCommandBuffer cb, const BodySet& running) {

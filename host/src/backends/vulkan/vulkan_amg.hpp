@@ -38,6 +38,8 @@ struct VulkanAmgHost {
   std::size_t nodeTotal = 0;
   /// The device's buffers by binding (common.glsl); the multigrid's descriptor set replaces some.
   const std::vector<vk::Buffer>* shared = nullptr;
+  /// The PCG's u (M^-1 r, the V-cycle's output), one of `shared`.
+  const vk::Buffer* u = nullptr;
   /// A descriptor set of the device's bindings with a product's input and output.
   std::function<VkDescriptorSet(const vk::Buffer& in, const vk::Buffer& out)> productSet;
   /// Records y = A p (projected) on a set of productSet, with the solve's coefficients.

@@ -13,8 +13,6 @@ VulkanDevice::VulkanDevice(const std::vector<const Problem*>& problems, const So
   isDouble_ = solver_.precision == Precision::Double;
   rs_ = isDouble_ ? sizeof(double) : sizeof(float);
   ctx_ = makeContext(isDouble_);
-  // The PCG path (VulkanTuning::groupPcgNodes): whole iterations in one dispatch where every body is
-  // small enough.
   // The PCG path for every body of the device (VulkanTuning::groupPcgNodes, from its largest body).
   // A dispatch of pcg_group runs at most kGroupChunkBudget passes over 64 nodes per work-group
   // (two an iteration per 64 nodes of its body, and one for the sums): lavapipe (Mesa 22.3)
@@ -38,6 +36,7 @@ VulkanDevice::VulkanDevice(const std::vector<const Problem*>& problems, const So
     host.segments = &layout_.segments;
     host.nodeTotal = layout_.nodeTotal;
     host.shared = &owned_;
+    host.u = &owned_[kVecU];
     host.productSet = [this](const vk::Buffer& in, const vk::Buffer& out) { return productSet(in, out); };
     host.product = [this](VkCommandBuffer cb, VkDescriptorSet set) { recordProduct(cb, basePush(), set); };
     host.dispatch = [this](VkCommandBuffer cb, VkPipeline p, VkDescriptorSet set, const Push& push,

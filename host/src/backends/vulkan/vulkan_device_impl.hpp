@@ -3,11 +3,14 @@
 // a Device (device/device.hpp) over a set of bodies laid out end to end (device/body_layout.hpp:
 // segments padded to whole work-groups of 64, a locality order per body), running the shaders of
 // kernels/vulkan/ (the OpenCL kernels' GPU path: one element or node per invocation) in float or,
-// where the device has shaderFloat64, in double. Each call records one command buffer: small
-// per-call tables (which bodies run, their coefficients, PCG tolerances) go in with
-// vkCmdUpdateBuffer, vectors through a host-visible staging buffer. PCG iterations are recorded n at
-// a time with the scalars and stop flags on the device (reduce.comp), and read back without
-// blocking (pcgRead), as the PCG driver of solve/pcg.cpp expects.
+// where the device has shaderFloat64, in double. Each call records its commands into the context's
+// open command buffer: small per-call tables (which bodies run, their coefficients, PCG
+// tolerances) go in with vkCmdUpdateBuffer, vectors through a host-visible staging buffer. A call
+// whose work nobody waits for yet (positions, the solve's set-up, a chunk of iterations) leaves it
+// open; the next call that reads an answer, or queues work the host will wait on, submits it
+// (vk::Context::begin). PCG iterations are recorded n at a time with the scalars and stop flags on
+// the device (reduce.comp), and read back without blocking (pcgRead), as the PCG driver of
+// solve/pcg.cpp expects.
 //
 // The device runs on a VkDevice of its own or on the application's (ExternalDevice), and updates
 // the bodies' render surfaces there (vulkan_surfaces.cpp) into VkBuffers a renderer draws from.
@@ -99,6 +102,9 @@ class VulkanDevice final : public Device {
 
   ~VulkanDevice() override {
     try {
+      // Commands left open read this device's buffers, which go now; the surfaces may keep the
+      // context (and so its open command buffer) beyond it.
+      if (ctx_) ctx_->discard();
       if (ctx_) ctx_->waitAll();
     } catch (...) {
     }

@@ -183,7 +183,9 @@ void VulkanDevice::pcgResidual(const std::vector<char>& bodies) {
   dispatch(cb, gather_, setup_, push, nodeGroups());
   push.mode = kReduceResidual;
   dispatch(cb, reduce_, setup_, push, static_cast<std::uint32_t>(bodyCount()));
-  // Left open: pcgEnd's read submits it.
+  // Submitted now: the PCG driver queues the residual before it waits for the last scalars, so that
+  // the device computes it meanwhile.
+  ctx_->submit();
 }
 
 void VulkanDevice::pcgEnd(const std::vector<int>&, const Vectors& x, std::vector<PcgScalars>& residual) {
