@@ -8,6 +8,9 @@
 //
 //   --busy_cpu=N           fork a process that spins on CPU N (pinned) for the whole run; -1 (default): none
 //   --preconditioner=NAME  auto (default), diagonal, block_diagonal (the measurements before "auto"), amg
+//   --team_pcg=N           OpenCLTuning::teamPcg (1: always a team for the lone body, 0: never; default
+//                          -1: the team or one work-group, whichever measures faster)
+//   --group_small=N        OpenCLTuning::groupPcgSmallElements (100000: one work-group on one core)
 //
 // bench/contention.sh runs it in turns: default and PoCL on one thread (POCL_MAX_PTHREAD_COUNT=1,
 // which must be set before the process starts), each with and without the busy process, and says
@@ -40,6 +43,8 @@ using namespace corofem;
 
 int busyCpu = -1;
 PreconditionerKind preconditioner = PreconditionerKind::Auto;
+int teamPcg = -1;  ///< OpenCLTuning::teamPcg of the run (--team_pcg)
+std::size_t groupSmall = 0;  ///< OpenCLTuning::groupPcgSmallElements of the run (--group_small)
 
 Scene beamScene() {
   const BodyDesc body = bench::clampedBox("beam", {1.2, 0.1, 0.1}, {72, 6, 6}, 5, 1e6, 0.3, 1000);
@@ -91,7 +96,10 @@ class BusyProcess {
 };
 
 void BM_BeamStep(benchmark::State& state) {
-  Result<Simulation> sim = Simulation::create(beamScene());
+  SimulationOptions options;
+  options.opencl.teamPcg = teamPcg;
+  options.opencl.groupPcgSmallElements = groupSmall;
+  Result<Simulation> sim = Simulation::create(beamScene(), options);
   if (!sim) {
     state.SkipWithError(sim.message().c_str());
     return;
@@ -139,6 +147,10 @@ int main(int argc, char** argv) {
   for (int i = 0; i < argc; ++i) {
     if (std::strncmp(argv[i], "--busy_cpu=", 11) == 0) {
       busyCpu = std::atoi(argv[i] + 11);
+    } else if (std::strncmp(argv[i], "--team_pcg=", 11) == 0) {
+      teamPcg = std::atoi(argv[i] + 11);
+    } else if (std::strncmp(argv[i], "--group_small=", 14) == 0) {
+      groupSmall = std::strtoul(argv[i] + 14, nullptr, 10);
     } else if (std::strncmp(argv[i], "--preconditioner=", 17) == 0) {
       const std::string name = argv[i] + 17;
       bool known = false;

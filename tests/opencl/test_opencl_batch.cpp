@@ -1298,9 +1298,13 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   o.workGroupSums = 0;
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t r = isDouble() ? 8 : 4;  // real; sum_real is the same outside mixed precision
-  const bool group = !context()->info().gpu;  // pcg_iterate_group (per-item partials); teams are off by default
+  const bool group = !context()->info().gpu;  // pcg_iterate_group (per-item partials)
+  // Teams by default on CPU devices where the process may use as many CPUs as compute units.
+  const bool teamsByDefault =
+      group && detail::usableCpus() >= std::max<std::size_t>(1, context()->info().computeUnits);
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
                       bool quaternion, bool teams = false) {
+    teams = teams || teamsByDefault;
     std::size_t S = 0, N = 0, E = 0, claims = 0;
     for (const detail::Problem* p : set) {
       const std::size_t s = (p->mesh.tetCount() + 511) / 512 * 512, n = (p->mesh.nodeCount() + 255) / 256 * 256;

@@ -50,9 +50,12 @@ struct OpenCLTuning {
   /// twice its share (elements of the round / compute units). 0 = 32,768 / compute units.
   std::size_t groupPcgMaxElements = 0;
   /// Rounds of fewer bodies than compute units in one launch with a team of work-groups per body
-  /// (pcg_iterate_team): 1 on, 0 or -1 off. Off by default: a team's members wait for each other
-  /// spinning on claim words, which OpenCL does not promise to make progress (a member the OS has
-  /// descheduled stalls the others), so another busy process on the cores slows it many times.
+  /// (pcg_iterate_team): 1 in every such round, 0 never, -1 = on CPU devices where the process may
+  /// run on as many CPUs as the device has compute units, each round taking the team or one
+  /// work-group per body (pcg_iterate_group, one core), whichever has been the faster lately by
+  /// the measured time per iteration; both give the same bits. A team's members wait for each
+  /// other: on a quiet machine the fastest way for a lone body of 2,560 to 32,768 elements on 2
+  /// cores, while another process keeps a core busy the slower (a parked member holds the others).
   int teamPcg = -1;
   /// The largest body (elements) for pcg_iterate_team. 0 = 16,384 per compute unit.
   std::size_t teamPcgMaxElements = 0;

@@ -34,6 +34,7 @@ CpuPcg::CpuPcg(SegmentEngine& engine) : e_(engine) {
   const bool launched = e_.precond_ == PreconditionerKind::Amg;
   group_ = !launched && e_.tuning_.groupPcg != 0;
   team_ = !launched && e_.tuning_.teamPcg != 0;
+  teamChosen_ = team_ && e_.tuning_.teamPcg == kTeamPcgByMeasurement;
   packs_ = !launched && e_.tuning_.packPcg != 0;
   packAlways_ = e_.tuning_.packPcg > 0;
   findPackMeshes();
@@ -173,6 +174,27 @@ std::size_t CpuPcg::groupTeam(const std::vector<std::size_t>& requests) const {
   // measured on 2 cores: 10k + 10k elements 4.8 ms one-launch against 7.0 launched, 35k + 35k 20.6
   // against 18.7, 94k + 384 72 against 25.
   return requests.size() >= tuning_.groupPcgMinBodies && largest <= tuning_.groupPcgMaxElements && largest * cores <= 2 * total ? 1 : 0;
+}
+
+std::size_t CpuPcg::chooseTeam(std::size_t team) {
+  timing_ = false;
+  if (team < 2 || !teamChosen_) return team;
+  timing_ = true;
+  timedWay_ = choice_.next();
+  return timedWay_ == TeamChoice::Way::Team ? team : 1;
+}
+
+void CpuPcg::roundStarted() {
+  roundTimed_ = timing_;
+  if (roundTimed_) roundStart_ = std::chrono::steady_clock::now();
+}
+
+void CpuPcg::roundDone(int iterations) {
+  if (!roundTimed_) return;
+  roundTimed_ = false;
+  timing_ = false;
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart_).count();
+  if (iterations > 0) choice_.measured(timedWay_, seconds / iterations);
 }
 
 std::vector<cl_uint> CpuPcg::packRound(const std::vector<std::size_t>& requests, std::vector<char>& packed) const {

@@ -3,16 +3,18 @@
 // than a small body's work.
 //   pcg_iterate_group  a work-group per compute unit takes the round's bodies from a claim word,
 //                      the costliest first, and runs each body's iterations on one core
-//   pcg_iterate_team   a team of work-groups per body, for rounds of fewer bodies than cores (off
-//                      by default: its members spin on each other, which OpenCL does not promise
-//                      to end)
+//   pcg_iterate_team   a team of work-groups per body, for rounds of fewer bodies than cores (by
+//                      default chosen round by round against pcg_iterate_group by their measured
+//                      times: team_choice.hpp)
 //   pcg_iterate_pack   up to kPackLanes bodies that share a mesh in one work-item, a body per vector
 //                      lane, between pack_in and pack_out (the packs run their bodies' whole solve)
 // Which a solve round takes (groupTeam, packRound) follows the tuning's rule (corofem/tuning.hpp).
 #pragma once
 
 #include "backends/opencl/cl_objects.hpp"
+#include "backends/opencl/team_choice.hpp"
 
+#include <chrono>
 #include <cstddef>
 #include <vector>
 
@@ -46,6 +48,13 @@ class CpuPcg {
   /// T >= 2 in pcg_iterate_team, T work-groups per body, when fewer bodies than cores would leave
   /// cores idle (teams on, none larger than teamPcgMaxElements).
   std::size_t groupTeam(const std::vector<std::size_t>& segments) const;
+  /// A round's way as groupTeam gave it, where teams are chosen by measurement (teamPcg -1): the
+  /// team, or 1 (a work-group per body) where that has been the faster lately (team_choice.hpp).
+  std::size_t chooseTeam(std::size_t team);
+  /// The round chooseTeam chose starts its one-launch iterations now / has done `iterations` of
+  /// them (its read taken): the measurement of that way.
+  void roundStarted();
+  void roundDone(int iterations);
   /// The packs of a solve round that takes pcg_iterate_group: the rows of the pack table
   /// (kPackInfoCount each, the costliest first, then the claim word at 0; empty without packs),
   /// with packed[s] = 1 for the bodies they take. Bodies of a pack mesh are packed in the order of
@@ -65,6 +74,12 @@ class CpuPcg {
 
   SegmentEngine& e_;
   bool group_ = false, team_ = false, packs_ = false, packAlways_ = false;
+  bool teamChosen_ = false;    ///< teams by measurement (teamPcg -1), not always (1)
+  TeamChoice choice_;
+  bool timing_ = false;        ///< the round in flight was chosen by choice_
+  TeamChoice::Way timedWay_ = TeamChoice::Way::Team;
+  std::chrono::steady_clock::time_point roundStart_;
+  bool roundTimed_ = false;
   std::size_t teamSize_ = 1;   ///< the round's work-groups per body (pcg_iterate_team)
   cl_uint teamEpoch_ = 0;      ///< the last epoch pcg_iterate_team's claim words may hold
   friend struct SegmentEngineTestAccess;  // tests/common/opencl_test_access.hpp

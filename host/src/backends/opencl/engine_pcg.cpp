@@ -138,7 +138,7 @@ std::vector<PcgStart> SegmentEngine::pcgBegin(const BodySet& bodies, const std::
   std::vector<char> active = activeOf(running);
   // How the iterations run (cpu_pcg.hpp); in a round of one work-group per body, the bodies of packs
   // are flagged for pcg_iterate_pack, which pcg_iterate_group leaves alone.
-  round_.team = cpu_->groupTeam(running);
+  round_.team = cpu_->chooseTeam(cpu_->groupTeam(running));
   round_.packed.assign(segs_.size(), 0);
   if (round_.team == 1) round_.packTable = cpu_->packRound(running, round_.packed);
   for (std::size_t s : running) {
@@ -248,6 +248,8 @@ void SegmentEngine::pcgIterate(int n, const std::vector<char>& running) {
     // Every iteration but the cap's last in one launch (a work-group, or a team, per body, and the
     // packs), then the last launched.
     const cl_uint iterations = cl_uint(round_.cap - round_.enqueued - 1);
+    cpu_->roundStarted();  // timed to the read that follows (pcgTake)
+    timedTicket_ = firstTicket_ + reads_.size();
     if (iterations > 0) cpu_->launchIterations(iterations);
     pcgIteration(true);
     round_.enqueued = round_.cap;
@@ -286,6 +288,12 @@ void SegmentEngine::pcgTake(PcgTicket ticket, std::vector<PcgScalars>& scalars) 
     scalars[i].rr = value(kScalarRr);
     scalars[i].bb = value(kScalarBb);
     scalars[i].stop = static_cast<PcgStop>(static_cast<unsigned>(value(kScalarStop)));
+  }
+  if (ticket == timedTicket_) {  // the one-launch round's read: its time per iteration
+    int iterations = 0;
+    for (std::size_t i = 0; i < round_.bodies.size(); ++i)
+      if (round_.running[i]) iterations = std::max(iterations, scalars[i].iterations);
+    cpu_->roundDone(iterations);
   }
 }
 

@@ -389,6 +389,8 @@ class SegmentEngine {
   };
   std::deque<Read> reads_;               ///< scalar reads not yet taken, the oldest first
   PcgTicket firstTicket_ = 0;            ///< the ticket of reads_.front()
+  /// The read after a one-launch round's iterations (CpuPcg::roundDone times the round to it).
+  PcgTicket timedTicket_ = ~PcgTicket{0};
 
   ClKernel kRotations_, kForces_, kEnergy_, kProduct_, kGatherSum_, kGatherProduct_, kBlocks_, kCornerGradients_,
       kPcgInit_, kPcgUpdate_, kReduceFinish_;

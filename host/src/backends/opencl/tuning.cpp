@@ -4,6 +4,7 @@
 #include "backends/opencl/tuning.hpp"
 
 #include "util/error.hpp"
+#include "util/parallel.hpp"
 
 #include <algorithm>
 
@@ -57,8 +58,12 @@ OpenCLTuning resolveTuning(const OpenCLTuning& requested, const cl::DeviceInfo& 
   if (!t.groupPcgMaxElements) t.groupPcgMaxElements = 32768 / cores;
   if (!t.claimWorkGroups) t.claimWorkGroups = cores;
 
-  // Teams hand work over through coherent caches: CPU devices only, and only where asked for.
-  t.teamPcg = t.teamPcg > 0 && t.groupPcg && cpu ? 1 : 0;
+  // Teams hand work over through coherent caches: CPU devices only. By default each round's team or
+  // one work-group per body, whichever has been the faster lately (team_choice.hpp), and only where
+  // the process may run on as many CPUs as the device has compute units: pinned to fewer, a team's
+  // members take turns on one CPU and each waits a time slice for the others.
+  const bool byDefault = t.teamPcg < 0 && usableCpus() >= cores;
+  t.teamPcg = !t.groupPcg || !cpu ? 0 : t.teamPcg > 0 ? 1 : byDefault ? kTeamPcgByMeasurement : 0;
   if (!t.teamPcgMinElements) t.teamPcgMinElements = kTeamPcgMinElements;
   if (!t.teamPcgMaxElements) t.teamPcgMaxElements = kTeamPcgMaxElementsPerCore * cores;
 

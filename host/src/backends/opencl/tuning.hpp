@@ -14,6 +14,9 @@ using corofem::OpenCLTuning;
 /// The largest iteration cap pcg_iterate_team takes (its claims' 32-bit epochs advance by 4 per
 /// iteration of a launch); larger caps take the other strategies.
 constexpr int kTeamMaxIterations = 1 << 24;
+/// OpenCLTuning::teamPcg as resolveTuning leaves it where each round's team or single work-group is
+/// chosen by their measured times (team_choice.hpp): the default on CPU devices.
+constexpr int kTeamPcgByMeasurement = 2;
 /// What a pack's iteration costs a core, in iterations of one body of the same mesh alone
 /// (pcg_iterate_group); a round packs a mesh's bodies only where ceil(bodies / cores) exceeds
 /// kPackCost * ceil(packs / cores).
