@@ -10,7 +10,8 @@
 //   --preconditioner=NAME  auto (default), diagonal, block_diagonal (the measurements before "auto"), amg
 //   --team_pcg=N           OpenCLTuning::teamPcg (1: always a team for the lone body, 0: never; default
 //                          -1: the team or one work-group, whichever measures faster)
-//   --group_small=N        OpenCLTuning::groupPcgSmallElements (100000: one work-group on one core)
+//   --group_small=N        OpenCLTuning::groupPcgSmallElements (100000 with --team_pcg=0: one work-group
+//                          on one core)
 //
 // bench/contention.sh runs it in turns: default and PoCL on one thread (POCL_MAX_PTHREAD_COUNT=1,
 // which must be set before the process starts), each with and without the busy process, and says

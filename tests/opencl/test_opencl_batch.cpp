@@ -1112,6 +1112,37 @@ TEST_P(OpenCLBatch, TeamRuleTakesRoundsOfFewerBodiesThanCores) {
   }
 }
 
+TEST_P(OpenCLBatch, ByDefaultALoneBodyTakesATeamThenAProbeOfOneWorkGroupWithTheSameBits) {
+  // Teams chosen by measurement (team_choice.hpp) on a fresh engine, whatever the timings: the first
+  // round a team of two, the second one work-group (the probe), and both the same solution bits.
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const std::size_t units = context()->info().computeUnits;
+  if (!context()->info().cpu || units < 2 || detail::usableCpus() < units)
+    GTEST_SKIP() << "teams run on CPU devices of 2 or more compute units, all usable by this process";
+  const std::vector<detail::Problem> ps = bodies();
+  const detail::Problem& beam = ps[0];
+  detail::OpenCLTuning o;
+  o.teamPcgMinElements = std::max<std::size_t>(1, beam.mesh.tetCount() / 2);  // a team of two members
+  auto dev = test::openclOn(beam, solver(), context(), o);
+  const Eigen::VectorXd x = deformed(beam, 0.3), rhs = randomVector(beam.dofCount(), 1234);
+  dev->setPositions(x);
+  auto counter = [&](const char* name) {
+    for (const detail::DeviceCounter& c : dev->device().counters())
+      if (c.name == name) return c.value;
+    ADD_FAILURE() << "no counter " << name;
+    return -1LL;
+  };
+  const detail::SystemCoeffs c{900.0, 30.0, 1.0};
+  Eigen::VectorXd first = Eigen::VectorXd::Zero(rhs.size()), second = first;
+  dev->solve(c, rhs, first);
+  EXPECT_EQ(counter("pcg_team_launches"), 1);
+  EXPECT_EQ(counter("pcg_group_launches"), 0);
+  dev->solve(c, rhs, second);
+  EXPECT_EQ(counter("pcg_team_launches"), 1);
+  EXPECT_EQ(counter("pcg_group_launches"), 1) << "the second round probes one work-group";
+  EXPECT_TRUE(sameBits(first, second));
+}
+
 TEST_P(OpenCLBatch, TeamsOfTwoHostThreadsAtOnceKeepTheirBits) {
   // Two batches solving at the same time from two host threads, both in teams (2 and 8 work-groups
   // per body), each with a context and queue of its own, so that their team kernels run on the
@@ -1300,8 +1331,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
   const std::size_t r = isDouble() ? 8 : 4;  // real; sum_real is the same outside mixed precision
   const bool group = !context()->info().gpu;  // pcg_iterate_group (per-item partials)
   // Teams by default on CPU devices where the process may use as many CPUs as compute units.
-  const bool teamsByDefault =
-      group && detail::usableCpus() >= std::max<std::size_t>(1, context()->info().computeUnits);
+  const bool teamsByDefault = group && context()->info().cpu &&
+                              detail::usableCpus() >= std::max<std::size_t>(1, context()->info().computeUnits);
   auto expected = [&](const std::vector<const detail::Problem*>& set, bool mass, PreconditionerKind pc,
                       bool quaternion, bool teams = false) {
     teams = teams || teamsByDefault;

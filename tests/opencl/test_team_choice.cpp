@@ -58,7 +58,8 @@ TEST(TeamChoice, ABusyCoreMovesTheRoundsToOneWorkGroupAndTheyComeBackWhenItIsGon
 }
 
 TEST(TeamChoice, APinnedProcessPaysForFewTeamRounds) {
-  // Members taking turns on one CPU: the team 60 times slower than one work-group.
+  // Members taking turns on one CPU: the team 60 times slower than one work-group (more than 4x:
+  // the probes back off by 8 at a time).
   TeamChoice c;
   const int team = run(c, 0, 2000, [](Way w, int) { return w == Way::Team ? 60.0 : 1.0; });
   EXPECT_LE(team, 4) << "the first round, then probes after 8, 64 and 512 rounds";

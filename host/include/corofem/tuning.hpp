@@ -51,9 +51,10 @@ struct OpenCLTuning {
   std::size_t groupPcgMaxElements = 0;
   /// Rounds of fewer bodies than compute units in one launch with a team of work-groups per body
   /// (pcg_iterate_team): 1 in every such round, 0 never, -1 = on CPU devices where the process may
-  /// run on as many CPUs as the device has compute units, each round taking the team or one
-  /// work-group per body (pcg_iterate_group, one core), whichever has been the faster lately by
-  /// the measured time per iteration; both give the same bits. A team's members wait for each
+  /// run on as many CPUs as the device has compute units, a team of two taking the team or one
+  /// work-group per body (pcg_iterate_group, one core) round by round, whichever has been the
+  /// faster lately by the measured time per iteration (larger teams always the team); both give
+  /// the same bits. A team's members wait for each
   /// other: on a quiet machine the fastest way for a lone body of 2,560 to 32,768 elements on 2
   /// cores, while another process keeps a core busy the slower (a parked member holds the others).
   int teamPcg = -1;

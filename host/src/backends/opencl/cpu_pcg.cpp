@@ -176,11 +176,16 @@ std::size_t CpuPcg::groupTeam(const std::vector<std::size_t>& requests) const {
   return requests.size() >= tuning_.groupPcgMinBodies && largest <= tuning_.groupPcgMaxElements && largest * cores <= 2 * total ? 1 : 0;
 }
 
-std::size_t CpuPcg::chooseTeam(std::size_t team) {
-  timing_ = false;
-  if (team < 2 || !teamChosen_) return team;
+std::size_t CpuPcg::chooseTeam(std::size_t team, const std::vector<std::size_t>& segments) {
+  timing_ = roundTimed_ = false;
+  // Only teams of two: one work-group then runs a round on half the cores the team has, so that a
+  // probe of the other way costs at most about twice a round (a larger team's round on one core
+  // would cost as many times as it has members). A team size the tuning fixes is not chosen.
+  if (team != 2 || !teamChosen_ || e_.tuning_.teamPcgSize > 0) return team;
   timing_ = true;
   timedWay_ = choice_.next();
+  timedElements_ = 0;
+  for (std::size_t s : segments) timedElements_ += e_.segs_[s].elems;
   return timedWay_ == TeamChoice::Way::Team ? team : 1;
 }
 
@@ -191,10 +196,11 @@ void CpuPcg::roundStarted() {
 
 void CpuPcg::roundDone(int iterations) {
   if (!roundTimed_) return;
-  roundTimed_ = false;
-  timing_ = false;
+  roundTimed_ = timing_ = false;
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart_).count();
-  if (iterations > 0) choice_.measured(timedWay_, seconds / iterations);
+  // Per iteration and element: rounds of other bodies (Newton drops the converged ones) compare.
+  if (iterations > 0 && timedElements_ > 0)
+    choice_.measured(timedWay_, seconds / iterations / static_cast<double>(timedElements_));
 }
 
 std::vector<cl_uint> CpuPcg::packRound(const std::vector<std::size_t>& requests, std::vector<char>& packed) const {

@@ -48,9 +48,10 @@ class CpuPcg {
   /// T >= 2 in pcg_iterate_team, T work-groups per body, when fewer bodies than cores would leave
   /// cores idle (teams on, none larger than teamPcgMaxElements).
   std::size_t groupTeam(const std::vector<std::size_t>& segments) const;
-  /// A round's way as groupTeam gave it, where teams are chosen by measurement (teamPcg -1): the
-  /// team, or 1 (a work-group per body) where that has been the faster lately (team_choice.hpp).
-  std::size_t chooseTeam(std::size_t team);
+  /// The way of a round of `segments` that groupTeam gave `team`, where teams are chosen by
+  /// measurement (teamPcg -1) and the team has two members: the team, or 1 (a work-group per body)
+  /// where that has been the faster lately (team_choice.hpp).
+  std::size_t chooseTeam(std::size_t team, const std::vector<std::size_t>& segments);
   /// The round chooseTeam chose starts its one-launch iterations now / has done `iterations` of
   /// them (its read taken): the measurement of that way.
   void roundStarted();
@@ -78,6 +79,7 @@ class CpuPcg {
   TeamChoice choice_;
   bool timing_ = false;        ///< the round in flight was chosen by choice_
   TeamChoice::Way timedWay_ = TeamChoice::Way::Team;
+  std::size_t timedElements_ = 0;  ///< the timed round's elements (its work per iteration)
   std::chrono::steady_clock::time_point roundStart_;
   bool roundTimed_ = false;
   std::size_t teamSize_ = 1;   ///< the round's work-groups per body (pcg_iterate_team)

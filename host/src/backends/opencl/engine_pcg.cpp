@@ -138,7 +138,8 @@ std::vector<PcgStart> SegmentEngine::pcgBegin(const BodySet& bodies, const std::
   std::vector<char> active = activeOf(running);
   // How the iterations run (cpu_pcg.hpp); in a round of one work-group per body, the bodies of packs
   // are flagged for pcg_iterate_pack, which pcg_iterate_group leaves alone.
-  round_.team = cpu_->chooseTeam(cpu_->groupTeam(running));
+  timedTicket_ = ~PcgTicket{0};
+  round_.team = cpu_->chooseTeam(cpu_->groupTeam(running), running);
   round_.packed.assign(segs_.size(), 0);
   if (round_.team == 1) round_.packTable = cpu_->packRound(running, round_.packed);
   for (std::size_t s : running) {
@@ -248,9 +249,11 @@ void SegmentEngine::pcgIterate(int n, const std::vector<char>& running) {
     // Every iteration but the cap's last in one launch (a work-group, or a team, per body, and the
     // packs), then the last launched.
     const cl_uint iterations = cl_uint(round_.cap - round_.enqueued - 1);
-    cpu_->roundStarted();  // timed to the read that follows (pcgTake)
-    timedTicket_ = firstTicket_ + reads_.size();
-    if (iterations > 0) cpu_->launchIterations(iterations);
+    if (iterations > 0) {  // timed to the read that follows (pcgTake)
+      cpu_->roundStarted();
+      timedTicket_ = firstTicket_ + reads_.size();
+      cpu_->launchIterations(iterations);
+    }
     pcgIteration(true);
     round_.enqueued = round_.cap;
     return;

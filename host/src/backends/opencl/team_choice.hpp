@@ -12,10 +12,11 @@
 // The rule: the team first, then one probe of the group; afterwards the cheaper of the two, whose
 // time per iteration is followed solve by solve (a mean of the last ones), and every `interval`
 // solves one probe of the other. A probe that loses doubles the interval (up to kMaxInterval), or
-// multiplies it by 8 up to kMaxFarInterval where it was more than twice as slow (a process pinned
+// multiplies it by 8 up to kMaxFarInterval where it was more than 4 times as slow (a process pinned
 // to fewer CPUs than the team's members pays a team's solve many times over; on Linux tuning.cpp
-// does not offer teams to it at all); one that wins takes over and resets it. A switch needs a
-// margin of kMargin, so that noise does not flip it.
+// does not offer teams to it at all; a busy core makes a team about 1.3 times as slow); one that
+// wins takes over and resets it. A switch needs a margin of kMargin, so that noise does not flip
+// it. The times are per iteration and element, so that rounds of other bodies compare.
 #pragma once
 
 #include <algorithm>
@@ -29,7 +30,7 @@ class TeamChoice {
 
   static constexpr std::size_t kFirstInterval = 8;
   static constexpr std::size_t kMaxInterval = 256;
-  static constexpr std::size_t kMaxFarInterval = 4096;  ///< after a probe more than twice as slow
+  static constexpr std::size_t kMaxFarInterval = 4096;  ///< after a probe more than 4 times as slow
   static constexpr double kMargin = 0.05;
 
   /// The way the next round runs.
@@ -56,7 +57,7 @@ class TeamChoice {
         current_ = way;
         interval_ = kFirstInterval;
       } else {
-        interval_ = mine > 2 * theirs ? std::min(kMaxFarInterval, interval_ * 8) : std::min(kMaxInterval, interval_ * 2);
+        interval_ = mine > 4 * theirs ? std::min(kMaxFarInterval, interval_ * 8) : std::min(kMaxInterval, interval_ * 2);
       }
       return;
     }
