@@ -237,8 +237,13 @@ void registerOpenCLBackend() {
     return createOpenCLDevice(problems, solver, cl::Context::shared(c.selector), options.opencl);
   };
   e.buildId = [] {
+    // The kernels' source, and the revision of the defaults that choose among them (tuning.cpp,
+    // cpu_pcg.cpp): a change of either makes earlier calibrations stale. Revision 2: teams chosen by
+    // measurement (team_choice.hpp).
+    constexpr int kStrategyRevision = 2;
     std::ostringstream hex;
-    hex << "kernels " << std::hex << cl::fnv1a64(cl::corofemProgramSource());
+    hex << "kernels " << std::hex << cl::fnv1a64(cl::corofemProgramSource()) << std::dec << ", strategies "
+        << kStrategyRevision;
     return hex.str();
   };
   registerBackend(std::move(e));
