@@ -88,6 +88,13 @@ void putReals(unsigned char* base, bool isDouble, std::size_t begin, std::size_t
   });
 }
 
+/// A small table of reals as the bytes of a device buffer in its precision (on the calling thread).
+inline std::vector<unsigned char> realBytes(const std::vector<double>& values, bool isDouble) {
+  std::vector<unsigned char> bytes(values.size() * (isDouble ? sizeof(double) : sizeof(float)));
+  putReals(bytes.data(), isDouble, 0, values.size(), values.size() + 1, [&](std::size_t i) { return values[i]; });
+  return bytes;
+}
+
 /// out = segment sg's reals of `base` in double, in the problem's dof order (resized only if its
 /// size differs), in chunks of `chunk` on the host's threads.
 void getReals(const unsigned char* base, bool isDouble, const BodySegment& sg, std::size_t chunk, Eigen::VectorXd& out);

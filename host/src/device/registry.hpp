@@ -46,6 +46,15 @@ struct PlanPasses {
   RotationMethod rotation = RotationMethod::Polar;
   bool dynamic = false, damping = false;
   PreconditionerKind preconditioner = PreconditionerKind::None;  ///< as resolved for the body
+
+  bool amg() const { return preconditioner == PreconditionerKind::Amg; }
+  /// The PCG set-up forms the inverses of the 3x3 node blocks (block_diagonal; amg smooths with them).
+  bool nodeBlocks() const { return preconditioner == PreconditionerKind::BlockDiagonal || amg(); }
+  /// The PCG set-up's M^-1, as the plans name it ("" without a preconditioner).
+  const char* formsInverse() const {
+    return preconditioner == PreconditionerKind::None ? "" : nodeBlocks() ? " (forms M^-1: 3x3 blocks)"
+                                                                          : " (forms M^-1: diagonal)";
+  }
 };
 
 /// A body's sizes for the plan's list of device buffers.

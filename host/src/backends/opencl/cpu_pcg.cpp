@@ -177,7 +177,8 @@ std::size_t CpuPcg::groupTeam(const std::vector<std::size_t>& requests) const {
 }
 
 std::size_t CpuPcg::chooseTeam(std::size_t team, const std::vector<std::size_t>& segments) {
-  timing_ = roundTimed_ = false;
+  timing_ = false;
+  roundStart_.reset();
   // Only teams of two: one work-group then runs a round on half the cores the team has, so that a
   // probe of the other way costs at most about twice a round (a larger team's round on one core
   // would cost as many times as it has members). A team size the tuning fixes is not chosen.
@@ -190,14 +191,14 @@ std::size_t CpuPcg::chooseTeam(std::size_t team, const std::vector<std::size_t>&
 }
 
 void CpuPcg::roundStarted() {
-  roundTimed_ = timing_;
-  if (roundTimed_) roundStart_ = std::chrono::steady_clock::now();
+  if (timing_) roundStart_ = std::chrono::steady_clock::now();
 }
 
 void CpuPcg::roundDone(int iterations) {
-  if (!roundTimed_) return;
-  roundTimed_ = timing_ = false;
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - roundStart_).count();
+  if (!timing_ || !roundStart_) return;
+  timing_ = false;
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - *roundStart_).count();
+  roundStart_.reset();
   // Per iteration and element: rounds of other bodies (Newton drops the converged ones) compare.
   if (iterations > 0 && timedElements_ > 0)
     choice_.measured(timedWay_, seconds / iterations / static_cast<double>(timedElements_));

@@ -16,6 +16,7 @@
 
 #include <chrono>
 #include <cstddef>
+#include <optional>
 #include <vector>
 
 namespace corofem::detail {
@@ -80,8 +81,8 @@ class CpuPcg {
   bool timing_ = false;        ///< the round in flight was chosen by choice_
   TeamChoice::Way timedWay_ = TeamChoice::Way::Team;
   std::size_t timedElements_ = 0;  ///< the timed round's elements (its work per iteration)
-  std::chrono::steady_clock::time_point roundStart_;
-  bool roundTimed_ = false;
+  /// When the timed round's one-launch iterations were queued (none: not started).
+  std::optional<std::chrono::steady_clock::time_point> roundStart_;
   std::size_t teamSize_ = 1;   ///< the round's work-groups per body (pcg_iterate_team)
   cl_uint teamEpoch_ = 0;      ///< the last epoch pcg_iterate_team's claim words may hold
   friend struct SegmentEngineTestAccess;  // tests/common/opencl_test_access.hpp

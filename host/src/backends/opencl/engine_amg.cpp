@@ -8,7 +8,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <type_traits>
 
 namespace corofem::detail {
 
@@ -146,11 +145,7 @@ void EngineAmg::upload() {
 
 void EngineAmg::uploadWarp(const BodySet& running) {
   host_.warps(running, [&](std::size_t first, const std::vector<double>& values) {
-    std::vector<unsigned char> bytes(values.size() * e_.realSize_);
-    withReals(bytes.data(), e_.double_, 0, [&](auto* out) {
-      for (std::size_t i = 0; i < values.size(); ++i) out[i] = static_cast<std::remove_pointer_t<decltype(out)>>(values[i]);
-    });
-    e_.enqueueWrite(*rotations_, 9 * first * e_.realSize_, std::move(bytes));
+    e_.enqueueWrite(*rotations_, 9 * first * e_.realSize_, realBytes(values, e_.double_));
   });
 }
 

@@ -173,23 +173,19 @@ void registerOpenCLBackend() {
   e.name = "opencl";
   e.batches = true;
   e.passes = [](const PlanPasses& step) {
-    const bool precond = step.preconditioner != PreconditionerKind::None;
-    const bool amg = step.preconditioner == PreconditionerKind::Amg;
-    const bool block = step.preconditioner == PreconditionerKind::BlockDiagonal || amg;
     std::vector<std::string> k;
     if (step.corotational) k.push_back(std::string("compute_rotations (") + toString(step.rotation) + ")");
     k.push_back("element_forces + gather_forces");
     k.push_back(step.dynamic ? (step.damping ? "element_product (M, C, K_t) + gather_product"
                                              : "element_product (M, K_t) + gather_product")
                              : "element_product (K_t) + gather_product");
-    k.push_back(std::string("pcg_init") +
-                (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
+    k.push_back(std::string("pcg_init") + step.formsInverse() +
                 ", pcg_update, reduce_finish (single-reduction PCG; on a CPU device the iterations "
                 "of a round of small bodies, or of as many bodies as cores, run in one launch: "
                 "pcg_iterate_group, where bodies of one mesh take a vector lane each of a pack of 8: "
                 "pcg_iterate_pack; those of a round of fewer bodies than cores in one launch by a team "
                 "of work-groups per body: pcg_iterate_team)");
-    if (amg)
+    if (step.amg())
       k.push_back("amg V-cycle per iteration: Chebyshev smoothing with 4 products (element_product + "
                   "gather_product), amg_fine_*, amg_spmv on the coarse levels (the iterations are launched "
                   "ones, not pcg_iterate_*)");

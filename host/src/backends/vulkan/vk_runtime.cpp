@@ -447,6 +447,18 @@ void renderBarrier(VkCommandBuffer cb) {
                        nullptr, 0, nullptr);
 }
 
+void updateBuffer(VkCommandBuffer cb, const Buffer& to, std::size_t offset, const void* data, std::size_t bytes) {
+  const unsigned char* p = static_cast<const unsigned char*>(data);
+  for (std::size_t at = 0; at < bytes; at += 65536)
+    vkCmdUpdateBuffer(cb, to.handle(), offset + at, std::min<std::size_t>(65536, bytes - at), p + at);
+}
+
+void zeroBuffer(Context& ctx, const Buffer& b) {
+  VkCommandBuffer cb = ctx.begin();
+  vkCmdFillBuffer(cb, b.handle(), 0, VK_WHOLE_SIZE, 0u);
+  ctx.wait(ctx.submit());
+}
+
 void uploadOnce(Context& ctx, const Buffer& to, const void* data, std::size_t bytes) {
   if (bytes == 0) return;
   Buffer staging(ctx, bytes, true);

@@ -177,5 +177,10 @@ void hostReadBarrier(VkCommandBuffer cb);
 void renderBarrier(VkCommandBuffer cb);
 /// Copies `bytes` from the host into `to` at offset 0 through a temporary staging buffer, and waits.
 void uploadOnce(Context& ctx, const Buffer& to, const void* data, std::size_t bytes);
+/// Records `bytes` of `data` into `to` at byte `offset` through the command buffer itself
+/// (vkCmdUpdateBuffer, in pieces of its 64 KiB limit; no barrier after).
+void updateBuffer(VkCommandBuffer cb, const Buffer& to, std::size_t offset, const void* data, std::size_t bytes);
+/// Fills `b` with zero bytes, and waits.
+void zeroBuffer(Context& ctx, const Buffer& b);
 
 }  // namespace corofem::detail::vk

@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <limits>
-#include <type_traits>
 
 namespace corofem::detail {
 
@@ -30,12 +29,12 @@ std::uint32_t groupsOf(std::size_t items) { return static_cast<std::uint32_t>((i
 struct Packed {
   std::vector<std::uint32_t> idx;
   std::vector<double> val, inv;
-  std::uint32_t at(const std::vector<std::uint32_t>& v) const { return static_cast<std::uint32_t>(v.size()); }
 };
 
 std::uint32_t offset(std::size_t n) {
   if (n > std::numeric_limits<std::uint32_t>::max())
-    fail(ErrorCode::DeviceError, "Vulkan: the multigrid's levels need more than 2^32 entries in one buffer");
+    fail(ErrorCode::DeviceError, "Vulkan: the multigrid's levels need more than 2^32 entries in one buffer; use fewer "
+         "elements per device, the preconditioner \"diagonal\", or the opencl backend");
   return static_cast<std::uint32_t>(n);
 }
 
@@ -52,11 +51,7 @@ VulkanAmg::VulkanAmg(VulkanAmgHost host) : host_(std::move(host)), amg_(*host_.s
   ad0_ = vk::Buffer(ctx, fine, false);
   // Finite from the start: a padding node's entries are never written by the passes but are read
   // by the products' gathers of the segment's own nodes only; zero them once all the same.
-  for (const vk::Buffer* b : {&res0_, &d0_, &ad0_}) {
-    VkCommandBuffer cb = ctx.begin();
-    vkCmdFillBuffer(cb, b->handle(), 0, VK_WHOLE_SIZE, 0u);
-    ctx.wait(ctx.submit());
-  }
+  for (const vk::Buffer* b : {&res0_, &d0_, &ad0_}) vk::zeroBuffer(ctx, *b);
   productD_ = host_.productSet(d0_, ad0_);
   productU_ = host_.productSet(*host_.u, ad0_);
 }
@@ -126,7 +121,6 @@ void VulkanAmg::upload() {
   // Every aggregate at I until its body's positions give its rotation (a solve before any
   // setPositions, or a body handed over by a failover without positions, runs unwarped).
   rotations_ = offset(p.val.size());
-  aggregates_ = layout.aggregates;
   for (std::size_t a = 0; a < layout.aggregates; ++a)
     for (int i = 0; i < 9; ++i) p.val.push_back(i % 4 == 0 ? 1.0 : 0.0);
   nodeAggregate_ = offset(p.idx.size());
@@ -144,27 +138,16 @@ void VulkanAmg::upload() {
   if (groupsOf(3 * host_.nodeTotal) > lim.maxComputeWorkGroupCount[0])
     fail(ErrorCode::DeviceError, "Vulkan: the multigrid's finest products need ", groupsOf(3 * host_.nodeTotal),
          " work-groups; '", ctx.physical().name, "' allows ", lim.maxComputeWorkGroupCount[0], " per dispatch");
-  auto reals = [&](const std::vector<double>& v) {
-    std::vector<unsigned char> bytes(std::max<std::size_t>(v.size(), 1) * rs_, 0);
-    withReals(bytes.data(), host_.isDouble, 0, [&](auto* out) {
-      for (std::size_t i = 0; i < v.size(); ++i) out[i] = static_cast<std::remove_pointer_t<decltype(out)>>(v[i]);
-    });
-    return bytes;
-  };
   ctx.wait(ctx.flush());  // the buffers replaced may still be read by recorded work
-  const std::vector<unsigned char> val = reals(p.val), inv = reals(p.inv);
+  const std::vector<unsigned char> val = realBytes(p.val, host_.isDouble), inv = realBytes(p.inv, host_.isDouble);
   idx_ = vk::Buffer(ctx, std::max<std::size_t>(p.idx.size(), 1) * sizeof(std::uint32_t), false);
-  val_ = vk::Buffer(ctx, val.size(), false);
-  inv_ = vk::Buffer(ctx, inv.size(), false);
+  val_ = vk::Buffer(ctx, std::max<std::size_t>(val.size(), rs_), false);
+  inv_ = vk::Buffer(ctx, std::max<std::size_t>(inv.size(), rs_), false);
   vec_ = vk::Buffer(ctx, std::max<std::size_t>(vecEntries, 1) * rs_, false);
   vk::uploadOnce(ctx, idx_, p.idx.data(), p.idx.size() * sizeof(std::uint32_t));
   vk::uploadOnce(ctx, val_, val.data(), val.size());
   vk::uploadOnce(ctx, inv_, inv.data(), inv.size());
-  {
-    VkCommandBuffer cb = ctx.begin();
-    vkCmdFillBuffer(cb, vec_.handle(), 0, VK_WHOLE_SIZE, 0u);
-    ctx.wait(ctx.submit());
-  }
+  vk::zeroBuffer(ctx, vec_);
   if (set_ != VK_NULL_HANDLE) ctx.freeDescriptorSet(set_);
   std::vector<const vk::Buffer*> b;
   for (const vk::Buffer& s : *host_.shared) b.push_back(&s);
@@ -181,14 +164,8 @@ void VulkanAmg::upload() {
 
 void VulkanAmg::recordWarps(VkCommandBuffer cb, const BodySet& running) {
   amg_.warps(running, [&](std::size_t first, const std::vector<double>& values) {
-    std::vector<unsigned char> bytes(values.size() * rs_);
-    withReals(bytes.data(), host_.isDouble, 0, [&](auto* out) {
-      for (std::size_t i = 0; i < values.size(); ++i) out[i] = static_cast<std::remove_pointer_t<decltype(out)>>(values[i]);
-    });
-    const std::size_t at = (rotations_ + 9 * first) * rs_;
-    for (std::size_t done = 0; done < bytes.size(); done += 65536)
-      vkCmdUpdateBuffer(cb, val_.handle(), at + done, std::min<std::size_t>(65536, bytes.size() - done),
-                        bytes.data() + done);
+    const std::vector<unsigned char> bytes = realBytes(values, host_.isDouble);
+    vk::updateBuffer(cb, val_, (rotations_ + 9 * first) * rs_, bytes.data(), bytes.size());
   });
   vk::fullBarrier(cb);
 }

@@ -103,7 +103,6 @@ class VulkanAmg {
   Matrix P0_, Pt0_;
   std::vector<Level> levels_;
   std::uint32_t scale_ = 0, rotations_ = 0, nodeAggregate_ = 0;  ///< amgVal, amgVal, amgIdx offsets
-  std::size_t aggregates_ = 0;
 };
 
 }  // namespace corofem::detail

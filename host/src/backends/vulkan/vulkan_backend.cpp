@@ -67,20 +67,16 @@ void registerVulkanBackend() {
   e.name = "vulkan";
   e.batches = true;
   e.passes = [](const PlanPasses& step) {
-    const bool precond = step.preconditioner != PreconditionerKind::None;
-    const bool amg = step.preconditioner == PreconditionerKind::Amg;
-    const bool block = step.preconditioner == PreconditionerKind::BlockDiagonal || amg;
     std::vector<std::string> k;
     if (step.corotational) k.push_back(std::string("rotations.comp (") + toString(step.rotation) + ")");
     k.push_back("element.comp + gather.comp (forces and element energies)");
     k.push_back(std::string("element.comp + gather.comp (product of ") +
                 (step.dynamic ? (step.damping ? "M, C, K_t" : "M, K_t") : "K_t") + ")");
-    k.push_back(std::string("pcg.comp") +
-                (precond ? (block ? " (forms M^-1: 3x3 blocks)" : " (forms M^-1: diagonal)") : "") +
+    k.push_back(std::string("pcg.comp") + step.formsInverse() +
                 " + reduce.comp (single-reduction PCG, scalars and stop flags on the device)" +
-                (amg ? "" : "; bodies up to VulkanTuning::groupPcgNodes nodes run whole iterations in one "
+                (step.amg() ? "" : "; bodies up to VulkanTuning::groupPcgNodes nodes run whole iterations in one "
                             "pcg_group.comp dispatch, a work-group per body"));
-    if (amg)
+    if (step.amg())
       k.push_back("amg.comp V-cycle per iteration: Chebyshev smoothing with 4 products (element.comp + "
                   "gather.comp), level-0 passes and sliced-ELLPACK products on the coarse levels (the "
                   "iterations dispatched phase by phase, not in pcg_group.comp)");
@@ -103,7 +99,7 @@ void registerVulkanBackend() {
         {"product input and output", 2 * D * r},
         {"staging (host-visible: up, down)", 3 * D * r + E * r}};
     if (step.corotational && step.rotation == RotationMethod::Quaternion) b.push_back({"quaternions", 4 * E * r});
-    if (step.preconditioner == PreconditionerKind::Amg) {
+    if (step.amg()) {
       b.push_back({"amg levels (estimate: prolongations, coarse operators)", z.amgEntriesPerDof * D * (r + 4)});
       b.push_back({"amg level-0 vectors", 3 * D * r});
     }

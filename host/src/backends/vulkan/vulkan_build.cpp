@@ -187,9 +187,9 @@ void VulkanDevice::build() {
   // Every vector the shaders may read before writing starts finite (0): a padding dof is never
   // read, but a zero start of PCG reads no x.
   for (Binding v : {kVecB, kVecX, kVecR, kVecU, kVecP, kVecS, kVecW, kBlocks, kMinv, kEnergy})
-    zero(owned_[v]);
-  zero(pin_);
-  zero(yout_);
+    vk::zeroBuffer(*ctx_, owned_[v]);
+  vk::zeroBuffer(*ctx_, pin_);
+  vk::zeroBuffer(*ctx_, yout_);
   layout_.releaseReordered();
 
   auto pipeline = [&](vk::Shader s, const char* name) {
@@ -214,12 +214,6 @@ VkDescriptorSet VulkanDevice::productSet(const vk::Buffer& in, const vk::Buffer&
   b[kVecIn] = &in;
   b[kVecOut] = &out;
   return ctx_->descriptorSet(b);
-}
-
-void VulkanDevice::zero(const vk::Buffer& b) {
-  VkCommandBuffer cb = ctx_->begin();
-  vkCmdFillBuffer(cb, b.handle(), 0, VK_WHOLE_SIZE, 0u);
-  ctx_->wait(ctx_->submit());
 }
 
 }  // namespace corofem::detail::vkdevice

@@ -257,16 +257,12 @@ class VulkanDevice final : public Device {
 
   /// Small tables into a device buffer through the command buffer itself (no staging to wait for).
   static void update(VkCommandBuffer cb, const vk::Buffer& to, const void* data, std::size_t bytes) {
-    const unsigned char* p = static_cast<const unsigned char*>(data);
-    for (std::size_t at = 0; at < bytes; at += 65536)
-      vkCmdUpdateBuffer(cb, to.handle(), at, std::min<std::size_t>(65536, bytes - at), p + at);
+    vk::updateBuffer(cb, to, 0, data, bytes);
     vk::fullBarrier(cb);
   }
 
   void updateReals(VkCommandBuffer cb, const vk::Buffer& to, const std::vector<double>& values) const {
-    std::vector<unsigned char> bytes(values.size() * rs_);
-    putReals(bytes.data(), isDouble_, 0, values.size(), values.size() + 1,
-             [&](std::size_t i) { return values[i]; });
+    const std::vector<unsigned char> bytes = realBytes(values, isDouble_);
     update(cb, to, bytes.data(), bytes.size());
   }
 
@@ -348,7 +344,6 @@ class VulkanDevice final : public Device {
   /// A descriptor set of every binding with a product's input `in` and output `out`.
   VkDescriptorSet productSet(const vk::Buffer& in, const vk::Buffer& out);
 
-  void zero(const vk::Buffer& b);
 
   SolverDesc solver_;
   BodyLayout layout_;

@@ -117,13 +117,9 @@ class VulkanSurfaces final : public DeviceSurfaces {
         offsets[6 * m + k] = hi;
         offsets[6 * m + 3 + k] = c - hi;
       }
-    const std::size_t rs = src_.isDouble ? sizeof(double) : sizeof(float);
-    std::vector<unsigned char> bytes(offsets.size() * rs);
-    putReals(bytes.data(), src_.isDouble, 0, offsets.size(), offsets.size() + 1, [&](std::size_t i) { return offsets[i]; });
+    const std::vector<unsigned char> bytes = realBytes(offsets, src_.isDouble);
     VkCommandBuffer cb = ctx.begin();
-    for (std::size_t at = 0; at < bytes.size(); at += 65536)  // vkCmdUpdateBuffer's limit per call
-      vkCmdUpdateBuffer(cb, buffers_[kMemberOffsets].handle(), at, std::min<std::size_t>(65536, bytes.size() - at),
-                        bytes.data() + at);
+    vk::updateBuffer(cb, buffers_[kMemberOffsets], 0, bytes.data(), bytes.size());
     vk::fullBarrier(cb);
     SurfacePush push;
     push.vertices = static_cast<std::uint32_t>(vertices_);
