@@ -5,6 +5,7 @@
 // held to it on every Vulkan device, in double and float, for every
 // preconditioner the backend has, on the conformance suite's seven bodies solved together: the
 // same phases in the same order give the same iteration counts and answers.
+#include "backends/vulkan/vk_runtime.hpp"
 #include "conformance/conformance_support.hpp"
 
 #include <cstdio>
@@ -122,6 +123,34 @@ TEST_P(VulkanPaths, ManyIterationsInOneCallMatchOneAtATime) {
   EXPECT_EQ(all[0].stop, detail::PcgStop::Running);
   EXPECT_EQ(all[0].rr, one[0].rr);
   EXPECT_TRUE(xAll == xOne) << "x differs: " << relErr(xAll, xOne);
+}
+
+/// The process's instance outlives every backend and enumeration: NVIDIA's driver (580, H100) could
+/// not be loaded again once the loader had unloaded it with the last instance, so that a backend
+/// made after the device list failed with VK_ERROR_INCOMPATIBLE_DRIVER. lavapipe reloads fine, so
+/// this checks the policy that avoids it, not the driver.
+TEST(VulkanInstance, OnceMadeItOutlivesTheDeviceListAndEveryBackend) {
+  std::weak_ptr<detail::vk::Instance> seen;
+  try {
+    seen = detail::vk::Instance::shared();
+  } catch (const std::exception& e) {
+    GTEST_SKIP() << "no Vulkan instance: " << e.what();
+  }
+  const auto entry = detail::findBackend("vulkan");
+  ASSERT_NE(entry, nullptr);
+  const std::vector<detail::Candidate> devices = entry->candidates();
+  EXPECT_FALSE(seen.expired()) << "the device list let the instance go";
+  if (devices.empty()) GTEST_SKIP() << "no usable Vulkan device";
+  const detail::Problem beam = makeProblem(boxMesh(4, 1, 1, 0.1, 0.1, 0.1), 1e5, 0.3, 1000.0);
+  for (int round = 0; round < 2; ++round) {  // made and dropped twice: each finds the same instance
+    SolverDesc s;
+    s.precision = Precision::Float;
+    auto device = entry->create({&beam}, s, entry->resolve("0"), {});
+    ASSERT_NE(device, nullptr);
+    device.reset();
+    ASSERT_FALSE(seen.expired()) << "round " << round << ": the instance went with the backend";
+    EXPECT_EQ(seen.lock().get(), detail::vk::Instance::shared().get());
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Vulkan, VulkanPaths, testing::ValuesIn(vulkanCases()), caseName);

@@ -43,8 +43,9 @@ struct PhysicalDevice {
 /// too few storage buffers per stage or Vulkan older than 1.1 (the shaders' SPIR-V 1.3).
 PhysicalDevice describe(VkPhysicalDevice handle, bool* usable = nullptr);
 
-/// The process's Vulkan instance and its usable devices, made at the first call. Throws
-/// Error(DeviceError) where there is no Vulkan driver.
+/// The process's Vulkan instance and its usable devices, made at the first call that succeeds and
+/// kept until the process ends (vk_runtime.cpp says why). Throws Error(DeviceError) where there is
+/// no Vulkan driver.
 class Instance {
  public:
   static std::shared_ptr<Instance> shared();
