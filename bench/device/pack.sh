@@ -19,7 +19,20 @@ done
 for lib in libOpenCL.so.1 libbenchmark.so.1debian libvulkan.so.1; do
   cp -L "$(ldconfig -p | awk -v l="$lib" '$1 == l {print $NF; exit}')" .gpu/lib/
 done
+# NVIDIA's Vulkan driver is libGLX_nvidia, which needs GLVND's dispatch library (and, through
+# libGLX, X11's client libraries) that a compute image may lack: without them the loader finds no
+# driver. Where this machine has them they travel too.
+for lib in libGLdispatch.so.0 libGLX.so.0 libEGL.so.1 libX11.so.6 libXext.so.6 libxcb.so.1 libXau.so.6 \
+           libXdmcp.so.6 libbsd.so.0 libmd.so.0; do
+  f=$(ldconfig -p | awk -v l="$lib" '$1 == l {print $NF; exit}')
+  [[ -n $f ]] && cp -L "$f" .gpu/lib/
+done
+# The C API's shared library, which a test opens by its build path.
+for f in build/libcorofem_c.so.*.*.*; do [[ -f $f ]] && strip -o ".gpu/lib/$(basename "$f")" "$f"; done
 if [[ -d ../shared/data ]]; then
   mkdir -p .gpu/data && cp -r ../shared/data/. .gpu/data/
 fi
+# Compressed: the stripped binaries alone pass the device tool's 64 MiB (each links the library
+# statically); run_on_gpu.sh unpacks them there.
+(cd .gpu && tar -c bin lib $( [[ -d data ]] && echo data ) | xz -T0 -6 > pack.tar.xz && rm -rf bin lib data)
 du -sh .gpu

@@ -12,11 +12,13 @@
 # in the device's Morton order), precond (bench_precond: issue 29's 12,960-tet beam with the diagonal and the
 # multigrid, OpenCL and Vulkan in float; PRECOND_FILTER narrows it). The tests stage also runs five suites again with the Morton order
 # forced on every body (the test binaries' --corofem_morton flag), as CTest does, at the same time; TEST_TIMEOUT and
-# MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, and test_opencl runs in OPENCL_SHARDS
+# MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, MORTON_SUITES (those five by
+# default; "" for none) names the suites run again, TEST_SUITES (all by default) the suites run, and test_opencl runs in OPENCL_SHARDS
 # (6) gtest shards in each numbering.
 set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
+if [[ -f $g/pack.tar.xz ]]; then tar -C "$g" -xJf "$g/pack.tar.xz" && rm -f "$g/pack.tar.xz"; fi  # pack.sh's archive
 OUT=${OUT:-/tmp/out}; mkdir -p "$OUT" /tmp/logs
 stages=${STAGES:-probe tests bench vulkan precond}
 has() { [[ " $stages " == *" $1 "* ]]; }
@@ -27,6 +29,7 @@ if [[ $root != /work/main ]] && { [[ ! -e /work/main ]] || [[ -L /work/main ]]; 
 [[ -e /work/shared ]] || ln -sfn "$g" /work/shared
 # The CLI tests run the command where the build put it.
 [[ -x $root/build/corofem ]] || { mkdir -p "$root/build" && cp "$g/bin/corofem" "$root/build/corofem"; }
+for f in "$g"/lib/libcorofem_c.so.*; do [[ -e $root/build/$(basename "$f") ]] || cp "$f" "$root/build/"; done
 icd=$(find /usr/local/nvidia /usr/lib /usr/lib64 /usr/local/cuda* -name 'libnvidia-opencl.so.1' 2>/dev/null | head -1)
 mkdir -p /tmp/icd && echo "${icd:-libnvidia-opencl.so.1}" > /tmp/icd/nvidia.icd
 export OCL_ICD_VENDORS=/tmp/icd OCL_ICD_FILENAMES=${icd:-libnvidia-opencl.so.1}
@@ -41,7 +44,7 @@ if has probe; then
     echo "NVIDIA OpenCL driver: ${icd:-not found}"
     ls /etc/OpenCL/vendors 2>&1
     echo "NVIDIA Vulkan driver: ${vkicd:-not found}"
-    "$g/bin/bench_vulkan" --benchmark_list_tests=true 2>&1 | head -3 || true
+    VK_LOADER_DEBUG=error,warn,driver "$g/bin/bench_vulkan" --benchmark_list_tests=true 2>&1 | grep -v "^Searching\|^   " | head -30 || true
     "$g/bin/bench_opencl" --benchmark_list_tests=true 2>&1 | grep -E "dynamic_step_10k|device" || true
   } 2>&1 | tee "$OUT/probe.log"
 fi
@@ -60,13 +63,14 @@ if has tests; then  # every suite and the Morton reruns at once (16 cores; the G
   }
   for t in "$g"/bin/test_*; do
     n=$(basename "$t")
+    [[ -z ${TEST_SUITES:-} || " $TEST_SUITES " == *" $n "* ]] || continue
     if [[ $n == test_opencl ]]; then
       for ((k = 0; k < shards; ++k)); do run_one "${n}_$k" "" "${TEST_TIMEOUT:-400}" "$t" $k; done
     else
       run_one "$n" "" "${TEST_TIMEOUT:-400}" "$t" ""
     fi
   done
-  for n in test_batch test_embed test_opencl test_solve test_schedule; do
+  for n in ${MORTON_SUITES-test_batch test_embed test_opencl test_solve test_schedule}; do
     [[ -x $g/bin/$n ]] || continue
     if [[ $n == test_opencl ]]; then
       for ((k = 0; k < shards; ++k)); do run_one "morton_${n}_$k" --corofem_morton "${MORTON_TIMEOUT:-${TEST_TIMEOUT:-400}}" "$g/bin/$n" $k; done
