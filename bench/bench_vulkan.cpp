@@ -16,6 +16,9 @@
 //                               on CPU devices, 512 MiB on GPUs), bytes read + written per second.
 //
 //   ./build/bench/bench_vulkan --benchmark_format=json [--benchmark_filter=-/1M]   (skip the 1M box)
+//   --group_pcg_nodes=N   VulkanTuning::groupPcgNodes for every backend it makes (-1: a dispatch
+//                         per phase for every body; the default, 0, runs the 1k box's iterations
+//                         in one dispatch and the larger boxes per phase)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
 #include "bench_scenes.hpp"
@@ -34,6 +37,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <ctime>
 #include <map>
@@ -45,6 +50,12 @@
 
 namespace corofem {
 namespace {
+
+/// The tuning every backend of the run gets (--group_pcg_nodes).
+VulkanTuning& benchTuning() {
+  static VulkanTuning t;
+  return t;
+}
 
 struct BoxSize {
   const char* label;
@@ -134,7 +145,9 @@ void pcgIterations(benchmark::State& state, std::size_t index, BoxSize size) {
   const auto entry = detail::findBackend("vulkan");
   std::unique_ptr<detail::Device> dev;
   try {
-    dev = entry->create({&p}, s, entry->resolve(std::to_string(index)), {});
+    detail::DeviceOptions o;
+    o.vulkan = benchTuning();
+    dev = entry->create({&p}, s, entry->resolve(std::to_string(index)), o);
   } catch (const std::exception& e) {
     state.SkipWithError(e.what());
     return;
@@ -195,7 +208,9 @@ void step(benchmark::State& state, std::size_t index, BoxSize size) {
   const Scene scene = boxScene(size, index);
   std::optional<Simulation> sim;
   auto fresh = [&]() -> bool {
-    auto created = Simulation::create(scene);
+    SimulationOptions o;
+    o.vulkan = benchTuning();
+    auto created = Simulation::create(scene, o);
     if (!created) {
       state.SkipWithError(created.message().c_str());
       return false;
@@ -257,11 +272,41 @@ int registerAll() {
   return 0;
 }
 
-const int kRegistered = registerAll();
-
 }  // namespace
+
+/// Takes --group_pcg_nodes out of argv; exits with a message on a malformed value.
+void parseVulkanBenchOptions(int& argc, char** argv) {
+  int out = 1;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    const std::string flag = "--group_pcg_nodes=";
+    if (arg.rfind(flag, 0) != 0) {
+      argv[out++] = argv[i];
+      continue;
+    }
+    char* end = nullptr;
+    const long long v = std::strtoll(arg.c_str() + flag.size(), &end, 10);
+    if (arg.size() == flag.size() || !end || *end) {
+      std::fprintf(stderr, "%s: not an integer (VulkanTuning::groupPcgNodes)\n", arg.c_str());
+      std::exit(2);
+    }
+    benchTuning().groupPcgNodes = v;
+  }
+  argc = out;
+}
+
 }  // namespace corofem
 
 #endif  // COROFEM_WITH_VULKAN
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+#ifdef COROFEM_WITH_VULKAN
+  corofem::parseVulkanBenchOptions(argc, argv);
+  corofem::registerAll();
+#endif
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -2,7 +2,7 @@
 # Runs on the lent GPU machine (see pack.sh): points the carried OpenCL ICD loader at NVIDIA's
 # OpenCL driver, runs every test binary (each OpenCL test runs on every device present, here the
 # GPU) and the OpenCL benchmarks, and leaves logs and JSON in $OUT. STAGES (default
-# "probe tests bench vulkan") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
+# "probe tests bench vulkan precond") chooses what runs, among: probe, tests, bench (bench_opencl; BENCH_FILTER
 # narrows it), vulkan (bench_vulkan on the GPU, VULKAN_FILTER narrows it, and the renderer sample's
 # frames on the GPU's own VkDevice), profile (bench_opencl --profile on the 10k and 1M steps), ab (the dynamic steps of
 # the bench_opencl binaries named in AB, in turns), tuningab (bench_opencl under each tuning in
@@ -14,7 +14,10 @@
 # forced on every body (the test binaries' --corofem_morton flag), as CTest does, at the same time; TEST_TIMEOUT and
 # MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, MORTON_SUITES (those five by
 # default; "" for none) names the suites run again, TEST_SUITES (all by default) the suites run, and test_opencl runs in OPENCL_SHARDS
-# (6) gtest shards in each numbering.
+# (6) gtest shards in each numbering. vulkanab: bench_vulkan's steps under each VulkanTuning::groupPcgNodes in
+# VULKANAB ("0 -1": the default against a dispatch per phase), in turns. profile also profiles the multigrid's
+# iteration (pcg_iteration_amg, 10k). Call it as `bash bench/device/run_on_gpu.sh 2>&1` with nothing after it:
+# the device tool gives back nothing of a pipeline it kills at the call's limit (a `| grep` lost a whole call).
 set -uo pipefail
 root=$(pwd)
 g=$root/.gpu
@@ -94,8 +97,9 @@ if has bench; then
 fi
 
 if has profile; then  # per kernel: launches, device time, device idle before it
-  for size in 10k 1M; do
-    timeout 120 "$B/bench_opencl" --profile --benchmark_filter="dynamic_step_20pcg/dev0/$size" \
+  for size in 10k 1M amg; do
+    f="dynamic_step_20pcg/dev0/$size"; [[ $size == amg ]] && f="pcg_iteration_amg/dev0/10k"
+    timeout 120 "$B/bench_opencl" --profile --benchmark_filter="$f" \
       --benchmark_repetitions=1 --benchmark_min_time=1 2>&1 | grep -E 'profile\]|median' > "/tmp/logs/profile_$size.txt"
     echo "== profile $size"; cat "/tmp/logs/profile_$size.txt" | cut -c25-160
   done
@@ -163,6 +167,15 @@ if has vulkan; then  # the Vulkan backend on the GPU: its benchmark, then the re
     (cd "$root" && timeout 120 "$B/renderer" --out "$OUT/renderer" --png-every 40 > /tmp/logs/renderer.txt 2>&1)
     echo "renderer exit $?"; cat /tmp/logs/renderer.txt
   fi
+fi
+if has vulkanab; then  # Vulkan PCG paths in turns: bench_vulkan's steps under each groupPcgNodes in VULKANAB
+  for round in $(seq "${VULKANAB_ROUNDS:-2}"); do
+    for v in ${VULKANAB:-0 -1}; do
+      timeout 200 "$B/bench_vulkan" --group_pcg_nodes="$v" --benchmark_filter="${VULKANAB_FILTER:-^step/0/(1k|10k)/}" \
+        --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | \
+        awk -v g="$v" '{print "group_pcg_nodes=" g, $1, $2, $3, $4, $5}'
+    done
+  done | tee /tmp/logs/vulkanab.txt
 fi
 if has precond; then  # the preconditioners per converged step on the GPU (issue 29's beam, both APIs)
   (cd "$root" && timeout 240 "$B/bench_precond" \
