@@ -252,4 +252,63 @@ TEST(WarpedAmg, AGrabMakesAHierarchyAndTheReleaseTakesBackTheOneBefore) {
   EXPECT_EQ(body.builds(), 3);
 }
 
+/// m M + s K_0 assembled element by element, as the set-up once did: the yardstick of the operator
+/// restricted from the kept K_0.
+AmgMatrix assembledRestOperator(const Problem& p, const std::vector<Eigen::Index>& free, double m, double s) {
+  std::vector<int> index(p.dofCount(), -1);
+  for (std::size_t i = 0; i < free.size(); ++i) index[static_cast<std::size_t>(free[i])] = static_cast<int>(i);
+  std::vector<Eigen::Triplet<double, int>> t;
+  for (std::size_t e = 0; e < p.elements.size(); ++e) {
+    const Mat12 K = linearStiffness(p.elements[e], p.lame);
+    for (int a = 0; a < 12; ++a)
+      for (int b = 0; b < 12; ++b) {
+        const int r = index[3 * p.mesh.tets[4 * e + a / 3] + a % 3], c = index[3 * p.mesh.tets[4 * e + b / 3] + b % 3];
+        if (r >= 0 && c >= 0) t.emplace_back(r, c, s * K(a, b));
+      }
+  }
+  for (std::size_t i = 0; i < free.size(); ++i)
+    t.emplace_back(static_cast<int>(i), static_cast<int>(i), m * p.lumpedMass[static_cast<std::size_t>(free[i])]);
+  AmgMatrix A(static_cast<Eigen::Index>(free.size()), static_cast<Eigen::Index>(free.size()));
+  A.setFromTriplets(t.begin(), t.end());
+  return A;
+}
+
+double relativeDifference(const AmgMatrix& a, const AmgMatrix& b) {
+  return AmgMatrix(a - b).norm() / b.norm();
+}
+
+TEST(WarpedAmg, TheRestOperatorRestrictedFromTheKeptStiffnessIsTheAssembledOne) {
+  Problem p = beam(12);
+  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)  // a few more constrained dofs, single components too
+    if (n % 7 == 3) p.constrained[3 * n + n % 3] = 1;
+  const std::vector<Eigen::Index> free = freeDofs(p);
+  const AmgMatrix K = restStiffness(p);
+  for (const double m : {0.0, kBackwardEulerMass, 3.7e4}) {
+    const AmgMatrix restricted = restOperator(K, p, free, m, 0.8), assembled = assembledRestOperator(p, free, m, 0.8);
+    ASSERT_EQ(restricted.rows(), assembled.rows());
+    EXPECT_LT(relativeDifference(restricted, assembled), 1e-14) << "m = " << m;
+    EXPECT_TRUE(restricted.isCompressed());
+  }
+}
+
+TEST(WarpedAmg, AChangedMaterialOrMeshGivesTheHierarchyTheNewStiffness) {
+  // BodyAmg keeps K_0 across set-ups (a grab restricts it); a material change (setMaterial clears
+  // the hierarchy) or another body's problem must not find the old one.
+  Problem p = beam(12);
+  const std::vector<Eigen::Index> free = freeDofs(p);
+  BodyAmg body;
+  ASSERT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
+  EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(p, free, kBackwardEulerMass, 1.0)), 1e-14);
+  p.lame = lameFromYoungPoisson(3e6, 0.35);
+  body.clear();
+  ASSERT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
+  EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(p, free, kBackwardEulerMass, 1.0)), 1e-14)
+      << "the set-up used the stiffness of the old material";
+  const Problem other = beam(12);  // the same mesh, the first material, another object
+  body.clear();
+  ASSERT_EQ(body.ensure(other, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
+  EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(other, free, kBackwardEulerMass, 1.0)),
+            1e-14);
+}
+
 }  // namespace

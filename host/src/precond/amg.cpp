@@ -502,30 +502,77 @@ void WarpedAmg::apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eig
   cycle(0, r, z, &fine);
 }
 
-AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
-                       double stiffScale) {
-  std::vector<int> index(p.dofCount(), -1);
-  for (std::size_t i = 0; i < freeDofs.size(); ++i) index[static_cast<std::size_t>(freeDofs[i])] = static_cast<int>(i);
+AmgMatrix restStiffness(const Problem& p) {
   std::vector<Eigen::Triplet<double, int>> triplets;
-  triplets.reserve(p.elements.size() * 144 + freeDofs.size());
+  triplets.reserve(p.elements.size() * 144 + p.dofCount());
   for (std::size_t e = 0; e < p.elements.size(); ++e) {
     const Mat12 K = linearStiffness(p.elements[e], p.lame);
     for (int a = 0; a < 12; ++a) {
-      const int r = index[3 * p.mesh.tets[4 * e + a / 3] + a % 3];
-      if (r < 0) continue;
-      for (int b = 0; b < 12; ++b) {
-        const int c = index[3 * p.mesh.tets[4 * e + b / 3] + b % 3];
-        if (c >= 0) triplets.emplace_back(r, c, stiffScale * K(a, b));
-      }
+      const int r = static_cast<int>(3 * p.mesh.tets[4 * e + a / 3] + a % 3);
+      for (int b = 0; b < 12; ++b)
+        triplets.emplace_back(r, static_cast<int>(3 * p.mesh.tets[4 * e + b / 3] + b % 3), K(a, b));
     }
   }
-  for (std::size_t i = 0; i < freeDofs.size(); ++i)
-    triplets.emplace_back(static_cast<int>(i), static_cast<int>(i), massScale * p.lumpedMass[freeDofs[i]]);
+  for (std::size_t d = 0; d < p.dofCount(); ++d) triplets.emplace_back(static_cast<int>(d), static_cast<int>(d), 0.0);
+  const auto n = static_cast<Eigen::Index>(p.dofCount());
+  AmgMatrix K(n, n);
+  K.setFromTriplets(triplets.begin(), triplets.end());
+  return K;
+}
+
+AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::vector<Eigen::Index>& freeDofs,
+                       double massScale, double stiffScale) {
+  if (stiffness.rows() != static_cast<Eigen::Index>(p.dofCount()) || stiffness.cols() != stiffness.rows())
+    fail(ErrorCode::Internal, "restOperator: a stiffness of ", stiffness.rows(), " x ", stiffness.cols(), " for ",
+         p.dofCount(), " dofs");
+  std::vector<int> index(p.dofCount(), -1);
+  for (std::size_t i = 0; i < freeDofs.size(); ++i) index[static_cast<std::size_t>(freeDofs[i])] = static_cast<int>(i);
   const auto n = static_cast<Eigen::Index>(freeDofs.size());
   AmgMatrix A(n, n);
-  A.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::Index entries = 0;  // at most: the free rows' entries
+  for (Eigen::Index i = 0; i < n; ++i)
+    entries += stiffness.outerIndexPtr()[freeDofs[i] + 1] - stiffness.outerIndexPtr()[freeDofs[i]];
+  A.reserve(entries);  // compressed: startVec and insertBack fill it in order
+  // Rows in order, and in each row the columns in order: free indices ascend with the dofs.
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index d = freeDofs[i];
+    A.startVec(i);
+    for (AmgMatrix::InnerIterator it(stiffness, d); it; ++it) {
+      const int c = index[static_cast<std::size_t>(it.col())];
+      if (c < 0) continue;
+      A.insertBack(i, c) = stiffScale * it.value() + (c == i ? massScale * p.lumpedMass[d] : 0.0);
+    }
+  }
+  A.finalize();
   return A;
 }
+
+AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
+                       double stiffScale) {
+  return restOperator(restStiffness(p), p, freeDofs, massScale, stiffScale);
+}
+
+namespace {
+
+/// What K_0 depends on, hashed (FNV-1a over the bytes): the tets, the rest positions, each
+/// element's rest volume and the material. A body whose K_0 differs gives another key but for a 2^-64 chance.
+std::uint64_t stiffnessKey(const Problem& p) {
+  std::uint64_t h = 1469598103934665603ULL;
+  auto mix = [&h](const void* data, std::size_t bytes) {
+    const auto* c = static_cast<const unsigned char*>(data);
+    for (std::size_t i = 0; i < bytes; ++i) h = (h ^ c[i]) * 1099511628211ULL;
+  };
+  mix(p.mesh.tets.data(), p.mesh.tets.size() * sizeof(p.mesh.tets[0]));
+  mix(p.restPositions.data(), static_cast<std::size_t>(p.restPositions.size()) * sizeof(double));
+  for (const ElementRest& e : p.elements) mix(&e.volume, sizeof(e.volume));
+  mix(&p.lame.lambda, sizeof(double));
+  mix(&p.lame.mu, sizeof(double));
+  const std::size_t dofs = p.dofCount();
+  mix(&dofs, sizeof(dofs));
+  return h;
+}
+
+}  // namespace
 
 BodyAmg::BodyAmg() : amg_(std::make_unique<WarpedAmg>()), spare_(std::make_unique<WarpedAmg>()) {}
 
@@ -548,8 +595,14 @@ BodyAmg::Made BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>&
   if (fits(*amg_, ratio_)) return Made::Switched;
   // Level 0's Chebyshev bound from the operator with half the mass coefficient: the bound of the
   // whole window of ratios this hierarchy serves (lambda_max(B^-1 A) does not grow with the mass).
-  const AmgMatrix bound = restOperator(p, freeDofs, 0.5 * massScale, stiffScale);
-  amg_->build(restOperator(p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.mesh.nodeCount(), &bound);
+  const std::uint64_t key = stiffnessKey(p);
+  if (stiffness_.rows() == 0 || key != stiffnessKey_) {
+    stiffness_ = restStiffness(p);
+    stiffnessKey_ = key;
+  }
+  const AmgMatrix bound = restOperator(stiffness_, p, freeDofs, 0.5 * massScale, stiffScale);
+  amg_->build(restOperator(stiffness_, p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions,
+              p.mesh.nodeCount(), &bound);
   ratio_ = ratio;
   ++builds_;
   return Made::Built;

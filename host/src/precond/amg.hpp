@@ -135,8 +135,15 @@ class WarpedAmg {
   Eigen::VectorXd rest_;
 };
 
-/// The rest operator m M + s K_0 of a body on its free dofs (ascending dof indices): M lumped, K_0
-/// the sum of the linear element stiffnesses (the tangent of every formulation at rest).
+/// K_0 of a body on all its dofs (3N x 3N): the sum of the linear element stiffnesses (the tangent
+/// of every formulation at rest), with every diagonal entry present (zero where no element adds to
+/// it), so that a mass can be added in place.
+AmgMatrix restStiffness(const Problem& p);
+/// m M + s K_0 on the free dofs `freeDofs` (ascending dof indices) from K_0 on all dofs
+/// (restStiffness of the same body): M lumped. O(nonzeros), no assembly.
+AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::vector<Eigen::Index>& freeDofs,
+                       double massScale, double stiffScale);
+/// The same, assembling K_0.
 AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
                        double stiffScale);
 
@@ -149,7 +156,9 @@ AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDo
 /// The hierarchy it replaces is kept as a spare and taken back where the ratio returns near its
 /// own: a step retried in substeps (h / 2, h / 4: the ratio 4x, 16x) and the next full step then
 /// cost one set-up each, not one per change. The same for constraints: a hierarchy serves the free
-/// dofs it was made for, so a hard grab costs one set-up and its release none (the spare).
+/// dofs it was made for, so a hard grab costs one set-up and its release none (the spare). A
+/// set-up after the first assembles nothing: K_0 is kept (the assembly was about 60 ms of a grab's
+/// 140 on the 12,960-tet beam, docs/performance.md).
 /// (Keeping the hierarchy of before for a grab, its cycle restricted to the fewer free dofs, was
 /// tried: 40 PCG iterations a step instead of 18 on the 12,960-tet beam with its tip held, twice
 /// the step time, where the set-up costs about four steps; bench_precond's precondGrab.)
@@ -171,6 +180,12 @@ class BodyAmg {
   std::unique_ptr<WarpedAmg> amg_, spare_;
   double ratio_ = 0.0, spareRatio_ = 0.0;  ///< m / s each was made from (infinite for s = 0)
   long long builds_ = 0;
+  /// K_0 on all dofs, kept across set-ups: constraints and coefficients change a hierarchy, not
+  /// K_0, so a grab's set-up restricts it instead of assembling again (the assembly was about half
+  /// of a set-up). Made again where the body's mesh, rest state or material differ from those it
+  /// was made from (stiffnessKey).
+  AmgMatrix stiffness_;
+  std::uint64_t stiffnessKey_ = 0;
 };
 
 }  // namespace corofem::detail
