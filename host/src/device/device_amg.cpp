@@ -32,6 +32,54 @@ SlicedEll slicedEll(const AmgMatrix& m, std::size_t slice) {
   return out;
 }
 
+namespace {
+
+/// A body's part of a device matrix: its matrix (sparse, or dense with every entry kept), its row i
+/// at (*rowMap)[i] where given, else at rowOffset + i, its column j at colOffset + j.
+struct Block {
+  const AmgMatrix* sparse = nullptr;
+  const Eigen::MatrixXd* dense = nullptr;
+  const std::vector<std::size_t>* rowMap = nullptr;
+  std::size_t rowOffset = 0, colOffset = 0;
+  Eigen::Index rows() const { return sparse ? sparse->rows() : dense->rows(); }
+  std::size_t row(Eigen::Index i) const {
+    return rowMap ? (*rowMap)[static_cast<std::size_t>(i)] : rowOffset + static_cast<std::size_t>(i);
+  }
+};
+
+/// The `rows` x `cols` matrix of the blocks, as setFromTriplets of their entries would make it
+/// (no two blocks share a row, and a block's columns keep their order: every row comes sorted from
+/// its one source row), in O(entries) instead of a sort of them.
+AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<Block>& blocks) {
+  std::vector<int> start(rows + 1, 0);  // entries of each row, then where each row starts
+  for (const Block& b : blocks)
+    for (Eigen::Index i = 0; i < b.rows(); ++i)
+      start[b.row(i) + 1] = static_cast<int>(b.sparse ? b.sparse->outerIndexPtr()[i + 1] - b.sparse->outerIndexPtr()[i]
+                                                      : b.dense->cols());
+  for (std::size_t r = 0; r < rows; ++r) start[r + 1] += start[r];
+  AmgMatrix out(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+  out.resizeNonZeros(start[rows]);
+  std::copy(start.begin(), start.end(), out.outerIndexPtr());
+  for (const Block& b : blocks)
+    for (Eigen::Index i = 0; i < b.rows(); ++i) {
+      int at = start[b.row(i)];
+      if (b.sparse) {
+        for (AmgMatrix::InnerIterator it(*b.sparse, i); it; ++it, ++at) {
+          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(it.col()));
+          out.valuePtr()[at] = it.value();
+        }
+      } else {
+        for (Eigen::Index j = 0; j < b.dense->cols(); ++j, ++at) {
+          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(j));
+          out.valuePtr()[at] = (*b.dense)(i, j);
+        }
+      }
+    }
+  return out;
+}
+
+}  // namespace
+
 DeviceAmg::DeviceAmg(const std::vector<BodySegment>& segments)
     : segs_(segments),
       bodies_(segments.size()),
@@ -109,59 +157,55 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
     for (Eigen::Index dof : bodies_[s].amg().builtFreeDofs())
       fineRow[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
   }
-  using Triplets = std::vector<Eigen::Triplet<double, int>>;
-  auto row = [&](std::size_t k, std::size_t s, Eigen::Index i) {
-    return static_cast<int>(k == 0 ? fineRow[s][static_cast<std::size_t>(i)] : offset[k][s] + static_cast<std::size_t>(i));
-  };
-  auto add = [&](Triplets& t, const AmgMatrix& m, std::size_t rk, std::size_t ck, std::size_t s) {
-    for (Eigen::Index i = 0; i < m.outerSize(); ++i)
-      for (AmgMatrix::InnerIterator it(m, i); it; ++it) t.emplace_back(row(rk, s, i), row(ck, s, it.col()), it.value());
-  };
-  auto matrix = [&](const Triplets& t, std::size_t r, std::size_t c) {
-    AmgMatrix m(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c));
-    m.setFromTriplets(t.begin(), t.end());
-    return m;
-  };
+  auto transposed = [](const AmgMatrix& m) { return AmgMatrix(m.transpose()); };  // P^T, as each body's Pt
   DeviceAmgLayout out;
   out.levels.resize(depth - 1);
   {
-    Triplets p, pt;
+    std::vector<Block> p;
     for (std::size_t s = 0; s < K; ++s) {
       const auto& levels = bodies_[s].amg().levels();
       if (levels.size() < 2) continue;
-      add(p, levels[0].P, 0, 1, s);
-      add(pt, levels[0].Pt, 1, 0, s);
+      Block b;
+      b.sparse = &levels[0].P;
+      b.rowMap = &fineRow[s];
+      b.colOffset = offset[1][s];
+      p.push_back(b);
     }
-    out.P0 = matrix(p, rows[0], depth > 1 ? rows[1] : 0);
-    out.Pt0 = matrix(pt, depth > 1 ? rows[1] : 0, rows[0]);
+    out.P0 = joined(rows[0], depth > 1 ? rows[1] : 0, p);
+    out.Pt0 = transposed(out.P0);
   }
+  std::vector<Eigen::MatrixXd> inverses(K);
   for (std::size_t k = 1; k < depth; ++k) {
     DeviceAmgLevel& L = out.levels[k - 1];
     L.rows = rows[k];
     L.dinv.assign(rows[k], 0.0);
-    Triplets a, p, pt, inv;
+    std::vector<Block> a, p, inv;
     for (std::size_t s = 0; s < K; ++s) {
       const auto& levels = bodies_[s].amg().levels();
       if (k >= levels.size()) continue;
+      Block b;
+      b.rowOffset = b.colOffset = offset[k][s];
       if (k + 1 == levels.size()) {  // the body's coarsest: its dense inverse, no smoothing
-        const Eigen::MatrixXd M = bodies_[s].amg().coarsestInverse();
-        for (Eigen::Index i = 0; i < M.rows(); ++i)
-          for (Eigen::Index j = 0; j < M.cols(); ++j) inv.emplace_back(row(k, s, i), row(k, s, j), M(i, j));
+        inverses[s] = bodies_[s].amg().coarsestInverse();
+        b.dense = &inverses[s];
+        inv.push_back(b);
         continue;
       }
       const AmgLevel& level = levels[k];
-      add(a, level.A, k, k, s);
-      add(p, level.P, k, k + 1, s);
-      add(pt, level.Pt, k + 1, k, s);
+      b.sparse = &level.A;
+      a.push_back(b);
+      b.sparse = &level.P;
+      b.colOffset = offset[k + 1][s];
+      p.push_back(b);
       for (Eigen::Index i = 0; i < level.A.rows(); ++i)
-        L.dinv[static_cast<std::size_t>(row(k, s, i))] = level.diagInv[i] / level.lambdaMax;
+        L.dinv[offset[k][s] + static_cast<std::size_t>(i)] = level.diagInv[i] / level.lambdaMax;
     }
     const std::size_t next = k + 1 < depth ? rows[k + 1] : 0;
-    L.A = matrix(a, rows[k], rows[k]);
-    L.P = matrix(p, rows[k], next);
-    L.Pt = matrix(pt, next, rows[k]);
-    L.inverse = matrix(inv, rows[k], rows[k]);
-    L.inverseEntries = inv.size();
+    L.A = joined(rows[k], rows[k], a);
+    L.P = joined(rows[k], next, p);
+    L.Pt = transposed(L.P);
+    L.inverse = joined(rows[k], rows[k], inv);
+    L.inverseEntries = static_cast<std::size_t>(L.inverse.nonZeros());
     L.smooths = !a.empty();
   }
   // Level 0's 1 / lambda_max per segment; the warp's node table.

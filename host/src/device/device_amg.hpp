@@ -81,6 +81,8 @@ class DeviceAmg {
   bool prepare(const BodySet& running, const std::vector<std::pair<double, double>>& coefficients);
   /// Every body's levels end to end over `nodeTotal` device nodes.
   DeviceAmgLayout layout(std::size_t nodeTotal);
+  /// Segment s's hierarchy.
+  const BodyAmg& body(std::size_t s) const { return bodies_.at(s); }
   /// The device holds layout()'s levels now (called once its upload succeeded; until then prepare
   /// keeps saying the layout changed). Every co-rotational body's warp is due again (warps()): the
   /// device's aggregates start at the identity.
