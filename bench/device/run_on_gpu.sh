@@ -15,7 +15,8 @@
 # MORTON_TIMEOUT (seconds, 400 and TEST_TIMEOUT: they all run at once now) bound each binary, MORTON_SUITES (those five by
 # default; "" for none) names the suites run again, TEST_SUITES (all by default) the suites run, and test_opencl runs in OPENCL_SHARDS
 # (6) gtest shards in each numbering. vulkanab: bench_vulkan's steps under each VulkanTuning::groupPcgNodes in
-# VULKANAB ("0 -1": the default against a dispatch per phase), in turns. profile also profiles the multigrid's
+# VULKANAB ("3000 -1": the 1k and 10k boxes in one dispatch, against a dispatch per phase; the default, 0, puts
+# the 10k box's 2,100 nodes on the per-phase path), in turns. profile also profiles the multigrid's
 # iteration (pcg_iteration_amg, 10k). Call it as `bash bench/device/run_on_gpu.sh 2>&1` with nothing after it:
 # the device tool gives back nothing of a pipeline it kills at the call's limit (a `| grep` lost a whole call).
 set -uo pipefail
@@ -84,8 +85,9 @@ if has tests; then  # every suite and the Morton reruns at once (16 cores; the G
   wait "${pids[@]}"
   echo "tests took $SECONDS s since the script began"
   sort /tmp/logs/exits
-  for f in /tmp/logs/test_*.log /tmp/logs/morton_*.log; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
-  grep -h -E '^\[  FAILED  \]' /tmp/logs/test_*.log /tmp/logs/morton_*.log | head -40
+  logs=(/tmp/logs/test_*.log); [[ -n $(compgen -G '/tmp/logs/morton_*.log') ]] && logs+=(/tmp/logs/morton_*.log)
+  for f in "${logs[@]}"; do echo "$(basename $f): $(grep -E '^\[  (PASSED|SKIPPED) ' $f | tr '\n' ' ')"; done
+  grep -h -E '^\[  FAILED  \]' "${logs[@]}" | head -40
 fi
 
 B=$g/bin
@@ -170,7 +172,7 @@ if has vulkan; then  # the Vulkan backend on the GPU: its benchmark, then the re
 fi
 if has vulkanab; then  # Vulkan PCG paths in turns: bench_vulkan's steps under each groupPcgNodes in VULKANAB
   for round in $(seq "${VULKANAB_ROUNDS:-2}"); do
-    for v in ${VULKANAB:-0 -1}; do
+    for v in ${VULKANAB:-3000 -1}; do
       timeout 200 "$B/bench_vulkan" --group_pcg_nodes="$v" --benchmark_filter="${VULKANAB_FILTER:-^step/0/(1k|10k)/}" \
         --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | \
         awk -v g="$v" '{print "group_pcg_nodes=" g, $1, $2, $3, $4, $5}'

@@ -3,6 +3,8 @@
 // keeps it under a rigid rotation of the body, partially constrained nodes, and the reference
 // backend's "amg" preconditioner against its diagonal one.
 #include "common/body_backend.hpp"
+#include "device/body_layout.hpp"
+#include "device/device_amg.hpp"
 #include "model/element.hpp"
 #include "precond/amg.hpp"
 #include "reference/small_meshes.hpp"
@@ -309,6 +311,111 @@ TEST(WarpedAmg, AChangedMaterialOrMeshGivesTheHierarchyTheNewStiffness) {
   ASSERT_EQ(body.ensure(other, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
   EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(other, free, kBackwardEulerMass, 1.0)),
             1e-14);
+  // Another mesh of as many nodes, the same material: twice as long, so other element gradients.
+  Problem longer = test::makeProblem(test::boxMesh(12, 3, 3, 2.0, 0.1, 0.1, 0.0, 6), 1e6, 0.3, 1000.0);
+  longer.constrained = other.constrained;
+  body.clear();
+  ASSERT_EQ(body.ensure(longer, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
+  EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(longer, free, kBackwardEulerMass, 1.0)),
+            1e-14)
+      << "the set-up used the stiffness of the shorter mesh";
+}
+
+TEST(WarpedAmg, TheRestOperatorRefusesFreeDofsOutOfOrder) {
+  const Problem p = beam(4);
+  std::vector<Eigen::Index> free = freeDofs(p);
+  std::swap(free[3], free[4]);
+  EXPECT_THROW(restOperator(restStiffness(p), p, free, 1.0, 1.0), Error);
 }
 
 }  // namespace
+
+namespace {
+
+/// What every entry of a device matrix should be: body s's matrix m at rows row(s, i), columns
+/// colOffset[s] + j, and nothing else.
+template <class Row>
+void expectJoined(const AmgMatrix& device, const std::vector<const AmgMatrix*>& parts, const Row& row,
+                  const std::vector<std::size_t>& colOffset, const char* what) {
+  SCOPED_TRACE(what);
+  ASSERT_TRUE(device.isCompressed());
+  Eigen::Index entries = 0;
+  for (std::size_t s = 0; s < parts.size(); ++s) {
+    if (!parts[s]) continue;
+    entries += parts[s]->nonZeros();
+    for (Eigen::Index i = 0; i < parts[s]->rows(); ++i)
+      for (AmgMatrix::InnerIterator it(*parts[s], i); it; ++it)
+        ASSERT_EQ(device.coeff(static_cast<Eigen::Index>(row(s, i)), static_cast<Eigen::Index>(colOffset[s]) + it.col()),
+                  it.value())
+            << "body " << s << " entry (" << i << ", " << it.col() << ")";
+  }
+  EXPECT_EQ(device.nonZeros(), entries);
+  for (Eigen::Index r = 0; r < device.outerSize(); ++r)  // each row's columns ascend
+    for (int k = device.outerIndexPtr()[r] + 1; k < device.outerIndexPtr()[r + 1]; ++k)
+      ASSERT_LT(device.innerIndexPtr()[k - 1], device.innerIndexPtr()[k]) << "row " << r;
+}
+
+}  // namespace
+
+TEST(DeviceAmg, TheLevelsLaidEndToEndHoldEveryBodysEntriesInTheDevicesNumbering) {
+  // Two bodies of different depths, both in a Morton numbering (level 0's rows permuted), one with
+  // extra constrained dofs: every body's P_0, P_0^T, coarse operators, prolongators and coarsest
+  // inverse where the device finds them, nothing more.
+  Problem a = beam(160), b = beam(8);
+  for (std::size_t n = 0; n < b.mesh.nodeCount(); ++n)
+    if (n % 5 == 2) b.constrained[3 * n + 1] = 1;
+  const BodyLayout layout({&a, &b}, 1, 64, 64, 12);
+  DeviceAmg amg(layout.segments);
+  ASSERT_TRUE(amg.prepare({0, 1}, {{kBackwardEulerMass, 1.0}, {kBackwardEulerMass, 1.0}}));
+  const DeviceAmgLayout L = amg.layout(layout.nodeTotal);
+  const WarpedAmg* hierarchy[2] = {&amg.body(0).amg(), &amg.body(1).amg()};
+  ASSERT_GE(hierarchy[0]->levels().size(), 3u);
+  ASSERT_EQ(L.levels.size() + 1, std::max(hierarchy[0]->levels().size(), hierarchy[1]->levels().size()));
+  // Level 0 rows: the free dof i of body s at its device dof.
+  std::vector<std::vector<std::size_t>> fine(2);
+  for (std::size_t s = 0; s < 2; ++s) {
+    const BodySegment& sg = layout.segments[s];
+    std::vector<std::size_t> deviceDof(sg.dofs());
+    for (std::size_t d = 0; d < sg.dofs(); ++d) deviceDof[sg.hostDof(d)] = d;
+    for (Eigen::Index dof : hierarchy[s]->builtFreeDofs())
+      fine[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
+  }
+  // Level k's rows of body s from the rows of the bodies before it on that level.
+  auto offsets = [&](std::size_t k) {
+    std::vector<std::size_t> o(2, 0);
+    if (hierarchy[0]->levels().size() > k) o[1] = static_cast<std::size_t>(hierarchy[0]->levels()[k].A.rows());
+    return o;
+  };
+  auto atFine = [&](std::size_t s, Eigen::Index i) { return fine[s][static_cast<std::size_t>(i)]; };
+  expectJoined(L.P0, {&hierarchy[0]->levels()[0].P, &hierarchy[1]->levels()[0].P}, atFine, offsets(1), "P0");
+  EXPECT_EQ(AmgMatrix(L.Pt0 - AmgMatrix(L.P0.transpose())).norm(), 0.0) << "Pt0 is not P0^T";
+  for (std::size_t k = 1; k <= L.levels.size(); ++k) {
+    const std::vector<std::size_t> here = offsets(k), below = offsets(k + 1);
+    auto at = [&](std::size_t s, Eigen::Index i) { return here[s] + static_cast<std::size_t>(i); };
+    std::vector<const AmgMatrix*> A(2, nullptr), P(2, nullptr);
+    std::vector<Eigen::MatrixXd> inverse(2);
+    for (std::size_t s = 0; s < 2; ++s) {
+      const auto& levels = hierarchy[s]->levels();
+      if (k + 1 < levels.size()) {
+        A[s] = &levels[k].A;
+        P[s] = &levels[k].P;
+      } else if (k + 1 == levels.size()) {
+        inverse[s] = hierarchy[s]->coarsestInverse();
+      }
+    }
+    const DeviceAmgLevel& level = L.levels[k - 1];
+    expectJoined(level.A, A, at, here, "A_k");
+    expectJoined(level.P, P, at, below, "P_k");
+    EXPECT_EQ(AmgMatrix(level.Pt - AmgMatrix(level.P.transpose())).norm(), 0.0) << "level " << k;
+    std::size_t dense = 0;
+    for (std::size_t s = 0; s < 2; ++s) {
+      if (inverse[s].size() == 0) continue;
+      dense += static_cast<std::size_t>(inverse[s].size());
+      for (Eigen::Index i = 0; i < inverse[s].rows(); ++i)
+        for (Eigen::Index j = 0; j < inverse[s].cols(); ++j)
+          ASSERT_EQ(level.inverse.coeff(static_cast<Eigen::Index>(here[s]) + i, static_cast<Eigen::Index>(here[s]) + j),
+                    inverse[s](i, j));
+    }
+    EXPECT_EQ(level.inverseEntries, dense) << "level " << k;
+  }
+}

@@ -125,10 +125,10 @@ TEST_P(VulkanPaths, ManyIterationsInOneCallMatchOneAtATime) {
   EXPECT_TRUE(xAll == xOne) << "x differs: " << relErr(xAll, xOne);
 }
 
-/// The process's instance outlives every backend and enumeration: NVIDIA's driver (580, H100) could
-/// not be loaded again once the loader had unloaded it with the last instance, so that a backend
-/// made after the device list failed with VK_ERROR_INCOMPATIBLE_DRIVER. lavapipe reloads fine, so
-/// this checks the policy that avoids it, not the driver.
+/// The process's instance outlives every backend and enumeration: on an H100 (NVIDIA's driver 580),
+/// a backend made after the device list had been read (an instance made and dropped) failed with
+/// VK_ERROR_INCOMPATIBLE_DRIVER. lavapipe makes instances again fine, so this checks the policy
+/// that avoids it, not the driver.
 TEST(VulkanInstance, OnceMadeItOutlivesTheDeviceListAndEveryBackend) {
   std::weak_ptr<detail::vk::Instance> seen;
   try {

@@ -7,6 +7,7 @@
 #include <Eigen/QR>
 
 #include <algorithm>
+#include <functional>
 #include <cmath>
 
 namespace corofem::detail {
@@ -525,6 +526,11 @@ AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::
   if (stiffness.rows() != static_cast<Eigen::Index>(p.dofCount()) || stiffness.cols() != stiffness.rows())
     fail(ErrorCode::Internal, "restOperator: a stiffness of ", stiffness.rows(), " x ", stiffness.cols(), " for ",
          p.dofCount(), " dofs");
+  // The rows and columns below come out in order only for free dofs in ascending order.
+  if (std::adjacent_find(freeDofs.begin(), freeDofs.end(), std::greater_equal<Eigen::Index>()) != freeDofs.end() ||
+      (!freeDofs.empty() && (freeDofs.front() < 0 || freeDofs.back() >= stiffness.rows())) || !stiffness.isCompressed())
+    fail(ErrorCode::Internal, "restOperator: free dofs not strictly ascending within 0..", stiffness.rows() - 1,
+         ", or an uncompressed stiffness");
   std::vector<int> index(p.dofCount(), -1);
   for (std::size_t i = 0; i < freeDofs.size(); ++i) index[static_cast<std::size_t>(freeDofs[i])] = static_cast<int>(i);
   const auto n = static_cast<Eigen::Index>(freeDofs.size());
@@ -547,15 +553,10 @@ AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::
   return A;
 }
 
-AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
-                       double stiffScale) {
-  return restOperator(restStiffness(p), p, freeDofs, massScale, stiffScale);
-}
-
 namespace {
 
-/// What K_0 depends on, hashed (FNV-1a over the bytes): the tets, the rest positions, each
-/// element's rest volume and the material. A body whose K_0 differs gives another key but for a 2^-64 chance.
+/// What K_0 depends on, hashed (FNV-1a over the bytes): the tets, the rest positions (from which
+/// buildProblem derives the elements' gradients), each element's rest volume and the material. A body whose K_0 differs gives another key but for a 2^-64 chance.
 std::uint64_t stiffnessKey(const Problem& p) {
   std::uint64_t h = 1469598103934665603ULL;
   auto mix = [&h](const void* data, std::size_t bytes) {

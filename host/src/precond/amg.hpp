@@ -137,15 +137,13 @@ class WarpedAmg {
 
 /// K_0 of a body on all its dofs (3N x 3N): the sum of the linear element stiffnesses (the tangent
 /// of every formulation at rest), with every diagonal entry present (zero where no element adds to
-/// it), so that a mass can be added in place.
+/// it), so that restOperator always finds the entry its mass goes to.
 AmgMatrix restStiffness(const Problem& p);
-/// m M + s K_0 on the free dofs `freeDofs` (ascending dof indices) from K_0 on all dofs
-/// (restStiffness of the same body): M lumped. O(nonzeros), no assembly.
+/// m M + s K_0 on the free dofs `freeDofs` (strictly ascending dof indices) from K_0 on all dofs
+/// (restStiffness of the same body): M lumped. O(nonzeros), no assembly. Throws Error(Internal) for
+/// free dofs out of order or a stiffness of another size.
 AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::vector<Eigen::Index>& freeDofs,
                        double massScale, double stiffScale);
-/// The same, assembling K_0.
-AmgMatrix restOperator(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale,
-                       double stiffScale);
 
 /// A body's hierarchy with the coefficients it was made for: made again where the ratio m / s of a
 /// solve's operator moved by more than a factor of 2 from the one it was made with (a
@@ -183,7 +181,8 @@ class BodyAmg {
   /// K_0 on all dofs, kept across set-ups: constraints and coefficients change a hierarchy, not
   /// K_0, so a grab's set-up restricts it instead of assembling again (the assembly was about half
   /// of a set-up). Made again where the body's mesh, rest state or material differ from those it
-  /// was made from (stiffnessKey).
+  /// was made from (stiffnessKey). Its memory, about that of the hierarchy's level 0, stays with
+  /// the body (clear() keeps it: a material change is seen by the key).
   AmgMatrix stiffness_;
   std::uint64_t stiffnessKey_ = 0;
 };

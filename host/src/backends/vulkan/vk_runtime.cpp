@@ -70,10 +70,10 @@ PhysicalDevice describe(VkPhysicalDevice h, bool* usable) {
 
 std::shared_ptr<Instance> Instance::shared() {
   // Made once and kept for the process's life, never destroyed. When the last instance goes, the
-  // loader unloads the driver, and some drivers cannot be loaded again in the same process: NVIDIA's
-  // (libGLX_nvidia, driver 580, on an H100) then answers every later vkCreateInstance with
-  // VK_ERROR_INCOMPATIBLE_DRIVER, so that enumerating the devices and then creating a backend
-  // failed. A failed creation is not kept: a later call tries again.
+  // loader may unload the driver. On an H100 (NVIDIA's libGLX_nvidia, driver 580), in test
+  // binaries that had read the device list (an instance made and dropped), every later
+  // vkCreateInstance answered VK_ERROR_INCOMPATIBLE_DRIVER; with the instance kept every test
+  // passed. A failed creation is not kept: a later call tries again.
   static std::mutex mutex;
   static auto* kept = new std::shared_ptr<Instance>();  // reachable to the end, on purpose
   std::lock_guard<std::mutex> lock(mutex);
