@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 using namespace corofem;
@@ -277,6 +278,42 @@ AmgMatrix assembledRestOperator(const Problem& p, const std::vector<Eigen::Index
 
 double relativeDifference(const AmgMatrix& a, const AmgMatrix& b) {
   return AmgMatrix(a - b).norm() / b.norm();
+}
+
+TEST(WarpedAmg, TheStiffnessAssembledInPlaceIsTheOneTripletsGive) {
+  // The same pattern (every pair of nodes sharing an element, every diagonal) and the same sums in
+  // the same order: equal entries, on a mesh whose node numbering is scrambled.
+  TetMesh mesh = test::boxMesh(5, 3, 2, 0.5, 0.3, 0.2);
+  std::vector<std::uint32_t> to(mesh.nodeCount());
+  for (std::size_t n = 0; n < to.size(); ++n) to[n] = static_cast<std::uint32_t>(n);
+  std::mt19937 rng(17);
+  std::shuffle(to.begin(), to.end(), rng);
+  std::vector<double> nodes(mesh.nodes.size());
+  for (std::size_t n = 0; n < to.size(); ++n)
+    for (int c = 0; c < 3; ++c) nodes[3 * to[n] + static_cast<std::size_t>(c)] = mesh.nodes[3 * n + static_cast<std::size_t>(c)];
+  mesh.nodes = nodes;
+  for (std::uint32_t& v : mesh.tets) v = to[v];
+  const Problem p = test::makeProblem(mesh, 2e5, 0.3, 900.0);
+  std::vector<Eigen::Triplet<double, int>> t;
+  for (std::size_t e = 0; e < p.elements.size(); ++e) {
+    const Mat12 K = linearStiffness(p.elements[e], p.lame);
+    for (int a = 0; a < 12; ++a)
+      for (int b = 0; b < 12; ++b)
+        t.emplace_back(static_cast<int>(3 * p.mesh.tets[4 * e + a / 3] + a % 3),
+                       static_cast<int>(3 * p.mesh.tets[4 * e + b / 3] + b % 3), K(a, b));
+  }
+  for (std::size_t d = 0; d < p.dofCount(); ++d) t.emplace_back(static_cast<int>(d), static_cast<int>(d), 0.0);
+  AmgMatrix expected(static_cast<Eigen::Index>(p.dofCount()), static_cast<Eigen::Index>(p.dofCount()));
+  expected.setFromTriplets(t.begin(), t.end());
+  const AmgMatrix K = restStiffness(p);
+  ASSERT_EQ(K.nonZeros(), expected.nonZeros());
+  for (Eigen::Index r = 0; r < K.rows(); ++r) {
+    ASSERT_EQ(K.outerIndexPtr()[r + 1], expected.outerIndexPtr()[r + 1]) << "row " << r;
+    for (int k = K.outerIndexPtr()[r]; k < K.outerIndexPtr()[r + 1]; ++k) {
+      ASSERT_EQ(K.innerIndexPtr()[k], expected.innerIndexPtr()[k]) << "row " << r;
+      ASSERT_EQ(K.valuePtr()[k], expected.valuePtr()[k]) << "row " << r << ", column " << K.innerIndexPtr()[k];
+    }
+  }
 }
 
 TEST(WarpedAmg, TheRestOperatorRestrictedFromTheKeptStiffnessIsTheAssembledOne) {

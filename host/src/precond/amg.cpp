@@ -504,20 +504,51 @@ void WarpedAmg::apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eig
 }
 
 AmgMatrix restStiffness(const Problem& p) {
-  std::vector<Eigen::Triplet<double, int>> triplets;
-  triplets.reserve(p.elements.size() * 144 + p.dofCount());
-  for (std::size_t e = 0; e < p.elements.size(); ++e) {
-    const Mat12 K = linearStiffness(p.elements[e], p.lame);
-    for (int a = 0; a < 12; ++a) {
-      const int r = static_cast<int>(3 * p.mesh.tets[4 * e + a / 3] + a % 3);
-      for (int b = 0; b < 12; ++b)
-        triplets.emplace_back(r, static_cast<int>(3 * p.mesh.tets[4 * e + b / 3] + b % 3), K(a, b));
+  // Assembled in place: each node's neighbours (the nodes it shares an element with, itself
+  // included) sorted give every row's columns, 3 per neighbour; the element matrices are added in
+  // element order, the order in which setFromTriplets would sum them (the same bits), without a
+  // sort of 144 entries per element.
+  const std::size_t nodes = p.mesh.nodeCount(), elements = p.elements.size();
+  std::vector<std::vector<std::uint32_t>> near(nodes);
+  for (std::size_t n = 0; n < nodes; ++n) near[n].push_back(static_cast<std::uint32_t>(n));
+  for (std::size_t e = 0; e < elements; ++e)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        if (a != b) near[p.mesh.tets[4 * e + a]].push_back(p.mesh.tets[4 * e + b]);
+  std::vector<int> start(3 * nodes + 1, 0);  // each dof row's first entry
+  for (std::size_t n = 0; n < nodes; ++n) {
+    std::sort(near[n].begin(), near[n].end());
+    near[n].erase(std::unique(near[n].begin(), near[n].end()), near[n].end());
+    for (std::size_t c = 0; c < 3; ++c)
+      start[3 * n + c + 1] = start[3 * n + c] + static_cast<int>(3 * near[n].size());
+  }
+  const auto n3 = static_cast<Eigen::Index>(3 * nodes);
+  AmgMatrix K(n3, n3);
+  K.resizeNonZeros(start.back());
+  std::copy(start.begin(), start.end(), K.outerIndexPtr());
+  for (std::size_t n = 0; n < nodes; ++n)
+    for (std::size_t c = 0; c < 3; ++c)
+      for (std::size_t k = 0; k < near[n].size(); ++k)
+        for (std::size_t c2 = 0; c2 < 3; ++c2) {
+          const std::size_t at = static_cast<std::size_t>(start[3 * n + c]) + 3 * k + c2;
+          K.innerIndexPtr()[at] = static_cast<int>(3 * near[n][k] + c2);
+          K.valuePtr()[at] = 0.0;
+        }
+  for (std::size_t e = 0; e < elements; ++e) {
+    const Mat12 Ke = linearStiffness(p.elements[e], p.lame);
+    for (int a = 0; a < 4; ++a) {
+      const std::uint32_t na = p.mesh.tets[4 * e + a];
+      for (int b = 0; b < 4; ++b) {
+        const std::uint32_t nb = p.mesh.tets[4 * e + b];
+        const std::size_t k = static_cast<std::size_t>(
+            std::lower_bound(near[na].begin(), near[na].end(), nb) - near[na].begin());
+        for (int ca = 0; ca < 3; ++ca) {
+          double* row = K.valuePtr() + start[3 * na + static_cast<std::size_t>(ca)] + 3 * k;
+          for (int cb = 0; cb < 3; ++cb) row[cb] += Ke(3 * a + ca, 3 * b + cb);
+        }
+      }
     }
   }
-  for (std::size_t d = 0; d < p.dofCount(); ++d) triplets.emplace_back(static_cast<int>(d), static_cast<int>(d), 0.0);
-  const auto n = static_cast<Eigen::Index>(p.dofCount());
-  AmgMatrix K(n, n);
-  K.setFromTriplets(triplets.begin(), triplets.end());
   return K;
 }
 
