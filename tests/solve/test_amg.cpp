@@ -293,7 +293,8 @@ TEST(WarpedAmg, TheStiffnessAssembledInPlaceIsTheOneTripletsGive) {
     for (int c = 0; c < 3; ++c) nodes[3 * to[n] + static_cast<std::size_t>(c)] = mesh.nodes[3 * n + static_cast<std::size_t>(c)];
   mesh.nodes = nodes;
   for (std::uint32_t& v : mesh.tets) v = to[v];
-  const Problem p = test::makeProblem(mesh, 2e5, 0.3, 900.0);
+  for (double c : {0.9, 0.8, 0.7}) mesh.nodes.push_back(c);  // a node in no element: its diagonal alone
+  Problem p = test::makeProblem(mesh, 2e5, 0.3, 900.0);
   std::vector<Eigen::Triplet<double, int>> t;
   for (std::size_t e = 0; e < p.elements.size(); ++e) {
     const Mat12 K = linearStiffness(p.elements[e], p.lame);
@@ -312,6 +313,9 @@ TEST(WarpedAmg, TheStiffnessAssembledInPlaceIsTheOneTripletsGive) {
     for (int k = K.outerIndexPtr()[r]; k < K.outerIndexPtr()[r + 1]; ++k) {
       ASSERT_EQ(K.innerIndexPtr()[k], expected.innerIndexPtr()[k]) << "row " << r;
       ASSERT_EQ(K.valuePtr()[k], expected.valuePtr()[k]) << "row " << r << ", column " << K.innerIndexPtr()[k];
+      ASSERT_EQ(std::signbit(K.valuePtr()[k]) || K.valuePtr()[k] != 0.0,
+                std::signbit(expected.valuePtr()[k]) || expected.valuePtr()[k] != 0.0)
+          << "row " << r << ": a zero of another sign";
     }
   }
 }
@@ -441,6 +445,13 @@ TEST(DeviceAmg, TheLevelsLaidEndToEndHoldEveryBodysEntriesInTheDevicesNumbering)
       }
     }
     const DeviceAmgLevel& level = L.levels[k - 1];
+    ASSERT_EQ(level.dinv.size(), level.rows);
+    for (std::size_t s = 0; s < 2; ++s)  // the smoother's 1 / (A_ii lambda_max), 0 on a coarsest body's rows
+      for (Eigen::Index i = 0; A[s] && i < A[s]->rows(); ++i)
+        ASSERT_EQ(level.dinv[here[s] + static_cast<std::size_t>(i)],
+                  hierarchy[s]->levels()[k].diagInv[i] / hierarchy[s]->levels()[k].lambdaMax)
+            << "level " << k << ", body " << s << ", row " << i;
+    EXPECT_EQ(level.smooths, A[0] != nullptr || A[1] != nullptr) << "level " << k;
     expectJoined(level.A, A, at, here, "A_k");
     expectJoined(level.P, P, at, below, "P_k");
     EXPECT_EQ(AmgMatrix(level.Pt - AmgMatrix(level.P.transpose())).norm(), 0.0) << "level " << k;

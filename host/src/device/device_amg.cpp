@@ -51,6 +51,8 @@ struct Block {
 /// (no two blocks share a row, and a block's columns keep their order: every row comes sorted from
 /// its one source row), in O(entries) instead of a sort of them.
 AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<Block>& blocks) {
+  for (const Block& b : blocks)
+    if (b.sparse && !b.sparse->isCompressed()) fail(ErrorCode::Internal, "amg layout: an uncompressed level matrix");
   std::vector<int> start(rows + 1, 0);  // entries of each row, then where each row starts
   for (const Block& b : blocks)
     for (Eigen::Index i = 0; i < b.rows(); ++i)

@@ -506,8 +506,8 @@ void WarpedAmg::apply(const AmgFineOperator& fine, const Eigen::VectorXd& r, Eig
 AmgMatrix restStiffness(const Problem& p) {
   // Assembled in place: each node's neighbours (the nodes it shares an element with, itself
   // included) sorted give every row's columns, 3 per neighbour; the element matrices are added in
-  // element order, the order in which setFromTriplets would sum them (the same bits), without a
-  // sort of 144 entries per element.
+  // element order, the order in which setFromTriplets would sum them (the same values; only an
+  // entry whose every term is -0 comes out +0), without a sort of 144 entries per element.
   const std::size_t nodes = p.mesh.nodeCount(), elements = p.elements.size();
   std::vector<std::vector<std::uint32_t>> near(nodes);
   for (std::size_t n = 0; n < nodes; ++n) near[n].push_back(static_cast<std::uint32_t>(n));
@@ -515,25 +515,32 @@ AmgMatrix restStiffness(const Problem& p) {
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b)
         if (a != b) near[p.mesh.tets[4 * e + a]].push_back(p.mesh.tets[4 * e + b]);
+  // A node in no element (its dofs constrained, or freed by the application) has its diagonal alone.
   std::vector<int> start(3 * nodes + 1, 0);  // each dof row's first entry
   for (std::size_t n = 0; n < nodes; ++n) {
     std::sort(near[n].begin(), near[n].end());
     near[n].erase(std::unique(near[n].begin(), near[n].end()), near[n].end());
-    for (std::size_t c = 0; c < 3; ++c)
-      start[3 * n + c + 1] = start[3 * n + c] + static_cast<int>(3 * near[n].size());
+    const int width = near[n].size() > 1 ? static_cast<int>(3 * near[n].size()) : 1;
+    for (std::size_t c = 0; c < 3; ++c) start[3 * n + c + 1] = start[3 * n + c] + width;
   }
   const auto n3 = static_cast<Eigen::Index>(3 * nodes);
   AmgMatrix K(n3, n3);
   K.resizeNonZeros(start.back());
   std::copy(start.begin(), start.end(), K.outerIndexPtr());
   for (std::size_t n = 0; n < nodes; ++n)
-    for (std::size_t c = 0; c < 3; ++c)
+    for (std::size_t c = 0; c < 3; ++c) {
+      const std::size_t row = static_cast<std::size_t>(start[3 * n + c]);
+      if (near[n].size() == 1) {
+        K.innerIndexPtr()[row] = static_cast<int>(3 * n + c);
+        K.valuePtr()[row] = 0.0;
+        continue;
+      }
       for (std::size_t k = 0; k < near[n].size(); ++k)
         for (std::size_t c2 = 0; c2 < 3; ++c2) {
-          const std::size_t at = static_cast<std::size_t>(start[3 * n + c]) + 3 * k + c2;
-          K.innerIndexPtr()[at] = static_cast<int>(3 * near[n][k] + c2);
-          K.valuePtr()[at] = 0.0;
+          K.innerIndexPtr()[row + 3 * k + c2] = static_cast<int>(3 * near[n][k] + c2);
+          K.valuePtr()[row + 3 * k + c2] = 0.0;
         }
+    }
   for (std::size_t e = 0; e < elements; ++e) {
     const Mat12 Ke = linearStiffness(p.elements[e], p.lame);
     for (int a = 0; a < 4; ++a) {
