@@ -7,8 +7,8 @@
 #include <Eigen/QR>
 
 #include <algorithm>
-#include <functional>
 #include <cmath>
+#include <functional>
 
 namespace corofem::detail {
 
@@ -594,7 +594,8 @@ AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::
 namespace {
 
 /// What K_0 depends on, hashed (FNV-1a over the bytes): the tets, the rest positions (from which
-/// buildProblem derives the elements' gradients), each element's rest volume and the material. A body whose K_0 differs gives another key but for a 2^-64 chance.
+/// buildProblem derives the elements' gradients), each element's rest volume and the material. A
+/// body whose K_0 differs gives another key but for a 2^-64 chance.
 std::uint64_t stiffnessKey(const Problem& p) {
   std::uint64_t h = 1469598103934665603ULL;
   auto mix = [&h](const void* data, std::size_t bytes) {

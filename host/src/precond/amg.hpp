@@ -159,7 +159,8 @@ AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::
 /// 140 on the 12,960-tet beam, docs/performance.md).
 /// (Keeping the hierarchy of before for a grab, its cycle restricted to the fewer free dofs, was
 /// tried: 40 PCG iterations a step instead of 18 on the 12,960-tet beam with its tip held, twice
-/// the step time, where the set-up costs about four steps; bench_precond's precondGrab.)
+/// the step time, where the set-up then cost about four steps, now under three; bench_precond's
+/// precondGrab.)
 class BodyAmg {
  public:
   BodyAmg();
