@@ -2,12 +2,14 @@
 #include "precond/amg.hpp"
 
 #include "util/error.hpp"
+#include "util/parallel.hpp"
 
 #include <Eigen/LU>
 #include <Eigen/QR>
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <functional>
 
 namespace corofem::detail {
@@ -204,6 +206,38 @@ std::pair<AmgMatrix, AmgMatrix> nodeBlocks(const Eigen::SparseMatrix<double>& A,
   return nodeBlocksOf(A, freeDofs);
 }
 
+AmgMatrix sparseProduct(const AmgMatrix& A, const AmgMatrix& B) {
+  const std::size_t rows = static_cast<std::size_t>(A.rows());
+  if (rows <= kProductRows) return AmgMatrix(A * B);
+  std::vector<AmgMatrix> parts(chunkCount(rows, kProductRows));
+  std::vector<std::exception_ptr> failed(parts.size());
+  parallelChunks(rows, kProductRows, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    try {
+      parts[c] = A.middleRows(static_cast<Eigen::Index>(begin), static_cast<Eigen::Index>(end - begin)) * B;
+      parts[c].makeCompressed();
+    } catch (...) {
+      failed[c] = std::current_exception();  // parallelChunks' tasks must not throw
+    }
+  });
+  for (const std::exception_ptr& f : failed)
+    if (f) std::rethrow_exception(f);
+  // The slices' rows one after another.
+  Eigen::Index entries = 0;
+  for (const AmgMatrix& part : parts) entries += part.nonZeros();
+  AmgMatrix out(A.rows(), B.cols());
+  out.resizeNonZeros(entries);
+  int at = 0;
+  Eigen::Index row = 0;
+  for (const AmgMatrix& part : parts) {
+    std::copy(part.innerIndexPtr(), part.innerIndexPtr() + part.nonZeros(), out.innerIndexPtr() + at);
+    std::copy(part.valuePtr(), part.valuePtr() + part.nonZeros(), out.valuePtr() + at);
+    for (Eigen::Index r = 0; r < part.rows(); ++r) out.outerIndexPtr()[row + r + 1] = at + part.outerIndexPtr()[r + 1];
+    at += static_cast<int>(part.nonZeros());
+    row += part.rows();
+  }
+  return out;
+}
+
 void WarpedAmg::clear() {
   made_ = false;
   levels_.clear();
@@ -350,11 +384,11 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
 
     // P = (I - omega D^-1 A) P_t.
     const double omega = 4.0 / (3.0 * level.lambdaMax);
-    AmgMatrix AP = level.A * tentative;
+    AmgMatrix AP = sparseProduct(level.A, tentative);
     AmgMatrix P = tentative - AmgMatrix((omega * level.diagInv).asDiagonal() * AP);
     P.prune(0.0);
     AmgMatrix Pt = P.transpose();
-    AmgMatrix coarse = Pt * (level.A * P);
+    AmgMatrix coarse = sparseProduct(Pt, sparseProduct(level.A, P));
     coarse = AmgMatrix(0.5 * (coarse + AmgMatrix(coarse.transpose())));
     coarse.prune(0.0);
 
