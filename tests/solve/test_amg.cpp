@@ -373,8 +373,6 @@ TEST(WarpedAmg, TheRestOperatorRefusesFreeDofsOutOfOrder) {
 
 namespace {
 
-/// What every entry of a device matrix should be: body s's matrix m at rows row(s, i), columns
-/// colOffset[s] + j, and nothing else.
 /// Whether `pt` holds exactly the entries of `p` transposed (any size, empty included).
 bool isTransposeOf(const AmgMatrix& pt, const AmgMatrix& p) {
   const AmgMatrix t = p.transpose();
@@ -390,6 +388,8 @@ bool isTransposeOf(const AmgMatrix& pt, const AmgMatrix& p) {
   return true;
 }
 
+/// What every entry of a device matrix should be: body s's matrix m at rows row(s, i), columns
+/// colOffset[s] + j, and nothing else.
 template <class Row>
 void expectJoined(const AmgMatrix& device, const std::vector<const AmgMatrix*>& parts, const Row& row,
                   const std::vector<std::size_t>& colOffset, const char* what) {
@@ -488,7 +488,7 @@ TEST(WarpedAmg, TheProductInSlicesOfRowsIsEigensProductBitForBit) {
   // bits as the whole product, whatever the host's threads did with the slices.
   const Problem p = beam(150);
   const AmgMatrix K = restStiffness(p);
-  ASSERT_GT(static_cast<std::size_t>(K.rows()), 2 * kProductRows);  // three slices, the last one short
+  ASSERT_GT(static_cast<std::size_t>(K.rows()), 2 * kProductRows);  // 7,248 rows: four slices, the last short
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::vector<Eigen::Triplet<double, int>> t;
@@ -498,6 +498,7 @@ TEST(WarpedAmg, TheProductInSlicesOfRowsIsEigensProductBitForBit) {
   B.setFromTriplets(t.begin(), t.end());
   const AmgMatrix whole = K * B, sliced = sparseProduct(K, B);
   ASSERT_EQ(sliced.rows(), whole.rows());
+  ASSERT_EQ(sliced.cols(), whole.cols());
   ASSERT_EQ(sliced.nonZeros(), whole.nonZeros());
   for (Eigen::Index r = 0; r <= whole.rows(); ++r) ASSERT_EQ(sliced.outerIndexPtr()[r], whole.outerIndexPtr()[r]);
   for (Eigen::Index k = 0; k < whole.nonZeros(); ++k) {

@@ -24,7 +24,9 @@ namespace corofem {
 
 /// Runs task(0), ..., task(count - 1), each exactly once, and returns when every one has returned.
 /// The tasks are independent: they may run at once on any threads, in any order (an engine's job
-/// system, a thread pool, or a plain loop). They do not throw.
+/// system, a thread pool, or a plain loop). They do not throw. A task may use up to about 300 KiB
+/// of stack (Eigen's sparse products in the multigrid's set-up keep their scratch there): give
+/// fibers or job threads with smaller stacks only to plain loops.
 using TaskRunner = std::function<void(std::size_t count, const std::function<void(std::size_t)>& task)>;
 
 /// What one step (dynamics) or one load increment (statics) did, summed over bodies.
