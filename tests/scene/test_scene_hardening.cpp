@@ -295,7 +295,7 @@ TEST(FuzzFinding, AScaleThatOverflowsOrUnderflowsTheMeshIsBadInput) {
   // Scene values in range (a finite scale > 0) gave a mesh with infinite coordinates or elements of
   // zero volume; loadBodyMesh returned it as good (Simulation::create refused it later, without
   // naming the scale).
-  for (const char* scale : {"1e+308", "1e-120"}) {
+  for (const char* scale : {"1e+308", "1e+120", "1e-120"}) {  // 1e+120: coordinates finite, volumes not
     const Scene scene = test::parseOk(std::string(R"({"bodies": [{"name": "b", "mesh": {"box": {"max": [2, 2, 2]},)") +
                                       R"( "scale": )" + scale + "}}]}");
     const Result<TetMesh> mesh = loadBodyMesh(scene.bodies[0], "");
@@ -305,6 +305,8 @@ TEST(FuzzFinding, AScaleThatOverflowsOrUnderflowsTheMeshIsBadInput) {
   }
   const Scene far = test::parseOk(R"({"bodies": [{"mesh": {"box": {}, "translate": [1e300, 0, 0]}}]})");
   EXPECT_TRUE(has(loadBodyMesh(far.bodies[0], "").message(), "volume round to zero"));
+  const Scene huge = test::parseOk(R"({"bodies": [{"mesh": {"box": {}, "scale": 1e+120}}]})");
+  EXPECT_TRUE(has(loadBodyMesh(huge.bodies[0], "").message(), "volume overflow")) << loadBodyMesh(huge.bodies[0], "").message();
   const Scene fine = test::parseOk(R"({"bodies": [{"mesh": {"box": {}, "scale": 1e-3, "translate": [5, 0, 0]}}]})");
   EXPECT_TRUE(loadBodyMesh(fine.bodies[0], "").isOk());
 }

@@ -98,9 +98,9 @@ Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, M
   for (std::size_t n = 0; n < mesh.nodeCount(); ++n)
     for (int a = 0; a < 3; ++a) mesh.nodes[3 * n + a] = source.scale * mesh.nodes[3 * n + a] + source.translate[a];
   if (source.scale == 1 && source.translate == Vec3{0, 0, 0}) return mesh;
-  // A finite scale and translation can still overflow a coordinate (scale 1e308) or round an
-  // element's volume to zero (scale 1e-120: the volume goes as scale^3); the mesh as loaded had
-  // neither, so the transformation is to blame.
+  // A finite scale and translation can still overflow a coordinate (scale 1e308), an element's
+  // volume (scale 1e120) or round it to zero (scale 1e-120: the volume goes as scale^3); the mesh
+  // as loaded had none of these, so the transformation is to blame.
   const std::string transform = "mesh scale " + scene::formatNumber(source.scale) + " and translation " +
                                 scene::formatVec3(source.translate.data());
   for (std::size_t i = 0; i < mesh.nodes.size(); ++i)
@@ -108,10 +108,15 @@ Result<TetMesh> loadBodyMesh(const BodyDesc& body, const std::string& baseDir, M
       return Result<TetMesh>(ErrorCode::BadInput, where + "the " + transform + " move node " +
                                                       std::to_string(i / 3) +
                                                       " to a non-finite coordinate; use a smaller scale or translation");
-  for (std::size_t e = 0; e < mesh.tetCount(); ++e)
-    if (!(signedVolume(mesh, e) > 0))
+  for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
+    const double v = signedVolume(mesh, e);
+    if (!(v > 0))
       return Result<TetMesh>(ErrorCode::BadInput, where + "the " + transform + " make element " + std::to_string(e) +
                                                       "'s volume round to zero; use a scale closer to 1");
+    if (!std::isfinite(v))  // finite coordinates whose product overflows (scale 1e120: the volume goes as scale^3)
+      return Result<TetMesh>(ErrorCode::BadInput, where + "the " + transform + " make element " + std::to_string(e) +
+                                                      "'s volume overflow; use a scale closer to 1");
+  }
   return mesh;
 }
 
