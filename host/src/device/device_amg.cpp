@@ -32,56 +32,6 @@ SlicedEll slicedEll(const AmgMatrix& m, std::size_t slice) {
   return out;
 }
 
-namespace {
-
-/// A body's part of a device matrix: its matrix (sparse, or dense with every entry kept), its row i
-/// at (*rowMap)[i] where given, else at rowOffset + i, its column j at colOffset + j.
-struct Block {
-  const AmgMatrix* sparse = nullptr;
-  const Eigen::MatrixXd* dense = nullptr;
-  const std::vector<std::size_t>* rowMap = nullptr;
-  std::size_t rowOffset = 0, colOffset = 0;
-  Eigen::Index rows() const { return sparse ? sparse->rows() : dense->rows(); }
-  std::size_t row(Eigen::Index i) const {
-    return rowMap ? (*rowMap)[static_cast<std::size_t>(i)] : rowOffset + static_cast<std::size_t>(i);
-  }
-};
-
-/// The `rows` x `cols` matrix of the blocks, as setFromTriplets of their entries would make it
-/// (no two blocks share a row, and a block's columns keep their order: every row comes sorted from
-/// its one source row), in O(entries) instead of a sort of them.
-AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<Block>& blocks) {
-  for (const Block& b : blocks)
-    if (b.sparse && !b.sparse->isCompressed()) fail(ErrorCode::Internal, "amg layout: an uncompressed level matrix");
-  std::vector<int> start(rows + 1, 0);  // entries of each row, then where each row starts
-  for (const Block& b : blocks)
-    for (Eigen::Index i = 0; i < b.rows(); ++i)
-      start[b.row(i) + 1] = static_cast<int>(b.sparse ? b.sparse->outerIndexPtr()[i + 1] - b.sparse->outerIndexPtr()[i]
-                                                      : b.dense->cols());
-  for (std::size_t r = 0; r < rows; ++r) start[r + 1] += start[r];
-  AmgMatrix out(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
-  out.resizeNonZeros(start[rows]);
-  std::copy(start.begin(), start.end(), out.outerIndexPtr());
-  for (const Block& b : blocks)
-    for (Eigen::Index i = 0; i < b.rows(); ++i) {
-      int at = start[b.row(i)];
-      if (b.sparse) {
-        for (AmgMatrix::InnerIterator it(*b.sparse, i); it; ++it, ++at) {
-          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(it.col()));
-          out.valuePtr()[at] = it.value();
-        }
-      } else {
-        for (Eigen::Index j = 0; j < b.dense->cols(); ++j, ++at) {
-          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(j));
-          out.valuePtr()[at] = (*b.dense)(i, j);
-        }
-      }
-    }
-  return out;
-}
-
-}  // namespace
-
 DeviceAmg::DeviceAmg(const std::vector<BodySegment>& segments)
     : segs_(segments),
       bodies_(segments.size()),
@@ -163,11 +113,11 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
   DeviceAmgLayout out;
   out.levels.resize(depth - 1);
   {
-    std::vector<Block> p;
+    std::vector<MatrixBlock> p;
     for (std::size_t s = 0; s < K; ++s) {
       const auto& levels = bodies_[s].amg().levels();
       if (levels.size() < 2) continue;
-      Block b;
+      MatrixBlock b;
       b.sparse = &levels[0].P;
       b.rowMap = &fineRow[s];
       b.colOffset = offset[1][s];
@@ -181,11 +131,11 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
     DeviceAmgLevel& L = out.levels[k - 1];
     L.rows = rows[k];
     L.dinv.assign(rows[k], 0.0);
-    std::vector<Block> a, p, inv;
+    std::vector<MatrixBlock> a, p, inv;
     for (std::size_t s = 0; s < K; ++s) {
       const auto& levels = bodies_[s].amg().levels();
       if (k >= levels.size()) continue;
-      Block b;
+      MatrixBlock b;
       b.rowOffset = b.colOffset = offset[k][s];
       if (k + 1 == levels.size()) {  // the body's coarsest: its dense inverse, no smoothing
         inverses[s] = bodies_[s].amg().coarsestInverse();

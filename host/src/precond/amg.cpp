@@ -2,6 +2,7 @@
 #include "precond/amg.hpp"
 
 #include "util/error.hpp"
+#include "util/hash.hpp"
 #include "util/parallel.hpp"
 
 #include <Eigen/LU>
@@ -221,20 +222,41 @@ AmgMatrix sparseProduct(const AmgMatrix& A, const AmgMatrix& B) {
   });
   for (const std::exception_ptr& f : failed)
     if (f) std::rethrow_exception(f);
-  // The slices' rows one after another.
-  Eigen::Index entries = 0;
-  for (const AmgMatrix& part : parts) entries += part.nonZeros();
-  AmgMatrix out(A.rows(), B.cols());
-  out.resizeNonZeros(entries);
-  int at = 0;
-  Eigen::Index row = 0;
-  for (const AmgMatrix& part : parts) {
-    std::copy(part.innerIndexPtr(), part.innerIndexPtr() + part.nonZeros(), out.innerIndexPtr() + at);
-    std::copy(part.valuePtr(), part.valuePtr() + part.nonZeros(), out.valuePtr() + at);
-    for (Eigen::Index r = 0; r < part.rows(); ++r) out.outerIndexPtr()[row + r + 1] = at + part.outerIndexPtr()[r + 1];
-    at += static_cast<int>(part.nonZeros());
-    row += part.rows();
+  std::vector<MatrixBlock> slices(parts.size());  // the slices' rows one after another
+  for (std::size_t c = 0; c < parts.size(); ++c) {
+    slices[c].sparse = &parts[c];
+    slices[c].rowOffset = c * kProductRows;
   }
+  return joined(rows, static_cast<std::size_t>(B.cols()), slices);
+}
+
+AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<MatrixBlock>& blocks) {
+  for (const MatrixBlock& b : blocks)
+    if (b.sparse && !b.sparse->isCompressed()) fail(ErrorCode::Internal, "joined: an uncompressed matrix");
+  std::vector<int> start(rows + 1, 0);  // entries of each row, then where each row starts
+  for (const MatrixBlock& b : blocks)
+    for (Eigen::Index i = 0; i < b.rows(); ++i)
+      start[b.row(i) + 1] = static_cast<int>(b.sparse ? b.sparse->outerIndexPtr()[i + 1] - b.sparse->outerIndexPtr()[i]
+                                                      : b.dense->cols());
+  for (std::size_t r = 0; r < rows; ++r) start[r + 1] += start[r];
+  AmgMatrix out(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+  out.resizeNonZeros(start[rows]);
+  std::copy(start.begin(), start.end(), out.outerIndexPtr());
+  for (const MatrixBlock& b : blocks)
+    for (Eigen::Index i = 0; i < b.rows(); ++i) {
+      int at = start[b.row(i)];
+      if (b.sparse) {
+        for (AmgMatrix::InnerIterator it(*b.sparse, i); it; ++it, ++at) {
+          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(it.col()));
+          out.valuePtr()[at] = it.value();
+        }
+      } else {
+        for (Eigen::Index j = 0; j < b.dense->cols(); ++j, ++at) {
+          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(j));
+          out.valuePtr()[at] = (*b.dense)(i, j);
+        }
+      }
+    }
   return out;
 }
 
@@ -631,11 +653,8 @@ namespace {
 /// buildProblem derives the elements' gradients), each element's rest volume and the material. A
 /// body whose K_0 differs gives another key but for a 2^-64 chance.
 std::uint64_t stiffnessKey(const Problem& p) {
-  std::uint64_t h = 1469598103934665603ULL;
-  auto mix = [&h](const void* data, std::size_t bytes) {
-    const auto* c = static_cast<const unsigned char*>(data);
-    for (std::size_t i = 0; i < bytes; ++i) h = (h ^ c[i]) * 1099511628211ULL;
-  };
+  std::uint64_t h = kFnv1aOffset;
+  auto mix = [&h](const void* data, std::size_t bytes) { h = fnv1a64(data, bytes, h); };
   mix(p.mesh.tets.data(), p.mesh.tets.size() * sizeof(p.mesh.tets[0]));
   mix(p.restPositions.data(), static_cast<std::size_t>(p.restPositions.size()) * sizeof(double));
   for (const ElementRest& e : p.elements) mix(&e.volume, sizeof(e.volume));

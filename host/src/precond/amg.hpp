@@ -135,6 +135,26 @@ class WarpedAmg {
   Eigen::VectorXd rest_;
 };
 
+/// A part of a matrix that joined() puts together: a matrix (sparse, or dense with every entry
+/// kept), its row i at (*rowMap)[i] where given, else at rowOffset + i, its column j at
+/// colOffset + j.
+struct MatrixBlock {
+  const AmgMatrix* sparse = nullptr;
+  const Eigen::MatrixXd* dense = nullptr;
+  const std::vector<std::size_t>* rowMap = nullptr;
+  std::size_t rowOffset = 0, colOffset = 0;
+  Eigen::Index rows() const { return sparse ? sparse->rows() : dense->rows(); }
+  std::size_t row(Eigen::Index i) const {
+    return rowMap ? (*rowMap)[static_cast<std::size_t>(i)] : rowOffset + static_cast<std::size_t>(i);
+  }
+};
+
+/// The `rows` x `cols` matrix of the blocks, as setFromTriplets of their entries would make it
+/// (no two blocks share a row, and a block's columns keep their order: every row comes sorted from
+/// its one source row), in O(entries) instead of a sort of them. Throws Error(Internal) for an
+/// uncompressed sparse block.
+AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<MatrixBlock>& blocks);
+
 /// A B for row-major A and B, in slices of kProductRows rows of A on the host's threads
 /// (parallelChunks): each row is Eigen's product of that row, so the bits do not depend on the
 /// slicing or the threads. The Galerkin products of a set-up (about 33 ms of a grab's on the

@@ -2,8 +2,8 @@
 #include "backends/opencl/program_cache.hpp"
 
 #include "util/cache_dir.hpp"
-
 #include "util/error.hpp"
+#include "util/hash.hpp"
 
 #include <algorithm>
 #include <array>
@@ -31,12 +31,7 @@ namespace corofem::detail::cl {
 namespace fs = std::filesystem;
 
 std::uint64_t fnv1a64(const std::string& text, std::uint64_t seed) {
-  std::uint64_t h = seed;
-  for (unsigned char c : text) {
-    h ^= c;
-    h *= 1099511628211ull;
-  }
-  return h;
+  return detail::fnv1a64(text.data(), text.size(), seed);
 }
 
 std::string kernelCacheDirectory() {

@@ -6,6 +6,7 @@
 #pragma once
 
 #include "backends/opencl/cl_context.hpp"
+#include "util/hash.hpp"
 
 #include <cstdint>
 #include <string>
@@ -32,7 +33,7 @@ std::string kernelCacheDirectory();
 std::string corofemProgramSource();
 
 /// 64-bit FNV-1a hash (cache keys).
-std::uint64_t fnv1a64(const std::string& text, std::uint64_t seed = 1469598103934665603ull);
+std::uint64_t fnv1a64(const std::string& text, std::uint64_t seed = kFnv1aOffset);
 
 /// Returns the program built from `source` with `options` on ctx: from the context's memory cache,
 /// else from the disk cache, else compiled. Throws Error(DeviceError) with the compiler's build log

@@ -1,6 +1,8 @@
 // The embedded SPIR-V (shaders.hpp). The .inc files are glslc's C initializer lists.
 #include "backends/vulkan/shaders.hpp"
 
+#include "util/hash.hpp"
+
 #include <initializer_list>
 
 namespace corofem::detail::vk {
@@ -80,13 +82,12 @@ Spirv shaderCode(Shader shader, bool isDouble) {
 }
 
 std::uint64_t shaderHash() {
-  std::uint64_t h = 1469598103934665603ull;
+  std::uint64_t h = kFnv1aOffset;
   for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup,
                    Shader::Surface, Shader::Amg})
     for (bool d : {false, true}) {
       const Spirv code = shaderCode(s, d);
-      const unsigned char* bytes = reinterpret_cast<const unsigned char*>(code.words);
-      for (std::size_t i = 0; i < code.bytes; ++i) h = (h ^ bytes[i]) * 1099511628211ull;
+      h = fnv1a64(code.words, code.bytes, h);
     }
   return h;
 }
