@@ -91,9 +91,10 @@ struct VulkanTuning {
   /// Bodies of at most this many nodes run their PCG iterations in one dispatch, a work-group per
   /// body meeting at barriers (kernels/vulkan/pcg_group.comp); larger ones take a dispatch per
   /// phase (an update, the product's element and node passes, the scalars: four an iteration), which
-  /// spreads a body over the device. 0 = 2,048 (on lavapipe, a step of a 270-node block: 8.5 ms in
-  /// one dispatch against 10.0 ms per phase; of a 2,100-node block: 55 against 35 ms; not yet
-  /// measured on a GPU: docs/performance.md); -1 = never.
+  /// spreads a body over the device. 0 = 2,048 on a CPU device (on lavapipe, a step of a 270-node
+  /// block: 8.5 ms in one dispatch against 10.0 ms per phase; of a 2,100-node block: 55 against
+  /// 35 ms) and never on a GPU (an H200: 2.5 against 1.7 ms for the 270-node block, 14.2 against
+  /// 2.6 ms for the 2,100-node one; docs/performance.md); -1 = never.
   long long groupPcgNodes = 0;
   /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
   int localityOrder = -1;
