@@ -17,7 +17,8 @@
 # (6) gtest shards in each numbering. vulkanab: bench_vulkan's steps under each VulkanTuning::groupPcgNodes in
 # VULKANAB ("3000 -1": the 1k and 10k boxes in one dispatch, against a dispatch per phase; the default, 0, puts
 # the 10k box's 2,100 nodes on the per-phase path), in turns. profile also profiles the multigrid's
-# iteration (pcg_iteration_amg, 10k). Call it as `bash bench/device/run_on_gpu.sh 2>&1` with nothing after it:
+# iteration (pcg_iteration_amg, 10k). vulkanstep: bench_vulkan's steps from the binaries in VULKANSTEP, in
+# turns (see the stage). Call it as `bash bench/device/run_on_gpu.sh 2>&1` with nothing after it:
 # the device tool gives back nothing of a pipeline it kills at the call's limit (a `| grep` lost a whole call).
 set -uo pipefail
 root=$(pwd)
@@ -178,6 +179,18 @@ if has vulkanab; then  # Vulkan PCG paths in turns: bench_vulkan's steps under e
         awk -v g="$v" '{print "group_pcg_nodes=" g, $1, $2, $3, $4, $5}'
     done
   done | tee /tmp/logs/vulkanab.txt
+fi
+if has vulkanstep; then  # bench_vulkan's whole steps from several binaries (an A/B of two commits), in turns
+  # VULKANSTEP: space-separated binary[:groupPcgNodes] (binaries in .gpu/bin, e.g. a bench_vulkan_old
+  # built at the commit before), VULKANSTEP_FILTER the sizes; VULKANSTEP_ROUNDS rounds (2).
+  for round in $(seq "${VULKANSTEP_ROUNDS:-2}"); do
+    for e in ${VULKANSTEP:-bench_vulkan}; do
+      b=${e%%:*}; g=${e#*:}; [[ $g == "$e" ]] && g=0
+      timeout 200 "$B/$b" --group_pcg_nodes="$g" --benchmark_filter="${VULKANSTEP_FILTER:-^step/0/}" \
+        --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | \
+        awk -v r="$round" -v e="$e" '{print "round " r, e, $1, $2, $3, $4, $5, $9, $10}'
+    done
+  done | tee /tmp/logs/vulkanstep.txt
 fi
 if has precond; then  # the preconditioners per converged step on the GPU (issue 29's beam, both APIs)
   (cd "$root" && timeout 240 "$B/bench_precond" \

@@ -409,14 +409,27 @@ TEST(Dynamics, RollbackRestoresThePreviousStep) {
   SpringChainBackend backend(osc.problem, osc.k);
   DynamicSolver solver(osc.problem, backend, DynamicDesc{});
   solver.step(1, 3);
-  const Eigen::VectorXd x1 = solver.positions();
+  const Eigen::VectorXd x1 = solver.positions(), v1 = solver.velocities();
   const double w1 = solver.externalWork();
   solver.step(2, 3);
-  ASSERT_NE(solver.positions(), x1);
+  const Eigen::VectorXd x2 = solver.positions(), v2 = solver.velocities();
+  ASSERT_NE(x2, x1);
   solver.rollback();
   EXPECT_EQ(solver.positions(), x1);
+  EXPECT_EQ(solver.velocities(), v1);
   EXPECT_EQ(solver.externalWork(), w1);
   EXPECT_DOUBLE_EQ(solver.time(), DynamicDesc{}.timeStep);
+  // The step again from there: the same bits (the state before a step moves between the driver's
+  // buffers without copies; none of them may hold a stale vector).
+  solver.step(2, 3);
+  EXPECT_EQ(solver.positions(), x2);
+  EXPECT_EQ(solver.velocities(), v2);
+  solver.step(3, 3);
+  const Eigen::VectorXd x3 = solver.positions();
+  solver.rollback();
+  EXPECT_EQ(solver.positions(), x2);
+  solver.step(3, 3);
+  EXPECT_EQ(solver.positions(), x3);
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <thread>
@@ -44,18 +45,12 @@ TEST(HostParallel, EveryIndexOnceInItsFixedChunk) {
   }
 }
 
-/// Sum of v over fixed chunks, the chunks added in order: what the backend does for b . b and the
-/// centroid.
+/// Sum of v over fixed chunks, the chunks added in order (chunkSums): what the backend does for
+/// b . b and the centroid, and the dynamics driver for its norms and work.
 double chunkedSum(const std::vector<double>& v, std::size_t chunk) {
-  std::vector<double> parts(chunkCount(v.size(), chunk), 0.0);
-  parallelChunks(v.size(), chunk, [&](std::size_t c, std::size_t begin, std::size_t end) {
-    double s = 0.0;
-    for (std::size_t i = begin; i < end; ++i) s += v[i];
-    parts[c] = s;
-  });
-  double sum = 0.0;
-  for (double p : parts) sum += p;
-  return sum;
+  return detail::chunkSums<1>(v.size(), chunk, [&](std::size_t begin, std::size_t end, std::array<double, 1>& s) {
+    for (std::size_t i = begin; i < end; ++i) s[0] += v[i];
+  })[0];
 }
 
 TEST(HostParallel, ChunkedSumsHaveTheBitsOfTheSameChunksAddedInOrderOnOneThread) {
@@ -70,6 +65,36 @@ TEST(HostParallel, ChunkedSumsHaveTheBitsOfTheSameChunksAddedInOrderOnOneThread)
     }
     for (int repeat = 0; repeat < 5; ++repeat) EXPECT_EQ(chunkedSum(v, chunk), serial) << "chunk " << chunk;
   }
+}
+
+TEST(HostParallel, ChunkSumsAddTheChunksInOrderWhateverOrderTheyRunIn) {
+  // Chunks whose sums are 1e16, -1e16 and 1: added in order 1, last first 0 (1 - 1e16 rounds to
+  // -1e16).
+  std::vector<double> v(3000, 0.0);
+  v[10] = 1e16;
+  v[1500] = -1e16;
+  v[2999] = 1.0;
+  constexpr std::size_t chunk = 1000;
+  double serial = 0.0;
+  for (std::size_t begin = 0; begin < v.size(); begin += chunk) {
+    double s = 0.0;
+    for (std::size_t i = begin; i < begin + chunk; ++i) s += v[i];
+    serial += s;
+  }
+  const detail::TaskRunnerFn backwards = [](std::size_t count, const std::function<void(std::size_t)>& task) {
+    for (std::size_t i = count; i-- > 0;) task(i);
+  };
+  const detail::TaskScope scope(backwards);
+  const std::array<double, 2> sums =
+      detail::chunkSums<2>(v.size(), chunk, [&](std::size_t begin, std::size_t end, std::array<double, 2>& s) {
+        for (std::size_t i = begin; i < end; ++i) {
+          s[0] += v[i];
+          s[1] += 2.0 * v[i];
+        }
+      });
+  EXPECT_EQ(sums[0], serial);
+  EXPECT_EQ(sums[1], 2.0 * serial);
+  EXPECT_EQ(serial, 1.0);
 }
 
 TEST(HostParallel, TwoCallersAtOnceBothFinishWithTheirOwnAnswers) {

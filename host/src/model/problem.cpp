@@ -35,9 +35,20 @@ Eigen::VectorXd Problem::externalForce(double loadFactorOrTime, bool dynamic) co
   return f;
 }
 
+std::vector<double> Problem::loadScales(double loadFactorOrTime, bool dynamic) const {
+  std::vector<double> scales;
+  for (const ExternalForce& load : forces) scales.push_back(loadScale(loadFactorOrTime, dynamic, load.rampTime));
+  return scales;
+}
+
 void Problem::externalForce(double loadFactorOrTime, bool dynamic, Eigen::VectorXd& f) const {
-  f.setZero(restPositions.size());
-  for (const ExternalForce& load : forces) f += loadScale(loadFactorOrTime, dynamic, load.rampTime) * load.f;
+  const std::vector<double> scales = loadScales(loadFactorOrTime, dynamic);
+  f.resize(restPositions.size());
+  for (Eigen::Index d = 0; d < f.size(); ++d) {  // one pass, whatever the number of loads
+    double sum = 0.0;
+    for (std::size_t l = 0; l < forces.size(); ++l) sum += scales[l] * forces[l].f[d];
+    f[d] = sum;
+  }
 }
 
 void Problem::applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const {

@@ -59,6 +59,9 @@ struct Problem {
   Eigen::VectorXd externalForce(double loadFactorOrTime, bool dynamic) const;
   /// The same into f (resized to 3N; no allocation when it has that size already).
   void externalForce(double loadFactorOrTime, bool dynamic, Eigen::VectorXd& f) const;
+  /// The scale of each of `forces` at that load factor or time: externalForce is the sum over the
+  /// loads of scale * f, added in the loads' order from 0.
+  std::vector<double> loadScales(double loadFactorOrTime, bool dynamic) const;
   /// Writes the prescribed displacements (scaled likewise) into the positions x (3N): x = X + s u
   /// on prescribed dofs, and x = X on the other constrained (fixed) dofs; free dofs are untouched.
   void applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const;

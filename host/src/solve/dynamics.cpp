@@ -10,10 +10,12 @@
 #include "util/parallel.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace corofem::detail {
 
@@ -37,6 +39,20 @@ void forEach(std::size_t n, Fn&& fn) {
 }
 
 bool allFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
+
+/// Dofs of one body per chunk of the host's threads in the per-dof passes of a step. A body of at
+/// most this many dofs runs on one thread, its sums in dof order; a larger one's sums are taken per
+/// chunk, then added in chunk order: the same bits with any number of threads, and a body gets the
+/// same bits alone as in a batch.
+constexpr std::size_t kDofChunk = 16384;
+
+/// chunkSums over a body's n dofs in chunks of kDofChunk, fn(begin, end, sums) on Eigen indices.
+template <std::size_t K, class Fn>
+std::array<double, K> overDofs(Eigen::Index n, Fn&& fn) {
+  return chunkSums<K>(static_cast<std::size_t>(n), kDofChunk, [&](std::size_t lo, std::size_t hi, std::array<double, K>& sums) {
+    fn(static_cast<Eigen::Index>(lo), static_cast<Eigen::Index>(hi), sums);
+  });
+}
 
 /// A number as a message streams it ("0.05", "2.39").
 std::string num(double v) {
@@ -78,6 +94,13 @@ void DynamicsDriver::capture(const Body& b, State& s) const { s = static_cast<co
 void DynamicsDriver::restore(Body& b, const State& s) {
   static_cast<State&>(b) = s;
   b.deviceAtCommitted = false;
+}
+
+void DynamicsDriver::restoreStart(Body& b) {
+  if (b.startHeld)
+    restore(b, b.start);  // a substep committed: start keeps the step's start for the next attempt
+  else
+    b.deviceAtCommitted = false;  // nothing committed: the body's state is the step's start
 }
 
 void DynamicsDriver::setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
@@ -252,7 +275,9 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall
       out[i].error = std::make_exception_ptr(Error(ErrorCode::SolveFailed, startFailure[set[i]]));
       continue;
     }
-    capture(bodies_[set[i]], bodies_[set[i]].start);
+    Body& b = bodies_[set[i]];
+    b.start.copyScalars(b);  // the vectors follow at the first commit, without a copy
+    b.startHeld = false;
     pending.push_back(i);
   }
   try {
@@ -262,7 +287,7 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall
     // (out of memory, the application's task runner): the bodies still stepping keep their state
     // at the step's start; substeps would not help.
     for (std::size_t i : pending) {
-      restore(bodies_[set[i]], bodies_[set[i]].start);
+      restoreStart(bodies_[set[i]]);
       out[i].error = std::current_exception();
     }
   }
@@ -310,7 +335,7 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, d
           still.push_back(i);
         } else {
           lastFailure[i] = adv[j].failure;
-          restore(bodies_[set[i]], bodies_[set[i]].start);
+          restoreStart(bodies_[set[i]]);
         }
       }
       going = std::move(still);
@@ -330,7 +355,8 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, d
         log_(LogLevel::Debug, "body '", bodies_[set[i]].problem->name, "': ", where, " retried, succeeded with ",
              substeps, " substeps");
       // The rollback copy is the state before the whole step, whatever the substeps.
-      std::swap(bodies_[set[i]].previous, bodies_[set[i]].start);
+      std::swap(bodies_[set[i]].previous, bodies_[set[i]].start);  // held: the step committed
+      bodies_[set[i]].startHeld = false;
       out[i].stats = total[i];
     }
     std::vector<std::size_t> retry;
@@ -379,37 +405,51 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     const Problem& p = *b.problem;
     auto& w = b.w;
     const double h = a.h;
-    if (integratorOf(desc_) == Integrator::Newmark) {
+    const Eigen::Index n = b.x.size();
+    // vb = v + cv a and xb = x + h v + ca a - kx vb (Newmark), or vb = v and xb = x.
+    const bool newmark = integratorOf(desc_) == Integrator::Newmark;
+    double cv = 0.0, ca = 0.0;
+    if (newmark) {
       const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
       a.ka = 1.0 / (h * gamma);
       a.kx = h * beta / gamma;
-      w.vb = b.v + h * (1.0 - gamma) * b.a;
-      w.xb = b.x + h * b.v + h * h * (0.5 - beta) * b.a - a.kx * w.vb;
+      cv = h * (1.0 - gamma);
+      ca = h * h * (0.5 - beta);
     } else {
       a.ka = 1.0 / h;
       a.kx = h;
-      w.vb = b.v;
-      w.xb = b.x;
     }
-    w.target = p.restPositions;
+    // The targets, read on constrained dofs only (the other entries are left as they were).
+    w.target.resize(n);
     p.applyPrescribed(w.target, a.t1, /*dynamic=*/true);
-    if (b.heldTarget.size() == w.target.size())
-      for (Eigen::Index d = 0; d < w.target.size(); ++d)
+    if (b.heldTarget.size() == n) {
+      const Eigen::VectorXd& x0 = b.startHeld ? b.start.x : b.x;  // the step's start
+      for (Eigen::Index d = 0; d < n; ++d)
         if (!std::isnan(b.heldTarget[d]))
-          w.target[d] = a.fraction == 1.0 ? b.heldTarget[d]
-                                          : b.start.x[d] + a.fraction * (b.heldTarget[d] - b.start.x[d]);
-    externalForce(b, a.t1, w.fext);
-    a.fextNorm = freeNorm(b, w.fext);
-    const Eigen::Index n = b.x.size();
-    w.v = b.v;
-    for (Eigen::Index d = 0; d < n; ++d)
-      if (b.freeMask[d] == 0.0) w.v[d] = (w.target[d] - w.xb[d]) / a.kx;
-    w.x.resize(n);
-    w.a.resize(n);
-    w.fint.resize(n);
-    w.cv.setZero(n);
-    w.r.resize(n);
-    w.dv.resize(n);
+          w.target[d] = a.fraction == 1.0 ? b.heldTarget[d] : x0[d] + a.fraction * (b.heldTarget[d] - x0[d]);
+    }
+    const std::vector<double> scales = p.loadScales(a.t1, /*dynamic=*/true);
+    const bool applied = b.appliedForce.size() == n;
+    for (Eigen::VectorXd* v : {&w.vb, &w.xb, &w.fext, &w.v, &w.x, &w.a, &w.fint, &w.cv, &w.r, &w.dv, &w.rhs}) v->resize(n);
+    // One pass: vb, xb, f_ext (the loads, then the application's forces) and its free norm, and
+    // Newton's starting v. The same arithmetic, term by term, as the vector expressions it fuses.
+    const std::array<double, 1> fextSq = overDofs<1>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 1>& sum) {
+      for (Eigen::Index d = lo; d < hi; ++d) {
+        const double vb = newmark ? b.v[d] + cv * b.a[d] : b.v[d];
+        const double xb = newmark ? b.x[d] + h * b.v[d] + ca * b.a[d] - a.kx * vb : b.x[d];
+        w.vb[d] = vb;
+        w.xb[d] = xb;
+        double f = 0.0;
+        for (std::size_t l = 0; l < scales.size(); ++l) f += scales[l] * p.forces[l].f[d];
+        if (applied) f += b.appliedForce[d];
+        w.fext[d] = f;
+        const double ff = f * b.freeMask[d];
+        sum[0] += ff * ff;
+        w.v[d] = b.freeMask[d] == 0.0 ? (w.target[d] - xb) / a.kx : b.v[d];
+        w.cv[d] = 0.0;
+      }
+    });
+    a.fextNorm = std::sqrt(fextSq[0]);
   });
 
   const int maxIterations = std::max(1, desc_.newtonIterations);
@@ -421,10 +461,18 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     BodySet set;
     ConstVectors xs, vs;
     Vectors fs, cvs;
+    forEach(live.size(), [&](std::size_t k) {
+      const Advance& a = adv[live[k]];
+      auto& w = bodies_[a.body].w;
+      overDofs<0>(w.v.size(), [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 0>&) {
+        for (Eigen::Index d = lo; d < hi; ++d) {
+          w.x[d] = w.xb[d] + a.kx * w.v[d];
+          w.a[d] = a.ka * (w.v[d] - w.vb[d]);
+        }
+      });
+    });
     for (std::size_t j : live) {
       Body& b = bodies_[adv[j].body];
-      b.w.x = b.w.xb + adv[j].kx * b.w.v;
-      b.w.a = adv[j].ka * (b.w.v - b.w.vb);
       set.push_back(adv[j].body);
       xs.push_back(&b.w.x);
       fs.push_back(&b.w.fint);
@@ -459,22 +507,25 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       // The springs' S (x - t) joins f_int here (a zero vector's worth of work without springs).
       const Eigen::VectorXd& ks = b.problem->springStiffness;
       const bool springs = ks.size() == n && b.springTarget.size() == n;
-      double maSq = 0.0, cvSq = 0.0, fintSq = 0.0, springSq = 0.0, rSq = 0.0;
-      bool finite = true;
-      for (Eigen::Index d = 0; d < n; ++d) {
-        const double ma = mass[d] * w.a[d];
-        const double spring = springs && ks[d] != 0.0 ? ks[d] * (w.x[d] - b.springTarget[d]) : 0.0;
-        const double rd = ma + w.cv[d] + w.fint[d] + spring - w.fext[d];
-        w.r[d] = rd;
-        const double f = b.freeMask[d], maf = ma * f, cvf = w.cv[d] * f, fintf = w.fint[d] * f, sf = spring * f,
-                     rf = rd * f;
-        maSq += maf * maf;
-        cvSq += cvf * cvf;
-        fintSq += fintf * fintf;
-        springSq += sf * sf;
-        rSq += rf * rf;
-        finite = finite && std::isfinite(w.x[d]) && std::isfinite(w.v[d]);
-      }
+      // Sums: |M a|^2, |C v|^2, |f_int|^2, |S (x - t)|^2, |r|^2 (free dofs), non-finite x or v.
+      const std::array<double, 6> sums = overDofs<6>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 6>& sum) {
+        for (Eigen::Index d = lo; d < hi; ++d) {
+          const double ma = mass[d] * w.a[d];
+          const double spring = springs && ks[d] != 0.0 ? ks[d] * (w.x[d] - b.springTarget[d]) : 0.0;
+          const double rd = ma + w.cv[d] + w.fint[d] + spring - w.fext[d];
+          w.r[d] = rd;
+          const double f = b.freeMask[d], maf = ma * f, cvf = w.cv[d] * f, fintf = w.fint[d] * f, sf = spring * f,
+                       rf = rd * f;
+          sum[0] += maf * maf;
+          sum[1] += cvf * cvf;
+          sum[2] += fintf * fintf;
+          sum[3] += sf * sf;
+          sum[4] += rf * rf;
+          if (!std::isfinite(w.x[d]) || !std::isfinite(w.v[d])) sum[5] += 1.0;
+        }
+      });
+      const double maSq = sums[0], cvSq = sums[1], fintSq = sums[2], springSq = sums[3], rSq = sums[4];
+      const bool finite = sums[5] == 0.0;
       const double scale = std::max(
           {std::sqrt(maSq), std::sqrt(cvSq), std::sqrt(fintSq), std::sqrt(springSq), a.fextNorm, b.forceFloor});
       a.residualNorm = std::sqrt(rSq);
@@ -500,11 +551,19 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     if (solving.empty()) break;
     BodySet solveSet;
     std::vector<PcgSolve> solves(solving.size());
+    forEach(solving.size(), [&](std::size_t k) {
+      const Advance& a = adv[solving[k]];
+      auto& w = bodies_[a.body].w;
+      overDofs<0>(w.r.size(), [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 0>&) {
+        for (Eigen::Index d = lo; d < hi; ++d) {
+          w.dv[d] = 0.0;
+          w.rhs[d] = -w.r[d] / a.ka;
+        }
+      });
+    });
     for (std::size_t k = 0; k < solving.size(); ++k) {
       Advance& a = adv[solving[k]];
       Body& b = bodies_[a.body];
-      b.w.dv.setZero();
-      b.w.rhs = -b.w.r / a.ka;
       solveSet.push_back(a.body);
       solves[k].coeffs = SystemCoeffs{1.0, 1.0 / a.ka, a.kx / a.ka};
       solves[k].b = &b.w.rhs;
@@ -529,11 +588,17 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       a.stats.linearIterations += ls.iterations;
       a.stats.linearResidual = std::max(a.stats.linearResidual, ls.relativeResidual);
       a.allLinearConverged = a.allLinearConverged && ls.converged;
-      if (!allFinite(b.w.dv)) {
+      auto& w = b.w;  // v += dv, counting non-finite entries of dv (a failed body's v is scratch)
+      const std::array<double, 1> bad = overDofs<1>(w.v.size(), [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 1>& sum) {
+        for (Eigen::Index d = lo; d < hi; ++d) {
+          if (!std::isfinite(w.dv[d])) sum[0] += 1.0;
+          w.v[d] += w.dv[d];
+        }
+      });
+      if (bad[0] != 0.0) {
         failHere(a, "produced non-finite velocities");
         continue;
       }
-      b.w.v += b.w.dv;
       a.evaluated = false;  // the loop evaluates the new v before it ends
     }
   }
@@ -611,19 +676,36 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     Body& b = bodies_[a.body];
     auto& w = b.w;
     const Eigen::VectorXd& mass = b.problem->lumpedMass;
-    // The reactions are the constrained rows of the last residual, evaluated at the final v (or at
-    // the predictor when Newton stopped there).
-    w.reaction = (w.r.array() * (1.0 - b.freeMask)).matrix();
-    addSpringForces(b, w.x, w.fext);  // a load from here: its work, and f_n of the next step
-    const Eigen::VectorXd& dx = w.cv;  // scratch: C v is not needed past the residual
-    w.cv = w.x - b.x;
-    const double supportWork = b.supportWork + 0.5 * (b.reactionPrev + w.reaction).dot(dx);
-    const double loadWork = b.work + 0.5 * (b.fextPrev + w.fext).dot(dx);
+    const Eigen::Index n = b.x.size();
+    const Eigen::VectorXd& ks = b.problem->springStiffness;
+    const bool springs = ks.size() == n && b.springTarget.size() == n;
+    w.reaction.resize(n);
+    // One pass: the reactions (the constrained rows of the last residual, evaluated at the final v,
+    // or at the predictor when Newton stopped there); the springs' pull on free dofs joins f_ext
+    // (a load from here: its work, and f_n of the next step; on a held dof the reaction takes it);
+    // and the sums of the loads' and supports' work over dx = x_{n+1} - x_n and of m v^2:
+    // (R_n + R).dx, (F_n + F).dx, R_n.dx, R.dx, F_n.dx, F.dx, m v^2.
+    const std::array<double, 7> sums = overDofs<7>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 7>& sum) {
+      for (Eigen::Index d = lo; d < hi; ++d) {
+        const double reaction = w.r[d] * (1.0 - b.freeMask[d]);
+        w.reaction[d] = reaction;
+        if (springs && ks[d] != 0.0 && b.freeMask[d] != 0.0) w.fext[d] += ks[d] * (b.springTarget[d] - w.x[d]);
+        const double dx = w.x[d] - b.x[d], f = w.fext[d];
+        sum[0] += (b.reactionPrev[d] + reaction) * dx;
+        sum[1] += (b.fextPrev[d] + f) * dx;
+        sum[2] += b.reactionPrev[d] * dx;
+        sum[3] += reaction * dx;
+        sum[4] += b.fextPrev[d] * dx;
+        sum[5] += f * dx;
+        sum[6] += mass[d] * (w.v[d] * w.v[d]);
+      }
+    });
+    const double supportWork = b.supportWork + 0.5 * sums[0];
+    const double loadWork = b.work + 0.5 * sums[1];
     const double g = integratorOf(desc_) == Integrator::Newmark ? desc_.newmarkGamma : 1.0;
-    const double supportWorkScheme =
-        b.supportWorkScheme + (1.0 - g) * b.reactionPrev.dot(dx) + g * w.reaction.dot(dx);
-    const double loadWorkScheme = b.loadWorkScheme + (1.0 - g) * b.fextPrev.dot(dx) + g * w.fext.dot(dx);
-    const double kinetic = 0.5 * (mass.array() * w.v.array().square()).sum();
+    const double supportWorkScheme = b.supportWorkScheme + (1.0 - g) * sums[2] + g * sums[3];
+    const double loadWorkScheme = b.loadWorkScheme + (1.0 - g) * sums[4] + g * sums[5];
+    const double kinetic = 0.5 * sums[6];
     const double given = b.initialEnergy + std::max(std::abs(loadWork) + std::abs(supportWork),
                                                     std::abs(loadWorkScheme) + std::abs(supportWorkScheme));
     b.deviceAtCommitted = false;  // the device holds w.x now: committed below, or the step fails
@@ -637,7 +719,8 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
                               runawayFix);
       continue;
     }
-    // Commit: swapped with the scratch, whose old contents the next step overwrites.
+    // Commit: swapped with the scratch. The state before the step goes to start where start does
+    // not hold it yet (the step's first commit); else the next step overwrites it as scratch.
     b.work = loadWork;  // trapezoidal rule in time
     b.fextPrev.swap(w.fext);
     b.supportWork = supportWork;
@@ -647,6 +730,14 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     b.x.swap(w.x);
     b.v.swap(w.v);
     b.a.swap(w.a);
+    if (!b.startHeld) {
+      b.start.fextPrev.swap(w.fext);
+      b.start.reactionPrev.swap(w.reaction);
+      b.start.x.swap(w.x);
+      b.start.v.swap(w.v);
+      b.start.a.swap(w.a);
+      b.startHeld = true;
+    }
     b.t = a.t1;
     b.deviceAtCommitted = true;  // the device's positions are x: evaluated at the final v
   }

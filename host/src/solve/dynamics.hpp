@@ -111,6 +111,14 @@ class DynamicsDriver final : public Driver {
     /// or 1 (backward Euler, whose implicit step does the work F_{n+1} dx: an abruptly dragged
     /// handle does twice what the trapezoidal rule counts when F_n was 0).
     double loadWorkScheme = 0.0, supportWorkScheme = 0.0;
+    /// Takes o's scalars; the vectors stay.
+    void copyScalars(const State& o) {
+      work = o.work;
+      t = o.t;
+      supportWork = o.supportWork;
+      loadWorkScheme = o.loadWorkScheme;
+      supportWorkScheme = o.supportWorkScheme;
+    }
   };
   /// One body: its constants, its committed state (the fields of State), the state before its last
   /// step (rollback), and the scratch of the step in progress (sized by the first step, then
@@ -128,7 +136,11 @@ class DynamicsDriver final : public Driver {
     /// The application's hold (setControls): targets of constrained dofs (3N, NaN: the scene's
     /// target), added forces (3N) and the springs' targets (3N); empty when none.
     Eigen::VectorXd heldTarget, appliedForce, springTarget;
-    State start;                     ///< the state before the step in progress
+    /// The state before the step in progress: its scalars from the step's start, its vectors moved
+    /// there (not copied) by the step's first commit, startHeld telling which: until then the
+    /// body's own vectors are that state, as nothing but a commit changes them.
+    State start;
+    bool startHeld = false;
     State previous;                  ///< the state before the last successful step
     struct Scratch {
       Eigen::VectorXd vb, xb, target, fext, v, x, a, fint, cv, r, dv, rhs, reaction;
@@ -152,6 +164,8 @@ class DynamicsDriver final : public Driver {
   double freeNorm(const Body& b, const Eigen::VectorXd& v) const;
   void capture(const Body& b, State& s) const;
   void restore(Body& b, const State& s);
+  /// Back to the state before the step in progress (start and startHeld).
+  void restoreStart(Body& b);
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs, and the energy at t = 0, for
   /// the bodies of `set` not started yet; a body whose a_0 is not finite fails.
   void start(const BodySet& set, std::vector<std::string>& failure);

@@ -5,9 +5,12 @@
 // library's own.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cstddef>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace corofem::detail {
 
@@ -41,6 +44,21 @@ void parallelChunks(std::size_t n, std::size_t chunkSize,
 
 /// Number of chunks parallelChunks makes of n.
 inline std::size_t chunkCount(std::size_t n, std::size_t chunkSize) { return (n + chunkSize - 1) / chunkSize; }
+
+/// K sums over [0, n) by parallelChunks: fn(begin, end, sums) adds chunk [begin, end)'s terms to
+/// its own K sums (from 0), and the chunks' sums are added in chunk order, so the totals have the
+/// same bits with any number of threads running the chunks in any order; with one chunk, the bits
+/// of one pass in index order. fn must not throw.
+template <std::size_t K, class Fn>
+std::array<double, K> chunkSums(std::size_t n, std::size_t chunkSize, Fn&& fn) {
+  std::vector<std::array<double, K>> part(std::max<std::size_t>(1, chunkCount(n, chunkSize)));
+  for (std::array<double, K>& p : part) p.fill(0.0);
+  parallelChunks(n, chunkSize, [&](std::size_t c, std::size_t begin, std::size_t end) { fn(begin, end, part[c]); });
+  std::array<double, K> total = part[0];
+  for (std::size_t c = 1; c < part.size(); ++c)
+    for (std::size_t k = 0; k < K; ++k) total[k] += part[c][k];
+  return total;
+}
 
 /// CPUs this process may run on at once: the CPUs of its affinity mask, fewer where a cgroup's CPU
 /// quota (v2 cpu.max, v1 cpu.cfs_quota_us) allows less (rounded up); the hardware's count where
