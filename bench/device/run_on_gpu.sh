@@ -103,7 +103,7 @@ if has profile; then  # per kernel: launches, device time, device idle before it
   for size in 10k 1M amg; do
     f="dynamic_step_20pcg/dev0/$size"; [[ $size == amg ]] && f="pcg_iteration_amg/dev0/10k"
     timeout 120 "$B/bench_opencl" --profile --benchmark_filter="$f" \
-      --benchmark_repetitions=1 --benchmark_min_time=1 2>&1 | grep -E 'profile\]|median' > "/tmp/logs/profile_$size.txt"
+      --benchmark_repetitions=1 --benchmark_min_time=1 2>&1 | grep -E '^\[profile|median' > "/tmp/logs/profile_$size.txt"
     echo "== profile $size"; cat "/tmp/logs/profile_$size.txt" | cut -c25-160
   done
 fi
