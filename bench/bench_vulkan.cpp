@@ -12,13 +12,16 @@
 //                               bytes an iteration must move at least (product and vector updates)
 //                               over the copy bandwidth measured in the same run: the fraction of
 //                               the memory's rate the iterations reach.
-//   copy/<device>               the yardstick: vkCmdCopyBuffer between two device buffers (64 MiB
-//                               on CPU devices, 512 MiB on GPUs), bytes read + written per second.
+//   copy/<device>               the yardstick: a compute shader's copy between two device buffers
+//                               (64 MiB on CPU devices, 512 MiB on GPUs; bench/kernels/copy.comp,
+//                               four copies a submission), bytes read + written per second. Not
+//                               vkCmdCopyBuffer: on an H200 that reached 0.7-0.8 TB/s, a fifth of
+//                               the memory's rate (a copy engine's pace, not the shaders').
 //
 //   ./build/bench/bench_vulkan --benchmark_format=json [--benchmark_filter=-/1M]   (skip the 1M box)
 //   --group_pcg_nodes=N   VulkanTuning::groupPcgNodes for every backend it makes (-1: a dispatch
 //                         per phase for every body; the default, 0, runs the 1k box's iterations
-//                         in one dispatch and the larger boxes per phase)
+//                         in one dispatch on a CPU device and every box per phase on a GPU)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
 #include "bench_scenes.hpp"
@@ -75,31 +78,50 @@ double threadSeconds() {
   return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
-/// Two device buffers (64 MiB on CPU devices, 512 MiB on GPUs) on Vulkan device `index` and a
-/// copy between them, made once: a GPU copies 512 MiB in a fraction of a millisecond, far less than
-/// making a device and its buffers.
+/// glslc's SPIR-V of bench/kernels/copy.comp (bench/CMakeLists.txt).
+const std::uint32_t kCopyShader[] =
+#include "copy.inc"
+    ;
+
+/// Two device buffers (64 MiB on CPU devices, 512 MiB on GPUs) on Vulkan device `index` and the
+/// copy shader between them, made once: a GPU copies 512 MiB in a fraction of a millisecond, far
+/// less than making a device and its buffers.
 class CopyRig {
  public:
   explicit CopyRig(std::size_t index)
-      : ctx_(detail::vk::Instance::shared(), index, false, 31, 20), bytes_(copyBytes(index)), a_(ctx_, bytes_, false),
-        b_(ctx_, bytes_, false) {
+      : ctx_(detail::vk::Instance::shared(), index, false, 2, sizeof(std::uint32_t)), bytes_(copyBytes(index)),
+        a_(ctx_, bytes_, false), b_(ctx_, bytes_, false),
+        pipeline_(ctx_.pipeline(kCopyShader, sizeof(kCopyShader), "copy.comp")),
+        ab_(ctx_.descriptorSet({&a_, &b_})), ba_(ctx_.descriptorSet({&b_, &a_})) {
     once();  // warm-up
   }
   std::size_t bytes() const { return bytes_; }
-  /// One copy, waited for (s).
+  /// The time of one copy (s): four, a to b and back twice, with a barrier between each, in one
+  /// submission that is waited for (the submission and the wait shared among the four).
   double once() {
+    constexpr int kCopies = 4;
+    const std::uint32_t words = static_cast<std::uint32_t>(bytes_ / 16);
+    const std::uint32_t groups = std::min<std::uint32_t>(65535, (words + 255) / 256);
     const auto t0 = std::chrono::steady_clock::now();
     VkCommandBuffer cb = ctx_.begin();
-    VkBufferCopy region{0, 0, bytes_};
-    vkCmdCopyBuffer(cb, a_.handle(), b_.handle(), 1, &region);
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+    vkCmdPushConstants(cb, ctx_.pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(words), &words);
+    for (int k = 0; k < kCopies; ++k) {
+      VkDescriptorSet set = k % 2 == 0 ? ab_ : ba_;
+      vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_.pipelineLayout(), 0, 1, &set, 0, nullptr);
+      vkCmdDispatch(cb, groups, 1, 1);
+      detail::vk::fullBarrier(cb);
+    }
     ctx_.wait(ctx_.submit());
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / kCopies;
   }
 
  private:
   detail::vk::Context ctx_;
   std::size_t bytes_;
   detail::vk::Buffer a_, b_;
+  VkPipeline pipeline_;
+  VkDescriptorSet ab_, ba_;
 };
 
 /// Bytes per second of vkCmdCopyBuffer (read + write): the median of 9 copies, measured right after
