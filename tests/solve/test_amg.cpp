@@ -8,10 +8,13 @@
 #include "model/element.hpp"
 #include "precond/amg.hpp"
 #include "reference/small_meshes.hpp"
+#include "util/parallel.hpp"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <functional>
 #include <random>
 
 using namespace corofem;
@@ -481,6 +484,25 @@ TEST(DeviceAmg, TheLevelsLaidEndToEndHoldEveryBodysEntriesInTheDevicesNumbering)
     }
     EXPECT_EQ(level.inverseEntries, dense) << "level " << k;
   }
+}
+
+TEST(WarpedAmg, TheMatrixVectorProductInSlicesIsEigensBitForBit) {
+  // K_0 of four slices of rows times a random vector, the slices run last first: Eigen's bits.
+  const Problem p = beam(150);
+  const AmgMatrix K = restStiffness(p);
+  ASSERT_GT(static_cast<std::size_t>(K.rows()), 2 * kProductRows);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd x(K.cols());
+  for (Eigen::Index i = 0; i < x.size(); ++i) x[i] = u(rng) * std::pow(10.0, static_cast<int>(rng() % 9) - 4);
+  const Eigen::VectorXd whole = K * x;
+  const TaskRunnerFn backwards = [](std::size_t count, const std::function<void(std::size_t)>& task) {
+    for (std::size_t i = count; i-- > 0;) task(i);
+  };
+  const TaskScope scope(backwards);
+  const Eigen::VectorXd sliced = amgProduct(K, x);
+  ASSERT_EQ(sliced.size(), whole.size());
+  for (Eigen::Index i = 0; i < whole.size(); ++i) ASSERT_EQ(sliced[i], whole[i]) << "row " << i;
 }
 
 TEST(WarpedAmg, TheProductInSlicesOfRowsIsEigensProductBitForBit) {

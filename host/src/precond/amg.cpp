@@ -57,7 +57,7 @@ double estimateLambdaMax(const AmgMatrix& A, const Eigen::VectorXd& diagInv) {
   v.normalize();
   double lambda = 1.0;
   for (int k = 0; k < kPowerIterations; ++k) {
-    const Eigen::VectorXd w = s.cwiseProduct(A * s.cwiseProduct(v));
+    const Eigen::VectorXd w = s.cwiseProduct(amgProduct(A, s.cwiseProduct(v)));
     lambda = v.dot(w);
     const double norm = w.norm();
     if (!(norm > 0.0) || !std::isfinite(norm)) break;
@@ -76,7 +76,7 @@ double estimateBlockLambdaMax(const AmgMatrix& A, const AmgMatrix& B, const AmgM
   for (Eigen::Index i = 0; i < n; ++i) v[i] = std::fmod(0.6180339887 * double(i + 1), 1.0) - 0.5;
   double lambda = 1.0;
   for (int k = 0; k < kPowerIterations; ++k) {
-    const Eigen::VectorXd w = A * v, z = Binv * w;
+    const Eigen::VectorXd w = amgProduct(A, v), z = Binv * w;
     lambda = v.dot(w) / std::max(v.dot(B * v), 1e-300);
     const double norm = z.norm();
     if (!(norm > 0.0) || !std::isfinite(norm)) break;
@@ -228,6 +228,18 @@ AmgMatrix sparseProduct(const AmgMatrix& A, const AmgMatrix& B) {
     slices[c].rowOffset = c * kProductRows;
   }
   return joined(rows, static_cast<std::size_t>(B.cols()), slices);
+}
+
+Eigen::VectorXd amgProduct(const AmgMatrix& A, const Eigen::VectorXd& x) {
+  Eigen::VectorXd y(A.rows());
+  parallelChunks(static_cast<std::size_t>(A.rows()), kProductRows, [&](std::size_t, std::size_t lo, std::size_t hi) {
+    for (std::size_t i = lo; i < hi; ++i) {
+      double sum = 0.0;
+      for (AmgMatrix::InnerIterator it(A, static_cast<Eigen::Index>(i)); it; ++it) sum += it.value() * x[it.index()];
+      y[static_cast<Eigen::Index>(i)] = sum;
+    }
+  });
+  return y;
 }
 
 AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<MatrixBlock>& blocks) {
@@ -520,7 +532,7 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
     if (fine)
       fine->apply(v, y);
     else
-      y = level.A * v;
+      y = amgProduct(level.A, v);
   };
   auto inverse = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) {
     if (fine)
@@ -537,16 +549,16 @@ void WarpedAmg::cycle(std::size_t l, const Eigen::VectorXd& b, Eigen::VectorXd& 
   if (fine) {
     Eigen::VectorXd rr;
     warp(r, rr, true);
-    coarseB = level.Pt * rr;
+    coarseB = amgProduct(level.Pt, rr);
   } else {
-    coarseB = level.Pt * r;
+    coarseB = amgProduct(level.Pt, r);
   }
   cycle(l + 1, coarseB, coarseX, nullptr);
   if (fine) {
-    warp(level.P * coarseX, e, false);
+    warp(amgProduct(level.P, coarseX), e, false);
     x += e;
   } else {
-    x += level.P * coarseX;
+    x += amgProduct(level.P, coarseX);
   }
   chebyshev(apply, inverse, lambdaMax, b, x, false);
 }
