@@ -108,7 +108,8 @@ int registerAll() {
 #endif
 #ifdef COROFEM_WITH_VULKAN
     // The Vulkan backend's default PCG path for the device, and the path of a dispatch per phase
-    // (VulkanTuning::groupPcgNodes = -1), which a GPU takes for large bodies.
+    // (VulkanTuning::groupPcgNodes = -1), which a GPU takes for every body and a CPU device for
+    // bodies of more than 2,048 nodes.
     SimulationOptions phases;
     phases.vulkan.groupPcgNodes = -1;
     for (Precision p : {Precision::Float, Precision::Double}) {

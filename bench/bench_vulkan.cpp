@@ -15,8 +15,8 @@
 //   copy/<device>               the yardstick: a compute shader's copy between two device buffers
 //                               (64 MiB on CPU devices, 512 MiB on GPUs; bench/kernels/copy.comp,
 //                               four copies a submission), bytes read + written per second. Not
-//                               vkCmdCopyBuffer: on an H200 that reached 0.7-0.8 TB/s, a fifth of
-//                               the memory's rate (a copy engine's pace, not the shaders').
+//                               vkCmdCopyBuffer: on an H200 that reached 0.75-0.78 TB/s, a sixth of
+//                               the memory's rate (most likely a copy engine's pace; not measured).
 //
 //   ./build/bench/bench_vulkan --benchmark_format=json [--benchmark_filter=-/1M]   (skip the 1M box)
 //   --group_pcg_nodes=N   VulkanTuning::groupPcgNodes for every backend it makes (-1: a dispatch
@@ -66,8 +66,12 @@ struct BoxSize {
 };
 constexpr BoxSize kSizes[] = {{"1k", 10, 4, 4}, {"10k", 20, 9, 9}, {"100k", 40, 20, 21}, {"1M", 80, 45, 46}};
 
+/// The copy's buffer size: 512 MiB on a GPU, 64 MiB on a CPU device, at most what one storage
+/// buffer binding may span there (maxStorageBufferRange: Vulkan promises 128 MiB).
 std::size_t copyBytes(std::size_t index) {
-  return (detail::vk::Instance::shared()->devices()[index].gpu ? std::size_t{512} : std::size_t{64}) << 20;
+  const detail::vk::PhysicalDevice& d = detail::vk::Instance::shared()->devices()[index];
+  const std::size_t wanted = (d.gpu ? std::size_t{512} : std::size_t{64}) << 20;
+  return std::min<std::size_t>(wanted, d.limits.maxStorageBufferRange / 16 * 16);
 }
 
 /// The calling thread's CPU time (s): the host's own work, not the device's threads (lavapipe) nor
@@ -124,7 +128,7 @@ class CopyRig {
   VkDescriptorSet ab_, ba_;
 };
 
-/// Bytes per second of vkCmdCopyBuffer (read + write): the median of 9 copies, measured right after
+/// Bytes per second of the copy shader (read + write): the median of 9 copies, measured right after
 /// the benchmark that reports it (the machine is shared: both measurements under the same load).
 double copyBandwidth(std::size_t index) {
   CopyRig rig(index);

@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -266,6 +267,53 @@ TEST(BatchSimulation, DeviceCallsPerStepDoNotGrowWithTheBodies) {
   }
   EXPECT_EQ(rounds[0], rounds[1]);
   EXPECT_EQ(rounds[0], rounds[2]);
+}
+
+/// Depth of the test runner's tasks on the calling thread.
+int& taskDepth() {
+  thread_local int depth = 0;
+  return depth;
+}
+
+TEST(BatchSimulation, ALargeBodysChunkedPassesRunInsideTheBatchsTasksWithTheirBits) {
+  // A body of 35,547 dofs (its per-dof passes in three chunks of the host's threads) batched with
+  // a small one: the driver's pass over the batch's bodies runs each body's chunked passes inside
+  // one of its tasks. They run on that task's thread, never calling the application's runner from
+  // inside one of its tasks (nor taking the library's pool, which the pass's caller holds), with
+  // the bits of the unbatched scene, on the library's pool and on the application's runner.
+  BodyDesc big = boxBeam({40, 16, 16});
+  big.mesh.box->max = {1.0, 0.25, 0.25};
+  Scene scene = dynamicScene(big, 3);
+  BodyDesc small = boxBeam({6, 2, 2});
+  small.name = "small";
+  scene.bodies.push_back(small);
+  scene.solver.linearSolver = LinearSolverKind::Pcg;
+  scene.solver.tolerance = 1e-8;
+  scene.solver.maxIterations = 40;
+  const Trace alone = unbatched(scene);
+  std::atomic<long long> calls{0}, reentrant{0};
+  SimulationOptions withTasks = onBatchDevice();
+  withTasks.tasks = [&](std::size_t count, const std::function<void(std::size_t)>& task) {
+    ++calls;
+    if (taskDepth() > 0) ++reentrant;
+    auto one = [&](std::size_t i) {
+      ++taskDepth();
+      task(i);
+      --taskDepth();
+    };
+    std::thread other([&] {
+      for (std::size_t i = count; i-- > count / 2;) one(i);
+    });
+    for (std::size_t i = count / 2; i-- > 0;) one(i);
+    other.join();
+  };
+  std::atomic<int> made{0};
+  HookScope scope(backends({{}, &made}));
+  expectSameRun(run(scene, onBatchDevice()), alone);
+  expectSameRun(run(scene, withTasks), alone);
+  EXPECT_EQ(made.load(), 2) << "the two bodies were not batched";
+  EXPECT_GT(calls.load(), 0);
+  EXPECT_EQ(reentrant.load(), 0) << "the runner was called from inside one of its own tasks";
 }
 
 TEST(BatchSimulation, AnApplicationsTaskRunnerRunsTheHostWork) {

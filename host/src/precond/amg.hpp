@@ -163,7 +163,7 @@ AmgMatrix sparseProduct(const AmgMatrix& A, const AmgMatrix& B);
 constexpr std::size_t kProductRows = 2048;
 /// A x in slices of kProductRows rows on the host's threads, each row summed in entry order from 0
 /// as Eigen's row-major product sums it: the bits of A * x on any number of threads. The set-up's
-/// power iterations (about 20 ms of a grab's on the 12,960-tet beam, on one thread) and the host
+/// power iterations (about 16 ms of a grab's on the 12,960-tet beam, on one thread) and the host
 /// V-cycle's products.
 Eigen::VectorXd amgProduct(const AmgMatrix& A, const Eigen::VectorXd& x);
 

@@ -102,7 +102,8 @@ class DynamicsDriver final : public Driver {
   double time(std::size_t body) const { return bodies_.at(body).t; }
 
  private:
-  /// Everything a step changes.
+  /// Everything a step changes. A field added here joins copyScalars (a scalar) or the commit's
+  /// swaps into `start` in DynamicsDriver::advance (a vector): the step's start is made of both.
   struct State {
     Eigen::VectorXd x, v, a, fextPrev, reactionPrev;
     double work = 0.0, t = 0.0, supportWork = 0.0;
@@ -121,8 +122,8 @@ class DynamicsDriver final : public Driver {
     }
   };
   /// One body: its constants, its committed state (the fields of State), the state before its last
-  /// step (rollback), and the scratch of the step in progress (sized by the first step, then
-  /// assigned in place: a step allocates no vector).
+  /// step (rollback), and the scratch of the step in progress (sized by the first two steps, then
+  /// assigned in place: a later step allocates no vector of the body's size).
   struct Body : State {
     const Problem* problem = nullptr;
     Eigen::ArrayXd freeMask;    ///< 1 on free dofs, 0 on constrained ones

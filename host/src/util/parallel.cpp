@@ -152,6 +152,10 @@ std::size_t usableCpus() {
 namespace {
 
 thread_local const TaskRunnerFn* currentRunner = nullptr;
+/// Chunks of a parallelChunks call this thread is running for the pool or a runner (> 0: a nested
+/// call runs its chunks here, in order: it neither takes the pool this thread's caller holds nor
+/// calls the application's runner from inside one of its tasks).
+thread_local int chunkDepth = 0;
 
 /// $COROFEM_HOST_THREADS as a count, 0 where it is unset, empty or not a whole number from 1.
 std::size_t hostThreadsFromEnv() {
@@ -193,13 +197,20 @@ void parallelChunks(std::size_t n, std::size_t chunkSize,
                     const std::function<void(std::size_t chunk, std::size_t begin, std::size_t end)>& fn) {
   chunkSize = std::max<std::size_t>(chunkSize, 1);
   const std::size_t chunks = chunkCount(n, chunkSize);
-  auto one = [&](std::size_t c) { fn(c, c * chunkSize, std::min(n, (c + 1) * chunkSize)); };
-  if (chunks > 1 && currentRunner) {
-    (*currentRunner)(chunks, one);
-    return;
+  if (chunks > 1 && chunkDepth == 0) {
+    const std::function<void(std::size_t, std::size_t, std::size_t)> marked = [&](std::size_t c, std::size_t begin,
+                                                                                  std::size_t end) {
+      ++chunkDepth;
+      fn(c, begin, end);
+      --chunkDepth;
+    };
+    if (currentRunner) {
+      (*currentRunner)(chunks, [&](std::size_t c) { marked(c, c * chunkSize, std::min(n, (c + 1) * chunkSize)); });
+      return;
+    }
+    if (hostThreads() > 1 && pool().run(chunks, n, chunkSize, marked)) return;
   }
-  if (chunks > 1 && hostThreads() > 1 && pool().run(chunks, n, chunkSize, fn)) return;
-  for (std::size_t c = 0; c < chunks; ++c) one(c);
+  for (std::size_t c = 0; c < chunks; ++c) fn(c, c * chunkSize, std::min(n, (c + 1) * chunkSize));
 }
 
 }  // namespace corofem::detail

@@ -38,7 +38,9 @@ class TaskScope {
 /// Runs on the caller alone when there is one chunk; else on the calling thread's TaskScope runner
 /// where one is installed, else on the pool's threads and the caller (on the caller alone when
 /// the pool has one thread, COROFEM_HOST_THREADS=1, or another thread is using it), returning when
-/// every chunk is done. fn must not throw.
+/// every chunk is done. Called from inside a chunk of another call that the pool or a runner runs
+/// (a body's passes inside a pass over bodies), it runs its chunks on the calling thread, in order.
+/// fn must not throw.
 void parallelChunks(std::size_t n, std::size_t chunkSize,
                     const std::function<void(std::size_t chunk, std::size_t begin, std::size_t end)>& fn);
 

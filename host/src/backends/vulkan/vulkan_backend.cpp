@@ -74,8 +74,9 @@ void registerVulkanBackend() {
                 (step.dynamic ? (step.damping ? "M, C, K_t" : "M, K_t") : "K_t") + ")");
     k.push_back(std::string("pcg.comp") + step.formsInverse() +
                 " + reduce.comp (single-reduction PCG, scalars and stop flags on the device)" +
-                (step.amg() ? "" : "; bodies up to VulkanTuning::groupPcgNodes nodes run whole iterations in one "
-                            "pcg_group.comp dispatch, a work-group per body"));
+                (step.amg() ? "" : "; bodies up to VulkanTuning::groupPcgNodes nodes (by default 2,048 on a CPU "
+                            "device, none on a GPU) run whole iterations in one pcg_group.comp dispatch, a "
+                            "work-group per body"));
     if (step.amg())
       k.push_back("amg.comp V-cycle per iteration: Chebyshev smoothing with 4 products (element.comp + "
                   "gather.comp), level-0 passes and sliced-ELLPACK products on the coarse levels (the "
