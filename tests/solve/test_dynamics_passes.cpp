@@ -23,7 +23,7 @@ struct Outcome {
   EnergyReport energy;
 };
 
-/// The clamped box of threeSteps.
+/// The clamped box of twoSteps.
 Scene passesScene() {
   BodyDesc body = cantileverBody(boxMesh({0, 0, 0}, {1, 0.25, 0.25}, {40, 16, 16}), 0.0, 1e5, 0.3, 1000,
                                  Formulation::Corotational);
@@ -35,19 +35,19 @@ Scene passesScene() {
   scene.bodies.push_back(body);
   scene.analysis.kind = AnalysisDesc::Kind::Dynamic;
   scene.analysis.dynamics.timeStep = 1.0 / 60.0;
-  scene.analysis.dynamics.steps = 3;
-  scene.analysis.dynamics.newtonIterations = 2;
-  scene.analysis.dynamics.newtonTolerance = 1e-12;
+  scene.analysis.dynamics.steps = 2;
+  scene.analysis.dynamics.newtonIterations = 1;
   scene.solver.linearSolver = LinearSolverKind::Pcg;
   scene.solver.tolerance = 1e-8;
-  scene.solver.maxIterations = 40;
+  scene.solver.maxIterations = 8;  // the sums' order is the point, not the answer: a cheap step (the sanitizer job runs it at -O0)
   scene.backend.kind = BackendKind::Reference;
   return scene;
 }
 
-/// Three steps of a clamped 40 x 16 x 16-cell box (11,849 nodes, 35,547 dofs: three chunks) under
-/// gravity and a tip load, mass-damped, Newmark with two Newton iterations, on the reference device.
-Outcome threeSteps(const SimulationOptions& options) {
+/// Two steps of a clamped 40 x 16 x 16-cell box (11,849 nodes, 35,547 dofs: three chunks) under
+/// gravity and a tip load, mass-damped, linearised Newmark with 8 PCG iterations a solve, on the
+/// reference device.
+Outcome twoSteps(const SimulationOptions& options) {
   const Scene scene = passesScene();
   auto sim = Simulation::create(scene, options);
   EXPECT_TRUE(sim) << sim.message();
@@ -66,7 +66,7 @@ Outcome threeSteps(const SimulationOptions& options) {
 }
 
 TEST(DynamicsPasses, ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder) {
-  const Outcome pool = threeSteps({});
+  const Outcome pool = twoSteps({});
   ASSERT_FALSE(pool.x.empty());
   std::atomic<long long> calls{0};
   SimulationOptions backwards;  // every task on the caller, last first
@@ -83,7 +83,7 @@ TEST(DynamicsPasses, ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder) {
     other.join();
   };
   for (const SimulationOptions* o : {&backwards, &twoThreads}) {
-    const Outcome r = threeSteps(*o);
+    const Outcome r = twoSteps(*o);
     EXPECT_EQ(r.x, pool.x);
     EXPECT_EQ(r.v, pool.v);
     // The loads' work is one of the chunked sums.
