@@ -163,8 +163,8 @@ AmgMatrix sparseProduct(const AmgMatrix& A, const AmgMatrix& B);
 constexpr std::size_t kProductRows = 2048;
 /// A x in slices of kProductRows rows on the host's threads, each row summed in entry order from 0
 /// as Eigen's row-major product sums it: the bits of A * x on any number of threads. The set-up's
-/// power iterations (about 16 ms of a grab's on the 12,960-tet beam, on one thread) and the host
-/// V-cycle's products.
+/// power iterations (about 17 ms of each build of the 12,960-tet beam's hierarchy, on one thread)
+/// and the host V-cycle's products.
 Eigen::VectorXd amgProduct(const AmgMatrix& A, const Eigen::VectorXd& x);
 
 /// K_0 of a body on all its dofs (3N x 3N): the sum of the linear element stiffnesses (the tangent
