@@ -44,11 +44,7 @@ std::vector<double> Problem::loadScales(double loadFactorOrTime, bool dynamic) c
 void Problem::externalForce(double loadFactorOrTime, bool dynamic, Eigen::VectorXd& f) const {
   const std::vector<double> scales = loadScales(loadFactorOrTime, dynamic);
   f.resize(restPositions.size());
-  for (Eigen::Index d = 0; d < f.size(); ++d) {  // one pass, whatever the number of loads
-    double sum = 0.0;
-    for (std::size_t l = 0; l < forces.size(); ++l) sum += scales[l] * forces[l].f[d];
-    f[d] = sum;
-  }
+  for (Eigen::Index d = 0; d < f.size(); ++d) f[d] = externalForceAt(scales, d);  // one pass, whatever the loads
 }
 
 void Problem::applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const {

@@ -62,6 +62,12 @@ struct Problem {
   /// The scale of each of `forces` at that load factor or time: externalForce is the sum over the
   /// loads of scale * f, added in the loads' order from 0.
   std::vector<double> loadScales(double loadFactorOrTime, bool dynamic) const;
+  /// Dof d of externalForce with the loads' `scales` (loadScales): their sum from 0 in load order.
+  double externalForceAt(const std::vector<double>& scales, Eigen::Index d) const {
+    double sum = 0.0;
+    for (std::size_t l = 0; l < forces.size(); ++l) sum += scales[l] * forces[l].f[d];
+    return sum;
+  }
   /// Writes the prescribed displacements (scaled likewise) into the positions x (3N): x = X + s u
   /// on prescribed dofs, and x = X on the other constrained (fixed) dofs; free dofs are untouched.
   void applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool dynamic) const;

@@ -439,8 +439,7 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
         const double xb = newmark ? b.x[d] + h * b.v[d] + ca * b.a[d] - a.kx * vb : b.x[d];
         w.vb[d] = vb;
         w.xb[d] = xb;
-        double f = 0.0;
-        for (std::size_t l = 0; l < scales.size(); ++l) f += scales[l] * p.forces[l].f[d];
+        double f = p.externalForceAt(scales, d);
         if (applied) f += b.appliedForce[d];
         w.fext[d] = f;
         const double ff = f * b.freeMask[d];

@@ -53,6 +53,12 @@ inline std::size_t chunkCount(std::size_t n, std::size_t chunkSize) { return (n 
 /// of one pass in index order. fn must not throw.
 template <std::size_t K, class Fn>
 std::array<double, K> chunkSums(std::size_t n, std::size_t chunkSize, Fn&& fn) {
+  if (n <= chunkSize) {  // one chunk: on the caller, no allocation (the many small bodies of a batch)
+    std::array<double, K> total;
+    total.fill(0.0);
+    fn(std::size_t{0}, n, total);
+    return total;
+  }
   std::vector<std::array<double, K>> part(std::max<std::size_t>(1, chunkCount(n, chunkSize)));
   for (std::array<double, K>& p : part) p.fill(0.0);
   parallelChunks(n, chunkSize, [&](std::size_t c, std::size_t begin, std::size_t end) { fn(begin, end, part[c]); });
