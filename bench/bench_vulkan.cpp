@@ -12,6 +12,10 @@
 //                               bytes an iteration must move at least (product and vector updates)
 //                               over the copy bandwidth measured in the same run: the fraction of
 //                               the memory's rate the iterations reach.
+//   dispatch/<device>/<barrier> the launch yardstick: the device time of one small dispatch (64
+//                               work-groups) followed by the library's barrier between passes
+//                               (full), a compute-only barrier (compute) or none, from a chain of
+//                               200 in one submission (us_per_dispatch; the time is the chain's).
 //   copy/<device>               the yardstick: a compute shader's copy between two device buffers
 //                               (64 MiB on CPU devices, 512 MiB on GPUs; bench/kernels/copy.comp,
 //                               four copies a submission), bytes read + written per second. Not
@@ -22,6 +26,9 @@
 //   --group_pcg_nodes=N   VulkanTuning::groupPcgNodes for every backend it makes (-1: a dispatch
 //                         per phase for every body; the default, 0, runs the 1k box's iterations
 //                         in one dispatch on a CPU device and every box per phase on a GPU)
+//   --fused_pcg=N         VulkanTuning::fusedPcg for every backend it makes (1: two dispatches an
+//                         iteration off the one-dispatch path, 0: three; the default, -1, two on a
+//                         GPU and three on a CPU device)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
 #include "bench_scenes.hpp"
@@ -87,6 +94,22 @@ const std::uint32_t kCopyShader[] =
 #include "copy.inc"
     ;
 
+/// What follows each dispatch of a chain (CopyRig::chain): the library's barrier between two
+/// passes (all commands, any memory write before any access: vk::fullBarrier), a compute-to-compute
+/// barrier on shader memory alone (vk::computeBarrier), or nothing (dispatches that may overlap).
+enum class DispatchBarrier { Full, Compute, None };
+
+/// Earlier compute shaders' writes made visible to later compute shaders alone (the library puts
+/// vk::fullBarrier between its passes).
+void computeBarrier(VkCommandBuffer cb) {
+  VkMemoryBarrier m{};
+  m.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+  m.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  m.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
+  vkCmdPipelineBarrier(cb, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &m, 0,
+                       nullptr, 0, nullptr);
+}
+
 /// Two device buffers (64 MiB on CPU devices, 512 MiB on GPUs) on Vulkan device `index` and the
 /// copy shader between them, made once: a GPU copies 512 MiB in a fraction of a millisecond, far
 /// less than making a device and its buffers.
@@ -119,6 +142,26 @@ class CopyRig {
     ctx_.wait(ctx_.submit());
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / kCopies;
   }
+  /// The time of one small dispatch (s): `dispatches` copies of 64 work-groups (256 KiB each way,
+  /// the size of a 10k-element body's node pass) one after another in one submission, each followed
+  /// by `barrier`, the submission and its wait shared among them.
+  double chain(int dispatches, DispatchBarrier barrier) {
+    constexpr std::uint32_t kGroups = 64;
+    const std::uint32_t words = kGroups * 256;
+    const auto t0 = std::chrono::steady_clock::now();
+    VkCommandBuffer cb = ctx_.begin();
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+    vkCmdPushConstants(cb, ctx_.pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(words), &words);
+    for (int k = 0; k < dispatches; ++k) {
+      VkDescriptorSet set = k % 2 == 0 ? ab_ : ba_;
+      vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_.pipelineLayout(), 0, 1, &set, 0, nullptr);
+      vkCmdDispatch(cb, kGroups, 1, 1);
+      if (barrier == DispatchBarrier::Full) detail::vk::fullBarrier(cb);
+      if (barrier == DispatchBarrier::Compute) computeBarrier(cb);
+    }
+    ctx_.wait(ctx_.submit());
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / dispatches;
+  }
 
  private:
   detail::vk::Context ctx_;
@@ -142,6 +185,23 @@ void copy(benchmark::State& state, std::size_t index) {
   CopyRig rig(index);
   for (auto _ : state) state.SetIterationTime(rig.once());
   state.SetBytesProcessed(static_cast<std::int64_t>(2 * rig.bytes()) * state.iterations());
+}
+
+/// The launch yardstick: the device time of a small dispatch and its barrier, from a chain of 200
+/// in one submission (CopyRig::chain), the floor under a PCG iteration of a few dispatches. The
+/// benchmark's time is the whole chain's (a time per dispatch as the iteration time would make
+/// Google Benchmark run 200 times longer than its minimum time), us_per_dispatch its 200th.
+void dispatchChain(benchmark::State& state, std::size_t index, DispatchBarrier barrier) {
+  constexpr int kDispatches = 200;
+  CopyRig rig(index);
+  rig.chain(kDispatches, barrier);  // warm-up
+  double total = 0;
+  for (auto _ : state) {
+    const double t = kDispatches * rig.chain(kDispatches, barrier);
+    state.SetIterationTime(t);
+    total += t;
+  }
+  state.counters["us_per_dispatch"] = benchmark::Counter(1e6 * total / kDispatches, benchmark::Counter::kAvgIterations);
 }
 
 /// The box clamped at x = 0, E = 1e5 Pa, nu = 0.4, 1000 kg/m^3, cells of 5 cm.
@@ -288,6 +348,10 @@ int registerAll() {
   for (std::size_t i = 0; i < devices.size(); ++i) {
     const std::string dev = std::to_string(i);
     benchmark::RegisterBenchmark(("copy/" + dev).c_str(), copy, i)->UseManualTime()->MinTime(0.5)->Unit(benchmark::kMillisecond);
+    for (const auto& [name, barrier] : {std::pair{"full", DispatchBarrier::Full}, std::pair{"compute", DispatchBarrier::Compute},
+                                        std::pair{"none", DispatchBarrier::None}})
+      benchmark::RegisterBenchmark(("dispatch/" + dev + "/" + name).c_str(), dispatchChain, i, barrier)
+          ->UseManualTime()->MinTime(0.3)->Unit(benchmark::kMillisecond);
     for (const BoxSize& size : kSizes) {
       benchmark::RegisterBenchmark(("pcg_iterations/" + dev + "/" + size.label).c_str(), pcgIterations, i, size)
           ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);
@@ -300,23 +364,26 @@ int registerAll() {
 
 }  // namespace
 
-/// Takes --group_pcg_nodes out of argv; exits with a message on a malformed value.
+/// Takes --group_pcg_nodes and --fused_pcg out of argv; exits with a message on a malformed value.
 void parseVulkanBenchOptions(int& argc, char** argv) {
   int out = 1;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
-    const std::string flag = "--group_pcg_nodes=";
-    if (arg.rfind(flag, 0) != 0) {
+    const std::string group = "--group_pcg_nodes=", fused = "--fused_pcg=";
+    const std::string* flag = arg.rfind(group, 0) == 0 ? &group : arg.rfind(fused, 0) == 0 ? &fused : nullptr;
+    if (!flag) {
       argv[out++] = argv[i];
       continue;
     }
     char* end = nullptr;
-    const long long v = std::strtoll(arg.c_str() + flag.size(), &end, 10);
-    if (arg.size() == flag.size() || !end || *end) {
-      std::fprintf(stderr, "%s: not an integer (VulkanTuning::groupPcgNodes)\n", arg.c_str());
+    const long long v = std::strtoll(arg.c_str() + flag->size(), &end, 10);
+    if (arg.size() == flag->size() || !end || *end) {
+      std::fprintf(stderr, "%s: not an integer (VulkanTuning::%s)\n", arg.c_str(),
+                   flag == &group ? "groupPcgNodes" : "fusedPcg");
       std::exit(2);
     }
-    benchTuning().groupPcgNodes = v;
+    if (flag == &group) benchTuning().groupPcgNodes = v;
+    else benchTuning().fusedPcg = static_cast<int>(v);
   }
   argc = out;
 }

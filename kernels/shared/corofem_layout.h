@@ -148,7 +148,9 @@ COROFEM_CONSTANT(unsigned, kSegPartialCount, 4); /* its number of PCG partial tr
 COROFEM_CONSTANT(unsigned, kSegElemBegin, 5);    /* its first element (global)                    */
 COROFEM_CONSTANT(unsigned, kSegElemSpan, 6);     /* its elements, padding included                */
 COROFEM_CONSTANT(unsigned, kSegNodeBegin, 7);    /* its first node (global)                       */
-COROFEM_CONSTANT(unsigned, kSegInfoCount, 8);
+COROFEM_CONSTANT(unsigned, kSegArrived, 8);      /* Vulkan's fused PCG node pass: its work-groups
+                                                    done so far (0 between dispatches)             */
+COROFEM_CONSTANT(unsigned, kSegInfoCount, 9);
 /* Per segment (real) at segCoef[kSegCoefCount * s + k]: the material and the coefficients of the
  * current system A = m M + c C + k K^R with Rayleigh C = alpha M + beta K^R folded in.           */
 COROFEM_CONSTANT(unsigned, kCoefLambda, 0);      /* Lame lambda (forces, energy, preconditioner)  */

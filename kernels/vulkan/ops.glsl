@@ -34,20 +34,16 @@ void tree4() {
  * derivation): with `forces`, f = R K (R^T x - X) from the positions (E = sym(P) - I); else the
  * product k R K R^T p_e from p = vin (E = sym(P), lambda and mu already times k). Returns the
  * element's strain energy V/2 S_w : E (meaningful with `forces`). */
-real element_pass(uint e, uint S, real lambda, real mu, bool forces) {
+real element_pass_of(uint e, uint S, real lambda, real mu, bool forces, in real v[12]) {
   real a[9];
   for (uint k = 0u; k < 9u; ++k) a[k] = rotGrad[k * S + e];
   const real V = geom[kGeomVolume * S + e];
   const real shift = forces ? real(1) : real(0);
-  uint node[4];
-  for (uint c = 0u; c < 4u; ++c) node[c] = corners[c * S + e];
   real P[9];
   for (int k = 0; k < 9; ++k) P[k] = real(0);
-  real v0[3];
-  for (uint j = 0u; j < 3u; ++j) v0[j] = forces ? pos[3u * node[0] + j] : PRODUCT_IN[3u * node[0] + j];
   for (uint i = 1u; i < 4u; ++i)
     for (uint j = 0u; j < 3u; ++j) {
-      const real d = (forces ? pos[3u * node[i] + j] : PRODUCT_IN[3u * node[i] + j]) - v0[j];
+      const real d = v[3u * i + j] - v[j];
       for (uint k = 0u; k < 3u; ++k) P[3 * j + k] += d * a[3 * (i - 1u) + k];
     }
   const real exx = P[0] - shift, eyy = P[4] - shift, ezz = P[8] - shift;
@@ -75,6 +71,17 @@ real element_pass(uint e, uint S, real lambda, real mu, bool forces) {
   elemOut[12u * e + 1u] = y0y;
   elemOut[12u * e + 2u] = y0z;
   return real(0.5) * (sxx * exx + syy * eyy + szz * ezz + real(2) * (sxy * exy + sxz * exz + syz * eyz));
+}
+
+/* element_pass_of with the corner values v (3 per corner) read from the positions (`forces`) or
+ * from p = PRODUCT_IN. */
+real element_pass(uint e, uint S, real lambda, real mu, bool forces) {
+  real v[12];
+  for (uint c = 0u; c < 4u; ++c) {
+    const uint n = corners[c * S + e];
+    for (uint j = 0u; j < 3u; ++j) v[3u * c + j] = forces ? pos[3u * n + j] : PRODUCT_IN[3u * n + j];
+  }
+  return element_pass_of(e, S, lambda, mu, forces, v);
 }
 
 /* Node n's gathered element outputs (its CSR list in order). */
@@ -117,17 +124,44 @@ real gather_product_node(uint n, uint s) {
   return py;
 }
 
-/* z = M^-1 r for a node from its stored inverse m (row-major 3x3; the diagonal at 0, 4, 8). */
+/* z = M^-1 r for a node from its stored inverse m (row-major 3x3; the diagonal at 0, 4, 8).
+ * `precise` (no fused multiply-adds of the compiler's choosing), as in pcg_update_values: the fused
+ * element pass (pcg_corner_u) computes the u that the node pass stores, to the bit. */
 void apply_inverse(in real m[9], in real r[3], out real z[3]) {
+  precise real z0, z1, z2;
   if (pc.precond == 2u) {
-    z[0] = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];
-    z[1] = m[3] * r[0] + m[4] * r[1] + m[5] * r[2];
-    z[2] = m[6] * r[0] + m[7] * r[1] + m[8] * r[2];
+    z0 = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];
+    z1 = m[3] * r[0] + m[4] * r[1] + m[5] * r[2];
+    z2 = m[6] * r[0] + m[7] * r[1] + m[8] * r[2];
   } else {
-    z[0] = m[0] * r[0];
-    z[1] = m[4] * r[1];
-    z[2] = m[8] * r[2];
+    z0 = m[0] * r[0];
+    z1 = m[4] * r[1];
+    z2 = m[8] * r[2];
   }
+  z[0] = z0;
+  z[1] = z1;
+  z[2] = z2;
+}
+
+/* The new s = w + beta s and r' = r - alpha s of dof d (PCG's update; pcg_update_node). */
+void pcg_update_values(uint d, real alpha, real beta, out real sd, out real rd) {
+  precise real s_ = wvec[d] + beta * svec[d];
+  precise real r_ = rvec[d] - alpha * s_;
+  sd = s_;
+  rd = r_;
+}
+
+/* The u = M^-1 r' that pcg_update_node will store for node n, from the vectors before the update:
+ * the fused element pass's product input at its corners. */
+void pcg_corner_u(uint n, real alpha, real beta, out real un[3]) {
+  real m[9];
+  for (uint k = 0u; k < 9u; ++k) m[k] = pc.precond == 2u || k % 4u == 0u ? minv[9u * n + k] : real(0);
+  real rn[3];
+  for (uint k = 0u; k < 3u; ++k) {
+    real sd;
+    pcg_update_values(3u * n + k, alpha, beta, sd, rn[k]);
+  }
+  apply_inverse(m, rn, un);
 }
 
 /* PCG's vector update for node n: p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s,
@@ -138,11 +172,12 @@ void pcg_update_node(uint n, real alpha, real beta, out real sums[2]) {
   real rn[3], un[3];
   for (uint k = 0u; k < 3u; ++k) {
     const uint d = 3u * n + k;
-    const real pd = uvec[d] + beta * pvec[d], sd = wvec[d] + beta * svec[d];
+    const real pd = uvec[d] + beta * pvec[d];
+    real sd;
+    pcg_update_values(d, alpha, beta, sd, rn[k]);
     pvec[d] = pd;
     svec[d] = sd;
     xvec[d] += alpha * pd;
-    rn[k] = rvec[d] - alpha * sd;
   }
   apply_inverse(m, rn, un);
   sums[0] = real(0);

@@ -26,6 +26,10 @@
 
 #include <gtest/gtest.h>
 
+namespace corofem::test::layout {
+#include "../../kernels/shared/corofem_layout.h"
+}  // namespace corofem::test::layout
+
 #include <limits>
 
 #include <algorithm>
@@ -1346,7 +1350,8 @@ TEST_P(OpenCLBatch, AllocatedBytesAreTheBuffersAndStaticProblemsHaveNoMassBuffer
     }
     const std::size_t K = set.size();
     auto buf = [](std::size_t b) { return std::max<std::size_t>(b, 16); };  // the smallest buffer: 16 bytes
-    std::size_t bytes = buf(4 * (S / 512)) + buf(4 * (N / 64)) + 4 * 8 * K + r * 8 * K;  // segment tables
+    std::size_t bytes = buf(4 * (S / 512)) + buf(4 * (N / 64));  // segment tables
+    bytes += 4 * test::layout::kSegInfoCount * K + r * test::layout::kSegCoefCount * K;
     bytes += 4 * 4 * S + r * (10 + 9 + 12) * S;  // corners, geometry, a_i, element outputs
     if (quaternion) bytes += r * 9 * S + r * 4 * S;   // R (every pass writes it) and the quaternions
     bytes += 4 * (N + 1) + 4 * 4 * E;  // gather lists

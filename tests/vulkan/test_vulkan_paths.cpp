@@ -1,10 +1,13 @@
-// The Vulkan backend's two PCG paths (VulkanTuning::groupPcgNodes): a dispatch per phase (update,
-// the product's element and node passes, the scalars) and whole iterations in one dispatch, a
-// work-group per body (kernels/vulkan/pcg_group.comp). The conformance suite checks the default
-// path against the reference (its bodies are small: the one-dispatch path); here the other path is
-// held to it on every Vulkan device, in double and float, for every
-// preconditioner the backend has, on the conformance suite's seven bodies solved together: the
-// same phases in the same order give the same iteration counts and answers.
+// The Vulkan backend's PCG paths (VulkanTuning::groupPcgNodes and fusedPcg): whole iterations in
+// one dispatch, a work-group per body (kernels/vulkan/pcg_group.comp), and off it an iteration by
+// phases in four dispatches (the update, the product's element and node passes, the scalars) or,
+// fused, in two (the update folded into the product's passes, the scalars into the node pass's last
+// work-group: element_fused.comp and pcg_fused.comp; three with the multigrid's V-cycle). The
+// conformance suite checks the default path against the reference (its bodies are small: the
+// one-dispatch path on a CPU device); here the others are held to it on every Vulkan device, in
+// double and float, for every preconditioner the backend has, on the conformance suite's seven
+// bodies solved together: the same operations in the same order give the same iteration counts
+// and answers.
 #include "backends/vulkan/vk_runtime.hpp"
 #include "conformance/conformance_support.hpp"
 
@@ -24,12 +27,14 @@ std::vector<ConformanceCase> vulkanCases() {
 
 class VulkanPaths : public ConformanceBase {
  protected:
-  /// A device of the case on the path `groupNodes` picks (-1: a dispatch per phase; a large value:
-  /// whole iterations in one dispatch).
-  std::unique_ptr<detail::Device> onPath(const SolverDesc& s, long long groupNodes) const {
+  /// A device of the case on the path `groupNodes` and `fused` pick (-1: dispatches per phase, four
+  /// an iteration, or fused = 1: two, three with the multigrid; a large value: whole iterations in
+  /// one dispatch).
+  std::unique_ptr<detail::Device> onPath(const SolverDesc& s, long long groupNodes, int fused = 0) const {
     const auto entry = detail::findBackend(GetParam().backend);
     detail::DeviceOptions o = options();
     o.vulkan.groupPcgNodes = groupNodes;
+    o.vulkan.fusedPcg = fused;
     return entry->create(problemsOf(bodies()), s, entry->resolve(GetParam().selector), o);
   }
   static long long counter(const detail::Device& d, const std::string& name) {
@@ -39,7 +44,7 @@ class VulkanPaths : public ConformanceBase {
   }
 };
 
-TEST_P(VulkanPaths, BothPcgPathsIterateAlikeAndGiveTheSameAnswers) {
+TEST_P(VulkanPaths, EveryPcgPathIteratesAlikeAndGivesTheSameAnswers) {
   const detail::BodySet all = detail::allBodies(count());
   std::vector<Eigen::VectorXd> x(count()), b(count()), zeros(count());
   detail::ConstVectors xs;
@@ -54,31 +59,44 @@ TEST_P(VulkanPaths, BothPcgPathsIterateAlikeAndGiveTheSameAnswers) {
     zeros[i] = Eigen::VectorXd::Zero(b[i].size());
     systems.push_back(bodies()[i].solve);
   }
-  for (PreconditionerKind pc : {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
+  for (PreconditionerKind pc : {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal,
+                                PreconditionerKind::Amg}) {
     SCOPED_TRACE(toString(pc));
+    const bool amg = pc == PreconditionerKind::Amg;
     const SolverDesc s = solver(pc);
-    std::unique_ptr<detail::Device> phases = onPath(s, -1), group = onPath(s, std::numeric_limits<long long>::max());
-    phases->setPositions(all, xs);
-    group->setPositions(all, xs);
-    const SetSolve a = solveSet(*phases, all, b, zeros, s, systems);
-    const SetSolve g = solveSet(*group, all, b, zeros, s, systems);
-    // Each device took the path asked for (else the comparison would compare a path with itself).
-    EXPECT_GT(counter(*phases, "pcg_phase_dispatches"), 0);
-    EXPECT_EQ(counter(*phases, "pcg_group_dispatches"), 0);
-    EXPECT_GT(counter(*group, "pcg_group_dispatches"), 0);
-    EXPECT_EQ(counter(*group, "pcg_phase_dispatches"), 0);
-    for (std::size_t i = 0; i < count(); ++i) {
-      SCOPED_TRACE(problem(i).name);
-      ASSERT_TRUE(a.solves[i].failure.empty()) << a.solves[i].failure;
-      ASSERT_TRUE(g.solves[i].failure.empty()) << g.solves[i].failure;
-      std::printf("[info] %s, %s, %s: %d iterations per phase, %d in one dispatch, |x_a - x_g| / |x_a| %.1e\n",
-                  GetParam().describe().c_str(), toString(pc), problem(i).name.c_str(), a.solves[i].stats.iterations,
-                  g.solves[i].stats.iterations, relErr(g.x[i], a.x[i]));
-      EXPECT_EQ(a.solves[i].stats.iterations, g.solves[i].stats.iterations);
-      EXPECT_EQ(a.solves[i].stats.converged, g.solves[i].stats.converged);
-      // The same operations in the same order: equal up to the compiler's freedom to fuse a
-      // multiply-add differently in two shaders (a few roundings of the device's precision).
-      EXPECT_LE(relErr(g.x[i], a.x[i]), isDouble() ? 1e-12 : 1e-4);
+    // The path the others are held to: one dispatch (the multigrid has none: four by phases).
+    std::unique_ptr<detail::Device> first = amg ? onPath(s, -1, 0) : onPath(s, std::numeric_limits<long long>::max());
+    first->setPositions(all, xs);
+    const SetSolve g = solveSet(*first, all, b, zeros, s, systems);
+    EXPECT_EQ(counter(*first, "pcg_group_dispatches") > 0, !amg);
+    for (int fused : amg ? std::vector<int>{1} : std::vector<int>{0, 1}) {
+      const int perIteration = fused ? (amg ? 3 : 2) : 4;
+      SCOPED_TRACE(std::to_string(perIteration) + " dispatches an iteration");
+      std::unique_ptr<detail::Device> phases = onPath(s, -1, fused);
+      phases->setPositions(all, xs);
+      const SetSolve a = solveSet(*phases, all, b, zeros, s, systems);
+      // Each device took the path asked for (else the comparison would compare a path with itself):
+      // that many dispatches for each iteration enqueued, which are at least the most any body did
+      // and, the host reading the scalars every few, less than one and a half times that.
+      EXPECT_EQ(counter(*phases, "pcg_group_dispatches"), 0);
+      long long most = 0;
+      for (const detail::PcgSolve& solve : a.solves) most = std::max<long long>(most, solve.stats.iterations);
+      const long long dispatches = counter(*phases, "pcg_phase_dispatches");
+      EXPECT_GE(dispatches, perIteration * most - 2);  // the cap's last iteration takes two
+      EXPECT_LT(dispatches, (perIteration + 1) * most);
+      for (std::size_t i = 0; i < count(); ++i) {
+        SCOPED_TRACE(problem(i).name);
+        ASSERT_TRUE(a.solves[i].failure.empty()) << a.solves[i].failure;
+        ASSERT_TRUE(g.solves[i].failure.empty()) << g.solves[i].failure;
+        std::printf("[info] %s, %s, %s: %d iterations in %d dispatches each, %d on the first path, |x_a - x_g| / "
+                    "|x_a| %.1e\n", GetParam().describe().c_str(), toString(pc), problem(i).name.c_str(),
+                    a.solves[i].stats.iterations, perIteration, g.solves[i].stats.iterations, relErr(g.x[i], a.x[i]));
+        EXPECT_EQ(a.solves[i].stats.iterations, g.solves[i].stats.iterations);
+        EXPECT_EQ(a.solves[i].stats.converged, g.solves[i].stats.converged);
+        // The same operations in the same order: equal up to the compiler's freedom to fuse a
+        // multiply-add differently in two shaders (a few roundings of the device's precision).
+        EXPECT_LE(relErr(g.x[i], a.x[i]), isDouble() ? 1e-12 : 1e-4);
+      }
     }
   }
 }

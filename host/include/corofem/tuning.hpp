@@ -90,12 +90,21 @@ struct OpenCLTuning {
 struct VulkanTuning {
   /// Bodies of at most this many nodes run their PCG iterations in one dispatch, a work-group per
   /// body meeting at barriers (kernels/vulkan/pcg_group.comp); larger ones take a dispatch per
-  /// phase (an update, the product's element and node passes, the scalars: four an iteration), which
-  /// spreads a body over the device. 0 = 2,048 on a CPU device (on lavapipe, a step of a 270-node
-  /// block: 8.5 ms in one dispatch against 10.0 ms per phase; of a 2,100-node block: 55 against
-  /// 35 ms) and never on a GPU (an H200: 2.5 against 1.7 ms for the 270-node block, 14.2 against
-  /// 2.6 ms for the 2,100-node one; docs/performance.md); -1 = never.
+  /// phase (an update, the product's element and node passes, the scalars: four an iteration, or
+  /// two with fusedPcg), which spreads a body over the device. 0 = 2,048 on a CPU device (on
+  /// lavapipe, a step of a 270-node block: 8.5 ms in one dispatch against 10.0 ms per phase; of a
+  /// 2,100-node block: 55 against 35 ms) and never on a GPU (an H200: 2.5 against 1.7 ms for the
+  /// 270-node block, 14.2 against 2.6 ms for the 2,100-node one; docs/performance.md); -1 = never.
   long long groupPcgNodes = 0;
+  /// Off the one-dispatch path, a PCG iteration in two dispatches instead of four
+  /// (kernels/vulkan/pcg_fused.comp): the update folded into the product's passes, each element
+  /// computing the new u at its corners, and the scalars into the node pass's last work-group;
+  /// with the amg preconditioner, whose V-cycle runs between the update and the product, three.
+  /// The same bits either way. It saves dispatches and their barriers (about 7 us each on an
+  /// H200: bench_vulkan's dispatch yardstick) for three more vectors and the preconditioner's
+  /// entries read at each element's corners. -1 = on a GPU only (on lavapipe the iterations took
+  /// as long or longer with it: dispatches cost it little); 0 = never; 1 = always.
+  int fusedPcg = -1;
   /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
   int localityOrder = -1;
 };

@@ -46,6 +46,18 @@ const std::uint32_t kPcgGroupFloat[] =
 const std::uint32_t kPcgGroupDouble[] =
 #include "pcg_group_double.inc"
 ;
+const std::uint32_t kElementFusedFloat[] =
+#include "element_fused_float.inc"
+;
+const std::uint32_t kElementFusedDouble[] =
+#include "element_fused_double.inc"
+;
+const std::uint32_t kPcgFusedFloat[] =
+#include "pcg_fused_float.inc"
+;
+const std::uint32_t kPcgFusedDouble[] =
+#include "pcg_fused_double.inc"
+;
 const std::uint32_t kSurfaceFloat[] =
 #include "surface_float.inc"
 ;
@@ -75,6 +87,8 @@ Spirv shaderCode(Shader shader, bool isDouble) {
     case Shader::Pcg: return isDouble ? of(kPcgDouble) : of(kPcgFloat);
     case Shader::Reduce: return isDouble ? of(kReduceDouble) : of(kReduceFloat);
     case Shader::PcgGroup: return isDouble ? of(kPcgGroupDouble) : of(kPcgGroupFloat);
+    case Shader::ElementFused: return isDouble ? of(kElementFusedDouble) : of(kElementFusedFloat);
+    case Shader::PcgFused: return isDouble ? of(kPcgFusedDouble) : of(kPcgFusedFloat);
     case Shader::Surface: return isDouble ? of(kSurfaceDouble) : of(kSurfaceFloat);
     case Shader::Amg: return isDouble ? of(kAmgDouble) : of(kAmgFloat);
   }
@@ -84,7 +98,7 @@ Spirv shaderCode(Shader shader, bool isDouble) {
 std::uint64_t shaderHash() {
   std::uint64_t h = kFnv1aOffset;
   for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup,
-                   Shader::Surface, Shader::Amg})
+                   Shader::ElementFused, Shader::PcgFused, Shader::Surface, Shader::Amg})
     for (bool d : {false, true}) {
       const Spirv code = shaderCode(s, d);
       h = fnv1a64(code.words, code.bytes, h);

@@ -74,6 +74,9 @@ void registerVulkanBackend() {
                 (step.dynamic ? (step.damping ? "M, C, K_t" : "M, K_t") : "K_t") + ")");
     k.push_back(std::string("pcg.comp") + step.formsInverse() +
                 " + reduce.comp (single-reduction PCG, scalars and stop flags on the device)" +
+                "; on a GPU (VulkanTuning::fusedPcg) an iteration in " + (step.amg() ? "three" : "two") +
+                " dispatches: " + (step.amg() ? "pcg.comp's update, the V-cycle, element.comp" : "element_fused.comp") +
+                " and pcg_fused.comp with the scalars" +
                 (step.amg() ? "" : "; bodies up to VulkanTuning::groupPcgNodes nodes (by default 2,048 on a CPU "
                             "device, none on a GPU) run whole iterations in one pcg_group.comp dispatch, a "
                             "work-group per body"));

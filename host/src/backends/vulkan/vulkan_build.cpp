@@ -32,6 +32,7 @@ VulkanDevice::VulkanDevice(const std::vector<const Problem*>& problems, const So
   groupPcg_ = groupNodes > 0 && largest <= static_cast<std::size_t>(groupNodes) && chunks <= kGroupChunkBudget &&
               solver_.preconditioner != PreconditionerKind::Amg;
   groupIterationsPerDispatch_ = static_cast<int>(std::max<std::size_t>(1, kGroupChunkBudget / chunks));
+  fusedPcg_ = tuning.fusedPcg < 0 ? ctx_->physical().gpu : tuning.fusedPcg > 0;
   build();
   if (solver_.preconditioner == PreconditionerKind::Amg) {
     VulkanAmgHost host;
@@ -206,6 +207,8 @@ void VulkanDevice::build() {
   pcg_ = pipeline(vk::Shader::Pcg, "pcg.comp");
   reduce_ = pipeline(vk::Shader::Reduce, "reduce.comp");
   pcgGroup_ = pipeline(vk::Shader::PcgGroup, "pcg_group.comp");
+  elementFused_ = pipeline(vk::Shader::ElementFused, "element_fused.comp");
+  pcgFused_ = pipeline(vk::Shader::PcgFused, "pcg_fused.comp");
   apply_ = productSet(pin_, yout_);
   pcgSet_ = productSet(owned_[kVecU], owned_[kVecW]);
   setup_ = productSet(owned_[kVecX], owned_[kVecS]);

@@ -62,6 +62,7 @@ constexpr std::uint32_t kWg = 64;
 constexpr std::uint32_t kElementForces = 0, kElementProduct = 1, kElementCorners = 2;
 constexpr std::uint32_t kGatherSum = 0, kGatherProduct = 1, kGatherResidual = 2, kGatherBlocks = 3;
 constexpr std::uint32_t kPcgInit = 0, kPcgUpdate = 1;
+constexpr std::uint32_t kFusedUpdateProduct = 0, kFusedProduct = 1;  // pcg_fused.comp
 constexpr std::size_t kReadSlots = 8;  ///< scalar reads in flight before the oldest is taken to the host
 constexpr std::size_t kChunk = 4096;   ///< dofs per host thread's chunk in the conversions
 
@@ -359,7 +360,8 @@ class VulkanDevice final : public Device {
   std::vector<double> energyHost_;  ///< per body: its strain energy as last read
   std::vector<char> energyFresh_;   ///< per body: energyHost_ is at the positions and material set
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
-             reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE, surface_ = VK_NULL_HANDLE;
+             reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE, elementFused_ = VK_NULL_HANDLE,
+             pcgFused_ = VK_NULL_HANDLE, surface_ = VK_NULL_HANDLE;
   VkDescriptorSet apply_ = VK_NULL_HANDLE, pcgSet_ = VK_NULL_HANDLE, setup_ = VK_NULL_HANDLE;
 
   std::vector<std::uint32_t> segInfo_;                    ///< the segment table, every body inactive
@@ -369,6 +371,7 @@ class VulkanDevice final : public Device {
   bool hasMass_ = false, hasSprings_ = false;
   bool groupPcg_ = false;  ///< PCG iterations in one dispatch, a work-group per body (pcg_group.comp)
   int groupIterationsPerDispatch_ = 1;                   ///< pcg_group's iterations in one dispatch
+  bool fusedPcg_ = false;  ///< off pcg_group, two dispatches an iteration (VulkanTuning::fusedPcg)
   long long groupDispatches_ = 0, phaseDispatches_ = 0;  ///< PCG iteration dispatches of each path
   /// The last submission reading up_ (0: none pending; kOpenCommands: the open command buffer, or
   /// a submission since: Context::flush gives it).

@@ -125,19 +125,42 @@ void VulkanDevice::pcgIterate(int n, const std::vector<char>&) {
       dispatch(cb, pcgGroup_, pcgSet_, p, static_cast<std::uint32_t>(bodyCount()));
       ++groupDispatches_;
     }
-  } else {
-    const int last = enqueued_ + k == cap_ ? 1 : 0;  // the cap's last iteration: an update and the scalars
-    phaseDispatches_ += 4LL * (k - last) + 2LL * last;
+  } else {  // by phases: four dispatches an iteration, or with fusedPcg_ two (three with the V-cycle)
     for (int it = 0; it < k; ++it) {
       ++enqueued_;
-      const bool last = enqueued_ == cap_;
+      if (enqueued_ == cap_) {  // the cap's last iteration: the update and r . r alone (no next u)
+        push.mode = kPcgUpdate;
+        dispatch(cb, pcg_, pcgSet_, push, nodeGroups());
+        push.mode = kReduceLast;
+        dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
+        phaseDispatches_ += 2;
+        break;
+      }
+      Push p = push;
+      p.flags |= kFlagProject;
+      if (fusedPcg_ && !amg_) {  // each element computes the update's u at its corners; the node pass stores it
+        dispatch(cb, elementFused_, pcgSet_, p, elementGroups());
+        p.mode = kFusedUpdateProduct;
+        dispatch(cb, pcgFused_, pcgSet_, p, nodeGroups());
+        phaseDispatches_ += 2;
+        continue;
+      }
       push.mode = kPcgUpdate;
       dispatch(cb, pcg_, pcgSet_, push, nodeGroups());
-      // The cap's last iteration needs r . r alone (the stop test), not u: no V-cycle.
-      if (!last && amg_) amg_->recordCycle(cb, false);
-      if (!last) recordProduct(cb, push, pcgSet_);
-      push.mode = last ? kReduceLast : kReduceStep;
+      if (amg_) amg_->recordCycle(cb, false);  // u = M^-1 r by the V-cycle, over the update's
+      p.mode = kElementProduct;
+      dispatch(cb, element_, pcgSet_, p, elementGroups());
+      if (fusedPcg_) {  // the product's node pass and the scalars in one
+        p.mode = kFusedProduct;
+        dispatch(cb, pcgFused_, pcgSet_, p, nodeGroups());
+        phaseDispatches_ += 3;
+        continue;
+      }
+      p.mode = kGatherProduct;
+      dispatch(cb, gather_, pcgSet_, p, nodeGroups());
+      push.mode = kReduceStep;
       dispatch(cb, reduce_, pcgSet_, push, static_cast<std::uint32_t>(bodyCount()));
+      phaseDispatches_ += 4;
     }
   }
   // Left open: the read of the scalars that follows submits the chunk with it.
