@@ -126,28 +126,18 @@ class CopyRig {
   /// The time of one copy (s): four, a to b and back twice, with a barrier between each, in one
   /// submission that is waited for (the submission and the wait shared among the four).
   double once() {
-    constexpr int kCopies = 4;
     const std::uint32_t words = static_cast<std::uint32_t>(bytes_ / 16);
-    const std::uint32_t groups = std::min<std::uint32_t>(65535, (words + 255) / 256);
-    const auto t0 = std::chrono::steady_clock::now();
-    VkCommandBuffer cb = ctx_.begin();
-    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
-    vkCmdPushConstants(cb, ctx_.pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(words), &words);
-    for (int k = 0; k < kCopies; ++k) {
-      VkDescriptorSet set = k % 2 == 0 ? ab_ : ba_;
-      vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_.pipelineLayout(), 0, 1, &set, 0, nullptr);
-      vkCmdDispatch(cb, groups, 1, 1);
-      detail::vk::fullBarrier(cb);
-    }
-    ctx_.wait(ctx_.submit());
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / kCopies;
+    return copies(std::min<std::uint32_t>(65535, (words + 255) / 256), words, 4, DispatchBarrier::Full);
   }
   /// The time of one small dispatch (s): `dispatches` copies of 64 work-groups (256 KiB each way,
   /// the size of a 10k-element body's node pass) one after another in one submission, each followed
   /// by `barrier`, the submission and its wait shared among them.
-  double chain(int dispatches, DispatchBarrier barrier) {
-    constexpr std::uint32_t kGroups = 64;
-    const std::uint32_t words = kGroups * 256;
+  double chain(int dispatches, DispatchBarrier barrier) { return copies(64, 64 * 256, dispatches, barrier); }
+
+ private:
+  /// `dispatches` copies of `words` 16-byte words by `groups` work-groups, alternately a to b and b
+  /// to a, each followed by `barrier`, in one submission that is waited for: the time of one (s).
+  double copies(std::uint32_t groups, std::uint32_t words, int dispatches, DispatchBarrier barrier) {
     const auto t0 = std::chrono::steady_clock::now();
     VkCommandBuffer cb = ctx_.begin();
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
@@ -155,7 +145,7 @@ class CopyRig {
     for (int k = 0; k < dispatches; ++k) {
       VkDescriptorSet set = k % 2 == 0 ? ab_ : ba_;
       vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_.pipelineLayout(), 0, 1, &set, 0, nullptr);
-      vkCmdDispatch(cb, kGroups, 1, 1);
+      vkCmdDispatch(cb, groups, 1, 1);
       if (barrier == DispatchBarrier::Full) detail::vk::fullBarrier(cb);
       if (barrier == DispatchBarrier::Compute) computeBarrier(cb);
     }
@@ -163,7 +153,6 @@ class CopyRig {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / dispatches;
   }
 
- private:
   detail::vk::Context ctx_;
   std::size_t bytes_;
   detail::vk::Buffer a_, b_;
