@@ -12,10 +12,11 @@
 //                               bytes an iteration must move at least (product and vector updates)
 //                               over the copy bandwidth measured in the same run: the fraction of
 //                               the memory's rate the iterations reach.
-//   dispatch/<device>/<barrier> the launch yardstick: the device time of one small dispatch (64
+//   dispatch/<device>/<barrier> the launch yardstick: the time of one small dispatch (64
 //                               work-groups) followed by the library's barrier between passes
-//                               (full), a compute-only barrier (compute) or none, from a chain of
-//                               200 in one submission (us_per_dispatch; the time is the chain's).
+//                               (full), a compute-only barrier (compute) or none, as a 200th of a
+//                               chain of 200 recorded, submitted and waited for at once
+//                               (us_per_dispatch; the benchmark's time is the chain's).
 //   copy/<device>               the yardstick: a compute shader's copy between two device buffers
 //                               (64 MiB on CPU devices, 512 MiB on GPUs; bench/kernels/copy.comp,
 //                               four copies a submission), bytes read + written per second. Not
@@ -27,8 +28,8 @@
 //                         per phase for every body; the default, 0, runs the 1k box's iterations
 //                         in one dispatch on a CPU device and every box per phase on a GPU)
 //   --fused_pcg=N         VulkanTuning::fusedPcg for every backend it makes (1: two dispatches an
-//                         iteration off the one-dispatch path, 0: three; the default, -1, two on a
-//                         GPU and three on a CPU device)
+//                         iteration off the one-dispatch path, 0: four; the default, -1, two on a
+//                         GPU and four on a CPU device)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
 #include "bench_scenes.hpp"
@@ -176,8 +177,9 @@ void copy(benchmark::State& state, std::size_t index) {
   state.SetBytesProcessed(static_cast<std::int64_t>(2 * rig.bytes()) * state.iterations());
 }
 
-/// The launch yardstick: the device time of a small dispatch and its barrier, from a chain of 200
-/// in one submission (CopyRig::chain), the floor under a PCG iteration of a few dispatches. The
+/// The launch yardstick: the time of a small dispatch and its barrier, a 200th of a chain of 200 in
+/// one submission (CopyRig::chain; recording, submission and wait included), the floor under a PCG
+/// iteration of a few dispatches. The
 /// benchmark's time is the whole chain's (a time per dispatch as the iteration time would make
 /// Google Benchmark run 200 times longer than its minimum time), us_per_dispatch its 200th.
 void dispatchChain(benchmark::State& state, std::size_t index, DispatchBarrier barrier) {

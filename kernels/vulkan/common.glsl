@@ -19,13 +19,18 @@ layout(local_size_x = 64) in;
 #define WG 64u
 
 /* pcg_group.comp passes values between the invocations of a work-group through these buffers within
- * one dispatch: it declares them coherent. */
+ * one dispatch: it declares them coherent. pcg_fused.comp passes the partial sums between its
+ * work-groups: it declares those alone coherent (COROFEM_COHERENT_SUMS: the segment table and the
+ * partials). */
 #ifndef COROFEM_COHERENT
 #define COROFEM_COHERENT
 #endif
+#ifndef COROFEM_COHERENT_SUMS
+#define COROFEM_COHERENT_SUMS COROFEM_COHERENT
+#endif
 
 /* Bindings (set 0); the host's Binding enum (vulkan_device_impl.hpp) lists the same numbers. */
-layout(std430, binding = 0) COROFEM_COHERENT buffer SegInfo { uint segInfo[]; };
+layout(std430, binding = 0) COROFEM_COHERENT_SUMS buffer SegInfo { uint segInfo[]; };
 layout(std430, binding = 1) readonly COROFEM_COHERENT buffer SegCoef { real segCoef[]; };
 layout(std430, binding = 2) readonly COROFEM_COHERENT buffer ElemSeg { uint elemSeg[]; };
 layout(std430, binding = 3) readonly COROFEM_COHERENT buffer NodeSeg { uint nodeSeg[]; };
@@ -49,8 +54,8 @@ layout(std430, binding = 20) COROFEM_COHERENT buffer VecU { real uvec[]; };
 layout(std430, binding = 21) COROFEM_COHERENT buffer VecP { real pvec[]; };
 layout(std430, binding = 22) COROFEM_COHERENT buffer VecS { real svec[]; };
 layout(std430, binding = 23) COROFEM_COHERENT buffer VecW { real wvec[]; };
-layout(std430, binding = 24) COROFEM_COHERENT buffer Partials { real partials[]; };        /* 3 per node work-group */
-layout(std430, binding = 25) COROFEM_COHERENT buffer PartialsW { real partialsW[]; };
+layout(std430, binding = 24) COROFEM_COHERENT_SUMS buffer Partials { real partials[]; };        /* 3 per node work-group */
+layout(std430, binding = 25) COROFEM_COHERENT_SUMS buffer PartialsW { real partialsW[]; };
 layout(std430, binding = 26) COROFEM_COHERENT buffer Scalars { real scalars[]; };          /* kScalarCount per segment */
 layout(std430, binding = 27) COROFEM_COHERENT buffer Energy { real energy[]; };            /* per element */
 layout(std430, binding = 28) COROFEM_COHERENT buffer Quat { real quat[]; };                /* 4 per element (k S + e) */

@@ -2,9 +2,9 @@
 /* The element half of a PCG iteration in two dispatches (pcg_fused.comp's kModeUpdateProduct is the
  * node half), one invocation per element: element.comp's product of PCG's next u, k R K R^T u_e,
  * with u computed at the element's corners from the vectors before the iteration's update (ops.glsl's
- * pcg_corner_u, with the segment's alpha and beta), to the bit the u that the node pass stores. A
- * shader of its own: as a mode of element.comp it made lavapipe's code for the other modes slower
- * (a 10k-element box's iterations by phases took about 1.3x as long). */
+ * pcg_corner_u, with the segment's alpha and beta): the u that the node pass stores, the same
+ * arithmetic with no contraction (`precise`). A shader of its own: as a mode of element.comp it
+ * slowed lavapipe's code for that shader's other modes (docs/performance.md). */
 #include "common.glsl"
 #include "ops.glsl"
 

@@ -15,8 +15,10 @@
  *
  * The last work-group: each work-group writes its partial sums, makes them visible (coherent
  * buffers, memoryBarrierBuffer) and counts itself in segInfo's kSegArrived; the one that counts
- * last sums the segment's partials in order, updates its scalars and resets the count to 0. */
-#define COROFEM_COHERENT coherent
+ * last sums the segment's partials in order, updates its scalars and resets the count to 0 (the
+ * threadfence reduction of CUDA's samples, in GLSL's memory barriers: no work-group waits on
+ * another). The host uploads the segment table with every count 0 at each solve's start. */
+#define COROFEM_COHERENT_SUMS coherent
 #define PRODUCT_IN uvec
 #define PRODUCT_OUT wvec
 #include "common.glsl"
@@ -57,6 +59,7 @@ void main() {
     partialsW[3u * g + 2u] = real(0);
     memoryBarrierBuffer();
     const uint arrived = atomicAdd(segInfo[kSegInfoCount * s + kSegArrived], 1u);
+    memoryBarrierBuffer();
     lastGroup = arrived + 1u == seg_info(s, kSegPartialCount) ? 1u : 0u;
   }
   barrier();

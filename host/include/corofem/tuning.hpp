@@ -100,10 +100,10 @@ struct VulkanTuning {
   /// (kernels/vulkan/pcg_fused.comp): the update folded into the product's passes, each element
   /// computing the new u at its corners, and the scalars into the node pass's last work-group;
   /// with the amg preconditioner, whose V-cycle runs between the update and the product, three.
-  /// The same bits either way. It saves dispatches and their barriers (about 7 us each on an
-  /// H200: bench_vulkan's dispatch yardstick) for three more vectors and the preconditioner's
-  /// entries read at each element's corners. -1 = on a GPU only (on lavapipe the iterations took
-  /// as long or longer with it: dispatches cost it little); 0 = never; 1 = always.
+  /// The same operations either way (the same bits on lavapipe). It saves dispatches and their
+  /// barriers, which bound a small body's iteration on a GPU (bench_vulkan's dispatch yardstick;
+  /// docs/performance.md), for three more vectors and the preconditioner's entries read at each
+  /// element's corners, which a CPU device pays for. -1 = on a GPU only; 0 = never; 1 = always.
   int fusedPcg = -1;
   /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
   int localityOrder = -1;
