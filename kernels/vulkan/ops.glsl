@@ -31,9 +31,9 @@ void tree4() {
 }
 
 /* Element e's 12-vector V S_w a_i into elemOut (kernels/opencl/element_force.cl has the
- * derivation): with `forces`, f = R K (R^T x - X) from the positions (E = sym(P) - I); else the
- * product k R K R^T p_e from p = vin (E = sym(P), lambda and mu already times k). Returns the
- * element's strain energy V/2 S_w : E (meaningful with `forces`). */
+ * derivation) from its corners' values v (3 per corner): with `forces`, f = R K (R^T x - X) from
+ * the positions (E = sym(P) - I); else the product k R K R^T p_e from p (E = sym(P), lambda and mu
+ * already times k). Returns the element's strain energy V/2 S_w : E (meaningful with `forces`). */
 real element_pass_of(uint e, uint S, real lambda, real mu, bool forces, in real v[12]) {
   real a[9];
   for (uint k = 0u; k < 9u; ++k) a[k] = rotGrad[k * S + e];
