@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <functional>
 #include <thread>
 #include <vector>
@@ -94,12 +95,6 @@ TEST(DynamicsPasses, ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder) {
   EXPECT_GT(pool.energy.externalWork, 0.0);
   EXPECT_GT(pool.energy.kinetic, 0.0);
 }
-
-}  // namespace
-}  // namespace corofem
-
-namespace corofem {
-namespace {
 
 /// A cantilever (0.4 x 0.1 x 0.1 m, E = 1e5 Pa) whose tip nodes a hard handle drags `distance`
 /// sideways in `steps` steps of 0.05 s / steps (the handle's centre moved on a straight line, an
