@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -256,6 +258,95 @@ TEST(WarpedAmg, AGrabMakesAHierarchyAndTheReleaseTakesBackTheOneBefore) {
   EXPECT_EQ(body.ensure(loose, freeDofs(loose), kBackwardEulerMass, 1.0), Made::Built);
   EXPECT_EQ(body.amg().builtFreeDofs(), freeDofs(loose));
   EXPECT_EQ(body.builds(), 3);
+}
+
+/// The largest eigenvalue of B^-1 A (dense; B symmetric positive definite).
+double largestEigenvalue(const AmgMatrix& A, const AmgMatrix& B) {
+  const Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> es(Eigen::MatrixXd(A), Eigen::MatrixXd(B),
+                                                                     Eigen::EigenvaluesOnly);
+  return es.eigenvalues().maxCoeff();
+}
+
+TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere) {
+  // A grab's hierarchy (fewer free dofs, the same time step) takes level 0's two spectral bounds
+  // from the clamp's instead of 40 power steps (BodyAmg::ensure). They must bound the grabbed
+  // operator's spectra (interlacing: its Rayleigh quotients are some of the clamp's), stay near what
+  // a fresh estimate gives, and leave PCG's iterations where a fresh hierarchy has them. A ratio
+  // below the one the bounds were made at (the bounds may not hold) and free dofs the clamp's
+  // hierarchy lacks (a release of the clamp) estimate afresh: the bits of a body that never had
+  // the clamp's.
+  const Problem p = beam(12);
+  Problem grabbed = p;
+  for (std::size_t n = 0; n < grabbed.mesh.nodeCount(); ++n)
+    if (grabbed.mesh.nodes[3 * n] > 1.0 - 1e-12)
+      for (int c = 0; c < 3; ++c) grabbed.constrained[3 * n + c] = 1;
+  const std::vector<Eigen::Index> before = freeDofs(p), after = freeDofs(grabbed);
+  ASSERT_LT(after.size(), before.size());
+  const double m = kBackwardEulerMass;
+  using Made = BodyAmg::Made;
+
+  BodyAmg body;
+  ASSERT_EQ(body.ensure(p, before, m, 1.0), Made::Built);
+  const WarpedAmg::Bounds clamp = body.amg().bounds();
+  // The same ratio with its last bits changed, as a step's h comes back.
+  ASSERT_EQ(body.ensure(grabbed, after, m * (1.0 + 4e-16), 1.0), Made::Built);
+  const WarpedAmg::Bounds taken = body.amg().bounds();
+  EXPECT_EQ(taken.fine, clamp.fine);
+  EXPECT_EQ(taken.level0, clamp.level0);
+  EXPECT_EQ(body.amg().levels().at(0).lambdaMax, clamp.level0);
+
+  // They hold for the grabbed operators: level 0's Chebyshev bound against the node blocks of the
+  // operator with half the mass (the window of ratios served), the prolongator's against the diagonal.
+  const AmgMatrix K0 = restStiffness(grabbed);
+  const AmgMatrix half = restOperator(K0, grabbed, after, 0.5 * m, 1.0), A0 = restOperator(K0, grabbed, after, m, 1.0);
+  const double fineTrue = largestEigenvalue(half, nodeBlocks(half, after).first);
+  AmgMatrix D(A0.rows(), A0.cols());
+  D.setIdentity();
+  D.diagonal() = A0.diagonal();
+  const double level0True = largestEigenvalue(A0, D);
+  EXPECT_LE(fineTrue, taken.fine);
+  EXPECT_LE(level0True, taken.level0);
+
+  // Near a fresh estimate, and PCG's iterations with either hierarchy alike.
+  BodyAmg fresh;
+  ASSERT_EQ(fresh.ensure(grabbed, after, m, 1.0), Made::Built);
+  const WarpedAmg::Bounds own = fresh.amg().bounds();
+  EXPECT_NEAR(taken.fine, own.fine, 0.05 * own.fine);
+  EXPECT_NEAR(taken.level0, own.level0, 0.05 * own.level0);
+  AmgFineOperator fine;
+  fine.apply = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A0 * v; };
+  const AmgMatrix blocksInverse = nodeBlocks(A0, after).second;
+  fine.blockInverse = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = blocksInverse * v; };
+  auto iterations = [&](const WarpedAmg& amg) {
+    return pcgIterations(A0, randomVector(after.size(), 5), [&](const Eigen::VectorXd& r) {
+      Eigen::VectorXd z;
+      amg.apply(fine, r, z);
+      return z;
+    });
+  };
+  const int withTaken = iterations(body.amg()), withOwn = iterations(fresh.amg());
+  EXPECT_LE(withTaken, withOwn + 1);
+  EXPECT_LE(withTaken, 30);
+
+  // A smaller ratio (h longer) than the clamp's: estimated afresh, the bits of a fresh body.
+  BodyAmg longer, longerFresh;
+  ASSERT_EQ(longer.ensure(p, before, m, 1.0), Made::Built);
+  ASSERT_EQ(longer.ensure(grabbed, after, 0.9 * m, 1.0), Made::Built);
+  ASSERT_EQ(longerFresh.ensure(grabbed, after, 0.9 * m, 1.0), Made::Built);
+  EXPECT_EQ(longer.amg().bounds().fine, longerFresh.amg().bounds().fine);
+  EXPECT_EQ(longer.amg().bounds().level0, longerFresh.amg().bounds().level0);
+  EXPECT_NE(longer.amg().bounds().fine, clamp.fine);
+
+  // The clamp released too: dofs the clamp's hierarchy does not have.
+  Problem loose = grabbed;
+  for (std::size_t n = 0; n < loose.mesh.nodeCount(); ++n)
+    if (loose.mesh.nodes[3 * n] < 1e-12)
+      for (int c = 0; c < 3; ++c) loose.constrained[3 * n + c] = 0;
+  BodyAmg looseFresh;
+  ASSERT_EQ(body.ensure(loose, freeDofs(loose), m, 1.0), Made::Built);
+  ASSERT_EQ(looseFresh.ensure(loose, freeDofs(loose), m, 1.0), Made::Built);
+  EXPECT_EQ(body.amg().bounds().fine, looseFresh.amg().bounds().fine);
+  EXPECT_EQ(body.amg().bounds().level0, looseFresh.amg().bounds().level0);
 }
 
 /// m M + s K_0 assembled element by element, as the set-up once did: the yardstick of the operator

@@ -283,6 +283,23 @@ void WarpedAmg::clear() {
 
 void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
                       std::size_t nodeCount, const AmgMatrix* bound) {
+  make(A0, freeDofs, rest, nodeCount, bound, nullptr);
+}
+
+void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+                      std::size_t nodeCount, const Bounds& bounds) {
+  make(A0, freeDofs, rest, nodeCount, nullptr, &bounds);
+}
+
+WarpedAmg::Bounds WarpedAmg::bounds() const {
+  Bounds b;
+  b.fine = fineLambdaMax_;
+  if (!levels_.empty()) b.level0 = levels_[0].lambdaMax;
+  return b;
+}
+
+void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+                     std::size_t nodeCount, const AmgMatrix* bound, const Bounds* given) {
   clear();
   const Eigen::Index nf = static_cast<Eigen::Index>(freeDofs.size());
   if (A0.rows() != nf || A0.cols() != nf || static_cast<std::size_t>(rest.size()) != 3 * nodeCount)
@@ -322,7 +339,9 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
     for (int k = 0; k < 3; ++k) B(i, 3 + k) = rot[k][c];
   }
 
-  {
+  if (given) {
+    fineLambdaMax_ = given->fine;
+  } else {
     const AmgMatrix& Ab = bound ? *bound : A0;
     const auto [B0, B0inv] = nodeBlocks(Ab, freeDofs);
     fineLambdaMax_ = estimateBlockLambdaMax(Ab, B0, B0inv);
@@ -331,7 +350,7 @@ void WarpedAmg::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& free
   level.A = A0;
   for (;;) {
     level.diagInv = inverseDiagonal(level.A);
-    level.lambdaMax = estimateLambdaMax(level.A, level.diagInv);
+    level.lambdaMax = given && levels_.empty() ? given->level0 : estimateLambdaMax(level.A, level.diagInv);
     const Eigen::Index n = level.A.rows();
     // A body small enough to be solved directly (or one whose level 0 does not coarsen) still gets
     // one smoothed level above its direct solve (P = I), so that every body runs the same cycle:
@@ -698,16 +717,37 @@ BodyAmg::Made BodyAmg::ensure(const Problem& p, const std::vector<Eigen::Index>&
   std::swap(amg_, spare_);
   std::swap(ratio_, spareRatio_);
   if (fits(*amg_, ratio_)) return Made::Switched;
-  // Level 0's Chebyshev bound from the operator with half the mass coefficient: the bound of the
-  // whole window of ratios this hierarchy serves (lambda_max(B^-1 A) does not grow with the mass).
   const std::uint64_t key = stiffnessKey(p);
   if (stiffness_.rows() == 0 || key != stiffnessKey_) {
     stiffness_ = restStiffness(p);
     stiffnessKey_ = key;
+    amg_->clear();  // neither hierarchy's bounds are of this stiffness
+    spare_->clear();
   }
-  const AmgMatrix bound = restOperator(stiffness_, p, freeDofs, 0.5 * massScale, stiffScale);
-  amg_->build(restOperator(stiffness_, p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions,
-              p.mesh.nodeCount(), &bound);
+  // Level 0's Chebyshev bound comes from the operator with half the mass coefficient: the bound of
+  // the whole window of ratios this hierarchy serves (lambda_max(B^-1 A) does not grow with the
+  // mass; see below). A hierarchy made for more free dofs (a hard grab or a pin: the one just
+  // replaced) at a ratio r0 with r0 <= r < 2 r0 gives its two bounds instead (WarpedAmg::build with
+  // Bounds; docs/performance.md has what that spares a grab): both hold for the fewer dofs, and
+  // neither grows with the ratio. With M lumped (diagonal, so the blocks' and the diagonal's mass
+  // part is M itself), a Rayleigh quotient of B^-1 (r M + K) is (r m + k) / (r m + b) for
+  // m = v.M v, k = v.K v, b = v.B_K v: it moves towards 1 as r grows, so the largest (at least 1)
+  // does not grow. r0 is taken less a relative 1e-9: the same time step's ratio comes back with
+  // its last bits changed.
+  const WarpedAmg* wider = nullptr;
+  for (const auto& [a, made] : {std::pair<const WarpedAmg*, double>{spare_.get(), spareRatio_}, {amg_.get(), ratio_}})
+    if (!wider && a->built() && !a->levels().empty() && std::isfinite(made) && std::isfinite(ratio) &&
+        ratio >= made * (1.0 - 1e-9) && ratio < 2.0 * made &&
+        std::includes(a->builtFreeDofs().begin(), a->builtFreeDofs().end(), freeDofs.begin(), freeDofs.end()))
+      wider = a;
+  const AmgMatrix A0 = restOperator(stiffness_, p, freeDofs, massScale, stiffScale);
+  if (wider) {
+    const WarpedAmg::Bounds bounds = wider->bounds();
+    amg_->build(A0, freeDofs, p.restPositions, p.mesh.nodeCount(), bounds);
+  } else {
+    const AmgMatrix bound = restOperator(stiffness_, p, freeDofs, 0.5 * massScale, stiffScale);
+    amg_->build(A0, freeDofs, p.restPositions, p.mesh.nodeCount(), &bound);
+  }
   ratio_ = ratio;
   ++builds_;
   return Made::Built;

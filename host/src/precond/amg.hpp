@@ -82,6 +82,20 @@ class WarpedAmg {
   /// inconsistent sizes.
   void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
              std::size_t nodeCount, const AmgMatrix* bound = nullptr);
+  /// Level 0's two spectral bounds, as build() estimates them (each by 20 power steps).
+  struct Bounds {
+    double fine = 1.0;    ///< the Chebyshev bound on B^-1 A (fineLambdaMax)
+    double level0 = 1.0;  ///< lambda_max(D^-1 A_0) (levels()[0].lambdaMax: the prolongator's smoothing)
+  };
+  /// build() with level 0's bounds given instead of estimated: those of a hierarchy made from the
+  /// same operators on a superset of `freeDofs` (taken over by BodyAmg::ensure). They hold here:
+  /// A_0 on fewer dofs is a principal submatrix of the larger one, and so are its node blocks and
+  /// diagonal, so each Rayleigh quotient v.A v / v.B v it has is one the larger operator has (the
+  /// vector with zeros on the dofs dropped), and its largest is at most the larger one's.
+  void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+             std::size_t nodeCount, const Bounds& bounds);
+  /// Level 0's bounds as built (the defaults before a build with free dofs).
+  Bounds bounds() const;
   /// Whether build() ran since construction or clear() (a body without free dofs has no levels).
   bool built() const { return made_; }
   void clear();
@@ -116,6 +130,8 @@ class WarpedAmg {
   static constexpr int kChebyshevDegree = 2;
 
  private:
+  void make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+            std::size_t nodeCount, const AmgMatrix* bound, const Bounds* given);
   void cycle(std::size_t level, const Eigen::VectorXd& b, Eigen::VectorXd& x, const AmgFineOperator* fine) const;
   void warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const;
 
@@ -188,7 +204,8 @@ AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::
 /// cost one set-up each, not one per change. The same for constraints: a hierarchy serves the free
 /// dofs it was made for, so a hard grab costs one set-up and its release none (the spare). A
 /// set-up after the first assembles nothing: K_0 is kept (the assembly was about 60 ms of a grab's
-/// 140 on the 12,960-tet beam, docs/performance.md).
+/// 140 on the 12,960-tet beam, docs/performance.md), and a grab's or a pin's hierarchy takes level
+/// 0's spectral bounds from the one made for more free dofs at the same time step (ensure).
 /// (Keeping the hierarchy of before for a grab, its cycle restricted to the fewer free dofs, was
 /// tried: 40 PCG iterations a step instead of 18 on the 12,960-tet beam with its tip held, twice
 /// the step time, where the set-up then cost about four steps, now under three; bench_precond's
