@@ -16,7 +16,13 @@
 //                               work-groups) followed by the library's barrier between passes
 //                               (full), a compute-only barrier (compute) or none, as a 200th of a
 //                               chain of 200 recorded, submitted and waited for at once
-//                               (us_per_dispatch; the benchmark's time is the chain's).
+//                               (us_per_dispatch; the benchmark's time is the chain's), and the
+//                               host's time recording one (record_us_per_dispatch: what a
+//                               command buffer recorded once and replayed would spare).
+//   roundtrip/<device>          one wait for the device as the library makes one to read a
+//                               result: a small dispatch and a 64-byte copy to the host,
+//                               recorded, submitted and waited for (what each blocking wait of
+//                               a step costs beside its work).
 //   copy/<device>               the yardstick: a compute shader's copy between two device buffers
 //                               (64 MiB on CPU devices, 512 MiB on GPUs; bench/kernels/copy.comp,
 //                               four copies a submission), bytes read + written per second. Not
@@ -120,7 +126,7 @@ class CopyRig {
       : ctx_(detail::vk::Instance::shared(), index, false, 2, sizeof(std::uint32_t)), bytes_(copyBytes(index)),
         a_(ctx_, bytes_, false), b_(ctx_, bytes_, false),
         pipeline_(ctx_.pipeline(kCopyShader, sizeof(kCopyShader), "copy.comp")),
-        ab_(ctx_.descriptorSet({&a_, &b_})), ba_(ctx_.descriptorSet({&b_, &a_})) {
+        host_(ctx_, 64, true), ab_(ctx_.descriptorSet({&a_, &b_})), ba_(ctx_.descriptorSet({&b_, &a_})) {
     once();  // warm-up
   }
   std::size_t bytes() const { return bytes_; }
@@ -134,6 +140,26 @@ class CopyRig {
   /// the size of a 10k-element body's node pass) one after another in one submission, each followed
   /// by `barrier`, the submission and its wait shared among them.
   double chain(int dispatches, DispatchBarrier barrier) { return copies(64, 64 * 256, dispatches, barrier); }
+  /// The host's time recording the last chain or copy (s per dispatch, its barrier included).
+  double recordTime() const { return record_; }
+  /// One host round trip (s), as the library makes one to read a result: one small dispatch (64
+  /// work-groups) and a copy of 64 bytes into host-visible memory, recorded, submitted and waited
+  /// for.
+  double roundTrip() {
+    const std::uint32_t words = 64 * 256;
+    const auto t0 = std::chrono::steady_clock::now();
+    VkCommandBuffer cb = ctx_.begin();
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+    vkCmdPushConstants(cb, ctx_.pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(words), &words);
+    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_.pipelineLayout(), 0, 1, &ab_, 0, nullptr);
+    vkCmdDispatch(cb, 64, 1, 1);
+    detail::vk::fullBarrier(cb);
+    VkBufferCopy region{0, 0, 64};
+    vkCmdCopyBuffer(cb, b_.handle(), host_.handle(), 1, &region);
+    detail::vk::hostReadBarrier(cb);
+    ctx_.wait(ctx_.submit());
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
 
  private:
   /// `dispatches` copies of `words` 16-byte words by `groups` work-groups, alternately a to b and b
@@ -150,6 +176,7 @@ class CopyRig {
       if (barrier == DispatchBarrier::Full) detail::vk::fullBarrier(cb);
       if (barrier == DispatchBarrier::Compute) computeBarrier(cb);
     }
+    record_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / dispatches;
     ctx_.wait(ctx_.submit());
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / dispatches;
   }
@@ -158,7 +185,9 @@ class CopyRig {
   std::size_t bytes_;
   detail::vk::Buffer a_, b_;
   VkPipeline pipeline_;
+  detail::vk::Buffer host_;  ///< a round trip's 64 bytes
   VkDescriptorSet ab_, ba_;
+  double record_ = 0;
 };
 
 /// Bytes per second of the copy shader (read + write): the median of 9 copies, measured right after
@@ -186,13 +215,23 @@ void dispatchChain(benchmark::State& state, std::size_t index, DispatchBarrier b
   constexpr int kDispatches = 200;
   CopyRig rig(index);
   rig.chain(kDispatches, barrier);  // warm-up
-  double total = 0;
+  double total = 0, recording = 0;
   for (auto _ : state) {
     const double t = kDispatches * rig.chain(kDispatches, barrier);
     state.SetIterationTime(t);
     total += t;
+    recording += rig.recordTime();
   }
   state.counters["us_per_dispatch"] = benchmark::Counter(1e6 * total / kDispatches, benchmark::Counter::kAvgIterations);
+  state.counters["record_us_per_dispatch"] = benchmark::Counter(1e6 * recording, benchmark::Counter::kAvgIterations);
+}
+
+/// The cost of one wait for the device: a round trip (CopyRig::roundTrip) as the iteration time.
+/// What a step's blocking waits cost beside its dispatches.
+void roundTrip(benchmark::State& state, std::size_t index) {
+  CopyRig rig(index);
+  rig.roundTrip();  // warm-up
+  for (auto _ : state) state.SetIterationTime(rig.roundTrip());
 }
 
 /// The box clamped at x = 0, E = 1e5 Pa, nu = 0.4, 1000 kg/m^3, cells of 5 cm.
@@ -343,6 +382,8 @@ int registerAll() {
                                         std::pair{"none", DispatchBarrier::None}})
       benchmark::RegisterBenchmark(("dispatch/" + dev + "/" + name).c_str(), dispatchChain, i, barrier)
           ->UseManualTime()->MinTime(0.3)->Unit(benchmark::kMillisecond);
+    benchmark::RegisterBenchmark(("roundtrip/" + dev).c_str(), roundTrip, i)
+        ->UseManualTime()->MinTime(0.3)->Unit(benchmark::kMicrosecond);
     for (const BoxSize& size : kSizes) {
       benchmark::RegisterBenchmark(("pcg_iterations/" + dev + "/" + size.label).c_str(), pcgIterations, i, size)
           ->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.5);

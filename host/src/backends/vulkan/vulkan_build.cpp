@@ -172,7 +172,7 @@ void VulkanDevice::build() {
   up_ = vk::Buffer(*ctx_, 2 * 3 * N * rs_, true);
   scalarsOffset_ = 3 * N * rs_;  // after the node vectors read back (forces, x)
   energyOffset_ = scalarsOffset_ + (kReadSlots + 1) * scalarsBytes();
-  down_ = vk::Buffer(*ctx_, energyOffset_ + E * rs_, true);
+  down_ = vk::Buffer(*ctx_, energyOffset_ + scalarsBytes(), true);
   energyHost_.assign(B, 0.0);
   energyFresh_.assign(B, 0);
 

@@ -57,28 +57,12 @@ void VulkanDevice::internalForces(const BodySet& set, const Vectors& f) {
   recordActive(cb, activeOf(set));
   recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
   recordPasses(cb, kElementForces, kGatherSum);
-  // The forces' element pass wrote each element's strain energy too. On a CPU device (lavapipe)
-  // they are read with the forces, which answers an elasticEnergy at these positions (the drivers
-  // ask for it after the step's last forces) with no further round trip; on a GPU, whose host
-  // round trip is cheaper than E reals over the bus every Newton iteration, they are read only
-  // when asked for (as the OpenCL backend decides, segment_engine.cpp's energyWithForces_).
-  const bool withEnergies = !ctx_->physical().gpu;
-  if (withEnergies) {
-    std::vector<VkBufferCopy> regions;
-    for (std::size_t b : set) {
-      const std::size_t at = segment(b).elemBegin * rs_;
-      if (segment(b).elems) regions.push_back({at, energyOffset_ + at, segment(b).elems * rs_});
-    }
-    if (!regions.empty())
-      vkCmdCopyBuffer(cb, buffer(kEnergy).handle(), down_.handle(), static_cast<std::uint32_t>(regions.size()),
-                      regions.data());
-  }
+  // The forces' element pass wrote each element's strain energy too: summed per body on the device
+  // and read with the forces (a real per body), it answers an elasticEnergy at these positions (the
+  // drivers ask for it after the step's last forces) with no round trip of its own.
+  recordEnergySums(cb);
   readOutputs(cb, set, f);
-  if (withEnergies)
-    for (std::size_t b : set) {
-      energyHost_[b] = energySum(down_.mapped() + energyOffset_, segment(b));
-      energyFresh_[b] = 1;
-    }
+  takeEnergies(set);
 }
 
 void VulkanDevice::apply(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
@@ -106,33 +90,38 @@ void VulkanDevice::apply(const BodySet& set, const std::vector<SystemCoeffs>& co
 void VulkanDevice::elasticEnergy(const BodySet& set, std::vector<double>& energy) {
   checkSet(set, set.size(), "energies");
   energy.assign(set.size(), 0.0);
-  if (std::all_of(set.begin(), set.end(), [&](std::size_t b) { return energyFresh_[b] != 0; })) {
-    for (std::size_t i = 0; i < set.size(); ++i) energy[i] = energyHost_[set[i]];
-    return;
+  if (!std::all_of(set.begin(), set.end(), [&](std::size_t b) { return energyFresh_[b] != 0; })) {
+    VkCommandBuffer cb = ctx_->begin();
+    recordActive(cb, activeOf(set));
+    recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
+    Push push = basePush();
+    push.mode = kElementForces;
+    dispatch(cb, element_, apply_, push, elementGroups());
+    recordEnergySums(cb);
+    vk::hostReadBarrier(cb);
+    ctx_->wait(ctx_->submit());
+    takeEnergies(set);
   }
-  VkCommandBuffer cb = ctx_->begin();
-  recordActive(cb, activeOf(set));
-  recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
-  Push push = basePush();
-  push.mode = kElementForces;
-  dispatch(cb, element_, apply_, push, elementGroups());
-  copy(cb, buffer(kEnergy), 0, down_, energyOffset_, layout_.elementTotal * rs_);
-  vk::hostReadBarrier(cb);
-  ctx_->wait(ctx_->submit());
-  for (std::size_t i = 0; i < set.size(); ++i) {
-    energyHost_[set[i]] = energy[i] = energySum(down_.mapped() + energyOffset_, segment(set[i]));
-    energyFresh_[set[i]] = 1;
-  }
+  for (std::size_t i = 0; i < set.size(); ++i) energy[i] = energyHost_[set[i]];
 }
 
-/// A body's strain energy: the sum of its elements' in `elements` (every element of the device,
-/// as the energy buffer holds them), in element order.
-double VulkanDevice::energySum(const unsigned char* elements, const BodySegment& sg) const {
-  double sum = 0;
-  withReals(elements, isDouble_, sg.elemBegin, [&](const auto* e) {
-    for (std::size_t k = 0; k < sg.elems; ++k) sum += static_cast<double>(e[k]);
-  });
-  return sum;
+/// The active bodies' strain energies (reduce.comp's kReduceEnergy) into the scalars, and those
+/// copied to down_'s energy slot; the caller submits with a host-read barrier and waits.
+void VulkanDevice::recordEnergySums(VkCommandBuffer cb) const {
+  Push push = basePush();
+  push.mode = kReduceEnergy;
+  dispatch(cb, reduce_, apply_, push, static_cast<std::uint32_t>(bodyCount()));
+  copy(cb, buffer(kScalars), 0, down_, energyOffset_, scalarsBytes());
+}
+
+/// The set's energies as recordEnergySums read them, now fresh.
+void VulkanDevice::takeEnergies(const BodySet& set) {
+  std::vector<double> values;
+  readScalars(down_.mapped() + energyOffset_, values);
+  for (std::size_t b : set) {
+    energyHost_[b] = values[kScalarCount * b + kScalarEnergy];
+    energyFresh_[b] = 1;
+  }
 }
 
 void VulkanDevice::setConstraints(const BodySet& set, const std::vector<const std::vector<std::uint8_t>*>& constrained) {

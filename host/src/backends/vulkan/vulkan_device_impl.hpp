@@ -132,9 +132,10 @@ class VulkanDevice final : public Device {
 
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override;
 
-  /// A body's strain energy: the sum of its elements' in `elements` (every element of the device,
-  /// as the energy buffer holds them), in element order.
-  double energySum(const unsigned char* elements, const BodySegment& sg) const;
+  /// The active bodies' strain energies summed on the device (reduce.comp's kReduceEnergy) and
+  /// copied to down_; takeEnergies reads the set's once the submission is waited for.
+  void recordEnergySums(VkCommandBuffer cb) const;
+  void takeEnergies(const BodySet& set);
 
   void setConstraints(const BodySet& set, const std::vector<const std::vector<std::uint8_t>*>& constrained) override;
 
@@ -356,7 +357,7 @@ class VulkanDevice final : public Device {
   std::vector<vk::Buffer> owned_;
   vk::Buffer pin_, yout_, up_, down_;
   std::size_t scalarsOffset_ = 0;  ///< bytes: where the scalar reads start in down_
-  std::size_t energyOffset_ = 0;   ///< bytes: where the element energies are read to in down_
+  std::size_t energyOffset_ = 0;   ///< bytes: where the scalars with the bodies' energies are read to in down_
   std::vector<double> energyHost_;  ///< per body: its strain energy as last read
   std::vector<char> energyFresh_;   ///< per body: energyHost_ is at the positions and material set
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
