@@ -335,6 +335,8 @@ class VulkanDevice final : public Device {
   void stash(Read& r);
 
   void readScalars(const unsigned char* from, std::vector<double>& values) const;
+  /// Records the copies of x of the solve's running bodies and of the scalars that pcgEnd reads.
+  void recordEndReads(VkCommandBuffer cb);
 
   /// The solve's bodies' scalars from the device's (those that did not start: as they entered).
   void scalarsOf(const std::vector<double>& values, std::vector<PcgScalars>& out) const;
@@ -386,6 +388,9 @@ class VulkanDevice final : public Device {
   std::deque<Read> reads_;
   PcgTicket nextTicket_ = 0;
   std::vector<char> residualFor_;
+  /// The submission of the solve's last reads (x and the scalars after the true residual), made
+  /// with the residual by pcgResidual; 0: pcgEnd makes them.
+  std::uint64_t endReads_ = 0;
   std::unique_ptr<VulkanAmg> amg_;  ///< the "amg" preconditioner's levels and V-cycle (else null)
 };
 

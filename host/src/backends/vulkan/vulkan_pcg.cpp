@@ -18,6 +18,7 @@ std::vector<PcgStart> VulkanDevice::pcgBegin(const BodySet& set, const std::vect
   enqueued_ = 0;
   reads_.clear();
   residualFor_.clear();
+  endReads_ = 0;
   started_.assign(set.size(), PcgStart::Running);
   waitStaging();
   const std::size_t xOffset = 3 * layout_.nodeTotal;  // reals: b first, then x
@@ -206,9 +207,21 @@ void VulkanDevice::pcgResidual(const std::vector<char>& bodies) {
   dispatch(cb, gather_, setup_, push, nodeGroups());
   push.mode = kReduceResidual;
   dispatch(cb, reduce_, setup_, push, static_cast<std::uint32_t>(bodyCount()));
-  // Submitted now: the PCG driver queues the residual before it waits for the last scalars, so that
-  // the device computes it meanwhile.
-  ctx_->submit();
+  // Submitted now with pcgEnd's reads (no iteration follows a residual): the PCG driver queues the
+  // residual before it waits for the last scalars, so that the device computes it and copies the
+  // solution meanwhile, and pcgEnd only waits, with no submission and round trip of its own.
+  recordEndReads(cb);
+  endReads_ = ctx_->submit();
+}
+
+void VulkanDevice::recordEndReads(VkCommandBuffer cb) {
+  for (std::size_t i = 0; i < solve_.size(); ++i)
+    if (started_[i] == PcgStart::Running) {
+      const BodySegment& sg = segment(solve_[i]);
+      copy(cb, buffer(kVecX), sg.dofBegin() * rs_, down_, sg.dofBegin() * rs_, sg.dofs() * rs_);
+    }
+  copy(cb, buffer(kScalars), 0, down_, scalarsOffset_ + kReadSlots * scalarsBytes(), scalarsBytes());
+  vk::hostReadBarrier(cb);
 }
 
 void VulkanDevice::pcgEnd(const std::vector<int>&, const Vectors& x, std::vector<PcgScalars>& residual) {
@@ -217,16 +230,12 @@ void VulkanDevice::pcgEnd(const std::vector<int>&, const Vectors& x, std::vector
   reads_.clear();
   const bool any = std::any_of(started_.begin(), started_.end(), [](PcgStart s) { return s == PcgStart::Running; });
   if (any) {
-    VkCommandBuffer cb = ctx_->begin();
-    for (std::size_t i = 0; i < solve_.size(); ++i)
-      if (started_[i] == PcgStart::Running) {
-        const BodySegment& sg = segment(solve_[i]);
-        copy(cb, buffer(kVecX), sg.dofBegin() * rs_, down_, sg.dofBegin() * rs_, sg.dofs() * rs_);
-      }
+    if (!endReads_) {
+      recordEndReads(ctx_->begin());
+      endReads_ = ctx_->submit();
+    }
+    ctx_->wait(endReads_);
     const std::size_t finalSlot = scalarsOffset_ + kReadSlots * scalarsBytes();
-    copy(cb, buffer(kScalars), 0, down_, finalSlot, scalarsBytes());
-    vk::hostReadBarrier(cb);
-    ctx_->wait(ctx_->submit());
     std::vector<double> values;
     readScalars(down_.mapped() + finalSlot, values);
     std::vector<PcgScalars> all;
@@ -238,6 +247,7 @@ void VulkanDevice::pcgEnd(const std::vector<int>&, const Vectors& x, std::vector
     }
   }
   residualFor_.clear();
+  endReads_ = 0;
 }
 
 /// Takes a read's scalars to the host (waiting for it).
