@@ -47,6 +47,10 @@ TEST_P(Incompressible, StaticSolveConvergesOrSaysSoForEveryPreconditioner) {
   for (double nu : {0.45, 0.49, 0.499, 0.4999}) {
     for (PreconditionerKind p :
          {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
+      // Float cannot solve nu >= 0.499 (below): each such solve fails only after 30 Newton
+      // iterations in every cut increment, 20-50 s on lavapipe. One preconditioner shows that
+      // failure path there; the others' would repeat it at a cost of most of a CI minute each.
+      if (c.isFloat() && nu >= 0.499 && p != PreconditionerKind::Diagonal) continue;
       Scene scene = staticScene(c, cantilever(nu), 1);
       scene.solver.preconditioner = p;
       // Generous PCG cap: sqrt(cond) grows like sqrt(lambda / mu) ~ 70 at nu = 0.4999, times the

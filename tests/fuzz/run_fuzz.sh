@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (clang-14, AddressSanitizer + UndefinedBehaviorSanitizer) in
-# ./build-fuzz and runs each for a bounded time, one after the other. Fails (exit 1) when a target
+# ./build-fuzz and runs each for a bounded time, as many side by side as there are cores. Fails (exit 1) when a target
 # finds a crash, a leak, a timeout, an out-of-memory or a violated invariant; the input that did it
 # is saved under build-fuzz/artifacts/<target>/ and the log under build-fuzz/logs/<target>.log.
 #
@@ -78,38 +78,54 @@ max_len_of() {
   case "$1" in scene | capi_scene) echo 8192 ;; *) echo 65536 ;; esac
 }
 
-failed=()
-summary=()
+# One target's run; its summary line and exit status go to build-fuzz/logs/<target>.{summary,status}.
+run_target() {  # target
+  local target=$1
+  local corpus="$build/corpus/$target" artifacts="$build/artifacts/$target" log="$build/logs/$target.log"
+  local status=0 execs cov
+  # -timeout: one input running 10 s is a hang; -rss_limit_mb: 2 GiB is an out-of-memory.
+  timeout $((seconds + 120)) "$build/fuzz_$target" "$corpus" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
+    -max_len="$(max_len_of "$target")" -dict=tests/fuzz/dict/"$target".dict -artifact_prefix="$artifacts/" \
+    -print_final_stats=1 >"$log" 2>&1 || status=$?
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+  cov=$(grep -oE 'cov: [0-9]+ ft: [0-9]+' "$log" | tail -1 || true)
+  printf '%-7s %10s execs  %-22s  %s\n' "$target" "${execs:-?}" "${cov:-cov: ?}" \
+    "$( ((status == 0)) && echo ok || echo "FAILED (exit $status)")" >"$build/logs/$target.summary"
+  echo "$status" >"$build/logs/$target.status"
+}
+
+# The targets run side by side, as many at a time as there are cores (each libFuzzer run is one
+# thread): each still fuzzes for `seconds`, the whole in about 1/nproc of the time.
+jobs=$(nproc)
 for target in $targets; do
-  binary="$build/fuzz_$target"
-  if [[ ! -x "$binary" ]]; then
+  if [[ ! -x "$build/fuzz_$target" ]]; then
     echo "run_fuzz.sh: no target '$target' (targets: gmsh medit vtk veg tetgen obj scene capi_scene)" >&2
     exit 2
   fi
   corpus="$build/corpus/$target"
-  artifacts="$build/artifacts/$target"
-  mkdir -p "$corpus" "$artifacts" "$build/logs"
+  mkdir -p "$corpus" "$build/artifacts/$target" "$build/logs"
+  rm -f "$build/logs/$target.summary" "$build/logs/$target.status"
   cp tests/fuzz/corpus/"$target"/* "$corpus"/
   add_shared_seeds "$target" "$corpus"
   if [[ "$target" == scene || "$target" == capi_scene ]]; then
     for f in samples/*/*.json docs/examples/*.json; do [[ -f "$f" ]] && cp "$f" "$corpus/repo-$(basename "$f")"; done
   fi
-  log="$build/logs/$target.log"
   echo "run_fuzz.sh: fuzz_$target for $seconds s ($(ls "$corpus" | wc -l) inputs in its corpus)"
-  status=0
-  # -timeout: one input running 10 s is a hang; -rss_limit_mb: 2 GiB is an out-of-memory.
-  timeout $((seconds + 120)) "$binary" "$corpus" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 \
-    -max_len="$(max_len_of "$target")" -dict=tests/fuzz/dict/"$target".dict -artifact_prefix="$artifacts/" \
-    -print_final_stats=1 >"$log" 2>&1 || status=$?
-  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
-  cov=$(grep -oE 'cov: [0-9]+ ft: [0-9]+' "$log" | tail -1 || true)
-  summary+=("$(printf '%-7s %10s execs  %-22s  %s' "$target" "${execs:-?}" "${cov:-cov: ?}" \
-               "$( ((status == 0)) && echo ok || echo "FAILED (exit $status)")")")
-  if ((status != 0)); then
+  while (($(jobs -rp | wc -l) >= jobs)); do wait -n || true; done
+  run_target "$target" &
+done
+wait || true
+
+failed=()
+summary=()
+for target in $targets; do
+  status=$(cat "$build/logs/$target.status" 2>/dev/null || echo "no status")
+  summary+=("$(cat "$build/logs/$target.summary" 2>/dev/null || echo "$target: no summary")")
+  if [[ "$status" != 0 ]]; then
     failed+=("$target")
-    echo "run_fuzz.sh: fuzz_$target FAILED (exit $status); the end of $log:" >&2
-    tail -40 "$log" >&2
-    ls -1 "$artifacts" >&2 || true
+    echo "run_fuzz.sh: fuzz_$target FAILED (exit $status); the end of $build/logs/$target.log:" >&2
+    tail -40 "$build/logs/$target.log" >&2 || true
+    ls -1 "$build/artifacts/$target" >&2 || true
   fi
 done
 
