@@ -96,9 +96,6 @@ COROFEM_CONSTANT(unsigned, kScalarIterations, 7);/* iterations done (counted on 
 COROFEM_CONSTANT(unsigned, kScalarStop, 8);     /* why the segment stopped: kStop*     */
 COROFEM_CONSTANT(unsigned, kScalarTol2, 9);     /* tolerance^2 of the solve (the Vulkan shaders read it
                                                    here; the OpenCL kernels take it as an argument) */
-COROFEM_CONSTANT(unsigned, kScalarEnergy, 10);  /* the strain energy of the segment's elements at the
-                                                   last forces (Vulkan's kReduceEnergy; a solve's
-                                                   set-up clears it) */
 COROFEM_CONSTANT(unsigned, kScalarCount, 12);
 /* Values of kScalarStop: reduce_finish tests every iteration and makes a stopped segment inactive
  * (segInfo), so that the iterations the host has already enqueued return at once for it. */
@@ -112,7 +109,7 @@ COROFEM_CONSTANT(unsigned, kReduceInit, 0);     /* (r.u, r.r, b.b), u.w -> gamma
 COROFEM_CONSTANT(unsigned, kReduceStep, 1);     /* (r.u, r.r), u.w -> beta, alpha, gamma, rr              */
 COROFEM_CONSTANT(unsigned, kReduceResidual, 2); /* (r.u, r.r, b.b) -> rr, bb (the true residual)          */
 COROFEM_CONSTANT(unsigned, kReduceLast, 3);     /* (r.u, r.r) -> gamma, rr: the cap's last iteration     */
-COROFEM_CONSTANT(unsigned, kReduceEnergy, 4);   /* Vulkan: the elements' energies -> kScalarEnergy       */
+COROFEM_CONSTANT(unsigned, kReduceEnergy, 4);   /* Vulkan: each element work-group's energy sum         */
 COROFEM_CONSTANT(unsigned, kPartialComponents, 3); /* partial sums per work-group: 3 sum_reals    */
 /* pcg_iterate_team's state per segment (uint, one cache line each): chunks done and members gone
  * (zero between launches), where the segment's chunk claim words start in the same buffer. */

@@ -10,36 +10,24 @@
  * A non-positive p . A p sets alpha = 0 and the breakdown flag. After every mode but Residual the
  * stop test (tolerance^2 at kScalarTol2): a converged, broken-down or non-finite segment records why
  * and becomes inactive, so the iterations already recorded cost it nothing.
- *   kReduceEnergy    none of the above: the segment's strain energy, the sum of its elements' energies
- *                    (energy[], written by element.comp's forces), into kScalarEnergy, so that the host
- *                    reads a real per segment with the forces, not a real per element. Summed in the
- *                    same fixed order (strided lanes from the segment's first element, each
- *                    compensated, then the tree):
- *                    a body's bits do not depend on where its segment lies. */
+ *   kReduceEnergy    none of the above, and dispatched over the element work-groups (element.comp's):
+ *                    work-group g sums the energies its elements' forces wrote (energy[64 g + i], a
+ *                    tree) into energy[S + g], so that the host reads one real per 64 elements with
+ *                    the forces and adds each body's in order. */
 #include "common.glsl"
 #include "ops.glsl"
 
 void main() {
-  const uint seg = gl_WorkGroupID.x;
+  const uint seg = pc.mode == kReduceEnergy ? elemSeg[gl_WorkGroupID.x] : gl_WorkGroupID.x;
   if (seg_info(seg, kSegActive) == 0u) return;  /* the whole work-group */
   if (pc.mode == kReduceEnergy) {
-    const uint lid = gl_LocalInvocationID.x;
-    const uint begin = seg_info(seg, kSegElemBegin), end = seg_info(seg, kSegElemEnd);
-    /* Compensated (Kahan) per lane: a lane adds up to E / 64 energies, in float a million-element
-     * body's 15,600, whose rounding would otherwise reach 1e-4 of the sum. */
-    precise real sum = real(0), lost = real(0);
-    for (uint e = begin + lid; e < end; e += WG) {
-      precise const real y = energy[e] - lost;
-      precise const real t = sum + y;
-      lost = (t - sum) - y;
-      sum = t;
-    }
-    s0[lid] = sum;
+    const uint lid = gl_LocalInvocationID.x, g = gl_WorkGroupID.x, e = WG * g + lid;
+    s0[lid] = e < seg_info(seg, kSegElemEnd) ? energy[e] : real(0);
     s1[lid] = real(0);
     s2[lid] = real(0);
     s3[lid] = real(0);
     tree4();
-    if (lid == 0u) scalars[kScalarCount * seg + kScalarEnergy] = s0[0];
+    if (lid == 0u) energy[pc.S + g] = s0[0];
     return;
   }
   segment_sums(seg);

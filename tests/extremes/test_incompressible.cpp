@@ -47,10 +47,11 @@ TEST_P(Incompressible, StaticSolveConvergesOrSaysSoForEveryPreconditioner) {
   for (double nu : {0.45, 0.49, 0.499, 0.4999}) {
     for (PreconditionerKind p :
          {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
-      // Float cannot solve nu >= 0.499 (below): each such solve fails only after 30 Newton
-      // iterations in every cut increment, 20-50 s on lavapipe. One preconditioner shows that
-      // failure path there; the others' would repeat it at a cost of most of a CI minute each.
-      if (c.isFloat() && nu >= 0.499 && p != PreconditionerKind::Diagonal) continue;
+      // Float does not solve nu >= 0.499 here (it fails, clearly, after 30 Newton iterations in
+      // every cut increment): on Vulkan, whose CI device is lavapipe, 20-50 s a solve. There one
+      // preconditioner shows that path; the others' would repeat it at most of a CI minute each.
+      // OpenCL float (4 s for the whole table on PoCL) runs them all.
+      if (c.kind == BackendKind::Vulkan && c.isFloat() && nu >= 0.499 && p != PreconditionerKind::Diagonal) continue;
       Scene scene = staticScene(c, cantilever(nu), 1);
       scene.solver.preconditioner = p;
       // Generous PCG cap: sqrt(cond) grows like sqrt(lambda / mu) ~ 70 at nu = 0.4999, times the

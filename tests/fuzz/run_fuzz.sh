@@ -94,14 +94,23 @@ run_target() {  # target
   echo "$status" >"$build/logs/$target.status"
 }
 
-# The targets run side by side, as many at a time as there are cores (each libFuzzer run is one
-# thread): each still fuzzes for `seconds`, the whole in about 1/nproc of the time.
-jobs=$(nproc)
+# Every name checked (and each taken once) before any target starts.
+unique=""
 for target in $targets; do
   if [[ ! -x "$build/fuzz_$target" ]]; then
     echo "run_fuzz.sh: no target '$target' (targets: gmsh medit vtk veg tetgen obj scene capi_scene)" >&2
     exit 2
   fi
+  [[ " $unique " == *" $target "* ]] || unique+="${unique:+ }$target"
+done
+targets=$unique
+
+# The targets run side by side, as many at a time as there are cores (each libFuzzer run is one
+# thread): each still fuzzes for `seconds`, the whole in about 1/nproc of the time. A run stopped
+# or failed part way stops the targets still running.
+trap 'kill $(jobs -p) 2>/dev/null || true' EXIT INT TERM
+jobs=$(nproc)
+for target in $targets; do
   corpus="$build/corpus/$target"
   mkdir -p "$corpus" "$build/artifacts/$target" "$build/logs"
   rm -f "$build/logs/$target.summary" "$build/logs/$target.status"
@@ -110,8 +119,8 @@ for target in $targets; do
   if [[ "$target" == scene || "$target" == capi_scene ]]; then
     for f in samples/*/*.json docs/examples/*.json; do [[ -f "$f" ]] && cp "$f" "$corpus/repo-$(basename "$f")"; done
   fi
-  echo "run_fuzz.sh: fuzz_$target for $seconds s ($(ls "$corpus" | wc -l) inputs in its corpus)"
   while (($(jobs -rp | wc -l) >= jobs)); do wait -n || true; done
+  echo "run_fuzz.sh: fuzz_$target for $seconds s ($(ls "$corpus" | wc -l) inputs in its corpus)"
   run_target "$target" &
 done
 wait || true

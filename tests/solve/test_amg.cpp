@@ -328,14 +328,40 @@ TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
   EXPECT_LE(withTaken, withOwn + 1);
   EXPECT_LE(withTaken, 30);
 
-  // A smaller ratio (h longer) than the clamp's: estimated afresh, the bits of a fresh body.
-  BodyAmg longer, longerFresh;
-  ASSERT_EQ(longer.ensure(p, before, m, 1.0), Made::Built);
-  ASSERT_EQ(longer.ensure(grabbed, after, 0.9 * m, 1.0), Made::Built);
-  ASSERT_EQ(longerFresh.ensure(grabbed, after, 0.9 * m, 1.0), Made::Built);
-  EXPECT_EQ(longer.amg().bounds().fine, longerFresh.amg().bounds().fine);
-  EXPECT_EQ(longer.amg().bounds().level0, longerFresh.amg().bounds().level0);
-  EXPECT_NE(longer.amg().bounds().fine, clamp.fine);
+  // The same ratio with its last bits changed downwards: taken too.
+  BodyAmg below;
+  ASSERT_EQ(below.ensure(p, before, m, 1.0), Made::Built);
+  ASSERT_EQ(below.ensure(grabbed, after, m * (1.0 - 4e-16), 1.0), Made::Built);
+  EXPECT_EQ(below.amg().bounds().fine, clamp.fine);
+
+  // A smaller ratio (h longer) than the clamp's, where the bounds may not hold, and one 2.5 times
+  // it (beyond the hierarchy's window, where they would be loose): estimated afresh, the bits of a
+  // fresh body.
+  for (double ratio : {0.9 * m, 2.5 * m}) {
+    BodyAmg other, otherFresh;
+    ASSERT_EQ(other.ensure(p, before, m, 1.0), Made::Built);
+    ASSERT_EQ(other.ensure(grabbed, after, ratio, 1.0), Made::Built);
+    ASSERT_EQ(otherFresh.ensure(grabbed, after, ratio, 1.0), Made::Built);
+    EXPECT_EQ(other.amg().bounds().fine, otherFresh.amg().bounds().fine) << ratio;
+    EXPECT_EQ(other.amg().bounds().level0, otherFresh.amg().bounds().level0) << ratio;
+    EXPECT_NE(other.amg().bounds().fine, clamp.fine) << ratio;
+  }
+
+  // One dof of a node pinned (a node block shrinks to 2 x 2: still a principal submatrix): taken,
+  // and it holds.
+  Problem pinned = p;
+  std::size_t tip = 0;
+  for (std::size_t n = 0; n < pinned.mesh.nodeCount(); ++n)
+    if (pinned.mesh.nodes[3 * n] > pinned.mesh.nodes[3 * tip]) tip = n;
+  pinned.constrained[3 * tip + 1] = 1;
+  const std::vector<Eigen::Index> one = freeDofs(pinned);
+  ASSERT_EQ(one.size() + 1, before.size());
+  BodyAmg pin;
+  ASSERT_EQ(pin.ensure(p, before, m, 1.0), Made::Built);
+  ASSERT_EQ(pin.ensure(pinned, one, m, 1.0), Made::Built);
+  EXPECT_EQ(pin.amg().bounds().fine, clamp.fine);
+  const AmgMatrix halfPinned = restOperator(K0, pinned, one, 0.5 * m, 1.0);
+  EXPECT_LE(largestEigenvalue(halfPinned, nodeBlocks(halfPinned, one).first), clamp.fine);
 
   // The clamp released too: dofs the clamp's hierarchy does not have.
   Problem loose = grabbed;

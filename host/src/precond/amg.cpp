@@ -681,8 +681,10 @@ AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::
 namespace {
 
 /// What K_0 depends on, hashed (FNV-1a over the bytes): the tets, the rest positions (from which
-/// buildProblem derives the elements' gradients), each element's rest volume and the material. A
-/// body whose K_0 differs gives another key but for a 2^-64 chance.
+/// buildProblem derives the elements' gradients), each element's rest volume and the material; and
+/// the lumped mass, which the rest operators add to it (a hierarchy's spectral bounds, taken over
+/// by another, are of m M + s K_0). A body whose key data differ gives another key but for a 2^-64
+/// chance.
 std::uint64_t stiffnessKey(const Problem& p) {
   std::uint64_t h = kFnv1aOffset;
   auto mix = [&h](const void* data, std::size_t bytes) { h = fnv1a64(data, bytes, h); };
@@ -691,6 +693,7 @@ std::uint64_t stiffnessKey(const Problem& p) {
   for (const ElementRest& e : p.elements) mix(&e.volume, sizeof(e.volume));
   mix(&p.lame.lambda, sizeof(double));
   mix(&p.lame.mu, sizeof(double));
+  mix(p.lumpedMass.data(), static_cast<std::size_t>(p.lumpedMass.size()) * sizeof(double));
   const std::size_t dofs = p.dofCount();
   mix(&dofs, sizeof(dofs));
   return h;

@@ -163,7 +163,7 @@ void VulkanDevice::build() {
   owned_[kPartials] = reals(3 * (N / kWg));
   owned_[kPartialsW] = reals(3 * (N / kWg));
   owned_[kScalars] = reals(kScalarCount * B);
-  owned_[kEnergy] = reals(E);
+  owned_[kEnergy] = reals(E + E / kWg);  // per element, then per element work-group (reduce.comp)
   owned_[kQuat] = reals(quat.size());
   owned_[kRot] = reals(0);
   owned_[kSpring] = reals(3 * N);
@@ -172,7 +172,7 @@ void VulkanDevice::build() {
   up_ = vk::Buffer(*ctx_, 2 * 3 * N * rs_, true);
   scalarsOffset_ = 3 * N * rs_;  // after the node vectors read back (forces, x)
   energyOffset_ = scalarsOffset_ + (kReadSlots + 1) * scalarsBytes();
-  down_ = vk::Buffer(*ctx_, energyOffset_ + scalarsBytes(), true);
+  down_ = vk::Buffer(*ctx_, energyOffset_ + E / kWg * rs_, true);
   energyHost_.assign(B, 0.0);
   energyFresh_.assign(B, 0);
 

@@ -57,9 +57,10 @@ void VulkanDevice::internalForces(const BodySet& set, const Vectors& f) {
   recordActive(cb, activeOf(set));
   recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
   recordPasses(cb, kElementForces, kGatherSum);
-  // The forces' element pass wrote each element's strain energy too: summed per body on the device
-  // and read with the forces (a real per body), it answers an elasticEnergy at these positions (the
-  // drivers ask for it after the step's last forces) with no round trip of its own.
+  // The forces' element pass wrote each element's strain energy too: summed per 64 elements on the
+  // device and read with the forces (a real per element work-group), it answers an elasticEnergy at
+  // these positions (the drivers ask for it after the step's last forces) with no round trip of its
+  // own.
   recordEnergySums(cb);
   readOutputs(cb, set, f);
   takeEnergies(set);
@@ -105,21 +106,27 @@ void VulkanDevice::elasticEnergy(const BodySet& set, std::vector<double>& energy
   for (std::size_t i = 0; i < set.size(); ++i) energy[i] = energyHost_[set[i]];
 }
 
-/// The active bodies' strain energies (reduce.comp's kReduceEnergy) into the scalars, and those
-/// copied to down_'s energy slot; the caller submits with a host-read barrier and waits.
+/// The active bodies' energies summed per element work-group (reduce.comp's kReduceEnergy: one
+/// dispatch over the element work-groups, in parallel on a GPU, where a work-group per body walking
+/// a million-element body's energies would take milliseconds), and those sums copied to down_; the
+/// caller submits with a host-read barrier and waits.
 void VulkanDevice::recordEnergySums(VkCommandBuffer cb) const {
   Push push = basePush();
   push.mode = kReduceEnergy;
-  dispatch(cb, reduce_, apply_, push, static_cast<std::uint32_t>(bodyCount()));
-  copy(cb, buffer(kScalars), 0, down_, energyOffset_, scalarsBytes());
+  dispatch(cb, reduce_, apply_, push, elementGroups());
+  copy(cb, buffer(kEnergy), layout_.elementTotal * rs_, down_, energyOffset_, elementGroups() * rs_);
 }
 
-/// The set's energies as recordEnergySums read them, now fresh.
+/// The set's energies from the work-group sums recordEnergySums read (each body's added in order,
+/// in double), now fresh.
 void VulkanDevice::takeEnergies(const BodySet& set) {
-  std::vector<double> values;
-  readScalars(down_.mapped() + energyOffset_, values);
   for (std::size_t b : set) {
-    energyHost_[b] = values[kScalarCount * b + kScalarEnergy];
+    const BodySegment& sg = segment(b);
+    double sum = 0;
+    withReals(down_.mapped() + energyOffset_, isDouble_, 0, [&](const auto* g) {
+      for (std::size_t k = sg.elemBegin / kWg; k < (sg.elemBegin + sg.elemSpan) / kWg; ++k) sum += static_cast<double>(g[k]);
+    });
+    energyHost_[b] = sum;
     energyFresh_[b] = 1;
   }
 }

@@ -132,8 +132,8 @@ class VulkanDevice final : public Device {
 
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override;
 
-  /// The active bodies' strain energies summed on the device (reduce.comp's kReduceEnergy) and
-  /// copied to down_; takeEnergies reads the set's once the submission is waited for.
+  /// The active bodies' strain energies summed per element work-group on the device (reduce.comp's
+  /// kReduceEnergy) and copied to down_; takeEnergies adds the set's once the submission is waited for.
   void recordEnergySums(VkCommandBuffer cb) const;
   void takeEnergies(const BodySet& set);
 
@@ -359,7 +359,7 @@ class VulkanDevice final : public Device {
   std::vector<vk::Buffer> owned_;
   vk::Buffer pin_, yout_, up_, down_;
   std::size_t scalarsOffset_ = 0;  ///< bytes: where the scalar reads start in down_
-  std::size_t energyOffset_ = 0;   ///< bytes: where the scalars with the bodies' energies are read to in down_
+  std::size_t energyOffset_ = 0;   ///< bytes: where the element work-groups' energy sums are read to in down_
   std::vector<double> energyHost_;  ///< per body: its strain energy as last read
   std::vector<char> energyFresh_;   ///< per body: energyHost_ is at the positions and material set
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
