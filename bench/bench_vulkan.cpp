@@ -146,14 +146,9 @@ class CopyRig {
   /// work-groups) and a copy of 64 bytes into host-visible memory, recorded, submitted and waited
   /// for.
   double roundTrip() {
-    const std::uint32_t words = 64 * 256;
     const auto t0 = std::chrono::steady_clock::now();
     VkCommandBuffer cb = ctx_.begin();
-    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
-    vkCmdPushConstants(cb, ctx_.pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(words), &words);
-    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_.pipelineLayout(), 0, 1, &ab_, 0, nullptr);
-    vkCmdDispatch(cb, 64, 1, 1);
-    detail::vk::fullBarrier(cb);
+    recordCopies(cb, 64, 64 * 256, 1, DispatchBarrier::Full);
     VkBufferCopy region{0, 0, 64};
     vkCmdCopyBuffer(cb, b_.handle(), host_.handle(), 1, &region);
     detail::vk::hostReadBarrier(cb);
@@ -163,10 +158,9 @@ class CopyRig {
 
  private:
   /// `dispatches` copies of `words` 16-byte words by `groups` work-groups, alternately a to b and b
-  /// to a, each followed by `barrier`, in one submission that is waited for: the time of one (s).
-  double copies(std::uint32_t groups, std::uint32_t words, int dispatches, DispatchBarrier barrier) {
-    const auto t0 = std::chrono::steady_clock::now();
-    VkCommandBuffer cb = ctx_.begin();
+  /// to a, each followed by `barrier`, recorded into cb.
+  void recordCopies(VkCommandBuffer cb, std::uint32_t groups, std::uint32_t words, int dispatches,
+                    DispatchBarrier barrier) const {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
     vkCmdPushConstants(cb, ctx_.pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(words), &words);
     for (int k = 0; k < dispatches; ++k) {
@@ -176,6 +170,12 @@ class CopyRig {
       if (barrier == DispatchBarrier::Full) detail::vk::fullBarrier(cb);
       if (barrier == DispatchBarrier::Compute) computeBarrier(cb);
     }
+  }
+
+  /// recordCopies in one submission that is waited for: the time of one copy (s).
+  double copies(std::uint32_t groups, std::uint32_t words, int dispatches, DispatchBarrier barrier) {
+    const auto t0 = std::chrono::steady_clock::now();
+    recordCopies(ctx_.begin(), groups, words, dispatches, barrier);
     record_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / dispatches;
     ctx_.wait(ctx_.submit());
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / dispatches;
@@ -208,9 +208,9 @@ void copy(benchmark::State& state, std::size_t index) {
 
 /// The launch yardstick: the time of a small dispatch and its barrier, a 200th of a chain of 200 in
 /// one submission (CopyRig::chain; recording, submission and wait included), the floor under a PCG
-/// iteration of a few dispatches. The
-/// benchmark's time is the whole chain's (a time per dispatch as the iteration time would make
-/// Google Benchmark run 200 times longer than its minimum time), us_per_dispatch its 200th.
+/// iteration of a few dispatches. The benchmark's time is the whole chain's (a time per dispatch as
+/// the iteration time would make Google Benchmark run 200 times longer than its minimum time),
+/// us_per_dispatch its 200th.
 void dispatchChain(benchmark::State& state, std::size_t index, DispatchBarrier barrier) {
   constexpr int kDispatches = 200;
   CopyRig rig(index);

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (clang-14, AddressSanitizer + UndefinedBehaviorSanitizer) in
-# ./build-fuzz and runs each for a bounded time, as many side by side as there are cores. Fails (exit 1) when a target
-# finds a crash, a leak, a timeout, an out-of-memory or a violated invariant; the input that did it
-# is saved under build-fuzz/artifacts/<target>/ and the log under build-fuzz/logs/<target>.log.
+# ./build-fuzz and runs each for a bounded time, as many side by side as there are cores. Fails
+# (exit 1) when a target finds a crash, a leak, a timeout, an out-of-memory or a violated
+# invariant; the input that did it is saved under build-fuzz/artifacts/<target>/ and the log under
+# build-fuzz/logs/<target>.log.
 #
 #   tests/fuzz/run_fuzz.sh                      # every target, 10 s each (what CI runs)
 #   tests/fuzz/run_fuzz.sh --seconds 600        # the long run: 10 minutes per target
@@ -27,7 +28,7 @@ while (($#)); do
     --targets) targets="$2"; shift 2 ;;
     --targets=*) targets="${1#*=}"; shift ;;
     --build-only) build_only=1; shift ;;
-    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
     *) echo "run_fuzz.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
