@@ -18,6 +18,7 @@
 #include <cmath>
 #include <functional>
 #include <random>
+#include <string>
 
 using namespace corofem;
 using namespace corofem::detail;
@@ -509,10 +510,10 @@ bool isTransposeOf(const AmgMatrix& pt, const AmgMatrix& p) {
 }
 
 /// What every entry of a device matrix should be: body s's matrix m at rows row(s, i), columns
-/// colOffset[s] + j, and nothing else.
-template <class Row>
-void expectJoined(const AmgMatrix& device, const std::vector<const AmgMatrix*>& parts, const Row& row,
-                  const std::vector<std::size_t>& colOffset, const char* what) {
+/// col(s, j), and nothing else.
+template <class Row, class Col>
+void expectJoined(const AmgMatrix& device, const std::vector<const AmgMatrix*>& parts, const Row& row, const Col& col,
+                  const char* what) {
   SCOPED_TRACE(what);
   ASSERT_TRUE(device.isCompressed());
   Eigen::Index entries = 0;
@@ -521,7 +522,7 @@ void expectJoined(const AmgMatrix& device, const std::vector<const AmgMatrix*>& 
     entries += parts[s]->nonZeros();
     for (Eigen::Index i = 0; i < parts[s]->rows(); ++i)
       for (AmgMatrix::InnerIterator it(*parts[s], i); it; ++it)
-        ASSERT_EQ(device.coeff(static_cast<Eigen::Index>(row(s, i)), static_cast<Eigen::Index>(colOffset[s]) + it.col()),
+        ASSERT_EQ(device.coeff(static_cast<Eigen::Index>(row(s, i)), static_cast<Eigen::Index>(col(s, it.col()))),
                   it.value())
             << "body " << s << " entry (" << i << ", " << it.col() << ")";
   }
@@ -536,17 +537,24 @@ void expectJoined(const AmgMatrix& device, const std::vector<const AmgMatrix*>& 
 TEST(DeviceAmg, TheLevelsLaidEndToEndHoldEveryBodysEntriesInTheDevicesNumbering) {
   // Two bodies of different depths, both in a Morton numbering (level 0's rows permuted), one with
   // extra constrained dofs: every body's P_0, P_0^T, coarse operators, prolongators and coarsest
-  // inverse where the device finds them, nothing more.
+  // inverse where the device finds them, nothing more; in the plain layout (a body's coarse rows
+  // end to end) and the blocked one (each coarse vertex in 6 rows, its own first).
   Problem a = beam(160), b = beam(8);
   for (std::size_t n = 0; n < b.mesh.nodeCount(); ++n)
     if (n % 5 == 2) b.constrained[3 * n + 1] = 1;
   const BodyLayout layout({&a, &b}, 1, 64, 64, 12);
   DeviceAmg amg(layout.segments);
   ASSERT_TRUE(amg.prepare({0, 1}, {{kBackwardEulerMass, 1.0}, {kBackwardEulerMass, 1.0}}));
-  const DeviceAmgLayout L = amg.layout(layout.nodeTotal);
   const WarpedAmg* hierarchy[2] = {&amg.body(0).amg(), &amg.body(1).amg()};
   ASSERT_GE(hierarchy[0]->levels().size(), 3u);
-  ASSERT_EQ(L.levels.size() + 1, std::max(hierarchy[0]->levels().size(), hierarchy[1]->levels().size()));
+  bool partialVertex = false;  // the blocked layout pads some vertex (an aggregate with fewer than 6 modes)
+  for (std::size_t s = 0; s < 2; ++s)
+    for (std::size_t k = 1; k < hierarchy[s]->levels().size(); ++k) {
+      const std::vector<int>& vs = hierarchy[s]->levels()[k].vertexStart;
+      ASSERT_EQ(vs.back(), hierarchy[s]->levels()[k].A.rows()) << "body " << s << ", level " << k;
+      for (std::size_t v = 0; v + 1 < vs.size(); ++v) partialVertex |= vs[v + 1] - vs[v] < 6;
+    }
+  EXPECT_TRUE(partialVertex) << "no padded vertex: the blocked layout's padding goes untested";
   // Level 0 rows: the free dof i of body s at its device dof.
   std::vector<std::vector<std::size_t>> fine(2);
   for (std::size_t s = 0; s < 2; ++s) {
@@ -556,51 +564,112 @@ TEST(DeviceAmg, TheLevelsLaidEndToEndHoldEveryBodysEntriesInTheDevicesNumbering)
     for (Eigen::Index dof : hierarchy[s]->builtFreeDofs())
       fine[s].push_back(sg.dofBegin() + deviceDof[static_cast<std::size_t>(dof)]);
   }
-  // Level k's rows of body s from the rows of the bodies before it on that level.
-  auto offsets = [&](std::size_t k) {
-    std::vector<std::size_t> o(2, 0);
-    if (hierarchy[0]->levels().size() > k) o[1] = static_cast<std::size_t>(hierarchy[0]->levels()[k].A.rows());
-    return o;
-  };
-  auto atFine = [&](std::size_t s, Eigen::Index i) { return fine[s][static_cast<std::size_t>(i)]; };
-  expectJoined(L.P0, {&hierarchy[0]->levels()[0].P, &hierarchy[1]->levels()[0].P}, atFine, offsets(1), "P0");
-  EXPECT_TRUE(isTransposeOf(L.Pt0, L.P0)) << "Pt0 is not P0^T";
-  for (std::size_t k = 1; k <= L.levels.size(); ++k) {
-    const std::vector<std::size_t> here = offsets(k), below = offsets(k + 1);
-    auto at = [&](std::size_t s, Eigen::Index i) { return here[s] + static_cast<std::size_t>(i); };
-    std::vector<const AmgMatrix*> A(2, nullptr), P(2, nullptr);
-    std::vector<Eigen::MatrixXd> inverse(2);
-    for (std::size_t s = 0; s < 2; ++s) {
-      const auto& levels = hierarchy[s]->levels();
-      if (k + 1 < levels.size()) {
-        A[s] = &levels[k].A;
-        P[s] = &levels[k].P;
-      } else if (k + 1 == levels.size()) {
-        inverse[s] = hierarchy[s]->coarsestInverse();
+  for (const std::size_t block : {std::size_t{0}, std::size_t{6}}) {
+    SCOPED_TRACE("block " + std::to_string(block));
+    const DeviceAmgLayout L = amg.layout(layout.nodeTotal, block);
+    EXPECT_EQ(L.block, block);
+    ASSERT_EQ(L.levels.size() + 1, std::max(hierarchy[0]->levels().size(), hierarchy[1]->levels().size()));
+    // The rows body s takes on level k, and where its row i lies there: body 0's rows first.
+    auto taken = [&](std::size_t s, std::size_t k) -> std::size_t {
+      if (hierarchy[s]->levels().size() <= k) return 0;
+      const AmgLevel& level = hierarchy[s]->levels()[k];
+      return block == 0 ? static_cast<std::size_t>(level.A.rows()) : block * (level.vertexStart.size() - 1);
+    };
+    auto coarseRow = [&](std::size_t k) {
+      return [&, k](std::size_t s, Eigen::Index i) {
+        const std::size_t first = s == 0 ? 0 : taken(0, k);
+        if (block == 0) return first + static_cast<std::size_t>(i);
+        const std::vector<int>& vs = hierarchy[s]->levels()[k].vertexStart;
+        const std::size_t v = static_cast<std::size_t>(std::upper_bound(vs.begin(), vs.end(), int(i)) - vs.begin() - 1);
+        return first + block * v + static_cast<std::size_t>(i - vs[v]);
+      };
+    };
+    auto atFine = [&](std::size_t s, Eigen::Index i) { return fine[s][static_cast<std::size_t>(i)]; };
+    expectJoined(L.P0, {&hierarchy[0]->levels()[0].P, &hierarchy[1]->levels()[0].P}, atFine, coarseRow(1), "P0");
+    EXPECT_TRUE(isTransposeOf(L.Pt0, L.P0)) << "Pt0 is not P0^T";
+    for (std::size_t k = 1; k <= L.levels.size(); ++k) {
+      const auto here = coarseRow(k), below = coarseRow(k + 1);
+      std::vector<const AmgMatrix*> A(2, nullptr), P(2, nullptr);
+      std::vector<Eigen::MatrixXd> inverse(2);
+      for (std::size_t s = 0; s < 2; ++s) {
+        const auto& levels = hierarchy[s]->levels();
+        if (k + 1 < levels.size()) {
+          A[s] = &levels[k].A;
+          P[s] = &levels[k].P;
+        } else if (k + 1 == levels.size()) {
+          inverse[s] = hierarchy[s]->coarsestInverse();
+        }
       }
+      const DeviceAmgLevel& level = L.levels[k - 1];
+      ASSERT_EQ(level.rows, taken(0, k) + taken(1, k)) << "level " << k;
+      ASSERT_EQ(level.dinv.size(), level.rows);
+      // The smoother's 1 / (A_ii lambda_max); 0 on a coarsest body's rows and on padding rows.
+      std::vector<double> dinv(level.rows, 0.0);
+      for (std::size_t s = 0; s < 2; ++s)
+        for (Eigen::Index i = 0; A[s] && i < A[s]->rows(); ++i)
+          dinv[here(s, i)] = hierarchy[s]->levels()[k].diagInv[i] / hierarchy[s]->levels()[k].lambdaMax;
+      for (std::size_t r = 0; r < level.rows; ++r) ASSERT_EQ(level.dinv[r], dinv[r]) << "level " << k << ", row " << r;
+      EXPECT_EQ(level.smooths, A[0] != nullptr || A[1] != nullptr) << "level " << k;
+      expectJoined(level.A, A, here, here, "A_k");
+      expectJoined(level.P, P, here, below, "P_k");
+      EXPECT_TRUE(isTransposeOf(level.Pt, level.P)) << "level " << k;
+      std::size_t dense = 0;
+      for (std::size_t s = 0; s < 2; ++s) {
+        if (inverse[s].size() == 0) continue;
+        dense += static_cast<std::size_t>(inverse[s].size());
+        for (Eigen::Index i = 0; i < inverse[s].rows(); ++i)
+          for (Eigen::Index j = 0; j < inverse[s].cols(); ++j)
+            ASSERT_EQ(level.inverse.coeff(static_cast<Eigen::Index>(here(s, i)), static_cast<Eigen::Index>(here(s, j))),
+                      inverse[s](i, j));
+      }
+      EXPECT_EQ(level.inverseEntries, dense) << "level " << k;
     }
-    const DeviceAmgLevel& level = L.levels[k - 1];
-    ASSERT_EQ(level.dinv.size(), level.rows);
-    for (std::size_t s = 0; s < 2; ++s)  // the smoother's 1 / (A_ii lambda_max), 0 on a coarsest body's rows
-      for (Eigen::Index i = 0; A[s] && i < A[s]->rows(); ++i)
-        ASSERT_EQ(level.dinv[here[s] + static_cast<std::size_t>(i)],
-                  hierarchy[s]->levels()[k].diagInv[i] / hierarchy[s]->levels()[k].lambdaMax)
-            << "level " << k << ", body " << s << ", row " << i;
-    EXPECT_EQ(level.smooths, A[0] != nullptr || A[1] != nullptr) << "level " << k;
-    expectJoined(level.A, A, at, here, "A_k");
-    expectJoined(level.P, P, at, below, "P_k");
-    EXPECT_TRUE(isTransposeOf(level.Pt, level.P)) << "level " << k;
-    std::size_t dense = 0;
-    for (std::size_t s = 0; s < 2; ++s) {
-      if (inverse[s].size() == 0) continue;
-      dense += static_cast<std::size_t>(inverse[s].size());
-      for (Eigen::Index i = 0; i < inverse[s].rows(); ++i)
-        for (Eigen::Index j = 0; j < inverse[s].cols(); ++j)
-          ASSERT_EQ(level.inverse.coeff(static_cast<Eigen::Index>(here[s]) + i, static_cast<Eigen::Index>(here[s]) + j),
-                    inverse[s](i, j));
-    }
-    EXPECT_EQ(level.inverseEntries, dense) << "level " << k;
   }
+}
+
+TEST(DeviceAmg, BlockRowsHoldEveryEntryInItsBlockAndTheProductIsTheMatrixs) {
+  // A random matrix of 3 x 6 blocks (some empty, some partly filled) as BlockRows: each entry at
+  // its block and place, zeros elsewhere, the padding after the last block, and the product by
+  // blocks equal to the matrix's; sizes that are not whole blocks refused.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Eigen::Index rows = 3 * 40, cols = 6 * 25;
+  std::vector<Eigen::Triplet<double, int>> t;
+  for (Eigen::Index i = 0; i < rows; ++i)
+    for (Eigen::Index j = 0; j < cols; ++j)
+      if (rng() % 9 == 0) t.emplace_back(int(i), int(j), u(rng));
+  AmgMatrix m(rows, cols);
+  m.setFromTriplets(t.begin(), t.end());
+  const BlockRows b = blockRows(m, 3, 6, 8);
+  ASSERT_EQ(b.blockRows, 40u);
+  ASSERT_EQ(b.start.size(), 41u);
+  ASSERT_EQ(b.values.size(), 18 * b.cols.size() + 8);
+  for (std::size_t k = 18 * b.cols.size(); k < b.values.size(); ++k) EXPECT_EQ(b.values[k], 0.0);
+  const Eigen::MatrixXd dense = Eigen::MatrixXd(m);
+  const Eigen::VectorXd x = randomVector(static_cast<std::size_t>(cols), 8);
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(rows);
+  std::size_t blocksHeld = 0;
+  for (std::size_t i = 0; i < b.blockRows; ++i) {
+    for (std::uint32_t j = b.start[i]; j < b.start[i + 1]; ++j) {
+      if (j > b.start[i]) ASSERT_LT(b.cols[j - 1], b.cols[j]) << "block row " << i;
+      const Eigen::MatrixXd part = dense.block(3 * Eigen::Index(i), 6 * Eigen::Index(b.cols[j]), 3, 6);
+      EXPECT_NE(part.cwiseAbs().maxCoeff(), 0.0) << "an empty block kept in block row " << i;
+      for (int c = 0; c < 6; ++c)
+        for (int r = 0; r < 3; ++r) {
+          ASSERT_EQ(b.values[18 * j + 3 * std::size_t(c) + std::size_t(r)], part(r, c)) << "block row " << i;
+          y[3 * Eigen::Index(i) + r] += part(r, c) * x[6 * Eigen::Index(b.cols[j]) + c];
+        }
+    }
+    blocksHeld += b.start[i + 1] - b.start[i];
+  }
+  std::size_t blocksThere = 0;  // every non-empty block is held
+  for (Eigen::Index i = 0; i < rows / 3; ++i)
+    for (Eigen::Index j = 0; j < cols / 6; ++j) blocksThere += dense.block(3 * i, 6 * j, 3, 6).cwiseAbs().maxCoeff() > 0.0;
+  EXPECT_EQ(blocksHeld, blocksThere);
+  EXPECT_LT((y - m * x).norm(), 1e-13 * (m * x).norm());
+  EXPECT_THROW(blockRows(m, 7, 6, 0), Error);  // 120 rows are not whole blocks of 7,
+  EXPECT_THROW(blockRows(m, 3, 4, 0), Error);  // nor 150 columns of 4
+  EXPECT_THROW(blockRows(m, 0, 6, 0), Error);
 }
 
 TEST(WarpedAmg, TheMatrixVectorProductInSlicesIsEigensBitForBit) {

@@ -32,6 +32,42 @@ SlicedEll slicedEll(const AmgMatrix& m, std::size_t slice) {
   return out;
 }
 
+BlockRows blockRows(const AmgMatrix& m, std::size_t rowBlock, std::size_t colBlock, std::size_t pad) {
+  if (rowBlock == 0 || colBlock == 0 || static_cast<std::size_t>(m.rows()) % rowBlock != 0 ||
+      static_cast<std::size_t>(m.cols()) % colBlock != 0)
+    fail(ErrorCode::Internal, "amg: a ", m.rows(), " x ", m.cols(), " matrix is not made of ", rowBlock, " x ", colBlock,
+         " blocks");
+  BlockRows out;
+  out.rowBlock = rowBlock;
+  out.colBlock = colBlock;
+  out.blockRows = static_cast<std::size_t>(m.rows()) / rowBlock;
+  out.start.assign(1, 0);
+  const std::size_t area = rowBlock * colBlock;
+  std::vector<std::uint32_t> blockCols;
+  for (std::size_t i = 0; i < out.blockRows; ++i) {
+    blockCols.clear();  // the block row's block columns, ascending
+    for (std::size_t r = 0; r < rowBlock; ++r)
+      for (AmgMatrix::InnerIterator it(m, static_cast<Eigen::Index>(rowBlock * i + r)); it; ++it)
+        blockCols.push_back(static_cast<std::uint32_t>(static_cast<std::size_t>(it.col()) / colBlock));
+    std::sort(blockCols.begin(), blockCols.end());
+    blockCols.erase(std::unique(blockCols.begin(), blockCols.end()), blockCols.end());
+    const std::size_t first = out.cols.size();
+    out.cols.insert(out.cols.end(), blockCols.begin(), blockCols.end());
+    out.values.resize(out.cols.size() * area, 0.0);
+    for (std::size_t r = 0; r < rowBlock; ++r) {
+      std::size_t j = first;  // a row's columns ascend, and so do the block columns
+      for (AmgMatrix::InnerIterator it(m, static_cast<Eigen::Index>(rowBlock * i + r)); it; ++it) {
+        const std::size_t col = static_cast<std::size_t>(it.col());
+        while (out.cols[j] != col / colBlock) ++j;
+        out.values[area * j + rowBlock * (col % colBlock) + r] = it.value();
+      }
+    }
+    out.start.push_back(static_cast<std::uint32_t>(out.cols.size()));
+  }
+  out.values.resize(out.values.size() + pad, 0.0);
+  return out;
+}
+
 DeviceAmg::DeviceAmg(const std::vector<BodySegment>& segments)
     : segs_(segments),
       bodies_(segments.size()),
@@ -85,19 +121,36 @@ bool DeviceAmg::prepare(const BodySet& running, const std::vector<std::pair<doub
   return dirty_;
 }
 
-DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
-  // Body s's rows of device level k from offset[k][s].
+DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal, std::size_t block) {
+  // Body s's rows of device level k from offset[k][s]; its level-k row i at coarseRow[k][s][i].
   const std::size_t K = segs_.size();
   std::size_t depth = 1;
   for (const BodyAmg& b : bodies_) depth = std::max(depth, b.amg().levels().size());
   std::vector<std::vector<std::size_t>> offset(depth, std::vector<std::size_t>(K, 0));
+  std::vector<std::vector<std::vector<std::size_t>>> coarseRow(depth, std::vector<std::vector<std::size_t>>(K));
   std::vector<std::size_t> rows(depth, 0);
   rows[0] = 3 * nodeTotal;
   for (std::size_t k = 1; k < depth; ++k)
     for (std::size_t s = 0; s < K; ++s) {
       offset[k][s] = rows[k];
       const auto& levels = bodies_[s].amg().levels();
-      if (k < levels.size()) rows[k] += static_cast<std::size_t>(levels[k].A.rows());
+      if (k >= levels.size()) continue;
+      std::vector<std::size_t>& at = coarseRow[k][s];
+      const std::vector<int>& vs = levels[k].vertexStart;
+      if (block == 0) {
+        for (Eigen::Index i = 0; i < levels[k].A.rows(); ++i) at.push_back(rows[k] + static_cast<std::size_t>(i));
+        rows[k] += static_cast<std::size_t>(levels[k].A.rows());
+        continue;
+      }
+      if (vs.empty() || static_cast<Eigen::Index>(vs.back()) != levels[k].A.rows())
+        fail(ErrorCode::Internal, "amg: level ", k, " of body ", s, " has no vertex blocks for its rows");
+      for (std::size_t v = 0; v + 1 < vs.size(); ++v) {
+        const int size = vs[v + 1] - vs[v];
+        if (size < 0 || static_cast<std::size_t>(size) > block)
+          fail(ErrorCode::Internal, "amg: a vertex of ", size, " rows on level ", k, " of body ", s, " (blocks of ", block, ")");
+        for (int r = 0; r < size; ++r) at.push_back(rows[k] + block * v + static_cast<std::size_t>(r));
+      }
+      rows[k] += block * (vs.size() - 1);
     }
   // Body s's level-0 row i (the i-th free dof its hierarchy was built on) is device dof dofBegin +
   // device dof of that dof.
@@ -111,6 +164,7 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
   }
   auto transposed = [](const AmgMatrix& m) { return AmgMatrix(m.transpose()); };  // P^T, as each body's Pt
   DeviceAmgLayout out;
+  out.block = block;
   out.levels.resize(depth - 1);
   {
     std::vector<MatrixBlock> p;
@@ -120,7 +174,7 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
       MatrixBlock b;
       b.sparse = &levels[0].P;
       b.rowMap = &fineRow[s];
-      b.colOffset = offset[1][s];
+      b.colMap = &coarseRow[1][s];
       p.push_back(b);
     }
     out.P0 = joined(rows[0], depth > 1 ? rows[1] : 0, p);
@@ -136,7 +190,7 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
       const auto& levels = bodies_[s].amg().levels();
       if (k >= levels.size()) continue;
       MatrixBlock b;
-      b.rowOffset = b.colOffset = offset[k][s];
+      b.rowMap = b.colMap = &coarseRow[k][s];
       if (k + 1 == levels.size()) {  // the body's coarsest: its dense inverse, no smoothing
         inverses[s] = bodies_[s].amg().coarsestInverse();
         b.dense = &inverses[s];
@@ -147,10 +201,10 @@ DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal) {
       b.sparse = &level.A;
       a.push_back(b);
       b.sparse = &level.P;
-      b.colOffset = offset[k + 1][s];
+      b.colMap = &coarseRow[k + 1][s];
       p.push_back(b);
       for (Eigen::Index i = 0; i < level.A.rows(); ++i)
-        L.dinv[offset[k][s] + static_cast<std::size_t>(i)] = level.diagInv[i] / level.lambdaMax;
+        L.dinv[coarseRow[k][s][static_cast<std::size_t>(i)]] = level.diagInv[i] / level.lambdaMax;
     }
     const std::size_t next = k + 1 < depth ? rows[k + 1] : 0;
     L.A = joined(rows[k], rows[k], a);

@@ -40,6 +40,11 @@ struct DeviceAmgLevel {
 };
 
 struct DeviceAmgLayout {
+  /// 0: a body's level-k rows (k >= 1) end to end as its hierarchy numbers them; else each vertex
+  /// of a level (AmgLevel::vertexStart) takes `block` rows, its own first and zero rows after
+  /// them (no entries, dinv 0), so that every coarse matrix is made of dense block x block blocks
+  /// (P0 and Pt0: 3 x block and block x 3, level 0 having 3 rows per node).
+  std::size_t block = 0;
   AmgMatrix P0, Pt0;                        ///< level 0 <-> level 1
   std::vector<DeviceAmgLevel> levels;       ///< levels[k - 1] is device level k
   std::vector<double> scale;                ///< per segment: 1 / level 0's lambda_max (1 without a hierarchy)
@@ -57,6 +62,19 @@ struct SlicedEll {
   std::vector<double> values;
 };
 SlicedEll slicedEll(const AmgMatrix& m, std::size_t slice);
+
+/// A matrix of a blocked layout (DeviceAmgLayout::block) in dense blocks of rowBlock x colBlock:
+/// block row i (rows [rowBlock i, rowBlock (i + 1))) holds the blocks start[i] .. start[i + 1], in
+/// ascending block column cols[j], each with its entries column by column (entry (r, c) of block j
+/// at values[rowBlock colBlock j + rowBlock c + r]; zero where the matrix has none), then `pad`
+/// zeros (a device reading whole vectors past a block's last column stays in the buffer). Throws
+/// Error(Internal) where the matrix's sizes are not whole blocks.
+struct BlockRows {
+  std::size_t blockRows = 0, rowBlock = 0, colBlock = 0;
+  std::vector<std::uint32_t> start, cols;
+  std::vector<double> values;
+};
+BlockRows blockRows(const AmgMatrix& m, std::size_t rowBlock, std::size_t colBlock, std::size_t pad);
 
 /// The hierarchies of a device's bodies (segments), and their layout.
 class DeviceAmg {
@@ -79,8 +97,10 @@ class DeviceAmg {
   /// m M + s K of running[i]: makes or takes back their hierarchies. Returns whether the layout
   /// changed since the last layout() (the device uploads layout() again).
   bool prepare(const BodySet& running, const std::vector<std::pair<double, double>>& coefficients);
-  /// Every body's levels end to end over `nodeTotal` device nodes.
-  DeviceAmgLayout layout(std::size_t nodeTotal);
+  /// Every body's levels end to end over `nodeTotal` device nodes; with `block` > 0 each coarse
+  /// vertex in `block` rows (DeviceAmgLayout::block; at least the largest vertex, 6 always
+  /// suffices). Throws Error(Internal) for a vertex larger than `block`.
+  DeviceAmgLayout layout(std::size_t nodeTotal, std::size_t block = 0);
   /// Segment s's hierarchy.
   const BodyAmg& body(std::size_t s) const { return bodies_.at(s); }
   /// The device holds layout()'s levels now (called once its upload succeeded; until then prepare

@@ -259,12 +259,12 @@ AmgMatrix joined(std::size_t rows, std::size_t cols, const std::vector<MatrixBlo
       int at = start[b.row(i)];
       if (b.sparse) {
         for (AmgMatrix::InnerIterator it(*b.sparse, i); it; ++it, ++at) {
-          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(it.col()));
+          out.innerIndexPtr()[at] = static_cast<int>(b.col(it.col()));
           out.valuePtr()[at] = it.value();
         }
       } else {
         for (Eigen::Index j = 0; j < b.dense->cols(); ++j, ++at) {
-          out.innerIndexPtr()[at] = static_cast<int>(b.colOffset + static_cast<std::size_t>(j));
+          out.innerIndexPtr()[at] = static_cast<int>(b.col(j));
           out.valuePtr()[at] = (*b.dense)(i, j);
         }
       }
@@ -364,6 +364,7 @@ void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeD
       level.P = identity;
       level.Pt = identity;
       AmgMatrix copy = level.A;
+      level.vertexStart = vertexStart;
       levels_.push_back(std::move(level));
       level = AmgLevel{};
       level.A = std::move(copy);
@@ -447,6 +448,7 @@ void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeD
 
     level.P = std::move(P);
     level.Pt = std::move(Pt);
+    level.vertexStart = vertexStart;
     levels_.push_back(std::move(level));
     level = AmgLevel{};
     level.A = std::move(coarse);
@@ -477,6 +479,7 @@ void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeD
     }
     coarsest_.compute(diagonal);
   }
+  level.vertexStart = vertexStart;
   levels_.push_back(std::move(level));
   nodeAggregate_ = nodeAggregates();
 }

@@ -57,6 +57,10 @@ struct AmgLevel {
   double lambdaMax = 1.0;    ///< the largest eigenvalue of D^-1 A by 20 power steps, raised by 10 %
   AmgMatrix P;               ///< prolongation from the next level (rows: this level's dofs)
   AmgMatrix Pt;              ///< P^T
+  /// The level's rows by vertex: vertex v (level 0: a node with a free dof; coarser: an aggregate
+  /// of the level above, one row per near-null-space mode it kept, at most 6) holds rows
+  /// [vertexStart[v], vertexStart[v + 1]). A device lays the coarse levels out in blocks by it.
+  std::vector<int> vertexStart;
 };
 
 /// The fine operator of a V-cycle: y = A x on the free dofs, and z = B^-1 r with B the node blocks
@@ -153,15 +157,19 @@ class WarpedAmg {
 
 /// A part of a matrix that joined() puts together: a matrix (sparse, or dense with every entry
 /// kept), its row i at (*rowMap)[i] where given, else at rowOffset + i, its column j at
-/// colOffset + j.
+/// (*colMap)[j] where given (strictly ascending), else at colOffset + j.
 struct MatrixBlock {
   const AmgMatrix* sparse = nullptr;
   const Eigen::MatrixXd* dense = nullptr;
   const std::vector<std::size_t>* rowMap = nullptr;
+  const std::vector<std::size_t>* colMap = nullptr;
   std::size_t rowOffset = 0, colOffset = 0;
   Eigen::Index rows() const { return sparse ? sparse->rows() : dense->rows(); }
   std::size_t row(Eigen::Index i) const {
     return rowMap ? (*rowMap)[static_cast<std::size_t>(i)] : rowOffset + static_cast<std::size_t>(i);
+  }
+  std::size_t col(Eigen::Index j) const {
+    return colMap ? (*colMap)[static_cast<std::size_t>(j)] : colOffset + static_cast<std::size_t>(j);
   }
 };
 

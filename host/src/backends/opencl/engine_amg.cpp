@@ -39,18 +39,19 @@ void EngineAmg::createKernels() {
   const cl_program program = e_.build_.program;
   kFineBegin_.create(program, "amg_fine_begin", e_.dev_);
   kFineStep_.create(program, "amg_fine_step", e_.dev_);
+  kFineBeginAt_.create(program, "amg_fine_begin_at", e_.dev_);
   kUnwarp_.create(program, "amg_fine_unwarp", e_.dev_);
   kWarpAdd_.create(program, "amg_fine_warp_add", e_.dev_);
   kSpmv_.create(program, "amg_spmv", e_.dev_);
-  kSpmvSlices_.create(program, "amg_spmv_slices", e_.dev_);
   kCoarseBegin_.create(program, "amg_coarse_begin", e_.dev_);
   kCoarseStep_.create(program, "amg_coarse_step", e_.dev_);
-  kCoarseAdd_.create(program, "amg_coarse_add", e_.dev_);
+  kBlocks3x6_.create(program, "amg_blocks_3x6", e_.dev_);
+  kBlocks6x3_.create(program, "amg_blocks_6x3", e_.dev_);
+  kBlocks6x6_.create(program, "amg_blocks_6x6", e_.dev_);
   kCoarsest_.create(program, "amg_coarsest", e_.dev_);
   const std::size_t fine = 3 * e_.nodeTotal_;
   res0_ = buffer(fine * e_.realSize_);
   d0_ = buffer(fine * e_.realSize_);
-  ad0_ = buffer(fine * e_.realSize_);
   e0_ = buffer(fine * e_.realSize_);
 }
 
@@ -82,23 +83,14 @@ void EngineAmg::prepare(const BodySet& running) {
   uploadWarp(running);
 }
 
-void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool csr, bool doubleValues) {
-  // m is row-major with the device's row and column numbering already: CSR for the coarsest
-  // inverse (amg_coarsest), sliced ELLPACK (amg_spmv) for the others.
-  std::vector<cl_uint> start, cols;
-  std::vector<double> values;
-  if (csr) {
-    start.assign(m.outerIndexPtr(), m.outerIndexPtr() + m.rows() + 1);
-    cols.assign(m.innerIndexPtr(), m.innerIndexPtr() + m.nonZeros());
-    values.assign(m.valuePtr(), m.valuePtr() + m.nonZeros());
-  } else {
-    SlicedEll ell = slicedEll(m, kSlice);
-    start = std::move(ell.start);
-    cols = std::move(ell.cols);
-    values = std::move(ell.values);
-  }
-  const std::size_t rows = static_cast<std::size_t>(m.rows());
-  out.rows = rows;
+std::size_t EngineAmg::block() const {
+  // CPU devices: the coarse vertices in blocks of 6 rows (an aggregate's rigid modes), read by
+  // amg_blocks_*: vector multiply-adds of whole block columns instead of a gather per entry.
+  return e_.treeReduce_ ? 0 : 6;
+}
+
+void EngineAmg::putRows(Csr& out, const std::vector<cl_uint>& start, const std::vector<cl_uint>& cols,
+                        std::vector<double> values, bool doubleValues) {
   out.start = buffer(start.size() * sizeof(cl_uint));
   e_.uploadRaw(*out.start, start);
   out.cols = buffer(std::max<std::size_t>(cols.size(), 1) * sizeof(cl_uint));
@@ -112,24 +104,52 @@ void EngineAmg::setRows(Csr& out, const AmgMatrix& m, bool csr, bool doubleValue
   }
 }
 
+void EngineAmg::setRows(Csr& out, const AmgMatrix& m, std::size_t rowBlock, std::size_t colBlock) {
+  // m is row-major with the device's row and column numbering already.
+  out.rows = static_cast<std::size_t>(m.rows());
+  out.rowBlock = out.colBlock = 0;
+  if (rowBlock > 0 && colBlock > 0) {
+    // The kernels load a block column as a vector of 4 or 8 reals: 8 past the last block.
+    BlockRows blocks = blockRows(m, rowBlock, colBlock, 8);
+    out.rowBlock = rowBlock;
+    out.colBlock = colBlock;
+    putRows(out, blocks.start, blocks.cols, std::move(blocks.values), false);
+    return;
+  }
+  SlicedEll ell = slicedEll(m, kSlice);
+  putRows(out, ell.start, ell.cols, std::move(ell.values), false);
+}
+
+void EngineAmg::setCsr(Csr& out, const AmgMatrix& m, bool doubleValues) {
+  out.rows = static_cast<std::size_t>(m.rows());
+  out.rowBlock = out.colBlock = 0;
+  const std::vector<cl_uint> start(m.outerIndexPtr(), m.outerIndexPtr() + m.rows() + 1),
+      cols(m.innerIndexPtr(), m.innerIndexPtr() + m.nonZeros());
+  putRows(out, start, cols, std::vector<double>(m.valuePtr(), m.valuePtr() + m.nonZeros()), doubleValues);
+}
+
 void EngineAmg::upload() {
-  const DeviceAmgLayout layout = host_.layout(e_.nodeTotal_);
-  setRows(P0_, layout.P0);
-  setRows(Pt0_, layout.Pt0);
+  const std::size_t B = block();
+  const DeviceAmgLayout layout = host_.layout(e_.nodeTotal_, B);
+  setRows(P0_, layout.P0, B ? 3 : 0, B);
+  setRows(Pt0_, layout.Pt0, B, B ? 3 : 0);
   levels_.clear();
   levels_.resize(layout.levels.size());
   for (std::size_t k = 0; k < layout.levels.size(); ++k) {
     const DeviceAmgLevel& from = layout.levels[k];
     Level& L = levels_[k];
     L.rows = from.rows;
-    setRows(L.A, from.A);
-    setRows(L.P, from.P);
-    setRows(L.Pt, from.Pt);
-    setRows(L.inverse, from.inverse, true, e_.ctx_->info().fp64);
+    setRows(L.A, from.A, B, B);
+    setRows(L.P, from.P, B, B);
+    setRows(L.Pt, from.Pt, B, B);
+    setCsr(L.inverse, from.inverse, e_.ctx_->info().fp64);
     L.inverseEntries = from.inverseEntries;
     L.smooths = from.smooths;
     L.dinv = reals(from.dinv);
-    for (auto* v : {&L.b, &L.x, &L.res, &L.d, &L.t}) *v = buffer(std::max<std::size_t>(from.rows, 1) * e_.realSize_);
+    // Zeros to begin with: a blocked layout's padding rows are read (times zero) and only the
+    // smoothing writes them, which a body's coarsest level does not run.
+    const std::vector<double> zeros(std::max<std::size_t>(from.rows, 1), 0.0);
+    for (auto* v : {&L.b, &L.x, &L.res, &L.d, &L.t}) *v = reals(zeros);
   }
   scale_ = reals(layout.scale);
   std::vector<cl_int> nodeAggregate(layout.nodeAggregate.begin(), layout.nodeAggregate.end());
@@ -152,11 +172,15 @@ void EngineAmg::uploadWarp(const BodySet& running) {
 void EngineAmg::spmv(const Csr& m, const ClBuffer& x, const ClBuffer* b, cl_uint mode, const ClBuffer& y) {
   if (m.rows == 0) return;
   static const ClBuffer none;
-  // A work-item per slice on CPUs (vector code), per row on GPUs (engine: work-group trees).
-  const bool perSlice = !e_.treeReduce_;
-  const std::size_t items = perSlice ? (m.rows + kSlice - 1) / kSlice : m.rows;
-  const std::size_t wg = perSlice ? kSlice : e_.wg_, global = (items + wg - 1) / wg * wg;
-  e_.launchRange(perSlice ? kSpmvSlices_ : kSpmv_, 0, global, wg, cl_uint(m.rows), *m.start, *m.cols, *m.values, x, b ? *b : none, mode, y);
+  if (m.rowBlock > 0) {
+    const ClKernel& k = m.rowBlock == 3 ? kBlocks3x6_ : m.colBlock == 3 ? kBlocks6x3_ : kBlocks6x6_;
+    const std::size_t items = m.rows / m.rowBlock, global = (items + kBlockGroup - 1) / kBlockGroup * kBlockGroup;
+    e_.launchRange(k, 0, global, kBlockGroup, cl_uint(items), *m.start, *m.cols, *m.values, x, b ? *b : none, mode, y);
+    return;
+  }
+  // GPUs: a row per work-item (the engine's work-group size).
+  const std::size_t global = (m.rows + e_.wg_ - 1) / e_.wg_ * e_.wg_;
+  e_.launchRange(kSpmv_, 0, global, e_.wg_, cl_uint(m.rows), *m.start, *m.cols, *m.values, x, b ? *b : none, mode, y);
 }
 
 void EngineAmg::coarse(std::size_t k) {
@@ -181,8 +205,7 @@ void EngineAmg::coarse(std::size_t k) {
     spmv(L.A, *L.x, L.b.get(), 1, *L.t);  // t = b - A x
     spmv(L.Pt, *L.t, nullptr, 0, *N.b);
     coarse(k + 1);
-    spmv(L.P, *N.x, nullptr, 0, *L.t);
-    e_.launchRange(kCoarseAdd_, 0, global, wg, cl_uint(L.rows), *L.t, *L.x);
+    spmv(L.P, *N.x, nullptr, 2, *L.x);  // x += P e
   }
   // Post-smoothing.
   spmv(L.A, *L.x, nullptr, 0, *L.t);
@@ -202,26 +225,26 @@ void EngineAmg::cycle(bool setup) {
   static const Chebyshev ch;
   static const ClBuffer none;
   SegmentEngine& e = e_;
-  // Level 0: z = M^-1 r with the current operator (projected products into ad0).
-  e.launch(kFineBegin_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *scale_, e.minv_, e.r_, e.r_, cl_uint(1),
-           R{ch.invTheta}, *res0_, *d0_, e.z_);
-  e.product(*d0_, *ad0_, true, e.partialsW_);
-  e.launch(kFineStep_, Span::NodeChunks, e.nodeSeg_, e.segInfoBuf_, *scale_, e.minv_, *ad0_, R{ch.c1}, R{ch.c2}, *res0_,
-           *d0_, e.z_, cl_uint(0), none, none, none, none);
+  // Level 0: z = M^-1 r with the current operator. Each product's gather is the first part of the
+  // pass that reads it (amg.cl: A u is never stored).
+  auto gathered = [&](const ClKernel& k, const ClBuffer& u, auto&&... args) {
+    e.elementProduct(u);
+    e.launch(k, Span::NodeChunks, e.nodeSeg_, e.segInfoBuf_, e.segCoefBuf_, e.nodeStart_, e.nodeEntries_, e.elemOut_,
+             e.mass_, e.free_, args...);
+  };
+  e.launch(kFineBegin_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *scale_, e.minv_, e.r_, R{ch.invTheta}, *res0_, *d0_,
+           e.z_);
+  gathered(kFineStep_, *d0_, *scale_, e.minv_, R{ch.c1}, R{ch.c2}, *res0_, *d0_, e.z_, cl_uint(0), none, none, none);
   if (!levels_.empty()) {
-    e.product(e.z_, *ad0_, true, e.partialsW_);
-    e.launch(kUnwarp_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *nodeAggregate_, *rotations_, e.r_, *ad0_, *e0_);
+    gathered(kUnwarp_, e.z_, e.z_, *nodeAggregate_, *rotations_, e.r_, *e0_);
     spmv(Pt0_, *e0_, nullptr, 0, *levels_[0].b);
     coarse(1);
     spmv(P0_, *levels_[0].x, nullptr, 0, *e0_);
     e.launch(kWarpAdd_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *nodeAggregate_, *rotations_, *e0_, e.free_, e.z_);
   }
-  e.product(e.z_, *ad0_, true, e.partialsW_);
-  e.launch(kFineBegin_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *scale_, e.minv_, e.r_, *ad0_, cl_uint(0),
-           R{ch.invTheta}, *res0_, *d0_, e.z_);
-  e.product(*d0_, *ad0_, true, e.partialsW_);
-  e.launch(kFineStep_, Span::NodeChunks, e.nodeSeg_, e.segInfoBuf_, *scale_, e.minv_, *ad0_, R{ch.c1}, R{ch.c2}, *res0_,
-           *d0_, e.z_, cl_uint(1), e.r_, setup ? e.b_ : none, e.free_, e.partials_);
+  gathered(kFineBeginAt_, e.z_, *scale_, e.minv_, e.r_, R{ch.invTheta}, *res0_, *d0_, e.z_);
+  gathered(kFineStep_, *d0_, *scale_, e.minv_, R{ch.c1}, R{ch.c2}, *res0_, *d0_, e.z_, cl_uint(1), e.r_,
+           setup ? e.b_ : none, e.partials_);
 }
 
 std::vector<DeviceBuffer> EngineAmg::buffers() const {
@@ -235,7 +258,6 @@ std::vector<DeviceBuffer> EngineAmg::buffers() const {
   };
   put("amg level-0 vectors", res0_);
   put("amg level-0 vectors", d0_);
-  put("amg level-0 vectors", ad0_);
   put("amg level-0 vectors", e0_);
   put("amg warp", nodeAggregate_);
   put("amg warp", rotations_);

@@ -45,13 +45,20 @@ class EngineAmg {
   std::vector<DeviceBuffer> buffers() const;
 
  private:
-  /// A level matrix on the device: sliced ELLPACK in slices of kSlice rows (amg_spmv), or CSR (the
-  /// coarsest inverse, amg_coarsest): `start` the slices' or the rows' first entries.
+  /// A level matrix on the device: sliced ELLPACK in slices of kSlice rows (amg_spmv, GPUs), dense
+  /// rowBlock x colBlock blocks (BlockRows, amg_blocks_*: CPU devices, whose layout is blocked), or
+  /// CSR (the coarsest inverse, amg_coarsest): `start` the slices', the block rows' or the rows'
+  /// first entries.
   struct Csr {
     std::unique_ptr<ClBuffer> start, cols, values;
     std::size_t rows = 0;
+    std::size_t rowBlock = 0, colBlock = 0;  ///< 0: not in blocks
   };
+  /// The blocked layout's vertex rows (DeviceAmgLayout::block) on CPU devices; 0 on GPUs.
+  std::size_t block() const;
   static constexpr std::size_t kSlice = 16;  ///< kAmgSlice of kernels/opencl/amg.cl
+  /// Block rows per work-group of amg_blocks_* (4, 8 and 16 took the same time on PoCL).
+  static constexpr std::size_t kBlockGroup = 16;
   /// Device level k >= 1: every body's hierarchy level k end to end.
   struct Level {
     std::size_t rows = 0;
@@ -66,17 +73,23 @@ class EngineAmg {
   void spmv(const Csr& m, const ClBuffer& x, const ClBuffer* b, cl_uint mode, const ClBuffer& y);
   std::unique_ptr<ClBuffer> buffer(std::size_t bytes);
   std::unique_ptr<ClBuffer> reals(const std::vector<double>& values);
-  /// `csr`: CSR (the coarsest inverse), else sliced ELLPACK; `doubleValues`: the values in double
-  /// whatever the engine's precision (the coarsest inverse where the device has fp64).
-  void setRows(Csr& out, const AmgMatrix& m, bool csr = false, bool doubleValues = false);
+  /// The format of Csr for a transfer or an operator: rowBlock x colBlock blocks where both are
+  /// set (the blocked layout), else sliced ELLPACK.
+  void setRows(Csr& out, const AmgMatrix& m, std::size_t rowBlock, std::size_t colBlock);
+  /// CSR (the coarsest inverse), its values in double with `doubleValues` whatever the engine's
+  /// precision (where the device has fp64).
+  void setCsr(Csr& out, const AmgMatrix& m, bool doubleValues);
+  void putRows(Csr& out, const std::vector<cl_uint>& start, const std::vector<cl_uint>& cols,
+               std::vector<double> values, bool doubleValues);
 
   SegmentEngine& e_;
   DeviceAmg host_;                        ///< the hierarchies and their layout
   // Level 0 (device dofs), levels 1.. and the warp.
   Csr P0_, Pt0_;
   std::vector<Level> levels_;             ///< levels_[k - 1] is device level k
-  std::unique_ptr<ClBuffer> scale_, res0_, d0_, ad0_, e0_, nodeAggregate_, rotations_;
-  ClKernel kFineBegin_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarseAdd_, kCoarsest_, kSpmvSlices_;
+  std::unique_ptr<ClBuffer> scale_, res0_, d0_, e0_, nodeAggregate_, rotations_;
+  ClKernel kFineBegin_, kFineBeginAt_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarsest_,
+      kBlocks3x6_, kBlocks6x3_, kBlocks6x6_;
 };
 
 }  // namespace corofem::detail
