@@ -44,13 +44,18 @@ BlockRows blockRows(const AmgMatrix& m, std::size_t rowBlock, std::size_t colBlo
   out.start.assign(1, 0);
   const std::size_t area = rowBlock * colBlock;
   std::vector<std::uint32_t> blockCols;
+  // seen[c]: the last block row that met block column c, + 1 (each block column listed once).
+  std::vector<std::size_t> seen(static_cast<std::size_t>(m.cols()) / colBlock, 0);
   for (std::size_t i = 0; i < out.blockRows; ++i) {
     blockCols.clear();  // the block row's block columns, ascending
     for (std::size_t r = 0; r < rowBlock; ++r)
-      for (AmgMatrix::InnerIterator it(m, static_cast<Eigen::Index>(rowBlock * i + r)); it; ++it)
-        blockCols.push_back(static_cast<std::uint32_t>(static_cast<std::size_t>(it.col()) / colBlock));
+      for (AmgMatrix::InnerIterator it(m, static_cast<Eigen::Index>(rowBlock * i + r)); it; ++it) {
+        const std::size_t c = static_cast<std::size_t>(it.col()) / colBlock;
+        if (seen[c] == i + 1) continue;
+        seen[c] = i + 1;
+        blockCols.push_back(static_cast<std::uint32_t>(c));
+      }
     std::sort(blockCols.begin(), blockCols.end());
-    blockCols.erase(std::unique(blockCols.begin(), blockCols.end()), blockCols.end());
     const std::size_t first = out.cols.size();
     out.cols.insert(out.cols.end(), blockCols.begin(), blockCols.end());
     out.values.resize(out.cols.size() * area, 0.0);
