@@ -51,8 +51,9 @@ void amg_fine_begin(__global const uint* restrict nodeSeg, __global const uint* 
 /* The passes after a product of the current operator (element_product of u done): each gathers
  * its node's (A u)_n as gather_product does (projected, the same sums: au below) and goes on with
  * the node's own entries only, so that the product's gather and the pass are one launch and A u is
- * never stored. u is the pass's own d or x: a node reads its entries of u before it writes them,
- * and no other node reads them (the gathers read the element products). */
+ * never stored. u (and src) may be the pass's own d, x or res (no `restrict` on those): a node
+ * reads its entries of them before it writes them, and no other node reads them (the gathers read
+ * the element products). */
 COROFEM_FN void fine_gathered(uint n, real massCoef, __global const uint* start, __global const uint* entries,
                               __global const real* elemOut, __global const real* mass, __global const real* free,
                               __global const real* u, real* au) {
@@ -66,27 +67,31 @@ COROFEM_FN void fine_gathered(uint n, real massCoef, __global const uint* start,
       __global const uint *restrict entries, __global const real *restrict elemOut,                          \
       __global const real *restrict mass, __global const real *restrict free
 
-/* Chebyshev's step on level 0 after the product of d: res -= A d, d = c1 d + c2 s B^-1 res,
- * x += d. `last` != 0 (the end of the V-cycle, x = z = M^-1 r): also the partial sums (r . z,
+/* A Chebyshev pass on level 0 after the product of u:
+ *   the step (u = d, src = res):        res -= A d, d = c1 d + c2 s B^-1 res, x += d
+ *   a begin (u = x, src = b, c1 = 0):   res = b - A x, d = c2 s B^-1 res, x += d (c2 = 1 / theta)
+ * `last` != 0 (the step that ends the V-cycle, x = z = M^-1 r): also the partial sums (r . z,
  * r . r, |free b|^2 from b where given: the set-up's) as pcg_update / pcg_init leave them for
  * reduce_finish. */
 __kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void amg_fine_step(AMG_GATHER_PARAMS, __global const real* restrict scale, __global const real* restrict minv,
-                   const real c1, const real c2, __global real* restrict res, __global real* restrict d,
-                   __global real* restrict x, const uint last, __global const real* restrict r,
-                   __global const real* restrict b, __global sum_real* restrict partials) {
+void amg_fine_pass(AMG_GATHER_PARAMS, __global const real* restrict scale, __global const real* restrict minv,
+                   __global const real* u, __global const real* src, const real c1, const real c2,
+                   __global real* res, __global real* d, __global real* x, const uint last,
+                   __global const real* restrict r, __global const real* restrict b,
+                   __global sum_real* restrict partials) {
   COROFEM_PARTIAL_LOCALS
   COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last_);
   const real sc = scale[s] * c2, massCoef = seg_coef(segCoef, s, kCoefMass);
   sum_real ru = 0, rr = 0, bb = 0;
   for (uint n = first; n < last_; ++n) {
-    real ad[3], rn[3], zn[3];
-    fine_gathered(n, massCoef, start, entries, elemOut, mass, free, d, ad);
-    for (int k = 0; k < 3; ++k) rn[k] = res[3 * n + k] - ad[k];
+    real au[3], rn[3], zn[3];
+    fine_gathered(n, massCoef, start, entries, elemOut, mass, free, u, au);
+    for (int k = 0; k < 3; ++k) rn[k] = src[3 * n + k] - au[k];
     apply_preconditioner(n, minv, rn, zn);
     for (int k = 0; k < 3; ++k) {
       const uint i = 3 * n + k;
-      const real dk = c1 * d[i] + sc * zn[k];
+      /* a begin does not read d: what a step left there is no part of its sum */
+      const real dk = (c1 != (real)0 ? c1 * d[i] : (real)0) + sc * zn[k];
       const real xk = x[i] + dk;
       res[i] = rn[k];
       d[i] = dk;
@@ -99,29 +104,6 @@ void amg_fine_step(AMG_GATHER_PARAMS, __global const real* restrict scale, __glo
     }
   }
   if (last) COROFEM_PARTIAL_STORE(ru, rr, bb, partials);
-}
-
-/* Chebyshev's begin on level 0 after the product of x (the post-smoothing): res = b - A x,
- * d = s B^-1 res / theta, x += d. */
-__kernel __attribute__((reqd_work_group_size(COROFEM_WG, 1, 1)))
-void amg_fine_begin_at(AMG_GATHER_PARAMS, __global const real* restrict scale, __global const real* restrict minv,
-                       __global const real* restrict b, const real invTheta, __global real* restrict res,
-                       __global real* restrict d, __global real* restrict x) {
-  COROFEM_NODE_RANGE(nodeSeg, segInfo, s, first, last);
-  const real sc = scale[s] * invTheta, massCoef = seg_coef(segCoef, s, kCoefMass);
-  for (uint n = first; n < last; ++n) {
-    real ax[3], rn[3], zn[3];
-    fine_gathered(n, massCoef, start, entries, elemOut, mass, free, x, ax);
-    for (int k = 0; k < 3; ++k) rn[k] = b[3 * n + k] - ax[k];
-    apply_preconditioner(n, minv, rn, zn);
-    for (int k = 0; k < 3; ++k) {
-      const uint i = 3 * n + k;
-      const real dk = sc * zn[k];
-      res[i] = rn[k];
-      d[i] = dk;
-      x[i] += dk;
-    }
-  }
 }
 
 /* After the product of x: w = R^T (b - A x) per node, R the rotation of the node's aggregate
@@ -166,7 +148,7 @@ void amg_fine_warp_add(__global const uint* restrict nodeSeg, __global const uin
   for (int k = 0; k < 3; ++k) x[3 * n + k] += free[3 * n + k] * v[k];
 }
 
-/* -- coarse levels (one work-item per row of all bodies) */
+/* -- coarse levels (every body's rows: a work-item per row, or per block row in the blocked layout) */
 
 /* y = A x (mode 0), y = b - A x (mode 1) or y += A x (mode 2), a work-item per row (GPUs), A in
  * slices of kAmgSlice rows (sliced ELLPACK): slice s holds its rows' entries column by column from

@@ -63,7 +63,8 @@ BlockRows blockRows(const AmgMatrix& m, std::size_t rowBlock, std::size_t colBlo
       std::size_t j = first;  // a row's columns ascend, and so do the block columns
       for (AmgMatrix::InnerIterator it(m, static_cast<Eigen::Index>(rowBlock * i + r)); it; ++it) {
         const std::size_t col = static_cast<std::size_t>(it.col());
-        while (out.cols[j] != col / colBlock) ++j;
+        while (j < out.cols.size() && out.cols[j] != col / colBlock) ++j;
+        if (j == out.cols.size()) fail(ErrorCode::Internal, "amg: row ", rowBlock * i + r, " has columns out of order");
         out.values[area * j + rowBlock * (col % colBlock) + r] = it.value();
       }
     }
@@ -127,17 +128,15 @@ bool DeviceAmg::prepare(const BodySet& running, const std::vector<std::pair<doub
 }
 
 DeviceAmgLayout DeviceAmg::layout(std::size_t nodeTotal, std::size_t block) {
-  // Body s's rows of device level k from offset[k][s]; its level-k row i at coarseRow[k][s][i].
+  // Body s's level-k row i (k >= 1) at device row coarseRow[k][s][i], the bodies in turn.
   const std::size_t K = segs_.size();
   std::size_t depth = 1;
   for (const BodyAmg& b : bodies_) depth = std::max(depth, b.amg().levels().size());
-  std::vector<std::vector<std::size_t>> offset(depth, std::vector<std::size_t>(K, 0));
   std::vector<std::vector<std::vector<std::size_t>>> coarseRow(depth, std::vector<std::vector<std::size_t>>(K));
   std::vector<std::size_t> rows(depth, 0);
   rows[0] = 3 * nodeTotal;
   for (std::size_t k = 1; k < depth; ++k)
     for (std::size_t s = 0; s < K; ++s) {
-      offset[k][s] = rows[k];
       const auto& levels = bodies_[s].amg().levels();
       if (k >= levels.size()) continue;
       std::vector<std::size_t>& at = coarseRow[k][s];

@@ -58,7 +58,8 @@ struct AmgLevel {
   AmgMatrix P;               ///< prolongation from the next level (rows: this level's dofs)
   AmgMatrix Pt;              ///< P^T
   /// The level's rows by vertex: vertex v (level 0: a node with a free dof; coarser: an aggregate
-  /// of the level above, one row per near-null-space mode it kept, at most 6) holds rows
+  /// of the level above, one row per near-null-space mode it kept, at most 6; the level solved
+  /// directly below a body's level 0 keeps level 0's nodes) holds rows
   /// [vertexStart[v], vertexStart[v + 1]). A device lays the coarse levels out in blocks by it.
   std::vector<int> vertexStart;
 };

@@ -38,8 +38,7 @@ EngineAmg::EngineAmg(SegmentEngine& engine) : e_(engine), host_(engine.segs_) {}
 void EngineAmg::createKernels() {
   const cl_program program = e_.build_.program;
   kFineBegin_.create(program, "amg_fine_begin", e_.dev_);
-  kFineStep_.create(program, "amg_fine_step", e_.dev_);
-  kFineBeginAt_.create(program, "amg_fine_begin_at", e_.dev_);
+  kFinePass_.create(program, "amg_fine_pass", e_.dev_);
   kUnwarp_.create(program, "amg_fine_unwarp", e_.dev_);
   kWarpAdd_.create(program, "amg_fine_warp_add", e_.dev_);
   kSpmv_.create(program, "amg_spmv", e_.dev_);
@@ -84,8 +83,9 @@ void EngineAmg::prepare(const BodySet& running) {
 }
 
 std::size_t EngineAmg::block() const {
-  // CPU devices: the coarse vertices in blocks of 6 rows (an aggregate's rigid modes), read by
-  // amg_blocks_*: vector multiply-adds of whole block columns instead of a gather per entry.
+  // Per-work-item sums (CPU devices): the coarse vertices in blocks of 6 rows (an aggregate's
+  // rigid modes), read by amg_blocks_*, vector multiply-adds of whole block columns instead of a
+  // gather per entry. Work-group sums (GPUs): a row per work-item, whose loads coalesce.
   return e_.treeReduce_ ? 0 : 6;
 }
 
@@ -234,7 +234,8 @@ void EngineAmg::cycle(bool setup) {
   };
   e.launch(kFineBegin_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *scale_, e.minv_, e.r_, R{ch.invTheta}, *res0_, *d0_,
            e.z_);
-  gathered(kFineStep_, *d0_, *scale_, e.minv_, R{ch.c1}, R{ch.c2}, *res0_, *d0_, e.z_, cl_uint(0), none, none, none);
+  gathered(kFinePass_, *d0_, *scale_, e.minv_, *d0_, *res0_, R{ch.c1}, R{ch.c2}, *res0_, *d0_, e.z_, cl_uint(0), none, none,
+           none);
   if (!levels_.empty()) {
     gathered(kUnwarp_, e.z_, e.z_, *nodeAggregate_, *rotations_, e.r_, *e0_);
     spmv(Pt0_, *e0_, nullptr, 0, *levels_[0].b);
@@ -242,8 +243,9 @@ void EngineAmg::cycle(bool setup) {
     spmv(P0_, *levels_[0].x, nullptr, 0, *e0_);
     e.launch(kWarpAdd_, Span::Nodes, e.nodeSeg_, e.segInfoBuf_, *nodeAggregate_, *rotations_, *e0_, e.free_, e.z_);
   }
-  gathered(kFineBeginAt_, e.z_, *scale_, e.minv_, e.r_, R{ch.invTheta}, *res0_, *d0_, e.z_);
-  gathered(kFineStep_, *d0_, *scale_, e.minv_, R{ch.c1}, R{ch.c2}, *res0_, *d0_, e.z_, cl_uint(1), e.r_,
+  gathered(kFinePass_, e.z_, *scale_, e.minv_, e.z_, e.r_, R{0.0}, R{ch.invTheta}, *res0_, *d0_, e.z_, cl_uint(0), none,
+           none, none);
+  gathered(kFinePass_, *d0_, *scale_, e.minv_, *d0_, *res0_, R{ch.c1}, R{ch.c2}, *res0_, *d0_, e.z_, cl_uint(1), e.r_,
            setup ? e.b_ : none, e.partials_);
 }
 

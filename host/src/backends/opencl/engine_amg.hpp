@@ -45,8 +45,8 @@ class EngineAmg {
   std::vector<DeviceBuffer> buffers() const;
 
  private:
-  /// A level matrix on the device: sliced ELLPACK in slices of kSlice rows (amg_spmv, GPUs), dense
-  /// rowBlock x colBlock blocks (BlockRows, amg_blocks_*: CPU devices, whose layout is blocked), or
+  /// A level matrix on the device: sliced ELLPACK in slices of kSlice rows (amg_spmv), dense
+  /// rowBlock x colBlock blocks (BlockRows, amg_blocks_*: the blocked layout, block()), or
   /// CSR (the coarsest inverse, amg_coarsest): `start` the slices', the block rows' or the rows'
   /// first entries.
   struct Csr {
@@ -54,10 +54,12 @@ class EngineAmg {
     std::size_t rows = 0;
     std::size_t rowBlock = 0, colBlock = 0;  ///< 0: not in blocks
   };
-  /// The blocked layout's vertex rows (DeviceAmgLayout::block) on CPU devices; 0 on GPUs.
+  /// The blocked layout's vertex rows (DeviceAmgLayout::block) with per-work-item sums (the
+  /// tuning's workGroupSums 0: CPU devices by default); 0 with work-group sums (GPUs), whose
+  /// coarse products take a row per work-item in sliced ELLPACK.
   std::size_t block() const;
   static constexpr std::size_t kSlice = 16;  ///< kAmgSlice of kernels/opencl/amg.cl
-  /// Block rows per work-group of amg_blocks_* (4, 8 and 16 took the same time on PoCL).
+  /// Block rows per work-group of amg_blocks_*.
   static constexpr std::size_t kBlockGroup = 16;
   /// Device level k >= 1: every body's hierarchy level k end to end.
   struct Level {
@@ -88,7 +90,7 @@ class EngineAmg {
   Csr P0_, Pt0_;
   std::vector<Level> levels_;             ///< levels_[k - 1] is device level k
   std::unique_ptr<ClBuffer> scale_, res0_, d0_, e0_, nodeAggregate_, rotations_;
-  ClKernel kFineBegin_, kFineBeginAt_, kFineStep_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarsest_,
+  ClKernel kFineBegin_, kFinePass_, kUnwarp_, kWarpAdd_, kSpmv_, kCoarseBegin_, kCoarseStep_, kCoarsest_,
       kBlocks3x6_, kBlocks6x3_, kBlocks6x6_;
 };
 
