@@ -170,7 +170,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     buffer("pcg_vectors (x b r u p w s)", dv, 7 * D * r);
     if (amg) {
       buffer("amg_levels (estimate: prolongations, coarse operators)", dv, amgEntriesPerDof * D * (r + 4));
-      buffer("amg_vectors (level 0 scratch)", dv, 4 * D * r);
+      buffer("amg_vectors (level 0 scratch)", dv, 3 * D * r);
     }
   }
   if (device) {
