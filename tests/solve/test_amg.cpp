@@ -3,6 +3,7 @@
 // keeps it under a rigid rotation of the body, partially constrained nodes, and the reference
 // backend's "amg" preconditioner against its diagonal one.
 #include "common/body_backend.hpp"
+#include "common/textbook_pcg.hpp"
 #include "device/body_layout.hpp"
 #include "device/device_amg.hpp"
 #include "model/element.hpp"
@@ -73,20 +74,7 @@ AmgMatrix assembled(const Problem& p, double m, const Mat3& R) {
 
 /// Textbook PCG on A x = b to a relative residual of 1e-8; returns the iterations.
 int pcgIterations(const AmgMatrix& A, const Eigen::VectorXd& b, const std::function<Eigen::VectorXd(const Eigen::VectorXd&)>& M) {
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size()), r = b, z = M(r), p = z;
-  double rz = r.dot(z);
-  for (int it = 0; it < 5000; ++it) {
-    if (r.norm() <= 1e-8 * b.norm()) return it;
-    const Eigen::VectorXd Ap = A * p;
-    const double alpha = rz / p.dot(Ap);
-    x += alpha * p;
-    r -= alpha * Ap;
-    z = M(r);
-    const double rzNew = r.dot(z);
-    p = z + (rzNew / rz) * p;
-    rz = rzNew;
-  }
-  return 5000;
+  return test::textbookPcgIterations(A, b, M, 1e-8);
 }
 
 struct Fixture {

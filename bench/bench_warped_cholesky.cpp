@@ -1,0 +1,181 @@
+// A probe for issue 29's second preconditioner, the warped precomputed Cholesky of SOFA's
+// PrecomputedWarpPreconditioner and Courtecuisse et al. 2010: the rest system A_0 = m M + K_0 on
+// the free dofs factored once (Eigen's SimplicialLDLT, AMD ordering), applied each PCG iteration
+// turned by per-node rotations, z = W A_0^-1 W^T r, W = blockdiag(R_n), R_n the polar rotation of
+// the sum of the rotations of the elements around node n. Not a library feature: this program
+// holds the whole preconditioner, to choose by measurement what the library builds next.
+//
+// The body is issue 29's 12,960-tet beam (1 x 0.1 x 0.1 m, 60 x 6 x 6 cells of 6 tets, E = 1e6 Pa,
+// nu = 0.3, rho = 1000, clamped at x = 0), curled about y so that its end turns by 0, 0.3 or
+// 1 rad, with 0.1 mm of noise; the system is backward Euler's at 1/60 s (3600 M + K_t, K_t the
+// co-rotational tangent assembled from the element rotations); b is random. Each benchmark runs a
+// host PCG (double) to a relative residual of 1e-6 from zero, with Jacobi, the library's "amg"
+// (its host V-cycle, as the reference backend applies it), the rest Cholesky or the warped one:
+//   probeSolve/<preconditioner>/turn_<millirad>   iterations and the time of a solve
+//   probeFactor                                   the factorisation of A_0
+//
+//   build/bench/bench_warped_cholesky --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+#include "common/textbook_pcg.hpp"
+#include "model/element.hpp"
+#include "precond/amg.hpp"
+#include "reference/small_meshes.hpp"
+
+#include <benchmark/benchmark.h>
+
+#include <Eigen/SparseCholesky>
+
+#include <cmath>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+
+namespace {
+
+using namespace corofem;
+using namespace corofem::detail;
+
+constexpr double kMass = 3600.0;  // 1 / h^2 at h = 1/60 s, the stiffness coefficient 1
+
+struct Beam {
+  Problem p;
+  std::vector<Eigen::Index> free;
+  std::vector<int> index;  // per dof: its free index, or -1
+  AmgMatrix A0;
+  Beam() : p(test::makeProblem(test::boxMesh(60, 6, 6, 1.0, 0.1, 0.1, 0.0, 6), 1e6, 0.3, 1000.0)) {
+    for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
+      if (p.mesh.nodes[3 * n] < 1e-12)
+        for (int c = 0; c < 3; ++c) p.constrained[3 * n + c] = 1;
+    index.assign(p.dofCount(), -1);
+    for (std::size_t d = 0; d < p.dofCount(); ++d)
+      if (!p.constrained[d]) {
+        index[d] = static_cast<int>(free.size());
+        free.push_back(static_cast<Eigen::Index>(d));
+      }
+    A0 = restOperator(restStiffness(p), p, free, kMass, 1.0);
+  }
+};
+
+const Beam& beam() {
+  static const Beam b;
+  return b;
+}
+
+/// The curled beam's system A_t and per-node rotations.
+struct State {
+  AmgMatrix A;
+  std::vector<Mat3> nodeRotation;
+  Eigen::VectorXd b, x;  // the right-hand side on the free dofs; the positions (3N)
+};
+
+State curled(const Beam& beam, double turn) {
+  const Problem& p = beam.p;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd x = p.restPositions;
+  for (std::size_t n = 0; n < p.mesh.nodeCount() && turn > 0.0; ++n) {
+    const double s = p.mesh.nodes[3 * n] * turn, radius = 1.0 / turn - p.mesh.nodes[3 * n + 2];
+    x[3 * n] = radius * std::sin(s);
+    x[3 * n + 2] = 1.0 / turn - radius * std::cos(s);
+  }
+  for (Eigen::Index i = 0; i < x.size(); ++i) x[i] += 1e-4 * u(rng);
+  State st;
+  st.x = x;
+  std::vector<Eigen::Triplet<double, int>> t;
+  std::vector<Mat3> sum(p.mesh.nodeCount(), Mat3::Zero());
+  for (std::size_t e = 0; e < p.elements.size(); ++e) {
+    std::array<Vec3d, 4> xe;
+    for (int a = 0; a < 4; ++a) xe[a] = x.segment<3>(3 * p.mesh.tets[4 * e + a]);
+    const Mat3 R = polarRotation(deformationGradient(p.elements[e], xe));
+    for (int a = 0; a < 4; ++a) sum[p.mesh.tets[4 * e + a]] += R;
+    const Mat12 K = rotateStiffness(linearStiffness(p.elements[e], p.lame), R);
+    for (int a = 0; a < 12; ++a)
+      for (int c = 0; c < 12; ++c) {
+        const int i = beam.index[3 * p.mesh.tets[4 * e + a / 3] + a % 3];
+        const int j = beam.index[3 * p.mesh.tets[4 * e + c / 3] + c % 3];
+        if (i >= 0 && j >= 0) t.emplace_back(i, j, K(a, c));
+      }
+  }
+  for (std::size_t i = 0; i < beam.free.size(); ++i)
+    t.emplace_back(static_cast<int>(i), static_cast<int>(i), kMass * p.lumpedMass[static_cast<std::size_t>(beam.free[i])]);
+  const Eigen::Index n = static_cast<Eigen::Index>(beam.free.size());
+  st.A = AmgMatrix(n, n);
+  st.A.setFromTriplets(t.begin(), t.end());
+  for (const Mat3& s : sum) st.nodeRotation.push_back(polarRotation(s));
+  st.b.resize(n);
+  for (Eigen::Index i = 0; i < n; ++i) st.b[i] = u(rng);
+  return st;
+}
+
+using Ldlt = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>;
+
+const Ldlt& factor() {
+  static const std::unique_ptr<Ldlt> f = std::make_unique<Ldlt>(Eigen::SparseMatrix<double>(beam().A0));
+  return *f;
+}
+
+void probeFactor(benchmark::State& state) {
+  const Eigen::SparseMatrix<double> A = beam().A0;
+  for (auto _ : state) {
+    Ldlt f(A);
+    benchmark::DoNotOptimize(f.info());
+  }
+  state.counters["nnz_A"] = static_cast<double>(A.nonZeros());
+  state.counters["nnz_L"] = static_cast<double>(Ldlt(A).matrixL().nestedExpression().nonZeros());
+}
+
+void probeSolve(benchmark::State& state, const std::string& kind, double turn) {
+  const Beam& b = beam();
+  const State st = curled(b, turn);
+  const Ldlt& f = factor();
+  // W^T v or W v on the free dofs: a node's free entries turned with the node (the clamped ones zero).
+  auto warp = [&](const Eigen::VectorXd& v, bool transpose) {
+    Eigen::VectorXd full = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(b.p.dofCount())), out(v.size());
+    for (std::size_t i = 0; i < b.free.size(); ++i) full[b.free[i]] = v[static_cast<Eigen::Index>(i)];
+    for (std::size_t n = 0; n < st.nodeRotation.size(); ++n) {
+      const Vec3d w = full.segment<3>(static_cast<Eigen::Index>(3 * n));
+      full.segment<3>(static_cast<Eigen::Index>(3 * n)) = transpose ? Vec3d(st.nodeRotation[n].transpose() * w) : Vec3d(st.nodeRotation[n] * w);
+    }
+    for (std::size_t i = 0; i < b.free.size(); ++i) out[static_cast<Eigen::Index>(i)] = full[b.free[i]];
+    return out;
+  };
+  const Eigen::VectorXd dinv = st.A.diagonal().cwiseInverse();
+  std::function<Eigen::VectorXd(const Eigen::VectorXd&)> M;
+  if (kind == "jacobi") M = [&](const Eigen::VectorXd& r) { return Eigen::VectorXd(dinv.cwiseProduct(r)); };
+  if (kind == "rest_cholesky") M = [&](const Eigen::VectorXd& r) { return Eigen::VectorXd(f.solve(r)); };
+  if (kind == "warped_cholesky") M = [&](const Eigen::VectorXd& r) { return warp(f.solve(warp(r, true)), false); };
+  // The library's multigrid (precond/amg.hpp) on the same system, as the reference backend runs it:
+  // made from A_0, warped by its aggregates' rotations from the positions, smoothed with A_t.
+  WarpedAmg amg;
+  AmgFineOperator fine;
+  AmgMatrix blocksInverse;
+  if (kind == "amg") {
+    amg.build(b.A0, b.free, b.p.restPositions, b.p.mesh.nodeCount());
+    amg.setPositions(st.x);
+    blocksInverse = nodeBlocks(st.A, b.free).second;
+    fine.apply = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = st.A * v; };
+    fine.blockInverse = [&](const Eigen::VectorXd& r, Eigen::VectorXd& z) { z = blocksInverse * r; };
+    M = [&](const Eigen::VectorXd& r) {
+      Eigen::VectorXd z;
+      amg.apply(fine, r, z);
+      return z;
+    };
+  }
+  int iterations = 0;
+  for (auto _ : state) iterations = test::textbookPcgIterations(st.A, st.b, M, 1e-6);
+  state.counters["iterations"] = iterations;
+}
+
+const int registered = [] {
+  benchmark::RegisterBenchmark("probeFactor", probeFactor)->Unit(benchmark::kMillisecond);
+  for (const char* kind : {"jacobi", "amg", "rest_cholesky", "warped_cholesky"})
+    for (double turn : {0.0, 0.3, 1.0})
+      benchmark::RegisterBenchmark(("probeSolve/" + std::string(kind) + "/turn_" + std::to_string(int(std::lround(1000 * turn)))).c_str(),
+                                   probeSolve, std::string(kind), turn)
+          ->Unit(benchmark::kMillisecond);
+  return 0;
+}();
+
+}  // namespace
+
+BENCHMARK_MAIN();
