@@ -639,7 +639,9 @@ TEST(DeviceAmg, BlockRowsHoldEveryEntryInItsBlockAndTheProductIsTheMatrixs) {
   std::size_t blocksHeld = 0;
   for (std::size_t i = 0; i < b.blockRows; ++i) {
     for (std::uint32_t j = b.start[i]; j < b.start[i + 1]; ++j) {
-      if (j > b.start[i]) ASSERT_LT(b.cols[j - 1], b.cols[j]) << "block row " << i;
+      if (j > b.start[i]) {
+        ASSERT_LT(b.cols[j - 1], b.cols[j]) << "block row " << i;
+      }
       const Eigen::MatrixXd part = dense.block(3 * Eigen::Index(i), 6 * Eigen::Index(b.cols[j]), 3, 6);
       EXPECT_NE(part.cwiseAbs().maxCoeff(), 0.0) << "an empty block kept in block row " << i;
       for (int c = 0; c < 6; ++c)
