@@ -7,23 +7,28 @@
 //
 //   precondStep/<backend>/<preconditioner>/tets_12960   backend "reference", "opencl_float" or
 //                                                       "vulkan_float";
-//                                                       "diagonal", "block_diagonal" and "amg"
-//   precondStep/<backend>/<preconditioner>/tets_103680  cells 120 x 12 x 12, "diagonal" and "amg";
+//                                                       "diagonal", "block_diagonal" and "amg",
+//                                                       on the reference also "warped_cholesky"
+//   precondStep/<backend>/<preconditioner>/tets_103680  cells 120 x 12 x 12, "diagonal" and "amg"
+//                                                       (and "warped_cholesky" on the reference);
 //                                                       slow (seconds a step on the reference, a
 //                                                       set-up of seconds), registered only with
 //                                                       the flag --large
-//   precondGrab/<backend>/amg/tets_12960                the beam's tip grabbed by a hard handle after
-//                                                       the warm-up and lifted 2 cm, the timed steps
-//                                                       held, then released: grab_step_ms (the step
-//                                                       after the grab: its hierarchy's set-up),
+//   precondGrab/<backend>/<preconditioner>/tets_12960   "amg" (and "warped_cholesky" on the
+//                                                       reference): the beam's tip grabbed by a
+//                                                       hard handle after the warm-up and lifted
+//                                                       2 cm, the timed steps held, then released:
+//                                                       grab_step_ms (the step after the grab: its
+//                                                       hierarchy's or factor's set-up),
 //                                                       release_step_ms (the spare taken back). At
 //                                                       0db57de it compared a hierarchy kept through
 //                                                       the grab ("kept") with one made for it.
 // (OpenCL and Vulkan variants skip with the reason where the build or the machine has no such device.)
 //
 // Each benchmark creates its Simulation and takes 3 warm-up steps outside the timed loop (the first
-// solve builds the preconditioner: amg's hierarchy), then times 30 steps (10 on the large beam)
-// from there; a repetition starts again from a fresh Simulation, so repetitions time the same steps.
+// solve builds the preconditioner: amg's hierarchy, the warped Cholesky's factor), then times 30
+// steps (10 on the large beam) from there; a repetition starts again from a fresh Simulation, so
+// repetitions time the same steps.
 // Counters:
 //   ms/step          wall time of sim->step per timed step (the median is the _median aggregate of
 //                    --benchmark_repetitions)
@@ -151,24 +156,32 @@ void precondStep(benchmark::State& state, const std::string& backend, const std:
 void registerAll(bool large) {
   for (const char* b : {"reference", "opencl_float", "vulkan_float"}) {
     const std::string backend = b;
-    for (const char* p : {"diagonal", "block_diagonal", "amg"})
+    // "warped_cholesky" runs on the reference backend alone (the device backends refuse it).
+    std::vector<std::string> held = {"amg"};
+    if (backend == "reference") held.push_back("warped_cholesky");
+    std::vector<std::string> kinds = {"diagonal", "block_diagonal"};
+    kinds.insert(kinds.end(), held.begin(), held.end());
+    for (const std::string& p : kinds)
       benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_12960").c_str(), precondStep, backend,
-                                   std::string(p), std::string("[60,6,6]"), std::string())
+                                   p, std::string("[60,6,6]"), std::string())
           ->Iterations(30)
           ->Unit(benchmark::kMillisecond)
           ->UseRealTime();
-    benchmark::RegisterBenchmark(("precondGrab/" + backend + "/amg/tets_12960").c_str(), precondStep, backend,
-                                 std::string("amg"), std::string("[60,6,6]"), std::string("grab"))
-        ->Iterations(30)
-        ->Unit(benchmark::kMillisecond)
-        ->UseRealTime();
-    if (large)
-      for (const char* p : {"diagonal", "amg"})
+    for (const std::string& p : held)
+      benchmark::RegisterBenchmark(("precondGrab/" + backend + "/" + p + "/tets_12960").c_str(), precondStep, backend,
+                                   p, std::string("[60,6,6]"), std::string("grab"))
+          ->Iterations(30)
+          ->Unit(benchmark::kMillisecond)
+          ->UseRealTime();
+    if (large) {
+      held.insert(held.begin(), "diagonal");
+      for (const std::string& p : held)
         benchmark::RegisterBenchmark(("precondStep/" + backend + "/" + p + "/tets_103680").c_str(), precondStep,
-                                     backend, std::string(p), std::string("[120,12,12]"), std::string())
+                                     backend, p, std::string("[120,12,12]"), std::string())
             ->Iterations(10)
             ->Unit(benchmark::kMillisecond)
             ->UseRealTime();
+    }
   }
 }
 

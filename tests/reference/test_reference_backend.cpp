@@ -128,7 +128,8 @@ TEST_P(ReferenceBackendByFormulation, PcgAndCholeskyAgreeAndRespectConstraints) 
   EXPECT_LT(sc.relativeResidual, 1e-12);  // direct solve: rounding times a modest condition number
 
   for (PreconditionerKind pre : {PreconditionerKind::None, PreconditionerKind::Diagonal,
-                                 PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg}) {
+                                 PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg,
+                                 PreconditionerKind::WarpedCholesky}) {
     auto pcg = test::createReferenceBackend(p, solverDesc(LinearSolverKind::Pcg, pre, 1e-10));
     pcg->setPositions(x);
     Eigen::VectorXd xp = Eigen::VectorXd::Constant(b.size(), 3.0);  // constrained entries must come back 0

@@ -33,7 +33,7 @@ TEST(EnumNames, SolverEnumerationsParseBack) {
     EXPECT_EQ(parse("", std::string(R"(, "solver": {"precision": ")") + toString(p) + "\"}").solver.precision, p)
         << toString(p);
   for (PreconditionerKind p : {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal,
-                               PreconditionerKind::Amg, PreconditionerKind::Auto})
+                               PreconditionerKind::Amg, PreconditionerKind::WarpedCholesky, PreconditionerKind::Auto})
     EXPECT_EQ(parse("", std::string(R"(, "solver": {"preconditioner": ")") + toString(p) + "\"}").solver.preconditioner, p)
         << toString(p);
 }

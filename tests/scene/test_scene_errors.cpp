@@ -230,7 +230,7 @@ TEST(SceneErrors, BadEnumValueSuggestsTheNearest) {
             "backend: unknown value \"OpenCL\"; did you mean \"opencl\"? (valid: \"auto\", \"reference\", \"opencl\" or \"vulkan\")");
   EXPECT_CONTAINS(overrideError({"solver.preconditioner=jacobi"}),
                   "solver.preconditioner: unknown value \"jacobi\"; valid values are \"none\", \"diagonal\", "
-                  "\"block_diagonal\", \"amg\" or \"auto\"");
+                  "\"block_diagonal\", \"amg\", \"warped_cholesky\" or \"auto\"");
   EXPECT_CONTAINS(overrideError({"solver.rotation=polr"}), "did you mean \"polar\"?");
   EXPECT_CONTAINS(overrideError({"solver.precision=single"}), "solver.precision: unknown value \"single\"");
   EXPECT_CONTAINS(overrideError({"solver.linear_solver=cg"}), "did you mean \"pcg\"?");
@@ -309,6 +309,10 @@ TEST(SceneErrors, ReferenceOnlyFeaturesOnOpenClAreRejected) {
             "use \"pcg\", or the backend \"reference\"");
   EXPECT_CONTAINS(overrideError({"backend.kind=opencl", "bodies.0.formulation=neo_hookean"}),
                   "bodies[0].formulation: \"neo_hookean\" runs only on the reference backend");
+  EXPECT_EQ(overrideError({"backend=vulkan", "solver.preconditioner=warped_cholesky"}),
+            "solver.preconditioner: \"warped_cholesky\" runs only on the reference backend, and the backend is "
+            "\"vulkan\"; use \"amg\", or the backend \"reference\"");
+  EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=reference", "solver.preconditioner=warped_cholesky"}).isOk());
   // "amg" runs on both backends.
   EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=opencl", "solver.preconditioner=amg"}).isOk());
   // On "auto" the choice is left to the backend selection (tests/schedule/test_scheduler.cpp).

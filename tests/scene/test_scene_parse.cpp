@@ -238,7 +238,7 @@ TEST(SceneParse, EnumerationsAndShorthands) {
   for (const auto& [text, kind] : std::vector<std::pair<std::string, PreconditionerKind>>{
            {"none", PreconditionerKind::None}, {"diagonal", PreconditionerKind::Diagonal},
            {"block_diagonal", PreconditionerKind::BlockDiagonal}, {"amg", PreconditionerKind::Amg},
-           {"auto", PreconditionerKind::Auto}})
+           {"warped_cholesky", PreconditionerKind::WarpedCholesky}, {"auto", PreconditionerKind::Auto}})
     EXPECT_EQ(parseOk(test::kMinimalScene, {"solver.preconditioner=" + text}).solver.preconditioner, kind) << text;
   // Not given: "auto" (preconditionerOf chooses per body).
   EXPECT_EQ(parseOk(test::kMinimalScene).solver.preconditioner, PreconditionerKind::Auto);

@@ -263,6 +263,32 @@ TEST(Scheduler, HyperelasticAndCholeskyGoToTheReferenceWithoutCalibration) {
   EXPECT_EQ(created, 1);
 }
 
+// "warped_cholesky" runs on the reference backend alone: "auto" sends the body there without a
+// calibration, as every device backend of this build refuses it, and the body steps.
+TEST(Scheduler, WarpedCholeskyOnRealCandidatesGoesToTheReference) {
+  HookScope scope;  // real candidates of this build
+  std::size_t deviceBackends = 0;
+  for (const detail::BackendEntry& e : detail::registeredBackends())
+    if (e.name != "reference") {
+      ++deviceBackends;
+      ASSERT_TRUE(e.refuses) << e.name;
+      SolverDesc s;
+      s.preconditioner = PreconditionerKind::WarpedCholesky;
+      EXPECT_NE(e.refuses(detail::Problem{}, s).find("\"warped_cholesky\" runs only on the reference backend"),
+                std::string::npos)
+          << e.name;
+    }
+  Scene scene = calibrated(dynamicScene(boxBeam(), 2));
+  scene.solver.preconditioner = PreconditionerKind::WarpedCholesky;
+  auto sim = Simulation::create(scene);
+  ASSERT_TRUE(sim) << sim.message();
+  const auto rep = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(rep["choice"], "reference");
+  if (deviceBackends > 0) EXPECT_NE(rep["reason"].get<std::string>().find("warped_cholesky"), std::string::npos) << rep["reason"];
+  ASSERT_TRUE(sim->step().isOk());
+  ASSERT_TRUE(sim->step().isOk());
+}
+
 // "amg" runs on every backend of this build: "auto" calibrates the candidates as for any solver,
 // and the body steps on the one chosen.
 TEST(Scheduler, AmgOnRealCandidatesIsCalibrated) {

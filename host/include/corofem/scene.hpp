@@ -139,9 +139,11 @@ struct AnalysisDesc {
 
 enum class LinearSolverKind { Pcg, Cholesky };  ///< Cholesky only on the reference backend
 /// Amg: smoothed-aggregation multigrid over the rest operator, warped by the rotations of node aggregates.
+/// WarpedCholesky: the rest operator factored once (sparse LDL^T), applied turned by per-node
+/// rotations; reference backend only.
 /// Auto (the default): per body, Amg where it was measured faster, Diagonal elsewhere
 /// (preconditionerOf).
-enum class PreconditionerKind { None, Diagonal, BlockDiagonal, Amg, Auto };
+enum class PreconditionerKind { None, Diagonal, BlockDiagonal, Amg, WarpedCholesky, Auto };
 /// Floating-point precision of a device backend (the reference backend always computes in double).
 enum class Precision {
   Double,  ///< everything in double (needs cl_khr_fp64)

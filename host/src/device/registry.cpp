@@ -81,6 +81,19 @@ BackendEntry unavailableBackend(const std::string& name, const std::string& why)
   return e;
 }
 
+std::string hostOnlyFeature(const Problem& p, const SolverDesc& s) {
+  if (isHyperelastic(p.formulation))
+    return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
+           "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
+  if (s.linearSolver == LinearSolverKind::Cholesky)
+    return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the solver "
+           "\"pcg\"";
+  if (s.preconditioner == PreconditionerKind::WarpedCholesky)
+    return "the preconditioner \"warped_cholesky\" runs only on the reference backend; set \"backend\": "
+           "\"reference\" or the preconditioner \"amg\"";
+  return "";
+}
+
 Candidate referenceCandidate() {
   Candidate c;
   c.backend = "reference";

@@ -34,6 +34,7 @@
 
 #include "model/element.hpp"
 #include "model/problem.hpp"
+#include "precond/rest_system.hpp"
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
@@ -47,8 +48,6 @@
 #include <vector>
 
 namespace corofem::detail {
-
-using AmgMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
 
 /// One level of the hierarchy below the finest (whose operator is the current one).
 struct AmgLevel {
@@ -192,58 +191,32 @@ constexpr std::size_t kProductRows = 2048;
 /// and the host V-cycle's products.
 Eigen::VectorXd amgProduct(const AmgMatrix& A, const Eigen::VectorXd& x);
 
-/// K_0 of a body on all its dofs (3N x 3N): the sum of the linear element stiffnesses (the tangent
-/// of every formulation at rest), with every diagonal entry present (zero where no element adds to
-/// it), so that restOperator always finds the entry its mass goes to.
-AmgMatrix restStiffness(const Problem& p);
-/// m M + s K_0 on the free dofs `freeDofs` (strictly ascending dof indices) from K_0 on all dofs
-/// (restStiffness of the same body): M lumped. O(nonzeros), no assembly. Throws Error(Internal) for
-/// free dofs out of order or a stiffness of another size.
-AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::vector<Eigen::Index>& freeDofs,
-                       double massScale, double stiffScale);
-
-/// A body's hierarchy with the coefficients it was made for: made again where the ratio m / s of a
-/// solve's operator moved by more than a factor of 2 from the one it was made with (a
-/// preconditioner made for a nearby ratio is still a good one; the integrators keep the mass
-/// coefficient at 1, so the ratio alone moves), or after clear() (the constraints or the material
-/// changed).
-///
-/// The hierarchy it replaces is kept as a spare and taken back where the ratio returns near its
-/// own: a step retried in substeps (h / 2, h / 4: the ratio 4x, 16x) and the next full step then
-/// cost one set-up each, not one per change. The same for constraints: a hierarchy serves the free
-/// dofs it was made for, so a hard grab costs one set-up and its release none (the spare). A
-/// set-up after the first assembles nothing: K_0 is kept (the assembly was about 60 ms of a grab's
-/// 140 on the 12,960-tet beam, docs/performance.md), and a grab's or a pin's hierarchy takes level
-/// 0's spectral bounds from the one made for more free dofs at the same time step (ensure).
-/// (Keeping the hierarchy of before for a grab, its cycle restricted to the fewer free dofs, was
-/// tried: 40 PCG iterations a step instead of 18 on the 12,960-tet beam with its tip held, twice
-/// the step time, where the set-up then cost about four steps, now under three; bench_precond's
-/// precondGrab.)
+/// A body's hierarchy with the coefficients it was made for (precond/rest_system.hpp: made again
+/// where the ratio m / s of a solve's operator left the factor-2 window of the one it was made
+/// with, or for other free dofs, or after clear(): the material changed; the one it replaces kept
+/// as a spare). A set-up after the first assembles nothing (K_0 kept: the assembly was about 60 ms
+/// of a grab's 140 on the 12,960-tet beam, docs/performance.md), and a grab's or a pin's hierarchy
+/// takes level 0's spectral bounds from the one made for more free dofs at the same time step
+/// (ensure). (Keeping the hierarchy of before for a grab, its cycle restricted to the fewer free
+/// dofs, was tried: 40 PCG iterations a step instead of 18 on the 12,960-tet beam with its tip
+/// held, twice the step time, where the set-up then cost about four steps, now under three;
+/// bench_precond's precondGrab.)
 class BodyAmg {
  public:
-  BodyAmg();
-  /// What ensure did.
-  enum class Made { Kept, Switched, Built };
+  using Made = detail::Made;
   /// Makes the hierarchy where needed, or takes back the spare. A caller that keeps data derived
   /// from amg() (a device's copies, the warp) refreshes it unless Kept.
   Made ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale);
-  void clear();
+  void clear() { pair_.clear(); }
   /// Hierarchies made so far (Made::Built).
   long long builds() const { return builds_; }
-  WarpedAmg& amg() { return *amg_; }
-  const WarpedAmg& amg() const { return *amg_; }
+  WarpedAmg& amg() { return pair_.now(); }
+  const WarpedAmg& amg() const { return pair_.now(); }
 
  private:
-  std::unique_ptr<WarpedAmg> amg_, spare_;
-  double ratio_ = 0.0, spareRatio_ = 0.0;  ///< m / s each was made from (infinite for s = 0)
+  RestPair<WarpedAmg> pair_;
+  KeptStiffness stiffness_;
   long long builds_ = 0;
-  /// K_0 on all dofs, kept across set-ups: constraints and coefficients change a hierarchy, not
-  /// K_0, so a grab's set-up restricts it instead of assembling again (the assembly was about half
-  /// of a set-up). Made again where the body's mesh, rest state or material differ from those it
-  /// was made from (stiffnessKey). Its memory, about that of the hierarchy's level 0, stays with
-  /// the body (clear() keeps it: a material change is seen by the key).
-  AmgMatrix stiffness_;
-  std::uint64_t stiffnessKey_ = 0;
 };
 
 }  // namespace corofem::detail

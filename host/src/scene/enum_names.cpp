@@ -54,6 +54,7 @@ const char* toString(PreconditionerKind p) {
     case PreconditionerKind::Diagonal: return "diagonal";
     case PreconditionerKind::BlockDiagonal: return "block_diagonal";
     case PreconditionerKind::Amg: return "amg";
+    case PreconditionerKind::WarpedCholesky: return "warped_cholesky";
     case PreconditionerKind::Auto: return "auto";
   }
   return "?";

@@ -58,6 +58,7 @@ const Choices<PreconditionerKind> kPreconditioners{{"none", PreconditionerKind::
                                                    {"diagonal", PreconditionerKind::Diagonal},
                                                    {"block_diagonal", PreconditionerKind::BlockDiagonal},
                                                    {"amg", PreconditionerKind::Amg},
+                                                   {"warped_cholesky", PreconditionerKind::WarpedCholesky},
                                                    {"auto", PreconditionerKind::Auto}};
 const Choices<Precision> kPrecisions{{"double", Precision::Double},
                                      {"float", Precision::Float},
@@ -630,6 +631,9 @@ void checkConsistency(const Reader& r, const Scene& scene) {
     if (scene.solver.linearSolver == LinearSolverKind::Cholesky)
       r.fail("solver.linear_solver", "\"cholesky\" runs only on the reference backend, and the backend is \"", backend,
              "\"; use \"pcg\", or the backend \"reference\"");
+    if (scene.solver.preconditioner == PreconditionerKind::WarpedCholesky)
+      r.fail("solver.preconditioner", "\"warped_cholesky\" runs only on the reference backend, and the backend is \"",
+             backend, "\"; use \"amg\", or the backend \"reference\"");
     for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
       const Formulation f = scene.bodies[i].formulation;
       if (f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean)

@@ -73,6 +73,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const PreconditionerKind preconditioner = preconditionerOf(scene.solver, problem);
   const bool precond = pcg && preconditioner != PreconditionerKind::None;
   const bool amg = pcg && preconditioner == PreconditionerKind::Amg;
+  const bool warped = pcg && preconditioner == PreconditionerKind::WarpedCholesky;  // reference backend only
   // amg smooths with the node blocks' inverses: the block preconditioner's data on a device.
   const bool block = preconditioner == PreconditionerKind::BlockDiagonal || amg;
   // The multigrid's levels (precond/amg.hpp) per free dof of the body, as the Vega beam of
@@ -199,14 +200,18 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     if (dynamic) buffer("lumped_mass", h, D * 8);
     buffer(pcg ? "cg_vectors" : "cholesky_factor (at least the matrix)", h, pcg ? 5 * D * 8 : nnz * 12);
     if (amg) buffer("amg_levels (estimate: prolongations, coarse operators)", h, amgEntriesPerDof * D * 12);
+    // The factor's fill is not known before it is made: 3.5 times A's entries on the 12,960-tet beam.
+    if (warped) buffer("warped_cholesky_factor (at least the rest matrix and K_0)", h, 2 * nnz * 12);
     if (corot) kernels.push_back("polar decomposition per element (SVD)");
     kernels.push_back("element forces");
     kernels.push_back("sparse assembly of " + std::string(dynamic ? "M + C + K_t" : "K_t"));
     kernels.push_back(pcg ? "single-reduction PCG" : "Eigen SimplicialLDLT");
     if (amg) kernels.push_back("amg V-cycle per iteration (4 products of the assembled matrix, the coarse levels)");
+    if (warped) kernels.push_back("warped Cholesky per iteration (node rotations, two triangular solves of the rest factor)");
     product = nnz * 12 + 4 * (D + 1) + 3 * D * 8;
     pcgIter = product + 10 * D * 8;
     if (amg) pcgIter += 4 * product + 12 * D * 8 + (amgEntriesPerDof + 3 * 17) * D * 12;
+    if (warped) pcgIter += 2 * nnz * 12 + 6 * D * 8;  // at least: the factor read twice
     newtonFixed = nnz * 8 + 144 * 8 * E + product;
   }
   // Driver state on the host (BodySolver): committed and rollback copies.

@@ -212,15 +212,7 @@ void registerOpenCLBackend() {
       if (all[i].device == info.device) return candidateOf(info, i);
     fail(ErrorCode::DeviceError, "OpenCL device '", info.name, "' is not in the device list");
   };
-  e.refuses = [](const Problem& p, const SolverDesc& s) -> std::string {
-    if (isHyperelastic(p.formulation))
-      return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
-             "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
-    if (s.linearSolver == LinearSolverKind::Cholesky)
-      return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the "
-             "solver \"pcg\"";
-    return "";
-  };
+  e.refuses = hostOnlyFeature;
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate& c,
                 const DeviceOptions& options) {
     if (c.selector == kExternalSelector) {

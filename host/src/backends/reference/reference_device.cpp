@@ -12,6 +12,7 @@
 
 #include "backends/reference/block_jacobi.hpp"
 #include "precond/amg.hpp"
+#include "precond/warped_cholesky.hpp"
 #include "device/registry.hpp"
 #include "model/hyperelastic.hpp"
 #include "util/error.hpp"
@@ -67,9 +68,11 @@ class ReferenceBody {
     tangentsValid_ = false;
     running_ = false;
     amg_.clear();
+    cholesky_.clear();
   }
 
   long long amgBuilds() const { return amg_.builds(); }
+  long long choleskyBuilds() const { return cholesky_.builds(); }
 
   /// New springs (Problem::springStiffness): the next assembly adds them.
   void setSprings(const Problem& p) {
@@ -377,8 +380,9 @@ class ReferenceBody {
   }
 
   /// M^-1 of the assembled A: none, its diagonal (1 where a diagonal entry is 0), its 3x3 node
-  /// blocks over each node's free dofs (BlockJacobiPreconditioner), or the warped multigrid
-  /// (precond/amg.hpp) over the rest operator with A's coefficients.
+  /// blocks over each node's free dofs (BlockJacobiPreconditioner), the warped multigrid
+  /// (precond/amg.hpp) or the warped factor (precond/warped_cholesky.hpp) of the rest operator
+  /// with A's coefficients.
   void formPreconditioner(const SystemCoeffs& c) {
     switch (solver_.preconditioner) {
       case PreconditionerKind::None: break;
@@ -388,6 +392,9 @@ class ReferenceBody {
       case PreconditionerKind::Amg:
         amgBlocksInverse_ = nodeBlocks(A_, freeDofs_).second;  // level 0's smoother
         formAmg(c);
+        break;
+      case PreconditionerKind::WarpedCholesky:
+        formCholesky(c);
         break;
       case PreconditionerKind::BlockDiagonal:
         blocks_.setBlocks(blockStarts_);
@@ -410,6 +417,11 @@ class ReferenceBody {
         amg_.amg().apply(fine, r, z);
         return z;
       }
+      case PreconditionerKind::WarpedCholesky: {
+        Eigen::VectorXd z;
+        cholesky_.cholesky().apply(r, z);
+        return z;
+      }
       case PreconditionerKind::Auto: break;  // resolved before (formPreconditioner refuses it)
     }
     return r;
@@ -428,6 +440,24 @@ class ReferenceBody {
   void formAmg(const SystemCoeffs& c) {
     amg_.ensure(p_, freeDofs_, c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness);
     if (p_.formulation != Formulation::Linear) amg_.amg().setPositions(x_);  // linear: K_t = K_0, no warp
+  }
+
+  /// The factor of the rest operator with A's coefficients (BodyCholesky: made again where they
+  /// moved far), then the warp: each node's rotation from its elements' (the co-rotational R_e; a
+  /// hyperelastic formulation's polar rotations of F_e; none for the linear formulation, K_t = K_0).
+  void formCholesky(const SystemCoeffs& c) {
+    cholesky_.ensure(p_, freeDofs_, c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness);
+    if (p_.formulation == Formulation::Linear) {
+      cholesky_.cholesky().setNodeRotations({});
+      return;
+    }
+    if (p_.formulation == Formulation::Corotational) {
+      cholesky_.cholesky().setNodeRotations(nodeRotations(p_.mesh, rotations_));
+      return;
+    }
+    std::vector<Mat3> elementRotations(gradients_.size());
+    for (std::size_t e = 0; e < gradients_.size(); ++e) elementRotations[e] = polarRotation(gradients_[e]);
+    cholesky_.cholesky().setNodeRotations(nodeRotations(p_.mesh, elementRotations));
   }
 
   /// The kernels' stop test after the set-up and every iteration (pcg.cl, update_scalars).
@@ -464,6 +494,7 @@ class ReferenceBody {
   Eigen::VectorXd bf_, xf_, r_, u_, d_, ad_, w_, diagInverse_;
   BlockJacobiPreconditioner blocks_;
   BodyAmg amg_;
+  BodyCholesky cholesky_;
   AmgMatrix amgBlocksInverse_;  ///< the inverses of A's node blocks (amg's smoother)
   PcgScalars sc_;
   double gamma_ = 0.0, alpha_ = 0.0, beta_ = 0.0, tol2_ = 0.0;
@@ -506,9 +537,12 @@ class ReferenceDevice final : public Device {
     for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setMaterial(*problems[i]);
   }
   std::vector<DeviceCounter> counters() const override {
-    long long builds = 0;
-    for (const auto& b : bodies_) builds += b->amgBuilds();
-    return {{"amg_hierarchies_made", builds}};
+    long long amg = 0, cholesky = 0;
+    for (const auto& b : bodies_) {
+      amg += b->amgBuilds();
+      cholesky += b->choleskyBuilds();
+    }
+    return {{"amg_hierarchies_made", amg}, {"warped_cholesky_factors_made", cholesky}};
   }
   void setSprings(const BodySet& set, const std::vector<const Problem*>& problems) override {
     check(set, problems.size());

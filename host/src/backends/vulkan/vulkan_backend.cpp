@@ -12,12 +12,7 @@
 namespace corofem::detail {
 
 std::string vulkanRefusal(const Problem& p, const SolverDesc& s) {
-  if (isHyperelastic(p.formulation))
-    return std::string("the ") + toString(p.formulation) + " formulation runs only on the reference backend; set "
-           "\"backend\": \"reference\" or use the \"corotational\" or \"linear\" formulation";
-  if (s.linearSolver == LinearSolverKind::Cholesky)
-    return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the solver "
-           "\"pcg\"";
+  if (std::string why = hostOnlyFeature(p, s); !why.empty()) return why;
   if (s.precision == Precision::Mixed)
     return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
            "\"double\"";

@@ -1,0 +1,99 @@
+// The warped precomputed Cholesky preconditioner ("warped_cholesky" of SolverDesc), after SOFA's
+// PrecomputedWarpPreconditioner and Courtecuisse et al. 2010.
+//
+// The co-rotational tangent is K_t = sum_e R_e K_e R_e^T (Eq. 11). Where the elements around each
+// node share one rotation R_n, K_t = W K_0 W^T with W = blockdiag(R_n), and with M lumped (R m I
+// R^T = m I) the whole operator is A_t = m M + s K_t = W A_0 W^T, so
+//
+//   z = M^-1 r = W A_0^-1 W^T r
+//
+// is its exact inverse. A_0 = m M + s K_0 on the free dofs is the REST operator: it does not change
+// while the body moves, so it is factored once (a sparse LDL^T, approximate minimum degree
+// ordering) and each PCG iteration costs two triangular solves and 2 N 3x3 products. Only the
+// differences of the element rotations around a node (bending over a node's elements) and the
+// strain the co-rotational tangent leaves out are left for PCG to correct: on issue 29's curled
+// 12,960-tet beam 6-11 iterations to 1e-6 where Jacobi needs about 600 (bench_warped_cholesky).
+//
+// W: R_n is the polar rotation of the sum of the rotations of the elements around node n (the
+// co-rotational formulation's R_e; a hyperelastic one's polar rotations of F_e; the linear
+// formulation has none, W = I). A node's constrained dofs are zero in W^T r and dropped from
+// W A_0^-1 (...): a node with some of its dofs constrained sees the rotation of its free ones.
+//
+// The factor is deterministic (Eigen's SimplicialLDLT: its ordering and its sums depend on the
+// matrix alone) and it costs memory: the factor of the 12,960-tet beam holds 1.41 M entries (about
+// 17 MB), and a direct factor's fill grows faster than the mesh (docs/performance.md).
+#pragma once
+
+#include "model/element.hpp"
+#include "model/problem.hpp"
+#include "precond/rest_system.hpp"
+
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace corofem::detail {
+
+class WarpedCholesky {
+ public:
+  /// Factors the rest operator `A0` on the free dofs `freeDofs` (strictly ascending dof indices of
+  /// a body of `nodeCount` nodes). Throws Error(SolveFailed) naming `body` where A0 is not positive
+  /// definite (statics of a body that nothing holds: it can move rigidly), Error(Internal) for
+  /// inconsistent sizes.
+  void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, std::size_t nodeCount,
+             const std::string& body);
+  bool built() const { return built_; }
+  const std::vector<Eigen::Index>& builtFreeDofs() const { return freeDofs_; }
+  void clear();
+
+  /// The warp W: one rotation per node (nodeCount of build), or none (W = I).
+  void setNodeRotations(std::vector<Mat3> rotations);
+  /// z = W A_0^-1 W^T r on the free dofs.
+  void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
+  /// Entries of the factor's L below its diagonal.
+  Eigen::Index factorEntries() const;
+
+ private:
+  void warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const;
+
+  bool built_ = false;
+  std::vector<Eigen::Index> freeDofs_;
+  std::unique_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower>> factor_;  ///< null: none
+  /// Per node with a free dof: the node, and its dofs' free indices (-1: constrained).
+  struct WarpNode {
+    std::size_t node;
+    int free[3];
+  };
+  std::vector<WarpNode> warpNodes_;
+  std::size_t nodeCount_ = 0;
+  std::vector<Mat3> rotations_;  ///< per node, or empty: W = I
+};
+
+/// The warp's node rotations: R_n the polar rotation of the sum of the rotations `elementRotations`
+/// of the elements of `mesh` around node n (I for a node in no element).
+std::vector<Mat3> nodeRotations(const TetMesh& mesh, const std::vector<Mat3>& elementRotations);
+
+/// A body's factor with the coefficients it was made for (precond/rest_system.hpp: made again
+/// where the ratio m / s of a solve's operator left the factor-2 window of the one it was made
+/// with, or for other free dofs, or after clear(): the material changed; the one it replaces kept
+/// as a spare, so a substep's or a grab's factor costs one factorisation and the return none).
+class BodyCholesky {
+ public:
+  /// Factors where needed, or takes back the spare. Throws as WarpedCholesky::build.
+  Made ensure(const Problem& p, const std::vector<Eigen::Index>& freeDofs, double massScale, double stiffScale);
+  void clear() { pair_.clear(); }
+  /// Factorisations made so far (Made::Built).
+  long long builds() const { return builds_; }
+  WarpedCholesky& cholesky() { return pair_.now(); }
+  const WarpedCholesky& cholesky() const { return pair_.now(); }
+
+ private:
+  RestPair<WarpedCholesky> pair_;
+  KeptStiffness stiffness_;
+  long long builds_ = 0;
+};
+
+}  // namespace corofem::detail
