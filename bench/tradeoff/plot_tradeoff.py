@@ -48,7 +48,7 @@ def label(r):
         parts.append("cholesky")
     else:
         parts.append({"none": "pcg", "diagonal": "pcg+diag", "block_diagonal": "pcg+block",
-                      "amg": "pcg+amg"}[r["preconditioner"]])
+                      "amg": "pcg+amg", "warped_cholesky": "pcg+warped"}[r["preconditioner"]])
         parts.append("tol=%g" % num(r["tolerance"]))
         if int(r["max_iterations"]) < 1000:
             parts.append("cap=%s" % r["max_iterations"])
@@ -82,9 +82,9 @@ def style(r):
     elif r["rotation"] != "polar":
         m = {"svd": "v", "quaternion": "^", "qr": "<"}[r["rotation"]]
     elif int(r["max_iterations"]) < 1000:
-        m = "p" if r["preconditioner"] == "amg" else "s"
+        m = {"amg": "p", "warped_cholesky": "X"}.get(r["preconditioner"], "s")
     else:
-        m = {"none": "o", "diagonal": "D", "block_diagonal": "P", "amg": "h"}[r["preconditioner"]]
+        m = {"none": "o", "diagonal": "D", "block_diagonal": "P", "amg": "h", "warped_cholesky": ">"}[r["preconditioner"]]
     return c, m
 
 
@@ -147,8 +147,10 @@ def main():
                    Line2D([], [], color="gray", marker="D", ls="", label="PCG + diagonal"),
                    Line2D([], [], color="gray", marker="P", ls="", label="PCG + block diagonal"),
                    Line2D([], [], color="gray", marker="h", ls="", label="PCG + multigrid (amg)"),
+                   Line2D([], [], color="gray", marker=">", ls="", label="PCG + warped Cholesky"),
                    Line2D([], [], color="gray", marker="s", ls="", label="PCG iteration cap (block)"),
                    Line2D([], [], color="gray", marker="p", ls="", label="PCG iteration cap (amg)"),
+                   Line2D([], [], color="gray", marker="X", ls="", label="PCG iteration cap (warped)"),
                    Line2D([], [], color="gray", marker="v", ls="", label="rotation svd"),
                    Line2D([], [], color="gray", marker="^", ls="", label="rotation quaternion"),
                    Line2D([], [], color="gray", marker="<", ls="", label="rotation qr"),

@@ -355,16 +355,19 @@ std::vector<Knobs> fullKnobs(bool quick, bool withOpenCL) {
   const std::vector<PreconditionerKind> preconds = {PreconditionerKind::None, PreconditionerKind::Diagonal,
                                                     PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg};
   const std::vector<PreconditionerKind> quickPreconds = {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg};
+  // "warped_cholesky" runs on the reference backend alone.
+  std::vector<PreconditionerKind> refPreconds = quick ? quickPreconds : preconds;
+  refPreconds.push_back(PreconditionerKind::WarpedCholesky);
   const std::vector<double> refTols = quick ? std::vector<double>{1e-2, 1e-4, 1e-8}
                                             : std::vector<double>{1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8};
-  for (auto pc : (quick ? quickPreconds : preconds))
+  for (auto pc : refPreconds)
     for (double tol : refTols) {
       Knobs k;
       k.preconditioner = pc;
       k.tolerance = tol;
       out.push_back(k);
     }
-  for (auto pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg})
+  for (auto pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg, PreconditionerKind::WarpedCholesky})
     for (int cap : (quick ? std::vector<int>{5, 20} : std::vector<int>{5, 10, 20, 50, 100})) {
       Knobs k;
       k.tolerance = 1e-10;  // the cap, not the tolerance, ends these solves

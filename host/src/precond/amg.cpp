@@ -2,7 +2,6 @@
 #include "precond/amg.hpp"
 
 #include "util/error.hpp"
-#include "util/hash.hpp"
 #include "util/parallel.hpp"
 
 #include <Eigen/LU>

@@ -63,7 +63,7 @@ inline double restRatio(double massScale, double stiffScale) {
 }
 
 /// Whether a preconditioner made at the ratio `made` serves a solve at `ratio`: within a factor of
-/// 2, or equal where either is 0 or infinite.
+/// 2, or equal where either is 0 or infinite (never where either is NaN).
 inline bool ratioServes(double ratio, double made) {
   return std::isfinite(ratio) && std::isfinite(made) ? (ratio == 0.0 ? made == 0.0 : made > 0.5 * ratio && made < 2.0 * ratio)
                                                      : ratio == made;
@@ -77,13 +77,16 @@ class RestPair {
   RestPair() : now_(std::make_unique<T>()), spare_(std::make_unique<T>()) {}
   /// Kept where the one in use serves (ratio, freeDofs); Switched where the spare does (it is now
   /// in use); Built where neither does: then now() is the one to make (the one in use before is
-  /// the spare), and made() records its ratio once it is.
+  /// the spare), and made() records its ratio once it is. Until then now() serves no ratio, so
+  /// one whose making threw half way is never taken.
   Made find(double ratio, const std::vector<Eigen::Index>& freeDofs) {
     auto fits = [&](const T& t, double made) { return t.built() && t.builtFreeDofs() == freeDofs && ratioServes(ratio, made); };
     if (fits(*now_, ratio_)) return Made::Kept;
     std::swap(now_, spare_);
     std::swap(ratio_, spareRatio_);
-    return fits(*now_, ratio_) ? Made::Switched : Made::Built;
+    if (fits(*now_, ratio_)) return Made::Switched;
+    ratio_ = NAN;
+    return Made::Built;
   }
   void made(double ratio) { ratio_ = ratio; }
   T& now() { return *now_; }

@@ -3,35 +3,96 @@
 
 #include "util/error.hpp"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+#include <Eigen/SVD>
+
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <utility>
 
 namespace corofem::detail {
 
-void WarpedCholesky::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, std::size_t nodeCount,
+namespace {
+
+/// Where a rigid motion costs less than this, relative to its diagonal weight, the rest operator is
+/// singular. Rounding leaves a free body's rigid motions about 1e-14; a body held by fixed nodes
+/// has its smallest about the share of its nodes next to them (1e-2 for issue 29's beam clamped at
+/// one end; 1e-4 would be a beam a hundred times as many cells long).
+constexpr double kRigidThreshold = 1e-9;
+
+/// The smallest Rayleigh quotient v.A v / v.D v over the rigid motions v of the body (three
+/// translations, three rotations about its rest centroid) on its free dofs, D = diag(A) (all
+/// positive); +infinity where the free dofs span no rigid motion.
+double weakestRigidMotion(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
+                          const Eigen::VectorXd& diagonal) {
+  const auto n = static_cast<Eigen::Index>(freeDofs.size());
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (Eigen::Index i = 0; i + 2 < rest.size(); i += 3) centre += rest.segment<3>(i);
+  centre /= std::max<double>(1.0, static_cast<double>(rest.size() / 3));
+  // S = D^1/2 B, B the six motions on the free dofs; an orthonormal basis Q of its range.
+  Eigen::MatrixXd S(n, 6);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const Eigen::Index d = freeDofs[static_cast<std::size_t>(i)];
+    const int c = static_cast<int>(d % 3);
+    const Eigen::Vector3d arm = rest.segment<3>(d - c) - centre;
+    const double w = std::sqrt(diagonal[i]);
+    for (int k = 0; k < 3; ++k) {
+      S(i, k) = w * (k == c ? 1.0 : 0.0);
+      S(i, 3 + k) = w * Eigen::Vector3d::Unit(k).cross(arm)[c];  // rotation about axis k
+    }
+  }
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(S);
+  const double largest = std::abs(qr.matrixR()(0, 0));
+  Eigen::Index rank = 0;
+  for (Eigen::Index k = 0; k < std::min<Eigen::Index>(6, n); ++k)
+    if (std::abs(qr.matrixR()(k, k)) > 1e-10 * largest) ++rank;
+  if (rank == 0) return INFINITY;
+  const Eigen::MatrixXd Q = qr.householderQ() * Eigen::MatrixXd::Identity(n, rank);
+  // G = Q^T D^-1/2 A D^-1/2 Q: its smallest eigenvalue is the smallest Rayleigh quotient.
+  const Eigen::VectorXd s = diagonal.cwiseSqrt().cwiseInverse();
+  const Eigen::MatrixXd AQ = A * (s.asDiagonal() * Q);
+  const Eigen::MatrixXd G = Q.transpose() * (s.asDiagonal() * AQ);
+  return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(0.5 * (G + G.transpose()), Eigen::EigenvaluesOnly)
+      .eigenvalues()
+      .minCoeff();
+}
+
+[[noreturn]] void failSingular(const std::string& body) {
+  fail(ErrorCode::SolveFailed, "body '", body, "': the preconditioner \"warped_cholesky\" factors the body's system at "
+       "rest, and it is singular: the analysis has no mass to hold the body (statics), and a rigid motion of the "
+       "body or a free node in no element costs no energy. Hold the body with \"fixed\" nodes (at least three "
+       "not on one line), or run a dynamic analysis");
+}
+
+}  // namespace
+
+void WarpedCholesky::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
                            const std::string& body) {
   clear();
   const auto n = static_cast<Eigen::Index>(freeDofs.size());
-  if (A0.rows() != n || A0.cols() != n ||
+  if (A0.rows() != n || A0.cols() != n || rest.size() % 3 != 0 ||
       std::adjacent_find(freeDofs.begin(), freeDofs.end(), std::greater_equal<Eigen::Index>()) != freeDofs.end() ||
-      (!freeDofs.empty() && (freeDofs.front() < 0 || freeDofs.back() >= static_cast<Eigen::Index>(3 * nodeCount))))
+      (!freeDofs.empty() && (freeDofs.front() < 0 || freeDofs.back() >= rest.size())))
     fail(ErrorCode::Internal, "WarpedCholesky: a rest operator of ", A0.rows(), " x ", A0.cols(), " for ", n,
-         " free dofs, or free dofs not strictly ascending within 0..", 3 * nodeCount, " - 1");
+         " free dofs, or free dofs not strictly ascending within 0..", rest.size(), " - 1");
   if (n > 0) {
+    const Eigen::VectorXd diagonal = A0.diagonal();
+    if (!(diagonal.minCoeff() > 0.0) || !diagonal.allFinite() ||
+        !(weakestRigidMotion(A0, freeDofs, rest, diagonal) > kRigidThreshold))
+      failSingular(body);
     factor_ = std::make_unique<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower>>(
         Eigen::SparseMatrix<double>(A0));
-    // LDL^T of a positive definite matrix has a positive D; anything else (a zero or negative
-    // pivot: the body can move rigidly with no mass to resist) would make PCG break down.
+    // LDL^T of a positive definite matrix has a positive D; anything else (a mechanism the rigid
+    // motions above do not show) would make PCG break down.
     if (factor_->info() != Eigen::Success || !(factor_->vectorD().minCoeff() > 0.0) || !factor_->vectorD().allFinite()) {
       factor_.reset();
-      fail(ErrorCode::SolveFailed, "body '", body, "': the preconditioner \"warped_cholesky\" factors the body's "
-           "system at rest, and it is singular: nothing holds the body against a rigid motion (statics of a body "
-           "without enough constrained nodes). Constrain the body, or use the preconditioner \"diagonal\"");
+      failSingular(body);
     }
   }
   freeDofs_ = freeDofs;
-  nodeCount_ = nodeCount;
+  nodeCount_ = static_cast<std::size_t>(rest.size() / 3);
   for (std::size_t i = 0; i < freeDofs_.size(); ++i) {
     const std::size_t node = static_cast<std::size_t>(freeDofs_[i]) / 3;
     if (warpNodes_.empty() || warpNodes_.back().node != node) warpNodes_.push_back({node, {-1, -1, -1}});
@@ -44,23 +105,46 @@ void WarpedCholesky::clear() {
   built_ = false;
   freeDofs_.clear();
   warpNodes_.clear();
-  rotations_.clear();
+  blocks_.clear();
   factor_.reset();
 }
 
 void WarpedCholesky::setNodeRotations(std::vector<Mat3> rotations) {
   if (!rotations.empty() && rotations.size() != nodeCount_)
     fail(ErrorCode::Internal, "WarpedCholesky: ", rotations.size(), " node rotations for ", nodeCount_, " nodes");
-  rotations_ = std::move(rotations);
+  blocks_.clear();
+  if (rotations.empty()) return;
+  blocks_.reserve(warpNodes_.size());
+  for (const WarpNode& w : warpNodes_) {
+    const Mat3& R = rotations[w.node];
+    int dofs[3], k = 0;
+    for (int c = 0; c < 3; ++c)
+      if (w.free[c] >= 0) dofs[k++] = c;
+    if (k == 3) {
+      blocks_.push_back(R);
+      continue;
+    }
+    // A slip condition: the polar factor U V^T of the free dofs' block (orthogonal even where the
+    // block is singular).
+    Eigen::MatrixXd F(k, k);
+    for (int i = 0; i < k; ++i)
+      for (int j = 0; j < k; ++j) F(i, j) = R(dofs[i], dofs[j]);
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Eigen::MatrixXd Q = svd.matrixU() * svd.matrixV().transpose();
+    Mat3 block = Mat3::Zero();
+    for (int i = 0; i < k; ++i)
+      for (int j = 0; j < k; ++j) block(dofs[i], dofs[j]) = Q(i, j);
+    blocks_.push_back(block);
+  }
 }
 
 void WarpedCholesky::warp(const Eigen::VectorXd& v, Eigen::VectorXd& out, bool transpose) const {
   out.resize(v.size());
-  for (const WarpNode& w : warpNodes_) {
+  for (std::size_t n = 0; n < warpNodes_.size(); ++n) {
+    const WarpNode& w = warpNodes_[n];
     Vec3d a;
     for (int c = 0; c < 3; ++c) a[c] = w.free[c] >= 0 ? v[w.free[c]] : 0.0;
-    const Mat3& R = rotations_[w.node];
-    const Vec3d b = transpose ? Vec3d(R.transpose() * a) : Vec3d(R * a);
+    const Vec3d b = transpose ? Vec3d(blocks_[n].transpose() * a) : Vec3d(blocks_[n] * a);
     for (int c = 0; c < 3; ++c)
       if (w.free[c] >= 0) out[w.free[c]] = b[c];
   }
@@ -74,7 +158,7 @@ void WarpedCholesky::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
     z.resize(0);
     return;
   }
-  if (rotations_.empty()) {
+  if (blocks_.empty()) {
     z = factor_->solve(r);
     return;
   }
@@ -107,7 +191,7 @@ Made BodyCholesky::ensure(const Problem& p, const std::vector<Eigen::Index>& fre
   bool remade = false;
   const AmgMatrix& stiffness = stiffness_.of(p, remade);
   if (remade) pair_.clear();  // the spare is of another stiffness
-  pair_.now().build(restOperator(stiffness, p, freeDofs, massScale, stiffScale), freeDofs, p.mesh.nodeCount(), p.name);
+  pair_.now().build(restOperator(stiffness, p, freeDofs, massScale, stiffScale), freeDofs, p.restPositions, p.name);
   pair_.made(ratio);
   ++builds_;
   return Made::Built;

@@ -16,8 +16,11 @@
 //
 // W: R_n is the polar rotation of the sum of the rotations of the elements around node n (the
 // co-rotational formulation's R_e; a hyperelastic one's polar rotations of F_e; the linear
-// formulation has none, W = I). A node's constrained dofs are zero in W^T r and dropped from
-// W A_0^-1 (...): a node with some of its dofs constrained sees the rotation of its free ones.
+// formulation has none, W = I). On the free dofs W is block diagonal with one block per node; a
+// node with one or two dofs constrained (a slip condition) gets the nearest orthogonal matrix to
+// its free dofs' block of R_n (their polar factor), not the block itself: that block turned by 90
+// degrees is zero, and W singular would make the preconditioner singular. W stays orthogonal, so
+// z = W A_0^-1 W^T r is symmetric positive definite whatever the rotations.
 //
 // The factor is deterministic (Eigen's SimplicialLDLT: its ordering and its sums depend on the
 // matrix alone) and it costs memory: the factor of the 12,960-tet beam holds 1.41 M entries (about
@@ -40,16 +43,19 @@ namespace corofem::detail {
 class WarpedCholesky {
  public:
   /// Factors the rest operator `A0` on the free dofs `freeDofs` (strictly ascending dof indices of
-  /// a body of `nodeCount` nodes). Throws Error(SolveFailed) naming `body` where A0 is not positive
-  /// definite (statics of a body that nothing holds: it can move rigidly), Error(Internal) for
-  /// inconsistent sizes.
-  void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, std::size_t nodeCount,
+  /// a body at rest positions `rest`, 3N entries). Throws Error(SolveFailed) naming `body` where A0
+  /// is singular: a rigid motion of the body on its free dofs costs it no energy (statics of a body
+  /// too few fixed nodes hold; the smallest Rayleigh quotient v.A0 v / v.D v over the rigid
+  /// motions v, D = diag(A0), below 1e-9 where a held body's is about the share of its nodes next
+  /// to the fixed ones), a free dof has no stiffness and no mass (a free node in no element,
+  /// statics), or a pivot of the factor is not positive. Error(Internal) for inconsistent sizes.
+  void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
              const std::string& body);
   bool built() const { return built_; }
   const std::vector<Eigen::Index>& builtFreeDofs() const { return freeDofs_; }
   void clear();
 
-  /// The warp W: one rotation per node (nodeCount of build), or none (W = I).
+  /// The warp W: one rotation per node (rest.size() / 3 of build), or none (W = I).
   void setNodeRotations(std::vector<Mat3> rotations);
   /// z = W A_0^-1 W^T r on the free dofs.
   void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
@@ -69,7 +75,8 @@ class WarpedCholesky {
   };
   std::vector<WarpNode> warpNodes_;
   std::size_t nodeCount_ = 0;
-  std::vector<Mat3> rotations_;  ///< per node, or empty: W = I
+  /// Per warp node, its block of W (rows and columns of constrained dofs zero), or empty: W = I.
+  std::vector<Mat3> blocks_;
 };
 
 /// The warp's node rotations: R_n the polar rotation of the sum of the rotations `elementRotations`

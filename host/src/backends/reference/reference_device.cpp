@@ -24,6 +24,7 @@
 #include <cmath>
 #include <deque>
 #include <memory>
+#include <utility>
 
 namespace corofem::detail {
 
@@ -92,7 +93,7 @@ class ReferenceBody {
     p_.constrained = constrained;
     buildPattern();
     analyzed_ = false;
-    running_ = false;  // the multigrid follows at the next solve (BodyAmg::ensure: the spare, or a new one)
+    running_ = false;  // amg's hierarchy and the warped factor follow at the next solve (ensure: the spare, or a new one)
   }
 
   void setPositions(const Eigen::VectorXd& x) {
@@ -124,8 +125,7 @@ class ReferenceBody {
   void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) {
     checkSize(p, "apply");
     ensureTangents();
-    const double massScale = c.mass + c.damping * p_.rayleighMass;
-    const double stiffScale = c.stiffness + c.damping * p_.rayleighStiffness;
+    const auto [massScale, stiffScale] = scales(c);
     // y = (m + c alpha) M p + (k + c beta) K_t p, M lumped (diagonal), K_t by element loops.
     y = massScale * p_.lumpedMass.cwiseProduct(p);
     if (c.stiffness != 0.0 && p_.springStiffness.size() == p.size()) y += c.stiffness * p_.springStiffness.cwiseProduct(p);
@@ -293,6 +293,11 @@ class ReferenceBody {
            "); the Neo-Hookean energy is undefined there. Use smaller load increments or time steps");
   }
 
+  /// The coefficients of M and K_t in A with Rayleigh damping: (m + c alpha, k + c beta).
+  std::pair<double, double> scales(const SystemCoeffs& c) const {
+    return {c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness};
+  }
+
   /// Element tangents at the current positions: R K R^T (Eq. 11), K (linear) or the consistent
   /// hyperelastic tangent.
   void ensureTangents() {
@@ -363,8 +368,7 @@ class ReferenceBody {
   /// A = (m + c alpha) M + (k + c beta) K_t + k S restricted to the free dofs (x_c = 0).
   void assemble(const SystemCoeffs& c) {
     ensureTangents();
-    const double massScale = c.mass + c.damping * p_.rayleighMass;
-    const double stiffScale = c.stiffness + c.damping * p_.rayleighStiffness;
+    const auto [massScale, stiffScale] = scales(c);
     double* values = A_.valuePtr();
     std::fill(values, values + A_.nonZeros(), 0.0);
     for (std::size_t e = 0; e < p_.elements.size(); ++e) {
@@ -438,7 +442,8 @@ class ReferenceBody {
   /// The multigrid hierarchy over the rest operator with A's coefficients (BodyAmg: made again
   /// where they moved far), then the warp of the current positions.
   void formAmg(const SystemCoeffs& c) {
-    amg_.ensure(p_, freeDofs_, c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness);
+    const auto [massScale, stiffScale] = scales(c);
+    amg_.ensure(p_, freeDofs_, massScale, stiffScale);
     if (p_.formulation != Formulation::Linear) amg_.amg().setPositions(x_);  // linear: K_t = K_0, no warp
   }
 
@@ -446,7 +451,8 @@ class ReferenceBody {
   /// moved far), then the warp: each node's rotation from its elements' (the co-rotational R_e; a
   /// hyperelastic formulation's polar rotations of F_e; none for the linear formulation, K_t = K_0).
   void formCholesky(const SystemCoeffs& c) {
-    cholesky_.ensure(p_, freeDofs_, c.mass + c.damping * p_.rayleighMass, c.stiffness + c.damping * p_.rayleighStiffness);
+    const auto [massScale, stiffScale] = scales(c);
+    cholesky_.ensure(p_, freeDofs_, massScale, stiffScale);
     if (p_.formulation == Formulation::Linear) {
       cholesky_.cholesky().setNodeRotations({});
       return;
