@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <string>
 
@@ -315,6 +316,42 @@ TEST(WarpedCholesky, InconsistentSizesAreInternalErrors) {
   Eigen::VectorXd z;
   EXPECT_THROW(w.apply(Eigen::VectorXd::Ones(5), z), Error);
   EXPECT_THROW(nodeRotations(p.mesh, {}), Error);
+}
+
+}  // namespace
+
+namespace {
+
+TEST(WarpedCholesky, BodiesSolvedTogetherGetTheBitsEachGetsAlone) {
+  // Two bodies of one device (a batch: one solve of both) each with its own factor and warp: the
+  // same bits as each on a device of its own.
+  const Problem a = beam(16), b = beam(10);
+  const Eigen::VectorXd xa = curled(a, 0.6, 31), xb = curled(b, 0.2, 32);
+  const Eigen::VectorXd ba = randomVector(a.dofCount(), 33), bb = randomVector(b.dofCount(), 34);
+  SolverDesc s;
+  s.preconditioner = PreconditionerKind::WarpedCholesky;
+  s.tolerance = 1e-9;
+  const std::vector<SystemCoeffs> coeffs = {{kBackwardEulerMass, 0.0, 1.0}, {0.5 * kBackwardEulerMass, 0.0, 1.0}};
+  auto both = createReferenceDevice({&a, &b}, s);
+  both->setPositions({0, 1}, {&xa, &xb});
+  std::vector<PcgSolve> solves(2);
+  Eigen::VectorXd ua = Eigen::VectorXd::Zero(ba.size()), ub = Eigen::VectorXd::Zero(bb.size());
+  solves[0] = PcgSolve{coeffs[0], &ba, &ua, {}, {}};
+  solves[1] = PcgSolve{coeffs[1], &bb, &ub, {}, {}};
+  solvePcg(*both, {0, 1}, solves, s);
+  for (int i = 0; i < 2; ++i) {
+    const Problem& p = i == 0 ? a : b;
+    const Eigen::VectorXd& x = i == 0 ? xa : xb;
+    const Eigen::VectorXd& rhs = i == 0 ? ba : bb;
+    auto alone = test::createReferenceBackend(p, s);
+    alone->setPositions(x);
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(rhs.size());
+    const LinearSolveStats st = alone->solve(coeffs[static_cast<std::size_t>(i)], rhs, u);
+    EXPECT_TRUE(st.converged && solves[static_cast<std::size_t>(i)].stats.converged) << "body " << i;
+    EXPECT_EQ(st.iterations, solves[static_cast<std::size_t>(i)].stats.iterations) << "body " << i;
+    EXPECT_EQ(0, std::memcmp(u.data(), (i == 0 ? ua : ub).data(), sizeof(double) * static_cast<std::size_t>(u.size())))
+        << "body " << i;
+  }
 }
 
 }  // namespace
