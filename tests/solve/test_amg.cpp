@@ -8,6 +8,7 @@
 #include "device/device_amg.hpp"
 #include "model/element.hpp"
 #include "precond/amg.hpp"
+#include "common/clamped_beam.hpp"
 #include "reference/small_meshes.hpp"
 #include "util/parallel.hpp"
 
@@ -23,37 +24,16 @@
 
 using namespace corofem;
 using namespace corofem::detail;
+using corofem::test::clampedBeam;
+using corofem::test::freeDofsOf;
+using corofem::test::uniformRandom;
 
 namespace {
-
-Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-  return v;
-}
-
-/// A clamped cantilever, 1 x 0.1 x 0.1 m in `cells` x 3 x 3 cells of 6 tets (E = 1e6, nu = 0.3).
-Problem beam(int cells) {
-  Problem p = test::makeProblem(test::boxMesh(cells, 3, 3, 1.0, 0.1, 0.1, 0.0, 6), 1e6, 0.3, 1000.0);
-  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
-    if (p.mesh.nodes[3 * n] < 1e-12)
-      for (int c = 0; c < 3; ++c) p.constrained[3 * n + c] = 1;
-  return p;
-}
-
-std::vector<Eigen::Index> freeDofs(const Problem& p) {
-  std::vector<Eigen::Index> dofs;
-  for (std::size_t d = 0; d < p.dofCount(); ++d)
-    if (!p.constrained[d]) dofs.push_back(static_cast<Eigen::Index>(d));
-  return dofs;
-}
 
 /// m M + W K_0 W^T on the free dofs, W = blockdiag(R) (a rigid rotation of the whole body: the
 /// co-rotational tangent there), assembled here from the element functions.
 AmgMatrix assembled(const Problem& p, double m, const Mat3& R) {
-  const std::vector<Eigen::Index> dofs = freeDofs(p);
+  const std::vector<Eigen::Index> dofs = freeDofsOf(p);
   std::vector<int> index(p.dofCount(), -1);
   for (std::size_t i = 0; i < dofs.size(); ++i) index[static_cast<std::size_t>(dofs[i])] = static_cast<int>(i);
   std::vector<Eigen::Triplet<double, int>> t;
@@ -84,11 +64,11 @@ struct Fixture {
   AmgMatrix blocksInverse;
   WarpedAmg amg;
   AmgFineOperator fine;
-  Fixture(int cells, double m, const Mat3& R) : p(beam(cells)), A(assembled(p, m, R)) {
+  Fixture(int cells, double m, const Mat3& R) : p(clampedBeam(cells)), A(assembled(p, m, R)) {
     diagInv = A.diagonal().cwiseInverse();
-    amg.build(assembled(p, m, Mat3::Identity()), freeDofs(p), p.restPositions, p.mesh.nodeCount());
+    amg.build(assembled(p, m, Mat3::Identity()), freeDofsOf(p), p.restPositions, p.mesh.nodeCount());
     fine.apply = [this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A * v; };
-    blocksInverse = nodeBlocks(A, freeDofs(p)).second;
+    blocksInverse = nodeBlocks(A, freeDofsOf(p)).second;
     fine.blockInverse = [this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = blocksInverse * v; };
   }
   Eigen::VectorXd apply(const Eigen::VectorXd& r) const {
@@ -106,7 +86,7 @@ TEST(WarpedAmg, IsSymmetricPositiveDefiniteWithSeveralLevels) {
   EXPECT_EQ(f.amg.levelSizes().front(), f.A.rows());
   const auto n = static_cast<std::size_t>(f.A.rows());
   for (unsigned seed = 1; seed <= 3; ++seed) {
-    const Eigen::VectorXd a = randomVector(n, seed), b = randomVector(n, seed + 10);
+    const Eigen::VectorXd a = uniformRandom(n, seed), b = uniformRandom(n, seed + 10);
     const Eigen::VectorXd Ma = f.apply(a), Mb = f.apply(b);
     EXPECT_NEAR(a.dot(Mb), b.dot(Ma), 1e-10 * a.norm() * Mb.norm());
     EXPECT_GT(a.dot(Ma), 0.0);
@@ -120,7 +100,7 @@ TEST(WarpedAmg, IterationsStayFewWhereJacobiNeedsHundredsAndDoNotGrowWithTheMesh
     int k = 0;
     for (int cells : {20, 40}) {
       Fixture f(cells, m, Mat3::Identity());
-      const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(f.A.rows()), 7);
+      const Eigen::VectorXd b = uniformRandom(static_cast<std::size_t>(f.A.rows()), 7);
       const int jacobi = pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return Eigen::VectorXd(f.diagInv.cwiseProduct(r)); });
       const int amg = pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return f.apply(r); });
       EXPECT_LE(amg, 30) << cells << " cells, m = " << m;
@@ -136,7 +116,7 @@ TEST(WarpedAmg, TheWarpKeepsARotatedBodyAsEasyAsAtRest) {
   std::mt19937 rng(3);
   const Mat3 R = test::randomRotation(rng);
   Fixture rest(30, 0.0, Mat3::Identity()), turned(30, 0.0, R);
-  const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(rest.A.rows()), 5);
+  const Eigen::VectorXd b = uniformRandom(static_cast<std::size_t>(rest.A.rows()), 5);
   const int atRest = pcgIterations(rest.A, b, [&](const Eigen::VectorXd& r) { return rest.apply(r); });
   const int unwarped = pcgIterations(turned.A, b, [&](const Eigen::VectorXd& r) { return turned.apply(r); });
   Eigen::VectorXd x = turned.p.restPositions;
@@ -149,28 +129,28 @@ TEST(WarpedAmg, TheWarpKeepsARotatedBodyAsEasyAsAtRest) {
 
 TEST(WarpedAmg, PartlyConstrainedNodesAndTinyBodies) {
   // A node with one or two of its dofs constrained keeps its other ones in the hierarchy.
-  Problem p = beam(24);
+  Problem p = clampedBeam(24);
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (std::abs(p.mesh.nodes[3 * n] - 1.0) < 1e-12) p.constrained[3 * n + 2] = 1;  // the tip slides in x, y
   Fixture f(24, 0.0, Mat3::Identity());
   f.p = p;
   f.A = assembled(p, 0.0, Mat3::Identity());
   f.diagInv = f.A.diagonal().cwiseInverse();
-  f.blocksInverse = nodeBlocks(f.A, freeDofs(p)).second;
-  f.amg.build(f.A, freeDofs(p), p.restPositions, p.mesh.nodeCount());
-  const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(f.A.rows()), 9);
+  f.blocksInverse = nodeBlocks(f.A, freeDofsOf(p)).second;
+  f.amg.build(f.A, freeDofsOf(p), p.restPositions, p.mesh.nodeCount());
+  const Eigen::VectorXd b = uniformRandom(static_cast<std::size_t>(f.A.rows()), 9);
   EXPECT_LE(pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return f.apply(r); }), 30);
 
   // A body below the coarsest size: smoothing above the direct solve of its rest operator.
   Fixture tiny(2, kBackwardEulerMass, Mat3::Identity());
   EXPECT_EQ(tiny.amg.levelSizes().size(), 2u);
   EXPECT_EQ(tiny.amg.levelSizes()[0], tiny.amg.levelSizes()[1]);
-  const Eigen::VectorXd bt = randomVector(static_cast<std::size_t>(tiny.A.rows()), 4);
+  const Eigen::VectorXd bt = uniformRandom(static_cast<std::size_t>(tiny.A.rows()), 4);
   EXPECT_LE(pcgIterations(tiny.A, bt, [&](const Eigen::VectorXd& r) { return tiny.apply(r); }), 1);
 }
 
 TEST(WarpedAmg, TheReferenceBackendSolvesADeformedBeamInFewIterationsToTheSameAnswer) {
-  Problem p = beam(40);
+  Problem p = clampedBeam(40);
   // A large bend: the beam curled about y (radius 1 m, so its end turns by 1 rad), plus noise.
   Eigen::VectorXd x = p.restPositions;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) {
@@ -178,8 +158,8 @@ TEST(WarpedAmg, TheReferenceBackendSolvesADeformedBeamInFewIterationsToTheSameAn
     x[3 * n] = radius * std::sin(s);
     x[3 * n + 2] = 1.0 - radius * std::cos(s);
   }
-  x += 1e-3 * randomVector(p.dofCount(), 11);
-  const Eigen::VectorXd b = randomVector(p.dofCount(), 12);
+  x += 1e-3 * uniformRandom(p.dofCount(), 11);
+  const Eigen::VectorXd b = uniformRandom(p.dofCount(), 12);
   const SystemCoeffs c{kBackwardEulerMass, 0.0, 1.0};
   SolverDesc s;
   s.tolerance = 1e-10;
@@ -202,8 +182,8 @@ TEST(WarpedAmg, TheReferenceBackendSolvesADeformedBeamInFewIterationsToTheSameAn
 }
 
 TEST(WarpedAmg, ABodyKeepsItsHierarchyWithinAFactorOfTwoAndTakesBackTheOneItReplaced) {
-  const Problem p = beam(20);
-  const std::vector<Eigen::Index> free = freeDofs(p);
+  const Problem p = clampedBeam(20);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
   BodyAmg body;
   using Made = BodyAmg::Made;
   EXPECT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), Made::Built);
@@ -222,13 +202,13 @@ TEST(WarpedAmg, AGrabMakesAHierarchyAndTheReleaseTakesBackTheOneBefore) {
   // one is made for the new free dofs (keeping the clamp's restricted to them was tried: twice the
   // PCG iterations, bench_precond's precondGrab at 0db57de), and the clamp's stays as the spare, so
   // that the release takes it back with no set-up, and grabbing again takes back the grab's.
-  const Problem p = beam(30);
-  const std::vector<Eigen::Index> before = freeDofs(p);
+  const Problem p = clampedBeam(30);
+  const std::vector<Eigen::Index> before = freeDofsOf(p);
   Problem grabbed = p;
   for (std::size_t n = 0; n < grabbed.mesh.nodeCount(); ++n)
     if (grabbed.mesh.nodes[3 * n] > 1.0 - 1e-12)
       for (int c = 0; c < 3; ++c) grabbed.constrained[3 * n + c] = 1;
-  const std::vector<Eigen::Index> after = freeDofs(grabbed);
+  const std::vector<Eigen::Index> after = freeDofsOf(grabbed);
   ASSERT_LT(after.size(), before.size());
   BodyAmg body;
   using Made = BodyAmg::Made;
@@ -244,8 +224,8 @@ TEST(WarpedAmg, AGrabMakesAHierarchyAndTheReleaseTakesBackTheOneBefore) {
   for (std::size_t n = 0; n < loose.mesh.nodeCount(); ++n)
     if (loose.mesh.nodes[3 * n] < 1e-12)
       for (int c = 0; c < 3; ++c) loose.constrained[3 * n + c] = 0;
-  EXPECT_EQ(body.ensure(loose, freeDofs(loose), kBackwardEulerMass, 1.0), Made::Built);
-  EXPECT_EQ(body.amg().builtFreeDofs(), freeDofs(loose));
+  EXPECT_EQ(body.ensure(loose, freeDofsOf(loose), kBackwardEulerMass, 1.0), Made::Built);
+  EXPECT_EQ(body.amg().builtFreeDofs(), freeDofsOf(loose));
   EXPECT_EQ(body.builds(), 3);
 }
 
@@ -264,12 +244,12 @@ TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
   // below the one the bounds were made at (the bounds may not hold) and free dofs the clamp's
   // hierarchy lacks (a release of the clamp) estimate afresh: the bits of a body that never had
   // the clamp's.
-  const Problem p = beam(12);
+  const Problem p = clampedBeam(12);
   Problem grabbed = p;
   for (std::size_t n = 0; n < grabbed.mesh.nodeCount(); ++n)
     if (grabbed.mesh.nodes[3 * n] > 1.0 - 1e-12)
       for (int c = 0; c < 3; ++c) grabbed.constrained[3 * n + c] = 1;
-  const std::vector<Eigen::Index> before = freeDofs(p), after = freeDofs(grabbed);
+  const std::vector<Eigen::Index> before = freeDofsOf(p), after = freeDofsOf(grabbed);
   ASSERT_LT(after.size(), before.size());
   const double m = kBackwardEulerMass;
   using Made = BodyAmg::Made;
@@ -307,7 +287,7 @@ TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
   const AmgMatrix blocksInverse = nodeBlocks(A0, after).second;
   fine.blockInverse = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = blocksInverse * v; };
   auto iterations = [&](const WarpedAmg& amg) {
-    return pcgIterations(A0, randomVector(after.size(), 5), [&](const Eigen::VectorXd& r) {
+    return pcgIterations(A0, uniformRandom(after.size(), 5), [&](const Eigen::VectorXd& r) {
       Eigen::VectorXd z;
       amg.apply(fine, r, z);
       return z;
@@ -343,7 +323,7 @@ TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
   for (std::size_t n = 0; n < pinned.mesh.nodeCount(); ++n)
     if (pinned.mesh.nodes[3 * n] > pinned.mesh.nodes[3 * tip]) tip = n;
   pinned.constrained[3 * tip + 1] = 1;
-  const std::vector<Eigen::Index> one = freeDofs(pinned);
+  const std::vector<Eigen::Index> one = freeDofsOf(pinned);
   ASSERT_EQ(one.size() + 1, before.size());
   BodyAmg pin;
   ASSERT_EQ(pin.ensure(p, before, m, 1.0), Made::Built);
@@ -358,8 +338,8 @@ TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
     if (loose.mesh.nodes[3 * n] < 1e-12)
       for (int c = 0; c < 3; ++c) loose.constrained[3 * n + c] = 0;
   BodyAmg looseFresh;
-  ASSERT_EQ(body.ensure(loose, freeDofs(loose), m, 1.0), Made::Built);
-  ASSERT_EQ(looseFresh.ensure(loose, freeDofs(loose), m, 1.0), Made::Built);
+  ASSERT_EQ(body.ensure(loose, freeDofsOf(loose), m, 1.0), Made::Built);
+  ASSERT_EQ(looseFresh.ensure(loose, freeDofsOf(loose), m, 1.0), Made::Built);
   EXPECT_EQ(body.amg().bounds().fine, looseFresh.amg().bounds().fine);
   EXPECT_EQ(body.amg().bounds().level0, looseFresh.amg().bounds().level0);
 }
@@ -430,10 +410,10 @@ TEST(WarpedAmg, TheStiffnessAssembledInPlaceIsTheOneTripletsGive) {
 }
 
 TEST(WarpedAmg, TheRestOperatorRestrictedFromTheKeptStiffnessIsTheAssembledOne) {
-  Problem p = beam(12);
+  Problem p = clampedBeam(12);
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)  // a few more constrained dofs, single components too
     if (n % 7 == 3) p.constrained[3 * n + n % 3] = 1;
-  const std::vector<Eigen::Index> free = freeDofs(p);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
   const AmgMatrix K = restStiffness(p);
   for (const double m : {0.0, kBackwardEulerMass, 3.7e4}) {
     const AmgMatrix restricted = restOperator(K, p, free, m, 0.8), assembled = assembledRestOperator(p, free, m, 0.8);
@@ -446,8 +426,8 @@ TEST(WarpedAmg, TheRestOperatorRestrictedFromTheKeptStiffnessIsTheAssembledOne) 
 TEST(WarpedAmg, AChangedMaterialOrMeshGivesTheHierarchyTheNewStiffness) {
   // BodyAmg keeps K_0 across set-ups (a grab restricts it); a material change (setMaterial clears
   // the hierarchy) or another body's problem must not find the old one.
-  Problem p = beam(12);
-  const std::vector<Eigen::Index> free = freeDofs(p);
+  Problem p = clampedBeam(12);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
   BodyAmg body;
   ASSERT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
   EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(p, free, kBackwardEulerMass, 1.0)), 1e-14);
@@ -456,7 +436,7 @@ TEST(WarpedAmg, AChangedMaterialOrMeshGivesTheHierarchyTheNewStiffness) {
   ASSERT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
   EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(p, free, kBackwardEulerMass, 1.0)), 1e-14)
       << "the set-up used the stiffness of the old material";
-  const Problem other = beam(12);  // the same mesh, the first material, another object
+  const Problem other = clampedBeam(12);  // the same mesh, the first material, another object
   body.clear();
   ASSERT_EQ(body.ensure(other, free, kBackwardEulerMass, 1.0), BodyAmg::Made::Built);
   EXPECT_LT(relativeDifference(body.amg().levels()[0].A, assembledRestOperator(other, free, kBackwardEulerMass, 1.0)),
@@ -472,8 +452,8 @@ TEST(WarpedAmg, AChangedMaterialOrMeshGivesTheHierarchyTheNewStiffness) {
 }
 
 TEST(WarpedAmg, TheRestOperatorRefusesFreeDofsOutOfOrder) {
-  const Problem p = beam(4);
-  std::vector<Eigen::Index> free = freeDofs(p);
+  const Problem p = clampedBeam(4);
+  std::vector<Eigen::Index> free = freeDofsOf(p);
   std::swap(free[3], free[4]);
   EXPECT_THROW(restOperator(restStiffness(p), p, free, 1.0, 1.0), Error);
 }
@@ -527,7 +507,7 @@ TEST(DeviceAmg, TheLevelsLaidEndToEndHoldEveryBodysEntriesInTheDevicesNumbering)
   // extra constrained dofs: every body's P_0, P_0^T, coarse operators, prolongators and coarsest
   // inverse where the device finds them, nothing more; in the plain layout (a body's coarse rows
   // end to end) and the blocked one (each coarse vertex in 6 rows, its own first).
-  Problem a = beam(160), b = beam(8);
+  Problem a = clampedBeam(160), b = clampedBeam(8);
   for (std::size_t n = 0; n < b.mesh.nodeCount(); ++n)
     if (n % 5 == 2) b.constrained[3 * n + 1] = 1;
   const BodyLayout layout({&a, &b}, 1, 64, 64, 12);
@@ -634,7 +614,7 @@ TEST(DeviceAmg, BlockRowsHoldEveryEntryInItsBlockAndTheProductIsTheMatrixs) {
   ASSERT_EQ(b.values.size(), 18 * b.cols.size() + 8);
   for (std::size_t k = 18 * b.cols.size(); k < b.values.size(); ++k) EXPECT_EQ(b.values[k], 0.0);
   const Eigen::MatrixXd dense = Eigen::MatrixXd(m);
-  const Eigen::VectorXd x = randomVector(static_cast<std::size_t>(cols), 8);
+  const Eigen::VectorXd x = uniformRandom(static_cast<std::size_t>(cols), 8);
   Eigen::VectorXd y = Eigen::VectorXd::Zero(rows);
   std::size_t blocksHeld = 0;
   for (std::size_t i = 0; i < b.blockRows; ++i) {
@@ -664,7 +644,7 @@ TEST(DeviceAmg, BlockRowsHoldEveryEntryInItsBlockAndTheProductIsTheMatrixs) {
 
 TEST(WarpedAmg, TheMatrixVectorProductInSlicesIsEigensBitForBit) {
   // K_0 of four slices of rows times a random vector, the slices run last first: Eigen's bits.
-  const Problem p = beam(150);
+  const Problem p = clampedBeam(150);
   const AmgMatrix K = restStiffness(p);
   ASSERT_GT(static_cast<std::size_t>(K.rows()), 2 * kProductRows);
   std::mt19937 rng(9);
@@ -684,7 +664,7 @@ TEST(WarpedAmg, TheMatrixVectorProductInSlicesIsEigensBitForBit) {
 TEST(WarpedAmg, TheProductInSlicesOfRowsIsEigensProductBitForBit) {
   // A K_0 of more rows than a slice times a random sparse matrix: the same pattern and the same
   // bits as the whole product, whatever the host's threads did with the slices.
-  const Problem p = beam(150);
+  const Problem p = clampedBeam(150);
   const AmgMatrix K = restStiffness(p);
   ASSERT_GT(static_cast<std::size_t>(K.rows()), 2 * kProductRows);  // 7,248 rows: four slices, the last short
   std::mt19937 rng(5);

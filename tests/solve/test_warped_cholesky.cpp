@@ -5,6 +5,7 @@
 #include "common/body_backend.hpp"
 #include "model/element.hpp"
 #include "precond/warped_cholesky.hpp"
+#include "common/clamped_beam.hpp"
 #include "reference/small_meshes.hpp"
 #include "util/error.hpp"
 
@@ -17,34 +18,13 @@
 
 using namespace corofem;
 using namespace corofem::detail;
+using corofem::test::clampedBeam;
+using corofem::test::freeDofsOf;
+using corofem::test::uniformRandom;
 
 namespace {
 
 const double kBackwardEulerMass = 3600.0;  // 1 / h^2 at 60 Hz
-
-Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-  return v;
-}
-
-/// A clamped cantilever, 1 x 0.1 x 0.1 m in `cells` x 3 x 3 cells of 6 tets (E = 1e6, nu = 0.3).
-Problem beam(int cells, Formulation f = Formulation::Corotational) {
-  Problem p = test::makeProblem(test::boxMesh(cells, 3, 3, 1.0, 0.1, 0.1, 0.0, 6), 1e6, 0.3, 1000.0, f);
-  for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
-    if (p.mesh.nodes[3 * n] < 1e-12)
-      for (int c = 0; c < 3; ++c) p.constrained[3 * n + c] = 1;
-  return p;
-}
-
-std::vector<Eigen::Index> freeDofs(const Problem& p) {
-  std::vector<Eigen::Index> dofs;
-  for (std::size_t d = 0; d < p.dofCount(); ++d)
-    if (!p.constrained[d]) dofs.push_back(static_cast<Eigen::Index>(d));
-  return dofs;
-}
 
 /// The beam curled about y so that its end (x = 1) turns by `turn` rad, plus noise.
 Eigen::VectorXd curled(const Problem& p, double turn, unsigned seed) {
@@ -54,7 +34,7 @@ Eigen::VectorXd curled(const Problem& p, double turn, unsigned seed) {
     x[3 * n] = radius * std::sin(s);
     x[3 * n + 2] = 1.0 / turn - radius * std::cos(s);
   }
-  return x + 1e-4 * randomVector(p.dofCount(), seed);
+  return x + 1e-4 * uniformRandom(p.dofCount(), seed);
 }
 
 /// One linear solve of A x = b from zero on the reference backend with the preconditioner `pre` at
@@ -76,14 +56,14 @@ TEST(WarpedCholesky, ABodyTurnedRigidlyIsSolvedInOneIteration) {
   // mass lumped), so the warped factor is A_t's inverse and PCG stops after one iteration. Without
   // the warp (the factor at rest alone) or with a wrong one, it takes many.
   // With Rayleigh damping (m + c alpha) M + (s + c beta) K_t: the factor's ratio includes both.
-  Problem p = beam(12);
+  Problem p = clampedBeam(12);
   p.rayleighMass = 2.0;
   p.rayleighStiffness = 0.05;
   std::mt19937 rng(5);
   const Mat3 Q = test::randomRotation(rng);
   Eigen::VectorXd x = p.restPositions;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) x.segment<3>(3 * n) = Q * x.segment<3>(3 * n);
-  const Eigen::VectorXd b = randomVector(p.dofCount(), 6);
+  const Eigen::VectorXd b = uniformRandom(p.dofCount(), 6);
   for (const SystemCoeffs& c : {SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, SystemCoeffs{0.0, 0.0, 1.0},
                                 SystemCoeffs{kBackwardEulerMass, 60.0, 1.0}}) {
     Eigen::VectorXd warped, diagonal;
@@ -97,11 +77,11 @@ TEST(WarpedCholesky, ABodyTurnedRigidlyIsSolvedInOneIteration) {
 
   // The factor applied directly: W A_0^-1 W^T r is A_t^-1 r, and the factor at rest alone is not.
   BodyCholesky body;
-  const std::vector<Eigen::Index> free = freeDofs(p);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
   body.ensure(p, free, kBackwardEulerMass, 1.0);
   auto backend = test::createReferenceBackend(p, SolverDesc{});
   backend->setPositions(x);
-  const Eigen::VectorXd r = randomVector(free.size(), 8);
+  const Eigen::VectorXd r = uniformRandom(free.size(), 8);
   auto residual = [&](const Eigen::VectorXd& z) {  // |A_t z - r| / |r| on the free dofs
     Eigen::VectorXd full = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(p.dofCount())), y;
     for (std::size_t i = 0; i < free.size(); ++i) full[free[i]] = z[static_cast<Eigen::Index>(i)];
@@ -123,9 +103,9 @@ TEST(WarpedCholesky, ABodyTurnedRigidlyIsSolvedInOneIteration) {
 
 TEST(WarpedCholesky, ACurledBeamTakesFewIterationsWhereJacobiTakesHundredsToTheSameAnswer) {
   for (Formulation f : {Formulation::Corotational, Formulation::StVenantKirchhoff}) {
-    const Problem p = beam(40, f);
+    const Problem p = clampedBeam(40, f);
     const Eigen::VectorXd x = curled(p, f == Formulation::Corotational ? 1.0 : 0.1, 11);
-    const Eigen::VectorXd b = randomVector(p.dofCount(), 12);
+    const Eigen::VectorXd b = uniformRandom(p.dofCount(), 12);
     const SystemCoeffs c{kBackwardEulerMass, 0.0, 1.0};
     Eigen::VectorXd warped, diagonal;
     const LinearSolveStats sw = solve(p, PreconditionerKind::WarpedCholesky, x, c, b, warped);
@@ -136,10 +116,10 @@ TEST(WarpedCholesky, ACurledBeamTakesFewIterationsWhereJacobiTakesHundredsToTheS
     EXPECT_LT((warped - diagonal).norm(), 1e-8 * diagonal.norm()) << toString(f);
   }
   // The linear formulation has no warp: its tangent is K_0, and the factor its system's inverse.
-  const Problem p = beam(20, Formulation::Linear);
+  const Problem p = clampedBeam(20, Formulation::Linear);
   Eigen::VectorXd answer;
   const LinearSolveStats s = solve(p, PreconditionerKind::WarpedCholesky, curled(p, 1.0, 3),
-                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, randomVector(p.dofCount(), 4), answer);
+                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, uniformRandom(p.dofCount(), 4), answer);
   EXPECT_TRUE(s.converged);
   EXPECT_LE(s.iterations, 1);
 }
@@ -150,12 +130,12 @@ TEST(WarpedCholesky, PartlyConstrainedNodesKeepTheirFreeDofs) {
   // its rotation; the block itself, at a quarter turn about y with only x free, is zero, and the
   // preconditioner would be singular (PCG stopped short of the answer).
   for (int constrainedDofs : {1, 2}) {
-    Problem p = beam(24);
+    Problem p = clampedBeam(24);
     for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
       if (std::abs(p.mesh.nodes[3 * n] - 1.0) < 1e-12)
         for (int c = 3 - constrainedDofs; c < 3; ++c) p.constrained[3 * n + c] = 1;
     for (double turn : {0.5, 0.5 * 3.14159265358979}) {
-      const Eigen::VectorXd x = curled(p, turn, 13), b = randomVector(p.dofCount(), 14);
+      const Eigen::VectorXd x = curled(p, turn, 13), b = uniformRandom(p.dofCount(), 14);
       const SystemCoeffs c{kBackwardEulerMass, 0.0, 1.0};
       Eigen::VectorXd warped, diagonal;
       const LinearSolveStats sw = solve(p, PreconditionerKind::WarpedCholesky, x, c, b, warped);
@@ -169,7 +149,7 @@ TEST(WarpedCholesky, PartlyConstrainedNodesKeepTheirFreeDofs) {
 }
 
 TEST(WarpedCholesky, AGrabThroughTheDeviceMakesAFactorAndTheReleaseTakesBackTheOneBefore) {
-  const Problem p = beam(20);
+  const Problem p = clampedBeam(20);
   SolverDesc s;
   s.preconditioner = PreconditionerKind::WarpedCholesky;
   s.tolerance = 1e-10;
@@ -177,7 +157,7 @@ TEST(WarpedCholesky, AGrabThroughTheDeviceMakesAFactorAndTheReleaseTakesBackTheO
   s.preconditioner = PreconditionerKind::Diagonal;
   s.maxIterations = 5000;
   auto diagonal = test::createReferenceBackend(p, s);
-  const Eigen::VectorXd x = curled(p, 0.4, 21), b = randomVector(p.dofCount(), 22);
+  const Eigen::VectorXd x = curled(p, 0.4, 21), b = uniformRandom(p.dofCount(), 22);
   std::vector<std::uint8_t> grabbed = p.constrained;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] > 1.0 - 1e-12)
@@ -206,8 +186,8 @@ TEST(WarpedCholesky, AGrabThroughTheDeviceMakesAFactorAndTheReleaseTakesBackTheO
 }
 
 TEST(WarpedCholesky, ABodyKeepsItsFactorWithinAFactorOfTwoAndTakesBackTheOneItReplaced) {
-  const Problem p = beam(10);
-  const std::vector<Eigen::Index> free = freeDofs(p);
+  const Problem p = clampedBeam(10);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
   BodyCholesky body;
   EXPECT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), Made::Built);
   EXPECT_GT(body.cholesky().factorEntries(), 0);
@@ -219,8 +199,8 @@ TEST(WarpedCholesky, ABodyKeepsItsFactorWithinAFactorOfTwoAndTakesBackTheOneItRe
   for (std::size_t n = 0; n < grabbed.mesh.nodeCount(); ++n)
     if (grabbed.mesh.nodes[3 * n] > 1.0 - 1e-12)
       for (int c = 0; c < 3; ++c) grabbed.constrained[3 * n + c] = 1;
-  EXPECT_EQ(body.ensure(grabbed, freeDofs(grabbed), kBackwardEulerMass, 1.0), Made::Built);
-  EXPECT_EQ(body.cholesky().builtFreeDofs(), freeDofs(grabbed));
+  EXPECT_EQ(body.ensure(grabbed, freeDofsOf(grabbed), kBackwardEulerMass, 1.0), Made::Built);
+  EXPECT_EQ(body.cholesky().builtFreeDofs(), freeDofsOf(grabbed));
   EXPECT_EQ(body.ensure(p, free, kBackwardEulerMass, 1.0), Made::Switched);
   EXPECT_EQ(body.builds(), 3);
   body.clear();  // a material change
@@ -230,13 +210,13 @@ TEST(WarpedCholesky, ABodyKeepsItsFactorWithinAFactorOfTwoAndTakesBackTheOneItRe
 TEST(WarpedCholesky, AMaterialChangeReachesTheFactor) {
   // The reference backend's setMaterial clears the factor; with the old one kept, a stiffened body
   // would need many iterations where the new factor gives one (the linear formulation: exact).
-  Problem p = beam(16, Formulation::Linear);
+  Problem p = clampedBeam(16, Formulation::Linear);
   SolverDesc s;
   s.preconditioner = PreconditionerKind::WarpedCholesky;
   s.tolerance = 1e-10;
   auto backend = test::createReferenceBackend(p, s);
   backend->setPositions(p.restPositions);
-  const Eigen::VectorXd b = randomVector(p.dofCount(), 15);
+  const Eigen::VectorXd b = uniformRandom(p.dofCount(), 15);
   Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
   EXPECT_LE(backend->solve(SystemCoeffs{100.0, 0.0, 1.0}, b, x).iterations, 1);
   p.lame = lameFromYoungPoisson(5e7, 0.3);
@@ -259,7 +239,7 @@ TEST(WarpedCholesky, StaticsOfABodyNothingHoldsFailsWithTheFix) {
     Eigen::VectorXd answer;
     try {
       solve(p, PreconditionerKind::WarpedCholesky, p.restPositions, SystemCoeffs{0.0, 0.0, 1.0},
-            randomVector(p.dofCount(), 16), answer);
+            uniformRandom(p.dofCount(), 16), answer);
       ADD_FAILURE() << what << ": a singular rest system was factored";
     } catch (const Error& e) {
       EXPECT_EQ(e.code(), ErrorCode::SolveFailed) << what;
@@ -278,23 +258,23 @@ TEST(WarpedCholesky, StaticsOfABodyNothingHoldsFailsWithTheFix) {
       // With mass (dynamics) the free body factors, and a clamped one in statics.
       Eigen::VectorXd answer;
       const LinearSolveStats s = solve(p, PreconditionerKind::WarpedCholesky, p.restPositions,
-                                       SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, randomVector(p.dofCount(), 17), answer);
+                                       SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, uniformRandom(p.dofCount(), 17), answer);
       EXPECT_TRUE(s.converged);
       EXPECT_LE(s.iterations, 1);
     }
-  const Problem clamped = beam(20);
+  const Problem clamped = clampedBeam(20);
   Eigen::VectorXd answer;
   EXPECT_TRUE(solve(clamped, PreconditionerKind::WarpedCholesky, clamped.restPositions, SystemCoeffs{0.0, 0.0, 1.0},
-                    randomVector(clamped.dofCount(), 18), answer)
+                    uniformRandom(clamped.dofCount(), 18), answer)
                   .converged);
 }
 
 TEST(WarpedCholesky, ABodyWithEveryDofConstrainedHasNothingToSolve) {
-  Problem p = beam(3);
+  Problem p = clampedBeam(3);
   std::fill(p.constrained.begin(), p.constrained.end(), std::uint8_t{1});
   Eigen::VectorXd answer;
   const LinearSolveStats s = solve(p, PreconditionerKind::WarpedCholesky, p.restPositions,
-                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, randomVector(p.dofCount(), 19), answer);
+                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, uniformRandom(p.dofCount(), 19), answer);
   EXPECT_TRUE(s.converged);
   EXPECT_TRUE(answer.isZero(0.0));
   BodyCholesky body;
@@ -306,8 +286,8 @@ TEST(WarpedCholesky, ABodyWithEveryDofConstrainedHasNothingToSolve) {
 }
 
 TEST(WarpedCholesky, InconsistentSizesAreInternalErrors) {
-  const Problem p = beam(4);
-  const std::vector<Eigen::Index> free = freeDofs(p);
+  const Problem p = clampedBeam(4);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
   WarpedCholesky w;
   const AmgMatrix A0 = restOperator(restStiffness(p), p, free, 1.0, 1.0);
   EXPECT_THROW(w.build(A0, {free.begin(), free.end() - 1}, p.restPositions, p.name), Error);
@@ -325,9 +305,9 @@ namespace {
 TEST(WarpedCholesky, BodiesSolvedTogetherGetTheBitsEachGetsAlone) {
   // Two bodies of one device (a batch: one solve of both) each with its own factor and warp: the
   // same bits as each on a device of its own.
-  const Problem a = beam(16), b = beam(10);
+  const Problem a = clampedBeam(16), b = clampedBeam(10);
   const Eigen::VectorXd xa = curled(a, 0.6, 31), xb = curled(b, 0.2, 32);
-  const Eigen::VectorXd ba = randomVector(a.dofCount(), 33), bb = randomVector(b.dofCount(), 34);
+  const Eigen::VectorXd ba = uniformRandom(a.dofCount(), 33), bb = uniformRandom(b.dofCount(), 34);
   SolverDesc s;
   s.preconditioner = PreconditionerKind::WarpedCholesky;
   s.tolerance = 1e-9;
