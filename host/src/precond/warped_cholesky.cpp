@@ -17,10 +17,14 @@ namespace corofem::detail {
 namespace {
 
 /// Where a rigid motion costs less than this, relative to its diagonal weight, the rest operator is
-/// singular. Rounding leaves a free body's rigid motions about 1e-14; a body held by fixed nodes
-/// has its smallest about the share of its nodes next to them (1e-2 for issue 29's beam clamped at
-/// one end; 1e-4 would be a beam a hundred times as many cells long).
-constexpr double kRigidThreshold = 1e-9;
+/// singular. Rounding leaves a free body's rigid motions within 1.5e-16 of 0 in statics (box beams
+/// of 4 to 60 cells, E = 1e5 and 2e11). A held body's smallest falls as its length cubed: a
+/// cantilever of n x 1 x 1 cells clamped at one end gives 2.3e-7 at n = 100, 6.5e-10 at 700 and
+/// 8.3e-12 at 3,000 (its stiffness's condition number, about n^4, nears double precision's
+/// reach near n = 10,000). With mass (dynamics) it is at least about the ratio of mass to
+/// stiffness on the diagonal: 1.6e-9 for a 1 m steel-stiff (E = 2e11) beam at 1/60 s.
+/// (tests/solve/test_warped_cholesky.cpp, StaticsOfABodyNothingHoldsFailsWithTheFix.)
+constexpr double kRigidThreshold = 1e-13;
 
 /// The smallest Rayleigh quotient v.A v / v.D v over the rigid motions v of the body (three
 /// translations, three rotations about its rest centroid) on its free dofs, D = diag(A) (all
@@ -61,9 +65,10 @@ double weakestRigidMotion(const AmgMatrix& A, const std::vector<Eigen::Index>& f
 
 [[noreturn]] void failSingular(const std::string& body) {
   fail(ErrorCode::SolveFailed, "body '", body, "': the preconditioner \"warped_cholesky\" factors the body's system at "
-       "rest, and it is singular: the analysis has no mass to hold the body (statics), and a rigid motion of the "
-       "body or a free node in no element costs no energy. Hold the body with \"fixed\" nodes (at least three "
-       "not on one line), or run a dynamic analysis");
+       "rest, and it is singular: a rigid motion of the body costs it no energy (statics of a body too few "
+       "\"fixed\" nodes hold; spring handles are not in the factor), or a free node is in no element (it has no "
+       "mass or stiffness). Hold the body with \"fixed\" nodes (at least three not on one line), run a dynamic "
+       "analysis, or use the preconditioner \"amg\"");
 }
 
 }  // namespace

@@ -45,10 +45,10 @@ class WarpedCholesky {
   /// Factors the rest operator `A0` on the free dofs `freeDofs` (strictly ascending dof indices of
   /// a body at rest positions `rest`, 3N entries). Throws Error(SolveFailed) naming `body` where A0
   /// is singular: a rigid motion of the body on its free dofs costs it no energy (statics of a body
-  /// too few fixed nodes hold; the smallest Rayleigh quotient v.A0 v / v.D v over the rigid
-  /// motions v, D = diag(A0), below 1e-9 where a held body's is about the share of its nodes next
-  /// to the fixed ones), a free dof has no stiffness and no mass (a free node in no element,
-  /// statics), or a pivot of the factor is not positive. Error(Internal) for inconsistent sizes.
+  /// too few fixed nodes hold: the smallest Rayleigh quotient v.A0 v / v.D v over the rigid
+  /// motions v, D = diag(A0), below 1e-13; the .cpp has what it is for held and free bodies), a
+  /// free dof has no stiffness and no mass (a free node in no element), or a pivot of the factor is
+  /// not positive. Error(Internal) for inconsistent sizes.
   void build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
              const std::string& body);
   bool built() const { return built_; }
