@@ -14,6 +14,11 @@
 //   probeSolve/<preconditioner>/turn_<millirad>   iterations and the time of a solve
 //   probeFactor                                   the factorisation of A_0
 //   probeAmgSetup                                 the multigrid's set-up (BodyAmg::ensure)
+//   probeTriangular/<eigen|double|float>          one application of A_0^-1 (the permutation, the
+//                                                 two triangular solves, D^-1) on one thread: Eigen's
+//                                                 solve, and a loop over the factor's columns in
+//                                                 double and in float, as one work-item of a CPU
+//                                                 device would run it
 //
 //   build/bench/bench_warped_cholesky --benchmark_repetitions=5 --benchmark_enable_random_interleaving=true \
 //       --benchmark_report_aggregates_only=true
@@ -138,6 +143,56 @@ void probeAmgSetup(benchmark::State& state) {
   }
 }
 
+/// z = A_0^-1 r by the factor's columns: P, L y = P r (L unit lower, by columns), y /= D,
+/// L^T x = y (by rows of L^T, the same columns), P^T; the values in T.
+template <class T>
+void probeTriangular(benchmark::State& state) {
+  const Ldlt& f = factor();
+  const Eigen::SparseMatrix<double>& L = f.matrixL().nestedExpression();
+  const auto n = static_cast<int>(L.rows());
+  const std::vector<int> start(L.outerIndexPtr(), L.outerIndexPtr() + n + 1);
+  const std::vector<int> row(L.innerIndexPtr(), L.innerIndexPtr() + L.nonZeros());
+  std::vector<T> value(static_cast<std::size_t>(L.nonZeros())), dinv(static_cast<std::size_t>(n));
+  for (Eigen::Index k = 0; k < L.nonZeros(); ++k) value[static_cast<std::size_t>(k)] = static_cast<T>(L.valuePtr()[k]);
+  for (int i = 0; i < n; ++i) dinv[static_cast<std::size_t>(i)] = static_cast<T>(1.0 / f.vectorD()[i]);
+  const Eigen::VectorXi perm = f.permutationP().indices();  // (P r)[perm[i]] = r[i]
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd r(n);
+  for (int i = 0; i < n; ++i) r[i] = u(rng);
+  const Eigen::VectorXd expected = f.solve(r);
+  std::vector<T> y(static_cast<std::size_t>(n));
+  Eigen::VectorXd z(n);
+  for (auto _ : state) {
+    for (int i = 0; i < n; ++i) y[static_cast<std::size_t>(perm[i])] = static_cast<T>(r[i]);
+    for (int j = 0; j < n; ++j) {  // L y = b, column by column
+      const T yj = y[static_cast<std::size_t>(j)];
+      for (int k = start[static_cast<std::size_t>(j)]; k < start[static_cast<std::size_t>(j) + 1]; ++k)
+        y[static_cast<std::size_t>(row[static_cast<std::size_t>(k)])] -= value[static_cast<std::size_t>(k)] * yj;
+    }
+    for (int i = 0; i < n; ++i) y[static_cast<std::size_t>(i)] *= dinv[static_cast<std::size_t>(i)];
+    for (int j = n - 1; j >= 0; --j) {  // L^T x = y: row j of L^T is column j of L
+      T sum = y[static_cast<std::size_t>(j)];
+      for (int k = start[static_cast<std::size_t>(j)]; k < start[static_cast<std::size_t>(j) + 1]; ++k)
+        sum -= value[static_cast<std::size_t>(k)] * y[static_cast<std::size_t>(row[static_cast<std::size_t>(k)])];
+      y[static_cast<std::size_t>(j)] = sum;
+    }
+    for (int i = 0; i < n; ++i) z[i] = static_cast<double>(y[static_cast<std::size_t>(perm[i])]);
+    benchmark::DoNotOptimize(z.data());
+  }
+  state.counters["relative_error"] = (z - expected).norm() / expected.norm();
+  state.counters["factor_MB"] = static_cast<double>(L.nonZeros()) * (sizeof(T) + sizeof(int)) / 1e6;
+}
+
+void probeEigenSolve(benchmark::State& state) {
+  const Ldlt& f = factor();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd r(f.rows());
+  for (Eigen::Index i = 0; i < r.size(); ++i) r[i] = u(rng);
+  for (auto _ : state) benchmark::DoNotOptimize(f.solve(r).eval().data());
+}
+
 void probeSolve(benchmark::State& state, const std::string& kind, double turn) {
   const Beam& b = beam();
   const State st = curled(b, turn);
@@ -188,6 +243,9 @@ void probeSolve(benchmark::State& state, const std::string& kind, double turn) {
 const int registered = [] {
   benchmark::RegisterBenchmark("probeFactor", probeFactor)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("probeAmgSetup", probeAmgSetup)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("probeTriangular/eigen", probeEigenSolve)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("probeTriangular/double", probeTriangular<double>)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("probeTriangular/float", probeTriangular<float>)->Unit(benchmark::kMillisecond);
   for (const char* kind : {"jacobi", "amg", "rest_cholesky", "warped_cholesky"})
     for (double turn : {0.0, 0.3, 1.0})
       benchmark::RegisterBenchmark(("probeSolve/" + std::string(kind) + "/turn_" + std::to_string(int(std::lround(1000 * turn)))).c_str(),
