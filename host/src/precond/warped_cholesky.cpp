@@ -2,6 +2,7 @@
 #include "precond/warped_cholesky.hpp"
 
 #include "util/error.hpp"
+#include "util/parallel.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
@@ -184,7 +185,9 @@ std::vector<Mat3> nodeRotations(const TetMesh& mesh, const std::vector<Mat3>& el
   std::vector<Mat3> sum(mesh.nodeCount(), Mat3::Zero());
   for (std::size_t e = 0; e < elementRotations.size(); ++e)
     for (int a = 0; a < 4; ++a) sum[mesh.tets[4 * e + a]] += elementRotations[e];
-  for (Mat3& s : sum) s = s.isZero() ? Mat3::Identity() : polarRotation(s);
+  parallelChunks(sum.size(), 1024, [&](std::size_t, std::size_t begin, std::size_t end) {
+    for (std::size_t n = begin; n < end; ++n) sum[n] = sum[n].isZero() ? Mat3::Identity() : polarRotation(sum[n]);
+  });
   return sum;
 }
 

@@ -16,6 +16,7 @@
 #include "device/registry.hpp"
 #include "model/hyperelastic.hpp"
 #include "util/error.hpp"
+#include "util/parallel.hpp"
 
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -31,6 +32,12 @@ namespace corofem::detail {
 namespace {
 
 using SpMat = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
+
+/// The per-element passes (rotations, tangents, element forces and products) run in chunks of this
+/// many elements on the host's threads (util/parallel.hpp). Each element's result is its own, and
+/// every sum over elements is made afterwards in element order, so the answers have the bits of
+/// one thread's pass.
+constexpr std::size_t kElementChunk = 1024;
 
 /// One body: its element state at the current positions, its assembled system on the free dofs,
 /// and the PCG state of the solve in progress.
@@ -99,27 +106,27 @@ class ReferenceBody {
   void setPositions(const Eigen::VectorXd& x) {
     checkSize(x, "setPositions");
     x_ = x;
-    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-      const Mat3 F = deformationGradient(p_.elements[e], gather(x_, e));
-      gradients_[e] = F;
-      // Co-rotational: R = rotational part of F (polar decomposition). Linear: R = I.
-      rotations_[e] = p_.formulation == Formulation::Corotational ? polarRotation(F) : Mat3::Identity();
-    }
+    parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e) {
+        const Mat3 F = deformationGradient(p_.elements[e], gather(x_, e));
+        gradients_[e] = F;
+        // Co-rotational: R = rotational part of F (polar decomposition). Linear: R = I.
+        rotations_[e] = p_.formulation == Formulation::Corotational ? polarRotation(F) : Mat3::Identity();
+      }
+    });
     tangentsValid_ = false;
   }
 
   void internalForces(Eigen::VectorXd& f) {
     f.setZero(static_cast<Eigen::Index>(p_.dofCount()));
-    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-      Vec12 fe;
-      if (hyper_) {
-        checkInversion(e);
-        fe = hyperelasticForce(model_, p_.elements[e], p_.lame, gradients_[e]);
-      } else {
-        fe = corotationalForce(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);  // Eq. 9
-      }
-      scatterAdd(f, e, fe);
-    }
+    checkInversions();
+    elementVectors_.resize(p_.elements.size());
+    parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e)
+        elementVectors_[e] = hyper_ ? hyperelasticForce(model_, p_.elements[e], p_.lame, gradients_[e])
+                                    : corotationalForce(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);  // Eq. 9
+    });
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) scatterAdd(f, e, elementVectors_[e]);
   }
 
   void apply(const SystemCoeffs& c, const Eigen::VectorXd& p, Eigen::VectorXd& y) {
@@ -130,11 +137,15 @@ class ReferenceBody {
     y = massScale * p_.lumpedMass.cwiseProduct(p);
     if (c.stiffness != 0.0 && p_.springStiffness.size() == p.size()) y += c.stiffness * p_.springStiffness.cwiseProduct(p);
     if (stiffScale == 0.0) return;
-    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-      Vec12 pe;
-      for (int k = 0; k < 4; ++k) pe.segment<3>(3 * k) = p.segment<3>(3 * node(e, k));
-      scatterAdd(y, e, stiffScale * (tangents_[e] * pe));
-    }
+    elementVectors_.resize(p_.elements.size());
+    parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e) {
+        Vec12 pe;
+        for (int k = 0; k < 4; ++k) pe.segment<3>(3 * k) = p.segment<3>(3 * node(e, k));
+        elementVectors_[e] = stiffScale * (tangents_[e] * pe);
+      }
+    });
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) scatterAdd(y, e, elementVectors_[e]);
   }
 
   double elasticEnergy() {
@@ -286,6 +297,13 @@ class ReferenceBody {
            " dofs");
   }
 
+  /// checkInversion of every element of a hyperelastic body, in element order (before a parallel
+  /// pass, whose chunks must not throw).
+  void checkInversions() const {
+    if (hyper_)
+      for (std::size_t e = 0; e < p_.elements.size(); ++e) checkInversion(e);
+  }
+
   void checkInversion(std::size_t e) const {
     if (model_ == HyperelasticModel::NeoHookean && !(gradients_[e].determinant() > 0.0))
       fail(ErrorCode::SolveFailed, "body '", p_.name, "': element ", e, " (nodes ", node(e, 0), ", ", node(e, 1), ", ",
@@ -303,16 +321,17 @@ class ReferenceBody {
   void ensureTangents() {
     if (tangentsValid_) return;
     tangents_.resize(p_.elements.size());
-    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-      if (hyper_) {
-        checkInversion(e);
-        tangents_[e] = hyperelasticTangent(model_, p_.elements[e], p_.lame, gradients_[e]);
-      } else if (p_.formulation == Formulation::Corotational) {
-        tangents_[e] = rotateStiffness(stiffness_[e], rotations_[e]);
-      } else {
-        tangents_[e] = stiffness_[e];
+    checkInversions();
+    parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e) {
+        if (hyper_)
+          tangents_[e] = hyperelasticTangent(model_, p_.elements[e], p_.lame, gradients_[e]);
+        else if (p_.formulation == Formulation::Corotational)
+          tangents_[e] = rotateStiffness(stiffness_[e], rotations_[e]);
+        else
+          tangents_[e] = stiffness_[e];
       }
-    }
+    });
     tangentsValid_ = true;
   }
 
@@ -462,7 +481,9 @@ class ReferenceBody {
       return;
     }
     std::vector<Mat3> elementRotations(gradients_.size());
-    for (std::size_t e = 0; e < gradients_.size(); ++e) elementRotations[e] = polarRotation(gradients_[e]);
+    parallelChunks(gradients_.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e) elementRotations[e] = polarRotation(gradients_[e]);
+    });
     cholesky_.cholesky().setNodeRotations(nodeRotations(p_.mesh, elementRotations));
   }
 
@@ -483,6 +504,7 @@ class ReferenceBody {
   std::vector<Mat3> rotations_;   ///< R_e at the current positions
   std::vector<Mat3> gradients_;   ///< F_e at the current positions
   std::vector<Mat12> tangents_;   ///< element tangents, valid when tangentsValid_
+  std::vector<Vec12> elementVectors_;  ///< scratch: each element's force or product, summed in element order
   bool tangentsValid_ = false;
   Eigen::VectorXd x_;
 
