@@ -1,7 +1,9 @@
 // The reference device: plain Eigen, double precision, assembled sparse matrices, one body after
 // another. It is the oracle the device backends are tested against -- their element operations
 // and, since it runs the same single-reduction PCG (kernels/opencl/pcg.cl) on the same projected
-// system, their iterations -- so it favours clarity over speed.
+// system, their iterations -- so it favours clarity over speed. Its per-element passes run on the
+// host's threads (kElementChunk); every sum over elements is made in element order, so its answers
+// do not depend on the threads.
 //
 // Precision: SolverDesc::precision is accepted and ignored; this device always computes in double.
 // Rotation: every RotationMethod is computed here by the SVD-based polar decomposition
