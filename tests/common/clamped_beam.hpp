@@ -1,6 +1,5 @@
 // The clamped cantilever the preconditioner tests share (tests/solve/test_amg.cpp,
-// tests/solve/test_warped_cholesky.cpp): 1 x 0.1 x 0.1 m, E = 1e6 Pa, its free dofs, and random
-// right-hand sides.
+// tests/solve/test_warped_cholesky.cpp): 1 x 0.1 x 0.1 m, E = 1e6 Pa, and its free dofs.
 #pragma once
 
 #include "model/problem.hpp"
@@ -8,7 +7,6 @@
 
 #include <Eigen/Core>
 
-#include <random>
 #include <vector>
 
 namespace corofem::test {
@@ -29,15 +27,6 @@ inline std::vector<Eigen::Index> freeDofsOf(const detail::Problem& p) {
   for (std::size_t d = 0; d < p.dofCount(); ++d)
     if (!p.constrained[d]) dofs.push_back(static_cast<Eigen::Index>(d));
   return dofs;
-}
-
-/// n entries uniform in [-1, 1], reproducible from the seed.
-inline Eigen::VectorXd uniformRandom(std::size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-  return v;
 }
 
 }  // namespace corofem::test

@@ -3,6 +3,7 @@
 // vectors and rotations, and a bitwise comparison of vectors.
 #pragma once
 
+#include "common/random_vector.hpp"
 #include "model/element.hpp"
 #include "model/problem.hpp"
 
@@ -40,15 +41,6 @@ inline detail::Problem makeProblem(const TetMesh& mesh, double E = 1e5, double n
   p.constrained.assign(3 * n, 0);
   p.initialVelocity = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * n));
   return p;
-}
-
-/// n entries uniform in [-1, 1], reproducible from the seed.
-inline Eigen::VectorXd randomVector(std::size_t n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(static_cast<Eigen::Index>(n));
-  for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = u(rng);
-  return v;
 }
 
 /// Whether two vectors hold the same bits (same size, memcmp-equal).

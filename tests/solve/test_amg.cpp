@@ -9,6 +9,7 @@
 #include "model/element.hpp"
 #include "precond/amg.hpp"
 #include "common/clamped_beam.hpp"
+#include "common/random_vector.hpp"
 #include "reference/small_meshes.hpp"
 #include "util/parallel.hpp"
 
@@ -26,7 +27,7 @@ using namespace corofem;
 using namespace corofem::detail;
 using corofem::test::clampedBeam;
 using corofem::test::freeDofsOf;
-using corofem::test::uniformRandom;
+using corofem::test::randomVector;
 
 namespace {
 
@@ -86,7 +87,7 @@ TEST(WarpedAmg, IsSymmetricPositiveDefiniteWithSeveralLevels) {
   EXPECT_EQ(f.amg.levelSizes().front(), f.A.rows());
   const auto n = static_cast<std::size_t>(f.A.rows());
   for (unsigned seed = 1; seed <= 3; ++seed) {
-    const Eigen::VectorXd a = uniformRandom(n, seed), b = uniformRandom(n, seed + 10);
+    const Eigen::VectorXd a = randomVector(n, seed), b = randomVector(n, seed + 10);
     const Eigen::VectorXd Ma = f.apply(a), Mb = f.apply(b);
     EXPECT_NEAR(a.dot(Mb), b.dot(Ma), 1e-10 * a.norm() * Mb.norm());
     EXPECT_GT(a.dot(Ma), 0.0);
@@ -100,7 +101,7 @@ TEST(WarpedAmg, IterationsStayFewWhereJacobiNeedsHundredsAndDoNotGrowWithTheMesh
     int k = 0;
     for (int cells : {20, 40}) {
       Fixture f(cells, m, Mat3::Identity());
-      const Eigen::VectorXd b = uniformRandom(static_cast<std::size_t>(f.A.rows()), 7);
+      const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(f.A.rows()), 7);
       const int jacobi = pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return Eigen::VectorXd(f.diagInv.cwiseProduct(r)); });
       const int amg = pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return f.apply(r); });
       EXPECT_LE(amg, 30) << cells << " cells, m = " << m;
@@ -116,7 +117,7 @@ TEST(WarpedAmg, TheWarpKeepsARotatedBodyAsEasyAsAtRest) {
   std::mt19937 rng(3);
   const Mat3 R = test::randomRotation(rng);
   Fixture rest(30, 0.0, Mat3::Identity()), turned(30, 0.0, R);
-  const Eigen::VectorXd b = uniformRandom(static_cast<std::size_t>(rest.A.rows()), 5);
+  const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(rest.A.rows()), 5);
   const int atRest = pcgIterations(rest.A, b, [&](const Eigen::VectorXd& r) { return rest.apply(r); });
   const int unwarped = pcgIterations(turned.A, b, [&](const Eigen::VectorXd& r) { return turned.apply(r); });
   Eigen::VectorXd x = turned.p.restPositions;
@@ -138,14 +139,14 @@ TEST(WarpedAmg, PartlyConstrainedNodesAndTinyBodies) {
   f.diagInv = f.A.diagonal().cwiseInverse();
   f.blocksInverse = nodeBlocks(f.A, freeDofsOf(p)).second;
   f.amg.build(f.A, freeDofsOf(p), p.restPositions, p.mesh.nodeCount());
-  const Eigen::VectorXd b = uniformRandom(static_cast<std::size_t>(f.A.rows()), 9);
+  const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(f.A.rows()), 9);
   EXPECT_LE(pcgIterations(f.A, b, [&](const Eigen::VectorXd& r) { return f.apply(r); }), 30);
 
   // A body below the coarsest size: smoothing above the direct solve of its rest operator.
   Fixture tiny(2, kBackwardEulerMass, Mat3::Identity());
   EXPECT_EQ(tiny.amg.levelSizes().size(), 2u);
   EXPECT_EQ(tiny.amg.levelSizes()[0], tiny.amg.levelSizes()[1]);
-  const Eigen::VectorXd bt = uniformRandom(static_cast<std::size_t>(tiny.A.rows()), 4);
+  const Eigen::VectorXd bt = randomVector(static_cast<std::size_t>(tiny.A.rows()), 4);
   EXPECT_LE(pcgIterations(tiny.A, bt, [&](const Eigen::VectorXd& r) { return tiny.apply(r); }), 1);
 }
 
@@ -158,8 +159,8 @@ TEST(WarpedAmg, TheReferenceBackendSolvesADeformedBeamInFewIterationsToTheSameAn
     x[3 * n] = radius * std::sin(s);
     x[3 * n + 2] = 1.0 - radius * std::cos(s);
   }
-  x += 1e-3 * uniformRandom(p.dofCount(), 11);
-  const Eigen::VectorXd b = uniformRandom(p.dofCount(), 12);
+  x += 1e-3 * randomVector(p.dofCount(), 11);
+  const Eigen::VectorXd b = randomVector(p.dofCount(), 12);
   const SystemCoeffs c{kBackwardEulerMass, 0.0, 1.0};
   SolverDesc s;
   s.tolerance = 1e-10;
@@ -287,7 +288,7 @@ TEST(WarpedAmg, AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
   const AmgMatrix blocksInverse = nodeBlocks(A0, after).second;
   fine.blockInverse = [&](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = blocksInverse * v; };
   auto iterations = [&](const WarpedAmg& amg) {
-    return pcgIterations(A0, uniformRandom(after.size(), 5), [&](const Eigen::VectorXd& r) {
+    return pcgIterations(A0, randomVector(after.size(), 5), [&](const Eigen::VectorXd& r) {
       Eigen::VectorXd z;
       amg.apply(fine, r, z);
       return z;
@@ -614,7 +615,7 @@ TEST(DeviceAmg, BlockRowsHoldEveryEntryInItsBlockAndTheProductIsTheMatrixs) {
   ASSERT_EQ(b.values.size(), 18 * b.cols.size() + 8);
   for (std::size_t k = 18 * b.cols.size(); k < b.values.size(); ++k) EXPECT_EQ(b.values[k], 0.0);
   const Eigen::MatrixXd dense = Eigen::MatrixXd(m);
-  const Eigen::VectorXd x = uniformRandom(static_cast<std::size_t>(cols), 8);
+  const Eigen::VectorXd x = randomVector(static_cast<std::size_t>(cols), 8);
   Eigen::VectorXd y = Eigen::VectorXd::Zero(rows);
   std::size_t blocksHeld = 0;
   for (std::size_t i = 0; i < b.blockRows; ++i) {

@@ -6,6 +6,7 @@
 #include "model/element.hpp"
 #include "precond/warped_cholesky.hpp"
 #include "common/clamped_beam.hpp"
+#include "common/random_vector.hpp"
 #include "reference/small_meshes.hpp"
 #include "util/error.hpp"
 
@@ -20,7 +21,7 @@ using namespace corofem;
 using namespace corofem::detail;
 using corofem::test::clampedBeam;
 using corofem::test::freeDofsOf;
-using corofem::test::uniformRandom;
+using corofem::test::randomVector;
 
 namespace {
 
@@ -34,7 +35,7 @@ Eigen::VectorXd curled(const Problem& p, double turn, unsigned seed) {
     x[3 * n] = radius * std::sin(s);
     x[3 * n + 2] = 1.0 / turn - radius * std::cos(s);
   }
-  return x + 1e-4 * uniformRandom(p.dofCount(), seed);
+  return x + 1e-4 * randomVector(p.dofCount(), seed);
 }
 
 /// One linear solve of A x = b from zero on the reference backend with the preconditioner `pre` at
@@ -63,7 +64,7 @@ TEST(WarpedCholesky, ABodyTurnedRigidlyIsSolvedInOneIteration) {
   const Mat3 Q = test::randomRotation(rng);
   Eigen::VectorXd x = p.restPositions;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n) x.segment<3>(3 * n) = Q * x.segment<3>(3 * n);
-  const Eigen::VectorXd b = uniformRandom(p.dofCount(), 6);
+  const Eigen::VectorXd b = randomVector(p.dofCount(), 6);
   for (const SystemCoeffs& c : {SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, SystemCoeffs{0.0, 0.0, 1.0},
                                 SystemCoeffs{kBackwardEulerMass, 60.0, 1.0}}) {
     Eigen::VectorXd warped, diagonal;
@@ -81,7 +82,7 @@ TEST(WarpedCholesky, ABodyTurnedRigidlyIsSolvedInOneIteration) {
   body.ensure(p, free, kBackwardEulerMass, 1.0);
   auto backend = test::createReferenceBackend(p, SolverDesc{});
   backend->setPositions(x);
-  const Eigen::VectorXd r = uniformRandom(free.size(), 8);
+  const Eigen::VectorXd r = randomVector(free.size(), 8);
   auto residual = [&](const Eigen::VectorXd& z) {  // |A_t z - r| / |r| on the free dofs
     Eigen::VectorXd full = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(p.dofCount())), y;
     for (std::size_t i = 0; i < free.size(); ++i) full[free[i]] = z[static_cast<Eigen::Index>(i)];
@@ -105,7 +106,7 @@ TEST(WarpedCholesky, ACurledBeamTakesFewIterationsWhereJacobiTakesHundredsToTheS
   for (Formulation f : {Formulation::Corotational, Formulation::StVenantKirchhoff}) {
     const Problem p = clampedBeam(40, f);
     const Eigen::VectorXd x = curled(p, f == Formulation::Corotational ? 1.0 : 0.1, 11);
-    const Eigen::VectorXd b = uniformRandom(p.dofCount(), 12);
+    const Eigen::VectorXd b = randomVector(p.dofCount(), 12);
     const SystemCoeffs c{kBackwardEulerMass, 0.0, 1.0};
     Eigen::VectorXd warped, diagonal;
     const LinearSolveStats sw = solve(p, PreconditionerKind::WarpedCholesky, x, c, b, warped);
@@ -119,7 +120,7 @@ TEST(WarpedCholesky, ACurledBeamTakesFewIterationsWhereJacobiTakesHundredsToTheS
   const Problem p = clampedBeam(20, Formulation::Linear);
   Eigen::VectorXd answer;
   const LinearSolveStats s = solve(p, PreconditionerKind::WarpedCholesky, curled(p, 1.0, 3),
-                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, uniformRandom(p.dofCount(), 4), answer);
+                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, randomVector(p.dofCount(), 4), answer);
   EXPECT_TRUE(s.converged);
   EXPECT_LE(s.iterations, 1);
 }
@@ -135,7 +136,7 @@ TEST(WarpedCholesky, PartlyConstrainedNodesKeepTheirFreeDofs) {
       if (std::abs(p.mesh.nodes[3 * n] - 1.0) < 1e-12)
         for (int c = 3 - constrainedDofs; c < 3; ++c) p.constrained[3 * n + c] = 1;
     for (double turn : {0.5, 0.5 * 3.14159265358979}) {
-      const Eigen::VectorXd x = curled(p, turn, 13), b = uniformRandom(p.dofCount(), 14);
+      const Eigen::VectorXd x = curled(p, turn, 13), b = randomVector(p.dofCount(), 14);
       const SystemCoeffs c{kBackwardEulerMass, 0.0, 1.0};
       Eigen::VectorXd warped, diagonal;
       const LinearSolveStats sw = solve(p, PreconditionerKind::WarpedCholesky, x, c, b, warped);
@@ -157,7 +158,7 @@ TEST(WarpedCholesky, AGrabThroughTheDeviceMakesAFactorAndTheReleaseTakesBackTheO
   s.preconditioner = PreconditionerKind::Diagonal;
   s.maxIterations = 5000;
   auto diagonal = test::createReferenceBackend(p, s);
-  const Eigen::VectorXd x = curled(p, 0.4, 21), b = uniformRandom(p.dofCount(), 22);
+  const Eigen::VectorXd x = curled(p, 0.4, 21), b = randomVector(p.dofCount(), 22);
   std::vector<std::uint8_t> grabbed = p.constrained;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] > 1.0 - 1e-12)
@@ -216,7 +217,7 @@ TEST(WarpedCholesky, AMaterialChangeReachesTheFactor) {
   s.tolerance = 1e-10;
   auto backend = test::createReferenceBackend(p, s);
   backend->setPositions(p.restPositions);
-  const Eigen::VectorXd b = uniformRandom(p.dofCount(), 15);
+  const Eigen::VectorXd b = randomVector(p.dofCount(), 15);
   Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
   EXPECT_LE(backend->solve(SystemCoeffs{100.0, 0.0, 1.0}, b, x).iterations, 1);
   p.lame = lameFromYoungPoisson(5e7, 0.3);
@@ -240,7 +241,7 @@ TEST(WarpedCholesky, StaticsOfABodyNothingHoldsFailsWithTheFix) {
     Eigen::VectorXd answer;
     try {
       solve(p, PreconditionerKind::WarpedCholesky, p.restPositions, SystemCoeffs{0.0, 0.0, 1.0},
-            uniformRandom(p.dofCount(), 16), answer);
+            randomVector(p.dofCount(), 16), answer);
       ADD_FAILURE() << what << ": a singular rest system was factored";
     } catch (const Error& e) {
       EXPECT_EQ(e.code(), ErrorCode::SolveFailed) << what;
@@ -255,7 +256,7 @@ TEST(WarpedCholesky, StaticsOfABodyNothingHoldsFailsWithTheFix) {
     // With mass (dynamics) the free body factors and is solved at once (no rigid rotation: W = I).
     Eigen::VectorXd answer;
     LinearSolveStats s = solve(p, PreconditionerKind::WarpedCholesky, p.restPositions,
-                               SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, uniformRandom(p.dofCount(), 17), answer);
+                               SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, randomVector(p.dofCount(), 17), answer);
     EXPECT_TRUE(s.converged);
     EXPECT_LE(s.iterations, 1);
     // Held at one node: it can still turn about it.
@@ -280,7 +281,7 @@ TEST(WarpedCholesky, StaticsOfABodyNothingHoldsFailsWithTheFix) {
   const Problem clamped = clampedBeam(20);
   Eigen::VectorXd answer;
   EXPECT_TRUE(solve(clamped, PreconditionerKind::WarpedCholesky, clamped.restPositions, SystemCoeffs{0.0, 0.0, 1.0},
-                    uniformRandom(clamped.dofCount(), 18), answer)
+                    randomVector(clamped.dofCount(), 18), answer)
                   .converged);
 }
 
@@ -289,7 +290,7 @@ TEST(WarpedCholesky, ABodyWithEveryDofConstrainedHasNothingToSolve) {
   std::fill(p.constrained.begin(), p.constrained.end(), std::uint8_t{1});
   Eigen::VectorXd answer;
   const LinearSolveStats s = solve(p, PreconditionerKind::WarpedCholesky, p.restPositions,
-                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, uniformRandom(p.dofCount(), 19), answer);
+                                   SystemCoeffs{kBackwardEulerMass, 0.0, 1.0}, randomVector(p.dofCount(), 19), answer);
   EXPECT_TRUE(s.converged);
   EXPECT_TRUE(answer.isZero(0.0));
   BodyCholesky body;
@@ -322,7 +323,7 @@ TEST(WarpedCholesky, BodiesSolvedTogetherGetTheBitsEachGetsAlone) {
   // same bits as each on a device of its own.
   const Problem a = clampedBeam(16), b = clampedBeam(10);
   const Eigen::VectorXd xa = curled(a, 0.6, 31), xb = curled(b, 0.2, 32);
-  const Eigen::VectorXd ba = uniformRandom(a.dofCount(), 33), bb = uniformRandom(b.dofCount(), 34);
+  const Eigen::VectorXd ba = randomVector(a.dofCount(), 33), bb = randomVector(b.dofCount(), 34);
   SolverDesc s;
   s.preconditioner = PreconditionerKind::WarpedCholesky;
   s.tolerance = 1e-9;
