@@ -47,25 +47,29 @@ class OpenCLProgramCache : public ::testing::TestWithParam<DeviceCase> {
   std::string selector() const { return std::to_string(GetParam().device); }
 };
 
+// The disk cache's tests ask for it on every device (BinaryCache::Always): PoCL's devices, the only
+// ones in CI, do not use it by default (cachesBinaries; the tests after these).
+constexpr auto kAlways = detail::cl::BinaryCache::Always;
+
 TEST_P(OpenCLProgramCache, SecondBuildOnANewContextComesFromDisk) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   ScopedCacheDir cache(test::tempDir() / "kernels");
   auto ctx1 = detail::cl::Context::create(selector());
-  const auto first = detail::cl::buildProgram(*ctx1, "tiny", kTinySource, "-DTINY=1");
+  const auto first = detail::cl::buildProgram(*ctx1, "tiny", kTinySource, "-DTINY=1", kAlways);
   EXPECT_EQ(first.origin, detail::cl::ProgramOrigin::Compiled);
   ASSERT_FALSE(first.cacheFile.empty());
   EXPECT_TRUE(fs::exists(first.cacheFile)) << first.cacheFile;
   EXPECT_EQ(fs::path(first.cacheFile).parent_path(), cache.dir());
   // Same context: memory.
-  EXPECT_EQ(detail::cl::buildProgram(*ctx1, "tiny", kTinySource, "-DTINY=1").origin,
+  EXPECT_EQ(detail::cl::buildProgram(*ctx1, "tiny", kTinySource, "-DTINY=1", kAlways).origin,
             detail::cl::ProgramOrigin::Memory);
   // New context: the binary on disk.
   auto ctx2 = detail::cl::Context::create(selector());
-  const auto second = detail::cl::buildProgram(*ctx2, "tiny", kTinySource, "-DTINY=1");
+  const auto second = detail::cl::buildProgram(*ctx2, "tiny", kTinySource, "-DTINY=1", kAlways);
   EXPECT_EQ(second.origin, detail::cl::ProgramOrigin::Disk);
   EXPECT_EQ(second.cacheFile, first.cacheFile);
   // Other options or source: another file.
-  const auto other = detail::cl::buildProgram(*ctx2, "tiny", kTinySource, "-DTINY=2");
+  const auto other = detail::cl::buildProgram(*ctx2, "tiny", kTinySource, "-DTINY=2", kAlways);
   EXPECT_EQ(other.origin, detail::cl::ProgramOrigin::Compiled);
   EXPECT_NE(other.cacheFile, first.cacheFile);
 }
@@ -74,7 +78,7 @@ TEST_P(OpenCLProgramCache, CorruptedCacheFileIsRebuiltNotFatal) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   ScopedCacheDir cache(test::tempDir() / "kernels");
   auto ctx1 = detail::cl::Context::create(selector());
-  const auto first = detail::cl::buildProgram(*ctx1, "tiny", kTinySource, "");
+  const auto first = detail::cl::buildProgram(*ctx1, "tiny", kTinySource, "", kAlways);
   ASSERT_TRUE(fs::exists(first.cacheFile));
   const auto goodSize = fs::file_size(first.cacheFile);
   for (const std::string garbage : {std::string("not a binary at all"), std::string()}) {
@@ -83,35 +87,57 @@ TEST_P(OpenCLProgramCache, CorruptedCacheFileIsRebuiltNotFatal) {
       out << garbage;
     }
     auto ctx = detail::cl::Context::create(selector());
-    const auto again = detail::cl::buildProgram(*ctx, "tiny", kTinySource, "");
+    const auto again = detail::cl::buildProgram(*ctx, "tiny", kTinySource, "", kAlways);
     EXPECT_EQ(again.origin, detail::cl::ProgramOrigin::Compiled);
     ASSERT_NE(again.program, nullptr);
     // Rewritten with a real binary (the size may differ by a few bytes between compilations),
     // which the next context loads.
     EXPECT_GT(fs::file_size(first.cacheFile), goodSize / 2) << "the cache file was rewritten";
     auto next = detail::cl::Context::create(selector());
-    EXPECT_EQ(detail::cl::buildProgram(*next, "tiny", kTinySource, "").origin, detail::cl::ProgramOrigin::Disk);
+    EXPECT_EQ(detail::cl::buildProgram(*next, "tiny", kTinySource, "", kAlways).origin,
+              detail::cl::ProgramOrigin::Disk);
   }
 }
 
-TEST_P(OpenCLProgramCache, BackendCreationHitsTheDiskCache) {
+TEST_P(OpenCLProgramCache, BackendCreationUsesTheDiskCacheWhereTheDeviceCachesBinaries) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   ScopedCacheDir cache(test::tempDir() / "kernels");
   const detail::Problem p = test::makeProblem(test::boxMesh(2, 1, 1));
   SolverDesc s;
   s.precision = GetParam().precision;
   auto b1 = test::openclOn(p, s, detail::cl::Context::create(selector()));
-  EXPECT_EQ(b1->programOrigin(), detail::cl::ProgramOrigin::Compiled);
-  EXPECT_TRUE(fs::exists(b1->programBuild().cacheFile));
   auto b2 = test::openclOn(p, s, detail::cl::Context::create(selector()));
-  EXPECT_EQ(b2->programOrigin(), detail::cl::ProgramOrigin::Disk);
-  // And the program from disk computes the same forces.
+  EXPECT_EQ(b1->programOrigin(), detail::cl::ProgramOrigin::Compiled);
+  const auto info = detail::cl::listDevices().at(static_cast<std::size_t>(GetParam().device));
+  if (detail::cl::cachesBinaries(info)) {
+    EXPECT_TRUE(fs::exists(b1->programBuild().cacheFile));
+    EXPECT_EQ(b2->programOrigin(), detail::cl::ProgramOrigin::Disk);
+  } else {
+    // PoCL: no binary asked for (it would compile every kernel of the program) and none written;
+    // the second context's build is PoCL's, from its own cache.
+    EXPECT_EQ(b1->programBuild().cacheFile, "");
+    EXPECT_EQ(b2->programOrigin(), detail::cl::ProgramOrigin::Compiled);
+    EXPECT_TRUE(!fs::exists(cache.dir()) || fs::is_empty(cache.dir())) << cache.dir();
+  }
+  // Either way both compute the same forces.
   Eigen::VectorXd x = p.restPositions * 1.01, f1, f2;
   b1->setPositions(x);
   b2->setPositions(x);
   b1->internalForces(f1);
   b2->internalForces(f2);
   EXPECT_EQ(f1, f2);
+}
+
+TEST_P(OpenCLProgramCache, PoclKeepsItsOwnCacheAndOthersOurs) {
+  COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
+  const auto info = detail::cl::listDevices().at(static_cast<std::size_t>(GetParam().device));
+  const bool pocl = info.platformName.find("Portable Computing Language") != std::string::npos;
+  EXPECT_EQ(detail::cl::cachesBinaries(info), !pocl) << info.describe();
+  detail::cl::DeviceInfo other = info;
+  other.platformName = "NVIDIA CUDA";
+  EXPECT_TRUE(detail::cl::cachesBinaries(other));
+  other.platformName = "Portable Computing Language";
+  EXPECT_FALSE(detail::cl::cachesBinaries(other));
 }
 
 TEST_P(OpenCLProgramCache, BuildFailureReportsTheCompilerLog) {

@@ -140,8 +140,12 @@ void storeBinary(Context& ctx, cl_program program, const std::string& file) {
 
 }  // namespace
 
+bool cachesBinaries(const DeviceInfo& device) {
+  return device.platformName.find("Portable Computing Language") == std::string::npos;
+}
+
 ProgramBuild buildProgram(Context& ctx, const std::string& label, const std::string& source,
-                          const std::string& options) {
+                          const std::string& options, BinaryCache cache) {
   const DeviceInfo& dev = ctx.info();
   std::uint64_t h = fnv1a64(dev.name);
   h = fnv1a64(dev.driverVersion, h);
@@ -153,7 +157,7 @@ ProgramBuild buildProgram(Context& ctx, const std::string& label, const std::str
   const std::string key = keyStream.str();
 
   ProgramBuild result;
-  const std::string dir = kernelCacheDirectory();
+  const std::string dir = (cache == BinaryCache::Always || cachesBinaries(dev)) ? kernelCacheDirectory() : "";
   if (!dir.empty()) result.cacheFile = (fs::path(dir) / (key + ".clbin")).string();
 
   if (cl_program p = ctx.findProgram(key)) {

@@ -3,6 +3,7 @@
 // Disk cache: the kernels/ folder of the cache folder (util/cache_dir.hpp: $COROFEM_CACHE_DIR, whose
 // value "off" disables it, else $XDG_CACHE_HOME/corofem or ~/.cache/corofem); one file per (device
 // name, driver version, options, source hash). A cache file that does not load is rebuilt from source and overwritten, never fatal.
+// PoCL's devices get no file here (cachesBinaries): PoCL keeps its own cache of what it compiled.
 #pragma once
 
 #include "backends/opencl/cl_context.hpp"
@@ -25,6 +26,18 @@ struct ProgramBuild {
   std::string cacheFile;         ///< the disk cache file for this program ("" when disabled)
 };
 
+/// Whether corofem keeps the device's program binaries on disk. Not on PoCL ("Portable Computing
+/// Language"): asking PoCL for a program's binary makes it compile every kernel of the program for
+/// any work-group size, while a launch compiles only the kernel launched, for its size; and PoCL
+/// caches both the program and those kernels itself ($POCL_CACHE_DIR, else ~/.cache/pocl). A
+/// 200-tet beam's first `corofem run` on empty caches took 16 s with the binaries, 2.7 s without
+/// (docs/performance.md, "PoCL's cold start").
+bool cachesBinaries(const DeviceInfo& device);
+
+/// Where buildProgram looks for and keeps the program's binary: Auto follows cachesBinaries;
+/// Always uses the disk cache on every device (the tests of the disk cache, on PoCL).
+enum class BinaryCache { Auto, Always };
+
 /// The on-disk cache directory, "" when disabled or no home directory is known.
 std::string kernelCacheDirectory();
 
@@ -36,9 +49,9 @@ std::string corofemProgramSource();
 std::uint64_t fnv1a64(const std::string& text, std::uint64_t seed = kFnv1aOffset);
 
 /// Returns the program built from `source` with `options` on ctx: from the context's memory cache,
-/// else from the disk cache, else compiled. Throws Error(DeviceError) with the compiler's build log
-/// naming `label` when compilation fails.
+/// else from the disk cache (where `cache` and cachesBinaries allow it), else compiled. Throws
+/// Error(DeviceError) with the compiler's build log naming `label` when compilation fails.
 ProgramBuild buildProgram(Context& ctx, const std::string& label, const std::string& source,
-                          const std::string& options);
+                          const std::string& options, BinaryCache cache = BinaryCache::Auto);
 
 }  // namespace corofem::detail::cl
