@@ -3,7 +3,8 @@
 # headers and glslc build the Vulkan backend; mesa-vulkan-drivers is lavapipe, its CPU device; the Khronos
 # validation layers check the Vulkan tests that run on an application-made device). Run as root
 # (or with sudo available). Installs nothing when everything is already there. clang-14 and its
-# runtime (libFuzzer, the sanitizers) build the fuzz targets (tests/fuzz/run_fuzz.sh).
+# runtime (libFuzzer, the sanitizers) build the fuzz targets (tests/fuzz/run_fuzz.sh). MinGW-w64's g++
+# checks that the library compiles for Windows (tests/portability/windows_syntax.sh).
 set -euo pipefail
 
 packages=(
@@ -14,6 +15,7 @@ packages=(
   libvulkan-dev glslc mesa-vulkan-drivers vulkan-validationlayers
   python3 python3-matplotlib python3-numpy python3-meshio
   clang-14 libclang-rt-14-dev
+  g++-mingw-w64-x86-64-posix
 )
 
 missing=()

@@ -10,37 +10,125 @@
 #include <limits>
 #include <string_view>
 
+#ifdef _WIN32
+#include <filesystem>
+#include <fstream>
+#else
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#endif
 
 namespace corofem::mesh {
 
 namespace {
 
-/// Closes the descriptor when the read ends, by return or by throw.
-class Descriptor {
+/// What a path that is not a regular file is, for the error.
+enum class Kind { Directory, Fifo, CharacterDevice, BlockDevice, Socket, Other };
+
+[[noreturn]] void failNotRegular(const std::string& name, Kind kind) {
+  const char* words = kind == Kind::Directory         ? "a directory"
+                      : kind == Kind::Fifo            ? "a FIFO (a named pipe)"
+                      : kind == Kind::CharacterDevice ? "a character device"
+                      : kind == Kind::BlockDevice     ? "a block device"
+                      : kind == Kind::Socket          ? "a socket"
+                                                      : "not a regular file";
+  detail::fail(ErrorCode::BadInput, "cannot read ", name, ": it is ", words,
+               ", not a regular file; give the path of a file (corofem reads inputs from regular files only, "
+               "so save piped or generated data to a file first)");
+}
+
+#ifndef _WIN32
+/// An input file open for reading (POSIX). The kind checked is the opened file's own (fstat), so
+/// nothing can swap the path between the check and the read. Closed when the read ends, by return
+/// or by throw.
+class InputSource {
  public:
-  explicit Descriptor(int fd) : fd_(fd) {}
-  Descriptor(const Descriptor&) = delete;
-  Descriptor& operator=(const Descriptor&) = delete;
-  ~Descriptor() {
-    if (fd_ >= 0) ::close(fd_);
+  InputSource(const std::string& path, const std::string& name, const std::string& openHint) : name_(name) {
+    // O_NONBLOCK: opening a FIFO without a writer would otherwise wait forever. Regular files ignore it.
+    fd_ = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
+    if (fd_ < 0) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", std::strerror(errno), openHint);
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0) {
+      const int e = errno;
+      ::close(fd_);
+      detail::fail(ErrorCode::IoError, "cannot read ", name, ": ", std::strerror(e));
+    }
+    if (!S_ISREG(st.st_mode)) {
+      ::close(fd_);
+      failNotRegular(name, S_ISDIR(st.st_mode)    ? Kind::Directory
+                           : S_ISFIFO(st.st_mode) ? Kind::Fifo
+                           : S_ISCHR(st.st_mode)  ? Kind::CharacterDevice
+                           : S_ISBLK(st.st_mode)  ? Kind::BlockDevice
+                           : S_ISSOCK(st.st_mode) ? Kind::Socket
+                                                  : Kind::Other);
+    }
+    size_ = static_cast<std::uint64_t>(st.st_size);
   }
-  int get() const { return fd_; }
+  InputSource(const InputSource&) = delete;
+  InputSource& operator=(const InputSource&) = delete;
+  ~InputSource() { ::close(fd_); }
+
+  std::uint64_t size() const { return size_; }
+
+  /// Reads up to n bytes into `to`; 0 at the end of the file. Throws IoError naming the file.
+  std::size_t read(char* to, std::size_t n) {
+    for (;;) {
+      const ssize_t got = ::read(fd_, to, n);
+      if (got >= 0) return static_cast<std::size_t>(got);
+      if (errno != EINTR) detail::fail(ErrorCode::IoError, "cannot read ", name_, ": ", std::strerror(errno));
+    }
+  }
 
  private:
-  int fd_;
+  std::string name_;
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
 };
+#else
+/// An input file open for reading (Windows): its kind from std::filesystem, then a binary
+/// std::ifstream. The path is UTF-8, as everywhere in corofem. Compiled in CI by MinGW-w64
+/// (tests/portability/), not run there.
+class InputSource {
+ public:
+  InputSource(const std::string& path, const std::string& name, const std::string& openHint) : name_(name) {
+    namespace fs = std::filesystem;
+    const fs::path p = fs::u8path(path);
+    std::error_code ec;
+    const fs::file_status status = fs::status(p, ec);
+    if (status.type() == fs::file_type::not_found)
+      detail::fail(ErrorCode::IoError, "cannot open ", name, ": No such file or directory", openHint);
+    if (ec) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", ec.message(), openHint);
+    switch (status.type()) {
+      case fs::file_type::regular: break;
+      case fs::file_type::directory: failNotRegular(name, Kind::Directory);
+      case fs::file_type::fifo: failNotRegular(name, Kind::Fifo);
+      case fs::file_type::character: failNotRegular(name, Kind::CharacterDevice);
+      case fs::file_type::block: failNotRegular(name, Kind::BlockDevice);
+      case fs::file_type::socket: failNotRegular(name, Kind::Socket);
+      default: failNotRegular(name, Kind::Other);
+    }
+    in_.open(p, std::ios::binary);
+    if (!in_) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", std::strerror(errno), openHint);
+    size_ = fs::file_size(p, ec);
+    if (ec) detail::fail(ErrorCode::IoError, "cannot read ", name, ": ", ec.message());
+  }
 
-const char* kindOf(mode_t mode) {
-  if (S_ISDIR(mode)) return "a directory";
-  if (S_ISFIFO(mode)) return "a FIFO (a named pipe)";
-  if (S_ISCHR(mode)) return "a character device";
-  if (S_ISBLK(mode)) return "a block device";
-  if (S_ISSOCK(mode)) return "a socket";
-  return "not a regular file";
-}
+  std::uint64_t size() const { return size_; }
+
+  /// Reads up to n bytes into `to`; 0 at the end of the file. Throws IoError naming the file.
+  std::size_t read(char* to, std::size_t n) {
+    in_.read(to, static_cast<std::streamsize>(n));
+    if (in_.bad()) detail::fail(ErrorCode::IoError, "cannot read ", name_, ": ", std::strerror(errno));
+    return static_cast<std::size_t>(in_.gcount());
+  }
+
+ private:
+  std::string name_;
+  std::ifstream in_;
+  std::uint64_t size_ = 0;
+};
+#endif
 
 [[noreturn]] void failTooLarge(const std::string& name, const std::string& what, std::uint64_t limit,
                                const LimitName& limitName) {
@@ -88,36 +176,23 @@ std::string readInputFile(const std::string& path, const std::string& name, cons
                           const InputLimits& limits, InputKind kind) {
   const LimitName& limitName = kind == InputKind::Scene ? kMaxSceneBytes : kMaxInputBytes;
   const std::uint64_t limit = kind == InputKind::Scene ? limits.maxSceneBytes : limits.maxInputBytes;
-  // O_NONBLOCK: opening a FIFO without a writer would otherwise wait forever. Regular files ignore it.
-  const Descriptor fd(::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY));
-  if (fd.get() < 0) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", std::strerror(errno), openHint);
-  struct stat st {};
-  if (::fstat(fd.get(), &st) != 0)
-    detail::fail(ErrorCode::IoError, "cannot read ", name, ": ", std::strerror(errno));
-  if (!S_ISREG(st.st_mode))
-    detail::fail(ErrorCode::BadInput, "cannot read ", name, ": it is ", kindOf(st.st_mode),
-                 ", not a regular file; give the path of a file (corofem reads inputs from regular files only, "
-                 "so save piped or generated data to a file first)");
-  const auto size = static_cast<std::uint64_t>(st.st_size);
+  InputSource in(path, name, openHint);
+  const std::uint64_t size = in.size();
   if (size > limit) failTooLarge(name, "it has " + std::to_string(size) + " bytes, more than", limit, limitName);
 
   std::string text(static_cast<std::size_t>(size), '\0');
   std::size_t got = 0;
   for (;;) {
     if (got == text.size()) {
-      // At the size fstat gave: read on in case the file grew, but never past the limit.
+      // At the size the file had when opened: read on in case it grew, but never past the limit.
       if (got > limit) failTooLarge(name, "it grew, while being read, past", limit, limitName);
       // Room for 64 KiB more, or for one byte past the limit (to see that the file passed it).
       const std::uint64_t room = limit - got;
       text.resize(got + static_cast<std::size_t>(room >= (std::uint64_t(1) << 16) ? std::uint64_t(1) << 16 : room + 1));
     }
-    const ssize_t n = ::read(fd.get(), text.data() + got, text.size() - got);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      detail::fail(ErrorCode::IoError, "cannot read ", name, ": ", std::strerror(errno));
-    }
+    const std::size_t n = in.read(text.data() + got, text.size() - got);
     if (n == 0) break;
-    got += static_cast<std::size_t>(n);
+    got += n;
   }
   text.resize(got);
   return text;

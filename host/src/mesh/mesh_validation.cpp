@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <unordered_map>
 #include <utility>
 
@@ -39,8 +40,9 @@ class NodeIdMap {
     const auto& ids = parsed.nodeIds;
     bool consecutive = true;
     for (std::size_t i = 0; i < n && consecutive; ++i) {
-      std::int64_t expected = 0;
-      consecutive = !__builtin_add_overflow(ids[0], std::int64_t(i), &expected) && ids[i] == expected;
+      // ids[0] + i without overflow (i >= 0; standard C++, no compiler builtin: MSVC has none).
+      const auto step = static_cast<std::int64_t>(i);
+      consecutive = ids[0] <= std::numeric_limits<std::int64_t>::max() - step && ids[i] == ids[0] + step;
     }
     if (consecutive) {
       base_ = n ? ids[0] : 0;

@@ -114,9 +114,12 @@ Pool& pool() {
 }  // namespace
 
 namespace {
-/// The CPUs a cgroup quota grants (quota / period, rounded up), 0 where there is none or none can
-/// be read.
+/// The CPUs a Linux cgroup quota grants (quota / period, rounded up), 0 where there is none or none
+/// can be read (and on every other system).
 std::size_t cgroupCpus() {
+#ifndef __linux__
+  return 0;
+#else
   double quota = -1, period = -1;
   if (std::FILE* f = std::fopen("/sys/fs/cgroup/cpu.max", "r")) {  // v2: "max 100000" or "200000 100000"
     char q[32] = {0};
@@ -132,6 +135,7 @@ std::size_t cgroupCpus() {
   }
   if (quota <= 0 || period <= 0) return 0;
   return static_cast<std::size_t>(std::ceil(quota / period));
+#endif
 }
 }  // namespace
 

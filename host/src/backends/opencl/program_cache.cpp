@@ -7,15 +7,16 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <random>
 #include <sstream>
 #include <vector>
 
-#include <unistd.h>
 
 namespace corofem {
 struct EmbeddedSource {
@@ -122,9 +123,11 @@ void storeBinary(Context& ctx, cl_program program, const std::string& file) {
   (void)ctx;
   std::error_code ec;
   fs::create_directories(fs::path(file).parent_path(), ec);
-  // Unique per process and call, so that concurrent test processes never share a temporary file.
-  const std::string tmp = file + ".tmp" + std::to_string(::getpid()) + "-" +
-                          std::to_string(reinterpret_cast<std::uintptr_t>(&bytes));
+  // Unique per process and call, so that concurrent processes never share a temporary file: a
+  // random number drawn once per process, and a count (standard C++: no process id on every platform).
+  static const std::uint64_t processToken = (std::uint64_t(std::random_device{}()) << 32) ^ std::random_device{}();
+  static std::atomic<std::uint64_t> calls{0};
+  const std::string tmp = file + ".tmp" + std::to_string(processToken) + "-" + std::to_string(++calls);
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return;
