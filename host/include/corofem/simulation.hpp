@@ -275,7 +275,8 @@ class Simulation {
 /// "auto"), so that a later Simulation::create does not stall on a cold start: create() and one
 /// step of a copy of the scene, discarded. A step that fails to converge is not an error here; the
 /// scene's errors are (bad input, no device). `seconds`, when given, receives the time it took.
-/// The cache lives in COROFEM_CACHE_DIR (else the user's cache folder); `corofem warmup` runs it.
+/// The cache lives in COROFEM_CACHE_DIR (else the user's cache folder); PoCL's kernels in PoCL's
+/// own cache (POCL_CACHE_DIR, else ~/.cache/pocl). `corofem warmup` runs it.
 Status warmUp(const Scene& scene, const SimulationOptions& options = {}, double* seconds = nullptr);
 
 }  // namespace corofem

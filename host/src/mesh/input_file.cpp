@@ -87,13 +87,13 @@ class InputSource {
 };
 #else
 /// An input file open for reading (Windows): its kind from std::filesystem, then a binary
-/// std::ifstream. The path is UTF-8, as everywhere in corofem. Compiled in CI by MinGW-w64
-/// (tests/portability/), not run there.
+/// std::ifstream. The path converts to fs::path as everywhere else in the library (the active code
+/// page). Compiled in CI by MinGW-w64 (tests/portability/), not run there.
 class InputSource {
  public:
   InputSource(const std::string& path, const std::string& name, const std::string& openHint) : name_(name) {
     namespace fs = std::filesystem;
-    const fs::path p = fs::u8path(path);
+    const fs::path p(path);
     std::error_code ec;
     const fs::file_status status = fs::status(p, ec);
     if (status.type() == fs::file_type::not_found)
@@ -108,8 +108,9 @@ class InputSource {
       case fs::file_type::socket: failNotRegular(name, Kind::Socket);
       default: failNotRegular(name, Kind::Other);
     }
+    errno = 0;  // the standard streams need not set it: a reason only where the C library gave one
     in_.open(p, std::ios::binary);
-    if (!in_) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", std::strerror(errno), openHint);
+    if (!in_) detail::fail(ErrorCode::IoError, "cannot open ", name, ": ", reason(), openHint);
     size_ = fs::file_size(p, ec);
     if (ec) detail::fail(ErrorCode::IoError, "cannot read ", name, ": ", ec.message());
   }
@@ -118,12 +119,15 @@ class InputSource {
 
   /// Reads up to n bytes into `to`; 0 at the end of the file. Throws IoError naming the file.
   std::size_t read(char* to, std::size_t n) {
+    errno = 0;
     in_.read(to, static_cast<std::streamsize>(n));
-    if (in_.bad()) detail::fail(ErrorCode::IoError, "cannot read ", name_, ": ", std::strerror(errno));
+    if (in_.bad()) detail::fail(ErrorCode::IoError, "cannot read ", name_, ": ", reason());
     return static_cast<std::size_t>(in_.gcount());
   }
 
  private:
+  static std::string reason() { return errno ? std::strerror(errno) : "the system gave no reason"; }
+
   std::string name_;
   std::ifstream in_;
   std::uint64_t size_ = 0;

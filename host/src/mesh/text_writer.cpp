@@ -2,6 +2,7 @@
 #include "mesh/text_writer.hpp"
 
 #include "util/error.hpp"
+#include "util/temp_file.hpp"
 
 #include <cerrno>
 #include <cmath>
@@ -40,12 +41,8 @@ void TextWriter::save(const std::string& path) const {
     std::remove(tmp.c_str());
     detail::fail(ErrorCode::IoError, "cannot write ", path, ": ", std::strerror(err), " (disk full?)");
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int renameErr = errno;
-    std::remove(tmp.c_str());
-    detail::fail(ErrorCode::IoError, "cannot write ", path, ": renaming the temporary file failed: ",
-                 std::strerror(renameErr));
-  }
+  if (const std::error_code ec = detail::replaceFile(tmp, path))
+    detail::fail(ErrorCode::IoError, "cannot write ", path, ": renaming the temporary file failed: ", ec.message());
 }
 
 std::string xmlEscape(std::string_view s) {

@@ -4,6 +4,7 @@
 #include "solve/driver.hpp"
 #include "util/cache_dir.hpp"
 #include "util/error.hpp"
+#include "util/temp_file.hpp"
 
 
 #include <nlohmann/json.hpp>
@@ -73,16 +74,16 @@ void writeCache(const std::string& path, const json& j) {
   std::error_code ec;
   fs::create_directories(fs::path(path).parent_path(), ec);
   // Written to a temporary and renamed, so that a concurrent reader never sees half a file.
-  const std::string tmp = path + ".tmp" + std::to_string(static_cast<long long>(
-                                              std::chrono::steady_clock::now().time_since_epoch().count() % 1000000007));
-  {
-    std::ofstream out(tmp);
-    if (!out) return;
-    out << j.dump(2) << '\n';
-    if (!out) return;
+  const std::string tmp = temporaryNameFor(path);
+  std::ofstream out(tmp);
+  if (!out) return;
+  out << j.dump(2) << '\n';
+  out.close();  // the flush that meets a full disk
+  if (!out) {
+    fs::remove(tmp, ec);
+    return;
   }
-  fs::rename(tmp, path, ec);
-  if (ec) fs::remove(tmp, ec);
+  replaceFile(tmp, path);  // a cache not written is only a calibration made again
 }
 
 // ------------------------------------------------------------------ calibration

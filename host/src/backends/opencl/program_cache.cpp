@@ -4,16 +4,15 @@
 #include "util/cache_dir.hpp"
 #include "util/error.hpp"
 #include "util/hash.hpp"
+#include "util/temp_file.hpp"
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
-#include <random>
 #include <sstream>
 #include <vector>
 
@@ -123,11 +122,7 @@ void storeBinary(Context& ctx, cl_program program, const std::string& file) {
   (void)ctx;
   std::error_code ec;
   fs::create_directories(fs::path(file).parent_path(), ec);
-  // Unique per process and call, so that concurrent processes never share a temporary file: a
-  // random number drawn once per process, and a count (standard C++: no process id on every platform).
-  static const std::uint64_t processToken = (std::uint64_t(std::random_device{}()) << 32) ^ std::random_device{}();
-  static std::atomic<std::uint64_t> calls{0};
-  const std::string tmp = file + ".tmp" + std::to_string(processToken) + "-" + std::to_string(++calls);
+  const std::string tmp = temporaryNameFor(file);
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return;
@@ -137,8 +132,7 @@ void storeBinary(Context& ctx, cl_program program, const std::string& file) {
       return;
     }
   }
-  fs::rename(tmp, file, ec);
-  if (ec) fs::remove(tmp, ec);
+  replaceFile(tmp, file);  // best effort: a binary not kept is compiled again next time
 }
 
 }  // namespace

@@ -30,8 +30,8 @@ struct ProgramBuild {
 /// Language"): asking PoCL for a program's binary makes it compile every kernel of the program for
 /// any work-group size, while a launch compiles only the kernel launched, for its size; and PoCL
 /// caches both the program and those kernels itself ($POCL_CACHE_DIR, else ~/.cache/pocl). A
-/// 200-tet beam's first `corofem run` on empty caches took 16 s with the binaries, 2.7 s without
-/// (docs/performance.md, "PoCL's cold start").
+/// 200-tet beam's first `corofem run` on empty caches took 16 s with the binaries, 2.8-3.4 s
+/// without (docs/performance.md, "PoCL's cold start").
 bool cachesBinaries(const DeviceInfo& device);
 
 /// Where buildProgram looks for and keeps the program's binary: Auto follows cachesBinaries;
