@@ -127,14 +127,14 @@ void rotation_svd(in real F[9], out real R[9]) {
 }
 
 /* Higham's R <- (g R + R^-T / g) / 2 from R = F, g = (|R^-1|_F / |R|_F)^(1/2); stops when
- * |R_k+1 - R_k|_F < sqrt(3 eps). */
-void rotation_polar(in real F[9], out real R[9]) {
+ * |R_k+1 - R_k|_F < sqrt(3 eps). False where the SVD path must decide instead (an inverted or
+ * degenerate element, or no convergence): main() calls rotation_svd then. Its one call site there
+ * keeps one copy of it in the compiled shader (every function is inlined): five copies took a
+ * CPU driver's compiler (lavapipe) about 0.4 s at every device's creation. */
+bool rotation_polar(in real F[9], out real R[9]) {
   const real fn2 = norm2_3(F);
   const real detF = det3(F);
-  if (!(detF > real(1e-3) * fn2 * sqrt(fn2) * real(1e-3))) {
-    rotation_svd(F, R);
-    return;
-  }
+  if (!(detF > real(1e-3) * fn2 * sqrt(fn2) * real(1e-3))) return false;
   R = F;
   for (int it = 0; it < kPolarIters; ++it) {
     const real det = det3(R);
@@ -157,9 +157,9 @@ void rotation_polar(in real F[9], out real R[9]) {
       diff2 += (nk - R[k]) * (nk - R[k]);
       R[k] = nk;
     }
-    if (diff2 < real(3) * REAL_EPS) return;
+    if (diff2 < real(3) * REAL_EPS) return true;
   }
-  rotation_svd(F, R);
+  return false;
 }
 
 void quat_to_matrix(in real q[4], out real R[9]) {
@@ -236,24 +236,19 @@ void rotation_quaternion(in real F[9], inout real q[4], out real R[9]) {
   quat_to_matrix(q, R);
 }
 
-/* Gram-Schmidt of F's first two columns, r_3 = r_1 x r_2; degenerate columns take the SVD path. */
-void rotation_qr(in real F[9], out real R[9]) {
+/* Gram-Schmidt of F's first two columns, r_3 = r_1 x r_2; false for degenerate columns, which take
+ * the SVD path (main()). */
+bool rotation_qr(in real F[9], out real R[9]) {
   real r1[3] = real[3](F[0], F[3], F[6]);
   real r2[3] = real[3](F[1], F[4], F[7]);
   const real fn = sqrt(norm2_3(F));
   const real n1 = sqrt(r1[0] * r1[0] + r1[1] * r1[1] + r1[2] * r1[2]);
-  if (!(n1 > real(1e-3) * fn)) {
-    rotation_svd(F, R);
-    return;
-  }
+  if (!(n1 > real(1e-3) * fn)) return false;
   for (int j = 0; j < 3; ++j) r1[j] /= n1;
   const real d = r1[0] * r2[0] + r1[1] * r2[1] + r1[2] * r2[2];
   for (int j = 0; j < 3; ++j) r2[j] -= d * r1[j];
   const real n2 = sqrt(r2[0] * r2[0] + r2[1] * r2[1] + r2[2] * r2[2]);
-  if (!(n2 > real(1e-3) * fn)) {
-    rotation_svd(F, R);
-    return;
-  }
+  if (!(n2 > real(1e-3) * fn)) return false;
   for (int j = 0; j < 3; ++j) r2[j] /= n2;
   R[0] = r1[0];
   R[3] = r1[1];
@@ -264,6 +259,7 @@ void rotation_qr(in real F[9], out real R[9]) {
   R[2] = r1[1] * r2[2] - r1[2] * r2[1];
   R[5] = r1[2] * r2[0] - r1[0] * r2[2];
   R[8] = r1[0] * r2[1] - r1[1] * r2[0];
+  return true;
 }
 
 void main() {
@@ -284,17 +280,18 @@ void main() {
     }
   }
   real R[9];
-  if (pc.rotation == 1u) {
-    rotation_svd(F, R);
-  } else if (pc.rotation == 2u) {
+  bool done = false;  /* false: the SVD path, once (Svd, and Polar's and Qr's fallbacks) */
+  if (pc.rotation == 2u) {
     real q[4] = real[4](quat[e], quat[S + e], quat[2 * S + e], quat[3 * S + e]);
     rotation_quaternion(F, q, R);
     for (uint k = 0u; k < 4u; ++k) quat[k * S + e] = q[k];
+    done = true;
   } else if (pc.rotation == 3u) {
-    rotation_qr(F, R);
-  } else {
-    rotation_polar(F, R);
+    done = rotation_qr(F, R);
+  } else if (pc.rotation != 1u) {
+    done = rotation_polar(F, R);
   }
+  if (!done) rotation_svd(F, R);
   if (has_flag(kFlagWriteR))
     for (uint k = 0u; k < 9u; ++k) rot[k * S + e] = R[k];
   real a[9];
