@@ -23,14 +23,20 @@ trap 'rm -rf "$work"' EXIT
 failed=0
 
 # 1. The search. A conditional's state per nesting level: "ok" where a POSIX header may appear.
-posix='^[[:space:]]*#[[:space:]]*include[[:space:]]*<(unistd|fcntl|pthread|dlfcn|sched|sys/[a-z_]+)\.h>'
+posix='^[[:space:]]*#[[:space:]]*include[[:space:]]*<(unistd|fcntl|pthread|dlfcn|sched|sys/[a-z_]+)[.]h>'
 while IFS= read -r -d '' f; do
   awk -v file="$f" -v posix="$posix" '
+    # "ok": a POSIX branch (a condition that names a POSIX system and negates nothing, or
+    # #ifndef _WIN32); "win": #ifdef _WIN32 or #if defined(_WIN32) alone, whose #else is one.
+    function posixOnly(line) {
+      return line !~ /!/ && line ~ /(__linux__|__unix__|__APPLE__)([^A-Za-z0-9_]|$)/
+    }
     /^[[:space:]]*#[[:space:]]*if/ {
-      ok = ($0 ~ /#[[:space:]]*ifndef[[:space:]]+_WIN32/ || $0 ~ /__linux__/ || $0 ~ /__unix__/ || $0 ~ /__APPLE__/)
-      win = ($0 ~ /#[[:space:]]*ifdef[[:space:]]+_WIN32/ || $0 ~ /#[[:space:]]*if[[:space:]]+defined\(_WIN32\)/)
+      ok = ($0 ~ /#[[:space:]]*ifndef[[:space:]]+_WIN32([^A-Za-z0-9_]|$)/ || posixOnly($0))
+      win = ($0 ~ /#[[:space:]]*ifdef[[:space:]]+_WIN32[[:space:]]*$/ || $0 ~ /#[[:space:]]*if[[:space:]]+defined\(_WIN32\)[[:space:]]*$/)
       depth++; state[depth] = ok; winif[depth] = win; next
     }
+    /^[[:space:]]*#[[:space:]]*elif/ { if (depth) { state[depth] = posixOnly($0); winif[depth] = 0 } next }
     /^[[:space:]]*#[[:space:]]*else/ { if (depth) state[depth] = winif[depth]; next }
     /^[[:space:]]*#[[:space:]]*endif/ { if (depth) depth--; next }
     $0 ~ posix {
@@ -63,11 +69,11 @@ if [[ "$vulkan" == ON ]]; then
   [[ "$opencl" == ON ]] && skip='^$' || skip='/host/src/backends/opencl/'
 fi
 printf '%s\n' "${flags[@]}" > "$work/flags"
-find "$src/host/src" -name '*.cpp' | grep -Ev "$skip" | sort > "$work/files"
+find "$src/host/src" -name '*.cpp' | { grep -Ev "$skip" || true; } | sort > "$work/files"
 echo "windows_syntax.sh: $(wc -l < "$work/files") sources, $cxx (OpenCL $opencl, Vulkan $vulkan)"
 export cxx FLAGS="$work/flags"
 # shellcheck disable=SC2016
-xargs -d '\n' -n 1 -P "$jobs" bash -c '
+xargs -r -d '\n' -n 1 -P "$jobs" bash -c '
   mapfile -t flags < "$FLAGS"
   if ! out=$("$cxx" "${flags[@]}" "$1" 2>&1); then
     printf "FAILED: %s\n%s\n" "$1" "$(grep -m5 -E "error|warning" <<< "$out")"

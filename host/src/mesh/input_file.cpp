@@ -87,7 +87,7 @@ class InputSource {
 };
 #else
 /// An input file open for reading (Windows): its kind from std::filesystem, then a binary
-/// std::ifstream. The path converts to fs::path as everywhere else in the library (the active code
+/// std::ifstream (the kind is the path's, checked before the open: not race-free as on POSIX). The path converts to fs::path as everywhere else in the library (the active code
 /// page). Compiled in CI by MinGW-w64 (tests/portability/), not run there.
 class InputSource {
  public:

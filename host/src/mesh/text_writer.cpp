@@ -27,6 +27,8 @@ void checkFinite(const T* values, std::size_t count, int perItem, const char* it
 }  // namespace
 
 void TextWriter::save(const std::string& path) const {
+  // A fixed name (not temporaryNameFor): one writer per output file, and the hardening tests point
+  // "<path>.tmp" at /dev/full to see a full disk reported.
   const std::string tmp = path + ".tmp";
   std::FILE* f = std::fopen(tmp.c_str(), "wb");
   if (!f)

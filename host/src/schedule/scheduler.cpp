@@ -74,10 +74,11 @@ void writeCache(const std::string& path, const json& j) {
   std::error_code ec;
   fs::create_directories(fs::path(path).parent_path(), ec);
   // Written to a temporary and renamed, so that a concurrent reader never sees half a file.
+  const std::string text = j.dump(2);  // before the file exists: dump throws on invalid UTF-8
   const std::string tmp = temporaryNameFor(path);
   std::ofstream out(tmp);
   if (!out) return;
-  out << j.dump(2) << '\n';
+  out << text << '\n';
   out.close();  // the flush that meets a full disk
   if (!out) {
     fs::remove(tmp, ec);

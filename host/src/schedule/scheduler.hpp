@@ -84,7 +84,8 @@ BodySchedule scheduleBody(const BodyDesc& desc, const Problem& problem, const Sc
                           const DeviceOptions& options = {}, const std::vector<std::string>& devices = {});
 
 /// scheduler.json in the cache folder (util/cache_dir.hpp: $COROFEM_CACHE_DIR, else
-/// $XDG_CACHE_HOME/corofem, else ~/.cache/corofem; "" when there is none).
+/// %LOCALAPPDATA%\corofem on Windows, else $XDG_CACHE_HOME/corofem, else ~/.cache/corofem; "" when
+/// there is none).
 std::string schedulerCachePath();
 
 /// What the calibration cache's times were measured with: corofem's version and every registered

@@ -1,5 +1,6 @@
 // Files written whole through a temporary beside them and a rename, so that a reader never sees
-// half a file (the kernel cache, the scheduler's calibrations, the outputs).
+// half a file: the kernel cache and the scheduler's calibrations take both a unique temporary and
+// the rename; the text writer of the outputs (mesh/text_writer.cpp) takes the rename.
 #pragma once
 
 #include <string>

@@ -127,6 +127,7 @@ void storeBinary(Context& ctx, cl_program program, const std::string& file) {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return;
     out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    out.close();  // the flush that meets a full disk
     if (!out) {
       fs::remove(tmp, ec);
       return;

@@ -1,7 +1,8 @@
 // OpenCL programs built from the embedded kernel sources (kernels/opencl/*.cl after
 // kernels/shared/*.h) with -D switches, cached in memory per context and on disk as device binaries.
 // Disk cache: the kernels/ folder of the cache folder (util/cache_dir.hpp: $COROFEM_CACHE_DIR, whose
-// value "off" disables it, else $XDG_CACHE_HOME/corofem or ~/.cache/corofem); one file per (device
+// value "off" disables it, else %LOCALAPPDATA%\corofem on Windows, $XDG_CACHE_HOME/corofem or
+// ~/.cache/corofem); one file per (device
 // name, driver version, options, source hash). A cache file that does not load is rebuilt from source and overwritten, never fatal.
 // PoCL's devices get no file here (cachesBinaries): PoCL keeps its own cache of what it compiled.
 #pragma once
