@@ -23,6 +23,7 @@
 //
 //   build/bench/bench_warped_cholesky --benchmark_repetitions=5 --benchmark_enable_random_interleaving=true \
 //       --benchmark_report_aggregates_only=true
+#include "common/random_vector.hpp"
 #include "common/textbook_pcg.hpp"
 #include "model/element.hpp"
 #include "precond/amg.hpp"
@@ -91,12 +92,12 @@ State curled(const Beam& beam, double turn) {
   State st;
   st.x = x;
   std::vector<Eigen::Triplet<double, int>> t;
-  std::vector<Mat3> sum(p.mesh.nodeCount(), Mat3::Zero());
+  std::vector<Mat3> rotations(p.elements.size());
   for (std::size_t e = 0; e < p.elements.size(); ++e) {
     std::array<Vec3d, 4> xe;
     for (int a = 0; a < 4; ++a) xe[a] = x.segment<3>(3 * p.mesh.tets[4 * e + a]);
     const Mat3 R = polarRotation(deformationGradient(p.elements[e], xe));
-    for (int a = 0; a < 4; ++a) sum[p.mesh.tets[4 * e + a]] += R;
+    rotations[e] = R;
     const Mat12 K = rotateStiffness(linearStiffness(p.elements[e], p.lame), R);
     for (int a = 0; a < 12; ++a)
       for (int c = 0; c < 12; ++c) {
@@ -110,7 +111,7 @@ State curled(const Beam& beam, double turn) {
   const Eigen::Index n = static_cast<Eigen::Index>(beam.free.size());
   st.A = AmgMatrix(n, n);
   st.A.setFromTriplets(t.begin(), t.end());
-  for (const Mat3& s : sum) st.nodeRotation.push_back(polarRotation(s));
+  st.nodeRotation = nodeRotations(p.mesh, rotations);  // the library's warp
   st.b.resize(n);
   for (Eigen::Index i = 0; i < n; ++i) st.b[i] = u(rng);
   return st;
@@ -168,10 +169,7 @@ void probeTriangular(benchmark::State& state) {
   for (Eigen::Index k = 0; k < L.nonZeros(); ++k) value[static_cast<std::size_t>(k)] = static_cast<T>(L.valuePtr()[k]);
   for (int i = 0; i < n; ++i) dinv[static_cast<std::size_t>(i)] = static_cast<T>(1.0 / f.vectorD()[i]);
   const Eigen::VectorXi perm = f.permutationP().indices();  // (P r)[perm[i]] = r[i]
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd r(n);
-  for (int i = 0; i < n; ++i) r[i] = u(rng);
+  const Eigen::VectorXd r = test::randomVector(static_cast<std::size_t>(n), 5);
   const Eigen::VectorXd expected = f.solve(r);
   std::vector<T> y(static_cast<std::size_t>(n));
   Eigen::VectorXd z(n);
@@ -198,10 +196,7 @@ void probeTriangular(benchmark::State& state) {
 
 void probeEigenSolve(benchmark::State& state) {
   const Ldlt& f = factor();
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd r(f.rows());
-  for (Eigen::Index i = 0; i < r.size(); ++i) r[i] = u(rng);
+  const Eigen::VectorXd r = test::randomVector(static_cast<std::size_t>(f.rows()), 5);
   for (auto _ : state) benchmark::DoNotOptimize(f.solve(r).eval().data());
 }
 

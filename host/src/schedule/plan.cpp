@@ -48,6 +48,10 @@ namespace {
 
 using nlohmann::json;
 
+/// The "warped_cholesky" factor's entries per entry of the system (its fill), as measured on the
+/// 12,960-tet beam; larger meshes fill more.
+constexpr double kWarpedFill = 4.2;
+
 /// Distinct node pairs that share an element (the off-diagonal 3x3 blocks of K).
 std::size_t edgeCount(const TetMesh& mesh) {
   std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
@@ -200,12 +204,12 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     if (dynamic) buffer("lumped_mass", h, D * 8);
     buffer(pcg ? "cg_vectors" : "cholesky_factor (at least the matrix)", h, pcg ? 5 * D * 8 : nnz * 12);
     if (amg) buffer("amg_levels (estimate: prolongations, coarse operators)", h, amgEntriesPerDof * D * 12);
-    // The factor's fill is known only once it is made: 4.2 times A's entries on the 12,960-tet beam
-    // (1.41 M below the diagonal), and it grows faster than the mesh. K_0 is kept beside it, and
-    // after a grab or a new time step the factor before it (the spare) too.
+    // The factor's fill is known only once it is made: kWarpedFill times A's entries on the
+    // 12,960-tet beam (1.41 M below the diagonal), and it grows faster than the mesh. K_0 is kept
+    // beside it, and after a grab or a new time step the factor before it (the spare) too.
     if (warped)
       buffer("warped_cholesky_factor (estimate: 4.2x the system's entries, more on larger meshes; twice after a grab)", h,
-             4.2 * nnz * 12);
+             kWarpedFill * nnz * 12);
     if (warped) buffer("rest_stiffness (K_0, kept)", h, nnz * 12);
     if (corot) kernels.push_back("polar decomposition per element (SVD)");
     kernels.push_back("element forces");
@@ -216,7 +220,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     product = nnz * 12 + 4 * (D + 1) + 3 * D * 8;
     pcgIter = product + 10 * D * 8;
     if (amg) pcgIter += 4 * product + 12 * D * 8 + (amgEntriesPerDof + 3 * 17) * D * 12;
-    if (warped) pcgIter += 2 * 4.2 * nnz * 12 + 6 * D * 8;  // the factor read twice
+    if (warped) pcgIter += 2 * kWarpedFill * nnz * 12 + 6 * D * 8;  // the factor read twice
     newtonFixed = nnz * 8 + 144 * 8 * E + product;
   }
   // Driver state on the host (BodySolver): committed and rollback copies.
