@@ -4,13 +4,12 @@
 #include "solve/dynamics.hpp"
 
 #include "solve/body_scale.hpp"
+#include "solve/device_slot.hpp"
 
 #include "util/error.hpp"
 #include "util/format.hpp"
-#include "util/parallel.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <sstream>
 #include <string>
@@ -30,30 +29,6 @@ constexpr double kBlowUpResidual = 1e-3;
 /// which a step ran away (see DynamicsDriver).
 constexpr double kRunawayEnergyRatio = 1.25;
 
-/// fn(i) for every i < n on the host's threads (each i a body's own work: no shared writes).
-template <class Fn>
-void forEach(std::size_t n, Fn&& fn) {
-  parallelChunks(n, 1, [&](std::size_t, std::size_t lo, std::size_t hi) {
-    for (std::size_t i = lo; i < hi; ++i) fn(i);
-  });
-}
-
-bool allFinite(const Eigen::VectorXd& v) { return v.allFinite(); }
-
-/// Dofs of one body per chunk of the host's threads in the per-dof passes of a step. A body of at
-/// most this many dofs runs on one thread, its sums in dof order; a larger one's sums are taken per
-/// chunk, then added in chunk order: the same bits with any number of threads, and a body gets the
-/// same bits alone as in a batch.
-constexpr std::size_t kDofChunk = 16384;
-
-/// chunkSums over a body's n dofs in chunks of kDofChunk, fn(begin, end, sums) on Eigen indices.
-template <std::size_t K, class Fn>
-std::array<double, K> overDofs(Eigen::Index n, Fn&& fn) {
-  return chunkSums<K>(static_cast<std::size_t>(n), kDofChunk, [&](std::size_t lo, std::size_t hi, std::array<double, K>& sums) {
-    fn(static_cast<Eigen::Index>(lo), static_cast<Eigen::Index>(hi), sums);
-  });
-}
-
 /// A number as a message streams it ("0.05", "2.39").
 std::string num(double v) {
   std::ostringstream os;
@@ -64,64 +39,93 @@ std::string num(double v) {
 }  // namespace
 
 DynamicsDriver::DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const Log& log)
-    : slot_(slot), desc_(desc), log_(log) {
+    : slot_(slot), desc_(desc), log_(log), store_(createHostStepStore(slot)) {
   bodies_.resize(slot.bodyCount());
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     Body& b = bodies_[i];
     const Problem& p = slot.problem(i);
     b.problem = &p;
     const Eigen::Index n = p.restPositions.size();
-    BodyScale scale = bodyScale(p);
-    b.freeMask = std::move(scale.freeMask);
+    const BodyScale scale = bodyScale(p);
     b.diagonal = scale.diagonal;
     b.forceFloor = scale.forceFloor;
-    b.x = p.restPositions;
-    b.v = p.initialVelocity.size() == n ? p.initialVelocity : Eigen::VectorXd::Zero(n);
-    b.v = (b.v.array() * b.freeMask).matrix();  // constrained dofs start at rest
-    b.a = Eigen::VectorXd::Zero(n);
-    b.fextPrev = Eigen::VectorXd::Zero(n);
-    b.reactionPrev = Eigen::VectorXd::Zero(n);
-    capture(b, b.previous);
+    const Eigen::VectorXd v = p.initialVelocity.size() == n ? p.initialVelocity : Eigen::VectorXd::Zero(n);
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+    store_->setState(i, StateSlot::Committed, StateVec::X, p.restPositions);
+    store_->setState(i, StateSlot::Committed, StateVec::V, (v.array() * scale.freeMask).matrix());  // constrained dofs start at rest
+    for (StateVec z : {StateVec::A, StateVec::Fext, StateVec::Reaction}) store_->setState(i, StateSlot::Committed, z, zero);
+    capture(i, StateSlot::Previous);
   }
 }
 
-double DynamicsDriver::freeNorm(const Body& b, const Eigen::VectorXd& v) const {
-  return (v.array() * b.freeMask).matrix().norm();
+DynamicsDriver::State& DynamicsDriver::scalars(Body& b, StateSlot slot) {
+  switch (slot) {
+    case StateSlot::Start: return b.start;
+    case StateSlot::Previous: return b.previous;
+    case StateSlot::Committed: return b;
+    default: fail(ErrorCode::Internal, "dynamics: no scalars for the step's result state");
+  }
 }
 
-void DynamicsDriver::capture(const Body& b, State& s) const { s = static_cast<const State&>(b); }
+void DynamicsDriver::capture(std::size_t body, StateSlot slot) {
+  Body& b = bodies_.at(body);
+  scalars(b, slot) = static_cast<const State&>(b);
+  store_->copy(body, StateSlot::Committed, slot);
+}
 
-void DynamicsDriver::restore(Body& b, const State& s) {
-  static_cast<State&>(b) = s;
+void DynamicsDriver::restore(std::size_t body, StateSlot slot) {
+  Body& b = bodies_.at(body);
+  static_cast<State&>(b) = scalars(b, slot);
+  store_->copy(body, slot, StateSlot::Committed);
   b.deviceAtCommitted = false;
 }
 
-void DynamicsDriver::restoreStart(Body& b) {
+void DynamicsDriver::restoreStart(std::size_t body) {
+  Body& b = bodies_.at(body);
   if (b.startHeld)
-    restore(b, b.start);  // a substep committed: start keeps the step's start for the next attempt
+    restore(body, StateSlot::Start);  // a substep committed: start keeps the step's start for the next attempt
   else
     b.deviceAtCommitted = false;  // nothing committed: the body's state is the step's start
 }
 
+const Eigen::VectorXd& DynamicsDriver::positions(std::size_t body) const {
+  bodies_.at(body);
+  return store_->state(body, StateSlot::Committed, StateVec::X);
+}
+
+const Eigen::VectorXd& DynamicsDriver::velocities(std::size_t body) const {
+  bodies_.at(body);
+  return store_->state(body, StateSlot::Committed, StateVec::V);
+}
+
+void DynamicsDriver::removeBody(std::size_t body) {
+  bodies_.at(body);
+  store_->removeBody(body);
+  bodies_.erase(bodies_.begin() + static_cast<std::ptrdiff_t>(body));
+}
+
 void DynamicsDriver::setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) {
   Body& b = bodies_.at(body);
-  if (x.size() != b.x.size() || v.size() != b.x.size())
-    fail(ErrorCode::BadInput, "body '", b.problem->name, "': a state needs ", b.x.size(),
+  const Eigen::Index n = b.problem->restPositions.size();
+  if (x.size() != n || v.size() != n)
+    fail(ErrorCode::BadInput, "body '", b.problem->name, "': a state needs ", n,
          " positions and velocities (3 per node), got ", x.size(), " and ", v.size());
   if (!x.allFinite() || !v.allFinite())
     fail(ErrorCode::BadInput, "body '", b.problem->name, "': the positions or velocities are not finite; give finite "
          "numbers (m, m/s)");
-  b.x = x;
-  b.v = (v.array() * b.freeMask).matrix();
+  store_->setState(body, StateSlot::Committed, StateVec::X, x);
+  store_->setState(body, StateSlot::Committed, StateVec::V, (v.array() * store_->freeMask(body)).matrix());
   b.started = false;  // the next step measures a and the energy budget from this state
-  capture(b, b.previous);
+  capture(body, StateSlot::Previous);
   b.deviceAtCommitted = false;
 }
 
 void DynamicsDriver::constraintsChanged(std::size_t body) {
-  Body& b = bodies_.at(body);
-  b.freeMask = bodyScale(*b.problem).freeMask;
-  b.v = (b.v.array() * b.freeMask).matrix();  // held dofs: their velocities follow from their targets
+  bodies_.at(body);
+  store_->constraintsChanged(body);
+  // Held dofs: their velocities follow from their targets.
+  const Eigen::VectorXd v = (store_->state(body, StateSlot::Committed, StateVec::V).array() * store_->freeMask(body)).matrix();
+  store_->setState(body, StateSlot::Committed, StateVec::V, v);
 }
 
 void DynamicsDriver::materialChanged(std::size_t body) {
@@ -133,34 +137,33 @@ void DynamicsDriver::materialChanged(std::size_t body) {
 
 void DynamicsDriver::setControls(std::size_t body, const BodyControls& c) {
   Body& b = bodies_.at(body);
-  const Eigen::Index n = b.x.size();
+  const Eigen::Index n = b.problem->restPositions.size();
   for (const Eigen::VectorXd* v : {&c.targets, &c.forces, &c.springTargets})
     if (v->size() != 0 && v->size() != n)
       fail(ErrorCode::Internal, "body '", b.problem->name, "': controls of size ", v->size(), " for ", n, " dofs");
-  b.heldTarget = c.targets;
-  b.appliedForce = c.forces;
-  b.springTarget = c.springTargets;
+  store_->setControls(body, c);
 }
 
-void DynamicsDriver::externalForce(const Body& b, double t, Eigen::VectorXd& f) const {
+void DynamicsDriver::externalForce(std::size_t body, double t, const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  const Body& b = bodies_.at(body);
+  const BodyControls& c = store_->controls(body);
   b.problem->externalForce(t, /*dynamic=*/true, f);
-  if (b.appliedForce.size() == f.size()) f += b.appliedForce;
-}
-
-void DynamicsDriver::addSpringForces(const Body& b, const Eigen::VectorXd& x, Eigen::VectorXd& f) const {
+  if (c.forces.size() == f.size()) f += c.forces;
   // Free dofs only: on a held dof the support's reaction takes the spring's pull (the residual's
   // constrained rows hold it), and counting it as a load as well would count its work twice.
   const Eigen::VectorXd& k = b.problem->springStiffness;
-  if (k.size() != x.size() || b.springTarget.size() != x.size()) return;
+  const Eigen::ArrayXd& free = store_->freeMask(body);
+  if (k.size() != x.size() || c.springTargets.size() != x.size()) return;
   for (Eigen::Index d = 0; d < x.size(); ++d)
-    if (k[d] != 0.0 && b.freeMask[d] != 0.0) f[d] += k[d] * (b.springTarget[d] - x[d]);
+    if (k[d] != 0.0 && free[d] != 0.0) f[d] += k[d] * (c.springTargets[d] - x[d]);
 }
 
 double DynamicsDriver::kineticEnergy(std::size_t body) const {
   const Body& b = bodies_.at(body);
   const Eigen::VectorXd& m = b.problem->lumpedMass;
-  if (m.size() != b.v.size()) return 0.0;
-  return 0.5 * (m.array() * b.v.array().square()).sum();
+  const Eigen::VectorXd& v = store_->state(body, StateSlot::Committed, StateVec::V);
+  if (m.size() != v.size()) return 0.0;
+  return 0.5 * (m.array() * v.array().square()).sum();
 }
 
 double DynamicsDriver::elasticEnergy(std::size_t body) {
@@ -172,35 +175,11 @@ double DynamicsDriver::elasticEnergy(std::size_t body) {
 
 void DynamicsDriver::syncDevicePositions(const BodySet& set) {
   BodySet stale;
-  ConstVectors xs;
   for (std::size_t i : set)
-    if (!bodies_.at(i).deviceAtCommitted) {
-      stale.push_back(i);
-      xs.push_back(&bodies_[i].x);
-    }
+    if (!bodies_.at(i).deviceAtCommitted) stale.push_back(i);
   if (stale.empty()) return;
-  slot_.setPositions(stale, xs);
+  store_->setPositions(slot_, stale, StateSlot::Committed);
   for (std::size_t i : stale) bodies_[i].deviceAtCommitted = true;
-}
-
-void DynamicsDriver::dampingForces(const BodySet& set, const ConstVectors& v, const Vectors& cv) {
-  // Mass damping alone (beta = 0, the common "air drag") is a scaling of the lumped mass: formed
-  // here in double, the same expression and bits as the reference device's apply, with no device
-  // call (on a device that call is an upload, a product and a read per force evaluation).
-  BodySet stiff;
-  ConstVectors stiffV;
-  Vectors stiffCv;
-  for (std::size_t i = 0; i < set.size(); ++i) {
-    const Problem& p = *bodies_[set[i]].problem;
-    if (p.rayleighStiffness == 0.0 && p.lumpedMass.size() == v[i]->size()) {
-      *cv[i] = p.rayleighMass * p.lumpedMass.cwiseProduct(*v[i]);
-    } else {
-      stiff.push_back(set[i]);
-      stiffV.push_back(v[i]);
-      stiffCv.push_back(cv[i]);
-    }
-  }
-  if (!stiff.empty()) slot_.apply(stiff, std::vector<SystemCoeffs>(stiff.size(), SystemCoeffs{0.0, 1.0, 0.0}), stiffV, stiffCv);
 }
 
 void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure) {
@@ -208,51 +187,42 @@ void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure
   for (std::size_t i : set)
     if (!bodies_[i].started) fresh.push_back(i);
   if (fresh.empty()) return;
-  const std::size_t n = fresh.size();
-  ConstVectors xs(n), vs(n);
-  Vectors fs(n), cvs(n);
-  std::vector<Eigen::VectorXd> fint(n), cv(n);
-  BodySet damped;
-  ConstVectors dampedV;
-  Vectors dampedCv;
-  for (std::size_t k = 0; k < n; ++k) {
-    Body& b = bodies_[fresh[k]];
-    xs[k] = &b.x;
-    fs[k] = &fint[k];
-    cv[k] = Eigen::VectorXd::Zero(b.x.size());
-    if (b.problem->rayleighMass != 0.0 || b.problem->rayleighStiffness != 0.0) {
-      damped.push_back(fresh[k]);
-      dampedV.push_back(&b.v);
-      dampedCv.push_back(&cv[k]);
-    }
-  }
-  slot_.setPositions(fresh, xs);
+  store_->setPositions(slot_, fresh, StateSlot::Committed);
   for (std::size_t i : fresh) bodies_[i].deviceAtCommitted = true;
-  slot_.internalForces(fresh, fs);
-  if (!damped.empty()) dampingForces(damped, dampedV, dampedCv);
+  store_->internalForces(slot_, fresh);
+  store_->damping(slot_, fresh, StateSlot::Committed);
   std::vector<double> energy;
   slot_.elasticEnergy(fresh, energy);
-  for (std::size_t k = 0; k < n; ++k) {
-    Body& b = bodies_[fresh[k]];
+  for (std::size_t k = 0; k < fresh.size(); ++k) {
+    const std::size_t i = fresh[k];
+    Body& b = bodies_[i];
     const Problem& p = *b.problem;
-    const Eigen::Index size = b.x.size();
-    externalForce(b, b.t, b.fextPrev);
-    addSpringForces(b, b.x, b.fextPrev);
-    b.a = Eigen::VectorXd::Zero(size);
+    const Eigen::VectorXd& x = store_->state(i, StateSlot::Committed, StateVec::X);
+    const Eigen::VectorXd& fint = store_->scratch(i, Scratch::Fint);
+    const Eigen::VectorXd& cv = store_->scratch(i, Scratch::Cv);
+    const Eigen::ArrayXd& free = store_->freeMask(i);
+    const Eigen::Index size = x.size();
+    Eigen::VectorXd fext;
+    externalForce(i, b.t, x, fext);
+    Eigen::VectorXd a = Eigen::VectorXd::Zero(size);
     for (Eigen::Index d = 0; d < size; ++d) {
       const double m = p.lumpedMass.size() == size ? p.lumpedMass[d] : 0.0;
-      if (b.freeMask[d] != 0.0 && m > 0.0) b.a[d] = (b.fextPrev[d] - cv[k][d] - fint[k][d]) / m;
+      if (free[d] != 0.0 && m > 0.0) a[d] = (fext[d] - cv[d] - fint[d]) / m;
     }
     // Reactions of the supports at t = 0 (a = 0 on constrained dofs), and the energy at t = 0.
-    b.reactionPrev = ((cv[k] + fint[k] - b.fextPrev).array() * (1.0 - b.freeMask)).matrix();
-    b.initialEnergy = kineticEnergy(fresh[k]) + energy[k];
-    if (!allFinite(b.a)) {
-      failure[fresh[k]] = "body '" + p.name +
-                          "': the initial acceleration is not finite; check the material, the loads and the initial velocity";
+    const Eigen::VectorXd reaction = ((cv + fint - fext).array() * (1.0 - free)).matrix();
+    const bool finite = a.allFinite();
+    store_->setState(i, StateSlot::Committed, StateVec::A, a);
+    store_->setState(i, StateSlot::Committed, StateVec::Fext, fext);
+    store_->setState(i, StateSlot::Committed, StateVec::Reaction, reaction);
+    b.initialEnergy = kineticEnergy(i) + energy[k];
+    if (!finite) {
+      failure[i] = "body '" + p.name +
+                   "': the initial acceleration is not finite; check the material, the loads and the initial velocity";
       continue;
     }
     b.started = true;
-    capture(b, b.previous);
+    capture(i, StateSlot::Previous);
   }
 }
 
@@ -287,7 +257,7 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall
     // (out of memory, the application's task runner): the bodies still stepping keep their state
     // at the step's start; substeps would not help.
     for (std::size_t i : pending) {
-      restoreStart(bodies_[set[i]]);
+      restoreStart(set[i]);
       out[i].error = std::current_exception();
     }
   }
@@ -316,7 +286,6 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, d
         a.body = set[going[j]];
         // End time of substep k as start + k h / K, so that the step ends exactly at t_n + h.
         a.t1 = b.start.t + h * k / substeps;
-        a.h = a.t1 - b.t;
         a.fraction = static_cast<double>(k) / substeps;
         a.where = substeps == 1 ? where
                                 : where + ", substep " + std::to_string(k) + "/" + std::to_string(substeps);
@@ -335,7 +304,7 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, d
           still.push_back(i);
         } else {
           lastFailure[i] = adv[j].failure;
-          restoreStart(bodies_[set[i]]);
+          restoreStart(set[i]);
         }
       }
       going = std::move(still);
@@ -356,6 +325,7 @@ void DynamicsDriver::runAttempts(const BodySet& set, const std::string& where, d
              substeps, " substeps");
       // The rollback copy is the state before the whole step, whatever the substeps.
       std::swap(bodies_[set[i]].previous, bodies_[set[i]].start);  // held: the step committed
+      store_->swap(set[i], StateSlot::Previous, StateSlot::Start);
       bodies_[set[i]].startHeld = false;
       out[i].stats = total[i];
     }
@@ -399,57 +369,32 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
   // The affine maps a(v) = ka (v - vb), x(v) = xb + kx v of the scheme, the targets of the
   // constrained dofs at t_{n+1} (rest position, or X + ramp * value for prescribed ones), f_ext,
   // and Newton's starting point v = v_n (constrained dofs hitting their targets).
-  forEach(adv.size(), [&](std::size_t j) {
-    Advance& a = adv[j];
-    Body& b = bodies_[a.body];
-    const Problem& p = *b.problem;
-    auto& w = b.w;
-    const double h = a.h;
-    const Eigen::Index n = b.x.size();
-    // vb = v + cv a and xb = x + h v + ca a - kx vb (Newmark), or vb = v and xb = x.
-    const bool newmark = integratorOf(desc_) == Integrator::Newmark;
-    double cv = 0.0, ca = 0.0;
-    if (newmark) {
-      const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
-      a.ka = 1.0 / (h * gamma);
-      a.kx = h * beta / gamma;
-      cv = h * (1.0 - gamma);
-      ca = h * h * (0.5 - beta);
-    } else {
-      a.ka = 1.0 / h;
-      a.kx = h;
-    }
-    // The targets, read on constrained dofs only (the other entries are left as they were).
-    w.target.resize(n);
-    p.applyPrescribed(w.target, a.t1, /*dynamic=*/true);
-    if (b.heldTarget.size() == n) {
-      const Eigen::VectorXd& x0 = b.startHeld ? b.start.x : b.x;  // the step's start
-      for (Eigen::Index d = 0; d < n; ++d)
-        if (!std::isnan(b.heldTarget[d]))
-          w.target[d] = a.fraction == 1.0 ? b.heldTarget[d] : x0[d] + a.fraction * (b.heldTarget[d] - x0[d]);
-    }
-    const std::vector<double> scales = p.loadScales(a.t1, /*dynamic=*/true);
-    const bool applied = b.appliedForce.size() == n;
-    for (Eigen::VectorXd* v : {&w.vb, &w.xb, &w.fext, &w.v, &w.x, &w.a, &w.fint, &w.cv, &w.r, &w.dv, &w.rhs}) v->resize(n);
-    // One pass: vb, xb, f_ext (the loads, then the application's forces) and its free norm, and
-    // Newton's starting v. The same arithmetic, term by term, as the vector expressions it fuses.
-    const std::array<double, 1> fextSq = overDofs<1>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 1>& sum) {
-      for (Eigen::Index d = lo; d < hi; ++d) {
-        const double vb = newmark ? b.v[d] + cv * b.a[d] : b.v[d];
-        const double xb = newmark ? b.x[d] + h * b.v[d] + ca * b.a[d] - a.kx * vb : b.x[d];
-        w.vb[d] = vb;
-        w.xb[d] = xb;
-        double f = p.externalForceAt(scales, d);
-        if (applied) f += b.appliedForce[d];
-        w.fext[d] = f;
-        const double ff = f * b.freeMask[d];
-        sum[0] += ff * ff;
-        w.v[d] = b.freeMask[d] == 0.0 ? (w.target[d] - xb) / a.kx : b.v[d];
-        w.cv[d] = 0.0;
+  {
+    BodySet all;
+    std::vector<BeginArgs> args(adv.size());
+    for (std::size_t j = 0; j < adv.size(); ++j) {
+      Advance& a = adv[j];
+      const Body& b = bodies_[a.body];
+      SchemeMaps& m = a.maps;
+      m.h = a.t1 - b.t;
+      m.newmark = integratorOf(desc_) == Integrator::Newmark;
+      if (m.newmark) {
+        const double beta = desc_.newmarkBeta, gamma = desc_.newmarkGamma;
+        m.ka = 1.0 / (m.h * gamma);
+        m.kx = m.h * beta / gamma;
+        m.cv = m.h * (1.0 - gamma);
+        m.ca = m.h * m.h * (0.5 - beta);
+      } else {
+        m.ka = 1.0 / m.h;
+        m.kx = m.h;
       }
-    });
-    a.fextNorm = std::sqrt(fextSq[0]);
-  });
+      all.push_back(a.body);
+      args[j] = BeginArgs{m, a.t1, a.fraction, b.startHeld ? StateSlot::Start : StateSlot::Committed};
+    }
+    std::vector<double> fextNorm;
+    store_->begin(all, args, fextNorm);
+    for (std::size_t j = 0; j < adv.size(); ++j) adv[j].fextNorm = fextNorm[j];
+  }
 
   const int maxIterations = std::max(1, desc_.newtonIterations);
   for (int iteration = 0;; ++iteration) {
@@ -457,81 +402,40 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     for (std::size_t j = 0; j < adv.size(); ++j)
       if (adv[j].running) live.push_back(j);
     if (live.empty()) break;
-    BodySet set;
-    ConstVectors xs, vs;
-    Vectors fs, cvs;
-    forEach(live.size(), [&](std::size_t k) {
-      const Advance& a = adv[live[k]];
-      auto& w = bodies_[a.body].w;
-      overDofs<0>(w.v.size(), [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 0>&) {
-        for (Eigen::Index d = lo; d < hi; ++d) {
-          w.x[d] = w.xb[d] + a.kx * w.v[d];
-          w.a[d] = a.ka * (w.v[d] - w.vb[d]);
-        }
-      });
-    });
+    BodySet set, damped;
+    std::vector<SchemeMaps> maps;
     for (std::size_t j : live) {
-      Body& b = bodies_[adv[j].body];
       set.push_back(adv[j].body);
-      xs.push_back(&b.w.x);
-      fs.push_back(&b.w.fint);
-    }
-    BodySet damped;
-    for (std::size_t j : live) {
+      maps.push_back(adv[j].maps);
       const Problem& p = *bodies_[adv[j].body].problem;
-      if (p.rayleighMass != 0.0 || p.rayleighStiffness != 0.0) {
-        damped.push_back(adv[j].body);
-        vs.push_back(&bodies_[adv[j].body].w.v);
-        cvs.push_back(&bodies_[adv[j].body].w.cv);
-      }
+      if (p.rayleighMass != 0.0 || p.rayleighStiffness != 0.0) damped.push_back(adv[j].body);
     }
+    store_->positions(set, maps);
     try {
-      slot_.setPositions(set, xs);
+      store_->setPositions(slot_, set, StateSlot::Result);
       for (std::size_t i : set) bodies_[i].deviceAtCommitted = false;
-      slot_.internalForces(set, fs);
-      if (!damped.empty()) dampingForces(damped, vs, cvs);
+      store_->internalForces(slot_, set);
+      if (!damped.empty()) store_->damping(slot_, damped, StateSlot::Result);
     } catch (const Error& e) {
       if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
       for (std::size_t j : live) failHere(adv[j], std::string("failed: ") + e.what());
       break;
     }
-    // r = M a + C v + f_int - f_ext, the free norms of its terms and of r, and whether x and v are
-    // finite, in one pass over the body's vectors. The norms' sums run in dof order.
-    forEach(live.size(), [&](std::size_t k) {
+    // r = M a + C v + f_int - f_ext, the free norms of its terms and of r, and whether x, v and a
+    // are finite, in one pass over the body's vectors.
+    std::vector<ResidualSums> sums;
+    store_->residual(set, maps, sums);
+    for (std::size_t k = 0; k < live.size(); ++k) {
       Advance& a = adv[live[k]];
-      Body& b = bodies_[a.body];
-      auto& w = b.w;
-      const Eigen::VectorXd& mass = b.problem->lumpedMass;
-      const Eigen::Index n = b.x.size();
-      // The springs' S (x - t) joins f_int here (a zero vector's worth of work without springs).
-      const Eigen::VectorXd& ks = b.problem->springStiffness;
-      const bool springs = ks.size() == n && b.springTarget.size() == n;
-      // Sums: |M a|^2, |C v|^2, |f_int|^2, |S (x - t)|^2, |r|^2 (free dofs), non-finite x or v.
-      const std::array<double, 6> sums = overDofs<6>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 6>& sum) {
-        for (Eigen::Index d = lo; d < hi; ++d) {
-          const double ma = mass[d] * w.a[d];
-          const double spring = springs && ks[d] != 0.0 ? ks[d] * (w.x[d] - b.springTarget[d]) : 0.0;
-          const double rd = ma + w.cv[d] + w.fint[d] + spring - w.fext[d];
-          w.r[d] = rd;
-          const double f = b.freeMask[d], maf = ma * f, cvf = w.cv[d] * f, fintf = w.fint[d] * f, sf = spring * f,
-                       rf = rd * f;
-          sum[0] += maf * maf;
-          sum[1] += cvf * cvf;
-          sum[2] += fintf * fintf;
-          sum[3] += sf * sf;
-          sum[4] += rf * rf;
-          if (!std::isfinite(w.x[d]) || !std::isfinite(w.v[d])) sum[5] += 1.0;
-        }
-      });
-      const double maSq = sums[0], cvSq = sums[1], fintSq = sums[2], springSq = sums[3], rSq = sums[4];
-      const bool finite = sums[5] == 0.0;
-      const double scale = std::max(
-          {std::sqrt(maSq), std::sqrt(cvSq), std::sqrt(fintSq), std::sqrt(springSq), a.fextNorm, b.forceFloor});
-      a.residualNorm = std::sqrt(rSq);
+      const Body& b = bodies_[a.body];
+      const ResidualSums& s = sums[k];
+      const double scale = std::max({std::sqrt(s.ma), std::sqrt(s.cv), std::sqrt(s.fint), std::sqrt(s.spring),
+                                     a.fextNorm, b.forceFloor});
+      a.residualNorm = std::sqrt(s.r);
       const double relative = a.residualNorm / scale;
-      if (!std::isfinite(relative) || !finite) {
+      if (!std::isfinite(relative) || s.nonFinite != 0.0) {
         failHere(a, "produced non-finite forces, velocities or positions");
-        return;
+        continue;
       }
       if (iteration == 0) {
         a.initialRelative = relative;
@@ -540,7 +444,7 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       a.stats.residual = relative;
       a.evaluated = true;
       if (relative <= desc_.newtonTolerance || iteration == maxIterations) a.running = false;
-    });
+    }
 
     // Newton update: A dv = -r / ka with A = M + (1/ka) C + (kx/ka) K_t, starting at dv = 0 (the
     // previous velocities on the first iteration, the current iterate after).
@@ -550,34 +454,22 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
     if (solving.empty()) break;
     BodySet solveSet;
     std::vector<PcgSolve> solves(solving.size());
-    forEach(solving.size(), [&](std::size_t k) {
-      const Advance& a = adv[solving[k]];
-      auto& w = bodies_[a.body].w;
-      overDofs<0>(w.r.size(), [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 0>&) {
-        for (Eigen::Index d = lo; d < hi; ++d) {
-          w.dv[d] = 0.0;
-          w.rhs[d] = -w.r[d] / a.ka;
-        }
-      });
-    });
     for (std::size_t k = 0; k < solving.size(); ++k) {
-      Advance& a = adv[solving[k]];
-      Body& b = bodies_[a.body];
+      const Advance& a = adv[solving[k]];
       solveSet.push_back(a.body);
-      solves[k].coeffs = SystemCoeffs{1.0, 1.0 / a.ka, a.kx / a.ka};
-      solves[k].b = &b.w.rhs;
-      solves[k].x = &b.w.dv;
+      solves[k].coeffs = SystemCoeffs{1.0, 1.0 / a.maps.ka, a.maps.kx / a.maps.ka};
     }
     try {
-      slot_.solve(solveSet, solves);
+      store_->solve(slot_, solveSet, solves);
     } catch (const Error& e) {
       if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
       for (std::size_t j : solving) failHere(adv[j], std::string("failed in the linear solve: ") + e.what());
       break;
     }
+    BodySet updateSet;
+    std::vector<std::size_t> updating;  // indices into adv
     for (std::size_t k = 0; k < solving.size(); ++k) {
       Advance& a = adv[solving[k]];
-      Body& b = bodies_[a.body];
       if (!solves[k].failure.empty()) {
         failHere(a, "failed in the linear solve: " + solves[k].failure);
         continue;
@@ -587,14 +479,15 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       a.stats.linearIterations += ls.iterations;
       a.stats.linearResidual = std::max(a.stats.linearResidual, ls.relativeResidual);
       a.allLinearConverged = a.allLinearConverged && ls.converged;
-      auto& w = b.w;  // v += dv, counting non-finite entries of dv (a failed body's v is scratch)
-      const std::array<double, 1> bad = overDofs<1>(w.v.size(), [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 1>& sum) {
-        for (Eigen::Index d = lo; d < hi; ++d) {
-          if (!std::isfinite(w.dv[d])) sum[0] += 1.0;
-          w.v[d] += w.dv[d];
-        }
-      });
-      if (bad[0] != 0.0) {
+      updateSet.push_back(a.body);
+      updating.push_back(solving[k]);
+    }
+    // v += dv, counting non-finite entries of dv (a failed body's v is scratch).
+    std::vector<double> bad;
+    store_->update(updateSet, bad);
+    for (std::size_t k = 0; k < updating.size(); ++k) {
+      Advance& a = adv[updating[k]];
+      if (bad[k] != 0.0) {
         failHere(a, "produced non-finite velocities");
         continue;
       }
@@ -603,19 +496,15 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
   }
 
   // The loop ends for a body only right after evaluating its v: x and a are that evaluation's, and
-  // x and v were checked there. Growth is judged on the absolute residual: the relative one is
+  // x, v and a were checked there. Growth is judged on the absolute residual: the relative one is
   // bounded by the number of terms when f_int dominates, exactly as it does in a blow-up.
   std::vector<std::size_t> ok;
   for (std::size_t j = 0; j < adv.size(); ++j) {
     Advance& a = adv[j];
     if (!a.failure.empty()) continue;
-    Body& b = bodies_[a.body];
+    const Body& b = bodies_[a.body];
     log_(LogLevel::Debug, "body '", b.problem->name, "': ", a.where, ": ", a.stats.newtonIterations,
          " Newton iterations, relative residual ", sci(a.initialRelative), " -> ", sci(a.stats.residual));
-    if (!allFinite(b.w.a)) {
-      failHere(a, "produced non-finite velocities or positions");
-      continue;
-    }
     if (!a.allLinearConverged && a.evaluated && a.residualNorm > a.initialNorm && a.stats.residual > kBlowUpResidual) {
       // What was seen, not a diagnosis: the relative residual may have stayed near 1 (a solve
       // stopped far from its tolerance made no progress), or the state may be running away.
@@ -648,24 +537,25 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
 
   // Runaway guard (see the class comment): an elastic-energy evaluation per step, at the final v.
   BodySet reset, energySet;
-  ConstVectors resetX;
   for (std::size_t j : ok) {
-    Body& b = bodies_[adv[j].body];
     energySet.push_back(adv[j].body);
-    if (!adv[j].evaluated) {
-      reset.push_back(adv[j].body);
-      resetX.push_back(&b.w.x);
-    }
+    if (!adv[j].evaluated) reset.push_back(adv[j].body);
   }
   std::vector<double> elastic;
   try {
-    if (!reset.empty()) slot_.setPositions(reset, resetX);
+    if (!reset.empty()) store_->setPositions(slot_, reset, StateSlot::Result);
     slot_.elasticEnergy(energySet, elastic);
   } catch (const Error& e) {
     if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
     for (std::size_t j : ok) failHere(adv[j], std::string("failed: ") + e.what());
     return;
   }
+  // One pass: the reactions (the constrained rows of the last residual, evaluated at the final v,
+  // or at the predictor when Newton stopped there); the springs' pull on free dofs joins f_ext (a
+  // load from here: its work, and f_n of the next step; on a held dof the reaction takes it); and
+  // the loads' and supports' work over dx = x_{n+1} - x_n, and m v^2 (EndSums).
+  std::vector<EndSums> sums;
+  store_->end(energySet, sums);
   const std::string runawayFix =
       "use more analysis.newton_iterations (with analysis.newton_tolerance), a smaller analysis.time_step, "
       "a dissipative scheme (analysis.integrator \"backward_euler\", or analysis.newmark_gamma 0.6 with "
@@ -673,41 +563,16 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
   for (std::size_t k = 0; k < ok.size(); ++k) {
     Advance& a = adv[ok[k]];
     Body& b = bodies_[a.body];
-    auto& w = b.w;
-    const Eigen::VectorXd& mass = b.problem->lumpedMass;
-    const Eigen::Index n = b.x.size();
-    const Eigen::VectorXd& ks = b.problem->springStiffness;
-    const bool springs = ks.size() == n && b.springTarget.size() == n;
-    w.reaction.resize(n);
-    // One pass: the reactions (the constrained rows of the last residual, evaluated at the final v,
-    // or at the predictor when Newton stopped there); the springs' pull on free dofs joins f_ext
-    // (a load from here: its work, and f_n of the next step; on a held dof the reaction takes it);
-    // and the sums of the loads' and supports' work over dx = x_{n+1} - x_n and of m v^2:
-    // (R_n + R).dx, (F_n + F).dx, R_n.dx, R.dx, F_n.dx, F.dx, m v^2.
-    const std::array<double, 7> sums = overDofs<7>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 7>& sum) {
-      for (Eigen::Index d = lo; d < hi; ++d) {
-        const double reaction = w.r[d] * (1.0 - b.freeMask[d]);
-        w.reaction[d] = reaction;
-        if (springs && ks[d] != 0.0 && b.freeMask[d] != 0.0) w.fext[d] += ks[d] * (b.springTarget[d] - w.x[d]);
-        const double dx = w.x[d] - b.x[d], f = w.fext[d];
-        sum[0] += (b.reactionPrev[d] + reaction) * dx;
-        sum[1] += (b.fextPrev[d] + f) * dx;
-        sum[2] += b.reactionPrev[d] * dx;
-        sum[3] += reaction * dx;
-        sum[4] += b.fextPrev[d] * dx;
-        sum[5] += f * dx;
-        sum[6] += mass[d] * (w.v[d] * w.v[d]);
-      }
-    });
-    const double supportWork = b.supportWork + 0.5 * sums[0];
-    const double loadWork = b.work + 0.5 * sums[1];
+    const EndSums& s = sums[k];
+    const double supportWork = b.supportWork + 0.5 * s[0];
+    const double loadWork = b.work + 0.5 * s[1];
     const double g = integratorOf(desc_) == Integrator::Newmark ? desc_.newmarkGamma : 1.0;
-    const double supportWorkScheme = b.supportWorkScheme + (1.0 - g) * sums[2] + g * sums[3];
-    const double loadWorkScheme = b.loadWorkScheme + (1.0 - g) * sums[4] + g * sums[5];
-    const double kinetic = 0.5 * sums[6];
+    const double supportWorkScheme = b.supportWorkScheme + (1.0 - g) * s[2] + g * s[3];
+    const double loadWorkScheme = b.loadWorkScheme + (1.0 - g) * s[4] + g * s[5];
+    const double kinetic = 0.5 * s[6];
     const double given = b.initialEnergy + std::max(std::abs(loadWork) + std::abs(supportWork),
                                                     std::abs(loadWorkScheme) + std::abs(supportWorkScheme));
-    b.deviceAtCommitted = false;  // the device holds w.x now: committed below, or the step fails
+    b.deviceAtCommitted = false;  // the device holds the result's x now: committed below, or the step fails
     if (!(kinetic + elastic[k] <= kRunawayEnergyRatio * given + b.forceFloor * b.diagonal)) {
       a.failure = failureText(a,
                               "ran away: the kinetic + elastic energy " + sci(kinetic + elastic[k]) + " J exceeds " +
@@ -718,23 +583,15 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
                               runawayFix);
       continue;
     }
-    // Commit: swapped with the scratch. The state before the step goes to start where start does
-    // not hold it yet (the step's first commit); else the next step overwrites it as scratch.
+    // Commit: the result swapped in. The state before the step goes to Start where Start does not
+    // hold it yet (the step's first commit); else the next step overwrites it as its result.
     b.work = loadWork;  // trapezoidal rule in time
-    b.fextPrev.swap(w.fext);
     b.supportWork = supportWork;
     b.supportWorkScheme = supportWorkScheme;
     b.loadWorkScheme = loadWorkScheme;
-    b.reactionPrev.swap(w.reaction);
-    b.x.swap(w.x);
-    b.v.swap(w.v);
-    b.a.swap(w.a);
+    store_->swap(a.body, StateSlot::Committed, StateSlot::Result);
     if (!b.startHeld) {
-      b.start.fextPrev.swap(w.fext);
-      b.start.reactionPrev.swap(w.reaction);
-      b.start.x.swap(w.x);
-      b.start.v.swap(w.v);
-      b.start.a.swap(w.a);
+      store_->swap(a.body, StateSlot::Start, StateSlot::Result);
       b.startHeld = true;
     }
     b.t = a.t1;
@@ -747,18 +604,21 @@ void DynamicsDriver::idleStep(std::size_t body, double h) {
   start({body}, failure);
   if (!failure[body].empty()) fail(ErrorCode::SolveFailed, failure[body]);
   Body& b = bodies_[body];
-  capture(b, b.start);
+  capture(body, StateSlot::Start);
   b.t = b.start.t + h;
-  b.v.setZero();
-  b.a.setZero();
-  externalForce(b, b.t, b.fextPrev);
-  addSpringForces(b, b.x, b.fextPrev);
+  const Eigen::Index n = b.problem->restPositions.size();
+  store_->setState(body, StateSlot::Committed, StateVec::V, Eigen::VectorXd::Zero(n));
+  store_->setState(body, StateSlot::Committed, StateVec::A, Eigen::VectorXd::Zero(n));
+  Eigen::VectorXd fext;
+  externalForce(body, b.t, store_->state(body, StateSlot::Committed, StateVec::X), fext);
+  store_->setState(body, StateSlot::Committed, StateVec::Fext, fext);
   std::swap(b.previous, b.start);
+  store_->swap(body, StateSlot::Previous, StateSlot::Start);
 }
 
 void DynamicsDriver::rollback(std::size_t body) {
-  Body& b = bodies_.at(body);
-  restore(b, b.previous);
+  bodies_.at(body);
+  restore(body, StateSlot::Previous);
 }
 
 }  // namespace corofem::detail

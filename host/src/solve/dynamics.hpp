@@ -1,13 +1,16 @@
 // Implicit dynamics of a set of bodies in lock-step (paper Eq. 14): every Newton iteration of every
 // body still in the step is one device call for all of them (positions, forces, the damping
-// product, the linear solves through solvePcg, the energies), the per-body host work between them
-// runs on the host's threads, and a body that has converged, failed or finished its step costs
-// nothing more. A body that fails is retried in substeps while the others wait. Each body's sequence
-// of device calls is the one it would make alone, so batching changes no answer.
+// product, the linear solves through solvePcg, the energies), the per-dof passes between them are
+// the step store's (solve/step_store.hpp: the vectors stay where the store keeps them, the driver
+// reads their sums), and a body that has converged, failed or finished its step costs nothing
+// more. A body that fails is retried in substeps while the others wait. Each body's sequence of
+// device calls is the one it would make alone, so batching changes no answer.
 #pragma once
 
 #include "solve/driver.hpp"
+#include "solve/step_store.hpp"
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -91,9 +94,9 @@ class DynamicsDriver final : public Driver {
   void constraintsChanged(std::size_t body) override;
   void materialChanged(std::size_t body) override;
   void setControls(std::size_t body, const BodyControls& controls) override;
-  void removeBody(std::size_t body) override { bodies_.erase(bodies_.begin() + static_cast<std::ptrdiff_t>(body)); }
-  const Eigen::VectorXd& positions(std::size_t body) const override { return bodies_.at(body).x; }
-  const Eigen::VectorXd& velocities(std::size_t body) const override { return bodies_.at(body).v; }
+  void removeBody(std::size_t body) override;
+  const Eigen::VectorXd& positions(std::size_t body) const override;
+  const Eigen::VectorXd& velocities(std::size_t body) const override;
   double externalWork(std::size_t body) const override { return bodies_.at(body).work; }
   double kineticEnergy(std::size_t body) const override;
   double elasticEnergy(std::size_t body) override;
@@ -102,31 +105,22 @@ class DynamicsDriver final : public Driver {
   double time(std::size_t body) const { return bodies_.at(body).t; }
 
  private:
-  /// Everything a step changes. A field added here joins copyScalars (a scalar) or the commit's
-  /// swaps into `start` in DynamicsDriver::advance (a vector): the step's start is made of both.
+  /// The scalars of a state of a body; its vectors are the store's (StateSlot). A field added here
+  /// joins copyScalars: a state is made of both.
   struct State {
-    Eigen::VectorXd x, v, a, fextPrev, reactionPrev;
     double work = 0.0, t = 0.0, supportWork = 0.0;
     /// The loads' and supports' work as the scheme weighs the step's end forces, for the runaway
     /// guard: ((1 - g) F_n + g F_{n+1}) . dx with g = gamma (Newmark; 1/2: the trapezoidal rule)
     /// or 1 (backward Euler, whose implicit step does the work F_{n+1} dx: an abruptly dragged
     /// handle does twice what the trapezoidal rule counts when F_n was 0).
     double loadWorkScheme = 0.0, supportWorkScheme = 0.0;
-    /// Takes o's scalars; the vectors stay.
-    void copyScalars(const State& o) {
-      work = o.work;
-      t = o.t;
-      supportWork = o.supportWork;
-      loadWorkScheme = o.loadWorkScheme;
-      supportWorkScheme = o.supportWorkScheme;
-    }
+    void copyScalars(const State& o) { *this = o; }
   };
-  /// One body: its constants, its committed state (the fields of State), the state before its last
-  /// step (rollback), and the scratch of the step in progress (sized by the first two steps, then
-  /// assigned in place: a later step allocates no vector of the body's size).
+  /// One body: its constants and the scalars of its committed state (the fields of State), of the
+  /// step's start and of the state before its last step (rollback); the vectors of all three, and
+  /// the step's scratch, are the store's.
   struct Body : State {
     const Problem* problem = nullptr;
-    Eigen::ArrayXd freeMask;    ///< 1 on free dofs, 0 on constrained ones
     double diagonal = 1.0;      ///< rest bounding-box diagonal (m), the body's length scale
     /// Force below which a residual counts as zero: (lambda + 2 mu) diagonal^2 1e-8 (N).
     double forceFloor = 0.0;
@@ -134,46 +128,40 @@ class DynamicsDriver final : public Driver {
     double initialEnergy = 0.0;
     bool started = false;
     bool deviceAtCommitted = false;  ///< the device's positions equal x
-    /// The application's hold (setControls): targets of constrained dofs (3N, NaN: the scene's
-    /// target), added forces (3N) and the springs' targets (3N); empty when none.
-    Eigen::VectorXd heldTarget, appliedForce, springTarget;
-    /// The state before the step in progress: its scalars from the step's start, its vectors moved
-    /// there (not copied) by the step's first commit, startHeld telling which: until then the
-    /// body's own vectors are that state, as nothing but a commit changes them.
+    /// The state before the step in progress (StateSlot::Start): its scalars from the step's start,
+    /// its vectors swapped there by the step's first commit, startHeld telling which: until then
+    /// the body's committed state is that state, as nothing but a commit changes it.
     State start;
     bool startHeld = false;
-    State previous;                  ///< the state before the last successful step
-    struct Scratch {
-      Eigen::VectorXd vb, xb, target, fext, v, x, a, fint, cv, r, dv, rhs, reaction;
-    } w;
+    State previous;  ///< the state before the last successful step (StateSlot::Previous)
   };
   /// One body's part of one advance (a step, or a substep of one).
   struct Advance {
     std::size_t body = 0;
-    double h = 0.0, t1 = 0.0;
+    double t1 = 0.0;
     /// How far through the whole step t1 is (1 but in substeps): the application's held targets
     /// are reached in proportion, as the scene's prescribed ones follow their time.
     double fraction = 1.0;
     std::string where;  ///< "time step 3/10", "time step 3/10, substep 2/4"
-    double ka = 0.0, kx = 0.0, fextNorm = 0.0;
+    SchemeMaps maps;
+    double fextNorm = 0.0;
     double initialRelative = 0.0, initialNorm = 0.0, residualNorm = 0.0;
     bool allLinearConverged = true, evaluated = false, running = true;
     BodyStepStats stats;
     std::string failure;  ///< empty, or the SolveFailed message
   };
 
-  double freeNorm(const Body& b, const Eigen::VectorXd& v) const;
-  void capture(const Body& b, State& s) const;
-  void restore(Body& b, const State& s);
+  /// The body's scalars of state `slot` (Committed: the body's own).
+  State& scalars(Body& b, StateSlot slot);
+  /// State `slot` made a copy of the committed one (scalars and vectors).
+  void capture(std::size_t body, StateSlot slot);
+  /// The committed state made a copy of state `slot`.
+  void restore(std::size_t body, StateSlot slot);
   /// Back to the state before the step in progress (start and startHeld).
-  void restoreStart(Body& b);
+  void restoreStart(std::size_t body);
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs, and the energy at t = 0, for
   /// the bodies of `set` not started yet; a body whose a_0 is not finite fails.
   void start(const BodySet& set, std::vector<std::string>& failure);
-  /// The damping force C v of the bodies of `set` (index i of `set`: v[i] into cv[i]): mass
-  /// damping alone (beta = 0) as a scaling of the lumped mass on the host, the stiffness part by
-  /// the device's product.
-  void dampingForces(const BodySet& set, const ConstVectors& v, const Vectors& cv);
   /// Per body of a step's set: its stats (every attempt's iterations, the successful attempt's
   /// residuals and substeps), the substep counts tried, the last failure, and the bodies still to
   /// succeed (indices into the set).
@@ -187,10 +175,9 @@ class DynamicsDriver final : public Driver {
   /// as long as it fails; throws what is not a solve failure (a DeviceError when every device
   /// failed), leaving the pending bodies for the caller to restore.
   void runAttempts(const BodySet& set, const std::string& where, double h, Attempts& at, std::vector<BodyOutcome>& out);
-  /// f_ext of body b at time t: the scene's loads and the application's forces, into f.
-  void externalForce(const Body& b, double t, Eigen::VectorXd& f) const;
-  /// Adds the application's spring forces at positions x, k_d (target_d - x_d), to f on the free dofs.
-  void addSpringForces(const Body& b, const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
+  /// f_ext of a body at time t and positions x: the scene's loads, the application's forces, and
+  /// its springs' pull k_d (target_d - x_d) on free dofs, into f.
+  void externalForce(std::size_t body, double t, const Eigen::VectorXd& x, Eigen::VectorXd& f) const;
   /// One step of the scheme for every Advance, from its body's committed state to t1 = t + h,
   /// committed in place on success (no rollback copy); a failure leaves the body's committed state
   /// as it was and says why in Advance::failure.
@@ -202,6 +189,7 @@ class DynamicsDriver final : public Driver {
   DynamicDesc desc_;
   const Log& log_;
   std::vector<Body> bodies_;
+  std::unique_ptr<StepStore> store_;  ///< the bodies' vectors
 };
 
 }  // namespace corofem::detail
