@@ -1,0 +1,366 @@
+// The contract of a StepStore (solve/step_store.hpp), the dynamics driver's vectors and per-dof
+// passes: each pass against the expressions of DynamicsDriver's documentation written out here in
+// plain Eigen, on random states of two bodies with every feature a pass reads (loads with ramps,
+// prescribed and fixed dofs, held targets with NaN entries, applied forces, springs, Rayleigh
+// damping), one of them larger than a chunk of the host's threads (16,384 dofs). A store that keeps
+// the vectors on a device joins the parameter list and meets the same expressions within its
+// precision; the host store meets them to rounding. The whole states' swaps and copies, and a
+// body's independence of the set it is passed in, are checked too.
+#include "common/random_vector.hpp"
+#include "common/test_problems.hpp"
+
+#include "backends/reference/reference_device.hpp"
+#include "solve/device_slot.hpp"
+#include "solve/step_store.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <vector>
+
+namespace corofem {
+namespace {
+
+using detail::BeginArgs;
+using detail::EndSums;
+using detail::ResidualSums;
+using detail::SchemeMaps;
+using detail::Scratch;
+using detail::StateSlot;
+using detail::StateVec;
+using test::randomVector;
+
+/// Relative difference of two vectors (infinity norm), 0 for two zero vectors.
+double relDiff(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  if (a.size() != b.size()) return INFINITY;
+  const double scale = std::max(a.lpNorm<Eigen::Infinity>(), b.lpNorm<Eigen::Infinity>());
+  return scale == 0.0 ? 0.0 : (a - b).lpNorm<Eigen::Infinity>() / scale;
+}
+
+double relDiff(double a, double b) {
+  const double scale = std::max(std::abs(a), std::abs(b));
+  return scale == 0.0 ? 0.0 : std::abs(a - b) / scale;
+}
+
+/// A box of cells of edge h with every feature a pass reads: the nodes at x = 0 fixed, those at
+/// the far end prescribed (ramped over 0.5 s), two loads (one ramped over 2 s), springs on every
+/// fifth dof, and Rayleigh damping.
+detail::Problem featureBody(int nx, int ny, int nz, double h, unsigned seed) {
+  detail::Problem p = test::makeProblem(test::boxMesh(nx, ny, nz, h, h, h), 2e5, 0.3, 900.0);
+  const Eigen::Index n = p.restPositions.size();
+  detail::PrescribedDisplacement moved;
+  moved.rampTime = 0.5;
+  for (Eigen::Index d = 0; d < n; ++d) {
+    const double x = p.restPositions[d - d % 3];
+    if (x < 1e-9) p.constrained[static_cast<std::size_t>(d)] = 1;
+    if (x > h * nx - 1e-9 && d % 3 == 1) {
+      p.constrained[static_cast<std::size_t>(d)] = 1;
+      moved.dofs.push_back(static_cast<std::uint32_t>(d));
+      moved.values.push_back(-0.01 * static_cast<double>(1 + d % 7));
+    }
+  }
+  p.prescribed.push_back(moved);
+  p.forces.push_back({randomVector(static_cast<std::size_t>(n), seed), 0.0, false});
+  p.forces.push_back({randomVector(static_cast<std::size_t>(n), seed + 1), 2.0, false});
+  p.springStiffness = Eigen::VectorXd::Zero(n);
+  for (Eigen::Index d = 0; d < n; d += 5) p.springStiffness[d] = 50.0 + static_cast<double>(d % 13);
+  p.rayleighMass = 0.3;
+  p.rayleighStiffness = 0.002;
+  return p;
+}
+
+Eigen::ArrayXd freeOf(const detail::Problem& p) {
+  Eigen::ArrayXd f = Eigen::ArrayXd::Ones(p.restPositions.size());
+  for (std::size_t d = 0; d < p.constrained.size(); ++d)
+    if (p.constrained[d]) f[static_cast<Eigen::Index>(d)] = 0.0;
+  return f;
+}
+
+/// A state near rest: x = X + 0.01 * random, v, a, f_ext and reactions random.
+void randomState(detail::StepStore& store, std::size_t body, StateSlot slot, const detail::Problem& p, unsigned seed) {
+  const auto n = static_cast<std::size_t>(p.restPositions.size());
+  store.setState(body, slot, StateVec::X, p.restPositions + 0.01 * randomVector(n, seed));
+  store.setState(body, slot, StateVec::V, randomVector(n, seed + 1));
+  store.setState(body, slot, StateVec::A, 3.0 * randomVector(n, seed + 2));
+  store.setState(body, slot, StateVec::Fext, randomVector(n, seed + 3));
+  store.setState(body, slot, StateVec::Reaction, randomVector(n, seed + 4));
+}
+
+/// The application's controls: held targets on half of the constrained dofs (NaN on the others),
+/// applied forces everywhere, spring targets near rest.
+detail::BodyControls randomControls(const detail::Problem& p, unsigned seed) {
+  const auto n = static_cast<std::size_t>(p.restPositions.size());
+  detail::BodyControls c;
+  c.targets = Eigen::VectorXd::Constant(static_cast<Eigen::Index>(n), std::numeric_limits<double>::quiet_NaN());
+  for (std::size_t d = 0; d < n; ++d)
+    if (p.constrained[d] && d % 2 == 0)
+      c.targets[static_cast<Eigen::Index>(d)] = p.restPositions[static_cast<Eigen::Index>(d)] + 0.02;
+  c.forces = randomVector(n, seed);
+  c.springTargets = p.restPositions + 0.05 * randomVector(n, seed + 1);
+  return c;
+}
+
+SchemeMaps newmarkMaps(double h) {
+  const double beta = 0.25, gamma = 0.5;
+  SchemeMaps m;
+  m.newmark = true;
+  m.h = h;
+  m.ka = 1.0 / (h * gamma);
+  m.kx = h * beta / gamma;
+  m.cv = h * (1.0 - gamma);
+  m.ca = h * h * (0.5 - beta);
+  return m;
+}
+
+SchemeMaps eulerMaps(double h) {
+  SchemeMaps m;
+  m.h = h;
+  m.ka = 1.0 / h;
+  m.kx = h;
+  return m;
+}
+
+class StepStoreContract : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    // Body 0: 6 x 3 x 3 cells of 10 cm (112 nodes); body 1: a rod of 1,400 x 1 x 1 cells of 1 cm
+    // (5,604 nodes, 16,812 dofs: two chunks of the host's threads, in few elements for the
+    // sanitizer job's -O0).
+    problems_.push_back(featureBody(6, 3, 3, 0.1, 11));
+    problems_.push_back(featureBody(1400, 1, 1, 0.01, 21));
+    ASSERT_GT(problems_[1].restPositions.size(), 16384);
+    SolverDesc solver;
+    solver.linearSolver = LinearSolverKind::Pcg;
+    solver.tolerance = 1e-8;
+    solver.maxIterations = 2000;
+    std::vector<const detail::Problem*> ps;
+    for (const detail::Problem& p : problems_) ps.push_back(&p);
+    slot_ = std::make_unique<detail::DeviceSlot>(detail::createReferenceDevice(ps, solver), solver);
+    store_ = detail::createHostStepStore(*slot_);
+    for (std::size_t b = 0; b < problems_.size(); ++b) {
+      randomState(*store_, b, StateSlot::Committed, problems_[b], 100 + 10 * static_cast<unsigned>(b));
+      randomState(*store_, b, StateSlot::Start, problems_[b], 200 + 10 * static_cast<unsigned>(b));
+      store_->setControls(b, randomControls(problems_[b], 300 + 10 * static_cast<unsigned>(b)));
+    }
+  }
+
+  /// Runs begin and positions for `set` with `maps` (t1 = 0.3 s, halfway through the step, from
+  /// the step's start) and returns the f_ext norms.
+  std::vector<double> beginAndPositions(const detail::BodySet& set, const std::vector<SchemeMaps>& maps) {
+    std::vector<BeginArgs> args;
+    for (const SchemeMaps& m : maps) args.push_back(BeginArgs{m, 0.3, 0.5, StateSlot::Start});
+    std::vector<double> fextNorm;
+    store_->begin(set, args, fextNorm);
+    store_->positions(set, maps);
+    return fextNorm;
+  }
+
+  std::vector<detail::Problem> problems_;
+  std::unique_ptr<detail::DeviceSlot> slot_;
+  std::unique_ptr<detail::StepStore> store_;
+};
+
+TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoads) {
+  const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
+  const std::vector<double> fextNorm = beginAndPositions({0, 1}, maps);
+  for (std::size_t b = 0; b < 2; ++b) {
+    SCOPED_TRACE("body " + std::to_string(b));
+    const detail::Problem& p = problems_[b];
+    const SchemeMaps& m = maps[b];
+    const Eigen::ArrayXd free = freeOf(p);
+    const Eigen::VectorXd x = store_->state(b, StateSlot::Committed, StateVec::X);
+    const Eigen::VectorXd v = store_->state(b, StateSlot::Committed, StateVec::V);
+    const Eigen::VectorXd a = store_->state(b, StateSlot::Committed, StateVec::A);
+    const Eigen::VectorXd x0 = store_->state(b, StateSlot::Start, StateVec::X);
+    const detail::BodyControls& c = store_->controls(b);
+    const Eigen::VectorXd vb = m.newmark ? Eigen::VectorXd(v + m.cv * a) : v;
+    const Eigen::VectorXd xb = m.newmark ? Eigen::VectorXd(x + m.h * v + m.ca * a - m.kx * vb) : x;
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Vb), vb), 1e-15);
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Xb), xb), 1e-15);
+    // Targets at t1 = 0.3 s: rest on fixed dofs, X + 0.6 u on prescribed ones (ramp 0.5 s), the
+    // held ones halfway from the step's start.
+    Eigen::VectorXd target = p.restPositions;
+    for (const detail::PrescribedDisplacement& pd : p.prescribed)
+      for (std::size_t k = 0; k < pd.dofs.size(); ++k) target[pd.dofs[k]] += 0.6 * pd.values[k];
+    for (Eigen::Index d = 0; d < target.size(); ++d)
+      if (!std::isnan(c.targets[d])) target[d] = x0[d] + 0.5 * (c.targets[d] - x0[d]);
+    const Eigen::VectorXd fext = p.forces[0].f + 0.15 * p.forces[1].f + c.forces;  // ramps: 1 and 0.3 / 2
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Fext), fext), 1e-15);
+    EXPECT_LT(relDiff(fextNorm[b], (fext.array() * free).matrix().norm()), 1e-14);
+    Eigen::VectorXd vStart = v;
+    for (Eigen::Index d = 0; d < v.size(); ++d)
+      if (free[d] == 0.0) vStart[d] = (target[d] - xb[d]) / m.kx;
+    // The result state at Newton's start: free dofs keep v_n; constrained ones land on their targets.
+    const Eigen::VectorXd vNew = store_->state(b, StateSlot::Result, StateVec::V);
+    const Eigen::VectorXd xNew = store_->state(b, StateSlot::Result, StateVec::X);
+    EXPECT_LT(relDiff(vNew, vStart), 1e-14);
+    EXPECT_LT(relDiff(xNew, xb + m.kx * vNew), 1e-15);
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::A), m.ka * (vNew - vb)), 1e-15);
+    for (Eigen::Index d = 0; d < x.size(); ++d)
+      if (free[d] == 0.0) EXPECT_NEAR(xNew[d], target[d], 1e-14) << "dof " << d;
+    EXPECT_EQ(store_->scratch(b, Scratch::Cv).norm(), 0.0);
+  }
+}
+
+TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpressions) {
+  const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
+  const detail::BodySet set = {0, 1};
+  beginAndPositions(set, maps);
+  store_->setPositions(*slot_, set, StateSlot::Result);
+  store_->internalForces(*slot_, set);
+  store_->damping(*slot_, set, StateSlot::Result);
+  std::vector<ResidualSums> sums;
+  store_->residual(set, maps, sums);
+  std::vector<detail::PcgSolve> solves(2);
+  for (std::size_t b = 0; b < 2; ++b) solves[b].coeffs = {1.0, 1.0 / maps[b].ka, maps[b].kx / maps[b].ka};
+  // The solve's expected answer: the slot's own solve of the same system from host vectors.
+  std::vector<Eigen::VectorXd> rhs(2), dvExpected(2);
+  std::vector<detail::PcgSolve> direct(2);
+  for (std::size_t b = 0; b < 2; ++b) {
+    rhs[b] = store_->scratch(b, Scratch::Rhs);
+    dvExpected[b] = Eigen::VectorXd::Zero(rhs[b].size());
+    direct[b].coeffs = solves[b].coeffs;
+    direct[b].b = &rhs[b];
+    direct[b].x = &dvExpected[b];
+  }
+  std::vector<Eigen::VectorXd> vBefore;
+  for (std::size_t b = 0; b < 2; ++b) vBefore.push_back(store_->state(b, StateSlot::Result, StateVec::V));
+  store_->solve(*slot_, set, solves);
+  for (std::size_t b = 0; b < 2; ++b) {
+    SCOPED_TRACE("body " + std::to_string(b));
+    EXPECT_TRUE(solves[b].failure.empty()) << solves[b].failure;
+    EXPECT_TRUE(solves[b].stats.converged);
+    EXPECT_GT(solves[b].stats.iterations, 0);
+  }
+  std::vector<double> bad;
+  store_->update(set, bad);
+  std::vector<EndSums> ends;
+  store_->end(set, ends);
+
+  for (std::size_t b = 0; b < 2; ++b) {
+    SCOPED_TRACE("body " + std::to_string(b));
+    const detail::Problem& p = problems_[b];
+    const Eigen::ArrayXd free = freeOf(p);
+    const detail::BodyControls& c = store_->controls(b);
+    const Eigen::VectorXd x = store_->state(b, StateSlot::Result, StateVec::X);
+    const Eigen::VectorXd a = store_->state(b, StateSlot::Result, StateVec::A);
+    // The device calls: f_int at the result's x, C v at its v (before the update).
+    Eigen::VectorXd fint, cv;
+    slot_->setPositions({b}, {&x});
+    slot_->internalForces({b}, {&fint});
+    slot_->apply({b}, {detail::SystemCoeffs{0.0, 1.0, 0.0}}, {&vBefore[b]}, {&cv});
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Fint), fint), 1e-15);
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Cv), cv), 1e-15);
+    // The residual and its sums.
+    Eigen::VectorXd spring = Eigen::VectorXd::Zero(x.size());
+    for (Eigen::Index d = 0; d < x.size(); ++d)
+      if (p.springStiffness[d] != 0.0) spring[d] = p.springStiffness[d] * (x[d] - c.springTargets[d]);
+    const Eigen::VectorXd ma = p.lumpedMass.cwiseProduct(a);
+    const Eigen::VectorXd fextNew = p.forces[0].f + 0.15 * p.forces[1].f + c.forces;
+    const Eigen::VectorXd r = ma + cv + fint + spring - fextNew;
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::R), r), 1e-14);
+    auto freeSq = [&](const Eigen::VectorXd& u) { return (u.array() * free).matrix().squaredNorm(); };
+    EXPECT_LT(relDiff(sums[b].ma, freeSq(ma)), 1e-13);
+    EXPECT_LT(relDiff(sums[b].cv, freeSq(cv)), 1e-13);
+    EXPECT_LT(relDiff(sums[b].fint, freeSq(fint)), 1e-13);
+    EXPECT_LT(relDiff(sums[b].spring, freeSq(spring)), 1e-13);
+    EXPECT_LT(relDiff(sums[b].r, freeSq(r)), 1e-13);
+    EXPECT_EQ(sums[b].nonFinite, 0.0);
+    EXPECT_LT(relDiff(rhs[b], -r / maps[b].ka), 1e-14);
+    // The solve: the slot's own answer for the store's right-hand side, and v += dv.
+    std::vector<detail::PcgSolve> alone = {direct[b]};
+    slot_->solve({b}, alone);
+    const Eigen::VectorXd dv = store_->scratch(b, Scratch::Dv);
+    EXPECT_LT(relDiff(dv, dvExpected[b]), 1e-12);
+    EXPECT_GT(dv.norm(), 0.0);
+    EXPECT_EQ(bad[b], 0.0);
+    const Eigen::VectorXd vNew = store_->state(b, StateSlot::Result, StateVec::V);
+    EXPECT_LT(relDiff(vNew, vBefore[b] + dv), 1e-15);
+    // The end: reactions on constrained rows, the springs' pull joining f_ext on free dofs, the
+    // work sums over dx and m v^2.
+    const Eigen::VectorXd reaction = (r.array() * (1.0 - free)).matrix();
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Reaction), reaction), 1e-15);
+    const Eigen::VectorXd fEnd = fextNew - (spring.array() * free).matrix();
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Fext), fEnd), 1e-14);
+    const Eigen::VectorXd dx = x - store_->state(b, StateSlot::Committed, StateVec::X);
+    const Eigen::VectorXd fPrev = store_->state(b, StateSlot::Committed, StateVec::Fext);
+    const Eigen::VectorXd rPrev = store_->state(b, StateSlot::Committed, StateVec::Reaction);
+    const EndSums want = {(rPrev + reaction).dot(dx), (fPrev + fEnd).dot(dx), rPrev.dot(dx), reaction.dot(dx),
+                          fPrev.dot(dx),           fEnd.dot(dx),           p.lumpedMass.dot(vNew.cwiseProduct(vNew))};
+    for (std::size_t k = 0; k < want.size(); ++k) EXPECT_LT(relDiff(ends[b][k], want[k]), 1e-12) << "sum " << k;
+  }
+}
+
+TEST_F(StepStoreContract, ResidualCountsTheDofsWhereTheResultStateIsNotFinite) {
+  const std::vector<SchemeMaps> maps = {eulerMaps(0.01), eulerMaps(0.01)};
+  const detail::BodySet set = {0, 1};
+  beginAndPositions(set, maps);
+  store_->setPositions(*slot_, set, StateSlot::Result);
+  store_->internalForces(*slot_, set);
+  store_->damping(*slot_, set, StateSlot::Result);
+  // A Newton iterate that went non-finite at one dof of body 0: x(v) and a(v) follow it there.
+  Eigen::VectorXd v = store_->state(0, StateSlot::Result, StateVec::V);
+  v[4] = std::numeric_limits<double>::quiet_NaN();
+  store_->setState(0, StateSlot::Result, StateVec::V, v);
+  store_->positions({0}, {maps[0]});
+  std::vector<ResidualSums> sums;
+  store_->residual({1, 0}, {maps[1], maps[0]}, sums);
+  EXPECT_EQ(sums[0].nonFinite, 0.0);
+  EXPECT_EQ(sums[1].nonFinite, 1.0);  // one dof, whose x, v and a are all NaN
+  EXPECT_TRUE(std::isfinite(sums[0].r));
+}
+
+TEST_F(StepStoreContract, SwapsAndCopiesMoveWholeStatesOfOneBody) {
+  auto snapshot = [&](std::size_t b, StateSlot s) {
+    std::vector<Eigen::VectorXd> out;
+    for (StateVec v : {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction})
+      out.push_back(store_->state(b, s, v));
+    return out;
+  };
+  const auto committed0 = snapshot(0, StateSlot::Committed), start0 = snapshot(0, StateSlot::Start);
+  const auto committed1 = snapshot(1, StateSlot::Committed);
+  store_->swap(0, StateSlot::Committed, StateSlot::Start);
+  EXPECT_EQ(snapshot(0, StateSlot::Committed), start0);
+  EXPECT_EQ(snapshot(0, StateSlot::Start), committed0);
+  EXPECT_EQ(snapshot(1, StateSlot::Committed), committed1);  // the other body keeps its states
+  store_->copy(0, StateSlot::Start, StateSlot::Previous);
+  EXPECT_EQ(snapshot(0, StateSlot::Previous), committed0);
+  EXPECT_EQ(snapshot(0, StateSlot::Start), committed0);
+  // A copy is a copy: changing the source leaves it.
+  store_->setState(0, StateSlot::Start, StateVec::X, problems_[0].restPositions);
+  EXPECT_EQ(store_->state(0, StateSlot::Previous, StateVec::X), committed0[0]);
+}
+
+TEST_F(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {
+  const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
+  auto run = [&](const detail::BodySet& set) {
+    std::vector<SchemeMaps> m;
+    for (std::size_t b : set) m.push_back(maps[b]);
+    beginAndPositions(set, m);
+    store_->setPositions(*slot_, set, StateSlot::Result);
+    store_->internalForces(*slot_, set);
+    store_->damping(*slot_, set, StateSlot::Result);
+    std::vector<ResidualSums> sums;
+    store_->residual(set, m, sums);
+    std::vector<EndSums> ends;
+    store_->end(set, ends);
+    std::vector<std::vector<double>> out;
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      const ResidualSums& s = sums[k];
+      std::vector<double> row = {s.ma, s.cv, s.fint, s.spring, s.r};
+      row.insert(row.end(), ends[k].begin(), ends[k].end());
+      out.push_back(row);
+    }
+    return out;
+  };
+  const auto both = run({0, 1});
+  const Eigen::VectorXd r1 = store_->scratch(1, Scratch::R);
+  const auto alone = run({1});
+  EXPECT_EQ(both[1], alone[0]);  // bitwise: the same doubles
+  EXPECT_TRUE(test::sameBits(store_->scratch(1, Scratch::R), r1));
+}
+
+}  // namespace
+}  // namespace corofem
