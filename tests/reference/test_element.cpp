@@ -160,6 +160,28 @@ TEST(PolarRotation, ProperRotationAndSymmetricStretch) {
   }
 }
 
+TEST(PolarRotation, IsTheSvdsRotationToRoundingWhereNewtonRuns) {
+  // polarRotation takes Higham's Newton iteration for proper F not nearly flat, the SVD otherwise:
+  // the two give the same polar factor U V^T, here to 1e-14 for stretch ratios up to 100 (det F
+  // at least 1e-4 |F|^3: every one of them takes Newton), near-identity F, and F of any scale
+  // (1e-6 to 1e6).
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 400; ++trial) {
+    const double ratio = std::pow(10.0, 2.0 * u(rng));  // largest over smallest stretch
+    const double scale = std::pow(10.0, 12.0 * u(rng) - 6.0);
+    const Vec3d s(scale, scale * std::pow(ratio, u(rng)), scale * ratio);
+    const Mat3 F = trial % 10 == 0 ? Mat3(randomRotation(rng) * (Mat3::Identity() + 1e-9 * Mat3::Random()))
+                                   : Mat3(randomRotation(rng) * s.asDiagonal() * randomRotation(rng));
+    Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Mat3 expected = svd.matrixU() * svd.matrixV().transpose();
+    ASSERT_GT(expected.determinant(), 0.0);
+    const Mat3 R = polarRotation(F);
+    EXPECT_LT((R - expected).norm(), 1e-14) << "trial " << trial << ", ratio " << ratio;
+    EXPECT_LT((R.transpose() * R - Mat3::Identity()).norm(), 1e-14);
+  }
+}
+
 TEST(PolarRotation, InvertedAndFlatElementsStayProper) {
   std::mt19937 rng(9);
   for (int trial = 0; trial < 20; ++trial) {

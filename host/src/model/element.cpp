@@ -93,15 +93,62 @@ Mat3 deformationGradient(const ElementRest& rest, const std::array<Vec3d, 4>& x)
   return edgeMatrix(x) * rest.DmInv;  // F = D_s D_m^-1
 }
 
-Mat3 polarRotation(const Mat3& F) {
-  // F = U S V^T, R = U V^T. When det(U V^T) < 0 (inverted element, det F < 0) the column of U for
-  // the smallest singular value is negated, which gives the closest proper rotation (det R = +1)
-  // and a signed stretch diag(s0, s1, -s2): the element is treated as a rotated, inverted one.
+namespace {
+
+/// The rotation of F by SVD, for every F: F = U S V^T, R = U V^T. When det(U V^T) < 0 (inverted
+/// element, det F < 0) the column of U for the smallest singular value is negated, which gives the
+/// closest proper rotation (det R = +1) and a signed stretch diag(s0, s1, -s2): the element is
+/// treated as a rotated, inverted one.
+Mat3 rotationBySvd(const Mat3& F) {
   Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 U = svd.matrixU();
   const Mat3& V = svd.matrixV();
   if ((U * V.transpose()).determinant() < 0.0) U.col(2) = -U.col(2);  // singular values descend
   return U * V.transpose();
+}
+
+/// det F / |F|_F^3 below which (a singular value under about 1e-6 of the others, or an inverted F)
+/// the SVD decides; the same threshold as the kernels' Newton polar (kernels/opencl/rotation.cl).
+constexpr double kNewtonMinDet = 1e-6;
+
+/// The polar factor of F (det F > 0, well away from 0) by Higham's scaled Newton iteration
+/// X <- (zeta X + X^-T / zeta) / 2, zeta = (|X^-1|_F / |X|_F)^(1/2) until the steps are small, then
+/// unscaled (quadratic convergence): a step under 1e-9 leaves an error near its square, so the
+/// next iterate is the polar factor to rounding. False where 20 steps did not get there.
+bool rotationByNewton(const Mat3& F, Mat3& R) {
+  Mat3 X = F;
+  bool scaled = true;
+  for (int k = 0; k < 20; ++k) {
+    Mat3 invT;  // X^-T: the columns of X's cofactor matrix over det X
+    invT.col(0) = X.col(1).cross(X.col(2));
+    invT.col(1) = X.col(2).cross(X.col(0));
+    invT.col(2) = X.col(0).cross(X.col(1));
+    const double det = X.col(0).dot(invT.col(0));
+    if (!(det > 0.0)) return false;
+    invT /= det;
+    const double zeta = scaled ? std::sqrt(std::sqrt(invT.squaredNorm() / X.squaredNorm())) : 1.0;
+    const Mat3 next = 0.5 * (zeta * X + invT / zeta);
+    const double step = (next - X).norm();
+    X = next;
+    if (step < 1e-9) {
+      R = X;
+      return true;
+    }
+    if (step < 1e-2) scaled = false;
+  }
+  return false;
+}
+
+}  // namespace
+
+Mat3 polarRotation(const Mat3& F) {
+  // Newton where F is a proper, not nearly flat deformation (the common case, and several times
+  // cheaper than the SVD: docs/performance.md); the SVD for inverted, flat or non-finite F and
+  // where Newton stops short.
+  const double norm = F.norm();
+  Mat3 R;
+  if (F.determinant() > kNewtonMinDet * norm * norm * norm && rotationByNewton(F, R)) return R;
+  return rotationBySvd(F);
 }
 
 Vec12 corotationalForce(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4>& x,

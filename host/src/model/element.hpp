@@ -36,8 +36,9 @@ Mat12 linearStiffness(const ElementRest& rest, const Lame& lame);
 /// F = D_s D_m^-1 from current positions.
 Mat3 deformationGradient(const ElementRest& rest, const std::array<Vec3d, 4>& x);
 
-/// Rotational part of F by polar decomposition F = R S, det R = +1 (the reference: SVD-based,
-/// with the smallest singular direction flipped for inverted elements).
+/// Rotational part of F by polar decomposition F = R S, det R = +1 (the reference): Higham's
+/// scaled Newton iteration where det F > 1e-6 |F|_F^3, else the SVD, with the smallest singular
+/// direction flipped for inverted elements. Both give U V^T of F's SVD to rounding where both run.
 Mat3 polarRotation(const Mat3& F);
 
 /// Co-rotational element force f = R K (R^T x - X) (Eq. 9), 12 entries.
