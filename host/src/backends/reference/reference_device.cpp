@@ -6,10 +6,11 @@
 // do not depend on the threads.
 //
 // Precision: SolverDesc::precision is accepted and ignored; this device always computes in double.
-// Rotation: every RotationMethod is computed here by the SVD-based polar decomposition
-// (polarRotation); the cheaper methods are device variants measured against it.
+// Rotation: every RotationMethod is computed here by the polar decomposition (polarRotation,
+// model/element.hpp); the cheaper methods are device variants measured against it.
 // The PCG runs on the free dofs of the assembled A (the constrained rows and columns dropped),
-// which is the device backends' projected system.
+// which is the device backends' projected system; its products run on the host's threads
+// (kColumnChunk), each entry of A v a sum in the same order whatever the threads.
 #include "backends/reference/reference_device.hpp"
 
 #include "backends/reference/block_jacobi.hpp"
@@ -40,6 +41,10 @@ using SpMat = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
 /// every sum over elements is made afterwards in element order, so the answers have the bits of
 /// one thread's pass.
 constexpr std::size_t kElementChunk = 1024;
+
+/// The products A v run in chunks of this many columns of A (about 80 entries each in a 3D mesh)
+/// on the host's threads.
+constexpr std::size_t kColumnChunk = 1024;
 
 /// One body: its element state at the current positions, its assembled system on the free dofs,
 /// and the PCG state of the solve in progress.
@@ -187,10 +192,11 @@ class ReferenceBody {
     }
     assemble(c);
     formPreconditioner(c);
-    r_ = bf_ - A_ * xf_;
+    product(xf_, w_);
+    r_ = bf_ - w_;
     u_ = precondition(r_);
     d_ = ad_ = Eigen::VectorXd::Zero(nf);
-    w_ = A_ * u_;
+    product(u_, w_);
     gamma_ = r_.dot(u_);
     sc_.rr = r_.squaredNorm();
     const double delta = u_.dot(w_);
@@ -214,7 +220,7 @@ class ReferenceBody {
     sc_.rr = r_.squaredNorm();
     bool breakdown = false;
     if (!last) {
-      w_ = A_ * u_;
+      product(u_, w_);
       const double delta = u_.dot(w_);
       beta_ = gamma_ != 0.0 ? gammaNew / gamma_ : 0.0;
       const double pq = alpha_ != 0.0 ? delta - beta_ * gammaNew / alpha_ : 0.0;
@@ -232,7 +238,9 @@ class ReferenceBody {
 
   PcgScalars trueResidual() const {
     PcgScalars t = sc_;
-    t.rr = (bf_ - A_ * xf_).squaredNorm();
+    Eigen::VectorXd ax;
+    product(xf_, ax);
+    t.rr = (bf_ - ax).squaredNorm();
     return t;
   }
 
@@ -404,6 +412,24 @@ class ReferenceBody {
         values[diagSlot_[i]] += c.stiffness * p_.springStiffness[freeDofs_[i]];
   }
 
+  /// y = A v on the free dofs, each entry the sum over A's column in stored order (A is symmetric:
+  /// R K R^T blocks and their transposes, equal to rounding), in chunks of kColumnChunk columns on
+  /// the host's threads: the same bits on any number of threads.
+  void product(const Eigen::VectorXd& v, Eigen::VectorXd& y) const {
+    const Eigen::Index n = A_.cols();
+    y.resize(n);
+    const int* start = A_.outerIndexPtr();
+    const int* row = A_.innerIndexPtr();
+    const double* value = A_.valuePtr();
+    parallelChunks(static_cast<std::size_t>(n), kColumnChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t j = begin; j < end; ++j) {
+        double sum = 0.0;
+        for (int q = start[j]; q < start[j + 1]; ++q) sum += value[q] * v[row[q]];
+        y[static_cast<Eigen::Index>(j)] = sum;
+      }
+    });
+  }
+
   /// M^-1 of the assembled A: none, its diagonal (1 where a diagonal entry is 0), its 3x3 node
   /// blocks over each node's free dofs (BlockJacobiPreconditioner), the warped multigrid
   /// (precond/amg.hpp) or the warped factor (precond/warped_cholesky.hpp) of the rest operator
@@ -437,7 +463,7 @@ class ReferenceBody {
       case PreconditionerKind::BlockDiagonal: return blocks_.solve(r);
       case PreconditionerKind::Amg: {
         Eigen::VectorXd z;
-        const AmgFineOperator fine{[this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = A_ * v; },
+        const AmgFineOperator fine{[this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { product(v, y); },
                                    [this](const Eigen::VectorXd& v, Eigen::VectorXd& y) { y = amgBlocksInverse_ * v; }};
         amg_.amg().apply(fine, r, z);
         return z;
