@@ -239,6 +239,28 @@ TEST(BatchSimulation, BatchIsBitIdenticalWithAFailingAndASleepingBody) {
   EXPECT_TRUE(alone.scheduler["bodies"][0]["batch"].is_null());
 }
 
+TEST(BatchSimulation, TheReferenceBackendBatchesItsBodiesBitForBitAndLeavesHyperelasticOnesAlone) {
+  // The reference backend batches: one call per operation for the set, its bodies across the
+  // host's threads. The same bits as every body alone; a Neo-Hookean body (whose inverted element
+  // would fail its whole call) runs alone.
+  Scene scene = fiveBodies(10, /*withFlaky=*/false);
+  BodyDesc rubber = boxBeam({6, 2, 2});
+  rubber.name = "rubber";
+  rubber.formulation = Formulation::NeoHookean;
+  scene.bodies.push_back(rubber);
+  scene.backend.kind = BackendKind::Reference;
+  const Trace batched = run(scene);
+  Scene apart = scene;
+  apart.backend.batch = false;
+  const Trace alone = run(apart);
+  expectSameRun(batched, alone);
+  ASSERT_EQ(batched.scheduler["batches"].size(), 1u) << batched.scheduler.dump(1);
+  const json& batch = batched.scheduler["batches"][0];
+  EXPECT_EQ(batch["backend"], "reference");
+  EXPECT_EQ(batch["bodies"], json({"a", "damped", "steady", "quiet", "linear"}));
+  EXPECT_TRUE(alone.scheduler["batches"].empty());
+}
+
 TEST(BatchSimulation, DeviceCallsPerStepDoNotGrowWithTheBodies) {
   // Copies of one beam (same mesh, material and loads, side by side) take the same iterations, so
   // a batch of any number of them makes the same device calls per step, each holding all of them:

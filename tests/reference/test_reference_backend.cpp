@@ -19,6 +19,7 @@ using corofem::test::makeProblem;
 namespace corofem {
 /// How GoogleTest (and so CTest's test list) prints a formulation: its name.
 inline void PrintTo(Formulation f, std::ostream* os) { *os << toString(f); }
+
 }  // namespace corofem
 
 namespace {
@@ -321,4 +322,34 @@ TEST(ReferenceBackend, InvertedNeoHookeanElementIsASolveFailureNamingIt) {
   svk->setPositions(x);
   svk->internalForces(f);
   EXPECT_TRUE(f.allFinite());
+}
+
+TEST(ReferenceBackend, ACallOverSeveralBodiesFinishesEveryBodyAndThrowsTheFirstBodysError) {
+  // Two equal Neo-Hookean bodies: the device runs a call's bodies across the host's threads, and a
+  // body whose element is inverted fails the call with its own error once the others are done.
+  const TetMesh mesh = boxMesh(2, 1, 1);
+  Problem p0 = makeProblem(mesh, 1e5, 0.3, 1000.0, Formulation::NeoHookean);
+  Problem p1 = p0;
+  p0.name = "first";
+  p1.name = "second";
+  auto device = detail::createReferenceDevice({&p0, &p1}, SolverDesc{});
+  Eigen::VectorXd mirrored = p0.restPositions;
+  for (std::size_t n = 0; n < mesh.nodeCount(); ++n) mirrored[3 * n + 2] *= -1.0;
+  const Eigen::VectorXd moved = p0.restPositions + 0.01 * Eigen::VectorXd::Ones(p0.restPositions.size());
+  auto errorOf = [&](const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) -> std::string {
+    device->setPositions({0, 1}, {&x0, &x1});
+    Eigen::VectorXd f0, f1;
+    try {
+      device->internalForces({0, 1}, {&f0, &f1});
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::SolveFailed);
+      if (x0 != mirrored) EXPECT_TRUE(f0.size() == p0.restPositions.size() && f0.allFinite()) << "body 0 was not done";
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_EQ(errorOf(moved, moved), "");
+  EXPECT_NE(errorOf(moved, mirrored).find("body 'second'"), std::string::npos);
+  EXPECT_NE(errorOf(mirrored, mirrored).find("body 'first'"), std::string::npos);
+  EXPECT_NE(errorOf(mirrored, moved).find("body 'first'"), std::string::npos);
 }

@@ -82,7 +82,7 @@ void Simulation::Impl::formGroups() {
     for (std::size_t i = 0; i < bodies.size(); ++i) {
       const detail::Candidate& c = bodies[i].schedule.choice();
       const detail::Problem& p = *bodies[i].problem;
-      if (const auto entry = detail::findBackend(c.backend); entry && entry->batches)
+      if (const auto entry = detail::findBackend(c.backend); entry && entry->batches && (!entry->batchable || entry->batchable(p)))
         byDevice[{c.label(), detail::preconditionerOf(scene.solver, p)}].push_back(i);
     }
     std::map<std::string, std::size_t> onDevice;  // candidate label -> its bodies, every preconditioner

@@ -91,6 +91,10 @@ struct BackendEntry {
   std::function<std::string()> buildId;
   /// Bodies scheduled on one of its devices share its buffers and launches (BackendDesc::batch).
   bool batches = false;
+  /// Where batches: whether this body joins a batch (null: every body). A body whose device calls
+  /// can fail for it alone (a Neo-Hookean element turned inside out fails the reference device's
+  /// call) runs alone, so that its failure fails no other body's step.
+  std::function<bool(const Problem& problem)> batchable;
   /// The passes a step of such a body runs on the backend's devices, named as its kernels or
   /// shaders, for the plan; null: the plan names them generically.
   std::function<std::vector<std::string>(const PlanPasses& step)> passes;

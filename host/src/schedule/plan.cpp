@@ -103,7 +103,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   json f;
   f["formulation"] = toString(problem.formulation);
   if (corot)
-    f["rotation_method"] = device ? toString(problem.rotation) : "polar (the reference backend computes every method by SVD)";
+    f["rotation_method"] = device ? toString(problem.rotation) : "polar (the reference backend computes every method as the polar decomposition)";
   f["precision"] = device ? (scene.solver.precision == Precision::Float ? "float" : "double") : "double";
   f["analysis"] = dynamic ? "dynamic" : "static";
   if (dynamic) f["integrator"] = integratorOf(scene.analysis.dynamics) == Integrator::Newmark ? "newmark" : "backward_euler";
@@ -122,7 +122,9 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   if (batched) {
     std::string names;
     for (const std::string& n : batchMates) names += (names.empty() ? "" : ", ") + n;
-    f["shared_launches"] = "one launch sequence for " + std::to_string(batchMates.size()) + " bodies: " + names;
+    f["shared_launches"] = device ? "one launch sequence for " + std::to_string(batchMates.size()) + " bodies: " + names
+                                  : "one call per operation for " + std::to_string(batchMates.size()) +
+                                        " bodies, run across the host's threads: " + names;
     j["shared_launches"] = batchMates;
   } else {
     f["shared_launches"] = false;

@@ -27,8 +27,10 @@
 #include <algorithm>
 #include <cmath>
 #include <deque>
+#include <exception>
 #include <memory>
 #include <utility>
+#include <vector>
 
 namespace corofem::detail {
 
@@ -43,8 +45,9 @@ using SpMat = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
 constexpr std::size_t kElementChunk = 1024;
 
 /// The products A v run in chunks of this many columns of A (about 80 entries each in a 3D mesh)
-/// on the host's threads.
-constexpr std::size_t kColumnChunk = 1024;
+/// on the host's threads. A body of fewer free dofs takes its products on the calling thread, where
+/// waking the pool would cost more than it saves (docs/performance.md).
+constexpr std::size_t kColumnChunk = 4096;
 
 /// One body: its element state at the current positions, its assembled system on the free dofs,
 /// and the PCG state of the solve in progress.
@@ -572,21 +575,21 @@ class ReferenceDevice final : public Device {
 
   void setPositions(const BodySet& set, const ConstVectors& x) override {
     check(set, x.size());
-    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setPositions(*x[i]);
+    forBodies(set, [&](std::size_t i) { at(set[i]).setPositions(*x[i]); });
   }
   void internalForces(const BodySet& set, const Vectors& f) override {
     check(set, f.size());
-    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).internalForces(*f[i]);
+    forBodies(set, [&](std::size_t i) { at(set[i]).internalForces(*f[i]); });
   }
   void apply(const BodySet& set, const std::vector<SystemCoeffs>& c, const ConstVectors& p, const Vectors& y) override {
     check(set, p.size());
     check(set, y.size());
     check(set, c.size());
-    for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).apply(c[i], *p[i], *y[i]);
+    forBodies(set, [&](std::size_t i) { at(set[i]).apply(c[i], *p[i], *y[i]); });
   }
   void elasticEnergy(const BodySet& set, std::vector<double>& energy) override {
     energy.resize(set.size());
-    for (std::size_t i = 0; i < set.size(); ++i) energy[i] = at(set[i]).elasticEnergy();
+    forBodies(set, [&](std::size_t i) { energy[i] = at(set[i]).elasticEnergy(); });
   }
   void setMaterial(const BodySet& set, const std::vector<const Problem*>& problems) override {
     check(set, problems.size());
@@ -619,15 +622,18 @@ class ReferenceDevice final : public Device {
     cap_ = maxIterations;
     reads_.clear();
     std::vector<PcgStart> out(set.size());
-    for (std::size_t i = 0; i < set.size(); ++i) out[i] = at(set[i]).pcgBegin(c[i], *b[i], *x[i], tolerance, maxIterations);
+    forBodies(set, [&](std::size_t i) { out[i] = at(set[i]).pcgBegin(c[i], *b[i], *x[i], tolerance, maxIterations); });
     return out;
   }
 
   void pcgIterate(int n, const std::vector<char>&) override {
-    for (int k = 0; k < n && enqueued_ < cap_; ++k) {
-      ++enqueued_;
-      for (std::size_t body : solve_) at(body).pcgIteration(enqueued_ == cap_);
-    }
+    const int first = enqueued_;
+    const int count = std::max(0, std::min(n, cap_ - enqueued_));
+    enqueued_ += count;
+    // Each body its own iterations in turn (iteration k the cap's last where first + k + 1 = cap).
+    forBodies(solve_, [&](std::size_t i) {
+      for (int k = 0; k < count; ++k) at(solve_[i]).pcgIteration(first + k + 1 == cap_);
+    });
   }
 
   PcgTicket pcgRead() override {
@@ -649,11 +655,11 @@ class ReferenceDevice final : public Device {
 
   void pcgEnd(const std::vector<int>&, const Vectors& x, std::vector<PcgScalars>& residual) override {
     residual.assign(solve_.size(), PcgScalars{});
-    for (std::size_t i = 0; i < solve_.size(); ++i) {
+    forBodies(solve_, [&](std::size_t i) {
       ReferenceBody& b = at(solve_[i]);
       if (i < residualFor_.size() && residualFor_[i]) residual[i] = b.trueResidual();
       if (b.running()) b.pcgEnd(*x[i]);
-    }
+    });
     firstTicket_ += reads_.size();
     reads_.clear();
     residualFor_.clear();
@@ -673,6 +679,37 @@ class ReferenceDevice final : public Device {
   }
   static void check(const BodySet& set, std::size_t n) {
     if (set.size() != n) fail(ErrorCode::Internal, "reference backend: ", n, " vectors for ", set.size(), " bodies");
+  }
+
+  /// fn(i) for every body set[i]: across the host's threads, a body on each, where the set's work
+  /// spreads (two bodies or more, the largest at most half of their elements); else one body after
+  /// another, each body's own passes on the threads. The bodies are independent, so either way each
+  /// gets the bits it gets alone. A body's error stops nothing else; the first body's (in set order)
+  /// is thrown once all are done.
+  template <class Fn>
+  void forBodies(const BodySet& set, Fn&& fn) {
+    std::size_t largest = 0, total = 0;
+    for (std::size_t body : set) {
+      const std::size_t e = at(body).problem().elements.size();
+      largest = std::max(largest, e);
+      total += e;
+    }
+    if (set.size() < 2 || 2 * largest > total) {
+      for (std::size_t i = 0; i < set.size(); ++i) fn(i);
+      return;
+    }
+    std::vector<std::exception_ptr> errors(set.size());
+    parallelChunks(set.size(), 1, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t i = begin; i < end; ++i) {
+        try {
+          fn(i);
+        } catch (...) {
+          errors[i] = std::current_exception();
+        }
+      }
+    });
+    for (const std::exception_ptr& e : errors)
+      if (e) std::rethrow_exception(e);
   }
 
   std::vector<std::unique_ptr<ReferenceBody>> bodies_;
@@ -696,6 +733,9 @@ void registerReferenceBackend() {
   e.resolve = [](const std::string&) { return referenceCandidate(); };
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate&,
                 const DeviceOptions&) { return createReferenceDevice(problems, solver); };
+  e.batches = true;  // a batch's bodies share each call, run across the host's threads (forBodies)
+  // A hyperelastic body's inverted element fails the whole call (checkInversion): it runs alone.
+  e.batchable = [](const Problem& p) { return !isHyperelastic(p.formulation); };
   registerBackend(std::move(e));
 }
 
