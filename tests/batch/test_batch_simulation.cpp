@@ -261,6 +261,50 @@ TEST(BatchSimulation, TheReferenceBackendBatchesItsBodiesBitForBitAndLeavesHyper
   EXPECT_TRUE(alone.scheduler["batches"].empty());
 }
 
+/// Refuses body "refuser"'s state in the forces' call (Error(SolveFailed) naming it, whatever else
+/// the call holds) at its 4th and 5th calls: a device that fails one body's call, as the reference
+/// device does for an inverted Neo-Hookean element.
+class RefusingDevice final : public ForwardingDevice {
+ public:
+  explicit RefusingDevice(std::unique_ptr<detail::Device> inner) : ForwardingDevice(std::move(inner)) {}
+  void internalForces(const detail::BodySet& bodies, const detail::Vectors& f) override {
+    for (std::size_t b : bodies)
+      if (problem(b).name == "refuser" && ++calls_ >= 4 && calls_ <= 5)
+        detail::fail(ErrorCode::SolveFailed, "body 'refuser': its state is refused");
+    ForwardingDevice::internalForces(bodies, f);
+  }
+
+ private:
+  int calls_ = 0;
+};
+
+TEST(BatchSimulation, ABodyWhoseCallFailsInItsBatchFailsAloneAndTheStatusNamesIt) {
+  // The call fails for the whole batch; the driver repeats it body by body to find whose failure it
+  // is. Before, every body of the call failed with the refuser's error, and the status named the
+  // first of them in scene order ("a").
+  Scene scene = fiveBodies(8, /*withFlaky=*/false);
+  BodyDesc refuser = boxBeam({7, 2, 2});
+  refuser.name = "refuser";
+  scene.bodies.push_back(refuser);
+  auto make = [](const std::vector<const detail::Problem*>& problems, const SolverDesc& s,
+                 const detail::Candidate&) -> std::unique_ptr<detail::Device> {
+    return std::make_unique<RefusingDevice>(detail::createReferenceDevice(problems, s));
+  };
+  HookScope scope({fakeBackend("batchdev", {batchCandidate()}, make, /*batches=*/true), *detail::findBackend("reference")});
+  auto sim = Simulation::create(scene, onBatchDevice());
+  ASSERT_TRUE(sim) << sim.message();
+  ASSERT_EQ(json::parse(sim->schedulerReport())["batches"][0]["bodies"].size(), 6u);
+  std::string failure;
+  for (int k = 0; k < 8 && failure.empty(); ++k)
+    if (const Status st = sim->step(); !st) failure = st.message();
+  ASSERT_FALSE(failure.empty()) << "the refused step did not fail";
+  EXPECT_EQ(failure.rfind("body 'refuser'", 0), 0u) << failure;
+  EXPECT_NE(failure.find("its state is refused"), std::string::npos) << failure;
+  // The scene goes on from the last step every body completed.
+  const Status next = sim->step();
+  EXPECT_TRUE(next) << next.message();
+}
+
 TEST(BatchSimulation, DeviceCallsPerStepDoNotGrowWithTheBodies) {
   // Copies of one beam (same mesh, material and loads, side by side) take the same iterations, so
   // a batch of any number of them makes the same device calls per step, each holding all of them:

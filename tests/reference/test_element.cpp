@@ -162,7 +162,8 @@ TEST(PolarRotation, ProperRotationAndSymmetricStretch) {
 
 TEST(PolarRotation, IsTheSvdsRotationToRoundingWhereNewtonRuns) {
   // polarRotation takes Higham's Newton iteration for proper F not nearly flat, the SVD otherwise:
-  // the two give the same polar factor U V^T, here to 1e-14 for stretch ratios up to 100 (det F
+  // the two give the same polar factor U V^T, here to 5e-14 (the factor's own sensitivity to
+  // rounding reaches about 2e-14 at a stretch ratio of 100) for stretch ratios up to 100 (det F
   // at least 1e-4 |F|^3: every one of them takes Newton), near-identity F, and F of any scale
   // (1e-6 to 1e6).
   std::mt19937 rng(21);
@@ -171,13 +172,15 @@ TEST(PolarRotation, IsTheSvdsRotationToRoundingWhereNewtonRuns) {
     const double ratio = std::pow(10.0, 2.0 * u(rng));  // largest over smallest stretch
     const double scale = std::pow(10.0, 12.0 * u(rng) - 6.0);
     const Vec3d s(scale, scale * std::pow(ratio, u(rng)), scale * ratio);
-    const Mat3 F = trial % 10 == 0 ? Mat3(randomRotation(rng) * (Mat3::Identity() + 1e-9 * Mat3::Random()))
+    Mat3 jitter;
+    for (int k = 0; k < 9; ++k) jitter(k / 3, k % 3) = 2.0 * u(rng) - 1.0;
+    const Mat3 F = trial % 10 == 0 ? Mat3(randomRotation(rng) * (Mat3::Identity() + 1e-9 * jitter))
                                    : Mat3(randomRotation(rng) * s.asDiagonal() * randomRotation(rng));
     Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
     const Mat3 expected = svd.matrixU() * svd.matrixV().transpose();
     ASSERT_GT(expected.determinant(), 0.0);
     const Mat3 R = polarRotation(F);
-    EXPECT_LT((R - expected).norm(), 1e-14) << "trial " << trial << ", ratio " << ratio;
+    EXPECT_LT((R - expected).norm(), 5e-14) << "trial " << trial << ", ratio " << ratio;
     EXPECT_LT((R.transpose() * R - Mat3::Identity()).norm(), 1e-14);
   }
 }

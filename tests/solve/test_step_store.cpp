@@ -202,6 +202,18 @@ TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoa
       if (free[d] == 0.0) EXPECT_NEAR(xNew[d], target[d], 1e-14) << "dof " << d;
     EXPECT_EQ(store_->scratch(b, Scratch::Cv).norm(), 0.0);
   }
+  // The step's first advance (fraction 1, from the committed state): held targets exactly.
+  std::vector<double> norms;
+  store_->begin({0}, {BeginArgs{maps[0], 0.3, 1.0, StateSlot::Committed}}, norms);
+  const detail::BodyControls& c = store_->controls(0);
+  const Eigen::VectorXd& target = store_->scratch(0, Scratch::Target);
+  int held = 0;
+  for (Eigen::Index d = 0; d < target.size(); ++d)
+    if (!std::isnan(c.targets[d])) {
+      EXPECT_EQ(target[d], c.targets[d]) << "dof " << d;
+      ++held;
+    }
+  EXPECT_GT(held, 0);
 }
 
 TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpressions) {
@@ -238,6 +250,16 @@ TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpression
   store_->update(set, bad);
   std::vector<EndSums> ends;
   store_->end(set, ends);
+  // A solve starts from Dv = 0, not from the last answer: the same solve again gives the same bits.
+  std::vector<Eigen::VectorXd> dvFirst;
+  for (std::size_t b = 0; b < 2; ++b) dvFirst.push_back(store_->scratch(b, Scratch::Dv));
+  std::vector<detail::PcgSolve> again(2);
+  for (std::size_t b = 0; b < 2; ++b) again[b].coeffs = solves[b].coeffs;
+  store_->solve(*slot_, set, again);
+  for (std::size_t b = 0; b < 2; ++b) {
+    EXPECT_TRUE(test::sameBits(store_->scratch(b, Scratch::Dv), dvFirst[b])) << "body " << b;
+    EXPECT_EQ(again[b].stats.iterations, solves[b].stats.iterations) << "body " << b;
+  }
 
   for (std::size_t b = 0; b < 2; ++b) {
     SCOPED_TRACE("body " + std::to_string(b));

@@ -194,7 +194,9 @@ enum class BackendKind { Auto, Reference, OpenCL, Vulkan };
 struct BackendDesc {
   BackendKind kind = BackendKind::Auto;
   std::string device;  ///< device name substring or index ("" = the scheduler's choice)
-  bool batch = true;   ///< bodies scheduled on one OpenCL device share its buffers and kernel launches
+  /// Bodies scheduled on one OpenCL or Vulkan device share its buffers and kernel launches; on the
+  /// reference backend they share each call, their bodies run across the host's threads.
+  bool batch = true;
   /// "auto": bodies with fewer elements than this run on the reference backend without a
   /// calibration (a device launch then costs more than the whole step), >= 0.
   std::size_t minDeviceElements = 512;

@@ -196,6 +196,11 @@ int printPlan(const Simulation& sim, bool asJson) {
               << ", PCG cap " << m["pcg_iteration_cap"] << ")\n";
   }
   for (const auto& g : plan["batches"]) {
+    if (g["backend"] == "reference") {  // no device buffers: the host's threads run the bodies of each call
+      std::cout << "batch on " << g["device"].get<std::string>() << " (" << g["bodies"].size()
+                << " bodies, one call per operation, the bodies across the host's threads)\n";
+      continue;
+    }
     std::cout << "batch on " << g["device"].get<std::string>() << " (" << g["bodies"].size() << " bodies, one set of "
               << "launches): device buffers allocated " << humanBytes(g["allocated_bytes"].get<double>()) << '\n';
     printBuffers(g["buffers"]);

@@ -159,6 +159,13 @@ class Device {
   /// `problems[i]->springStiffness` is body bodies[i]'s new S (nothing else of it is read). A
   /// device that cannot change them throws Error(DeviceError).
   virtual void setSprings(const BodySet& bodies, const std::vector<const Problem*>& problems);
+  /// Drops body `body` (later bodies' indices move down by one) where the device can do so in
+  /// place, the others keeping all they hold (the reference device: its bodies are independent);
+  /// false, and nothing changed, where the slot must make a device for the others instead.
+  virtual bool removeBody(std::size_t body) {
+    (void)body;
+    return false;
+  }
 
   // -- PCG building blocks (driven by solvePcg, solve/pcg.hpp): the single-reduction PCG of
   // kernels/opencl/pcg.cl on the projected system (constrained dofs: identity rows and columns,

@@ -213,7 +213,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
       buffer("warped_cholesky_factor (estimate: 4.2x the system's entries, more on larger meshes; twice after a grab)", h,
              kWarpedFill * nnz * 12);
     if (warped) buffer("rest_stiffness (K_0, kept)", h, nnz * 12);
-    if (corot) kernels.push_back("polar decomposition per element (SVD)");
+    if (corot) kernels.push_back("polar decomposition per element (Newton's iteration, the SVD where F is inverted or flat)");
     kernels.push_back("element forces");
     kernels.push_back("sparse assembly of " + std::string(dynamic ? "M + C + K_t" : "K_t"));
     kernels.push_back(pcg ? "single-reduction PCG" : "Eigen SimplicialLDLT");

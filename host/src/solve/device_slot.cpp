@@ -178,6 +178,13 @@ void DeviceSlot::setSprings(const BodySet& bodies) {
 void DeviceSlot::removeBody(std::size_t body) {
   if (body >= problems_.size() || problems_.size() < 2)
     fail(ErrorCode::Internal, "removing body ", body, " of a device slot of ", problems_.size());
+  if (!exhausted_ && device_->removeBody(body)) {  // in place: the other bodies keep what they hold
+    problems_.erase(problems_.begin() + static_cast<std::ptrdiff_t>(body));
+    lastX_.erase(lastX_.begin() + static_cast<std::ptrdiff_t>(body));
+    solveStart_.clear();
+    ++generation_;  // the bodies' indices moved: surfaces made for them are made again
+    return;
+  }
   if (given_ || exhausted_)
     fail(ErrorCode::DeviceError, "body '", problems_[body]->name, "' cannot leave its device: ",
          given_ ? "the device was made by the caller, and no other can be made for the bodies that stay; create the "

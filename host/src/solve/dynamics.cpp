@@ -411,15 +411,40 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       if (p.rayleighMass != 0.0 || p.rayleighStiffness != 0.0) damped.push_back(adv[j].body);
     }
     store_->positions(set, maps);
+    const auto evaluate = [&](const BodySet& bodies, const BodySet& dampedBodies) {
+      store_->setPositions(slot_, bodies, StateSlot::Result);
+      for (std::size_t i : bodies) bodies_[i].deviceAtCommitted = false;
+      store_->internalForces(slot_, bodies);
+      if (!dampedBodies.empty()) store_->damping(slot_, dampedBodies, StateSlot::Result);
+    };
     try {
-      store_->setPositions(slot_, set, StateSlot::Result);
-      for (std::size_t i : set) bodies_[i].deviceAtCommitted = false;
-      store_->internalForces(slot_, set);
-      if (!damped.empty()) store_->damping(slot_, damped, StateSlot::Result);
+      evaluate(set, damped);
     } catch (const Error& e) {
       if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
-      for (std::size_t j : live) failHere(adv[j], std::string("failed: ") + e.what());
-      break;
+      // A body's own failure (a device that refuses its state) failed the whole call: each body
+      // alone finds whose, and the others carry on with the same bits.
+      for (std::size_t j : live) {
+        const std::size_t body = adv[j].body;
+        const bool isDamped = std::find(damped.begin(), damped.end(), body) != damped.end();
+        try {
+          if (live.size() > 1) evaluate({body}, isDamped ? BodySet{body} : BodySet{});
+          else failHere(adv[j], std::string("failed: ") + e.what());
+        } catch (const Error& alone) {
+          if (alone.code() == ErrorCode::DeviceError) throw;
+          failHere(adv[j], std::string("failed: ") + alone.what());
+        }
+      }
+      std::vector<std::size_t> still;
+      set.clear();
+      maps.clear();
+      for (std::size_t j : live)
+        if (adv[j].running) {
+          still.push_back(j);
+          set.push_back(adv[j].body);
+          maps.push_back(adv[j].maps);
+        }
+      live = std::move(still);
+      if (live.empty()) break;
     }
     // r = M a + C v + f_int - f_ext, the free norms of its terms and of r, and whether x, v and a
     // are finite, in one pass over the body's vectors.
@@ -463,8 +488,19 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       store_->solve(slot_, solveSet, solves);
     } catch (const Error& e) {
       if (e.code() == ErrorCode::DeviceError) throw;  // every device of the slot failed: the step fails
-      for (std::size_t j : solving) failHere(adv[j], std::string("failed in the linear solve: ") + e.what());
-      break;
+      // As above: each body's solve alone, a body whose own solve throws failing with its error.
+      for (std::size_t k = 0; k < solving.size(); ++k) {
+        std::vector<PcgSolve> one(1);
+        one[0].coeffs = solves[k].coeffs;
+        try {
+          if (solving.size() > 1) store_->solve(slot_, {solveSet[k]}, one);
+          else one[0].failure = e.what();
+        } catch (const Error& alone) {
+          if (alone.code() == ErrorCode::DeviceError) throw;
+          one[0].failure = alone.what();
+        }
+        solves[k] = std::move(one[0]);
+      }
     }
     BodySet updateSet;
     std::vector<std::size_t> updating;  // indices into adv

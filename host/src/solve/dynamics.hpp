@@ -105,8 +105,8 @@ class DynamicsDriver final : public Driver {
   double time(std::size_t body) const { return bodies_.at(body).t; }
 
  private:
-  /// The scalars of a state of a body; its vectors are the store's (StateSlot). A field added here
-  /// joins copyScalars: a state is made of both.
+  /// The scalars of a state of a body; its vectors are the store's (StateSlot): a state is made of
+  /// both.
   struct State {
     double work = 0.0, t = 0.0, supportWork = 0.0;
     /// The loads' and supports' work as the scheme weighs the step's end forces, for the runaway

@@ -120,11 +120,13 @@ class HostStepStore final : public StepStore {
       Body& b = at(set[k]);
       solves[k].b = &b.scratch[index(Scratch::Rhs)];
       solves[k].x = &b.scratch[index(Scratch::Dv)];
+      solves[k].x->setZero(b.problem->restPositions.size());  // Newton's correction starts at 0
     }
     device.solve(set, solves);
   }
 
   void begin(const BodySet& set, const std::vector<BeginArgs>& args, std::vector<double>& fextNorm) override {
+    check(set, args.size());
     fextNorm.assign(set.size(), 0.0);
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
@@ -176,6 +178,7 @@ class HostStepStore final : public StepStore {
   }
 
   void positions(const BodySet& set, const std::vector<SchemeMaps>& maps) override {
+    check(set, maps.size());
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
       const SchemeMaps& m = maps[k];
@@ -193,6 +196,7 @@ class HostStepStore final : public StepStore {
   }
 
   void residual(const BodySet& set, const std::vector<SchemeMaps>& maps, std::vector<ResidualSums>& out) override {
+    check(set, maps.size());
     out.assign(set.size(), ResidualSums{});
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
@@ -204,8 +208,7 @@ class HostStepStore final : public StepStore {
       const Eigen::VectorXd &x = next[index(StateVec::X)], &v = next[index(StateVec::V)], &a = next[index(StateVec::A)],
                             &fext = next[index(StateVec::Fext)], &cv = b.scratch[index(Scratch::Cv)],
                             &fint = b.scratch[index(Scratch::Fint)];
-      Eigen::VectorXd &r = b.scratch[index(Scratch::R)], &rhs = b.scratch[index(Scratch::Rhs)],
-                      &dv = b.scratch[index(Scratch::Dv)];
+      Eigen::VectorXd &r = b.scratch[index(Scratch::R)], &rhs = b.scratch[index(Scratch::Rhs)];
       // The springs' S (x - t) joins f_int here (a zero vector's worth of work without springs).
       const Eigen::VectorXd& ks = p.springStiffness;
       const Eigen::VectorXd& springTarget = b.controls.springTargets;
@@ -220,7 +223,6 @@ class HostStepStore final : public StepStore {
           const double rd = ma + cv[d] + fint[d] + spring - fext[d];
           r[d] = rd;
           rhs[d] = -rd / ka;
-          dv[d] = 0.0;
           const double f = free[d], maf = ma * f, cvf = cv[d] * f, fintf = fint[d] * f, sf = spring * f, rf = rd * f;
           sum[0] += maf * maf;
           sum[1] += cvf * cvf;
@@ -235,6 +237,7 @@ class HostStepStore final : public StepStore {
   }
 
   void update(const BodySet& set, std::vector<double>& nonFinite) override {
+    check(set, set.size());
     nonFinite.assign(set.size(), 0.0);
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
@@ -251,6 +254,7 @@ class HostStepStore final : public StepStore {
   }
 
   void end(const BodySet& set, std::vector<EndSums>& out) override {
+    check(set, set.size());
     out.assign(set.size(), EndSums{});
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
@@ -304,6 +308,13 @@ class HostStepStore final : public StepStore {
     if (body >= bodies_.size())
       fail(ErrorCode::Internal, "step store: body ", body, " of ", bodies_.size());
     return bodies_[body];
+  }
+  /// Throws Error(Internal) for a body the store lacks or per-body arguments of another count,
+  /// before a pass's tasks run (which must not throw).
+  void check(const BodySet& set, std::size_t args) {
+    for (std::size_t body : set) at(body);
+    if (args != set.size())
+      fail(ErrorCode::Internal, "step store: ", args, " arguments for ", set.size(), " bodies");
   }
 
   std::vector<Body> bodies_;

@@ -103,8 +103,8 @@ class StepStore {
   /// = 0) as a scaling of the lumped mass, the stiffness part by the device's product. Bodies
   /// without damping get Cv = 0.
   virtual void damping(DeviceSlot& device, const BodySet& set, StateSlot slot) = 0;
-  /// The linear solves A Dv = Rhs of `set` (Dv starting where the last pass left it), with
-  /// solves[i].coeffs; fills the solves' stats and failures (their b and x are the store's).
+  /// The linear solves A Dv = Rhs of `set` from Dv = 0, with solves[i].coeffs; fills the solves'
+  /// stats and failures (their b and x are the store's).
   virtual void solve(DeviceSlot& device, const BodySet& set, std::vector<PcgSolve>& solves) = 0;
 
   // -- the driver's per-dof passes, each over a body's dofs with its sums in dof order (a body's
@@ -118,8 +118,8 @@ class StepStore {
   virtual void begin(const BodySet& set, const std::vector<BeginArgs>& args, std::vector<double>& fextNorm) = 0;
   /// Result.X = Xb + kx Result.V and Result.A = ka (Result.V - Vb).
   virtual void positions(const BodySet& set, const std::vector<SchemeMaps>& maps) = 0;
-  /// r = M a + C v + f_int + S (x - t) - f_ext at the result state into R, Rhs = -r / ka, Dv = 0,
-  /// and the sums of ResidualSums.
+  /// r = M a + C v + f_int + S (x - t) - f_ext at the result state into R, Rhs = -r / ka, and the
+  /// sums of ResidualSums.
   virtual void residual(const BodySet& set, const std::vector<SchemeMaps>& maps, std::vector<ResidualSums>& sums) = 0;
   /// Result.V += Dv; returns the non-finite entries of Dv per body.
   virtual void update(const BodySet& set, std::vector<double>& nonFinite) = 0;

@@ -44,10 +44,11 @@ using SpMat = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
 /// one thread's pass.
 constexpr std::size_t kElementChunk = 1024;
 
-/// The products A v run in chunks of this many columns of A (about 80 entries each in a 3D mesh)
-/// on the host's threads. A body of fewer free dofs takes its products on the calling thread, where
-/// waking the pool would cost more than it saves (docs/performance.md).
-constexpr std::size_t kColumnChunk = 4096;
+/// The products A v of a body of more free dofs than this run on the host's threads in chunks of
+/// kColumnChunk columns (about 45 to 80 entries each in a 3D mesh); a smaller body's run on the
+/// calling thread, where waking the pool would cost more than it saves (docs/performance.md).
+constexpr std::size_t kSerialColumns = 4096;
+constexpr std::size_t kColumnChunk = 1024;
 
 /// One body: its element state at the current positions, its assembled system on the free dofs,
 /// and the PCG state of the solve in progress.
@@ -415,16 +416,18 @@ class ReferenceBody {
         values[diagSlot_[i]] += c.stiffness * p_.springStiffness[freeDofs_[i]];
   }
 
-  /// y = A v on the free dofs, each entry the sum over A's column in stored order (A is symmetric:
-  /// R K R^T blocks and their transposes, equal to rounding), in chunks of kColumnChunk columns on
-  /// the host's threads: the same bits on any number of threads.
+  /// y = A v on the free dofs, each entry the sum over A's column in stored order: A^T v, which is
+  /// A v to rounding (A is symmetric but for the co-rotational blocks R K_ij R^T and R K_ji R^T,
+  /// rounded apart), on the host's threads in chunks of columns: the same bits on any number of
+  /// threads, since each entry is one column's sum.
   void product(const Eigen::VectorXd& v, Eigen::VectorXd& y) const {
     const Eigen::Index n = A_.cols();
     y.resize(n);
     const int* start = A_.outerIndexPtr();
     const int* row = A_.innerIndexPtr();
     const double* value = A_.valuePtr();
-    parallelChunks(static_cast<std::size_t>(n), kColumnChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+    const std::size_t chunk = static_cast<std::size_t>(n) <= kSerialColumns ? kSerialColumns : kColumnChunk;
+    parallelChunks(static_cast<std::size_t>(n), chunk, [&](std::size_t, std::size_t begin, std::size_t end) {
       for (std::size_t j = begin; j < end; ++j) {
         double sum = 0.0;
         for (int q = start[j]; q < start[j + 1]; ++q) sum += value[q] * v[row[q]];
@@ -595,6 +598,14 @@ class ReferenceDevice final : public Device {
     check(set, problems.size());
     for (std::size_t i = 0; i < set.size(); ++i) at(set[i]).setMaterial(*problems[i]);
   }
+  bool removeBody(std::size_t body) override {
+    at(body);
+    bodies_.erase(bodies_.begin() + static_cast<std::ptrdiff_t>(body));
+    solve_.clear();  // between steps: no solve is in progress
+    reads_.clear();
+    residualFor_.clear();
+    return true;
+  }
   std::vector<DeviceCounter> counters() const override {
     long long amg = 0, cholesky = 0;
     for (const auto& b : bodies_) {
@@ -694,12 +705,8 @@ class ReferenceDevice final : public Device {
       largest = std::max(largest, e);
       total += e;
     }
-    if (set.size() < 2 || 2 * largest > total) {
-      for (std::size_t i = 0; i < set.size(); ++i) fn(i);
-      return;
-    }
     std::vector<std::exception_ptr> errors(set.size());
-    parallelChunks(set.size(), 1, [&](std::size_t, std::size_t begin, std::size_t end) {
+    const auto run = [&](std::size_t, std::size_t begin, std::size_t end) {
       for (std::size_t i = begin; i < end; ++i) {
         try {
           fn(i);
@@ -707,7 +714,11 @@ class ReferenceDevice final : public Device {
           errors[i] = std::current_exception();
         }
       }
-    });
+    };
+    if (set.size() < 2 || 2 * largest > total)
+      run(0, 0, set.size());
+    else
+      parallelChunks(set.size(), 1, run);
     for (const std::exception_ptr& e : errors)
       if (e) std::rethrow_exception(e);
   }
@@ -733,6 +744,9 @@ void registerReferenceBackend() {
   e.resolve = [](const std::string&) { return referenceCandidate(); };
   e.create = [](const std::vector<const Problem*>& problems, const SolverDesc& solver, const Candidate&,
                 const DeviceOptions&) { return createReferenceDevice(problems, solver); };
+  // The calibration cache's key: bumped when the device's speed changes (Newton's polar rotations,
+  // the PCG's products on threads, batches: 2026-11-28).
+  e.buildId = [] { return std::string("reference-2"); };
   e.batches = true;  // a batch's bodies share each call, run across the host's threads (forBodies)
   // A hyperelastic body's inverted element fails the whole call (checkInversion): it runs alone.
   e.batchable = [](const Problem& p) { return !isHyperelastic(p.formulation); };
