@@ -4,6 +4,8 @@
 
 #include "model/hyperelastic.hpp"
 #include "common/body_backend.hpp"
+#include "common/random_vector.hpp"
+#include "solve/device_slot.hpp"
 #include "util/error.hpp"
 
 #include <gtest/gtest.h>
@@ -353,4 +355,34 @@ TEST(ReferenceBackend, ACallOverSeveralBodiesFinishesEveryBodyAndThrowsTheFirstB
   EXPECT_NE(errorOf(moved, mirrored).find("body 'second'"), std::string::npos);
   EXPECT_NE(errorOf(mirrored, mirrored).find("body 'first'"), std::string::npos);
   EXPECT_NE(errorOf(mirrored, moved).find("body 'first'"), std::string::npos);
+}
+
+TEST(ReferenceBackend, ABodyLeavesItsDeviceInPlaceAndTheOthersKeepTheirState) {
+  // A reference device drops a body without being made again (Device::removeBody): the slot keeps
+  // the same device, and the other bodies keep their positions (the same energies, bit for bit)
+  // and whatever they had built.
+  Problem first = makeProblem(boxMesh(3, 1, 1));
+  Problem second = makeProblem(boxMesh(2, 2, 1));
+  Problem third = makeProblem(boxMesh(1, 2, 2));
+  first.name = "first";
+  second.name = "second";
+  third.name = "third";
+  std::unique_ptr<Device> device = createReferenceDevice({&first, &second, &third}, SolverDesc{});
+  const Device* made = device.get();
+  DeviceSlot slot(std::move(device), SolverDesc{});
+  std::vector<Eigen::VectorXd> x;
+  for (const Problem* p : {&first, &second, &third})
+    x.push_back(p->restPositions + 0.01 * test::randomVector(p->dofCount(), static_cast<unsigned>(x.size()) + 5));
+  slot.setPositions({0, 1, 2}, {&x[0], &x[1], &x[2]});
+  std::vector<double> before;
+  slot.elasticEnergy({0, 1, 2}, before);
+  slot.removeBody(1);
+  EXPECT_EQ(&slot.device(), made) << "the device was made again";
+  ASSERT_EQ(slot.bodyCount(), 2u);
+  EXPECT_EQ(slot.problem(1).name, "third");
+  std::vector<double> after;
+  slot.elasticEnergy({0, 1}, after);
+  EXPECT_EQ(after[0], before[0]);
+  EXPECT_EQ(after[1], before[2]);
+  EXPECT_GT(after[1], 0.0);
 }
