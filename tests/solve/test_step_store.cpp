@@ -133,7 +133,7 @@ class StepStoreContract : public ::testing::Test {
     ASSERT_GT(problems_[1].restPositions.size(), 16384);
     SolverDesc solver;
     solver.linearSolver = LinearSolverKind::Pcg;
-    solver.tolerance = 1e-8;
+    solver.tolerance = 1e-6;  // the solves are compared with the slot's own, not with an answer
     solver.maxIterations = 2000;
     std::vector<const detail::Problem*> ps;
     for (const detail::Problem& p : problems_) ps.push_back(&p);
