@@ -157,6 +157,14 @@ class StepStoreContract : public ::testing::Test {
     return fextNorm;
   }
 
+  /// beginAndPositions, then the device's positions, forces and damping at the result state.
+  void evaluate(const detail::BodySet& set, const std::vector<SchemeMaps>& maps) {
+    beginAndPositions(set, maps);
+    store_->setPositions(*slot_, set, StateSlot::Result);
+    store_->internalForces(*slot_, set);
+    store_->damping(*slot_, set, StateSlot::Result);
+  }
+
   std::vector<detail::Problem> problems_;
   std::unique_ptr<detail::DeviceSlot> slot_;
   std::unique_ptr<detail::StepStore> store_;
@@ -219,10 +227,7 @@ TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoa
 TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpressions) {
   const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
   const detail::BodySet set = {0, 1};
-  beginAndPositions(set, maps);
-  store_->setPositions(*slot_, set, StateSlot::Result);
-  store_->internalForces(*slot_, set);
-  store_->damping(*slot_, set, StateSlot::Result);
+  evaluate(set, maps);
   std::vector<ResidualSums> sums;
   store_->residual(set, maps, sums);
   std::vector<detail::PcgSolve> solves(2);
@@ -318,10 +323,7 @@ TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpression
 TEST_F(StepStoreContract, ResidualCountsTheDofsWhereTheResultStateIsNotFinite) {
   const std::vector<SchemeMaps> maps = {eulerMaps(0.01), eulerMaps(0.01)};
   const detail::BodySet set = {0, 1};
-  beginAndPositions(set, maps);
-  store_->setPositions(*slot_, set, StateSlot::Result);
-  store_->internalForces(*slot_, set);
-  store_->damping(*slot_, set, StateSlot::Result);
+  evaluate(set, maps);
   // A Newton iterate that went non-finite at one dof of body 0: x(v) and a(v) follow it there.
   Eigen::VectorXd v = store_->state(0, StateSlot::Result, StateVec::V);
   v[4] = std::numeric_limits<double>::quiet_NaN();
@@ -360,10 +362,7 @@ TEST_F(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {
   auto run = [&](const detail::BodySet& set) {
     std::vector<SchemeMaps> m;
     for (std::size_t b : set) m.push_back(maps[b]);
-    beginAndPositions(set, m);
-    store_->setPositions(*slot_, set, StateSlot::Result);
-    store_->internalForces(*slot_, set);
-    store_->damping(*slot_, set, StateSlot::Result);
+    evaluate(set, m);
     std::vector<ResidualSums> sums;
     store_->residual(set, m, sums);
     std::vector<EndSums> ends;
