@@ -20,3 +20,10 @@ inline OpenCLTuning morton(OpenCLTuning t = {}) {
 }
 
 }  // namespace corofem::test
+
+/// The first line of a test that sets every device's order itself (OpenCLTuning::localityOrder 0
+/// or 1, or each value in turn): under --corofem_morton it would run again exactly as in the
+/// suite's own run, so the repeat skips it.
+#define COROFEM_SKIP_IN_MORTON_REPEAT()                                                       \
+  if (::corofem::test::mortonEverywhere())                                                   \
+  GTEST_SKIP() << "sets its devices' orders itself: the suite's own run is this run"

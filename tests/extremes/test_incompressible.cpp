@@ -48,10 +48,12 @@ TEST_P(Incompressible, StaticSolveConvergesOrSaysSoForEveryPreconditioner) {
     for (PreconditionerKind p :
          {PreconditionerKind::None, PreconditionerKind::Diagonal, PreconditionerKind::BlockDiagonal}) {
       // Float does not solve nu >= 0.499 here (it fails, clearly, after 30 Newton iterations in
-      // every cut increment): on Vulkan, whose CI device is lavapipe, 20-50 s a solve. There one
-      // preconditioner shows that path; the others' would repeat it at most of a CI minute each.
-      // OpenCL float (4 s for the whole table on PoCL) runs them all.
-      if (c.kind == BackendKind::Vulkan && c.isFloat() && nu >= 0.499 && p != PreconditionerKind::Diagonal) continue;
+      // every cut increment): on Vulkan, whose CI device is lavapipe, 13 s a solve at nu = 0.499
+      // and 43 s at 0.4999. There one solve (nu = 0.499, diagonal) shows that path; the others
+      // would repeat it at a CI minute or more. OpenCL float (4 s for the whole table on PoCL) runs
+      // them all.
+      if (c.kind == BackendKind::Vulkan && c.isFloat() && nu >= 0.499 && (nu > 0.499 || p != PreconditionerKind::Diagonal))
+        continue;
       Scene scene = staticScene(c, cantilever(nu), 1);
       scene.solver.preconditioner = p;
       // Generous PCG cap: sqrt(cond) grows like sqrt(lambda / mu) ~ 70 at nu = 0.4999, times the

@@ -29,21 +29,28 @@ TetMesh box(int nx, int ny, int nz) {
 
 TetMesh shuffled(const TetMesh& m, unsigned seed) { return test::shuffledMesh(m, seed); }
 
+/// The box the Morton codes quantise: the mesh's bounds and their largest extent.
+struct MortonBox {
+  double lo[3], hi[3], extent;
+  explicit MortonBox(const TetMesh& m) {
+    for (int k = 0; k < 3; ++k) lo[k] = hi[k] = m.nodes[k];
+    for (std::size_t n = 0; n < m.nodeCount(); ++n)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], m.nodes[3 * n + k]);
+        hi[k] = std::max(hi[k], m.nodes[3 * n + k]);
+      }
+    extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  }
+};
+
 /// The Morton code of element e's centroid, bit by bit (the library spreads bits with masks).
-std::uint64_t naiveMorton(const TetMesh& m, std::size_t e) {
-  double lo[3], hi[3];
-  for (int k = 0; k < 3; ++k) lo[k] = hi[k] = m.nodes[k];
-  for (std::size_t n = 0; n < m.nodeCount(); ++n)
-    for (int k = 0; k < 3; ++k) {
-      lo[k] = std::min(lo[k], m.nodes[3 * n + k]);
-      hi[k] = std::max(hi[k], m.nodes[3 * n + k]);
-    }
-  const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+std::uint64_t naiveMorton(const TetMesh& m, const MortonBox& box, std::size_t e) {
   std::uint64_t code = 0;
   for (int k = 0; k < 3; ++k) {
     double c = 0.0;
     for (int j = 0; j < 4; ++j) c += m.nodes[3 * m.tets[4 * e + j] + k];
-    const auto q = static_cast<std::uint64_t>(std::clamp((0.25 * c - lo[k]) * (2097151.0 / extent), 0.0, 2097151.0));
+    const auto q = static_cast<std::uint64_t>(
+        std::clamp((0.25 * c - box.lo[k]) * (2097151.0 / box.extent), 0.0, 2097151.0));
     for (int bit = 0; bit < 21; ++bit) code |= ((q >> bit) & 1u) << (3 * bit + k);
   }
   return code;
@@ -58,10 +65,11 @@ void expectValidOrder(const TetMesh& m, const detail::LocalityOrder& o) {
   for (std::size_t i = 0; i < sorted.size(); ++i) ASSERT_EQ(sorted[i], i) << "elements: not a permutation";
   for (std::size_t i = 0; i < o.nodes.size(); ++i) ASSERT_EQ(o.nodeOf[o.nodes[i]], i) << "nodeOf does not invert nodes";
   // Elements along the curve; nodes numbered by first use in that order.
+  const MortonBox box(m);
   std::uint32_t nextNew = 0;
   for (std::size_t i = 0; i < o.elements.size(); ++i) {
     if (i > 0) {
-      EXPECT_LE(naiveMorton(m, o.elements[i - 1]), naiveMorton(m, o.elements[i])) << "element " << i;
+      EXPECT_LE(naiveMorton(m, box, o.elements[i - 1]), naiveMorton(m, box, o.elements[i])) << "element " << i;
     }
     for (int k = 0; k < 4; ++k) {
       const std::uint32_t n = o.nodeOf[m.tets[4 * o.elements[i] + k]];
