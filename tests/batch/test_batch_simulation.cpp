@@ -382,6 +382,36 @@ TEST(BatchSimulation, ALargeBodysChunkedPassesRunInsideTheBatchsTasksWithTheirBi
   EXPECT_EQ(reentrant.load(), 0) << "the runner was called from inside one of its own tasks";
 }
 
+TEST(BatchSimulation, RemovingABodyFromABatchRunsTheNewDevicesSetUpOnTheApplicationsTasks) {
+  // Removing the small body of a batch makes the batch's device again for the large one (the test
+  // device cannot remove a body in place): the positions it is given (its rotations) run in chunks
+  // of the host's threads, on the application's runner as every other call's do, then the large
+  // body steps on.
+  BodyDesc big = boxBeam({40, 16, 16});
+  big.mesh.box->max = {1.0, 0.25, 0.25};
+  Scene scene = dynamicScene(big, 3);
+  BodyDesc small = boxBeam({6, 2, 2});
+  small.name = "small";
+  scene.bodies.push_back(small);
+  std::atomic<long long> calls{0};
+  SimulationOptions o = onBatchDevice();
+  o.tasks = [&](std::size_t count, const std::function<void(std::size_t)>& task) {
+    ++calls;
+    for (std::size_t i = 0; i < count; ++i) task(i);
+  };
+  std::atomic<int> made{0};
+  HookScope scope(backends({{}, &made}));
+  auto sim = Simulation::create(scene, o);
+  ASSERT_TRUE(sim) << sim.message();
+  EXPECT_EQ(made.load(), 1) << "the two bodies were not batched";
+  ASSERT_TRUE(sim->step());  // the slot now gives a new device the positions it knows
+  calls = 0;
+  ASSERT_TRUE(sim->removeBody(1));
+  EXPECT_GT(calls.load(), 0) << "the new device's set-up did not run on the application's tasks";
+  ASSERT_EQ(sim->bodyCount(), 1);
+  EXPECT_TRUE(sim->step());
+}
+
 TEST(BatchSimulation, AnApplicationsTaskRunnerRunsTheHostWork) {
   // SimulationOptions::tasks: the per-body host work of the batch runs on the application's tasks
   // (here half on the calling thread, backwards, half on a thread of the application's), with the

@@ -38,6 +38,7 @@ Result<int> Simulation::addBody(const BodyDesc& desc) {
 }
 
 Status Simulation::removeBody(int body) {
+  const detail::TaskScope tasks(impl_->tasks);  // a batch's device made again runs on the application's tasks
   return detail::guard([&] {
     Impl& s = *impl_;
     const Impl::Body& b = s.body(body);
