@@ -17,7 +17,7 @@ using detail::ElementLocator;
 using detail::fail;
 using detail::Point3;
 
-constexpr std::size_t kVerticesPerThread = 20000;  // below this a thread costs more than it saves
+constexpr std::size_t kVerticesPerBindThread = 20000;  // below this a thread costs more than it saves
 constexpr std::size_t kReportedVertices = 5;       // failures located by index and coordinates
 
 void validateTetMesh(const TetMesh& mesh) {
@@ -139,7 +139,7 @@ SurfaceBinding bind(const TetMesh& tets, const SurfaceMesh& surface, const Bindi
   if (options.threads > 0)
     threadCount = std::min<std::size_t>(static_cast<std::size_t>(options.threads), vertexCount);
   else
-    threadCount = std::clamp<std::size_t>((vertexCount + kVerticesPerThread - 1) / kVerticesPerThread, 1,
+    threadCount = std::clamp<std::size_t>((vertexCount + kVerticesPerBindThread - 1) / kVerticesPerBindThread, 1,
                                           std::max(1u, std::thread::hardware_concurrency()));
   std::vector<RangeResult> results(threadCount);
   if (threadCount == 1) {

@@ -11,7 +11,7 @@
 namespace corofem {
 namespace {
 
-constexpr std::size_t kVerticesPerThread = 100000;  // below this a thread costs more than it saves
+constexpr std::size_t kVerticesPerDeformThread = 100000;  // below this a thread costs more than it saves
 
 /// Pass 1, vertices [first, last): x_v = sum_k w_vk x_{n_vk}, into `out` (double) and/or `outFloat`.
 void computePositions(const SurfaceBinding& b, const double* x, std::size_t first, std::size_t last, double* out,
@@ -118,7 +118,7 @@ Status deformSurface(const SurfaceBinding& binding, const double* tetNodePositio
 
     std::size_t threads = output.threads > 0
                               ? static_cast<std::size_t>(output.threads)
-                              : std::clamp<std::size_t>((vertexCount + kVerticesPerThread - 1) / kVerticesPerThread, 1,
+                              : std::clamp<std::size_t>((vertexCount + kVerticesPerDeformThread - 1) / kVerticesPerDeformThread, 1,
                                                         std::max(1u, std::thread::hardware_concurrency()));
     threads = std::min(threads, vertexCount);
 

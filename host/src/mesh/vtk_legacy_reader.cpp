@@ -15,7 +15,7 @@
 namespace corofem::mesh {
 namespace {
 
-constexpr std::int64_t kVtkTetra = 10;
+constexpr std::int64_t kVtkTetraCell = 10;
 
 std::string lower(std::string_view s) {
   std::string r(s);
@@ -291,7 +291,7 @@ class VtkParser {
     out.elementLines.reserve(cells);
     for (std::size_t c = 0; c < cells; ++c) {
       const std::int64_t begin = offsets_[c], size = offsets_[c + 1] - offsets_[c];
-      if (types_[c] != kVtkTetra) {
+      if (types_[c] != kVtkTetraCell) {
         ++report_.skippedElements;
         ++report_.skippedByType[vtkCellTypeName(types_[c])];
         continue;

@@ -10,6 +10,10 @@
 
 namespace corofem::detail {
 
+namespace layout {
+#include "../../../../kernels/shared/corofem_layout.h"
+}  // namespace layout
+
 namespace {
 
 constexpr std::size_t kDefaultWorkGroup = 64;
@@ -18,7 +22,6 @@ constexpr int kDefaultQuaternionIterations = 6;
 constexpr std::size_t kTeamPcgMinElements = 1280;
 constexpr std::size_t kTeamPcgMaxElementsPerCore = 16384;
 constexpr std::size_t kPackMinLanes = 3;
-constexpr std::size_t kPackLanes = 8;
 
 }  // namespace
 
@@ -71,7 +74,7 @@ OpenCLTuning resolveTuning(const OpenCLTuning& requested, const cl::DeviceInfo& 
   if (t.packPcg < 0 && !cpu) t.packPcg = 0;
   if (!t.groupPcg) t.packPcg = 0;
   if (!t.packPcgMinLanes) t.packPcgMinLanes = kPackMinLanes;
-  if (t.packPcgMinLanes > kPackLanes) bad("packPcgMinLanes", t.packPcgMinLanes, "1 to 8");
+  if (t.packPcgMinLanes > layout::kPackLanes) bad("packPcgMinLanes", t.packPcgMinLanes, "1 to 8");
 
   if (t.flushDenormals < 0) t.flushDenormals = cpu ? 1 : 0;
   return t;
