@@ -124,37 +124,25 @@ SchemeMaps eulerMaps(double h) {
 
 class StepStoreContract : public ::testing::Test {
  protected:
-  // The bodies and their device are made once for the suite (the rod's device took 4 s a test in
-  // the sanitizer job); each test starts a new store on it. Every device call of a test follows
-  // its own setPositions, so no test sees another's device state.
-  static void SetUpTestSuite() {
+  void SetUp() override {
     // Body 0: 6 x 3 x 3 cells of 10 cm (112 nodes); body 1: a rod of 1,400 x 1 x 1 cells of 1 cm
     // (5,604 nodes, 16,812 dofs: two chunks of the host's threads, in few elements for the
     // sanitizer job's -O0).
-    problems_ = new std::vector<detail::Problem>{featureBody(6, 3, 3, 0.1, 11), featureBody(1400, 1, 1, 0.01, 21)};
+    problems_.push_back(featureBody(6, 3, 3, 0.1, 11));
+    problems_.push_back(featureBody(1400, 1, 1, 0.01, 21));
+    ASSERT_GT(problems_[1].restPositions.size(), 16384);
     SolverDesc solver;
     solver.linearSolver = LinearSolverKind::Pcg;
     solver.tolerance = 1e-6;  // the solves are compared with the slot's own, not with an answer
     solver.maxIterations = 2000;
     std::vector<const detail::Problem*> ps;
-    for (const detail::Problem& p : *problems_) ps.push_back(&p);
-    slot_ = new detail::DeviceSlot(detail::createReferenceDevice(ps, solver), solver);
-  }
-  static void TearDownTestSuite() {
-    delete slot_;
-    delete problems_;
-    slot_ = nullptr;
-    problems_ = nullptr;
-  }
-
-  void SetUp() override {
-    ASSERT_GT((*problems_)[1].restPositions.size(), 16384);
+    for (const detail::Problem& p : problems_) ps.push_back(&p);
+    slot_ = std::make_unique<detail::DeviceSlot>(detail::createReferenceDevice(ps, solver), solver);
     store_ = detail::createHostStepStore(*slot_);
-    for (std::size_t b = 0; b < problems_->size(); ++b) {
-      const detail::Problem& p = (*problems_)[b];
-      randomState(*store_, b, StateSlot::Committed, p, 100 + 10 * static_cast<unsigned>(b));
-      randomState(*store_, b, StateSlot::Start, p, 200 + 10 * static_cast<unsigned>(b));
-      store_->setControls(b, randomControls(p, 300 + 10 * static_cast<unsigned>(b)));
+    for (std::size_t b = 0; b < problems_.size(); ++b) {
+      randomState(*store_, b, StateSlot::Committed, problems_[b], 100 + 10 * static_cast<unsigned>(b));
+      randomState(*store_, b, StateSlot::Start, problems_[b], 200 + 10 * static_cast<unsigned>(b));
+      store_->setControls(b, randomControls(problems_[b], 300 + 10 * static_cast<unsigned>(b)));
     }
   }
 
@@ -177,20 +165,17 @@ class StepStoreContract : public ::testing::Test {
     store_->damping(*slot_, set, StateSlot::Result);
   }
 
-  static std::vector<detail::Problem>* problems_;
-  static detail::DeviceSlot* slot_;
+  std::vector<detail::Problem> problems_;
+  std::unique_ptr<detail::DeviceSlot> slot_;
   std::unique_ptr<detail::StepStore> store_;
 };
-
-std::vector<detail::Problem>* StepStoreContract::problems_ = nullptr;
-detail::DeviceSlot* StepStoreContract::slot_ = nullptr;
 
 TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoads) {
   const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
   const std::vector<double> fextNorm = beginAndPositions({0, 1}, maps);
   for (std::size_t b = 0; b < 2; ++b) {
     SCOPED_TRACE("body " + std::to_string(b));
-    const detail::Problem& p = (*problems_)[b];
+    const detail::Problem& p = problems_[b];
     const SchemeMaps& m = maps[b];
     const Eigen::ArrayXd free = freeOf(p);
     const Eigen::VectorXd x = store_->state(b, StateSlot::Committed, StateVec::X);
@@ -281,7 +266,7 @@ TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpression
 
   for (std::size_t b = 0; b < 2; ++b) {
     SCOPED_TRACE("body " + std::to_string(b));
-    const detail::Problem& p = (*problems_)[b];
+    const detail::Problem& p = problems_[b];
     const Eigen::ArrayXd free = freeOf(p);
     const detail::BodyControls& c = store_->controls(b);
     const Eigen::VectorXd x = store_->state(b, StateSlot::Result, StateVec::X);
@@ -368,7 +353,7 @@ TEST_F(StepStoreContract, SwapsAndCopiesMoveWholeStatesOfOneBody) {
   EXPECT_EQ(snapshot(0, StateSlot::Previous), committed0);
   EXPECT_EQ(snapshot(0, StateSlot::Start), committed0);
   // A copy is a copy: changing the source leaves it.
-  store_->setState(0, StateSlot::Start, StateVec::X, (*problems_)[0].restPositions);
+  store_->setState(0, StateSlot::Start, StateVec::X, problems_[0].restPositions);
   EXPECT_EQ(store_->state(0, StateSlot::Previous, StateVec::X), committed0[0]);
 }
 
