@@ -341,18 +341,25 @@ int& taskDepth() {
   return depth;
 }
 
-TEST(BatchSimulation, ALargeBodysChunkedPassesRunInsideTheBatchsTasksWithTheirBits) {
-  // A body of 35,547 dofs (its per-dof passes in three chunks of the host's threads) batched with
-  // a small one: the driver's pass over the batch's bodies runs each body's chunked passes inside
-  // one of its tasks. They run on that task's thread, never calling the application's runner from
-  // inside one of its tasks (nor taking the library's pool, which the pass's caller holds), with
-  // the bits of the unbatched scene, on the library's pool and on the application's runner.
+/// A body of 35,547 dofs (40 x 16 x 16 cells: its per-dof passes in three chunks of the host's
+/// threads) and a small one, 3 dynamic steps.
+Scene largeAndSmall() {
   BodyDesc big = boxBeam({40, 16, 16});
   big.mesh.box->max = {1.0, 0.25, 0.25};
   Scene scene = dynamicScene(big, 3);
   BodyDesc small = boxBeam({6, 2, 2});
   small.name = "small";
   scene.bodies.push_back(small);
+  return scene;
+}
+
+TEST(BatchSimulation, ALargeBodysChunkedPassesRunInsideTheBatchsTasksWithTheirBits) {
+  // A body of 35,547 dofs (its per-dof passes in three chunks of the host's threads) batched with
+  // a small one: the driver's pass over the batch's bodies runs each body's chunked passes inside
+  // one of its tasks. They run on that task's thread, never calling the application's runner from
+  // inside one of its tasks (nor taking the library's pool, which the pass's caller holds), with
+  // the bits of the unbatched scene, on the library's pool and on the application's runner.
+  Scene scene = largeAndSmall();
   scene.solver.linearSolver = LinearSolverKind::Pcg;
   scene.solver.tolerance = 1e-8;
   scene.solver.maxIterations = 40;
@@ -387,12 +394,7 @@ TEST(BatchSimulation, RemovingABodyFromABatchRunsTheNewDevicesSetUpOnTheApplicat
   // device cannot remove a body in place): the positions it is given (its rotations) run in chunks
   // of the host's threads, on the application's runner as every other call's do, then the large
   // body steps on.
-  BodyDesc big = boxBeam({40, 16, 16});
-  big.mesh.box->max = {1.0, 0.25, 0.25};
-  Scene scene = dynamicScene(big, 3);
-  BodyDesc small = boxBeam({6, 2, 2});
-  small.name = "small";
-  scene.bodies.push_back(small);
+  Scene scene = largeAndSmall();
   std::atomic<long long> calls{0};
   SimulationOptions o = onBatchDevice();
   o.tasks = [&](std::size_t count, const std::function<void(std::size_t)>& task) {
