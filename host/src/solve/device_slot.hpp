@@ -83,8 +83,8 @@ class DeviceSlot {
   /// Removes body `body` (later bodies' indices move down by one): in place where the device can
   /// (Device::removeBody), else the device is made again on the same candidate for the other
   /// bodies (their problems carry their constraints, material and springs), given their last
-  /// positions, and the old one with every buffer of the removed body goes. Throws (with nothing changed) where the new device cannot be made, or Error(Internal)
-  /// for the slot's only body.
+  /// positions, and the old one with every buffer of the removed body goes. Throws (with nothing
+  /// changed) where the new device cannot be made, or Error(Internal) for the slot's only body.
   void removeBody(std::size_t body);
   /// The linear solves of `bodies` as the solver asks for them: PCG for the set (solvePcg), or the
   /// device's direct solve body by body (Cholesky). Per-body failures in `solves[i].failure`.

@@ -237,7 +237,7 @@ class HostStepStore final : public StepStore {
   }
 
   void update(const BodySet& set, std::vector<double>& nonFinite) override {
-    check(set, set.size());
+    check(set);
     nonFinite.assign(set.size(), 0.0);
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
@@ -254,7 +254,7 @@ class HostStepStore final : public StepStore {
   }
 
   void end(const BodySet& set, std::vector<EndSums>& out) override {
-    check(set, set.size());
+    check(set);
     out.assign(set.size(), EndSums{});
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
@@ -309,10 +309,14 @@ class HostStepStore final : public StepStore {
       fail(ErrorCode::Internal, "step store: body ", body, " of ", bodies_.size());
     return bodies_[body];
   }
-  /// Throws Error(Internal) for a body the store lacks or per-body arguments of another count,
-  /// before a pass's tasks run (which must not throw).
-  void check(const BodySet& set, std::size_t args) {
+  /// Throws Error(Internal) for a body the store lacks, before a pass's tasks run (which must not
+  /// throw).
+  void check(const BodySet& set) {
     for (std::size_t body : set) at(body);
+  }
+  /// check(set), and Error(Internal) for per-body arguments of another count.
+  void check(const BodySet& set, std::size_t args) {
+    check(set);
     if (args != set.size())
       fail(ErrorCode::Internal, "step store: ", args, " arguments for ", set.size(), " bodies");
   }
