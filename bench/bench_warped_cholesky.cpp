@@ -20,6 +20,10 @@
 //                                                 solve, and a loop over the factor's columns in
 //                                                 double and in float, as one work-item of a CPU
 //                                                 device would run it
+//   probeTriangular/supernodal                    the same factor (minimum degree order) in the
+//                                                 library's supernodal solves, on the host's threads
+//   probeTriangular/library                       the library's: WarpedCholesky unwarped (nested
+//                                                 dissection order, supernodal solves)
 //
 //   build/bench/bench_warped_cholesky --benchmark_repetitions=5 --benchmark_enable_random_interleaving=true \
 //       --benchmark_report_aggregates_only=true
@@ -27,6 +31,7 @@
 #include "common/textbook_pcg.hpp"
 #include "model/element.hpp"
 #include "precond/amg.hpp"
+#include "precond/supernodal_ldlt.hpp"
 #include "precond/warped_cholesky.hpp"
 #include "reference/small_meshes.hpp"
 
@@ -200,6 +205,39 @@ void probeEigenSolve(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(f.solve(r).eval().data());
 }
 
+void probeSupernodal(benchmark::State& state) {
+  const Ldlt& f = factor();
+  SupernodalLdlt s;
+  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
+  const Eigen::VectorXd r = test::randomVector(static_cast<std::size_t>(f.rows()), 5);
+  const Eigen::VectorXd expected = f.solve(r);
+  Eigen::VectorXd z;
+  for (auto _ : state) {
+    s.solve(r, z);
+    benchmark::DoNotOptimize(z.data());
+  }
+  state.counters["relative_error"] = (z - expected).norm() / expected.norm();
+  state.counters["supernodes"] = static_cast<double>(s.supernodeCount());
+  state.counters["top_columns"] = static_cast<double>(s.topColumns());
+  state.counters["stored_values"] = static_cast<double>(s.storedValues());
+}
+
+/// The library's application of A_0^-1 (WarpedCholesky unwarped: its nested dissection order and
+/// supernodal solves on the host's threads).
+void probeLibrary(benchmark::State& state) {
+  WarpedCholesky& w = warpedFactor();
+  w.setNodeRotations({});
+  const Eigen::VectorXd r = test::randomVector(beam().free.size(), 5);
+  const Eigen::VectorXd expected = factor().solve(r);
+  Eigen::VectorXd z;
+  for (auto _ : state) {
+    w.apply(r, z);
+    benchmark::DoNotOptimize(z.data());
+  }
+  state.counters["relative_error"] = (z - expected).norm() / expected.norm();
+  state.counters["factor_entries"] = static_cast<double>(w.factorEntries());
+}
+
 void probeSolve(benchmark::State& state, const std::string& kind, double turn) {
   const Beam& b = beam();
   const State st = curled(b, turn);
@@ -250,6 +288,8 @@ const int registered = [] {
   benchmark::RegisterBenchmark("probeTriangular/eigen", probeEigenSolve)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("probeTriangular/double", probeTriangular<double>)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("probeTriangular/float", probeTriangular<float>)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("probeTriangular/supernodal", probeSupernodal)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("probeTriangular/library", probeLibrary)->Unit(benchmark::kMillisecond);
   for (const char* kind : {"jacobi", "amg", "rest_cholesky", "warped_cholesky"})
     for (double turn : {0.0, 0.3, 1.0})
       benchmark::RegisterBenchmark(("probeSolve/" + std::string(kind) + "/turn_" + std::to_string(int(std::lround(1000 * turn)))).c_str(),

@@ -156,7 +156,9 @@ Vec12 corotationalForce(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4
   // Eq. 9: f = R K (R^T x - X), applied node by node with the block-diagonal R.
   Vec12 u;
   for (int i = 0; i < 4; ++i) u.segment<3>(3 * i) = R.transpose() * x[i] - X[i];
-  const Vec12 local = K * u;
+  // lazyProduct: Eigen's coefficient loops, unrolled at 12 x 12 (its general matrix-vector
+  // kernel, which `K * u` takes at this size, costs more in set-up than in arithmetic here).
+  const Vec12 local = K.lazyProduct(u);
   Vec12 f;
   for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R * local.segment<3>(3 * i);
   return f;
@@ -176,10 +178,15 @@ Mat12 consistentMass(const ElementRest& rest, double density) {
 
 Mat12 rotateStiffness(const Mat12& K, const Mat3& R) {
   // Eq. 11: K^R = R K R^T with R the block-diagonal of four copies of the 3x3 rotation.
+  // K is symmetric (K_ji = K_ij^T), so R K_ji R^T is the transpose of R K_ij R^T: each block pair
+  // is formed once, which also makes the result exactly symmetric.
   Mat12 out;
   for (int i = 0; i < 4; ++i)
-    for (int j = 0; j < 4; ++j)
-      out.block<3, 3>(3 * i, 3 * j) = R * K.block<3, 3>(3 * i, 3 * j) * R.transpose();
+    for (int j = i; j < 4; ++j) {
+      const Mat3 block = R * K.block<3, 3>(3 * i, 3 * j) * R.transpose();
+      out.block<3, 3>(3 * i, 3 * j) = block;
+      if (j != i) out.block<3, 3>(3 * j, 3 * i) = block.transpose();
+    }
   return out;
 }
 
@@ -187,7 +194,7 @@ double corotationalEnergy(const Mat12& K, const Mat3& R, const std::array<Vec3d,
                           const std::array<Vec3d, 4>& X) {
   Vec12 u;
   for (int i = 0; i < 4; ++i) u.segment<3>(3 * i) = R.transpose() * x[i] - X[i];
-  return 0.5 * u.dot(K * u);
+  return 0.5 * u.dot(K.lazyProduct(u));
 }
 
 Mat3 smallStrain(const Mat3& F) { return 0.5 * (F + F.transpose()) - Mat3::Identity(); }

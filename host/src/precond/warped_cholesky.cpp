@@ -1,10 +1,12 @@
 // The warped precomputed Cholesky of precond/warped_cholesky.hpp.
 #include "precond/warped_cholesky.hpp"
 
+#include "precond/nested_dissection.hpp"
 #include "util/error.hpp"
 #include "util/parallel.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/OrderingMethods>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
@@ -88,14 +90,19 @@ void WarpedCholesky::build(const AmgMatrix& A0, const std::vector<Eigen::Index>&
     if (!(diagonal.minCoeff() > 0.0) || !diagonal.allFinite() ||
         !(weakestRigidMotion(A0, freeDofs, rest, diagonal) > kRigidThreshold))
       failSingular(body);
-    factor_ = std::make_unique<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower>>(
-        Eigen::SparseMatrix<double>(A0));
+    // P A0 P^T in nested dissection order (precond/nested_dissection.hpp), factored as it stands.
+    const std::vector<int> position = nestedDissection(A0, freeDofs, rest);
+    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P(n);
+    for (Eigen::Index i = 0; i < n; ++i) P.indices()[i] = position[static_cast<std::size_t>(i)];
+    Eigen::SparseMatrix<double> ordered(n, n);
+    ordered = Eigen::SparseMatrix<double>(A0).twistedBy(P);
+    const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> ldlt(ordered);
     // LDL^T of a positive definite matrix has a positive D; anything else (a mechanism the rigid
     // motions above do not show) would make PCG break down.
-    if (factor_->info() != Eigen::Success || !(factor_->vectorD().minCoeff() > 0.0) || !factor_->vectorD().allFinite()) {
-      factor_.reset();
+    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0) || !ldlt.vectorD().allFinite())
       failSingular(body);
-    }
+    factor_.build(ldlt.matrixL().nestedExpression(), ldlt.vectorD(), P.indices());
+    factorEntries_ = ldlt.matrixL().nestedExpression().nonZeros();
   }
   freeDofs_ = freeDofs;
   nodeCount_ = static_cast<std::size_t>(rest.size() / 3);
@@ -112,7 +119,8 @@ void WarpedCholesky::clear() {
   freeDofs_.clear();
   warpNodes_.clear();
   blocks_.clear();
-  factor_.reset();
+  factor_ = SupernodalLdlt();
+  factorEntries_ = 0;
 }
 
 void WarpedCholesky::setNodeRotations(std::vector<Mat3> rotations) {
@@ -165,17 +173,17 @@ void WarpedCholesky::apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const {
     return;
   }
   if (blocks_.empty()) {
-    z = factor_->solve(r);
+    factor_.solve(r, z);
     return;
   }
-  Eigen::VectorXd t;
+  Eigen::VectorXd t, s;
   warp(r, t, true);
-  const Eigen::VectorXd s = factor_->solve(t);
+  factor_.solve(t, s);
   warp(s, z, false);
 }
 
 Eigen::Index WarpedCholesky::factorEntries() const {
-  return factor_ ? factor_->matrixL().nestedExpression().nonZeros() : 0;
+  return factorEntries_;
 }
 
 std::vector<Mat3> nodeRotations(const TetMesh& mesh, const std::vector<Mat3>& elementRotations) {

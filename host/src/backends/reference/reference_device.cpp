@@ -153,20 +153,22 @@ class ReferenceBody {
       for (std::size_t e = begin; e < end; ++e) {
         Vec12 pe;
         for (int k = 0; k < 4; ++k) pe.segment<3>(3 * k) = p.segment<3>(3 * node(e, k));
-        elementVectors_[e] = stiffScale * (tangents_[e] * pe);
+        elementVectors_[e] = stiffScale * tangents_[e].lazyProduct(pe);
       }
     });
     for (std::size_t e = 0; e < p_.elements.size(); ++e) scatterAdd(y, e, elementVectors_[e]);
   }
 
   double elasticEnergy() {
+    elementEnergies_.resize(p_.elements.size());
+    parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+      for (std::size_t e = begin; e < end; ++e)
+        elementEnergies_[e] = hyper_ ? hyperelasticEnergy(model_, p_.elements[e], p_.lame, gradients_[e])
+                                     // 1/2 u^T K u, u = R^T x - X (R = I for the linear formulation)
+                                     : corotationalEnergy(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);
+    });
     double energy = 0.0;
-    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
-      if (hyper_)
-        energy += hyperelasticEnergy(model_, p_.elements[e], p_.lame, gradients_[e]);
-      else  // 1/2 u^T K u, u = R^T x - X (R = I for the linear formulation)
-        energy += corotationalEnergy(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);
-    }
+    for (const double e : elementEnergies_) energy += e;
     return energy;
   }
 
@@ -417,9 +419,9 @@ class ReferenceBody {
   }
 
   /// y = A v on the free dofs, each entry the sum over A's column in stored order: A^T v, which is
-  /// A v to rounding (A is symmetric but for the co-rotational blocks R K_ij R^T and R K_ji R^T,
-  /// rounded apart), on the host's threads in chunks of columns: the same bits on any number of
-  /// threads, since each entry is one column's sum.
+  /// A v to rounding (A is symmetric but for the rounding of the diagonal blocks R K_ii R^T of the
+  /// co-rotational tangents), on the host's threads in chunks of columns: the same bits on any
+  /// number of threads, since each entry is one column's sum.
   void product(const Eigen::VectorXd& v, Eigen::VectorXd& y) const {
     const Eigen::Index n = A_.cols();
     y.resize(n);
@@ -539,6 +541,7 @@ class ReferenceBody {
   std::vector<Mat3> gradients_;   ///< F_e at the current positions
   std::vector<Mat12> tangents_;   ///< element tangents, valid when tangentsValid_
   std::vector<Vec12> elementVectors_;  ///< scratch: each element's force or product, summed in element order
+  std::vector<double> elementEnergies_;  ///< scratch: each element's energy, summed in element order
   bool tangentsValid_ = false;
   Eigen::VectorXd x_;
 

@@ -1,0 +1,339 @@
+// The supernodal triangular solves of precond/supernodal_ldlt.hpp.
+#include "precond/supernodal_ldlt.hpp"
+
+#include "util/error.hpp"
+#include "util/parallel.hpp"
+
+#include <algorithm>
+#include <array>
+#include <numeric>
+#include <utility>
+
+namespace corofem::detail {
+
+namespace {
+
+/// A merged run's zeros stay at most this fraction of its panel's lower part.
+constexpr double kMaxZeroFraction = 0.25;
+
+/// Whether the ascending `rows` are all in the ascending `set`.
+bool within(const int* rows, const int* rowsEnd, const std::vector<int>& set, std::size_t from) {
+  std::size_t at = from;
+  for (const int* r = rows; r != rowsEnd; ++r) {
+    while (at < set.size() && set[at] < *r) ++at;
+    if (at == set.size() || set[at] != *r) return false;
+  }
+  return true;
+}
+
+/// sum_k a[k] b[k] for k < w, in eight running sums (lanes a vector unit runs side by side) added
+/// up in a fixed order: the same bits on every call.
+inline double dot(const double* a, const double* b, std::size_t w) {
+  double lane[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  std::size_t k = 0;
+  for (; k + 8 <= w; k += 8)
+    for (std::size_t l = 0; l < 8; ++l) lane[l] += a[k + l] * b[k + l];
+  for (std::size_t l = 0; k < w; ++k, ++l) lane[l] += a[k] * b[k];
+  return ((lane[0] + lane[1]) + (lane[2] + lane[3])) + ((lane[4] + lane[5]) + (lane[6] + lane[7]));
+}
+
+/// The narrow runs (most of them a node's three dofs): their rows below with the width fixed at
+/// compile time, so that a row is a few multiplies in registers and no loop. The generic loops in
+/// forward() and backward() take the wider runs.
+constexpr std::size_t kFixedWidths = 12;
+
+/// L y' = y's updates from a run of width W: y[below[r]] -= R_r . ys for the `direct` rows,
+/// top[topIndex[below[r]]] += R_r . ys for the rest.
+template <std::size_t W>
+void rowsDown(const double* R, const int* below, std::size_t direct, std::size_t h, const double* ys, double* y,
+              double* top, const int* topIndex) {
+  double v[W];
+  for (std::size_t k = 0; k < W; ++k) v[k] = ys[k];
+  const auto rowDot = [&](std::size_t r) {
+    double t = 0.0;
+    for (std::size_t k = 0; k < W; ++k) t += R[r * W + k] * v[k];
+    return t;
+  };
+  for (std::size_t r = 0; r < direct; ++r) y[below[r]] -= rowDot(r);
+  for (std::size_t r = direct; r < h; ++r) top[topIndex[below[r]]] += rowDot(r);
+}
+
+/// L^T x = y's gathers into a run of width W: acc[k] = sum_r R(r, k) y[below[r]].
+template <std::size_t W>
+void rowsUp(const double* R, const int* below, std::size_t h, const double* y, double* acc) {
+  double a[W] = {};
+  for (std::size_t r = 0; r < h; ++r) {
+    const double yr = y[below[r]];
+    for (std::size_t k = 0; k < W; ++k) a[k] += R[r * W + k] * yr;
+  }
+  for (std::size_t k = 0; k < W; ++k) acc[k] = a[k];
+}
+
+using RowsDown = void (*)(const double*, const int*, std::size_t, std::size_t, const double*, double*, double*,
+                          const int*);
+using RowsUp = void (*)(const double*, const int*, std::size_t, const double*, double*);
+
+template <std::size_t... W>
+constexpr std::array<RowsDown, sizeof...(W)> downTable(std::index_sequence<W...>) {
+  return {&rowsDown<W + 1>...};
+}
+template <std::size_t... W>
+constexpr std::array<RowsUp, sizeof...(W)> upTable(std::index_sequence<W...>) {
+  return {&rowsUp<W + 1>...};
+}
+constexpr auto kRowsDown = downTable(std::make_index_sequence<kFixedWidths>());  // [w - 1]
+constexpr auto kRowsUp = upTable(std::make_index_sequence<kFixedWidths>());
+
+}  // namespace
+
+void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm) {
+  const int n = static_cast<int>(L.cols());
+  if (L.rows() != n || d.size() != n || (perm.size() != 0 && perm.size() != n) || !L.isCompressed())
+    fail(ErrorCode::Internal, "SupernodalLdlt: a factor of ", L.rows(), " x ", L.cols(), " with ", d.size(),
+         " pivots and a permutation of ", perm.size());
+  const int* Lp = L.outerIndexPtr();
+  const int* Li = L.innerIndexPtr();
+  const double* Lx = L.valuePtr();
+  for (int j = 0; j < n; ++j)
+    for (int k = Lp[j]; k < Lp[j + 1]; ++k)
+      if (Li[k] <= j || Li[k] >= n || (k > Lp[j] && Li[k] <= Li[k - 1]))
+        fail(ErrorCode::Internal, "SupernodalLdlt: column ", j, " of the factor has row ", Li[k],
+             " (rows must be below the diagonal and ascending)");
+  std::vector<char> seen(static_cast<std::size_t>(n), 0);
+  for (Eigen::Index i = 0; i < perm.size(); ++i) {
+    if (perm[i] < 0 || perm[i] >= n || seen[static_cast<std::size_t>(perm[i])])
+      fail(ErrorCode::Internal, "SupernodalLdlt: the permutation is not one of 0..", n - 1);
+    seen[static_cast<std::size_t>(perm[i])] = 1;
+  }
+
+  first_.clear();
+  rowStart_.assign(1, 0);
+  rows_.clear();
+  // The runs: U holds the rows below the run [c0, j) not yet in it (ascending).
+  std::vector<int> U;
+  std::size_t nonzeros = 0;
+  int c0 = 0;
+  const auto close = [&](int end) {
+    first_.push_back(c0);
+    rows_.insert(rows_.end(), U.begin(), U.end());
+    rowStart_.push_back(rows_.size());
+    c0 = end;
+  };
+  for (int j = 0; j < n; ++j) {
+    const auto count = static_cast<std::size_t>(Lp[j + 1] - Lp[j]);
+    if (j > c0 && !U.empty() && U.front() == j && within(Li + Lp[j], Li + Lp[j + 1], U, 1)) {
+      const auto w = static_cast<std::size_t>(j - c0 + 1), h = U.size() - 1;
+      const std::size_t lower = w * (w - 1) / 2 + h * w;
+      if (static_cast<double>(lower - (nonzeros + count)) <= kMaxZeroFraction * static_cast<double>(lower)) {
+        U.erase(U.begin());
+        nonzeros += count;
+        continue;
+      }
+    }
+    if (j > 0) close(j);
+    U.assign(Li + Lp[j], Li + Lp[j + 1]);
+    nonzeros = count;
+  }
+  if (n > 0) close(n);
+  first_.push_back(n);
+
+  // The panels: the run's w x w triangle (row-major, unit diagonal and upper half stored as 0), then
+  // its h rows below, w values each.
+  const std::size_t S = first_.size() - 1;
+  panelStart_.assign(S + 1, 0);
+  for (std::size_t s = 0; s < S; ++s) {
+    const auto w = static_cast<std::size_t>(first_[s + 1] - first_[s]);
+    panelStart_[s + 1] = panelStart_[s] + w * w + (rowStart_[s + 1] - rowStart_[s]) * w;
+  }
+  values_.assign(panelStart_[S], 0.0);
+  for (std::size_t s = 0; s < S; ++s) {
+    const int a = first_[s], b = first_[s + 1];
+    const auto w = static_cast<std::size_t>(b - a);
+    double* T = values_.data() + panelStart_[s];
+    double* R = T + w * w;
+    const int* below = rows_.data() + rowStart_[s];
+    const auto h = rowStart_[s + 1] - rowStart_[s];
+    for (int c = a; c < b; ++c) {
+      const auto k = static_cast<std::size_t>(c - a);
+      std::size_t at = 0;
+      for (int e = Lp[c]; e < Lp[c + 1]; ++e) {
+        const int r = Li[e];
+        if (r < b) {
+          T[static_cast<std::size_t>(r - a) * w + k] = Lx[e];
+          continue;
+        }
+        while (at < h && below[at] < r) ++at;  // found: build() merged only columns within the rows
+        R[at * w + k] = Lx[e];
+      }
+    }
+  }
+  dinv_ = d.cwiseInverse();
+  perm_.assign(perm.data(), perm.data() + perm.size());
+  partition();
+}
+
+void SupernodalLdlt::partition() {
+  const std::size_t S = supernodeCount();
+  const auto n = static_cast<std::size_t>(rows());
+  // The elimination tree of the supernodes: a supernode's parent holds its first row below.
+  std::vector<int> of(n);
+  for (std::size_t s = 0; s < S; ++s)
+    for (int c = first_[s]; c < first_[s + 1]; ++c) of[static_cast<std::size_t>(c)] = static_cast<int>(s);
+  std::vector<std::vector<int>> children(S);
+  std::vector<int> roots;
+  std::vector<double> work(S, 0.0);  // the subtree's panel values, read once a sweep
+  for (std::size_t s = 0; s < S; ++s) {
+    work[s] += static_cast<double>(panelStart_[s + 1] - panelStart_[s]);
+    if (rowStart_[s + 1] == rowStart_[s]) {
+      roots.push_back(static_cast<int>(s));
+      continue;
+    }
+    const int parent = of[static_cast<std::size_t>(rows_[rowStart_[s]])];
+    children[static_cast<std::size_t>(parent)].push_back(static_cast<int>(s));
+    work[static_cast<std::size_t>(parent)] += work[s];  // a parent comes after its children
+  }
+  const double total = std::accumulate(roots.begin(), roots.end(), 0.0,
+                                       [&](double sum, int r) { return sum + work[static_cast<std::size_t>(r)]; });
+  // Split the largest subtree (the lowest index of equals) into its children until none holds more
+  // than 1/kTasks of the factor.
+  std::vector<int> subtrees = roots;
+  std::vector<char> inTop(S, 0);
+  for (;;) {
+    auto largest = subtrees.end();
+    for (auto it = subtrees.begin(); it != subtrees.end(); ++it)
+      if (!children[static_cast<std::size_t>(*it)].empty() &&
+          (largest == subtrees.end() || work[static_cast<std::size_t>(*it)] > work[static_cast<std::size_t>(*largest)]))
+        largest = it;
+    if (largest == subtrees.end() || work[static_cast<std::size_t>(*largest)] <= total / kTasks) break;
+    const int split = *largest;
+    subtrees.erase(largest);
+    inTop[static_cast<std::size_t>(split)] = 1;
+    const std::vector<int>& c = children[static_cast<std::size_t>(split)];
+    subtrees.insert(subtrees.end(), c.begin(), c.end());
+  }
+  // Deal the subtrees, the largest first, each to the task with the least work so far.
+  std::sort(subtrees.begin(), subtrees.end(), [&](int a, int b) {
+    const double wa = work[static_cast<std::size_t>(a)], wb = work[static_cast<std::size_t>(b)];
+    return wa != wb ? wa > wb : a < b;
+  });
+  std::vector<int> task(S, -1);
+  std::vector<double> load(kTasks, 0.0);
+  for (const int root : subtrees) {
+    const auto t = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
+    load[static_cast<std::size_t>(t)] += work[static_cast<std::size_t>(root)];
+    task[static_cast<std::size_t>(root)] = t;
+  }
+  // A supernode below a subtree's root joins its task (a child comes before its parent, so going
+  // down from the roots: the supernodes in descending order).
+  for (std::size_t s = S; s-- > 0;)
+    if (!inTop[s] && task[s] < 0) {
+      const int parent = of[static_cast<std::size_t>(rows_[rowStart_[s]])];  // not a root: it has rows below
+      task[s] = task[static_cast<std::size_t>(parent)];
+    }
+  tasks_.assign(kTasks, {});
+  top_.clear();
+  topColumns_.clear();
+  topIndex_.assign(n, -1);
+  direct_.assign(S, 0);
+  for (std::size_t s = 0; s < S; ++s) {
+    if (inTop[s]) {
+      top_.push_back(static_cast<int>(s));
+      for (int c = first_[s]; c < first_[s + 1]; ++c) {
+        topIndex_[static_cast<std::size_t>(c)] = static_cast<int>(topColumns_.size());
+        topColumns_.push_back(c);
+      }
+      direct_[s] = rowStart_[s + 1] - rowStart_[s];
+    } else {
+      tasks_[static_cast<std::size_t>(task[s])].push_back(static_cast<int>(s));
+    }
+  }
+  // A task's supernode: its ancestors in its subtree come before those in the top (each ancestor's
+  // index is above its descendants', and the top's ancestors of a subtree are above its root).
+  for (std::size_t s = 0; s < S; ++s)
+    if (!inTop[s]) {
+      std::size_t k = rowStart_[s];
+      while (k < rowStart_[s + 1] && topIndex_[static_cast<std::size_t>(rows_[k])] < 0) ++k;
+      direct_[s] = k - rowStart_[s];
+    }
+}
+
+void SupernodalLdlt::forward(int s, double* y, double* topUpdates) const {
+  const int a = first_[static_cast<std::size_t>(s)];
+  const auto w = static_cast<std::size_t>(first_[static_cast<std::size_t>(s) + 1] - a);
+  const double* T = values_.data() + panelStart_[static_cast<std::size_t>(s)];
+  const double* R = T + w * w;
+  double* ys = y + a;
+  for (std::size_t i = 1; i < w; ++i) ys[i] -= dot(T + i * w, ys, i);
+  const int* below = rows_.data() + rowStart_[static_cast<std::size_t>(s)];
+  const std::size_t h = rowStart_[static_cast<std::size_t>(s) + 1] - rowStart_[static_cast<std::size_t>(s)];
+  const std::size_t direct = direct_[static_cast<std::size_t>(s)];
+  if (w <= kFixedWidths) {
+    kRowsDown[w - 1](R, below, direct, h, ys, y, topUpdates, topIndex_.data());
+    return;
+  }
+  for (std::size_t r = 0; r < direct; ++r) y[below[r]] -= dot(R + r * w, ys, w);
+  for (std::size_t r = direct; r < h; ++r)
+    topUpdates[topIndex_[static_cast<std::size_t>(below[r])]] += dot(R + r * w, ys, w);
+}
+
+void SupernodalLdlt::backward(int s, double* y, std::vector<double>& acc) const {
+  const int a = first_[static_cast<std::size_t>(s)];
+  const auto w = static_cast<std::size_t>(first_[static_cast<std::size_t>(s) + 1] - a);
+  const double* T = values_.data() + panelStart_[static_cast<std::size_t>(s)];
+  const double* R = T + w * w;
+  double* ys = y + a;
+  const int* below = rows_.data() + rowStart_[static_cast<std::size_t>(s)];
+  const std::size_t h = rowStart_[static_cast<std::size_t>(s) + 1] - rowStart_[static_cast<std::size_t>(s)];
+  acc.assign(w, 0.0);
+  if (w <= kFixedWidths)
+    kRowsUp[w - 1](R, below, h, y, acc.data());
+  else
+    for (std::size_t r = 0; r < h; ++r) {
+      const double* row = R + r * w;
+      const double yr = y[below[r]];
+      for (std::size_t k = 0; k < w; ++k) acc[k] += row[k] * yr;
+    }
+  for (std::size_t k = 0; k < w; ++k) ys[k] -= acc[k];
+  // Row k of the triangle, from the last: ys[k] is final when it is reached.
+  for (std::size_t k = w; k-- > 1;) {
+    const double yk = ys[k];
+    const double* row = T + k * w;
+    for (std::size_t i = 0; i < k; ++i) ys[i] -= row[i] * yk;
+  }
+}
+
+void SupernodalLdlt::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const {
+  const Eigen::Index n = rows();
+  if (b.size() != n) fail(ErrorCode::Internal, "SupernodalLdlt: solve of ", b.size(), " entries with a factor of ", n);
+  Eigen::VectorXd& y = work_.y;
+  y.resize(n);
+  if (perm_.empty()) y = b;
+  else
+    for (Eigen::Index i = 0; i < n; ++i) y[perm_[static_cast<std::size_t>(i)]] = b[i];
+  double* yp = y.data();
+  // L y' = y: the tasks' subtrees, the top's rows taking their updates in task order, then the top.
+  const std::size_t m = topColumns_.size();
+  std::vector<double>& updates = work_.updates;
+  updates.assign(kTasks * m, 0.0);
+  parallelChunks(kTasks, 1, [&](std::size_t t, std::size_t, std::size_t) {
+    for (const int s : tasks_[t]) forward(s, yp, updates.data() + t * m);
+  });
+  for (std::size_t t = 0; t < kTasks; ++t)
+    for (std::size_t i = 0; i < m; ++i) yp[topColumns_[i]] -= updates[t * m + i];
+  for (const int s : top_) forward(s, yp, nullptr);
+  y.array() *= dinv_.array();
+  // L^T x = y': the top from its last supernode, then the tasks' subtrees (each reads its own rows
+  // and the top's, final by then).
+  std::vector<double> acc;
+  for (auto it = top_.rbegin(); it != top_.rend(); ++it) backward(*it, yp, acc);
+  parallelChunks(kTasks, 1, [&](std::size_t t, std::size_t, std::size_t) {
+    std::vector<double> own;
+    for (auto it = tasks_[t].rbegin(); it != tasks_[t].rend(); ++it) backward(*it, yp, own);
+  });
+  x.resize(n);
+  if (perm_.empty()) x = y;
+  else
+    for (Eigen::Index i = 0; i < n; ++i) x[i] = y[perm_[static_cast<std::size_t>(i)]];
+}
+
+}  // namespace corofem::detail

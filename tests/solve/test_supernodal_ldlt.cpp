@@ -1,0 +1,199 @@
+// The warped Cholesky's solves (precond/supernodal_ldlt.hpp) and order
+// (precond/nested_dissection.hpp): the supernodal solves against Eigen's on random symmetric
+// positive definite matrices of awkward sizes and on a beam's rest operator in its nested
+// dissection order, the same bits whatever runs the tasks and in whatever order, and the order's
+// split of the beam into independent subtrees with a fill near minimum degree's.
+#include "precond/nested_dissection.hpp"
+#include "precond/rest_system.hpp"
+#include "precond/supernodal_ldlt.hpp"
+#include "common/clamped_beam.hpp"
+#include "common/random_vector.hpp"
+#include "util/error.hpp"
+#include "util/parallel.hpp"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCholesky>
+
+#include <algorithm>
+#include <atomic>
+#include <cstring>
+#include <random>
+
+using namespace corofem;
+using namespace corofem::detail;
+using corofem::test::randomVector;
+
+namespace {
+
+using Ldlt = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower>;
+
+/// A random sparse symmetric positive definite n x n matrix: about `perRow` random off-diagonal
+/// entries a row in [-1, 1], the diagonal above the row's absolute sum.
+Eigen::SparseMatrix<double> randomSpd(int n, int perRow, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> col(0, std::max(0, n - 1));
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  std::vector<Eigen::Triplet<double>> entries;
+  std::vector<double> rowSum(static_cast<std::size_t>(n), 0.0);
+  for (int i = 0; i < n; ++i)
+    for (int k = 0; k < perRow; ++k) {
+      const int j = col(rng);
+      if (j == i) continue;
+      const double v = value(rng);
+      entries.emplace_back(i, j, v);
+      entries.emplace_back(j, i, v);
+      rowSum[static_cast<std::size_t>(i)] += std::abs(v);
+      rowSum[static_cast<std::size_t>(j)] += std::abs(v);
+    }
+  for (int i = 0; i < n; ++i) entries.emplace_back(i, i, 1.0 + rowSum[static_cast<std::size_t>(i)] + value(rng) * 0.5);
+  Eigen::SparseMatrix<double> A(n, n);
+  A.setFromTriplets(entries.begin(), entries.end());
+  return A;
+}
+
+SupernodalLdlt supernodal(const Ldlt& f) {
+  SupernodalLdlt s;
+  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
+  return s;
+}
+
+/// Runs a parallelChunks call's chunks on the calling thread, last first.
+void backwards(std::size_t count, const std::function<void(std::size_t)>& task) {
+  for (std::size_t i = count; i-- > 0;) task(i);
+}
+
+TEST(SupernodalLdlt, SolvesAsEigensFactorDoesOnRandomMatricesOfAwkwardSizes) {
+  for (const int n : {1, 2, 7, 64, 597, 2000})
+    for (const int perRow : {1, 4, 12}) {
+      const Eigen::SparseMatrix<double> A = randomSpd(n, perRow, static_cast<unsigned>(n * 31 + perRow));
+      const Ldlt f(A);
+      ASSERT_EQ(f.info(), Eigen::Success);
+      const SupernodalLdlt s = supernodal(f);
+      EXPECT_EQ(s.rows(), n);
+      EXPECT_LE(s.supernodeCount(), static_cast<std::size_t>(n));
+      for (const unsigned seed : {3u, 4u}) {
+        const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(n), seed);
+        Eigen::VectorXd x;
+        s.solve(b, x);
+        const Eigen::VectorXd expected = f.solve(b);
+        EXPECT_LT((x - expected).norm(), 1e-12 * expected.norm()) << n << " rows, " << perRow << " a row";
+        EXPECT_LT((A * x - b).norm(), 1e-10 * b.norm()) << n << " rows, " << perRow << " a row";
+      }
+    }
+}
+
+TEST(SupernodalLdlt, AFactorWithoutAPermutationSolvesToo) {
+  const Eigen::SparseMatrix<double> A = randomSpd(301, 5, 9);
+  const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> f(A);
+  ASSERT_EQ(f.info(), Eigen::Success);
+  SupernodalLdlt s;
+  s.build(f.matrixL().nestedExpression(), f.vectorD(), Eigen::VectorXi());
+  const Eigen::VectorXd b = randomVector(301, 2);
+  Eigen::VectorXd x;
+  s.solve(b, x);
+  EXPECT_LT((A * x - b).norm(), 1e-10 * b.norm());
+}
+
+/// The clamped beam's rest operator (backward Euler at 1/60 s) and its free dofs.
+struct BeamSystem {
+  Problem p = test::clampedBeam(40);
+  std::vector<Eigen::Index> free = test::freeDofsOf(p);
+  AmgMatrix A0 = restOperator(restStiffness(p), p, free, 3600.0, 1.0);
+};
+
+/// The factor of A0 in nested dissection order, as WarpedCholesky makes it.
+struct OrderedFactor {
+  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> ldlt;
+  SupernodalLdlt solves;
+  explicit OrderedFactor(const BeamSystem& b) {
+    const std::vector<int> position = nestedDissection(b.A0, b.free, b.p.restPositions);
+    const auto n = static_cast<Eigen::Index>(b.free.size());
+    P.resize(n);
+    for (Eigen::Index i = 0; i < n; ++i) P.indices()[i] = position[static_cast<std::size_t>(i)];
+    Eigen::SparseMatrix<double> ordered(n, n);
+    ordered = Eigen::SparseMatrix<double>(b.A0).twistedBy(P);
+    ldlt.compute(ordered);
+    solves.build(ldlt.matrixL().nestedExpression(), ldlt.vectorD(), P.indices());
+  }
+};
+
+TEST(NestedDissection, SplitsABeamIntoIndependentSubtreesWithAFillNearMinimumDegrees) {
+  const BeamSystem b;
+  const std::vector<int> position = nestedDissection(b.A0, b.free, b.p.restPositions);
+  ASSERT_EQ(position.size(), b.free.size());
+  std::vector<int> sorted = position;
+  std::sort(sorted.begin(), sorted.end());
+  for (std::size_t i = 0; i < sorted.size(); ++i) ASSERT_EQ(sorted[i], static_cast<int>(i)) << "not a permutation";
+  // A node's dofs stay together, in their order.
+  for (std::size_t i = 1; i < b.free.size(); ++i)
+    if (b.free[i] / 3 == b.free[i - 1] / 3) EXPECT_EQ(position[i], position[i - 1] + 1) << "free dof " << i;
+
+  const OrderedFactor f(b);
+  ASSERT_EQ(f.ldlt.info(), Eigen::Success);
+  const Ldlt amd{Eigen::SparseMatrix<double>(b.A0)};
+  const double fill = static_cast<double>(f.ldlt.matrixL().nestedExpression().nonZeros());
+  const double amdFill = static_cast<double>(amd.matrixL().nestedExpression().nonZeros());
+  EXPECT_LT(fill, 1.5 * amdFill) << "nested dissection's fill against minimum degree's";
+  // The beam's cross-sections are the separators: the top of the tree, which one thread solves,
+  // is a few of them (41 x 4 x 4 nodes, 48 dofs a cross-section; 40 x 4 x 4 free).
+  EXPECT_GT(f.solves.topColumns(), 0u);
+  EXPECT_LT(f.solves.topColumns(), b.free.size() / 8) << "the top of the tree";
+
+  const Eigen::VectorXd r = randomVector(b.free.size(), 7);
+  Eigen::VectorXd z;
+  f.solves.solve(r, z);
+  const Eigen::VectorXd expected = amd.solve(r);
+  EXPECT_LT((z - expected).norm(), 1e-10 * expected.norm());
+}
+
+TEST(SupernodalLdlt, GivesTheSameBitsWhateverRunsItsTasksAndInWhateverOrder) {
+  const BeamSystem b;
+  const OrderedFactor f(b);
+  const Eigen::VectorXd r = randomVector(b.free.size(), 11);
+  Eigen::VectorXd pooled, serial;
+  f.solves.solve(r, pooled);  // the library's pool (or the caller alone on one CPU)
+  std::atomic<int> calls{0};
+  const TaskRunnerFn runner = [&](std::size_t count, const std::function<void(std::size_t)>& task) {
+    ++calls;
+    backwards(count, task);
+  };
+  {
+    const TaskScope scope(runner);
+    f.solves.solve(r, serial);
+  }
+  EXPECT_EQ(calls.load(), 2) << "the two sweeps' tasks on the application's runner";
+  ASSERT_EQ(pooled.size(), serial.size());
+  EXPECT_EQ(std::memcmp(pooled.data(), serial.data(), sizeof(double) * static_cast<std::size_t>(pooled.size())), 0);
+}
+
+TEST(SupernodalLdlt, InconsistentFactorsAreInternalErrors) {
+  const Eigen::SparseMatrix<double> A = randomSpd(20, 3, 1);
+  const Ldlt f(A);
+  SupernodalLdlt s;
+  const auto expectInternal = [](const std::function<void()>& call, const char* what) {
+    try {
+      call();
+      ADD_FAILURE() << what << ": no error";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ErrorCode::Internal) << what;
+      EXPECT_NE(std::string(e.what()).find("SupernodalLdlt"), std::string::npos) << e.what();
+    }
+  };
+  expectInternal([&] { s.build(f.matrixL().nestedExpression(), Eigen::VectorXd::Ones(19), Eigen::VectorXi()); },
+                 "too few pivots");
+  Eigen::VectorXi twice = f.permutationP().indices();
+  twice[1] = twice[0];
+  expectInternal([&] { s.build(f.matrixL().nestedExpression(), f.vectorD(), twice); }, "a permutation with a repeat");
+  Eigen::SparseMatrix<double> upper = Eigen::SparseMatrix<double>(f.matrixL().nestedExpression()).transpose();
+  upper.makeCompressed();
+  if (upper.nonZeros() > 0)
+    expectInternal([&] { s.build(upper, f.vectorD(), Eigen::VectorXi()); }, "entries above the diagonal");
+  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
+  Eigen::VectorXd x;
+  expectInternal([&] { s.solve(Eigen::VectorXd::Ones(21), x); }, "a right-hand side of another size");
+}
+
+}  // namespace
