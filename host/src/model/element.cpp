@@ -152,13 +152,14 @@ Mat3 polarRotation(const Mat3& F) {
 }
 
 Vec12 corotationalForce(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4>& x,
-                        const std::array<Vec3d, 4>& X) {
+                        const std::array<Vec3d, 4>& X, double* energy) {
   // Eq. 9: f = R K (R^T x - X), applied node by node with the block-diagonal R.
   Vec12 u;
   for (int i = 0; i < 4; ++i) u.segment<3>(3 * i) = R.transpose() * x[i] - X[i];
   // lazyProduct: Eigen's coefficient loops, unrolled at 12 x 12 (its general matrix-vector
   // kernel, which `K * u` takes at this size, costs more in set-up than in arithmetic here).
   const Vec12 local = K.lazyProduct(u);
+  if (energy) *energy = 0.5 * u.dot(local);
   Vec12 f;
   for (int i = 0; i < 4; ++i) f.segment<3>(3 * i) = R * local.segment<3>(3 * i);
   return f;
@@ -194,7 +195,8 @@ double corotationalEnergy(const Mat12& K, const Mat3& R, const std::array<Vec3d,
                           const std::array<Vec3d, 4>& X) {
   Vec12 u;
   for (int i = 0; i < 4; ++i) u.segment<3>(3 * i) = R.transpose() * x[i] - X[i];
-  return 0.5 * u.dot(K.lazyProduct(u));
+  const Vec12 local = K.lazyProduct(u);  // evaluated as corotationalForce does: the same bits
+  return 0.5 * u.dot(local);
 }
 
 Mat3 smallStrain(const Mat3& F) { return 0.5 * (F + F.transpose()) - Mat3::Identity(); }

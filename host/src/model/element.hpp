@@ -41,9 +41,10 @@ Mat3 deformationGradient(const ElementRest& rest, const std::array<Vec3d, 4>& x)
 /// direction flipped for inverted elements. Both give U V^T of F's SVD to rounding where both run.
 Mat3 polarRotation(const Mat3& F);
 
-/// Co-rotational element force f = R K (R^T x - X) (Eq. 9), 12 entries.
+/// Co-rotational element force f = R K (R^T x - X) (Eq. 9), 12 entries; where `energy` is given,
+/// the element's strain energy 1/2 u^T K u too, u = R^T x - X (the bits of corotationalEnergy).
 Vec12 corotationalForce(const Mat12& K, const Mat3& R, const std::array<Vec3d, 4>& x,
-                        const std::array<Vec3d, 4>& X);
+                        const std::array<Vec3d, 4>& X, double* energy = nullptr);
 
 // ---- additions (model helper): volume, mass, energy, rotated stiffness, small-strain stress ----
 

@@ -85,6 +85,7 @@ class ReferenceBody {
     if (!hyper_)
       for (std::size_t e = 0; e < stiffness_.size(); ++e) stiffness_[e] = linearStiffness(p_.elements[e], p_.lame);
     tangentsValid_ = false;
+    energiesValid_ = false;
     running_ = false;
     amg_.clear();
     cholesky_.clear();
@@ -117,6 +118,7 @@ class ReferenceBody {
   void setPositions(const Eigen::VectorXd& x) {
     checkSize(x, "setPositions");
     x_ = x;
+    energiesValid_ = false;
     parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
       for (std::size_t e = begin; e < end; ++e) {
         const Mat3 F = deformationGradient(p_.elements[e], gather(x_, e));
@@ -132,11 +134,14 @@ class ReferenceBody {
     f.setZero(static_cast<Eigen::Index>(p_.dofCount()));
     checkInversions();
     elementVectors_.resize(p_.elements.size());
+    elementEnergies_.resize(p_.elements.size());
     parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
       for (std::size_t e = begin; e < end; ++e)
         elementVectors_[e] = hyper_ ? hyperelasticForce(model_, p_.elements[e], p_.lame, gradients_[e])
-                                    : corotationalForce(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);  // Eq. 9
+                                    : corotationalForce(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e],
+                                                        &elementEnergies_[e]);  // Eq. 9
     });
+    energiesValid_ = !hyper_;  // the energies of these positions, which elasticEnergy() sums
     for (std::size_t e = 0; e < p_.elements.size(); ++e) scatterAdd(f, e, elementVectors_[e]);
   }
 
@@ -160,13 +165,15 @@ class ReferenceBody {
   }
 
   double elasticEnergy() {
-    elementEnergies_.resize(p_.elements.size());
-    parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
-      for (std::size_t e = begin; e < end; ++e)
-        elementEnergies_[e] = hyper_ ? hyperelasticEnergy(model_, p_.elements[e], p_.lame, gradients_[e])
-                                     // 1/2 u^T K u, u = R^T x - X (R = I for the linear formulation)
-                                     : corotationalEnergy(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);
-    });
+    if (!energiesValid_) {
+      elementEnergies_.resize(p_.elements.size());
+      parallelChunks(p_.elements.size(), kElementChunk, [&](std::size_t, std::size_t begin, std::size_t end) {
+        for (std::size_t e = begin; e < end; ++e)
+          elementEnergies_[e] = hyper_ ? hyperelasticEnergy(model_, p_.elements[e], p_.lame, gradients_[e])
+                                       // 1/2 u^T K u, u = R^T x - X (R = I for the linear formulation)
+                                       : corotationalEnergy(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);
+      });
+    }
     double energy = 0.0;
     for (const double e : elementEnergies_) energy += e;
     return energy;
@@ -541,7 +548,8 @@ class ReferenceBody {
   std::vector<Mat3> gradients_;   ///< F_e at the current positions
   std::vector<Mat12> tangents_;   ///< element tangents, valid when tangentsValid_
   std::vector<Vec12> elementVectors_;  ///< scratch: each element's force or product, summed in element order
-  std::vector<double> elementEnergies_;  ///< scratch: each element's energy, summed in element order
+  std::vector<double> elementEnergies_;  ///< each element's energy, summed in element order
+  bool energiesValid_ = false;  ///< elementEnergies_ hold the current positions' (internalForces made them)
   bool tangentsValid_ = false;
   Eigen::VectorXd x_;
 
