@@ -13,7 +13,8 @@
 // host PCG (double) to a relative residual of 1e-6 from zero, with Jacobi, the library's "amg"
 // (its host V-cycle, as the reference backend applies it), the rest Cholesky or the warped one:
 //   probeSolve/<preconditioner>/turn_<millirad>   iterations and the time of a solve
-//   probeFactor                                   the factorisation of A_0
+//   probeFactor                                   the factorisation of A_0 (Eigen's, minimum degree)
+//   probeBuild                                    the library's factor (WarpedCholesky::build)
 //   probeAmgSetup                                 the multigrid's set-up (BodyAmg::ensure)
 //   probeTriangular/<eigen|double|float>          one application of A_0^-1 (the permutation, the
 //                                                 two triangular solves, D^-1) on one thread: Eigen's
@@ -150,6 +151,17 @@ void probeFactor(benchmark::State& state) {
   state.counters["nnz_L"] = static_cast<double>(Ldlt(A).matrixL().nestedExpression().nonZeros());  // strictly lower
 }
 
+/// The library's factor of the same system (WarpedCholesky::build: the rigid-motion check, the
+/// nested dissection order, Eigen's factorisation in that order, the supernodal copy).
+void probeBuild(benchmark::State& state) {
+  const Beam& b = beam();
+  for (auto _ : state) {
+    WarpedCholesky w;
+    w.build(b.A0, b.free, b.p.restPositions, "beam");
+    benchmark::DoNotOptimize(w.factorEntries());
+  }
+}
+
 /// The library's multigrid set-up for the same system, as the reference backend makes it
 /// (BodyAmg::ensure: K_0 assembled, the hierarchy, its bounds).
 void probeAmgSetup(benchmark::State& state) {
@@ -284,6 +296,7 @@ void probeSolve(benchmark::State& state, const std::string& kind, double turn) {
 
 const int registered = [] {
   benchmark::RegisterBenchmark("probeFactor", probeFactor)->Unit(benchmark::kMillisecond);
+  benchmark::RegisterBenchmark("probeBuild", probeBuild)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("probeAmgSetup", probeAmgSetup)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("probeTriangular/eigen", probeEigenSolve)->Unit(benchmark::kMillisecond);
   benchmark::RegisterBenchmark("probeTriangular/double", probeTriangular<double>)->Unit(benchmark::kMillisecond);

@@ -144,12 +144,7 @@ class Dissection {
 
 std::vector<int> nestedDissection(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
                                   const Eigen::VectorXd& rest) {
-  const auto n = static_cast<Eigen::Index>(freeDofs.size());
-  if (A.rows() != n || A.cols() != n || rest.size() % 3 != 0 ||
-      std::adjacent_find(freeDofs.begin(), freeDofs.end(), std::greater_equal<Eigen::Index>()) != freeDofs.end() ||
-      (!freeDofs.empty() && (freeDofs.front() < 0 || freeDofs.back() >= rest.size())))
-    fail(ErrorCode::Internal, "nestedDissection: an operator of ", A.rows(), " x ", A.cols(), " for ", n,
-         " free dofs, or free dofs not strictly ascending within 0..", rest.size(), " - 1");
+  checkRestSystem("nestedDissection", A, freeDofs, rest);
   const NodeGraph g = nodeGraph(A, freeDofs, rest);
   std::vector<int> all(g.size());
   for (std::size_t q = 0; q < g.size(); ++q) all[q] = static_cast<int>(q);

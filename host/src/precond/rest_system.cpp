@@ -66,14 +66,26 @@ AmgMatrix restStiffness(const Problem& p) {
   return K;
 }
 
+bool freeDofsInOrder(const std::vector<Eigen::Index>& freeDofs, Eigen::Index dofs) {
+  return std::adjacent_find(freeDofs.begin(), freeDofs.end(), std::greater_equal<Eigen::Index>()) == freeDofs.end() &&
+         (freeDofs.empty() || (freeDofs.front() >= 0 && freeDofs.back() < dofs));
+}
+
+void checkRestSystem(const char* who, const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
+                     const Eigen::VectorXd& rest) {
+  const auto n = static_cast<Eigen::Index>(freeDofs.size());
+  if (A.rows() != n || A.cols() != n || rest.size() % 3 != 0 || !freeDofsInOrder(freeDofs, rest.size()))
+    fail(ErrorCode::Internal, who, ": an operator of ", A.rows(), " x ", A.cols(), " for ", n,
+         " free dofs, or free dofs not strictly ascending within 0..", rest.size(), " - 1");
+}
+
 AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::vector<Eigen::Index>& freeDofs,
                        double massScale, double stiffScale) {
   if (stiffness.rows() != static_cast<Eigen::Index>(p.dofCount()) || stiffness.cols() != stiffness.rows())
     fail(ErrorCode::Internal, "restOperator: a stiffness of ", stiffness.rows(), " x ", stiffness.cols(), " for ",
          p.dofCount(), " dofs");
   // The rows and columns below come out in order only for free dofs in ascending order.
-  if (std::adjacent_find(freeDofs.begin(), freeDofs.end(), std::greater_equal<Eigen::Index>()) != freeDofs.end() ||
-      (!freeDofs.empty() && (freeDofs.front() < 0 || freeDofs.back() >= stiffness.rows())) || !stiffness.isCompressed())
+  if (!freeDofsInOrder(freeDofs, stiffness.rows()) || !stiffness.isCompressed())
     fail(ErrorCode::Internal, "restOperator: free dofs not strictly ascending within 0..", stiffness.rows() - 1,
          ", or an uncompressed stiffness");
   std::vector<int> index(p.dofCount(), -1);

@@ -37,6 +37,14 @@ AmgMatrix restStiffness(const Problem& p);
 AmgMatrix restOperator(const AmgMatrix& stiffness, const Problem& p, const std::vector<Eigen::Index>& freeDofs,
                        double massScale, double stiffScale);
 
+/// Whether `freeDofs` are strictly ascending dof indices within 0..dofs - 1 (the rows and columns
+/// of a rest operator come out in order only for those).
+bool freeDofsInOrder(const std::vector<Eigen::Index>& freeDofs, Eigen::Index dofs);
+/// Throws Error(Internal) naming `who` unless `A` is n x n for the n free dofs `freeDofs` and they
+/// are in order (freeDofsInOrder) for a body at rest positions `rest` (3N entries).
+void checkRestSystem(const char* who, const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
+                     const Eigen::VectorXd& rest);
+
 /// K_0 of a body kept across set-ups: constraints and coefficients change a preconditioner, not
 /// K_0, so a grab's set-up restricts it instead of assembling again (the assembly was about half of
 /// a multigrid set-up on the 12,960-tet beam). Made again where the body's mesh, rest state,

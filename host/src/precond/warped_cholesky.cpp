@@ -79,12 +79,8 @@ double weakestRigidMotion(const AmgMatrix& A, const std::vector<Eigen::Index>& f
 void WarpedCholesky::build(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest,
                            const std::string& body) {
   clear();
+  checkRestSystem("WarpedCholesky", A0, freeDofs, rest);
   const auto n = static_cast<Eigen::Index>(freeDofs.size());
-  if (A0.rows() != n || A0.cols() != n || rest.size() % 3 != 0 ||
-      std::adjacent_find(freeDofs.begin(), freeDofs.end(), std::greater_equal<Eigen::Index>()) != freeDofs.end() ||
-      (!freeDofs.empty() && (freeDofs.front() < 0 || freeDofs.back() >= rest.size())))
-    fail(ErrorCode::Internal, "WarpedCholesky: a rest operator of ", A0.rows(), " x ", A0.cols(), " for ", n,
-         " free dofs, or free dofs not strictly ascending within 0..", rest.size(), " - 1");
   if (n > 0) {
     const Eigen::VectorXd diagonal = A0.diagonal();
     if (!(diagonal.minCoeff() > 0.0) || !diagonal.allFinite() ||
