@@ -386,3 +386,35 @@ TEST(ReferenceBackend, ABodyLeavesItsDeviceInPlaceAndTheOthersKeepTheirState) {
   EXPECT_EQ(after[1], before[2]);
   EXPECT_GT(after[1], 0.0);
 }
+
+TEST(ReferenceBackend, TheEnergyTheForcePassKeepsHasTheBitsOfOneComputedAlone) {
+  // internalForces keeps each co-rotational element's energy; elasticEnergy at the same positions
+  // sums those. It must give what a device that never evaluated forces gives, and drop them when
+  // the positions or the material change.
+  Problem p = makeProblem(boxMesh(3, 2, 2, 1.0, 0.5, 0.5, 0.2, 7), 1e5, 0.3, 1000.0, Formulation::Corotational);
+  const Eigen::VectorXd x = p.restPositions + 0.05 * test::randomVector(p.dofCount(), 3);
+  const Eigen::VectorXd x2 = p.restPositions + 0.05 * test::randomVector(p.dofCount(), 4);
+  const auto alone = [&](const Problem& problem, const Eigen::VectorXd& at) {
+    auto fresh = test::createReferenceBackend(problem, SolverDesc{});
+    fresh->setPositions(at);
+    return fresh->elasticEnergy();
+  };
+  auto backend = test::createReferenceBackend(p, SolverDesc{});
+  Eigen::VectorXd f;
+  backend->setPositions(x);
+  backend->internalForces(f);
+  const double kept = backend->elasticEnergy();
+  EXPECT_GT(kept, 0.0);
+  EXPECT_EQ(kept, alone(p, x)) << "the kept energies' sum";
+  EXPECT_EQ(backend->elasticEnergy(), kept) << "asked twice";
+  backend->setPositions(x2);
+  EXPECT_EQ(backend->elasticEnergy(), alone(p, x2)) << "after new positions";
+  backend->internalForces(f);
+  Problem stiffer = p;
+  stiffer.lame.mu *= 2.0;
+  stiffer.lame.lambda *= 2.0;
+  backend->device().setMaterial({0}, {&stiffer});
+  const double afterMaterial = backend->elasticEnergy();
+  EXPECT_EQ(afterMaterial, alone(stiffer, x2)) << "after a material change";
+  EXPECT_NE(afterMaterial, alone(p, x2));
+}

@@ -65,9 +65,11 @@ struct SimulationOptions {
   /// None (the default): corofem makes its own.
   ExternalDevice device;
   /// Where the host's work between device calls runs (per-body passes over a batch's bodies, passes
-  /// over large node vectors): the application's task system. Empty (the default): a small pool of
-  /// the library's own (COROFEM_HOST_THREADS threads). The Simulation calls it only from inside its
-  /// own calls (create, step, reads), on the thread that made them.
+  /// over large node vectors; on the reference backend its element passes, its PCG products and
+  /// the "warped_cholesky" factor's two solves each PCG iteration): the application's task system.
+  /// Empty (the default): a small pool of the library's own (COROFEM_HOST_THREADS threads). The
+  /// Simulation calls it only from inside its own calls (create, step, reads), on the thread that
+  /// made them.
   TaskRunner tasks;
   /// The largest mesh, surface and .bou files the Simulation reads and the largest boxes it
   /// generates (create, addBody, warmUp); InputLimits' defaults unless raised. The scene file's

@@ -58,8 +58,9 @@ double lumpedNodeMass(const ElementRest& rest, double density);
 /// between different components (12x12, node-major). Its row sums equal the lumped masses.
 Mat12 consistentMass(const ElementRest& rest, double density);
 
-/// R K R^T applied block-wise (paper Eq. 11): the co-rotational element tangent. K must be
-/// symmetric: the blocks below the diagonal are the transposes of those above it.
+/// R K R^T applied block-wise (paper Eq. 11): the co-rotational element tangent, symmetric but for
+/// the rounding of its diagonal blocks. K must be symmetric: the blocks below the diagonal are
+/// taken as the transposes of those above it.
 Mat12 rotateStiffness(const Mat12& K, const Mat3& R);
 
 /// Strain energy 1/2 u^T K u with u = R^T x - X (co-rotational; R = I gives the linear energy) (J).

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 
 namespace corofem::detail {
 
@@ -145,6 +146,9 @@ class Dissection {
 std::vector<int> nestedDissection(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
                                   const Eigen::VectorXd& rest) {
   checkRestSystem("nestedDissection", A, freeDofs, rest);
+  for (const Eigen::Index d : freeDofs)
+    if (!std::isfinite(rest[d]))
+      fail(ErrorCode::Internal, "nestedDissection: the rest position of free dof ", d, " is not finite");
   const NodeGraph g = nodeGraph(A, freeDofs, rest);
   std::vector<int> all(g.size());
   for (std::size_t q = 0; q < g.size(); ++q) all[q] = static_cast<int>(q);

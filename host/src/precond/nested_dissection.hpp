@@ -30,7 +30,7 @@ constexpr std::size_t kLeafNodes = 64;
 /// The order of the free dofs `freeDofs` (strictly ascending dof indices 3 n + c of nodes at rest
 /// positions `rest`, 3N entries) for a factor of `A` (their operator, its pattern symmetric):
 /// position[i] is the place of free dof i in the elimination order (a permutation of 0..n-1).
-/// Throws Error(Internal) for inconsistent sizes.
+/// Throws Error(Internal) for inconsistent sizes or a free dof's rest position not finite.
 std::vector<int> nestedDissection(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
                                   const Eigen::VectorXd& rest);
 

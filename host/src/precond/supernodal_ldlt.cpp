@@ -7,21 +7,22 @@
 #include <algorithm>
 #include <array>
 #include <numeric>
+#include <queue>
 #include <utility>
 
 namespace corofem::detail {
 
 namespace {
 
-/// A merged run's zeros stay at most this fraction of its panel's lower part.
-constexpr double kMaxZeroFraction = 0.25;
+/// A factor of fewer panel values than this solves on the calling thread: waking the pool for its
+/// tasks would cost more than they take (the bits are the same either way).
+constexpr std::size_t kSerialValues = std::size_t{1} << 15;
 
-/// Whether the ascending `rows` are all in the ascending `set`.
-bool within(const int* rows, const int* rowsEnd, const std::vector<int>& set, std::size_t from) {
-  std::size_t at = from;
+/// Whether the ascending rows [rows, rowsEnd) are all in the ascending [set, setEnd).
+bool within(const int* rows, const int* rowsEnd, const int* set, const int* setEnd) {
   for (const int* r = rows; r != rowsEnd; ++r) {
-    while (at < set.size() && set[at] < *r) ++at;
-    if (at == set.size() || set[at] != *r) return false;
+    while (set != setEnd && *set < *r) ++set;
+    if (set == setEnd || *set != *r) return false;
   }
   return true;
 }
@@ -111,7 +112,6 @@ void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::Ve
   rows_.clear();
   // The runs: U holds the rows below the run [c0, j) not yet in it (ascending).
   std::vector<int> U;
-  std::size_t nonzeros = 0;
   int c0 = 0;
   const auto close = [&](int end) {
     first_.push_back(c0);
@@ -120,26 +120,39 @@ void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::Ve
     c0 = end;
   };
   for (int j = 0; j < n; ++j) {
-    const auto count = static_cast<std::size_t>(Lp[j + 1] - Lp[j]);
-    if (j > c0 && !U.empty() && U.front() == j && within(Li + Lp[j], Li + Lp[j + 1], U, 1)) {
-      const auto w = static_cast<std::size_t>(j - c0 + 1), h = U.size() - 1;
-      const std::size_t lower = w * (w - 1) / 2 + h * w;
-      if (static_cast<double>(lower - (nonzeros + count)) <= kMaxZeroFraction * static_cast<double>(lower)) {
-        U.erase(U.begin());
-        nonzeros += count;
-        continue;
-      }
+    if (j > c0 && !U.empty() && U.front() == j && within(Li + Lp[j], Li + Lp[j + 1], U.data() + 1, U.data() + U.size())) {
+      U.erase(U.begin());
+      continue;
     }
     if (j > 0) close(j);
     U.assign(Li + Lp[j], Li + Lp[j + 1]);
-    nonzeros = count;
   }
   if (n > 0) close(n);
   first_.push_back(n);
+  const std::size_t S = first_.size() - 1;
+
+  // A Cholesky factor's pattern: the rows below a supernode that are not its parent's columns (the
+  // parent holds its first row below) are among its parent's rows below, so every row below a
+  // supernode is an ancestor's (by induction from the roots), which the split into tasks needs.
+  std::vector<int> of(static_cast<std::size_t>(n));
+  widest_ = 0;
+  for (std::size_t s = 0; s < S; ++s) {
+    widest_ = std::max(widest_, static_cast<std::size_t>(first_[s + 1] - first_[s]));
+    for (int c = first_[s]; c < first_[s + 1]; ++c) of[static_cast<std::size_t>(c)] = static_cast<int>(s);
+  }
+  for (std::size_t s = 0; s < S; ++s) {
+    if (rowStart_[s + 1] == rowStart_[s]) continue;
+    const auto parent = static_cast<std::size_t>(of[static_cast<std::size_t>(rows_[rowStart_[s]])]);
+    const int* rest = rows_.data() + rowStart_[s];
+    const int* end = rows_.data() + rowStart_[s + 1];
+    while (rest != end && *rest < first_[parent + 1]) ++rest;
+    if (!within(rest, end, rows_.data() + rowStart_[parent], rows_.data() + rowStart_[parent + 1]))
+      fail(ErrorCode::Internal, "SupernodalLdlt: the factor's column ", first_[s],
+           " has a row below that is not an ancestor's in its elimination tree (not a Cholesky factor's pattern)");
+  }
 
   // The panels: the run's w x w triangle (row-major, unit diagonal and upper half stored as 0), then
   // its h rows below, w values each.
-  const std::size_t S = first_.size() - 1;
   panelStart_.assign(S + 1, 0);
   for (std::size_t s = 0; s < S; ++s) {
     const auto w = static_cast<std::size_t>(first_[s + 1] - first_[s]);
@@ -170,6 +183,9 @@ void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::Ve
   dinv_ = d.cwiseInverse();
   perm_.assign(perm.data(), perm.data() + perm.size());
   partition();
+  work_.acc.assign((kTasks + 1) * widest_, 0.0);
+  work_.updates.assign(kTasks * topColumns_.size(), 0.0);
+  work_.y.resize(n);
 }
 
 void SupernodalLdlt::partition() {
@@ -194,23 +210,25 @@ void SupernodalLdlt::partition() {
   }
   const double total = std::accumulate(roots.begin(), roots.end(), 0.0,
                                        [&](double sum, int r) { return sum + work[static_cast<std::size_t>(r)]; });
-  // Split the largest subtree (the lowest index of equals) into its children until none holds more
-  // than 1/kTasks of the factor.
-  std::vector<int> subtrees = roots;
+  // Split the largest subtree (of equals the lowest index) into its children until none that has
+  // children holds more than 1/kTasks of the factor; a leaf stays whole.
+  std::priority_queue<std::pair<double, int>> largest;  // (work, -index): the largest, then the lowest index
+  for (const int r : roots) largest.emplace(work[static_cast<std::size_t>(r)], -r);
+  std::vector<int> subtrees;
   std::vector<char> inTop(S, 0);
-  for (;;) {
-    auto largest = subtrees.end();
-    for (auto it = subtrees.begin(); it != subtrees.end(); ++it)
-      if (!children[static_cast<std::size_t>(*it)].empty() &&
-          (largest == subtrees.end() || work[static_cast<std::size_t>(*it)] > work[static_cast<std::size_t>(*largest)]))
-        largest = it;
-    if (largest == subtrees.end() || work[static_cast<std::size_t>(*largest)] <= total / kTasks) break;
-    const int split = *largest;
-    subtrees.erase(largest);
-    inTop[static_cast<std::size_t>(split)] = 1;
-    const std::vector<int>& c = children[static_cast<std::size_t>(split)];
-    subtrees.insert(subtrees.end(), c.begin(), c.end());
+  while (!largest.empty()) {
+    const auto [w, negative] = largest.top();
+    const auto s = static_cast<std::size_t>(-negative);
+    if (w <= total / kTasks) break;  // and so are the rest
+    largest.pop();
+    if (children[s].empty()) {
+      subtrees.push_back(static_cast<int>(s));
+      continue;
+    }
+    inTop[s] = 1;
+    for (const int c : children[s]) largest.emplace(work[static_cast<std::size_t>(c)], -c);
   }
+  for (; !largest.empty(); largest.pop()) subtrees.push_back(-largest.top().second);
   // Deal the subtrees, the largest first, each to the task with the least work so far.
   std::sort(subtrees.begin(), subtrees.end(), [&](int a, int b) {
     const double wa = work[static_cast<std::size_t>(a)], wb = work[static_cast<std::size_t>(b)];
@@ -276,7 +294,7 @@ void SupernodalLdlt::forward(int s, double* y, double* topUpdates) const {
     topUpdates[topIndex_[static_cast<std::size_t>(below[r])]] += dot(R + r * w, ys, w);
 }
 
-void SupernodalLdlt::backward(int s, double* y, std::vector<double>& acc) const {
+void SupernodalLdlt::backward(int s, double* y, double* acc) const {
   const int a = first_[static_cast<std::size_t>(s)];
   const auto w = static_cast<std::size_t>(first_[static_cast<std::size_t>(s) + 1] - a);
   const double* T = values_.data() + panelStart_[static_cast<std::size_t>(s)];
@@ -284,15 +302,16 @@ void SupernodalLdlt::backward(int s, double* y, std::vector<double>& acc) const 
   double* ys = y + a;
   const int* below = rows_.data() + rowStart_[static_cast<std::size_t>(s)];
   const std::size_t h = rowStart_[static_cast<std::size_t>(s) + 1] - rowStart_[static_cast<std::size_t>(s)];
-  acc.assign(w, 0.0);
-  if (w <= kFixedWidths)
-    kRowsUp[w - 1](R, below, h, y, acc.data());
-  else
+  if (w <= kFixedWidths) {
+    kRowsUp[w - 1](R, below, h, y, acc);
+  } else {
+    std::fill(acc, acc + w, 0.0);
     for (std::size_t r = 0; r < h; ++r) {
       const double* row = R + r * w;
       const double yr = y[below[r]];
       for (std::size_t k = 0; k < w; ++k) acc[k] += row[k] * yr;
     }
+  }
   for (std::size_t k = 0; k < w; ++k) ys[k] -= acc[k];
   // Row k of the triangle, from the last: ys[k] is final when it is reached.
   for (std::size_t k = w; k-- > 1;) {
@@ -302,21 +321,29 @@ void SupernodalLdlt::backward(int s, double* y, std::vector<double>& acc) const 
   }
 }
 
+template <class Fn>
+void SupernodalLdlt::forTasks(const Fn& fn) const {
+  if (values_.size() < kSerialValues) {
+    for (std::size_t t = 0; t < kTasks; ++t) fn(t);
+    return;
+  }
+  parallelChunks(kTasks, 1, [&fn](std::size_t t, std::size_t, std::size_t) { fn(t); });
+}
+
 void SupernodalLdlt::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const {
   const Eigen::Index n = rows();
   if (b.size() != n) fail(ErrorCode::Internal, "SupernodalLdlt: solve of ", b.size(), " entries with a factor of ", n);
   Eigen::VectorXd& y = work_.y;
-  y.resize(n);
   if (perm_.empty()) y = b;
   else
     for (Eigen::Index i = 0; i < n; ++i) y[perm_[static_cast<std::size_t>(i)]] = b[i];
   double* yp = y.data();
   // L y' = y: the tasks' subtrees, the top's rows taking their updates in task order, then the top.
   const std::size_t m = topColumns_.size();
-  std::vector<double>& updates = work_.updates;
-  updates.assign(kTasks * m, 0.0);
-  parallelChunks(kTasks, 1, [&](std::size_t t, std::size_t, std::size_t) {
-    for (const int s : tasks_[t]) forward(s, yp, updates.data() + t * m);
+  double* updates = work_.updates.data();
+  std::fill(work_.updates.begin(), work_.updates.end(), 0.0);
+  forTasks([&](std::size_t t) {
+    for (const int s : tasks_[t]) forward(s, yp, updates + t * m);
   });
   for (std::size_t t = 0; t < kTasks; ++t)
     for (std::size_t i = 0; i < m; ++i) yp[topColumns_[i]] -= updates[t * m + i];
@@ -324,16 +351,17 @@ void SupernodalLdlt::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const {
   y.array() *= dinv_.array();
   // L^T x = y': the top from its last supernode, then the tasks' subtrees (each reads its own rows
   // and the top's, final by then).
-  std::vector<double> acc;
-  for (auto it = top_.rbegin(); it != top_.rend(); ++it) backward(*it, yp, acc);
-  parallelChunks(kTasks, 1, [&](std::size_t t, std::size_t, std::size_t) {
-    std::vector<double> own;
-    for (auto it = tasks_[t].rbegin(); it != tasks_[t].rend(); ++it) backward(*it, yp, own);
+  double* acc = work_.acc.data();
+  for (auto it = top_.rbegin(); it != top_.rend(); ++it) backward(*it, yp, acc + kTasks * widest_);
+  forTasks([&](std::size_t t) {
+    for (auto it = tasks_[t].rbegin(); it != tasks_[t].rend(); ++it) backward(*it, yp, acc + t * widest_);
   });
+  if (perm_.empty()) {
+    x = y;
+    return;
+  }
   x.resize(n);
-  if (perm_.empty()) x = y;
-  else
-    for (Eigen::Index i = 0; i < n; ++i) x[i] = y[perm_[static_cast<std::size_t>(i)]];
+  for (Eigen::Index i = 0; i < n; ++i) x[i] = y[perm_[static_cast<std::size_t>(i)]];
 }
 
 }  // namespace corofem::detail

@@ -6,22 +6,22 @@
 // tree. Such a run is a supernode. Stored as a dense panel (its unit lower triangle, then the rows
 // below it, row by row, each as wide as the run) with one row index per panel row, a solve reads one
 // index per row of a panel instead of one per entry, and its inner loops run over the panel's width,
-// which a CPU vectorises. A column-by-column solve chains each entry's update through memory
-// instead; on issue 29's 12,960-tet beam it took about 3 ms an application on one core
-// (docs/performance.md).
+// which a CPU vectorises; a column-by-column solve chains each entry's update through memory
+// instead (docs/performance.md, "The warped factor's solves by supernodes").
 //
-// Runs are grown greedily: column j joins the supernode ending at j - 1 where it is a row of that
-// supernode and its own rows below are among the supernode's (its entries at the others are stored
-// as zeros), as long as the zeros stay under a quarter of the panel. The zeros change no result:
-// each is an exact 0 times a finite number.
+// Runs are grown greedily: column j joins the run ending at j - 1 where it is the first row below
+// the run and its own rows below are among the run's. In a Cholesky factor's pattern they are then
+// the same rows (the run's columns are a chain of the elimination tree); for another strictly lower
+// L the run stores zeros where column j has no entry.
 //
-// The solves run on the host's threads (util/parallel.hpp). A supernode's rows below are its
-// ancestors in the elimination tree, so disjoint subtrees solve apart: build() splits the tree from
-// its roots (the largest subtree first) until every subtree holds at most 1/kTasks of the factor,
-// and deals the subtrees to kTasks tasks; the supernodes split off (the top of the tree) are solved
-// on one thread, after the tasks going down (L) and before them coming up (L^T). A task's updates of
-// the top's rows are kept in its own buffer and subtracted in task order. The tasks and every sum's
-// order follow from the factor alone, so the bits do not depend on the number of threads.
+// The solves run on the host's threads (util/parallel.hpp). In a Cholesky factor's pattern a
+// supernode's rows below are its ancestors in the elimination tree (build() checks it), so disjoint
+// subtrees solve apart: build() splits the tree from its roots, the largest subtree first, until
+// none that can be split holds more than 1/kTasks of the panels' values, and deals the subtrees to
+// kTasks tasks; the supernodes split off (the top of the tree) are solved on one thread, after the
+// tasks going down (L) and before them coming up (L^T). A task's updates of the top's rows are kept
+// in its own buffer and subtracted in task order. The tasks and every sum's order follow from the
+// factor alone, so the bits do not depend on the number of threads or on who runs the tasks.
 #pragma once
 
 #include <Eigen/Core>
@@ -34,54 +34,63 @@ namespace corofem::detail {
 
 class SupernodalLdlt {
  public:
-  /// From a factor A = P^T L D L^T P: `L` strictly lower triangular, column-major with each
-  /// column's rows ascending (Eigen's SimplicialLDLT::matrixL(), its unit diagonal implied), `d`
-  /// D's diagonal (all non-zero) and `perm` P's indices ((P b)[perm[i]] = b[i]; empty: P = I).
-  /// Throws Error(Internal) for inconsistent sizes or a column with rows out of order.
+  /// The tasks the subtrees are dealt to (each runs on one thread at a time).
+  static constexpr std::size_t kTasks = 4;
+
+  /// From a factor A = P^T L D L^T P: `L` strictly lower triangular, compressed, column-major with
+  /// each column's rows ascending and the pattern of a Cholesky factor (each row below a column is
+  /// its ancestor in the elimination tree: Eigen's SimplicialLDLT::matrixL(), its unit diagonal
+  /// implied), `d` D's diagonal (all non-zero) and `perm` P's indices ((P b)[perm[i]] = b[i];
+  /// empty: P = I). Throws Error(Internal) for inconsistent sizes, a column with rows out of order
+  /// or another pattern.
   void build(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm);
 
-  /// x = A^-1 b (x is resized; it may not alias b). Not to be called on one object from two
-  /// threads at once (it keeps its work vectors between calls).
+  /// x = A^-1 b (x is resized; it may be b). Before a build(), A is the 0 x 0 matrix. Not to be
+  /// called on one object from two threads at once: it keeps its work vectors between calls.
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
 
   Eigen::Index rows() const { return static_cast<Eigen::Index>(dinv_.size()); }
   std::size_t supernodeCount() const { return first_.empty() ? 0 : first_.size() - 1; }
   /// Columns in the top of the tree (solved on one thread).
   std::size_t topColumns() const { return topColumns_.size(); }
-  /// The tasks' subtrees are dealt to (each runs on one thread at a time).
-  static constexpr std::size_t kTasks = 4;
-  /// Values stored in the panels (the factor's entries, the zeros of the merged runs, and the
-  /// triangles' diagonals and upper halves, which are kept as zeros for a square layout).
+  /// Values stored in the panels: the factor's entries, any zeros of the runs, and the triangles'
+  /// diagonals and upper halves (kept as zeros for a square layout).
   std::size_t storedValues() const { return values_.size(); }
 
  private:
   /// The tasks and the top from the elimination tree (build()).
   void partition();
+  /// fn(t) for every task t: on the host's threads, or on the caller where the factor is small.
+  template <class Fn>
+  void forTasks(const Fn& fn) const;
   /// Supernode s's share of L y' = y: its triangle, then its rows below (a top row's update added
   /// to topUpdates at its index in topColumns_).
   void forward(int s, double* y, double* topUpdates) const;
-  /// Supernode s's share of L^T x = y' (acc: scratch).
-  void backward(int s, double* y, std::vector<double>& acc) const;
+  /// Supernode s's share of L^T x = y' (acc: scratch of the widest supernode's width).
+  void backward(int s, double* y, double* acc) const;
 
   std::vector<int> first_;                 ///< supernode s: columns [first_[s], first_[s + 1])
   std::vector<std::size_t> rowStart_;      ///< its rows below the run: rows_[rowStart_[s] ..]
   std::vector<int> rows_;                  ///< ascending within a supernode
   std::vector<std::size_t> panelStart_;    ///< its panel: values_[panelStart_[s] ..], w x w then h x w
   std::vector<double> values_;
+  std::size_t widest_ = 0;                 ///< the widest supernode's columns
   /// Per supernode in a task: its rows below in that task's subtree, the first `direct_[s]` of them
   /// (the rest are in the top); all of them for a supernode of the top.
   std::vector<std::size_t> direct_;
-  std::vector<std::vector<int>> tasks_;    ///< each task's supernodes, ascending
+  std::vector<std::vector<int>> tasks_ = std::vector<std::vector<int>>(kTasks);  ///< their supernodes, ascending
   std::vector<int> top_;                   ///< the top's supernodes, ascending
   std::vector<int> topColumns_;            ///< the top's columns, ascending
   std::vector<int> topIndex_;              ///< per column: its index in topColumns_, or -1
   Eigen::VectorXd dinv_;                   ///< 1 / D
   std::vector<int> perm_;                  ///< empty: no permutation
-  /// solve()'s work vectors, kept so that a solve allocates nothing: the permuted vector, and each
-  /// task's updates of the top's rows.
+  /// solve()'s work vectors, kept between calls so that a solve does not allocate them: the
+  /// permuted vector, each task's updates of the top's rows, and kTasks + 1 scratch rows of the
+  /// widest supernode's width (one a task, the last the top's).
   struct Work {
     Eigen::VectorXd y;
     std::vector<double> updates;
+    std::vector<double> acc;
   };
   mutable Work work_;
 };

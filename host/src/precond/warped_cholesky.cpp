@@ -7,6 +7,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/OrderingMethods>
+#include <Eigen/SparseCholesky>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
@@ -90,9 +91,12 @@ void WarpedCholesky::build(const AmgMatrix& A0, const std::vector<Eigen::Index>&
     const std::vector<int> position = nestedDissection(A0, freeDofs, rest);
     Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P(n);
     for (Eigen::Index i = 0; i < n; ++i) P.indices()[i] = position[static_cast<std::size_t>(i)];
-    Eigen::SparseMatrix<double> ordered(n, n);
-    ordered = Eigen::SparseMatrix<double>(A0).twistedBy(P);
-    const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> ldlt(ordered);
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> ldlt;
+    {
+      Eigen::SparseMatrix<double> ordered(n, n);  // freed before the panels are made
+      ordered = Eigen::SparseMatrix<double>(A0).twistedBy(P);
+      ldlt.compute(ordered);
+    }
     // LDL^T of a positive definite matrix has a positive D; anything else (a mechanism the rigid
     // motions above do not show) would make PCG break down.
     if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0) || !ldlt.vectorD().allFinite())

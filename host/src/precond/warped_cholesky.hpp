@@ -8,9 +8,9 @@
 //   z = M^-1 r = W A_0^-1 W^T r
 //
 // is its exact inverse. A_0 = m M + s K_0 on the free dofs is the REST operator: it does not change
-// while the body moves, so it is factored once (a sparse LDL^T, approximate minimum degree
-// ordering) and each PCG iteration costs two triangular solves (by supernodes,
-// precond/supernodal_ldlt.hpp) and 2 N 3x3 products. Only the
+// while the body moves, so it is factored once (a sparse LDL^T in nested dissection order,
+// precond/nested_dissection.hpp) and each PCG iteration costs two triangular solves (by
+// supernodes on the host's threads, precond/supernodal_ldlt.hpp) and 2 N 3x3 products. Only the
 // differences of the element rotations around a node (bending over a node's elements) and the
 // strain the co-rotational tangent leaves out are left for PCG to correct: on issue 29's curled
 // 12,960-tet beam 6-11 iterations to 1e-6 where Jacobi needs about 600 (bench_warped_cholesky).
@@ -23,9 +23,10 @@
 // degrees is zero, and W singular would make the preconditioner singular. W stays orthogonal, so
 // z = W A_0^-1 W^T r is symmetric positive definite whatever the rotations.
 //
-// The factor is deterministic (Eigen's SimplicialLDLT: its ordering and its sums depend on the
-// matrix alone) and it costs memory: the factor of the 12,960-tet beam holds 1.41 M entries (about
-// 17 MB), and a direct factor's fill grows faster than the mesh (docs/performance.md).
+// The factor is deterministic (its order depends on the matrix and the rest positions alone, its
+// sums on the order, and its solves' on the factor, not on the threads) and it costs memory: the
+// factor of the 12,960-tet beam holds 1.71 M entries (about 16 MB in its panels), and a direct
+// factor's fill grows faster than the mesh (docs/performance.md).
 #pragma once
 
 #include "model/element.hpp"
@@ -33,10 +34,8 @@
 #include "precond/rest_system.hpp"
 #include "precond/supernodal_ldlt.hpp"
 
-#include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
 
-#include <memory>
 #include <string>
 #include <vector>
 
@@ -59,7 +58,8 @@ class WarpedCholesky {
 
   /// The warp W: one rotation per node (rest.size() / 3 of build), or none (W = I).
   void setNodeRotations(std::vector<Mat3> rotations);
-  /// z = W A_0^-1 W^T r on the free dofs.
+  /// z = W A_0^-1 W^T r on the free dofs. Not to be called on one object from two threads at once
+  /// (the factor's solves keep their work vectors).
   void apply(const Eigen::VectorXd& r, Eigen::VectorXd& z) const;
   /// Entries of the factor's L below its diagonal.
   Eigen::Index factorEntries() const;

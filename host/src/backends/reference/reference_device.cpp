@@ -173,6 +173,7 @@ class ReferenceBody {
                                        // 1/2 u^T K u, u = R^T x - X (R = I for the linear formulation)
                                        : corotationalEnergy(stiffness_[e], rotations_[e], gather(x_, e), restNodes_[e]);
       });
+      energiesValid_ = true;
     }
     double energy = 0.0;
     for (const double e : elementEnergies_) energy += e;
@@ -426,9 +427,9 @@ class ReferenceBody {
   }
 
   /// y = A v on the free dofs, each entry the sum over A's column in stored order: A^T v, which is
-  /// A v to rounding (A is symmetric but for the rounding of the diagonal blocks R K_ii R^T of the
-  /// co-rotational tangents), on the host's threads in chunks of columns: the same bits on any
-  /// number of threads, since each entry is one column's sum.
+  /// A v to rounding (A is symmetric but for the rounding of the co-rotational tangents' diagonal
+  /// blocks R K_ii R^T and of the linear K_e), on the host's threads in chunks of columns: the same
+  /// bits on any number of threads, since each entry is one column's sum.
   void product(const Eigen::VectorXd& v, Eigen::VectorXd& y) const {
     const Eigen::Index n = A_.cols();
     y.resize(n);
