@@ -245,13 +245,24 @@ TEST(SupernodalLdlt, InconsistentFactorsAreInternalErrors) {
   Eigen::SparseMatrix<double> unsorted = lowerOf(4, {{2, 3}, {3}, {}, {}});
   std::swap(unsorted.innerIndexPtr()[0], unsorted.innerIndexPtr()[1]);  // column 0's rows 3, 2
   expectInternal([&] { s.build(unsorted, Eigen::VectorXd::Ones(4), Eigen::VectorXi()); }, "rows out of order");
+
+  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
+  Eigen::VectorXd x;
+  expectInternal([&] { s.solve(Eigen::VectorXd::Ones(21), x); }, "a right-hand side of another size");
+  const Eigen::VectorXd b = randomVector(20, 3);
+  const auto keepsTheOneBefore = [&](const char* what) {
+    EXPECT_EQ(s.rows(), 20) << what;
+    s.solve(b, x);
+    EXPECT_LT((x - f.solve(b)).norm(), 1e-12 * x.norm()) << what;
+  };
+  expectInternal([&] { s.build(f.matrixL().nestedExpression(), Eigen::VectorXd::Ones(19), Eigen::VectorXi()); },
+                 "too few pivots, after a build");
+  keepsTheOneBefore("a factor refused for its sizes");
   // Column 0's rows {1, 3}: its parent is column 1, whose rows below are {2}, so row 3 is no
   // ancestor's.
   expectInternal([&] { s.build(lowerOf(4, {{1, 3}, {2}, {}, {}}), Eigen::VectorXd::Ones(4), Eigen::VectorXi()); },
                  "a pattern not a Cholesky factor's");
-  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
-  Eigen::VectorXd x;
-  expectInternal([&] { s.solve(Eigen::VectorXd::Ones(21), x); }, "a right-hand side of another size");
+  keepsTheOneBefore("a factor refused for its pattern");
 }
 
 }  // namespace

@@ -88,6 +88,12 @@ constexpr auto kRowsUp = upTable(std::make_index_sequence<kFixedWidths>());
 }  // namespace
 
 void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm) {
+  SupernodalLdlt made;  // a throw leaves this factor as it was
+  made.make(L, d, perm);
+  *this = std::move(made);
+}
+
+void SupernodalLdlt::make(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm) {
   const int n = static_cast<int>(L.cols());
   if (L.rows() != n || d.size() != n || (perm.size() != 0 && perm.size() != n) || !L.isCompressed())
     fail(ErrorCode::Internal, "SupernodalLdlt: a factor of ", L.rows(), " x ", L.cols(), " with ", d.size(),
@@ -107,9 +113,7 @@ void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::Ve
     seen[static_cast<std::size_t>(perm[i])] = 1;
   }
 
-  first_.clear();
   rowStart_.assign(1, 0);
-  rows_.clear();
   // The runs: U holds the rows below the run [c0, j) not yet in it (ascending).
   std::vector<int> U;
   int c0 = 0;
@@ -182,19 +186,16 @@ void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::Ve
   }
   dinv_ = d.cwiseInverse();
   perm_.assign(perm.data(), perm.data() + perm.size());
-  partition();
+  partition(of);
   work_.acc.assign((kTasks + 1) * widest_, 0.0);
   work_.updates.assign(kTasks * topColumns_.size(), 0.0);
   work_.y.resize(n);
 }
 
-void SupernodalLdlt::partition() {
+void SupernodalLdlt::partition(const std::vector<int>& of) {
   const std::size_t S = supernodeCount();
   const auto n = static_cast<std::size_t>(rows());
   // The elimination tree of the supernodes: a supernode's parent holds its first row below.
-  std::vector<int> of(n);
-  for (std::size_t s = 0; s < S; ++s)
-    for (int c = first_[s]; c < first_[s + 1]; ++c) of[static_cast<std::size_t>(c)] = static_cast<int>(s);
   std::vector<std::vector<int>> children(S);
   std::vector<int> roots;
   std::vector<double> work(S, 0.0);  // the subtree's panel values, read once a sweep

@@ -42,7 +42,8 @@ class SupernodalLdlt {
   /// its ancestor in the elimination tree: Eigen's SimplicialLDLT::matrixL(), its unit diagonal
   /// implied), `d` D's diagonal (all non-zero) and `perm` P's indices ((P b)[perm[i]] = b[i];
   /// empty: P = I). Throws Error(Internal) for inconsistent sizes, a column with rows out of order
-  /// or another pattern.
+  /// or a supernode with a row below that is not an ancestor's; the factor then is the one it was
+  /// before.
   void build(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm);
 
   /// x = A^-1 b (x is resized; it may be b). Before a build(), A is the 0 x 0 matrix. Not to be
@@ -58,8 +59,10 @@ class SupernodalLdlt {
   std::size_t storedValues() const { return values_.size(); }
 
  private:
-  /// The tasks and the top from the elimination tree (build()).
-  void partition();
+  /// build() on a new object.
+  void make(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm);
+  /// The tasks and the top from the elimination tree (make()); `of`: each column's supernode.
+  void partition(const std::vector<int>& of);
   /// fn(t) for every task t: on the host's threads, or on the caller where the factor is small.
   template <class Fn>
   void forTasks(const Fn& fn) const;
