@@ -311,12 +311,9 @@ void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeD
 
   // Level 0's vertices are the nodes with a free dof; `vertexStart` ranges their dofs (free indices
   // are ascending in dof order, so a node's free dofs are consecutive).
-  std::vector<int> vertexOf(static_cast<std::size_t>(nf));
   std::vector<int> vertexStart{0};
-  for (Eigen::Index i = 0; i < nf; ++i) {
-    if (i > 0 && freeDofs[i] / 3 != freeDofs[i - 1] / 3) vertexStart.push_back(static_cast<int>(i));
-    vertexOf[i] = static_cast<int>(vertexStart.size()) - 1;
-  }
+  for (Eigen::Index i = 1; i < nf; ++i)
+    if (freeDofs[i] / 3 != freeDofs[i - 1] / 3) vertexStart.push_back(static_cast<int>(i));
   vertexStart.push_back(static_cast<int>(nf));
 
   // The rigid-body modes about the rest bounding box's centre.
@@ -376,24 +373,9 @@ void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeD
 
     // The vertex graph of the level's operator.
     const int nv = static_cast<int>(vertexStart.size()) - 1;
-    std::vector<int> start(static_cast<std::size_t>(nv) + 1, 0), adj;
-    {
-      std::vector<int> mark(static_cast<std::size_t>(nv), -1);
-      for (int v = 0; v < nv; ++v) {
-        mark[v] = v;  // no self loop
-        for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i)
-          for (AmgMatrix::InnerIterator it(level.A, i); it; ++it) {
-            const int u = vertexOf[static_cast<std::size_t>(it.col())];
-            if (mark[u] != v && it.value() != 0.0) {
-              mark[u] = v;
-              adj.push_back(u);
-            }
-          }
-        start[v + 1] = static_cast<int>(adj.size());
-      }
-    }
+    const VertexGraph graph = vertexGraph(level.A, vertexStart);
     int aggregates = 0;
-    const std::vector<int> agg = aggregate(start, adj, aggregates);
+    const std::vector<int> agg = aggregate(graph.start, graph.adj, aggregates);
     if (levels_.empty()) {  // level 0: the warp's aggregates of nodes
       aggregateNodes_.assign(static_cast<std::size_t>(aggregates), {});
       for (int v = 0; v < nv; ++v)
@@ -457,9 +439,6 @@ void WarpedAmg::make(const AmgMatrix& A0, const std::vector<Eigen::Index>& freeD
       at += static_cast<std::size_t>(coarseB[a].rows());
     }
     vertexStart = std::move(coarseVertexStart);
-    vertexOf.assign(static_cast<std::size_t>(coarseDofs), 0);
-    for (std::size_t v = 0; v + 1 < vertexStart.size(); ++v)
-      for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i) vertexOf[static_cast<std::size_t>(i)] = static_cast<int>(v);
   }
   // The coarsest level, factored; a relative shift keeps a singular one (a free-floating body in
   // statics) from dividing by zero.

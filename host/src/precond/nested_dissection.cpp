@@ -15,41 +15,25 @@ namespace corofem::detail {
 namespace {
 
 /// The node graph of the free dofs: per node group (consecutive free dofs of one node) its
-/// position, its dofs, and its neighbours (groups sharing an entry of A).
+/// position, its dofs, and its neighbours (vertexGraph of A over the groups).
 struct NodeGraph {
   std::vector<std::array<double, 3>> position;
-  std::vector<int> dofStart;   ///< group g: free dofs [dofStart[g], dofStart[g + 1])
-  std::vector<int> edgeStart;  ///< group g: neighbours edges[edgeStart[g] ..]
-  std::vector<int> edges;
+  std::vector<int> dofStart;  ///< group g: free dofs [dofStart[g], dofStart[g + 1])
+  VertexGraph graph;
   std::size_t size() const { return position.size(); }
 };
 
 NodeGraph nodeGraph(const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs, const Eigen::VectorXd& rest) {
   NodeGraph g;
-  std::vector<int> groupOf(freeDofs.size());
   for (std::size_t i = 0; i < freeDofs.size(); ++i) {
     const Eigen::Index node = freeDofs[i] / 3;
     if (i == 0 || node != freeDofs[i - 1] / 3) {
       g.dofStart.push_back(static_cast<int>(i));
       g.position.push_back({rest[3 * node], rest[3 * node + 1], rest[3 * node + 2]});
     }
-    groupOf[i] = static_cast<int>(g.position.size()) - 1;
   }
   g.dofStart.push_back(static_cast<int>(freeDofs.size()));
-  g.edgeStart.assign(1, 0);
-  std::vector<int> around;
-  for (std::size_t q = 0; q < g.size(); ++q) {
-    around.clear();
-    for (int i = g.dofStart[q]; i < g.dofStart[q + 1]; ++i)
-      for (AmgMatrix::InnerIterator it(A, i); it; ++it) {
-        const int other = groupOf[static_cast<std::size_t>(it.col())];
-        if (other != static_cast<int>(q)) around.push_back(other);
-      }
-    std::sort(around.begin(), around.end());
-    around.erase(std::unique(around.begin(), around.end()), around.end());
-    g.edges.insert(g.edges.end(), around.begin(), around.end());
-    g.edgeStart.push_back(static_cast<int>(g.edges.size()));
-  }
+  g.graph = vertexGraph(A, g.dofStart);
   return g;
 }
 
@@ -86,8 +70,8 @@ class Dissection {
       const int v = nodes[k];
       const int own = label_[static_cast<std::size_t>(v)], other = own == side0 ? side1 : side0;
       bool touches = false;
-      for (int e = g_.edgeStart[static_cast<std::size_t>(v)]; e < g_.edgeStart[static_cast<std::size_t>(v) + 1] && !touches; ++e)
-        touches = label_[static_cast<std::size_t>(g_.edges[static_cast<std::size_t>(e)])] == other;
+      for (int e = g_.graph.start[static_cast<std::size_t>(v)]; e < g_.graph.start[static_cast<std::size_t>(v) + 1] && !touches; ++e)
+        touches = label_[static_cast<std::size_t>(g_.graph.adj[static_cast<std::size_t>(e)])] == other;
       (touches ? border : inner)[own == side0 ? 0 : 1].push_back(v);
     }
     const int cut = border[0].size() <= border[1].size() ? 0 : 1;
@@ -121,8 +105,8 @@ class Dissection {
     for (int k = 0; k < m; ++k) {
       const int v = nodes[static_cast<std::size_t>(k)];
       entries.emplace_back(k, k, 1.0);
-      for (int e = g_.edgeStart[static_cast<std::size_t>(v)]; e < g_.edgeStart[static_cast<std::size_t>(v) + 1]; ++e) {
-        const int j = local_[static_cast<std::size_t>(g_.edges[static_cast<std::size_t>(e)])];
+      for (int e = g_.graph.start[static_cast<std::size_t>(v)]; e < g_.graph.start[static_cast<std::size_t>(v) + 1]; ++e) {
+        const int j = local_[static_cast<std::size_t>(g_.graph.adj[static_cast<std::size_t>(e)])];
         if (j >= 0) entries.emplace_back(k, j, 1.0);
       }
     }

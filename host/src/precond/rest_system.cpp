@@ -71,6 +71,29 @@ bool freeDofsInOrder(const std::vector<Eigen::Index>& freeDofs, Eigen::Index dof
          (freeDofs.empty() || (freeDofs.front() >= 0 && freeDofs.back() < dofs));
 }
 
+VertexGraph vertexGraph(const AmgMatrix& A, const std::vector<int>& vertexStart) {
+  const int nv = static_cast<int>(vertexStart.size()) - 1;
+  std::vector<int> vertexOf(static_cast<std::size_t>(A.rows()));
+  for (int v = 0; v < nv; ++v)
+    for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i) vertexOf[static_cast<std::size_t>(i)] = v;
+  VertexGraph g;
+  g.start.assign(static_cast<std::size_t>(nv) + 1, 0);
+  std::vector<int> mark(static_cast<std::size_t>(nv), -1);
+  for (int v = 0; v < nv; ++v) {
+    mark[v] = v;  // no self loop
+    for (int i = vertexStart[v]; i < vertexStart[v + 1]; ++i)
+      for (AmgMatrix::InnerIterator it(A, i); it; ++it) {
+        const int u = vertexOf[static_cast<std::size_t>(it.col())];
+        if (mark[u] != v && it.value() != 0.0) {
+          mark[u] = v;
+          g.adj.push_back(u);
+        }
+      }
+    g.start[v + 1] = static_cast<int>(g.adj.size());
+  }
+  return g;
+}
+
 void checkRestSystem(const char* who, const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
                      const Eigen::VectorXd& rest) {
   const auto n = static_cast<Eigen::Index>(freeDofs.size());

@@ -45,6 +45,16 @@ bool freeDofsInOrder(const std::vector<Eigen::Index>& freeDofs, Eigen::Index dof
 void checkRestSystem(const char* who, const AmgMatrix& A, const std::vector<Eigen::Index>& freeDofs,
                      const Eigen::VectorXd& rest);
 
+/// The graph of A's vertices, vertex v holding rows [vertexStart[v], vertexStart[v + 1]) (ascending,
+/// from 0 to A's rows): u is a neighbour of v where a row of v has a non-zero entry in a column of
+/// u != v, each neighbour once, in the order v's rows meet them. CSR: v's neighbours are
+/// adj[start[v] .. start[v + 1]). (The multigrid's aggregation of a level, the nested dissection of
+/// the free dofs' nodes.)
+struct VertexGraph {
+  std::vector<int> start, adj;
+};
+VertexGraph vertexGraph(const AmgMatrix& A, const std::vector<int>& vertexStart);
+
 /// K_0 of a body kept across set-ups: constraints and coefficients change a preconditioner, not
 /// K_0, so a grab's set-up restricts it instead of assembling again (the assembly was about half of
 /// a multigrid set-up on the 12,960-tet beam). Made again where the body's mesh, rest state,

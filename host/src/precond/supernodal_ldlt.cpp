@@ -18,15 +18,6 @@ namespace {
 /// tasks would cost more than they take (the bits are the same either way).
 constexpr std::size_t kSerialValues = std::size_t{1} << 15;
 
-/// Whether the ascending rows [rows, rowsEnd) are all in the ascending [set, setEnd).
-bool within(const int* rows, const int* rowsEnd, const int* set, const int* setEnd) {
-  for (const int* r = rows; r != rowsEnd; ++r) {
-    while (set != setEnd && *set < *r) ++set;
-    if (set == setEnd || *set != *r) return false;
-  }
-  return true;
-}
-
 /// sum_k a[k] b[k] for k < w, in eight running sums (lanes a vector unit runs side by side) added
 /// up in a fixed order: the same bits on every call.
 inline double dot(const double* a, const double* b, std::size_t w) {
@@ -124,7 +115,7 @@ void SupernodalLdlt::make(const Eigen::SparseMatrix<double>& L, const Eigen::Vec
     c0 = end;
   };
   for (int j = 0; j < n; ++j) {
-    if (j > c0 && !U.empty() && U.front() == j && within(Li + Lp[j], Li + Lp[j + 1], U.data() + 1, U.data() + U.size())) {
+    if (j > c0 && !U.empty() && U.front() == j && std::includes(U.begin() + 1, U.end(), Li + Lp[j], Li + Lp[j + 1])) {
       U.erase(U.begin());
       continue;
     }
@@ -150,7 +141,7 @@ void SupernodalLdlt::make(const Eigen::SparseMatrix<double>& L, const Eigen::Vec
     const int* rest = rows_.data() + rowStart_[s];
     const int* end = rows_.data() + rowStart_[s + 1];
     while (rest != end && *rest < first_[parent + 1]) ++rest;
-    if (!within(rest, end, rows_.data() + rowStart_[parent], rows_.data() + rowStart_[parent + 1]))
+    if (!std::includes(rows_.data() + rowStart_[parent], rows_.data() + rowStart_[parent + 1], rest, end))
       fail(ErrorCode::Internal, "SupernodalLdlt: the factor's column ", first_[s],
            " has a row below that is not an ancestor's in its elimination tree (not a Cholesky factor's pattern)");
   }
@@ -276,15 +267,22 @@ void SupernodalLdlt::partition(const std::vector<int>& of) {
     }
 }
 
+SupernodalLdlt::Panel SupernodalLdlt::panel(int s) const {
+  const auto k = static_cast<std::size_t>(s);
+  Panel p;
+  p.first = first_[k];
+  p.w = static_cast<std::size_t>(first_[k + 1] - p.first);
+  p.T = values_.data() + panelStart_[k];
+  p.R = p.T + p.w * p.w;
+  p.below = rows_.data() + rowStart_[k];
+  p.h = rowStart_[k + 1] - rowStart_[k];
+  return p;
+}
+
 void SupernodalLdlt::forward(int s, double* y, double* topUpdates) const {
-  const int a = first_[static_cast<std::size_t>(s)];
-  const auto w = static_cast<std::size_t>(first_[static_cast<std::size_t>(s) + 1] - a);
-  const double* T = values_.data() + panelStart_[static_cast<std::size_t>(s)];
-  const double* R = T + w * w;
+  const auto [a, w, T, R, below, h] = panel(s);
   double* ys = y + a;
   for (std::size_t i = 1; i < w; ++i) ys[i] -= dot(T + i * w, ys, i);
-  const int* below = rows_.data() + rowStart_[static_cast<std::size_t>(s)];
-  const std::size_t h = rowStart_[static_cast<std::size_t>(s) + 1] - rowStart_[static_cast<std::size_t>(s)];
   const std::size_t direct = direct_[static_cast<std::size_t>(s)];
   if (w <= kFixedWidths) {
     kRowsDown[w - 1](R, below, direct, h, ys, y, topUpdates, topIndex_.data());
@@ -296,13 +294,8 @@ void SupernodalLdlt::forward(int s, double* y, double* topUpdates) const {
 }
 
 void SupernodalLdlt::backward(int s, double* y, double* acc) const {
-  const int a = first_[static_cast<std::size_t>(s)];
-  const auto w = static_cast<std::size_t>(first_[static_cast<std::size_t>(s) + 1] - a);
-  const double* T = values_.data() + panelStart_[static_cast<std::size_t>(s)];
-  const double* R = T + w * w;
+  const auto [a, w, T, R, below, h] = panel(s);
   double* ys = y + a;
-  const int* below = rows_.data() + rowStart_[static_cast<std::size_t>(s)];
-  const std::size_t h = rowStart_[static_cast<std::size_t>(s) + 1] - rowStart_[static_cast<std::size_t>(s)];
   if (w <= kFixedWidths) {
     kRowsUp[w - 1](R, below, h, y, acc);
   } else {

@@ -66,6 +66,17 @@ class SupernodalLdlt {
   /// fn(t) for every task t: on the host's threads, or on the caller where the factor is small.
   template <class Fn>
   void forTasks(const Fn& fn) const;
+  /// Supernode s's columns [first, first + w), its w x w triangle T, its h rows below `below` and
+  /// their values R (h x w, row by row).
+  struct Panel {
+    int first;
+    std::size_t w;
+    const double* T;
+    const double* R;
+    const int* below;
+    std::size_t h;
+  };
+  Panel panel(int s) const;
   /// Supernode s's share of L y' = y: its triangle, then its rows below (a top row's update added
   /// to topUpdates at its index in topColumns_).
   void forward(int s, double* y, double* topUpdates) const;

@@ -7,6 +7,7 @@
 #include "util/parallel.hpp"
 
 #include <algorithm>
+#include <string>
 
 namespace corofem::detail {
 
@@ -74,7 +75,8 @@ OpenCLTuning resolveTuning(const OpenCLTuning& requested, const cl::DeviceInfo& 
   if (t.packPcg < 0 && !cpu) t.packPcg = 0;
   if (!t.groupPcg) t.packPcg = 0;
   if (!t.packPcgMinLanes) t.packPcgMinLanes = kPackMinLanes;
-  if (t.packPcgMinLanes > layout::kPackLanes) bad("packPcgMinLanes", t.packPcgMinLanes, "1 to 8");
+  if (t.packPcgMinLanes > layout::kPackLanes)
+    bad("packPcgMinLanes", t.packPcgMinLanes, ("1 to " + std::to_string(layout::kPackLanes)).c_str());
 
   if (t.flushDenormals < 0) t.flushDenormals = cpu ? 1 : 0;
   return t;
