@@ -42,7 +42,7 @@ const detail::Problem* problemOf(const std::string& name) {
   if (!slot) {
     TetMesh mesh;
     if (name == "box100k") {
-      mesh = test::boxMesh(40, 20, 21, 0.1, 0.1, 0.1);
+      mesh = test::cellBox(40, 20, 21, 0.1, 0.1, 0.1);
     } else {
       const char* env = std::getenv("COROFEM_DATA_DIR");  // as the tests: else ../shared beside the sources
       const std::string path = (env && *env ? std::string(env) : std::string(COROFEM_SOURCE_DIR) + "/../shared/data") +

@@ -41,7 +41,7 @@ const detail::Problem& boxProblem(const MeshSize& size) {
       for (auto& entry : cache)
         if (entry.first != size.label) entry.second.reset();  // one size in memory at a time
     slot = std::make_unique<detail::Problem>(
-        test::makeProblem(test::boxMesh(size.nx, size.ny, size.nz, 0.1, 0.1, 0.1), 1e5, 0.4, 1000.0));
+        test::makeProblem(test::cellBox(size.nx, size.ny, size.nz, 0.1, 0.1, 0.1), 1e5, 0.4, 1000.0));
     for (std::size_t n = 0; n < slot->mesh.nodeCount(); ++n)
       if (slot->mesh.nodes[3 * n] < 1e-9)
         for (int k = 0; k < 3; ++k) slot->constrained[3 * n + k] = 1;
@@ -154,7 +154,7 @@ void runKernel(benchmark::State& state, Config c) {
 const detail::Problem& beamProblem() {
   static std::unique_ptr<detail::Problem> beam;
   if (!beam) {
-    beam = std::make_unique<detail::Problem>(test::makeProblem(test::boxMesh(40, 6, 7, 0.05, 0.05, 0.05), 1e5, 0.4, 1000.0));
+    beam = std::make_unique<detail::Problem>(test::makeProblem(test::cellBox(40, 6, 7, 0.05, 0.05, 0.05), 1e5, 0.4, 1000.0));
     for (std::size_t n = 0; n < beam->mesh.nodeCount(); ++n)
       if (beam->mesh.nodes[3 * n] < 1e-9)
         for (int k = 0; k < 3; ++k) beam->constrained[3 * n + k] = 1;

@@ -236,7 +236,7 @@ void roundTrip(benchmark::State& state, std::size_t index) {
 
 /// The box clamped at x = 0, E = 1e5 Pa, nu = 0.4, 1000 kg/m^3, cells of 5 cm.
 detail::Problem boxProblem(const BoxSize& size) {
-  detail::Problem p = test::makeProblem(test::boxMesh(size.nx, size.ny, size.nz, 0.05, 0.05, 0.05), 1e5, 0.4, 1000.0);
+  detail::Problem p = test::makeProblem(test::cellBox(size.nx, size.ny, size.nz, 0.05, 0.05, 0.05), 1e5, 0.4, 1000.0);
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] < 1e-9)
       for (int k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;

@@ -11,6 +11,9 @@
 
 namespace corofem::test {
 
+/// The paper's Fig. 8 beam (0.8 x 0.1 x 0.1 m, clamped at x = 0), from the project root.
+inline constexpr const char* kFig8Scene = "samples/fig8_beam/fig8_beam.json";
+
 struct CommandResult {
   int exitCode = -1;
   std::string output;  ///< stdout and stderr together

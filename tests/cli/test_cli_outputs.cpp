@@ -25,7 +25,6 @@ namespace {
 using corofem::test::runCli;
 namespace fs = std::filesystem;
 
-const char* kScene = "samples/fig8_beam/fig8_beam.json";  // the beam 0.8 x 0.1 x 0.1 m, clamped at x = 0
 
 /// A closed ellipsoid inside the beam (centre (0.4, 0.05, 0.05), radii 0.35, 0.04, 0.04): poles and
 /// rings of shared vertices, so every vertex normal averages several faces.
@@ -99,7 +98,7 @@ fs::path runWithSurface(const std::string& extra) {
   const corofem::Status st = corofem::writeSurfaceMesh((dir / "ellipsoid.obj").string(), ellipsoid(12, 16));
   EXPECT_TRUE(st.isOk()) << st.message();
   const fs::path out = dir / "out";
-  const auto r = runCli(std::string("run ") + kScene + " -q --out '" + out.string() + "' --set analysis.steps=6" +
+  const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " -q --out '" + out.string() + "' --set analysis.steps=6" +
                         " --set output.vtk_every=3 --set output.surface_obj=true --set 'bodies.0.surface=\"" +
                         (dir / "ellipsoid.obj").string() + "\"' " + extra);
   EXPECT_EQ(r.exitCode, 0) << r.output;
@@ -207,7 +206,7 @@ INSTANTIATE_TEST_SUITE_P(EveryFormat, CliVtuFormats,
                          [](const auto& info) { return std::string(info.param.format) + "_" + info.param.compression; });
 
 TEST(CliOutputs, ZlibWithAsciiIsBadInputNamingTheKeys) {
-  const auto r = runCli(std::string("run ") + kScene + " -q --out '" + (corofem::test::tempDir() / "out").string() +
+  const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " -q --out '" + (corofem::test::tempDir() / "out").string() +
                         "' --set output.vtu_compression=zlib");
   EXPECT_EQ(r.exitCode, 2) << r.output;
   EXPECT_NE(r.output.find("output.vtu_compression"), std::string::npos) << r.output;
@@ -215,7 +214,7 @@ TEST(CliOutputs, ZlibWithAsciiIsBadInputNamingTheKeys) {
 }
 
 TEST(CliOutputs, RunOutputsRefuseWhatTheParserWouldForASceneMadeInCode) {
-  auto scene = corofem::loadScene(kScene);
+  auto scene = corofem::loadScene(corofem::test::kFig8Scene);
   ASSERT_TRUE(scene.isOk()) << scene.message();
   scene.value().output.vtuCompression = corofem::VtuCompression::Zlib;  // with the default ascii format
   auto sim = corofem::Simulation::create(scene.value());

@@ -21,11 +21,10 @@ std::size_t lineCount(const std::string& s) {
   return n;
 }
 
-const char* kScene = "samples/fig8_beam/fig8_beam.json";
 
 TEST(CliRun, WritesProbesVtkAndSummary) {
   const fs::path out = corofem::test::tempDir();
-  const auto r = runCli(std::string("run ") + kScene + " --quiet --out '" + out.string() +
+  const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " --quiet --out '" + out.string() +
                         "' --set analysis.steps=12 --set output.vtk_every=5");
   ASSERT_EQ(r.exitCode, 0) << r.output;
   // probes.csv: a header, the initial state (step 0) and one row per step.
@@ -51,8 +50,8 @@ TEST(CliRun, WritesProbesVtkAndSummary) {
 TEST(CliRun, SetOverridesAValue) {
   const fs::path a = corofem::test::tempDir() / "stiff";
   const fs::path b = corofem::test::tempDir() / "soft";
-  ASSERT_EQ(runCli(std::string("run ") + kScene + " -q --out '" + a.string() + "' --set analysis.steps=5 --set output.vtk=false").exitCode, 0);
-  ASSERT_EQ(runCli(std::string("run ") + kScene + " -q --out '" + b.string() +
+  ASSERT_EQ(runCli(std::string("run ") + corofem::test::kFig8Scene + " -q --out '" + a.string() + "' --set analysis.steps=5 --set output.vtk=false").exitCode, 0);
+  ASSERT_EQ(runCli(std::string("run ") + corofem::test::kFig8Scene + " -q --out '" + b.string() +
                    "' --set analysis.steps=5 --set output.vtk=false --set bodies.0.material.youngs_modulus=2e4").exitCode, 0);
   const double tipStiff = nlohmann::json::parse(readFile(a / "summary.json"))["final_probe_displacement"]["tip"][1];
   const double tipSoft = nlohmann::json::parse(readFile(b / "summary.json"))["final_probe_displacement"]["tip"][1];
@@ -61,7 +60,7 @@ TEST(CliRun, SetOverridesAValue) {
 }
 
 TEST(CliRun, MisspeltOverrideIsBadInputWithSuggestion) {
-  const auto r = runCli(std::string("run ") + kScene + " --out '" + corofem::test::tempDir().string() +
+  const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " --out '" + corofem::test::tempDir().string() +
                         "' --set bodies.0.material.youngs_modulus_=1e5");
   EXPECT_EQ(r.exitCode, 2) << r.output;
   EXPECT_NE(r.output.find("youngs_modulus"), std::string::npos) << r.output;
@@ -69,7 +68,7 @@ TEST(CliRun, MisspeltOverrideIsBadInputWithSuggestion) {
 }
 
 TEST(CliRun, OutOfRangeValueIsBadInput) {
-  const auto r = runCli(std::string("run ") + kScene + " --out '" + corofem::test::tempDir().string() +
+  const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " --out '" + corofem::test::tempDir().string() +
                         "' --set bodies.0.material.poisson_ratio=0.5");
   EXPECT_EQ(r.exitCode, 2) << r.output;
   EXPECT_NE(r.output.find("poisson_ratio"), std::string::npos) << r.output;
@@ -79,7 +78,7 @@ TEST(CliRun, FailedSolveExitsThreeAndLeavesReadableOutputs) {
   const fs::path out = corofem::test::tempDir();
   // A static analysis allowed a single Newton iteration under a load that rotates the beam a lot:
   // the co-rotational Newton cannot converge in one iteration, so the first increment fails.
-  const auto r = runCli(std::string("run ") + kScene + " --out '" + out.string() +
+  const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " --out '" + out.string() +
                         "' --set analysis='{\"type\":\"static\",\"increments\":2,\"max_newton_iterations\":1}'"
                         " --set bodies.0.material.youngs_modulus=2e4");
   EXPECT_EQ(r.exitCode, 3) << r.output;
@@ -97,7 +96,7 @@ TEST(CliRun, MissingSceneNamesThePath) {
 
 TEST(CliRun, UnknownCommandAndOption) {
   EXPECT_EQ(runCli("frobnicate").exitCode, 2);
-  EXPECT_EQ(runCli(std::string("run ") + kScene + " --bogus").exitCode, 2);
+  EXPECT_EQ(runCli(std::string("run ") + corofem::test::kFig8Scene + " --bogus").exitCode, 2);
 }
 
 TEST(CliConvert, RoundTripKeepsCounts) {

@@ -80,8 +80,9 @@ inline TetMesh randomSoup(std::size_t count, std::mt19937& rng) {
   return mesh;
 }
 
-/// A box [0,L]^3-like mesh of nx*ny*nz cells, each split into 6 tetrahedra (Kuhn: conforming).
-inline TetMesh boxMesh(int nx, int ny, int nz, double hx = 1.0, double hy = 1.0, double hz = 1.0) {
+/// A box of nx*ny*nz cells of hx x hy x hz, each split into 6 tetrahedra (Kuhn: conforming);
+/// reference/small_meshes.hpp's boxMesh takes the box's sides instead, and can perturb it.
+inline TetMesh cellBox(int nx, int ny, int nz, double hx = 1.0, double hy = 1.0, double hz = 1.0) {
   TetMesh mesh;
   auto id = [&](int i, int j, int k) { return static_cast<std::uint32_t>((k * (ny + 1) + j) * (nx + 1) + i); };
   for (int k = 0; k <= nz; ++k)

@@ -200,21 +200,21 @@ inline const std::vector<Body>& suiteBodies() {
       out.push_back({std::move(p), {900.0, 30.0, 1.0}});
     }
     {  // 3: linear formulation, 108 elements, 48 nodes, clamped at x = 0, mass damping; static
-      detail::Problem p = makeProblem(boxMesh(3, 3, 2, 0.1, 0.1, 0.1), 1e6, 0.35, 800.0, Formulation::Linear);
+      detail::Problem p = makeProblem(cellBox(3, 3, 2, 0.1, 0.1, 0.1), 1e6, 0.35, 800.0, Formulation::Linear);
       p.name = "linear-cube";
       p.rayleighMass = 0.1;
       clampBelow(p, 0, 1e-9, 3);
       out.push_back({std::move(p), {0.0, 0.0, 1.0}});
     }
     {  // 4: a stiff light slab, 144 elements, 63 nodes, x and y held on z = 0; dynamic
-      detail::Problem p = makeProblem(boxMesh(6, 2, 2, 0.2, 0.3, 0.05), 3e6, 0.3, 500.0);
+      detail::Problem p = makeProblem(cellBox(6, 2, 2, 0.2, 0.3, 0.05), 3e6, 0.3, 500.0);
       p.name = "slab";
       clampBelow(p, 2, 1e-9, 2);
       out.push_back({std::move(p), {3600.0, 60.0, 1.0}});
     }
     {  // 5: a nearly incompressible beam, 540 elements, 176 nodes, clamped at x = 0, both Rayleigh
        // terms; dynamic
-      detail::Problem p = makeProblem(boxMesh(10, 3, 3, 0.2, 0.1, 0.1), 1e5, 0.45, 1000.0);
+      detail::Problem p = makeProblem(cellBox(10, 3, 3, 0.2, 0.1, 0.1), 1e5, 0.45, 1000.0);
       p.name = "beam";
       p.rayleighMass = 0.2;
       p.rayleighStiffness = 0.01;
@@ -222,7 +222,7 @@ inline const std::vector<Body>& suiteBodies() {
       out.push_back({std::move(p), {14400.0, 120.0, 1.0}});
     }
     {  // 6: a block of 2,970 elements, 720 nodes, clamped at x = 0, stiffness damping; static
-      detail::Problem p = makeProblem(boxMesh(11, 9, 5, 0.1, 0.1, 0.1), 5e5, 0.3, 1200.0);
+      detail::Problem p = makeProblem(cellBox(11, 9, 5, 0.1, 0.1, 0.1), 5e5, 0.3, 1200.0);
       p.name = "block";
       p.rayleighStiffness = 0.02;
       clampBelow(p, 0, 1e-9, 3);

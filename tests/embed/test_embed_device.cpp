@@ -79,7 +79,7 @@ class EmbedDevice : public ::testing::TestWithParam<DeviceCase> {
 
 /// A 6x6x6-cell box with a UV sphere inside plus a few vertices outside the box (extrapolated), with
 /// a vertex count that is not a multiple of any work-group size.
-struct Scene {
+struct EmbedCase {
   TetMesh tets;
   SurfaceMesh surface;
   SurfaceBinding binding;
@@ -88,8 +88,8 @@ struct Scene {
 /// `shuffled`: the sphere's vertices renumbered at random, so that no ring slot of a block of
 /// vertices holds consecutive vertices (the normal pass gathers every neighbour lane by lane);
 /// otherwise the row-by-row numbering, where most do (vector loads from the block's run start).
-Scene makeScene(bool shuffled = false) {
-  Scene s;
+EmbedCase makeEmbedCase(bool shuffled = false) {
+  EmbedCase s;
   BoxSpec spec;
   spec.cells = {6, 6, 6};
   s.tets = *generateBox(spec);
@@ -113,7 +113,7 @@ Scene makeScene(bool shuffled = false) {
 }
 
 TEST_P(EmbedDevice, MatchesHostReference) {
-  const Scene s = makeScene();
+  const EmbedCase s = makeEmbedCase();
   auto device = DeviceSurface::create(s.binding, options());
   ASSERT_TRUE(device.isOk()) << device.message();
   EXPECT_EQ(device->vertexCount(), s.binding.vertexCount());
@@ -158,7 +158,7 @@ TEST_P(EmbedDevice, MatchesHostReference) {
 TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
   for (bool shuffled : {false, true}) {
     SCOPED_TRACE(shuffled ? "vertices shuffled" : "vertices row by row");
-    const Scene s = makeScene(shuffled);
+    const EmbedCase s = makeEmbedCase(shuffled);
     const std::size_t n = s.binding.vertexCount();
     ASSERT_NE(n % 8, 0u) << "the last block must be partial at every width";
     for (std::size_t lanes : {8, 16}) {  // the layout the kernels get: runs in some slots, or in none
@@ -199,7 +199,7 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
       EXPECT_LE(worstNormal, nTol) << lanes << " lanes";
     }
   }
-  const Scene s = makeScene();
+  const EmbedCase s = makeEmbedCase();
   DeviceSurfaceOptions four = options();
   four.normalPassLanes = 4;
   auto refused = DeviceSurface::create(s.binding, four);
@@ -214,7 +214,7 @@ TEST_P(EmbedDevice, EveryLaneWidthMatchesHostReference) {
 /// read(positions, normals)), and a null pointer is refused.
 TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
   for (bool shuffled : {false, true}) {
-    const Scene s = makeScene(shuffled);
+    const EmbedCase s = makeEmbedCase(shuffled);
     const std::size_t n = s.binding.vertexCount();
     std::mt19937 rng(31);
     const std::vector<double> x = test::SmoothDeformation::random(rng, 1.0, true).apply(s.tets.nodes);
@@ -271,7 +271,7 @@ TEST_P(EmbedDevice, SeparateStreamsHoldTheInterleavedValues) {
 /// buffers() lists what was allocated, with the sizes OpenCL reports; the upload buffer of host node
 /// positions appears with the first update() (a surface fed from device positions never has it).
 TEST_P(EmbedDevice, ListsItsBuffersAsAllocated) {
-  const Scene s = makeScene();
+  const EmbedCase s = makeEmbedCase();
   auto device = DeviceSurface::create(s.binding, options());
   ASSERT_TRUE(device.isOk()) << device.message();
   auto sizes = [&] {
@@ -300,7 +300,7 @@ TEST_P(EmbedDevice, ListsItsBuffersAsAllocated) {
 }
 
 TEST_P(EmbedDevice, IsDeterministicAndRejectsWrongNodeCount) {
-  const Scene s = makeScene();
+  const EmbedCase s = makeEmbedCase();
   auto device = DeviceSurface::create(s.binding, options());
   ASSERT_TRUE(device.isOk()) << device.message();
   std::mt19937 rng(19);
@@ -332,7 +332,7 @@ void storeReal(std::vector<unsigned char>& bytes, std::size_t index, double valu
 /// updateFromDevice with node positions relative to an offset c (the OpenCL backend's centroid-relative
 /// buffer) writes the same surface as absolute positions: x_v = sum_k w_vk (x_k - c) + c.
 TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
-  const Scene s = makeScene();
+  const EmbedCase s = makeEmbedCase();
   const bool dbl = GetParam().doublePrecision;
   auto ctx = detail::cl::Context::shared(std::to_string(GetParam().device));
   DeviceSurfaceOptions o = options();
@@ -442,8 +442,8 @@ TEST_P(EmbedDevice, RelativePositionsWithOffsetMatchAbsolute) {
 TEST_P(EmbedDevice, GroupOfBodiesMatchesOneSurfaceEach) {
   const bool dbl = GetParam().doublePrecision;
   auto ctx = detail::cl::Context::shared(std::to_string(GetParam().device));
-  const Scene rows = makeScene(false), shuffled = makeScene(true);
-  const Scene* scenes[3] = {&rows, &shuffled, &rows};
+  const EmbedCase rows = makeEmbedCase(false), shuffled = makeEmbedCase(true);
+  const EmbedCase* scenes[3] = {&rows, &shuffled, &rows};
   const std::size_t first[3] = {0, 400, 1000}, total = 1400, nodes = rows.tets.nodeCount();
   ASSERT_LE(nodes, 400u);
   const double centroid[3][3] = {{100.25, -37.5, 64.125}, {-20.0, 3.5, 0.25}, {0.0, 0.0, 0.0}};

@@ -13,7 +13,7 @@ namespace {
 
 class Incompressible : public testing::TestWithParam<BackendCase> {};
 
-BodyDesc cantilever(double nu) {
+BodyDesc cantileverOfPoissonRatio(double nu) {
   BodyDesc body = makeBody(box({0, 0, 0}, {0.4, 0.1, 0.1}, {8, 2, 2}), 1e6, nu);
   body.fixed.push_back(planeSet(0, 0.0));
   LoadDesc g;
@@ -32,7 +32,7 @@ TEST_P(Incompressible, StaticSolveConvergesOrSaysSoForEveryPreconditioner) {
   // solver that stopped early rather than locking).
   double tipAt03 = 0;
   {
-    Scene scene = staticScene(c, cantilever(0.3), 1);
+    Scene scene = staticScene(c, cantileverOfPoissonRatio(0.3), 1);
     scene.solver.maxIterations = 20000;
     COROFEM_CREATE_SIM(sim, scene);
     const Status st = sim->step();
@@ -54,7 +54,7 @@ TEST_P(Incompressible, StaticSolveConvergesOrSaysSoForEveryPreconditioner) {
       // PoCL) runs them all.
       if (c.kind == BackendKind::Vulkan && c.isFloat() && nu >= 0.499 && (nu > 0.499 || p != PreconditionerKind::Diagonal))
         continue;
-      Scene scene = staticScene(c, cantilever(nu), 1);
+      Scene scene = staticScene(c, cantileverOfPoissonRatio(nu), 1);
       scene.solver.preconditioner = p;
       // Generous PCG cap: sqrt(cond) grows like sqrt(lambda / mu) ~ 70 at nu = 0.4999, times the
       // mesh's own ~50; 20000 leaves room, and a solve that still does not converge must say so.
@@ -99,13 +99,13 @@ TEST_P(Incompressible, DynamicsStayFiniteAndBounded) {
   // Static sag at nu = 0.4999 on the reference backend (double): the scale of the motion.
   double sag = 0;
   {
-    Scene scene = staticScene(backendCases()[0], cantilever(0.4999), 1);
+    Scene scene = staticScene(backendCases()[0], cantileverOfPoissonRatio(0.4999), 1);
     scene.solver.maxIterations = 20000;
     COROFEM_CREATE_SIM(sim, scene);
     ASSERT_TRUE(sim->step());
     sag = maxAbs(displacements(*sim));
   }
-  Scene scene = dynamicScene(c, cantilever(0.4999), 1.0 / 60.0, 30);
+  Scene scene = dynamicScene(c, cantileverOfPoissonRatio(0.4999), 1.0 / 60.0, 30);
   scene.solver.maxIterations = 20000;
   COROFEM_CREATE_SIM(sim, scene);
   double worst = 0;

@@ -23,7 +23,7 @@ constexpr double kG = 9.81;
 /// the incompressible test at nu = 0.3: 2.6228e-2 m); linear sag scales as 1 / E.
 constexpr double kSagAt1e6 = 2.6228e-2;
 
-BodyDesc cantilever(double E) {
+BodyDesc cantileverOfModulus(double E) {
   BodyDesc body = makeBody(box({0, 0, 0}, {0.4, 0.1, 0.1}, {8, 2, 2}), E, 0.3);
   body.fixed.push_back(planeSet(0, 0.0));
   LoadDesc g;
@@ -44,7 +44,7 @@ struct RunResult {
 RunResult runCase(const BackendCase& c, double E, double h, int steps, bool* skipped,
                   Integrator integrator = Integrator::Newmark, int maxSubsteps = 1) {
   RunResult r;
-  Scene scene = dynamicScene(c, cantilever(E), h, steps);
+  Scene scene = dynamicScene(c, cantileverOfModulus(E), h, steps);
   scene.analysis.dynamics.integrator = integrator;
   scene.analysis.dynamics.maxSubsteps = maxSubsteps;
   scene.solver.maxIterations = 20000;

@@ -32,19 +32,19 @@ std::string readBytes(const std::string& path) {
 
 /// A box of 20 x 10 x 10 cells (2541 nodes, 10000 tets: every binary array spans several 32 KiB
 /// blocks), regions of both signs, a point field and a cell field of irregular values.
-struct TetCase {
+struct FieldCase {
   corofem::TetMesh mesh;
   std::vector<corofem::MeshField> fields;
 };
 
-TetCase tetCase() {
+FieldCase fieldCase() {
   corofem::BoxSpec spec;
   spec.min = {-0.1, 0.2, 0.3};
   spec.max = {1.7, 0.9, 1.3};
   spec.cells = {20, 10, 10};
   auto box = corofem::generateBox(spec);
   EXPECT_TRUE(box.isOk()) << box.message();
-  TetCase c{std::move(box).value(), {}};
+  FieldCase c{std::move(box).value(), {}};
   for (std::size_t e = 0; e < c.mesh.tetCount(); ++e) c.mesh.regions.push_back(std::int32_t(e % 7) - 3);
   corofem::MeshField disp{"displacement", 3, false, {}};
   for (std::size_t i = 0; i < c.mesh.nodes.size(); ++i) disp.values.push_back(1e-3 * std::sin(double(i)) / 3.0);
@@ -112,7 +112,7 @@ std::vector<T> arrayOf(const nlohmann::json& a, const std::string& dtype, std::v
 
 TEST_P(VtuFormats, MeshioReadsTheTetMeshBackBitForBit) {
   COROFEM_REQUIRE_MESHIO();
-  const TetCase c = tetCase();
+  const FieldCase c = fieldCase();
   const std::string path = (tempDir() / (std::string("box_") + GetParam().name + ".vtu")).string();
   const corofem::Status st = corofem::writeTetMesh(path, c.mesh, c.fields, GetParam().options);
   ASSERT_TRUE(st.isOk()) << st.message();
@@ -231,7 +231,7 @@ std::string storedBytes(const std::string& file, const std::string& name) {
 }
 
 TEST(VtuBinaryLayout, UncompressedArraysAreAUInt64ByteCountThenLittleEndianValues) {
-  const TetCase c = tetCase();
+  const FieldCase c = fieldCase();
   const std::size_t n = c.mesh.nodeCount(), e = c.mesh.tetCount();
   for (VtuFormat format : {VtuFormat::Base64, VtuFormat::Raw}) {
     const std::string path = (tempDir() / "layout.vtu").string();
@@ -272,7 +272,7 @@ TEST(VtuBinaryLayout, UncompressedArraysAreAUInt64ByteCountThenLittleEndianValue
 
 TEST(VtuBinaryLayout, ZlibArraysHaveVtksBlockTable) {
   if (!corofem::vtuZlibAvailable()) GTEST_SKIP() << "this build has no zlib; nothing compressed to check";
-  const TetCase c = tetCase();
+  const FieldCase c = fieldCase();
   const std::size_t pointBytes = 24 * c.mesh.nodeCount();  // 60984: two blocks, the last partial
   for (VtuFormat format : {VtuFormat::Base64, VtuFormat::Raw}) {
     const std::string path = (tempDir() / "zlib.vtu").string();
@@ -350,7 +350,7 @@ TEST(VtuEncoding, Base64AndLittleEndianBytes) {
 // ---- ascii stays as it was; refusals ----
 
 TEST(VtuOptions, AsciiIsTheDefaultAndWritesNoBinary) {
-  const TetCase c = tetCase();
+  const FieldCase c = fieldCase();
   const std::string a = (tempDir() / "default.vtu").string();
   ASSERT_TRUE(corofem::writeTetMesh(a, c.mesh, c.fields).isOk());
   const std::string file = readBytes(a);
@@ -369,7 +369,7 @@ TEST(VtuOptions, AsciiIsTheDefaultAndWritesNoBinary) {
 }
 
 TEST(VtuOptions, ZlibWithAsciiIsRefusedNamingTheKeyAndTheFix) {
-  const TetCase c = tetCase();
+  const FieldCase c = fieldCase();
   const std::string path = (tempDir() / "z.vtu").string();
   const corofem::Status st = corofem::writeTetMesh(path, c.mesh, {}, {VtuFormat::Ascii, VtuCompression::Zlib});
   EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput);
@@ -381,7 +381,7 @@ TEST(VtuOptions, ZlibWithAsciiIsRefusedNamingTheKeyAndTheFix) {
 
 TEST(VtuOptions, ZlibInABuildWithoutZlibIsRefusedNamingTheFix) {
   if (corofem::vtuZlibAvailable()) GTEST_SKIP() << "this build has zlib; the refusal is for builds without it";
-  const TetCase c = tetCase();
+  const FieldCase c = fieldCase();
   const std::string path = (tempDir() / "z.vtu").string();
   const corofem::Status st = corofem::writeTetMesh(path, c.mesh, {}, {VtuFormat::Raw, VtuCompression::Zlib});
   EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput);
@@ -394,13 +394,13 @@ TEST(WriterErrors, NonFiniteValuesAreRefusedInEveryFormatAndNothingIsWritten) {
   const auto dir = tempDir();
   for (const FormatCase& f : kFormatCases) {
     if (f.options.compression == VtuCompression::Zlib && !corofem::vtuZlibAvailable()) continue;
-    TetCase c = tetCase();
+    FieldCase c = fieldCase();
     c.mesh.nodes[7] = std::nan("");
     const std::string path = (dir / (std::string("nan_") + f.name + ".vtu")).string();
     corofem::Status st = corofem::writeTetMesh(path, c.mesh, c.fields, f.options);
     EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput) << f.name;
     EXPECT_TRUE(contains(st.message(), "the position of node 2 is nan (component 1)")) << f.name;
-    c = tetCase();
+    c = fieldCase();
     c.fields[1].values[5] = -INFINITY;
     st = corofem::writeTetMesh(path, c.mesh, c.fields, f.options);
     EXPECT_EQ(st.code(), corofem::ErrorCode::BadInput) << f.name;

@@ -40,7 +40,7 @@ class OpenCLBackendVsReference : public ::testing::TestWithParam<DeviceCase> {
   /// A 2 x 0.5 x 0.5 m box beam (8 x 2 x 2 cells, 192 tets) clamped at x = 0, with Rayleigh
   /// damping, bent and rotated as a whole by 50 degrees about a skew axis.
   static detail::Problem beam() {
-    detail::Problem p = test::makeProblem(test::boxMesh(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
+    detail::Problem p = test::makeProblem(test::cellBox(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
     p.rayleighMass = 0.2;
     p.rayleighStiffness = 0.01;
     for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)

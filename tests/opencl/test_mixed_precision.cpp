@@ -56,7 +56,7 @@ std::shared_ptr<detail::cl::Context> contextOf(int device) {
 
 /// The clamped, damped 2 x 0.5 x 0.5 m beam of test_backend.cpp (8 x 2 x 2 cells, 192 tets).
 detail::Problem beam() {
-  detail::Problem p = test::makeProblem(test::boxMesh(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
+  detail::Problem p = test::makeProblem(test::cellBox(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
   p.rayleighMass = 0.2;
   p.rayleighStiffness = 0.01;
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
@@ -237,7 +237,7 @@ TEST(OpenCLMixedPrecision, LargeSystemTrueResidualIsLimitedByTheFloatOperator) {
   // between the two programs), and double is 100x below both (the floor is the float operator,
   // which only double removes).
   const int nx = 40, ny = 20, nz = 20;
-  detail::Problem p = test::makeProblem(test::boxMesh(nx, ny, nz, 0.1, 0.1, 0.1), 1e5, 0.45, 1000.0);
+  detail::Problem p = test::makeProblem(test::cellBox(nx, ny, nz, 0.1, 0.1, 0.1), 1e5, 0.45, 1000.0);
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] < 1e-9)
       for (int k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;

@@ -140,7 +140,7 @@ std::vector<detail::Problem> bodies() {
         for (int k = 0; k < components; ++k) p.constrained[3 * n + k] = 1;
   };
   {  // 0: the beam of test_backend.cpp (192 tets), damped, clamped at x = 0
-    detail::Problem p = test::makeProblem(test::boxMesh(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
+    detail::Problem p = test::makeProblem(test::cellBox(8, 2, 2, 0.25, 0.25, 0.25), 1e5, 0.45, 1000.0);
     p.name = "beam";
     p.rayleighMass = 0.2;
     p.rayleighStiffness = 0.01;
@@ -148,7 +148,7 @@ std::vector<detail::Problem> bodies() {
     out.push_back(std::move(p));
   }
   {  // 1: a stiff light slab (180 tets), no damping, x and y fixed on z = 0
-    detail::Problem p = test::makeProblem(test::boxMesh(5, 3, 2, 0.2, 0.3, 0.1), 3e6, 0.3, 500.0);
+    detail::Problem p = test::makeProblem(test::cellBox(5, 3, 2, 0.2, 0.3, 0.1), 3e6, 0.3, 500.0);
     p.name = "slab";
     clampBelow(p, 2, 1e-9, 2);
     out.push_back(std::move(p));
@@ -161,7 +161,7 @@ std::vector<detail::Problem> bodies() {
     out.push_back(std::move(p));
   }
   {  // 3: a linear cube (162 tets), mass damping only
-    detail::Problem p = test::makeProblem(test::boxMesh(3, 3, 3, 0.1, 0.1, 0.1), 1e6, 0.35, 800.0,
+    detail::Problem p = test::makeProblem(test::cellBox(3, 3, 3, 0.1, 0.1, 0.1), 1e6, 0.35, 800.0,
                                           Formulation::Linear);
     p.name = "linear-cube";
     p.rayleighMass = 0.1;
@@ -169,7 +169,7 @@ std::vector<detail::Problem> bodies() {
     out.push_back(std::move(p));
   }
   {  // 4: a long soft bar (600 tets: more than one element work-group on CPUs), stiffness damping
-    detail::Problem p = test::makeProblem(test::boxMesh(25, 2, 2, 0.1, 0.05, 0.05), 5e5, 0.4, 1200.0);
+    detail::Problem p = test::makeProblem(test::cellBox(25, 2, 2, 0.1, 0.05, 0.05), 5e5, 0.4, 1200.0);
     p.name = "bar";
     p.rayleighStiffness = 0.02;
     clampBelow(p, 0, 1e-9, 3);
@@ -183,7 +183,7 @@ std::vector<detail::Problem> bodies() {
 /// hand-offs within a phase.
 std::vector<detail::Problem> bodiesWithABlock() {
   std::vector<detail::Problem> out;
-  detail::Problem p = test::makeProblem(test::boxMesh(20, 6, 6, 0.1, 0.1, 0.1), 1e5, 0.45, 1000.0);
+  detail::Problem p = test::makeProblem(test::cellBox(20, 6, 6, 0.1, 0.1, 0.1), 1e5, 0.45, 1000.0);
   p.name = "block";
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] < 1e-9)
@@ -202,7 +202,7 @@ std::vector<detail::Problem> bodiesWithABlock() {
 /// packs' bodies are not consecutive segments.
 std::vector<detail::Problem> instances(std::size_t count, bool rotated = true) {
   std::vector<detail::Problem> out;
-  const TetMesh base = test::boxMesh(5, 5, 2, 0.1, 0.08, 0.06);
+  const TetMesh base = test::cellBox(5, 5, 2, 0.1, 0.08, 0.06);
   for (std::size_t i = 0; i < count; ++i) {
     TetMesh mesh = base;
     const Eigen::Matrix3d R = rotated ? Eigen::AngleAxisd(0.4 * static_cast<double>(i), Eigen::Vector3d(1, -1, 2).normalized())
@@ -226,7 +226,7 @@ std::vector<detail::Problem> instances(std::size_t count, bool rotated = true) {
           for (int k = 0; k < (i % 3 == 1 ? 1 : 3); ++k) p.constrained[3 * n + k] = 1;
     out.push_back(std::move(p));
     if (i == 4) {
-      detail::Problem other = test::makeProblem(test::boxMesh(5, 3, 2, 0.2, 0.3, 0.1), 3e6, 0.3, 500.0);
+      detail::Problem other = test::makeProblem(test::cellBox(5, 3, 2, 0.2, 0.3, 0.1), 3e6, 0.3, 500.0);
       other.name = "slab";
       out.push_back(std::move(other));
     }
@@ -1262,7 +1262,7 @@ TEST_P(OpenCLBatch, MultigridInBothCoarseLayoutsMatchesTheReference) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   std::vector<detail::Problem> ps = bodies();
   {  // and a slender beam of 8,640 tets, whose hierarchy smooths a coarse level (three levels or more)
-    detail::Problem p = test::makeProblem(test::boxMesh(160, 3, 3, 1.0 / 160, 0.1 / 3, 0.1 / 3), 1e6, 0.3, 1000.0);
+    detail::Problem p = test::makeProblem(test::cellBox(160, 3, 3, 1.0 / 160, 0.1 / 3, 0.1 / 3), 1e6, 0.3, 1000.0);
     p.name = "long beam";
     std::vector<Eigen::Index> free;
     for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)

@@ -102,7 +102,7 @@ TEST_P(OpenCLProgramCache, CorruptedCacheFileIsRebuiltNotFatal) {
 TEST_P(OpenCLProgramCache, BackendCreationUsesTheDiskCacheWhereTheDeviceCachesBinaries) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   ScopedCacheDir cache(test::tempDir() / "kernels");
-  const detail::Problem p = test::makeProblem(test::boxMesh(2, 1, 1));
+  const detail::Problem p = test::makeProblem(test::cellBox(2, 1, 1));
   SolverDesc s;
   s.precision = GetParam().precision;
   auto b1 = test::openclOn(p, s, detail::cl::Context::create(selector()));
@@ -173,7 +173,7 @@ TEST_P(OpenCLProgramCache, EmbeddedSourcesFormOneProgram) {
 
 TEST_P(OpenCLProgramCache, UnsupportedFormulationNamesItAndTheReferenceBackend) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  detail::Problem p = test::makeProblem(test::boxMesh(1, 1, 1));
+  detail::Problem p = test::makeProblem(test::cellBox(1, 1, 1));
   p.name = "jelly";
   for (Formulation f : {Formulation::StVenantKirchhoff, Formulation::NeoHookean}) {
     p.formulation = f;
@@ -196,7 +196,7 @@ TEST_P(OpenCLProgramCache, UnsupportedFormulationNamesItAndTheReferenceBackend) 
 
 TEST_P(OpenCLProgramCache, BadDeviceSelectorListsTheDevices) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
-  const detail::Problem p = test::makeProblem(test::boxMesh(1, 1, 1));
+  const detail::Problem p = test::makeProblem(test::cellBox(1, 1, 1));
   const auto devices = detail::cl::listDevices();
   for (const std::string sel : {std::string("no-such-device-xyz"), std::to_string(devices.size() + 5)}) {
     try {
@@ -219,7 +219,7 @@ TEST_P(OpenCLProgramCache, DoubleOnADeviceWithoutFp64IsAClearError) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const auto info = detail::cl::listDevices().at(static_cast<std::size_t>(GetParam().device));
   if (info.fp64) GTEST_SKIP() << info.name << " has cl_khr_fp64; the error path cannot be reached here";
-  const detail::Problem p = test::makeProblem(test::boxMesh(1, 1, 1));
+  const detail::Problem p = test::makeProblem(test::cellBox(1, 1, 1));
   SolverDesc s;
   s.precision = Precision::Double;
   try {

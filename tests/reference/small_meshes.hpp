@@ -2,6 +2,7 @@
 // mesh generator and the scene code, so these tests only exercise model/ and backends/reference/).
 #pragma once
 
+#include "common/test_problems.hpp"  // makeProblem, randomRotation
 #include "model/element.hpp"
 #include "model/problem.hpp"
 
@@ -23,14 +24,6 @@ using detail::Vec3d;
 /// Rodrigues rotation about a (not necessarily unit) axis by angle (rad).
 inline Mat3 rotation(const Vec3d& axis, double angle) {
   return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
-}
-
-/// A uniformly random proper rotation.
-inline Mat3 randomRotation(std::mt19937& rng) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  Eigen::Quaterniond q(n(rng), n(rng), n(rng), n(rng));
-  q.normalize();
-  return q.toRotationMatrix();
 }
 
 /// A random, reasonably shaped tetrahedron: the regular one (edge ~1) under a random rotation, a
@@ -86,31 +79,6 @@ inline TetMesh boxMesh(int nx, int ny, int nz, double lx = 1.0, double ly = 1.0,
           mesh.tets.insert(mesh.tets.end(), t.begin(), t.end());
         }
   return mesh;
-}
-
-/// A problem built by hand (no scene, no node-set resolution): elements, lumped masses, no loads,
-/// nothing constrained. Tests add constraints and loads directly.
-inline detail::Problem makeProblem(const TetMesh& mesh, double E = 1e5, double nu = 0.3, double rho = 1000.0,
-                                   Formulation formulation = Formulation::Corotational) {
-  detail::Problem p;
-  p.name = "test";
-  p.mesh = mesh;
-  p.formulation = formulation;
-  p.lame = detail::lameFromYoungPoisson(E, nu);
-  p.density = rho;
-  const auto n3 = static_cast<Eigen::Index>(mesh.nodes.size());
-  p.restPositions = Eigen::Map<const Eigen::VectorXd>(mesh.nodes.data(), n3);
-  p.lumpedMass = Eigen::VectorXd::Zero(n3);
-  for (std::size_t e = 0; e < mesh.tetCount(); ++e) {
-    std::array<Vec3d, 4> X;
-    for (int k = 0; k < 4; ++k) X[k] = p.restPositions.segment<3>(3 * mesh.tets[4 * e + k]);
-    p.elements.push_back(detail::computeElementRest(X));
-    for (int k = 0; k < 4; ++k)
-      p.lumpedMass.segment<3>(3 * mesh.tets[4 * e + k]).array() += detail::lumpedNodeMass(p.elements.back(), rho);
-  }
-  p.constrained.assign(static_cast<std::size_t>(n3), 0);
-  p.initialVelocity = Eigen::VectorXd::Zero(n3);
-  return p;
 }
 
 /// Element node positions of element e in a 3N vector.

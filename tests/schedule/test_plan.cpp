@@ -349,9 +349,9 @@ TEST(AutoPreconditioner, AmgForLargeSlenderCorotationalOrLinearBodiesDiagonalEls
   EXPECT_EQ(preconditionerOf(s, 12960, beam, Formulation::Corotational), PreconditionerKind::BlockDiagonal);
 
   // Slenderness from the rest mesh: L / sqrt(V / L) of a 1 x 0.1 x 0.1 beam is 10, of a cube 1.
-  const detail::Problem longBeam = makeProblem(boxMesh(40, 4, 4, 1.0 / 40, 0.1 / 4, 0.1 / 4));  // cell sizes
-  const detail::Problem cube = makeProblem(boxMesh(16, 16, 16, 0.1, 0.1, 0.1));
-  const detail::Problem small = makeProblem(boxMesh(10, 2, 2, 1.0 / 10, 0.1 / 2, 0.1 / 2));
+  const detail::Problem longBeam = makeProblem(cellBox(40, 4, 4, 1.0 / 40, 0.1 / 4, 0.1 / 4));  // cell sizes
+  const detail::Problem cube = makeProblem(cellBox(16, 16, 16, 0.1, 0.1, 0.1));
+  const detail::Problem small = makeProblem(cellBox(10, 2, 2, 1.0 / 10, 0.1 / 2, 0.1 / 2));
   EXPECT_NEAR(detail::slendernessOf(longBeam), 10.0, 1e-9);
   EXPECT_NEAR(detail::slendernessOf(cube), 1.0, 1e-9);
   ASSERT_GE(longBeam.mesh.tetCount(), kAutoAmgElements);

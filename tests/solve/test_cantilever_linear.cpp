@@ -23,27 +23,27 @@ namespace {
 
 using namespace corofem::test;
 
-constexpr double kLength = 10.0, kWidth = 0.5, kHeight = 1.0;
-constexpr double kE = 1e9, kNu = 0.3, kRho = 1000.0, kG = 9.81, kP = 1e4;
-constexpr double kI = kWidth * kHeight * kHeight * kHeight / 12.0, kArea = kWidth * kHeight;
-constexpr double kKappa = 5.0 / 6.0;
-constexpr double kShear = kE / (2.0 * (1.0 + kNu));
+constexpr double kBarLength = 10.0, kBarWidth = 0.5, kBarHeight = 1.0;
+constexpr double kBarE = 1e9, kBarNu = 0.3, kBarRho = 1000.0, kBarG = 9.81, kBarP = 1e4;
+constexpr double kBarI = kBarWidth * kBarHeight * kBarHeight * kBarHeight / 12.0, kBarArea = kBarWidth * kBarHeight;
+constexpr double kBarKappa = 5.0 / 6.0;
+constexpr double kBarShear = kBarE / (2.0 * (1.0 + kBarNu));
 
 double tipLoadClosedForm() {
-  return kP * std::pow(kLength, 3) / (3 * kE * kI) + kP * kLength / (kKappa * kShear * kArea);
+  return kBarP * std::pow(kBarLength, 3) / (3 * kBarE * kBarI) + kBarP * kBarLength / (kBarKappa * kBarShear * kBarArea);
 }
 double selfWeightClosedForm() {
-  const double q = kRho * kG * kArea;
-  return q * std::pow(kLength, 4) / (8 * kE * kI) + q * kLength * kLength / (2 * kKappa * kShear * kArea);
+  const double q = kBarRho * kBarG * kBarArea;
+  return q * std::pow(kBarLength, 4) / (8 * kBarE * kBarI) + q * kBarLength * kBarLength / (2 * kBarKappa * kBarShear * kBarArea);
 }
 
 /// Tip deflection (mean -u_z of the tip face) of the linear formulation, one static increment.
 double tipDeflection(const MeshSourceDesc& mesh, bool selfWeight) {
-  BodyDesc body = cantileverBody(mesh, 0.0, kE, kNu, kRho, Formulation::Linear);
+  BodyDesc body = cantileverBody(mesh, 0.0, kBarE, kBarNu, kBarRho, Formulation::Linear);
   if (selfWeight)
-    body.loads.push_back(gravity({0, 0, -kG}));
+    body.loads.push_back(gravity({0, 0, -kBarG}));
   else
-    body.loads.push_back(tipForce(kLength, {0, 0, -kP}));
+    body.loads.push_back(tipForce(kBarLength, {0, 0, -kBarP}));
   Scene scene = staticScene(body, 1);
   auto sim = Simulation::create(scene);
   if (!sim) {
@@ -51,7 +51,7 @@ double tipDeflection(const MeshSourceDesc& mesh, bool selfWeight) {
     return NAN;
   }
   if (!runToEnd(sim.value())) return NAN;
-  return -meanDisplacement(sim.value(), planeX(kLength))[2];
+  return -meanDisplacement(sim.value(), planeX(kBarLength))[2];
 }
 
 struct Series {
@@ -96,7 +96,7 @@ std::vector<std::pair<std::string, MeshSourceDesc>> boxMeshes() {
     const std::array<int, 3> cells{20 * n, n, 2 * n};
     meshes.push_back({"box " + std::to_string(cells[0]) + "x" + std::to_string(cells[1]) + "x" +
                           std::to_string(cells[2]) + "x5",
-                      boxMesh({0, 0, 0}, {kLength, kWidth, kHeight}, cells)});
+                      boxMesh({0, 0, 0}, {kBarLength, kBarWidth, kBarHeight}, cells)});
   }
   return meshes;
 }

@@ -20,7 +20,7 @@ using test::StaticSolver;
 using test::SpringChainBackend;
 using test::springChainProblem;
 
-constexpr double kPi = 3.14159265358979323846;
+constexpr double kTwoPi = 2 * 3.14159265358979323846;
 
 /// Tip force (N) on the last node of the chain.
 void addTipForce(detail::Problem& p, const Eigen::Vector3d& force, double rampTime = 0.0) {
@@ -212,7 +212,7 @@ TEST(Newmark, PeriodElongationMatchesTheory) {
   const History run = runOscillator(osc, desc, 2000, 4.0);
   // Average acceleration: tan(omegaBar h / 2) = omega h / 2, so T_num / T = (omega h / 2) / atan(omega h / 2).
   const double expected = (omegaH / 2) / std::atan(omegaH / 2);
-  const double measured = measuredPeriod(run, 4.0 / osc.k) / (2 * kPi / osc.omega());
+  const double measured = measuredPeriod(run, 4.0 / osc.k) / (kTwoPi / osc.omega());
   // 1e-5: the interpolation error of the crossings, O((omega h)^3) per crossing, divided by ~150
   // cycles; the elongation itself is 2.1e-2, so the test separates the formula from T_num = T.
   EXPECT_NEAR(measured, expected, 1e-5) << "measured T/T0 " << measured << ", theory " << expected;
@@ -271,7 +271,7 @@ TEST(Newmark, RayleighMassDampingDecaysAtTheRightRate) {
     if (run.u[i] > run.u[i - 1] && run.u[i] >= run.u[i + 1]) peaks.push_back(run.u[i] - 4.0 / osc.k);
   ASSERT_GE(peaks.size(), 4u);
   const double zeta = alpha / (2 * osc.omega());
-  const double td = 2 * kPi / (osc.omega() * std::sqrt(1 - zeta * zeta));
+  const double td = kTwoPi / (osc.omega() * std::sqrt(1 - zeta * zeta));
   const double expected = std::exp(-zeta * osc.omega() * td);
   // 2e-3: the sampled peaks sit within h of the true ones (relative error ~ (omega h)^2 / 2 = 2e-4)
   // plus the trapezoidal rule's O((omega h)^2) damping error.
@@ -291,7 +291,7 @@ TEST(Newmark, RayleighStiffnessDampingDecaysAtTheRightRate) {
     if (run.u[i] > run.u[i - 1] && run.u[i] >= run.u[i + 1]) peaks.push_back(run.u[i] - 4.0 / osc.k);
   ASSERT_GE(peaks.size(), 4u);
   const double zeta = beta * osc.omega() / 2;
-  const double td = 2 * kPi / (osc.omega() * std::sqrt(1 - zeta * zeta));
+  const double td = kTwoPi / (osc.omega() * std::sqrt(1 - zeta * zeta));
   // 2e-3: as for the mass-proportional case (sampled peaks, O((omega h)^2) scheme error).
   EXPECT_NEAR(peaks[2] / peaks[1], std::exp(-zeta * osc.omega() * td), 2e-3);
 }

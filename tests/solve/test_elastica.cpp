@@ -26,7 +26,7 @@ namespace {
 
 using namespace corofem::test;
 
-constexpr double kLength = 1.0, kSide = 0.05, kE = 1e7;
+constexpr double kRodLength = 1.0, kRodSide = 0.05, kRodE = 1e7;
 
 struct ElasticaRow {
   double v = 0, u = 0;
@@ -48,11 +48,11 @@ std::map<double, ElasticaRow> readElastica() {
   return table;
 }
 
-MeshSourceDesc beamMesh() { return boxMesh({0, 0, 0}, {kLength, kSide, kSide}, {40, 2, 2}); }
+MeshSourceDesc beamMesh() { return boxMesh({0, 0, 0}, {kRodLength, kRodSide, kRodSide}, {40, 2, 2}); }
 
 BodyDesc beam(Formulation formulation, double load) {
-  BodyDesc body = cantileverBody(beamMesh(), 0.0, kE, 0.0, 1000.0, formulation);
-  body.loads.push_back(tipForce(kLength, {0, 0, -load}));
+  BodyDesc body = cantileverBody(beamMesh(), 0.0, kRodE, 0.0, 1000.0, formulation);
+  body.loads.push_back(tipForce(kRodLength, {0, 0, -load}));
   return body;
 }
 
@@ -65,8 +65,8 @@ double effectiveBendingStiffness() {
     return NAN;
   }
   runToEnd(sim.value());
-  const double delta = -meanDisplacement(sim.value(), planeX(kLength))[2];
-  return load * std::pow(kLength, 3) / (3 * delta);
+  const double delta = -meanDisplacement(sim.value(), planeX(kRodLength))[2];
+  return load * std::pow(kRodLength, 3) / (3 * delta);
 }
 
 struct Curve {
@@ -76,7 +76,7 @@ struct Curve {
 /// Loads to alpha_eff = alphaMax in `increments` equal increments and records the tip after each.
 Curve loadCurve(Formulation formulation, double eiEff, double alphaMax, int increments) {
   Curve c;
-  Scene scene = staticScene(beam(formulation, alphaMax * eiEff / (kLength * kLength)), increments);
+  Scene scene = staticScene(beam(formulation, alphaMax * eiEff / (kRodLength * kRodLength)), increments);
   scene.analysis.statics.maxNewtonIterations = 60;
   auto sim = Simulation::create(scene);
   if (!sim) {
@@ -92,10 +92,10 @@ Curve loadCurve(Formulation formulation, double eiEff, double alphaMax, int incr
       return c;
     }
     totalNewton += report.newtonIterations;
-    const Vec3 tip = meanDisplacement(sim.value(), planeX(kLength));
+    const Vec3 tip = meanDisplacement(sim.value(), planeX(kRodLength));
     c.alpha.push_back(alphaMax * report.time);
-    c.v.push_back(-tip[2] / kLength);
-    c.u.push_back(-tip[0] / kLength);
+    c.v.push_back(-tip[2] / kRodLength);
+    c.u.push_back(-tip[0] / kRodLength);
   }
   std::cout << "  " << toString(formulation) << ": " << totalNewton << " Newton iterations over " << increments
             << " increments\n";
@@ -105,7 +105,7 @@ Curve loadCurve(Formulation formulation, double eiEff, double alphaMax, int incr
 TEST(Elastica, CorotationalFollowsTheElasticaWithCalibratedStiffness) {
   COROFEM_REQUIRE_DATA("references/cantilever_elastica.csv");
   const auto table = readElastica();
-  const double ei = kE * std::pow(kSide, 4) / 12.0;
+  const double ei = kRodE * std::pow(kRodSide, 4) / 12.0;
   const double eiEff = effectiveBendingStiffness();
   std::cout << "  EI_eff / EI = " << eiEff / ei << " (locking of the 40x2x2x5 mesh)\n";
   const Curve co = loadCurve(Formulation::Corotational, eiEff, 10.0, 10);

@@ -21,7 +21,7 @@ class NoSetupRead final : public ForwardingDevice {
 };
 
 TEST(PcgDriver, ADeviceWithoutTheSetUpReadIteratesChunkByChunkToTheSameAnswer) {
-  detail::Problem p = makeProblem(boxMesh(6, 2, 2, 0.1, 0.1, 0.1), 1e5, 0.3, 1000.0);
+  detail::Problem p = makeProblem(cellBox(6, 2, 2, 0.1, 0.1, 0.1), 1e5, 0.3, 1000.0);
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] < 1e-9)
       for (int k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;

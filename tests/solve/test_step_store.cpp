@@ -48,7 +48,7 @@ double relDiff(double a, double b) {
 /// the far end prescribed (ramped over 0.5 s), two loads (one ramped over 2 s), springs on every
 /// fifth dof, and Rayleigh damping.
 detail::Problem featureBody(int nx, int ny, int nz, double h, unsigned seed) {
-  detail::Problem p = test::makeProblem(test::boxMesh(nx, ny, nz, h, h, h), 2e5, 0.3, 900.0);
+  detail::Problem p = test::makeProblem(test::cellBox(nx, ny, nz, h, h, h), 2e5, 0.3, 900.0);
   const Eigen::Index n = p.restPositions.size();
   detail::PrescribedDisplacement moved;
   moved.rampTime = 0.5;

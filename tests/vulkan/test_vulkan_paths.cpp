@@ -112,7 +112,7 @@ TEST_P(VulkanPaths, ManyIterationsInOneCallMatchOneAtATime) {
   // a body of 2,541 nodes (40 passes of 64 nodes per phase): the same scalars and x as 150 calls of
   // one iteration. Lavapipe ended such work-groups silently after about 1,500 passes in one dispatch
   // (here: after 38 iterations, stopped but "running"), which the host now splits (VulkanDevice).
-  detail::Problem p = makeProblem(boxMesh(20, 10, 10, 0.1, 0.1, 0.1), 5e5, 0.3, 1200.0);
+  detail::Problem p = makeProblem(cellBox(20, 10, 10, 0.1, 0.1, 0.1), 5e5, 0.3, 1200.0);
   for (std::size_t n = 0; n < p.mesh.nodeCount(); ++n)
     if (p.mesh.nodes[3 * n] < 1e-9)
       for (std::size_t k = 0; k < 3; ++k) p.constrained[3 * n + k] = 1;
@@ -228,7 +228,7 @@ TEST(VulkanInstance, OnceMadeItOutlivesTheDeviceListAndEveryBackend) {
   const std::vector<detail::Candidate> devices = entry->candidates();
   EXPECT_FALSE(seen.expired()) << "the device list let the instance go";
   if (devices.empty()) GTEST_SKIP() << "no usable Vulkan device";
-  const detail::Problem beam = makeProblem(boxMesh(4, 1, 1, 0.1, 0.1, 0.1), 1e5, 0.3, 1000.0);
+  const detail::Problem beam = makeProblem(cellBox(4, 1, 1, 0.1, 0.1, 0.1), 1e5, 0.3, 1000.0);
   for (int round = 0; round < 2; ++round) {  // made and dropped twice: each finds the same instance
     SolverDesc s;
     s.precision = Precision::Float;
