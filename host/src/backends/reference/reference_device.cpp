@@ -26,10 +26,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <deque>
 #include <exception>
-#include <limits>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -400,29 +398,14 @@ class ReferenceBody {
     };
     diagSlot_.resize(static_cast<std::size_t>(nf));
     for (int i = 0; i < nf; ++i) diagSlot_[static_cast<std::size_t>(i)] = slotOf(i, i);
-    // Each value of A gathers its element terms (slotTerms_, from slotStart_): the terms of a slot
-    // in element order, the order in which one pass over the elements would add them.
-    if (p_.elements.size() > std::numeric_limits<std::uint32_t>::max() / 144)
-      fail(ErrorCode::BadInput, "reference backend: body '", p_.name, "' has ", p_.elements.size(),
-           " elements, more than the ", std::numeric_limits<std::uint32_t>::max() / 144,
-           " its assembly indexes; split it into bodies or use the OpenCL backend");
-    std::vector<int> termSlot(p_.elements.size() * 144, -1);
-    slotStart_.assign(static_cast<std::size_t>(A_.nonZeros()) + 1, 0);
+    elementSlots_.assign(p_.elements.size() * 144, -1);
     for (std::size_t e = 0; e < p_.elements.size(); ++e)
       for (int a = 0; a < 12; ++a)
         for (int b = 0; b < 12; ++b) {
           const int r = freeIndex_[static_cast<std::size_t>(3 * node(e, a / 3) + a % 3)];
           const int c = freeIndex_[static_cast<std::size_t>(3 * node(e, b / 3) + b % 3)];
-          if (r < 0 || c < 0) continue;
-          const int slot = slotOf(r, c);
-          termSlot[e * 144 + static_cast<std::size_t>(a + 12 * b)] = slot;  // Mat12 is column-major
-          ++slotStart_[static_cast<std::size_t>(slot) + 1];
+          if (r >= 0 && c >= 0) elementSlots_[e * 144 + static_cast<std::size_t>(12 * a + b)] = slotOf(r, c);
         }
-    for (std::size_t q = 1; q < slotStart_.size(); ++q) slotStart_[q] += slotStart_[q - 1];
-    slotTerms_.resize(slotStart_.back());
-    std::vector<std::size_t> fill(slotStart_.begin(), slotStart_.end() - 1);
-    for (std::size_t t = 0; t < termSlot.size(); ++t)  // in element order
-      if (termSlot[t] >= 0) slotTerms_[fill[static_cast<std::size_t>(termSlot[t])]++] = static_cast<std::uint32_t>(t);
   }
 
   /// A = (m + c alpha) M + (k + c beta) K_t + k S restricted to the free dofs (x_c = 0).
@@ -430,20 +413,13 @@ class ReferenceBody {
     ensureTangents();
     const auto [massScale, stiffScale] = scales(c);
     double* values = A_.valuePtr();
-    // Column by column on the host's threads, each value the sum of its element terms in element
-    // order: the bits of one pass over the elements, on any number of threads.
-    static_assert(sizeof(Mat12) == 144 * sizeof(double), "the tangents are read as one array");
-    const double* terms = tangents_.empty() ? nullptr : tangents_.front().data();
-    const int* start = A_.outerIndexPtr();
-    const Eigen::Index n = A_.cols();
-    const std::size_t chunk = static_cast<std::size_t>(n) <= kSerialColumns ? kSerialColumns : kColumnChunk;
-    parallelChunks(static_cast<std::size_t>(n), chunk, [&](std::size_t, std::size_t begin, std::size_t end) {
-      for (std::size_t q = static_cast<std::size_t>(start[begin]); q < static_cast<std::size_t>(start[end]); ++q) {
-        double sum = 0.0;
-        for (std::size_t t = slotStart_[q]; t < slotStart_[q + 1]; ++t) sum += stiffScale * terms[slotTerms_[t]];
-        values[q] = sum;
-      }
-    });
+    std::fill(values, values + A_.nonZeros(), 0.0);
+    for (std::size_t e = 0; e < p_.elements.size(); ++e) {
+      const int* slots = &elementSlots_[e * 144];
+      for (int a = 0; a < 12; ++a)
+        for (int b = 0; b < 12; ++b)
+          if (slots[12 * a + b] >= 0) values[slots[12 * a + b]] += stiffScale * tangents_[e](a, b);
+    }
     for (std::size_t i = 0; i < freeDofs_.size(); ++i) values[diagSlot_[i]] += massScale * p_.lumpedMass[freeDofs_[i]];
     if (c.stiffness != 0.0 && p_.springStiffness.size() != 0)
       for (std::size_t i = 0; i < freeDofs_.size(); ++i)
@@ -581,8 +557,7 @@ class ReferenceBody {
   std::vector<int> freeIndex_;           ///< dof -> free index or -1
   std::vector<Eigen::Index> freeDofs_;   ///< free index -> dof
   std::vector<int> blockStarts_;         ///< per-node blocks of the free dofs (block Jacobi)
-  std::vector<std::size_t> slotStart_;   ///< per value of A_: its first term in slotTerms_ (one past the last: the next's)
-  std::vector<std::uint32_t> slotTerms_; ///< per term: its element e and entry k (column-major) as 144 e + k
+  std::vector<int> elementSlots_;        ///< 144 per element: index into A_'s values, -1 if constrained
   std::vector<int> diagSlot_;
   SpMat A_;
   Eigen::SimplicialLDLT<SpMat, Eigen::Lower> ldlt_;
