@@ -12,6 +12,7 @@
 #include "backends/reference/reference_device.hpp"
 #include "solve/device_slot.hpp"
 #include "solve/step_store.hpp"
+#include "util/error.hpp"
 
 #include <gtest/gtest.h>
 
@@ -355,6 +356,38 @@ TEST_F(StepStoreContract, SwapsAndCopiesMoveWholeStatesOfOneBody) {
   // A copy is a copy: changing the source leaves it.
   store_->setState(0, StateSlot::Start, StateVec::X, problems_[0].restPositions);
   EXPECT_EQ(store_->state(0, StateSlot::Previous, StateVec::X), committed0[0]);
+}
+
+TEST_F(StepStoreContract, SetZeroClearsOneVectorOfOneStateAndLeavesEveryOther) {
+  const std::vector<StateSlot> slots = {StateSlot::Committed, StateSlot::Start};
+  const std::vector<StateVec> vecs = {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction};
+  std::vector<Eigen::VectorXd> before;
+  for (std::size_t b = 0; b < 2; ++b)
+    for (StateSlot s : slots)
+      for (StateVec v : vecs) before.push_back(store_->state(b, s, v));
+  store_->setZero(1, StateSlot::Committed, StateVec::A);
+  store_->setZero(0, StateSlot::Start, StateVec::Fext);
+  std::size_t k = 0;
+  for (std::size_t b = 0; b < 2; ++b)
+    for (StateSlot s : slots)
+      for (StateVec v : vecs) {
+        const Eigen::VectorXd& now = store_->state(b, s, v);
+        const bool cleared = (b == 1 && s == StateSlot::Committed && v == StateVec::A) ||
+                             (b == 0 && s == StateSlot::Start && v == StateVec::Fext);
+        SCOPED_TRACE("body " + std::to_string(b) + ", entry " + std::to_string(k));
+        ASSERT_EQ(now.size(), problems_[b].restPositions.size());
+        if (cleared) {
+          EXPECT_TRUE(before[k].cwiseAbs().maxCoeff() > 0.0);  // the random state it replaced
+          EXPECT_EQ(now.cwiseAbs().maxCoeff(), 0.0);
+        } else {
+          EXPECT_EQ(now, before[k]);
+        }
+        ++k;
+      }
+  // A state the store never held gets its 3N zeros too; a body it lacks is an error.
+  store_->setZero(1, StateSlot::Result, StateVec::V);
+  EXPECT_EQ(store_->state(1, StateSlot::Result, StateVec::V), Eigen::VectorXd::Zero(problems_[1].restPositions.size()));
+  EXPECT_THROW(store_->setZero(2, StateSlot::Committed, StateVec::X), detail::Error);
 }
 
 TEST_F(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {

@@ -50,10 +50,9 @@ DynamicsDriver::DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const 
     b.diagonal = scale.diagonal;
     b.forceFloor = scale.forceFloor;
     const Eigen::VectorXd v = p.initialVelocity.size() == n ? p.initialVelocity : Eigen::VectorXd::Zero(n);
-    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
     store_->setState(i, StateSlot::Committed, StateVec::X, p.restPositions);
     store_->setState(i, StateSlot::Committed, StateVec::V, (v.array() * scale.freeMask).matrix());  // constrained dofs start at rest
-    for (StateVec z : {StateVec::A, StateVec::Fext, StateVec::Reaction}) store_->setState(i, StateSlot::Committed, z, zero);
+    for (StateVec z : {StateVec::A, StateVec::Fext, StateVec::Reaction}) store_->setZero(i, StateSlot::Committed, z);
     capture(i, StateSlot::Previous);
   }
 }
@@ -642,9 +641,8 @@ void DynamicsDriver::idleStep(std::size_t body, double h) {
   Body& b = bodies_[body];
   capture(body, StateSlot::Start);
   b.t = b.start.t + h;
-  const Eigen::Index n = b.problem->restPositions.size();
-  store_->setState(body, StateSlot::Committed, StateVec::V, Eigen::VectorXd::Zero(n));
-  store_->setState(body, StateSlot::Committed, StateVec::A, Eigen::VectorXd::Zero(n));
+  store_->setZero(body, StateSlot::Committed, StateVec::V);
+  store_->setZero(body, StateSlot::Committed, StateVec::A);
   Eigen::VectorXd fext;
   externalForce(body, b.t, store_->state(body, StateSlot::Committed, StateVec::X), fext);
   store_->setState(body, StateSlot::Committed, StateVec::Fext, fext);

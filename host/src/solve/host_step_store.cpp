@@ -64,6 +64,10 @@ class HostStepStore final : public StepStore {
            "' of ", b.problem->restPositions.size(), " dofs");
     b.states[index(slot)][index(vec)] = value;
   }
+  void setZero(std::size_t body, StateSlot slot, StateVec vec) override {
+    Body& b = at(body);
+    b.states[index(slot)][index(vec)].setZero(b.problem->restPositions.size());
+  }
   const Eigen::VectorXd& scratch(std::size_t body, Scratch vec) override { return at(body).scratch[index(vec)]; }
   void swap(std::size_t body, StateSlot a, StateSlot b) override {
     std::swap(at(body).states[index(a)], at(body).states[index(b)]);  // each vector's buffer, not its entries

@@ -78,6 +78,9 @@ class StepStore {
   virtual const Eigen::VectorXd& state(std::size_t body, StateSlot slot, StateVec vec) = 0;
   /// Replaces a state's vector (3N entries).
   virtual void setState(std::size_t body, StateSlot slot, StateVec vec, const Eigen::VectorXd& value) = 0;
+  /// Sets a state's vector to 3N zeros, with no vector from the caller (a device's store clears its
+  /// own buffer; the host's reuses the vector's storage).
+  virtual void setZero(std::size_t body, StateSlot slot, StateVec vec) = 0;
   /// A scratch vector as the last pass left it.
   virtual const Eigen::VectorXd& scratch(std::size_t body, Scratch vec) = 0;
   /// Exchanges two states of the body (all five vectors), or copies one onto another.
