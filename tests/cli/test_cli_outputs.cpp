@@ -25,7 +25,6 @@ namespace {
 using corofem::test::runCli;
 namespace fs = std::filesystem;
 
-
 /// A closed ellipsoid inside the beam (centre (0.4, 0.05, 0.05), radii 0.35, 0.04, 0.04): poles and
 /// rings of shared vertices, so every vertex normal averages several faces.
 corofem::SurfaceMesh ellipsoid(int rings, int segments) {

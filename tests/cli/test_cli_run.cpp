@@ -21,7 +21,6 @@ std::size_t lineCount(const std::string& s) {
   return n;
 }
 
-
 TEST(CliRun, WritesProbesVtkAndSummary) {
   const fs::path out = corofem::test::tempDir();
   const auto r = runCli(std::string("run ") + corofem::test::kFig8Scene + " --quiet --out '" + out.string() +

@@ -11,6 +11,9 @@
 
 namespace corofem::test {
 
+/// The mass coefficient of backward Euler's system at 60 Hz: 1 / h^2 (1/s^2).
+inline constexpr double kBackwardEulerMass = 3600.0;
+
 /// A cantilever 1 x 0.1 x 0.1 m in `cells` x 3 x 3 cells of 6 tets (E = 1e6 Pa, nu = 0.3,
 /// rho = 1000), every node on x = 0 clamped.
 inline detail::Problem clampedBeam(int cells, Formulation f = Formulation::Corotational) {

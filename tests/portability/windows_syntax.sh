@@ -2,8 +2,10 @@
 # The library and the corofem command compile for Windows. Two checks over host/src:
 # - MinGW-w64's g++ (Debian's g++-mingw-w64-x86-64-posix) compiles every source with -fsyntax-only
 #   against Windows' own headers, warnings as errors (eight at a time in the library's unity
-#   batches where the build has them; an error still names its source file). It catches a POSIX call or flag Windows lacks
-#   (O_NONBLOCK, S_ISSOCK, sched_getaffinity ...).
+#   batches where the build has them; an error still names its source file, but a header that a
+#   source's Windows branch needs and does not include passes where an earlier source of its batch
+#   includes it). It catches a POSIX call or flag Windows lacks (O_NONBLOCK, S_ISSOCK,
+#   sched_getaffinity ...).
 # - A search: POSIX headers (unistd.h, fcntl.h, sys/*.h, pthread.h, dlfcn.h, sched.h) only inside
 #   `#ifndef _WIN32`, `#ifdef __linux__` or the `#else` of `#ifdef _WIN32`; no GCC __builtin_. MinGW
 #   ships unistd.h and getpid and takes GCC's builtins, and MSVC has none of them.
@@ -73,14 +75,16 @@ printf '%s\n' "${flags[@]}" > "$work/flags"
 find "$src/host/src" -name '*.cpp' | { grep -Ev "$skip" || true; } | sort > "$work/sources"
 # The library's unity batches (COROFEM_UNITY_BUILD: CMake's Unity/unity_N_cxx.cxx, which include
 # the sources by absolute path) are compiled as they are, each a compiler run that parses the
-# Windows and Eigen headers once for its eight sources: the check took 78 s of both cores source by
-# source. A batch is taken only when every source it includes is one of this check's; the sources
+# Windows and Eigen headers once for its eight sources: the check took 77 s of both cores source by
+# source. A batch is taken only when the build's generator lists it (CMake leaves the batch files of
+# an earlier configuration behind) and every source it includes is one of this check's; the sources
 # no batch holds (the C API's, the command's, those the library keeps out of its batches, or all of
 # them in a build without batches) are compiled one by one.
 : > "$work/batched"
 : > "$work/files"
 for batch in "$build"/CMakeFiles/corofem.dir/Unity/unity_*_cxx.cxx; do
   [[ -f "$batch" ]] || continue
+  grep -qsF "Unity/${batch##*/}" "$build"/CMakeFiles/corofem.dir/build.make "$build"/build.ninja || continue
   sed -n 's/^#include "\(.*\)"$/\1/p' "$batch" | sort > "$work/members"
   if [[ -s "$work/members" ]] && [[ -z "$(comm -23 "$work/members" "$work/sources")" ]]; then
     cat "$work/members" >> "$work/batched"

@@ -26,6 +26,7 @@
 using namespace corofem;
 using namespace corofem::detail;
 using corofem::test::clampedBeam;
+using corofem::test::kBackwardEulerMass;
 using corofem::test::freeDofsOf;
 using corofem::test::randomVector;
 
@@ -78,8 +79,6 @@ struct Fixture {
     return z;
   }
 };
-
-const double kBackwardEulerMass = 3600.0;  // 1 / h^2 at 60 Hz
 
 TEST(WarpedAmg, IsSymmetricPositiveDefiniteWithSeveralLevels) {
   Fixture f(30, kBackwardEulerMass, Mat3::Identity());

@@ -19,7 +19,7 @@ namespace {
 
 using namespace corofem::test;
 
-struct Outcome {
+struct PassOutcome {
   std::vector<double> x, v;
   EnergyReport energy;
 };
@@ -48,11 +48,11 @@ Scene passesScene() {
 /// Two steps of a clamped 40 x 16 x 16-cell box (11,849 nodes, 35,547 dofs: three chunks) under
 /// gravity and a tip load, mass-damped, linearised Newmark with 8 PCG iterations a solve, on the
 /// reference device.
-Outcome twoSteps(const SimulationOptions& options) {
+PassOutcome twoSteps(const SimulationOptions& options) {
   const Scene scene = passesScene();
   auto sim = Simulation::create(scene, options);
   EXPECT_TRUE(sim) << sim.message();
-  Outcome r;
+  PassOutcome r;
   if (!sim) return r;
   EXPECT_EQ(sim->restMesh(0).nodes.size(), 3u * 41 * 17 * 17);
   while (!sim->finished()) {
@@ -67,7 +67,7 @@ Outcome twoSteps(const SimulationOptions& options) {
 }
 
 TEST(DynamicsPasses, ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder) {
-  const Outcome pool = twoSteps({});
+  const PassOutcome pool = twoSteps({});
   ASSERT_FALSE(pool.x.empty());
   std::atomic<long long> calls{0};
   SimulationOptions backwards;  // every task on the caller, last first
@@ -84,7 +84,7 @@ TEST(DynamicsPasses, ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder) {
     other.join();
   };
   for (const SimulationOptions* o : {&backwards, &twoThreads}) {
-    const Outcome r = twoSteps(*o);
+    const PassOutcome r = twoSteps(*o);
     EXPECT_EQ(r.x, pool.x);
     EXPECT_EQ(r.v, pool.v);
     // The loads' work is one of the chunked sums.

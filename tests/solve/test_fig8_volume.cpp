@@ -27,14 +27,14 @@ BodyDesc fig8Beam(Formulation formulation) {
   return body;
 }
 
-struct Outcome {
+struct Fig8Outcome {
   double volume = NAN;  // deformed / rest
   Vec3 tip{NAN, NAN, NAN};
 };
 
-Outcome staticOutcome(Formulation formulation, int increments = 10) {
+Fig8Outcome staticOutcome(Formulation formulation, int increments = 10) {
   Scene scene = staticScene(fig8Beam(formulation), increments);  // default Newton settings
-  Outcome o;
+  Fig8Outcome o;
   auto sim = Simulation::create(scene);
   if (!sim) {
     ADD_FAILURE() << sim.message();
@@ -47,8 +47,8 @@ Outcome staticOutcome(Formulation formulation, int increments = 10) {
 }
 
 TEST(Fig8, LinearGrowsTheVolumeCorotationalKeepsIt) {
-  const Outcome linear = staticOutcome(Formulation::Linear);
-  const Outcome corot = staticOutcome(Formulation::Corotational);
+  const Fig8Outcome linear = staticOutcome(Formulation::Linear);
+  const Fig8Outcome corot = staticOutcome(Formulation::Corotational);
   std::cout << "  Fig. 8 beam (static, gravity): linear formulation volume change " << 100 * (linear.volume - 1)
             << " %, tip (" << linear.tip[0] << ", " << linear.tip[1] << ") m\n"
             << "                                 co-rotational volume change " << 100 * (corot.volume - 1)
@@ -88,8 +88,8 @@ TEST(Fig8, FullLoadInOneIncrementGivesTheSameAnswer) {
   // The paper (Sec. 4): the co-rotational formulation "allows ... even the application of full load
   // in one step". With the default 30 Newton iterations the full load from rest needs 31 here, so
   // the automatic cut-back halves it once; the answer is the 10-increment one.
-  const Outcome one = staticOutcome(Formulation::Corotational, 1);
-  const Outcome ten = staticOutcome(Formulation::Corotational, 10);
+  const Fig8Outcome one = staticOutcome(Formulation::Corotational, 1);
+  const Fig8Outcome ten = staticOutcome(Formulation::Corotational, 10);
   // 1e-6 m: both converged to residual 1e-6 relative on a tip displacement of ~0.6 m.
   EXPECT_NEAR(one.tip[0], ten.tip[0], 1e-6);
   EXPECT_NEAR(one.tip[1], ten.tip[1], 1e-6);
@@ -107,7 +107,7 @@ TEST(Fig8, DampedDynamicsSettlesOnTheStaticSolution) {
     ASSERT_TRUE(st) << st.message();
     worstVolume = std::max(worstVolume, std::abs(volumeRatio(sim.value()) - 1));
   }
-  const Outcome reference = staticOutcome(Formulation::Corotational);
+  const Fig8Outcome reference = staticOutcome(Formulation::Corotational);
   const Vec3 tip = meanDisplacement(sim.value(), planeX(kFig8Length));
   std::cout << "  dynamic co-rotational after 6 s: tip (" << tip[0] << ", " << tip[1] << ") m, static ("
             << reference.tip[0] << ", " << reference.tip[1] << ") m; worst volume change on the way "

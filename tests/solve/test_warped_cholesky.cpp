@@ -20,12 +20,11 @@
 using namespace corofem;
 using namespace corofem::detail;
 using corofem::test::clampedBeam;
+using corofem::test::kBackwardEulerMass;
 using corofem::test::freeDofsOf;
 using corofem::test::randomVector;
 
 namespace {
-
-const double kBackwardEulerMass = 3600.0;  // 1 / h^2 at 60 Hz
 
 /// The beam curled about y so that its end (x = 1) turns by `turn` rad, plus noise.
 Eigen::VectorXd curled(const Problem& p, double turn, unsigned seed) {
