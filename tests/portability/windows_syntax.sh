@@ -84,7 +84,7 @@ find "$src/host/src" -name '*.cpp' | { grep -Ev "$skip" || true; } | sort > "$wo
 : > "$work/files"
 for batch in "$build"/CMakeFiles/corofem.dir/Unity/unity_*_cxx.cxx; do
   [[ -f "$batch" ]] || continue
-  grep -qsF "Unity/${batch##*/}" "$build"/CMakeFiles/corofem.dir/build.make "$build"/build.ninja || continue
+  grep -qsF "corofem.dir/Unity/${batch##*/}" "$build"/CMakeFiles/corofem.dir/build.make "$build"/build.ninja || continue
   sed -n 's/^#include "\(.*\)"$/\1/p' "$batch" | sort > "$work/members"
   if [[ -s "$work/members" ]] && [[ -z "$(comm -23 "$work/members" "$work/sources")" ]]; then
     cat "$work/members" >> "$work/batched"
