@@ -10,6 +10,7 @@
 #include "common/test_problems.hpp"
 
 #include "backends/reference/reference_device.hpp"
+#include "device/registry.hpp"
 #include "solve/device_slot.hpp"
 #include "solve/step_store.hpp"
 #include "util/error.hpp"
@@ -123,8 +124,26 @@ SchemeMaps eulerMaps(double h) {
   return m;
 }
 
-class StepStoreContract : public ::testing::Test {
+/// A store of the contract: the host's, or a Vulkan device's in double or float. `floor`: the
+/// relative difference its precision allows wherever the host's meets an expression to rounding.
+struct StoreKind {
+  const char* name;
+  bool vulkan;
+  Precision precision;
+  double floor;
+};
+
+const StoreKind kStores[] = {
+    {"host", false, Precision::Double, 0.0},
+    {"vulkan_double", true, Precision::Double, 1e-13},
+    {"vulkan_float", true, Precision::Float, 2e-5},
+};
+
+class StepStoreContract : public ::testing::TestWithParam<StoreKind> {
  protected:
+  /// The bound of a comparison the host's store meets to `t`.
+  double tol(double t) const { return std::max(t, GetParam().floor); }
+
   void SetUp() override {
     // Body 0: 6 x 3 x 3 cells of 10 cm (112 nodes); body 1: a rod of 1,400 x 1 x 1 cells of 1 cm
     // (5,604 nodes, 16,812 dofs: two chunks of the host's threads, in few elements for the
@@ -136,10 +155,25 @@ class StepStoreContract : public ::testing::Test {
     solver.linearSolver = LinearSolverKind::Pcg;
     solver.tolerance = 1e-6;  // the solves are compared with the slot's own, not with an answer
     solver.maxIterations = 2000;
+    solver.precision = GetParam().precision;
     std::vector<const detail::Problem*> ps;
     for (const detail::Problem& p : problems_) ps.push_back(&p);
-    slot_ = std::make_unique<detail::DeviceSlot>(detail::createReferenceDevice(ps, solver), solver);
-    store_ = detail::createHostStepStore(*slot_);
+    if (!GetParam().vulkan) {
+      slot_ = std::make_unique<detail::DeviceSlot>(detail::createReferenceDevice(ps, solver), solver);
+      store_ = detail::createHostStepStore(*slot_);
+    } else {
+      const auto entry = detail::findBackend("vulkan");
+      if (!entry || entry->candidates().empty()) GTEST_SKIP() << "no Vulkan device";
+      std::unique_ptr<detail::Device> device;
+      try {
+        device = entry->create(ps, solver, entry->resolve(""), {});
+      } catch (const detail::Error& e) {
+        GTEST_SKIP() << "no Vulkan device for this precision: " << e.what();
+      }
+      slot_ = std::make_unique<detail::DeviceSlot>(std::move(device), solver);
+      store_ = slot_->device().createStepStore(*slot_);
+      ASSERT_NE(store_, nullptr);
+    }
     for (std::size_t b = 0; b < problems_.size(); ++b) {
       randomState(*store_, b, StateSlot::Committed, problems_[b], 100 + 10 * static_cast<unsigned>(b));
       randomState(*store_, b, StateSlot::Start, problems_[b], 200 + 10 * static_cast<unsigned>(b));
@@ -171,7 +205,7 @@ class StepStoreContract : public ::testing::Test {
   std::unique_ptr<detail::StepStore> store_;
 };
 
-TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoads) {
+TEST_P(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoads) {
   const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
   const std::vector<double> fextNorm = beginAndPositions({0, 1}, maps);
   for (std::size_t b = 0; b < 2; ++b) {
@@ -186,8 +220,8 @@ TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoa
     const detail::BodyControls& c = store_->controls(b);
     const Eigen::VectorXd vb = m.newmark ? Eigen::VectorXd(v + m.cv * a) : v;
     const Eigen::VectorXd xb = m.newmark ? Eigen::VectorXd(x + m.h * v + m.ca * a - m.kx * vb) : x;
-    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Vb), vb), 1e-15);
-    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Xb), xb), 1e-15);
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Vb), vb), tol(1e-15));
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Xb), xb), tol(1e-15));
     // Targets at t1 = 0.3 s: rest on fixed dofs, X + 0.6 u on prescribed ones (ramp 0.5 s), the
     // held ones halfway from the step's start.
     Eigen::VectorXd target = p.restPositions;
@@ -196,19 +230,19 @@ TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoa
     for (Eigen::Index d = 0; d < target.size(); ++d)
       if (!std::isnan(c.targets[d])) target[d] = x0[d] + 0.5 * (c.targets[d] - x0[d]);
     const Eigen::VectorXd fext = p.forces[0].f + 0.15 * p.forces[1].f + c.forces;  // ramps: 1 and 0.3 / 2
-    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Fext), fext), 1e-15);
-    EXPECT_LT(relDiff(fextNorm[b], (fext.array() * free).matrix().norm()), 1e-14);
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Fext), fext), tol(1e-15));
+    EXPECT_LT(relDiff(fextNorm[b], (fext.array() * free).matrix().norm()), tol(1e-14));
     Eigen::VectorXd vStart = v;
     for (Eigen::Index d = 0; d < v.size(); ++d)
       if (free[d] == 0.0) vStart[d] = (target[d] - xb[d]) / m.kx;
     // The result state at Newton's start: free dofs keep v_n; constrained ones land on their targets.
     const Eigen::VectorXd vNew = store_->state(b, StateSlot::Result, StateVec::V);
     const Eigen::VectorXd xNew = store_->state(b, StateSlot::Result, StateVec::X);
-    EXPECT_LT(relDiff(vNew, vStart), 1e-14);
-    EXPECT_LT(relDiff(xNew, xb + m.kx * vNew), 1e-15);
-    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::A), m.ka * (vNew - vb)), 1e-15);
+    EXPECT_LT(relDiff(vNew, vStart), tol(1e-14));
+    EXPECT_LT(relDiff(xNew, xb + m.kx * vNew), tol(1e-15));
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::A), m.ka * (vNew - vb)), tol(1e-15));
     for (Eigen::Index d = 0; d < x.size(); ++d)
-      if (free[d] == 0.0) EXPECT_NEAR(xNew[d], target[d], 1e-14) << "dof " << d;
+      if (free[d] == 0.0) EXPECT_NEAR(xNew[d], target[d], tol(1e-14)) << "dof " << d;
     EXPECT_EQ(store_->scratch(b, Scratch::Cv).norm(), 0.0);
   }
   // The step's first advance (fraction 1, from the committed state): held targets exactly.
@@ -219,13 +253,13 @@ TEST_F(StepStoreContract, BeginAndPositionsFormTheSchemesAffineMapsTargetsAndLoa
   int held = 0;
   for (Eigen::Index d = 0; d < target.size(); ++d)
     if (!std::isnan(c.targets[d])) {
-      EXPECT_EQ(target[d], c.targets[d]) << "dof " << d;
+      EXPECT_NEAR(target[d], c.targets[d], tol(0.0) * std::abs(c.targets[d])) << "dof " << d;
       ++held;
     }
   EXPECT_GT(held, 0);
 }
 
-TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpressions) {
+TEST_P(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpressions) {
   const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
   const detail::BodySet set = {0, 1};
   evaluate(set, maps);
@@ -277,8 +311,8 @@ TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpression
     slot_->setPositions({b}, {&x});
     slot_->internalForces({b}, {&fint});
     slot_->apply({b}, {detail::SystemCoeffs{0.0, 1.0, 0.0}}, {&vBefore[b]}, {&cv});
-    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Fint), fint), 1e-15);
-    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Cv), cv), 1e-15);
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Fint), fint), tol(1e-15));
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::Cv), cv), tol(1e-15));
     // The residual and its sums.
     Eigen::VectorXd spring = Eigen::VectorXd::Zero(x.size());
     for (Eigen::Index d = 0; d < x.size(); ++d)
@@ -286,42 +320,42 @@ TEST_F(StepStoreContract, DeviceCallsResidualUpdateAndEndAreTheDriversExpression
     const Eigen::VectorXd ma = p.lumpedMass.cwiseProduct(a);
     const Eigen::VectorXd fextNew = p.forces[0].f + 0.15 * p.forces[1].f + c.forces;
     const Eigen::VectorXd r = ma + cv + fint + spring - fextNew;
-    EXPECT_LT(relDiff(store_->scratch(b, Scratch::R), r), 1e-14);
+    EXPECT_LT(relDiff(store_->scratch(b, Scratch::R), r), tol(1e-14));
     auto freeSq = [&](const Eigen::VectorXd& u) { return (u.array() * free).matrix().squaredNorm(); };
-    EXPECT_LT(relDiff(sums[b].ma, freeSq(ma)), 1e-13);
-    EXPECT_LT(relDiff(sums[b].cv, freeSq(cv)), 1e-13);
-    EXPECT_LT(relDiff(sums[b].fint, freeSq(fint)), 1e-13);
-    EXPECT_LT(relDiff(sums[b].spring, freeSq(spring)), 1e-13);
-    EXPECT_LT(relDiff(sums[b].r, freeSq(r)), 1e-13);
+    EXPECT_LT(relDiff(sums[b].ma, freeSq(ma)), tol(1e-13));
+    EXPECT_LT(relDiff(sums[b].cv, freeSq(cv)), tol(1e-13));
+    EXPECT_LT(relDiff(sums[b].fint, freeSq(fint)), tol(1e-13));
+    EXPECT_LT(relDiff(sums[b].spring, freeSq(spring)), tol(1e-13));
+    EXPECT_LT(relDiff(sums[b].r, freeSq(r)), tol(1e-13));
     EXPECT_EQ(sums[b].nonFinite, 0.0);
-    EXPECT_LT(relDiff(rhs[b], -r / maps[b].ka), 1e-14);
+    EXPECT_LT(relDiff(rhs[b], -r / maps[b].ka), tol(1e-14));
     // The solve: the slot's own answer for the store's right-hand side (body 0's), and v += dv.
     const Eigen::VectorXd dv = store_->scratch(b, Scratch::Dv);
     if (b == 0) {
       std::vector<detail::PcgSolve> alone = {direct[b]};
       slot_->solve({b}, alone);
-      EXPECT_LT(relDiff(dv, dvExpected[b]), 1e-12);
+      EXPECT_LT(relDiff(dv, dvExpected[b]), tol(1e-12));
     }
     EXPECT_GT(dv.norm(), 0.0);
     EXPECT_EQ(bad[b], 0.0);
     const Eigen::VectorXd vNew = store_->state(b, StateSlot::Result, StateVec::V);
-    EXPECT_LT(relDiff(vNew, vBefore[b] + dv), 1e-15);
+    EXPECT_LT(relDiff(vNew, vBefore[b] + dv), tol(1e-15));
     // The end: reactions on constrained rows, the springs' pull joining f_ext on free dofs, the
     // work sums over dx and m v^2.
     const Eigen::VectorXd reaction = (r.array() * (1.0 - free)).matrix();
-    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Reaction), reaction), 1e-15);
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Reaction), reaction), tol(1e-15));
     const Eigen::VectorXd fEnd = fextNew - (spring.array() * free).matrix();
-    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Fext), fEnd), 1e-14);
+    EXPECT_LT(relDiff(store_->state(b, StateSlot::Result, StateVec::Fext), fEnd), tol(1e-14));
     const Eigen::VectorXd dx = x - store_->state(b, StateSlot::Committed, StateVec::X);
     const Eigen::VectorXd fPrev = store_->state(b, StateSlot::Committed, StateVec::Fext);
     const Eigen::VectorXd rPrev = store_->state(b, StateSlot::Committed, StateVec::Reaction);
     const EndSums want = {(rPrev + reaction).dot(dx), (fPrev + fEnd).dot(dx), rPrev.dot(dx), reaction.dot(dx),
                           fPrev.dot(dx),           fEnd.dot(dx),           p.lumpedMass.dot(vNew.cwiseProduct(vNew))};
-    for (std::size_t k = 0; k < want.size(); ++k) EXPECT_LT(relDiff(ends[b][k], want[k]), 1e-12) << "sum " << k;
+    for (std::size_t k = 0; k < want.size(); ++k) EXPECT_LT(relDiff(ends[b][k], want[k]), tol(1e-12)) << "sum " << k;
   }
 }
 
-TEST_F(StepStoreContract, ResidualCountsTheDofsWhereTheResultStateIsNotFinite) {
+TEST_P(StepStoreContract, ResidualCountsTheDofsWhereTheResultStateIsNotFinite) {
   const std::vector<SchemeMaps> maps = {eulerMaps(0.01), eulerMaps(0.01)};
   const detail::BodySet set = {0, 1};
   evaluate(set, maps);
@@ -337,7 +371,7 @@ TEST_F(StepStoreContract, ResidualCountsTheDofsWhereTheResultStateIsNotFinite) {
   EXPECT_TRUE(std::isfinite(sums[0].r));
 }
 
-TEST_F(StepStoreContract, SwapsAndCopiesMoveWholeStatesOfOneBody) {
+TEST_P(StepStoreContract, SwapsAndCopiesMoveWholeStatesOfOneBody) {
   auto snapshot = [&](std::size_t b, StateSlot s) {
     std::vector<Eigen::VectorXd> out;
     for (StateVec v : {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction})
@@ -358,7 +392,7 @@ TEST_F(StepStoreContract, SwapsAndCopiesMoveWholeStatesOfOneBody) {
   EXPECT_EQ(store_->state(0, StateSlot::Previous, StateVec::X), committed0[0]);
 }
 
-TEST_F(StepStoreContract, SetZeroClearsOneVectorOfOneStateAndLeavesEveryOther) {
+TEST_P(StepStoreContract, SetZeroClearsOneVectorOfOneStateAndLeavesEveryOther) {
   const std::vector<StateSlot> slots = {StateSlot::Committed, StateSlot::Start};
   const std::vector<StateVec> vecs = {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction};
   std::vector<Eigen::VectorXd> before;
@@ -390,7 +424,7 @@ TEST_F(StepStoreContract, SetZeroClearsOneVectorOfOneStateAndLeavesEveryOther) {
   EXPECT_THROW(store_->setZero(2, StateSlot::Committed, StateVec::X), detail::Error);
 }
 
-TEST_F(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {
+TEST_P(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {
   const std::vector<SchemeMaps> maps = {newmarkMaps(1.0 / 60.0), eulerMaps(0.01)};
   auto run = [&](const detail::BodySet& set) {
     std::vector<SchemeMaps> m;
@@ -416,5 +450,9 @@ TEST_F(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {
   EXPECT_TRUE(test::sameBits(store_->scratch(1, Scratch::R), r1));
 }
 
+INSTANTIATE_TEST_SUITE_P(Stores, StepStoreContract, ::testing::ValuesIn(kStores),
+                         [](const ::testing::TestParamInfo<StoreKind>& info) { return std::string(info.param.name); });
+
 }  // namespace
 }  // namespace corofem
+

@@ -33,6 +33,9 @@
 
 namespace corofem::detail {
 
+class DeviceSlot;
+class StepStore;
+
 struct SystemCoeffs {
   double mass = 0.0;
   double damping = 0.0;
@@ -238,6 +241,12 @@ class Device {
     (void)out;
     return false;
   }
+
+  /// A store of the dynamics driver's vectors on this device for the slot's bodies (the slot holds
+  /// this device), or null where the device keeps none (the driver keeps the host's store,
+  /// createHostStepStore). The store lives in the device's memory but not in the device object: it
+  /// outlives a device the slot makes again for the same context only where the backend says so.
+  virtual std::unique_ptr<StepStore> createStepStore(const DeviceSlot& slot);
 };
 
 /// The set {0, ..., n - 1}.

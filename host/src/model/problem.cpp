@@ -41,6 +41,12 @@ std::vector<double> Problem::loadScales(double loadFactorOrTime, bool dynamic) c
   return scales;
 }
 
+std::vector<double> Problem::prescribedScales(double loadFactorOrTime, bool dynamic) const {
+  std::vector<double> scales;
+  for (const PrescribedDisplacement& p : prescribed) scales.push_back(loadScale(loadFactorOrTime, dynamic, p.rampTime));
+  return scales;
+}
+
 void Problem::externalForce(double loadFactorOrTime, bool dynamic, Eigen::VectorXd& f) const {
   const std::vector<double> scales = loadScales(loadFactorOrTime, dynamic);
   f.resize(restPositions.size());
@@ -52,11 +58,12 @@ void Problem::applyPrescribed(Eigen::VectorXd& x, double loadFactorOrTime, bool 
   // X + scale * value. Prescribed entries are written after, so they win on a shared dof.
   for (std::size_t d = 0; d < constrained.size(); ++d)
     if (constrained[d]) x[static_cast<Eigen::Index>(d)] = restPositions[static_cast<Eigen::Index>(d)];
-  for (const PrescribedDisplacement& p : prescribed) {
-    const double s = loadScale(loadFactorOrTime, dynamic, p.rampTime);
+  const std::vector<double> scales = prescribedScales(loadFactorOrTime, dynamic);
+  for (std::size_t g = 0; g < prescribed.size(); ++g) {
+    const PrescribedDisplacement& p = prescribed[g];
     for (std::size_t k = 0; k < p.dofs.size(); ++k) {
       const auto d = static_cast<Eigen::Index>(p.dofs[k]);
-      x[d] = restPositions[d] + s * p.values[k];
+      x[d] = restPositions[d] + scales[g] * p.values[k];
     }
   }
 }

@@ -62,6 +62,9 @@ struct Problem {
   /// The scale of each of `forces` at that load factor or time: externalForce is the sum over the
   /// loads of scale * f, added in the loads' order from 0.
   std::vector<double> loadScales(double loadFactorOrTime, bool dynamic) const;
+  /// The scale of each prescribed displacement (Problem::prescribed, in order) at the load factor
+  /// (statics) or the time (dynamics, its ramp): applyPrescribed's x = X + scale * u.
+  std::vector<double> prescribedScales(double loadFactorOrTime, bool dynamic) const;
   /// Dof d of externalForce with the loads' `scales` (loadScales): their sum from 0 in load order.
   double externalForceAt(const std::vector<double>& scales, Eigen::Index d) const {
     double sum = 0.0;

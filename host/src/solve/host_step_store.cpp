@@ -95,29 +95,16 @@ class HostStepStore final : public StepStore {
     device.internalForces(set, fs);
   }
   void damping(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
-    // Mass damping alone (beta = 0, the common "air drag") is a scaling of the lumped mass: formed
-    // here in double, the same expression and bits as the reference device's apply, with no device
-    // call (on a device that call is an upload, a product and a read per force evaluation).
-    BodySet stiff;
-    ConstVectors stiffV;
-    Vectors stiffCv;
+    std::vector<const Problem*> problems;
+    ConstVectors v;
+    Vectors cv;
     for (std::size_t i : set) {
       Body& b = at(i);
-      const Problem& p = *b.problem;
-      const Eigen::VectorXd& v = b.states[index(slot)][index(StateVec::V)];
-      Eigen::VectorXd& cv = b.scratch[index(Scratch::Cv)];
-      if (p.rayleighMass == 0.0 && p.rayleighStiffness == 0.0) {
-        cv.setZero(v.size());
-      } else if (p.rayleighStiffness == 0.0 && p.lumpedMass.size() == v.size()) {
-        cv = p.rayleighMass * p.lumpedMass.cwiseProduct(v);
-      } else {
-        stiff.push_back(i);
-        stiffV.push_back(&v);
-        stiffCv.push_back(&cv);
-      }
+      problems.push_back(b.problem);
+      v.push_back(&b.states[index(slot)][index(StateVec::V)]);
+      cv.push_back(&b.scratch[index(Scratch::Cv)]);
     }
-    if (!stiff.empty())
-      device.apply(stiff, std::vector<SystemCoeffs>(stiff.size(), SystemCoeffs{0.0, 1.0, 0.0}), stiffV, stiffCv);
+    dampingForces(device, set, problems, v, cv);
   }
   void solve(DeviceSlot& device, const BodySet& set, std::vector<PcgSolve>& solves) override {
     for (std::size_t k = 0; k < set.size(); ++k) {
@@ -329,6 +316,30 @@ class HostStepStore final : public StepStore {
 };
 
 }  // namespace
+
+void dampingForces(DeviceSlot& device, const BodySet& set, const std::vector<const Problem*>& problems,
+                   const ConstVectors& v, const Vectors& cv) {
+  // Mass damping alone (beta = 0, the common "air drag") is a scaling of the lumped mass: formed
+  // here in double, the same expression and bits as the reference device's apply, with no device
+  // call (on a device that call is an upload, a product and a read per force evaluation).
+  BodySet stiff;
+  ConstVectors stiffV;
+  Vectors stiffCv;
+  for (std::size_t k = 0; k < set.size(); ++k) {
+    const Problem& p = *problems[k];
+    if (p.rayleighMass == 0.0 && p.rayleighStiffness == 0.0) {
+      cv[k]->setZero(v[k]->size());
+    } else if (p.rayleighStiffness == 0.0 && p.lumpedMass.size() == v[k]->size()) {
+      *cv[k] = p.rayleighMass * p.lumpedMass.cwiseProduct(*v[k]);
+    } else {
+      stiff.push_back(set[k]);
+      stiffV.push_back(v[k]);
+      stiffCv.push_back(cv[k]);
+    }
+  }
+  if (!stiff.empty())
+    device.apply(stiff, std::vector<SystemCoeffs>(stiff.size(), SystemCoeffs{0.0, 1.0, 0.0}), stiffV, stiffCv);
+}
 
 std::unique_ptr<StepStore> createHostStepStore(const DeviceSlot& slot) { return std::make_unique<HostStepStore>(slot); }
 

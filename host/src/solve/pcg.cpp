@@ -1,6 +1,8 @@
 // The PCG loop over a device's building blocks (solve/pcg.hpp).
 #include "solve/pcg.hpp"
 
+#include "solve/step_store.hpp"
+
 #include "util/error.hpp"
 #include "util/finite.hpp"
 
@@ -29,6 +31,8 @@ void Device::setSprings(const BodySet& bodies, const std::vector<const Problem*>
   if (bodies.empty()) return;
   fail(ErrorCode::DeviceError, "the ", name(), " backend cannot attach springs to a body at run time");
 }
+
+std::unique_ptr<StepStore> Device::createStepStore(const DeviceSlot&) { return nullptr; }
 
 double slendernessOf(const Problem& p) {
   const Eigen::Index n = p.restPositions.size() / 3;

@@ -131,6 +131,12 @@ class StepStore {
   virtual void end(const BodySet& set, std::vector<EndSums>& sums) = 0;
 };
 
+/// The damping force C v of each body of `set` (problems[k], v[k]) into cv[k] (StepStore::damping):
+/// 0 without damping, the scaling of the lumped mass for mass damping alone (beta = 0), else the
+/// device's product with C = alpha M + beta K.
+void dampingForces(DeviceSlot& device, const BodySet& set, const std::vector<const Problem*>& problems,
+                   const ConstVectors& v, const Vectors& cv);
+
 /// The store on the host (double, the problem's numbering); the slot's problems outlive it.
 std::unique_ptr<StepStore> createHostStepStore(const DeviceSlot& slot);
 

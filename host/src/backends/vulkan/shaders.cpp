@@ -70,6 +70,12 @@ const std::uint32_t kAmgFloat[] =
 const std::uint32_t kAmgDouble[] =
 #include "amg_double.inc"
 ;
+const std::uint32_t kStepFloat[] =
+#include "step_float.inc"
+;
+const std::uint32_t kStepDouble[] =
+#include "step_double.inc"
+;
 // clang-format on
 
 template <std::size_t N>
@@ -91,6 +97,7 @@ Spirv shaderCode(Shader shader, bool isDouble) {
     case Shader::PcgFused: return isDouble ? of(kPcgFusedDouble) : of(kPcgFusedFloat);
     case Shader::Surface: return isDouble ? of(kSurfaceDouble) : of(kSurfaceFloat);
     case Shader::Amg: return isDouble ? of(kAmgDouble) : of(kAmgFloat);
+    case Shader::Step: return isDouble ? of(kStepDouble) : of(kStepFloat);
   }
   return {};
 }
@@ -98,7 +105,7 @@ Spirv shaderCode(Shader shader, bool isDouble) {
 std::uint64_t shaderHash() {
   std::uint64_t h = kFnv1aOffset;
   for (Shader s : {Shader::Rotations, Shader::Element, Shader::Gather, Shader::Pcg, Shader::Reduce, Shader::PcgGroup,
-                   Shader::ElementFused, Shader::PcgFused, Shader::Surface, Shader::Amg})
+                   Shader::ElementFused, Shader::PcgFused, Shader::Surface, Shader::Amg, Shader::Step})
     for (bool d : {false, true}) {
       const Spirv code = shaderCode(s, d);
       h = fnv1a64(code.words, code.bytes, h);

@@ -7,7 +7,7 @@
 
 namespace corofem::detail::vk {
 
-enum class Shader { Rotations, Element, Gather, Pcg, Reduce, PcgGroup, ElementFused, PcgFused, Surface, Amg };
+enum class Shader { Rotations, Element, Gather, Pcg, Reduce, PcgGroup, ElementFused, PcgFused, Surface, Amg, Step };
 
 struct Spirv {
   const std::uint32_t* words = nullptr;

@@ -116,6 +116,8 @@ class Context {
   VkDescriptorSet descriptorSet(const std::vector<const Buffer*>& buffers);
   void freeDescriptorSet(VkDescriptorSet set);
   VkPipelineLayout pipelineLayout() const { return pipelineLayout_; }
+  /// The storage buffers of the shared layout (a descriptor set binds one at each).
+  std::uint32_t bindings() const { return bindings_; }
 
   /// The open command buffer: the one an earlier begin() gave and nobody submitted yet (its commands
   /// first, then a full barrier), or a new one of the ring (waits for the ring's oldest when all

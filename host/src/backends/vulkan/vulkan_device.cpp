@@ -194,6 +194,10 @@ std::vector<DeviceBuffer> VulkanDevice::buffers() const {
   return out;
 }
 
+std::unique_ptr<StepStore> VulkanDevice::createStepStore(const DeviceSlot& slot) {
+  return createVulkanStepStore(ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
+}
+
 }  // namespace vkdevice
 
 using vkdevice::VulkanDevice;

@@ -24,6 +24,7 @@
 #include "backends/vulkan/vk_runtime.hpp"
 #include "backends/vulkan/vulkan_amg.hpp"
 #include "backends/vulkan/vulkan_device.hpp"
+#include "backends/vulkan/vulkan_step_store.hpp"
 #include "backends/vulkan/vulkan_surfaces.hpp"
 #include "device/body_layout.hpp"
 #include "util/error.hpp"
@@ -163,6 +164,9 @@ class VulkanDevice final : public Device {
   std::vector<DeviceCounter> counters() const override;
 
   std::vector<DeviceBuffer> buffers() const override;
+
+  /// The store on this device's context, in its numbering and precision (vulkan_step_store.hpp).
+  std::unique_ptr<StepStore> createStepStore(const DeviceSlot& slot) override;
 
  private:
   struct Read {

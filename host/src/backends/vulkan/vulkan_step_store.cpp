@@ -1,0 +1,535 @@
+// The Vulkan device's step store (vulkan_step_store.hpp) over kernels/vulkan/step.comp.
+#include "backends/vulkan/vulkan_step_store.hpp"
+
+#include "backends/vulkan/shaders.hpp"
+#include "backends/vulkan/vk_runtime.hpp"
+#include "backends/vulkan/vulkan_amg.hpp"
+#include "solve/body_scale.hpp"
+#include "solve/device_slot.hpp"
+#include "util/error.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <utility>
+
+namespace corofem::detail {
+
+namespace {
+
+// step.comp's numbers (its comment says what each holds).
+constexpr std::uint32_t kNone = 0xFFFFFFFFu;
+constexpr std::size_t kWg = 64;  ///< dofs per work-group: a segment's 64 padded nodes are three
+constexpr std::size_t kChunk = 4096;
+constexpr std::size_t kStates = static_cast<std::size_t>(StateSlot::kCount);
+constexpr std::size_t kStateVecs = static_cast<std::size_t>(StateVec::kCount);
+constexpr std::size_t kScratchVecs = static_cast<std::size_t>(Scratch::kCount);
+constexpr std::size_t kVectors = kStates * kStateVecs + kScratchVecs;
+constexpr std::size_t kSums = 8;  ///< partial sums per work-group
+enum Mode : std::uint32_t { kModeBegin, kModePositions, kModeResidual, kModeUpdate, kModeEnd };
+enum Input : std::size_t { kInRest, kInMass, kInFree, kInSpring, kInHeld, kInApplied, kInSpringTarget, kInPresc, kInputs };
+constexpr std::size_t kUActive = 0, kUDofBegin = 1, kUDofs = 2, kUSlot = 3, kUFrom = 7, kUFlags = 8, kUCount = 12;
+constexpr std::uint32_t kFlagNewmark = 1, kFlagSprings = 2, kFlagApplied = 4, kFlagHeld = 8;
+constexpr std::size_t kRH = 0, kRKa = 1, kRKx = 2, kRCv = 3, kRCa = 4, kRFraction = 5, kRCount = 6;
+enum Binding : std::size_t { kBindWgBody, kBindBodyU, kBindBodyR, kBindVecs, kBindInputs, kBindLoads, kBindPresc,
+                             kBindPartials, kBindings };
+
+template <class E>
+std::size_t index(E e) {
+  return static_cast<std::size_t>(e);
+}
+
+/// Vectors whose entries are positions: the device keeps them relative to the body's origin.
+bool isPosition(StateVec v) { return v == StateVec::X; }
+bool isPosition(Scratch v) { return v == Scratch::Xb || v == Scratch::Target; }
+
+class VulkanStepStore final : public StepStore {
+ public:
+  VulkanStepStore(std::shared_ptr<vk::Context> ctx, bool isDouble, const std::vector<BodySegment>& segments,
+                  std::size_t nodeTotal, const DeviceSlot& slot)
+      : ctx_(std::move(ctx)), isDouble_(isDouble), rs_(isDouble ? sizeof(double) : sizeof(float)),
+        dofTotal_(3 * nodeTotal) {
+    if (segments.size() != slot.bodyCount())
+      fail(ErrorCode::Internal, "vulkan step store: ", segments.size(), " segments for ", slot.bodyCount(), " bodies");
+    for (std::size_t i = 0; i < segments.size(); ++i) {
+      Body b;
+      b.problem = &slot.problem(i);
+      b.seg = segments[i];
+      if (b.seg.dofs() != static_cast<std::size_t>(b.problem->restPositions.size()) || b.seg.dofBegin() % kWg != 0)
+        fail(ErrorCode::Internal, "vulkan step store: body '", b.problem->name, "' has ", b.seg.dofs(),
+             " dofs on the device at ", b.seg.dofBegin(), " for ", b.problem->restPositions.size());
+      const Eigen::Index n = b.problem->restPositions.size();
+      for (int k = 0; k < 3; ++k) {
+        double sum = 0.0;
+        for (Eigen::Index d = k; d < n; d += 3) sum += b.problem->restPositions[d];
+        b.origin[static_cast<std::size_t>(k)] = n >= 3 ? sum / static_cast<double>(n / 3) : 0.0;
+      }
+      loads_ = std::max(loads_, b.problem->forces.size());
+      groups_ = std::max(groups_, b.problem->prescribed.size());
+      bodies_.push_back(std::move(b));
+    }
+    const vk::Spirv code = vk::shaderCode(vk::Shader::Step, isDouble_);
+    pipeline_ = ctx_->pipeline(code.words, code.bytes, "step.comp");
+    const std::size_t groups = dofTotal_ / kWg;
+    buffers_[kBindWgBody] = vk::Buffer(*ctx_, groups * sizeof(std::uint32_t), false);
+    buffers_[kBindBodyU] = vk::Buffer(*ctx_, bodies_.size() * kUCount * sizeof(std::uint32_t), false);
+    buffers_[kBindVecs] = vk::Buffer(*ctx_, kVectors * dofTotal_ * rs_, false);
+    buffers_[kBindInputs] = vk::Buffer(*ctx_, kInputs * dofTotal_ * rs_, false);
+    buffers_[kBindPresc] = vk::Buffer(*ctx_, dofTotal_ * sizeof(std::uint32_t), false);
+    buffers_[kBindPartials] = vk::Buffer(*ctx_, groups * kSums * rs_, false);
+    placeholder_ = vk::Buffer(*ctx_, 0, false);
+    up_ = vk::Buffer(*ctx_, std::max(dofTotal_ * rs_, dofTotal_ * sizeof(std::uint32_t)), true);
+    down_ = vk::Buffer(*ctx_, std::max(dofTotal_ * rs_, groups * kSums * rs_), true);
+    for (const Binding b : {kBindWgBody, kBindBodyU, kBindVecs, kBindInputs, kBindPartials}) vk::zeroBuffer(*ctx_, buffers_[b]);
+    uploadWorkGroups();
+    std::vector<std::uint32_t> none(dofTotal_, kNone);
+    uploadWords(buffers_[kBindPresc], 0, none.data(), none.size());
+    grow(loads_, groups_);
+  }
+
+  ~VulkanStepStore() override {
+    try {
+      ctx_->wait(ctx_->flush());
+      ctx_->freeDescriptorSet(set_);
+    } catch (...) {
+    }
+  }
+
+  // ---------------------------------------------------------------------------- vectors
+
+  const Eigen::VectorXd& state(std::size_t body, StateSlot slot, StateVec vec) override {
+    Body& b = at(body);
+    Eigen::VectorXd& out = b.read[index(slot) * kStateVecs + index(vec)];
+    readVector(b, stateOffset(b, slot, vec), isPosition(vec), out);
+    return out;
+  }
+
+  void setState(std::size_t body, StateSlot slot, StateVec vec, const Eigen::VectorXd& value) override {
+    Body& b = at(body);
+    if (static_cast<std::size_t>(value.size()) != b.seg.dofs())
+      fail(ErrorCode::Internal, "step store: a state vector of ", value.size(), " entries for body '", b.problem->name,
+           "' of ", b.seg.dofs(), " dofs");
+    writeVector(b, stateOffset(b, slot, vec), [&](Eigen::Index d) {
+      return value[d] - (isPosition(vec) ? b.origin[static_cast<std::size_t>(d % 3)] : 0.0);
+    });
+  }
+
+  void setZero(std::size_t body, StateSlot slot, StateVec vec) override {
+    Body& b = at(body);
+    if (isPosition(vec)) {
+      writeVector(b, stateOffset(b, slot, vec), [&](Eigen::Index d) { return -b.origin[static_cast<std::size_t>(d % 3)]; });
+      return;
+    }
+    VkCommandBuffer cb = ctx_->begin();
+    vkCmdFillBuffer(cb, buffers_[kBindVecs].handle(), (stateOffset(b, slot, vec) + b.seg.dofBegin()) * rs_,
+                    b.seg.dofs() * rs_, 0u);
+    ctx_->wait(ctx_->submit());
+  }
+
+  const Eigen::VectorXd& scratch(std::size_t body, Scratch vec) override {
+    Body& b = at(body);
+    Eigen::VectorXd& out = b.read[kStates * kStateVecs + index(vec)];
+    readVector(b, scratchOffset(vec), isPosition(vec), out);
+    return out;
+  }
+
+  void swap(std::size_t body, StateSlot a, StateSlot b) override {
+    Body& s = at(body);
+    std::swap(s.slot[index(a)], s.slot[index(b)]);  // the tables the passes read follow at their next dispatch
+  }
+
+  void copy(std::size_t body, StateSlot from, StateSlot to) override {
+    Body& b = at(body);
+    if (from == to) return;
+    VkCommandBuffer cb = ctx_->begin();
+    for (std::size_t v = 0; v < kStateVecs; ++v) {
+      const VkBufferCopy region{(stateOffset(b, from, StateVec(v)) + b.seg.dofBegin()) * rs_,
+                                (stateOffset(b, to, StateVec(v)) + b.seg.dofBegin()) * rs_, b.seg.dofs() * rs_};
+      vkCmdCopyBuffer(cb, buffers_[kBindVecs].handle(), buffers_[kBindVecs].handle(), 1, &region);
+    }
+    ctx_->wait(ctx_->submit());
+  }
+
+  void constraintsChanged(std::size_t body) override { uploadProblem(checked(body)); }
+
+  void setControls(std::size_t body, const BodyControls& controls) override {
+    Body& b = at(body);
+    b.controls = controls;
+    uploadControls(b);
+  }
+
+  const BodyControls& controls(std::size_t body) const override { return bodies_.at(body).controls; }
+
+  void removeBody(std::size_t body) override {
+    checked(body);
+    bodies_.erase(bodies_.begin() + static_cast<std::ptrdiff_t>(body));
+    uploadWorkGroups();  // later bodies' indices moved down; the body's dofs belong to none
+  }
+
+  const Eigen::ArrayXd& freeMask(std::size_t body) const override { return bodies_.at(body).freeMask; }
+
+  // ---------------------------------------------------------------------------- device calls
+  // Through host vectors for now (vulkan_step_store.hpp: the next step reads the store's buffers on
+  // the device).
+
+  void setPositions(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
+    ConstVectors xs;
+    for (std::size_t i : set) xs.push_back(&state(i, slot, StateVec::X));
+    device.setPositions(set, xs);
+  }
+
+  void internalForces(DeviceSlot& device, const BodySet& set) override {
+    std::vector<Eigen::VectorXd> f(set.size());
+    Vectors fs;
+    for (Eigen::VectorXd& v : f) fs.push_back(&v);
+    device.internalForces(set, fs);
+    for (std::size_t k = 0; k < set.size(); ++k) setScratch(at(set[k]), Scratch::Fint, f[k]);
+  }
+
+  void damping(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
+    std::vector<Eigen::VectorXd> v(set.size()), cv(set.size());
+    std::vector<const Problem*> problems;
+    ConstVectors vs;
+    Vectors cvs;
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      v[k] = state(set[k], slot, StateVec::V);
+      problems.push_back(at(set[k]).problem);
+      vs.push_back(&v[k]);
+      cvs.push_back(&cv[k]);
+    }
+    dampingForces(device, set, problems, vs, cvs);
+    for (std::size_t k = 0; k < set.size(); ++k) setScratch(at(set[k]), Scratch::Cv, cv[k]);
+  }
+
+  void solve(DeviceSlot& device, const BodySet& set, std::vector<PcgSolve>& solves) override {
+    std::vector<Eigen::VectorXd> rhs(set.size()), dv(set.size());
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      rhs[k] = scratch(set[k], Scratch::Rhs);
+      dv[k].setZero(rhs[k].size());  // Newton's correction starts at 0
+      solves[k].b = &rhs[k];
+      solves[k].x = &dv[k];
+    }
+    device.solve(set, solves);
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      setScratch(at(set[k]), Scratch::Dv, dv[k]);
+      solves[k].b = nullptr;
+      solves[k].x = nullptr;  // the temporaries go with this call
+    }
+  }
+
+  // ---------------------------------------------------------------------------- passes
+
+  void begin(const BodySet& set, const std::vector<BeginArgs>& args, std::vector<double>& fextNorm) override {
+    check(set, args.size());
+    Tables t = tables();
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      const Body& b = bodies_[set[k]];
+      const BeginArgs& a = args[k];
+      setMaps(t, set[k], a.maps);
+      std::uint32_t* u = &t.u[kUCount * set[k]];
+      u[kUFrom] = static_cast<std::uint32_t>(index(a.from));
+      double* r = &t.r[realsPerBody() * set[k]];
+      r[kRFraction] = a.fraction;
+      const std::vector<double> scales = b.problem->loadScales(a.t1, /*dynamic=*/true);
+      const std::vector<double> presc = b.problem->prescribedScales(a.t1, /*dynamic=*/true);
+      std::copy(scales.begin(), scales.end(), r + kRCount);
+      std::copy(presc.begin(), presc.end(), r + kRCount + loads_);
+    }
+    const std::vector<std::array<double, kSums>> sums = run(kModeBegin, set, t);
+    fextNorm.resize(set.size());
+    for (std::size_t k = 0; k < set.size(); ++k) fextNorm[k] = std::sqrt(sums[k][0]);
+  }
+
+  void positions(const BodySet& set, const std::vector<SchemeMaps>& maps) override {
+    check(set, maps.size());
+    Tables t = tables();
+    for (std::size_t k = 0; k < set.size(); ++k) setMaps(t, set[k], maps[k]);
+    run(kModePositions, set, t);
+  }
+
+  void residual(const BodySet& set, const std::vector<SchemeMaps>& maps, std::vector<ResidualSums>& out) override {
+    check(set, maps.size());
+    Tables t = tables();
+    for (std::size_t k = 0; k < set.size(); ++k) setMaps(t, set[k], maps[k]);
+    const std::vector<std::array<double, kSums>> sums = run(kModeResidual, set, t);
+    out.resize(set.size());
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      const auto& s = sums[k];
+      out[k] = ResidualSums{s[0], s[1], s[2], s[3], s[4], s[5]};
+    }
+  }
+
+  void update(const BodySet& set, std::vector<double>& nonFinite) override {
+    check(set, set.size());
+    const std::vector<std::array<double, kSums>> sums = run(kModeUpdate, set, tables());
+    nonFinite.resize(set.size());
+    for (std::size_t k = 0; k < set.size(); ++k) nonFinite[k] = sums[k][0];
+  }
+
+  void end(const BodySet& set, std::vector<EndSums>& out) override {
+    check(set, set.size());
+    const std::vector<std::array<double, kSums>> sums = run(kModeEnd, set, tables());
+    out.resize(set.size());
+    for (std::size_t k = 0; k < set.size(); ++k) std::copy_n(sums[k].begin(), out[k].size(), out[k].begin());
+  }
+
+ private:
+  struct Body {
+    const Problem* problem = nullptr;
+    BodySegment seg;
+    std::array<double, 3> origin = {0, 0, 0};  ///< subtracted from every position the device holds
+    Eigen::ArrayXd freeMask;
+    BodyControls controls;
+    std::array<std::uint32_t, kStates> slot = {0, 1, 2, 3};  ///< the physical state of each StateSlot
+    std::array<Eigen::VectorXd, kVectors> read;               ///< state() and scratch() answers
+  };
+
+  /// The per-body tables of one dispatch (every body of the store: those outside the set inactive).
+  struct Tables {
+    std::vector<std::uint32_t> u;
+    std::vector<double> r;
+  };
+
+  std::size_t realsPerBody() const { return kRCount + loads_ + groups_; }
+
+  Body& at(std::size_t body) { return bodies_[checked(body)]; }
+  std::size_t checked(std::size_t body) const {
+    if (body >= bodies_.size()) fail(ErrorCode::Internal, "step store: body ", body, " of ", bodies_.size());
+    return body;
+  }
+  void check(const BodySet& set, std::size_t args) const {
+    for (std::size_t body : set) checked(body);
+    if (args != set.size())
+      fail(ErrorCode::Internal, "step store: ", args, " arguments for ", set.size(), " bodies");
+  }
+
+  /// Where a vector starts in the vectors' buffer (reals; the body's entries from its dofBegin()).
+  std::size_t stateOffset(const Body& b, StateSlot slot, StateVec vec) const {
+    return (kStateVecs * b.slot[index(slot)] + index(vec)) * dofTotal_;
+  }
+  std::size_t scratchOffset(Scratch vec) const { return (kStates * kStateVecs + index(vec)) * dofTotal_; }
+
+  /// out = the body's entries of the vector at `offset`, in double in the problem's numbering (the
+  /// origin added back to positions).
+  void readVector(const Body& b, std::size_t offset, bool position, Eigen::VectorXd& out) {
+    VkCommandBuffer cb = ctx_->begin();
+    const VkBufferCopy region{(offset + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_};
+    vkCmdCopyBuffer(cb, buffers_[kBindVecs].handle(), down_.handle(), 1, &region);
+    vk::hostReadBarrier(cb);
+    ctx_->wait(ctx_->submit());
+    getReals(down_.mapped(), isDouble_, b.seg, kChunk, out);
+    if (position)
+      for (Eigen::Index d = 0; d < out.size(); ++d) out[d] += b.origin[static_cast<std::size_t>(d % 3)];
+  }
+
+  /// The body's entries of the vector at `offset` = value(problem dof), in the device's precision
+  /// and numbering.
+  template <class Value>
+  void writeVector(const Body& b, std::size_t offset, Value&& value) {
+    putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk,
+             [&](std::size_t d) { return value(static_cast<Eigen::Index>(b.seg.hostDof(d))); });
+    VkCommandBuffer cb = ctx_->begin();
+    const VkBufferCopy region{b.seg.dofBegin() * rs_, (offset + b.seg.dofBegin()) * rs_, b.seg.dofs() * rs_};
+    vkCmdCopyBuffer(cb, up_.handle(), buffers_[kBindVecs].handle(), 1, &region);
+    ctx_->wait(ctx_->submit());
+  }
+
+  void setScratch(const Body& b, Scratch vec, const Eigen::VectorXd& value) {
+    if (static_cast<std::size_t>(value.size()) != b.seg.dofs())
+      fail(ErrorCode::Internal, "step store: a scratch vector of ", value.size(), " entries for body '",
+           b.problem->name, "' of ", b.seg.dofs(), " dofs");
+    writeVector(b, scratchOffset(vec), [&](Eigen::Index d) {
+      return value[d] - (isPosition(vec) ? b.origin[static_cast<std::size_t>(d % 3)] : 0.0);
+    });
+  }
+
+  /// Input `k` of the body (kIn*) = value(problem dof).
+  template <class Value>
+  void writeInput(const Body& b, Input k, Value&& value) {
+    putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk,
+             [&](std::size_t d) { return value(static_cast<Eigen::Index>(b.seg.hostDof(d))); });
+    copyUp(buffers_[kBindInputs], (k * dofTotal_ + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_);
+  }
+
+  void copyUp(const vk::Buffer& to, std::size_t toByte, std::size_t fromByte, std::size_t bytes) {
+    VkCommandBuffer cb = ctx_->begin();
+    const VkBufferCopy region{fromByte, toByte, bytes};
+    vkCmdCopyBuffer(cb, up_.handle(), to.handle(), 1, &region);
+    ctx_->wait(ctx_->submit());
+  }
+
+  void uploadWords(const vk::Buffer& to, std::size_t first, const std::uint32_t* words, std::size_t count) {
+    if (count == 0) return;
+    std::memcpy(up_.mapped(), words, count * sizeof(std::uint32_t));
+    copyUp(to, first * sizeof(std::uint32_t), 0, count * sizeof(std::uint32_t));
+  }
+
+  /// Each dof work-group's body (an index into bodies_), or none.
+  void uploadWorkGroups() {
+    std::vector<std::uint32_t> wg(dofTotal_ / kWg, kNone);
+    for (std::size_t i = 0; i < bodies_.size(); ++i) {
+      const BodySegment& s = bodies_[i].seg;
+      for (std::size_t g = s.dofBegin() / kWg; g < 3 * (s.nodeBegin + s.nodeSpan) / kWg; ++g)
+        wg[g] = static_cast<std::uint32_t>(i);
+    }
+    uploadWords(buffers_[kBindWgBody], 0, wg.data(), wg.size());
+  }
+
+  /// The body's per-dof inputs from its problem (rest positions, mass, free dofs, springs, the
+  /// prescribed dofs' groups and values, the loads) and its controls.
+  void uploadProblem(std::size_t body) {
+    Body& b = bodies_[body];
+    const Problem& p = *b.problem;
+    b.freeMask = bodyScale(p).freeMask;
+    const Eigen::Index n = p.restPositions.size();
+    const auto originOf = [&](Eigen::Index d) { return b.origin[static_cast<std::size_t>(d % 3)]; };
+    writeInput(b, kInRest, [&](Eigen::Index d) { return p.restPositions[d] - originOf(d); });
+    writeInput(b, kInMass, [&](Eigen::Index d) { return p.lumpedMass.size() == n ? p.lumpedMass[d] : 0.0; });
+    writeInput(b, kInFree, [&](Eigen::Index d) { return b.freeMask[d]; });
+    writeInput(b, kInSpring, [&](Eigen::Index d) { return p.springStiffness.size() == n ? p.springStiffness[d] : 0.0; });
+    // A prescribed dof takes the last group that names it (Problem::applyPrescribed).
+    std::vector<std::uint32_t> group(static_cast<std::size_t>(n), kNone);
+    Eigen::VectorXd value = Eigen::VectorXd::Zero(n);
+    for (std::size_t g = 0; g < p.prescribed.size(); ++g)
+      for (std::size_t k = 0; k < p.prescribed[g].dofs.size(); ++k) {
+        group[p.prescribed[g].dofs[k]] = static_cast<std::uint32_t>(g);
+        value[p.prescribed[g].dofs[k]] = p.prescribed[g].values[k];
+      }
+    writeInput(b, kInPresc, [&](Eigen::Index d) { return value[d]; });
+    std::vector<std::uint32_t> deviceGroup(b.seg.dofs());
+    for (std::size_t d = 0; d < b.seg.dofs(); ++d) deviceGroup[d] = group[b.seg.hostDof(d)];
+    uploadWords(buffers_[kBindPresc], b.seg.dofBegin(), deviceGroup.data(), deviceGroup.size());
+    if (p.forces.size() > loads_ || p.prescribed.size() > groups_) {
+      grow(std::max(loads_, p.forces.size()), std::max(groups_, p.prescribed.size()));  // uploads every body again
+      return;
+    }
+    for (std::size_t l = 0; l < loads_; ++l) {
+      putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk, [&](std::size_t d) {
+        return l < p.forces.size() ? p.forces[l].f[static_cast<Eigen::Index>(b.seg.hostDof(d))] : 0.0;
+      });
+      copyUp(buffers_[kBindLoads], (l * dofTotal_ + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_);
+    }
+    uploadControls(b);
+  }
+
+  /// Room for `loads` load patterns and `groups` prescribed groups a body: the buffers sized by them
+  /// made again, the descriptor set written again, and every body's problem uploaded again.
+  void grow(std::size_t loads, std::size_t groups) {
+    ctx_->wait(ctx_->flush());  // recorded work may still read the buffers replaced
+    loads_ = loads;
+    groups_ = groups;
+    buffers_[kBindBodyR] = vk::Buffer(*ctx_, std::max<std::size_t>(bodies_.size(), 1) * realsPerBody() * rs_, false);
+    buffers_[kBindLoads] = vk::Buffer(*ctx_, std::max<std::size_t>(loads_, 1) * dofTotal_ * rs_, false);
+    vk::zeroBuffer(*ctx_, buffers_[kBindLoads]);
+    if (set_ != VK_NULL_HANDLE) ctx_->freeDescriptorSet(set_);
+    std::vector<const vk::Buffer*> set(ctx_->bindings(), &placeholder_);
+    for (std::size_t b = 0; b < kBindings; ++b) set[b] = &buffers_[b];
+    set_ = ctx_->descriptorSet(set);
+    for (std::size_t i = 0; i < bodies_.size(); ++i) uploadProblem(i);
+  }
+
+  /// The application's held targets (NaN: not held), applied forces and spring targets.
+  void uploadControls(const Body& b) {
+    const Eigen::Index n = b.problem->restPositions.size();
+    const BodyControls& c = b.controls;
+    const auto originOf = [&](Eigen::Index d) { return b.origin[static_cast<std::size_t>(d % 3)]; };
+    if (c.targets.size() == n) writeInput(b, kInHeld, [&](Eigen::Index d) { return c.targets[d] - originOf(d); });
+    if (c.forces.size() == n) writeInput(b, kInApplied, [&](Eigen::Index d) { return c.forces[d]; });
+    if (c.springTargets.size() == n)
+      writeInput(b, kInSpringTarget, [&](Eigen::Index d) { return c.springTargets[d] - originOf(d); });
+  }
+
+  /// The tables with every body inactive, its dofs and states set.
+  Tables tables() const {
+    Tables t;
+    t.u.assign(kUCount * bodies_.size(), 0u);
+    t.r.assign(realsPerBody() * bodies_.size(), 0.0);
+    for (std::size_t i = 0; i < bodies_.size(); ++i) {
+      const Body& b = bodies_[i];
+      const Problem& p = *b.problem;
+      const Eigen::Index n = p.restPositions.size();
+      std::uint32_t* u = &t.u[kUCount * i];
+      u[kUDofBegin] = static_cast<std::uint32_t>(b.seg.dofBegin());
+      u[kUDofs] = static_cast<std::uint32_t>(b.seg.dofs());
+      std::copy(b.slot.begin(), b.slot.end(), u + kUSlot);
+      const bool springs = p.springStiffness.size() == n && b.controls.springTargets.size() == n;
+      u[kUFlags] = (springs ? kFlagSprings : 0u) | (b.controls.forces.size() == n ? kFlagApplied : 0u) |
+                   (b.controls.targets.size() == n ? kFlagHeld : 0u);
+    }
+    return t;
+  }
+
+  void setMaps(Tables& t, std::size_t body, const SchemeMaps& m) const {
+    if (m.newmark) t.u[kUCount * body + kUFlags] |= kFlagNewmark;
+    double* r = &t.r[realsPerBody() * body];
+    r[kRH] = m.h;
+    r[kRKa] = m.ka;
+    r[kRKx] = m.kx;
+    r[kRCv] = m.cv;
+    r[kRCa] = m.ca;
+  }
+
+  /// Dispatches `mode` over every dof work-group with the set's bodies active, waits, and returns
+  /// each body's sums: its work-groups' partial sums added in order, in double.
+  std::vector<std::array<double, kSums>> run(Mode mode, const BodySet& set, Tables t) {
+    for (std::size_t i : set) t.u[kUCount * i + kUActive] = 1u;
+    VkCommandBuffer cb = ctx_->begin();
+    vk::updateBuffer(cb, buffers_[kBindBodyU], 0, t.u.data(), t.u.size() * sizeof(std::uint32_t));
+    const std::vector<unsigned char> reals = realBytes(t.r, isDouble_);
+    vk::updateBuffer(cb, buffers_[kBindBodyR], 0, reals.data(), reals.size());
+    vk::fullBarrier(cb);
+    VulkanPush push;
+    push.mode = mode;
+    push.o[0] = static_cast<std::uint32_t>(dofTotal_);
+    push.o[1] = static_cast<std::uint32_t>(loads_);
+    push.o[2] = static_cast<std::uint32_t>(groups_);
+    push.o[3] = static_cast<std::uint32_t>(realsPerBody());
+    vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+    vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_->pipelineLayout(), 0, 1, &set_, 0, nullptr);
+    vkCmdPushConstants(cb, ctx_->pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(push), &push);
+    vkCmdDispatch(cb, static_cast<std::uint32_t>(dofTotal_ / kWg), 1, 1);
+    vk::fullBarrier(cb);
+    for (std::size_t i : set) {
+      const BodySegment& s = bodies_[i].seg;
+      const std::size_t first = s.dofBegin() / kWg, count = s.dofs() == 0 ? 0 : (s.dofs() + kWg - 1) / kWg;
+      const VkBufferCopy region{first * kSums * rs_, first * kSums * rs_, count * kSums * rs_};
+      if (count) vkCmdCopyBuffer(cb, buffers_[kBindPartials].handle(), down_.handle(), 1, &region);
+    }
+    vk::hostReadBarrier(cb);
+    ctx_->wait(ctx_->submit());
+    std::vector<std::array<double, kSums>> out(set.size());
+    for (std::size_t k = 0; k < set.size(); ++k) {
+      const BodySegment& s = bodies_[set[k]].seg;
+      const std::size_t first = s.dofBegin() / kWg, count = (s.dofs() + kWg - 1) / kWg;
+      out[k].fill(0.0);
+      withReals(down_.mapped(), isDouble_, 0, [&](const auto* p) {
+        for (std::size_t g = first; g < first + count; ++g)
+          for (std::size_t j = 0; j < kSums; ++j) out[k][j] += static_cast<double>(p[kSums * g + j]);
+      });
+    }
+    return out;
+  }
+
+  std::shared_ptr<vk::Context> ctx_;
+  bool isDouble_;
+  std::size_t rs_;
+  std::size_t dofTotal_;
+  std::vector<Body> bodies_;
+  std::size_t loads_ = 0, groups_ = 0;  ///< the most load patterns and prescribed groups of a body
+  VkPipeline pipeline_ = VK_NULL_HANDLE;
+  std::array<vk::Buffer, kBindings> buffers_;
+  vk::Buffer placeholder_, up_, down_;
+  VkDescriptorSet set_ = VK_NULL_HANDLE;
+};
+
+}  // namespace
+
+std::unique_ptr<StepStore> createVulkanStepStore(std::shared_ptr<vk::Context> ctx, bool isDouble,
+                                                 const std::vector<BodySegment>& segments, std::size_t nodeTotal,
+                                                 const DeviceSlot& slot) {
+  return std::make_unique<VulkanStepStore>(std::move(ctx), isDouble, segments, nodeTotal, slot);
+}
+
+}  // namespace corofem::detail
