@@ -7,6 +7,7 @@
  *   kModeResidual   r = M a + C v + f_int + S (x - t) - f_ext, rhs = -r / ka
  *   kModeUpdate     v += dv
  *   kModeEnd        the reactions, the springs' pull joining f_ext, the work sums
+ *   kModeDamping    Cv = alpha M v of the state kUFrom names (mass damping alone; alpha 0: none)
  * Each work-group of 64 dofs belongs to one body (the device's segments are whole node work-groups,
  * 192 dofs); it writes its sums (the host adds a body's work-groups in order, in double) to
  * partials[8 g + k], a tree over its invocations: the same bits for a body alone or in a set.
@@ -41,14 +42,15 @@ layout(push_constant) uniform Push {
   uint o0, o1, o2, o3, o4, o5;                   /* D, load patterns, prescribed groups, reals per body */
 } pc;
 
-const uint kModeBegin = 0u, kModePositions = 1u, kModeResidual = 2u, kModeUpdate = 3u, kModeEnd = 4u;
+const uint kModeBegin = 0u, kModePositions = 1u, kModeResidual = 2u, kModeUpdate = 3u, kModeEnd = 4u,
+           kModeDamping = 5u;
 /* Per body (uint): running, first dof, dofs, the physical state of each StateSlot, the state the
  * held targets start from, kU* flags. */
 const uint kUActive = 0u, kUDofBegin = 1u, kUDofs = 2u, kUSlot = 3u, kUFrom = 7u, kUFlags = 8u, kUCount = 12u;
 const uint kFlagNewmark = 1u, kFlagSprings = 2u, kFlagApplied = 4u, kFlagHeld = 8u;
-/* Per body (real): the scheme's maps, the held targets' fraction, then the load scales (pc.o1) and
- * the prescribed groups' scales (pc.o2). */
-const uint kRH = 0u, kRKa = 1u, kRKx = 2u, kRCv = 3u, kRCa = 4u, kRFraction = 5u, kRCount = 6u;
+/* Per body (real): the scheme's maps, the held targets' fraction, the mass damping's alpha, then the
+ * load scales (pc.o1) and the prescribed groups' scales (pc.o2). */
+const uint kRH = 0u, kRKa = 1u, kRKx = 2u, kRCv = 3u, kRCa = 4u, kRFraction = 5u, kRAlpha = 6u, kRCount = 7u;
 /* The state vectors and the scratch (solve/step_store.hpp's StateVec and Scratch). */
 const uint kX = 0u, kV = 1u, kA = 2u, kFext = 3u, kReaction = 4u;
 const uint kVb = 0u, kXb = 1u, kTarget = 2u, kFint = 3u, kCv = 4u, kR = 5u, kDv = 6u, kRhs = 7u;
@@ -100,7 +102,7 @@ void main() {
       vecs[scratch_at(kXb, d)] = xb;
       const real free_d = input_of(kInFree, d);
       /* The targets: constrained dofs at rest or prescribed (the last group on the dof), then the
-       * application's held ones (NaN: not held), in proportion from the state pc's kUFrom gives. */
+       * application's held ones (NaN: not held), in proportion from the state kUFrom names. */
       real target = vecs[scratch_at(kTarget, d)];
       if (free_d == real(0)) target = input_of(kInRest, d);
       const uint g = presc[d];
@@ -182,5 +184,8 @@ void main() {
       sums[6][lid] = input_of(kInMass, d) * (v * v);
     }
     write_sums(7u);
+  } else if (pc.mode == kModeDamping) {
+    if (real_dof)
+      vecs[scratch_at(kCv, d)] = body_real(kRAlpha) * (input_of(kInMass, d) * vecs[state_at(bodyU[kUCount * body + kUFrom], kV, d)]);
   }
 }

@@ -125,7 +125,10 @@ SchemeMaps eulerMaps(double h) {
 }
 
 /// A store of the contract: the host's, or a Vulkan device's in double or float. `floor`: the
-/// relative difference its precision allows wherever the host's meets an expression to rounding.
+/// relative difference its precision allows wherever the host's meets an expression to rounding (a
+/// device store keeps positions relative to an origin of its own, where the device's own calls take
+/// them relative to their centroid: the forces and products the test compares differ by rounding
+/// there; in float, Newton's starting v on held dofs, (t - xb) / kx, loses most).
 struct StoreKind {
   const char* name;
   bool vulkan;
@@ -135,7 +138,7 @@ struct StoreKind {
 
 const StoreKind kStores[] = {
     {"host", false, Precision::Double, 0.0},
-    {"vulkan_double", true, Precision::Double, 1e-13},
+    {"vulkan_double", true, Precision::Double, 1e-12},
     {"vulkan_float", true, Precision::Float, 2e-5},
 };
 
@@ -150,6 +153,7 @@ class StepStoreContract : public ::testing::TestWithParam<StoreKind> {
     // sanitizer job's -O0).
     problems_.push_back(featureBody(6, 3, 3, 0.1, 11));
     problems_.push_back(featureBody(1400, 1, 1, 0.01, 21));
+    problems_[1].rayleighStiffness = 0.0;  // mass damping alone: the damping's other path
     ASSERT_GT(problems_[1].restPositions.size(), 16384);
     SolverDesc solver;
     solver.linearSolver = LinearSolverKind::Pcg;

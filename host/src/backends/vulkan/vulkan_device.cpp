@@ -36,7 +36,11 @@ void VulkanDevice::setPositions(const BodySet& set, const ConstVectors& x) {
   }
   if (amg_) amg_->positionsSet(set, x);
   vk::fullBarrier(cb);
-  // The rotations, one pass per rotation method among the set's co-rotational bodies.
+  recordRotations(cb, set);
+  stagingUse_ = kOpenCommands;  // left open: the forces' read, or the next read, submits it
+}
+
+void VulkanDevice::recordRotations(VkCommandBuffer cb, const BodySet& set) const {
   for (RotationMethod m : {RotationMethod::Polar, RotationMethod::Svd, RotationMethod::Quaternion, RotationMethod::Qr}) {
     std::vector<char> active(bodyCount(), 0);
     bool any = false;
@@ -48,12 +52,17 @@ void VulkanDevice::setPositions(const BodySet& set, const ConstVectors& x) {
     push.rotation = rotationCode(m);
     dispatch(cb, rotations_, apply_, push, elementGroups());
   }
-  stagingUse_ = kOpenCommands;  // left open: the forces' read, or the next read, submits it
 }
 
 void VulkanDevice::internalForces(const BodySet& set, const Vectors& f) {
   checkSet(set, f.size(), "forces");
   VkCommandBuffer cb = ctx_->begin();
+  recordForces(cb, set);
+  readOutputs(cb, set, f);
+  takeEnergies(set);
+}
+
+void VulkanDevice::recordForces(VkCommandBuffer cb, const BodySet& set) const {
   recordActive(cb, activeOf(set));
   recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
   recordPasses(cb, kElementForces, kGatherSum);
@@ -62,8 +71,60 @@ void VulkanDevice::internalForces(const BodySet& set, const Vectors& f) {
   // these positions (the drivers ask for it after the step's last forces) with no round trip of its
   // own.
   recordEnergySums(cb);
-  readOutputs(cb, set, f);
+}
+
+void VulkanDevice::setPositionsFrom(const BodySet& set, const vk::Buffer& from, const std::vector<std::size_t>& at,
+                                    const std::vector<std::array<double, 3>>& origins, const ConstVectors* hostX) {
+  checkSet(set, at.size(), "positions");
+  checkSet(set, origins.size(), "origins");
+  if (amg_ && (!hostX || hostX->size() != set.size()))
+    fail(ErrorCode::Internal, "vulkan backend: the multigrid's warp needs the positions on the host");
+  VkCommandBuffer cb = ctx_->begin();
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    BodySegment& sg = layout_.segments[set[i]];
+    energyFresh_[set[i]] = 0;
+    std::copy(origins[i].begin(), origins[i].end(), sg.centroid);
+    copy(cb, from, (at[i] + sg.dofBegin()) * rs_, buffer(kPos), sg.dofBegin() * rs_, sg.dofs() * rs_);
+  }
+  if (amg_) amg_->positionsSet(set, *hostX);
+  vk::fullBarrier(cb);
+  recordRotations(cb, set);
+}
+
+void VulkanDevice::internalForcesInto(const BodySet& set, const vk::Buffer& to, const std::vector<std::size_t>& at) {
+  checkSet(set, at.size(), "forces");
+  VkCommandBuffer cb = ctx_->begin();
+  recordForces(cb, set);
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    const BodySegment& sg = segment(set[i]);
+    copy(cb, yout_, sg.dofBegin() * rs_, to, (at[i] + sg.dofBegin()) * rs_, sg.dofs() * rs_);
+  }
+  vk::hostReadBarrier(cb);  // the energies' sums, read now; the forces stay on the device
+  ctx_->wait(ctx_->submit());
   takeEnergies(set);
+}
+
+void VulkanDevice::applyIn(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const vk::Buffer& vectors,
+                           const std::vector<std::size_t>& from, const std::vector<std::size_t>& to) {
+  checkSet(set, coeffs.size(), "products");
+  checkSet(set, from.size(), "products");
+  checkSet(set, to.size(), "products");
+  VkCommandBuffer cb = ctx_->begin();
+  std::vector<SystemCoeffs> all(bodyCount());
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    const BodySegment& sg = segment(set[i]);
+    copy(cb, vectors, (from[i] + sg.dofBegin()) * rs_, pin_, sg.dofBegin() * rs_, sg.dofs() * rs_);
+    all[set[i]] = coeffs[i];
+  }
+  vk::fullBarrier(cb);
+  recordActive(cb, activeOf(set));
+  recordCoefficients(cb, all);
+  recordPasses(cb, kElementProduct, kGatherProduct);
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    const BodySegment& sg = segment(set[i]);
+    copy(cb, yout_, sg.dofBegin() * rs_, vectors, (to[i] + sg.dofBegin()) * rs_, sg.dofs() * rs_);
+  }
+  vk::fullBarrier(cb);  // left open: the store's next pass reads y after it
 }
 
 void VulkanDevice::apply(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const ConstVectors& p,
@@ -195,7 +256,7 @@ std::vector<DeviceBuffer> VulkanDevice::buffers() const {
 }
 
 std::unique_ptr<StepStore> VulkanDevice::createStepStore(const DeviceSlot& slot) {
-  return createVulkanStepStore(ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
+  return createVulkanStepStore(*this, ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
 }
 
 }  // namespace vkdevice

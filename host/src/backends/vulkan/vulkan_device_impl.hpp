@@ -32,6 +32,7 @@
 #include "../../../../kernels/shared/corofem_layout.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <deque>
@@ -168,6 +169,22 @@ class VulkanDevice final : public Device {
   /// The store on this device's context, in its numbering and precision (vulkan_step_store.hpp).
   std::unique_ptr<StepStore> createStepStore(const DeviceSlot& slot) override;
 
+  // ---------------------------------------------------------------------------- a store's calls
+  // The element operations on vectors a step store keeps in a buffer of this device's context, in
+  // its numbering and precision: body set[i]'s entries at reals at[i] + its dofBegin().
+
+  /// The positions of `set` from `from` (relative to origins[i], which becomes the body's
+  /// centroid), then the rotations. `hostX`: the same positions on the host where
+  /// positionsNeedHost() (the multigrid's warp is the host's), else null.
+  void setPositionsFrom(const BodySet& set, const vk::Buffer& from, const std::vector<std::size_t>& at,
+                        const std::vector<std::array<double, 3>>& origins, const ConstVectors* hostX);
+  bool positionsNeedHost() const { return amg_ != nullptr; }
+  /// f_int of `set` at the device's positions into `to`.
+  void internalForcesInto(const BodySet& set, const vk::Buffer& to, const std::vector<std::size_t>& at);
+  /// y = A p for `set` with p and y in `vectors` (p at from[i], y at to[i]).
+  void applyIn(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const vk::Buffer& vectors,
+               const std::vector<std::size_t>& from, const std::vector<std::size_t>& to);
+
  private:
   struct Read {
     PcgTicket ticket = 0;
@@ -231,6 +248,13 @@ class VulkanDevice final : public Device {
     push.mode = gatherMode;
     dispatch(cb, gather_, apply_, push, nodeGroups());
   }
+
+  /// The rotations of the set's co-rotational bodies at the positions set, one pass per rotation
+  /// method among them.
+  void recordRotations(VkCommandBuffer cb, const BodySet& set) const;
+
+  /// The forces' passes of `set` (into yout_) with their energies' work-group sums.
+  void recordForces(VkCommandBuffer cb, const BodySet& set) const;
 
   /// Submits cb with the copies of yout_'s entries of the set's bodies, waits, and converts them
   /// into `out` (one vector per body of the set, in the problem's numbering).

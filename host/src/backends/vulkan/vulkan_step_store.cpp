@@ -3,7 +3,7 @@
 
 #include "backends/vulkan/shaders.hpp"
 #include "backends/vulkan/vk_runtime.hpp"
-#include "backends/vulkan/vulkan_amg.hpp"
+#include "backends/vulkan/vulkan_device_impl.hpp"
 #include "solve/body_scale.hpp"
 #include "solve/device_slot.hpp"
 #include "util/error.hpp"
@@ -28,11 +28,11 @@ constexpr std::size_t kStateVecs = static_cast<std::size_t>(StateVec::kCount);
 constexpr std::size_t kScratchVecs = static_cast<std::size_t>(Scratch::kCount);
 constexpr std::size_t kVectors = kStates * kStateVecs + kScratchVecs;
 constexpr std::size_t kSums = 8;  ///< partial sums per work-group
-enum Mode : std::uint32_t { kModeBegin, kModePositions, kModeResidual, kModeUpdate, kModeEnd };
+enum Mode : std::uint32_t { kModeBegin, kModePositions, kModeResidual, kModeUpdate, kModeEnd, kModeDamping };
 enum Input : std::size_t { kInRest, kInMass, kInFree, kInSpring, kInHeld, kInApplied, kInSpringTarget, kInPresc, kInputs };
 constexpr std::size_t kUActive = 0, kUDofBegin = 1, kUDofs = 2, kUSlot = 3, kUFrom = 7, kUFlags = 8, kUCount = 12;
 constexpr std::uint32_t kFlagNewmark = 1, kFlagSprings = 2, kFlagApplied = 4, kFlagHeld = 8;
-constexpr std::size_t kRH = 0, kRKa = 1, kRKx = 2, kRCv = 3, kRCa = 4, kRFraction = 5, kRCount = 6;
+constexpr std::size_t kRH = 0, kRKa = 1, kRKx = 2, kRCv = 3, kRCa = 4, kRFraction = 5, kRAlpha = 6, kRCount = 7;
 enum Binding : std::size_t { kBindWgBody, kBindBodyU, kBindBodyR, kBindVecs, kBindInputs, kBindLoads, kBindPresc,
                              kBindPartials, kBindings };
 
@@ -47,9 +47,9 @@ bool isPosition(Scratch v) { return v == Scratch::Xb || v == Scratch::Target; }
 
 class VulkanStepStore final : public StepStore {
  public:
-  VulkanStepStore(std::shared_ptr<vk::Context> ctx, bool isDouble, const std::vector<BodySegment>& segments,
-                  std::size_t nodeTotal, const DeviceSlot& slot)
-      : ctx_(std::move(ctx)), isDouble_(isDouble), rs_(isDouble ? sizeof(double) : sizeof(float)),
+  VulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx, bool isDouble,
+                  const std::vector<BodySegment>& segments, std::size_t nodeTotal, const DeviceSlot& slot)
+      : device_(&device), ctx_(std::move(ctx)), isDouble_(isDouble), rs_(isDouble ? sizeof(double) : sizeof(float)),
         dofTotal_(3 * nodeTotal) {
     if (segments.size() != slot.bodyCount())
       fail(ErrorCode::Internal, "vulkan step store: ", segments.size(), " segments for ", slot.bodyCount(), " bodies");
@@ -171,16 +171,32 @@ class VulkanStepStore final : public StepStore {
   const Eigen::ArrayXd& freeMask(std::size_t body) const override { return bodies_.at(body).freeMask; }
 
   // ---------------------------------------------------------------------------- device calls
-  // Through host vectors for now (vulkan_step_store.hpp: the next step reads the store's buffers on
-  // the device).
+  // On the store's device, from and into its buffers; on another (the slot moved), through host
+  // vectors.
 
   void setPositions(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
     ConstVectors xs;
+    if (vkdevice::VulkanDevice* d = mine(device)) {
+      std::vector<std::size_t> at;
+      std::vector<std::array<double, 3>> origins;
+      for (std::size_t i : set) {
+        at.push_back(stateOffset(bodies_[checked(i)], slot, StateVec::X));
+        origins.push_back(bodies_[i].origin);
+        if (d->positionsNeedHost()) xs.push_back(&state(i, slot, StateVec::X));
+      }
+      d->setPositionsFrom(set, buffers_[kBindVecs], at, origins, d->positionsNeedHost() ? &xs : nullptr);
+      return;
+    }
     for (std::size_t i : set) xs.push_back(&state(i, slot, StateVec::X));
     device.setPositions(set, xs);
   }
 
   void internalForces(DeviceSlot& device, const BodySet& set) override {
+    if (vkdevice::VulkanDevice* d = mine(device)) {
+      for (std::size_t i : set) checked(i);
+      d->internalForcesInto(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Fint)));
+      return;
+    }
     std::vector<Eigen::VectorXd> f(set.size());
     Vectors fs;
     for (Eigen::VectorXd& v : f) fs.push_back(&v);
@@ -189,6 +205,33 @@ class VulkanStepStore final : public StepStore {
   }
 
   void damping(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
+    if (vkdevice::VulkanDevice* d = mine(device)) {
+      // Mass damping alone (or none) as alpha M v in the store's pass, stiffness damping by the
+      // device's product with C = alpha M + beta K.
+      BodySet byMass, byProduct;
+      Tables t = tables();
+      for (std::size_t i : set) {
+        const Problem& p = *at(i).problem;
+        if (p.rayleighStiffness == 0.0) {
+          byMass.push_back(i);
+          t.r[realsPerBody() * i + kRAlpha] = p.rayleighMass;
+          t.u[kUCount * i + kUFrom] = static_cast<std::uint32_t>(index(slot));
+        } else {
+          byProduct.push_back(i);
+        }
+      }
+      if (!byMass.empty()) run(kModeDamping, byMass, t, /*sums=*/false);
+      if (!byProduct.empty()) {
+        std::vector<std::size_t> from, to;
+        for (std::size_t i : byProduct) {
+          from.push_back(stateOffset(bodies_[i], slot, StateVec::V));
+          to.push_back(scratchOffset(Scratch::Cv));
+        }
+        d->applyIn(byProduct, std::vector<SystemCoeffs>(byProduct.size(), SystemCoeffs{0.0, 1.0, 0.0}),
+                   buffers_[kBindVecs], from, to);
+      }
+      return;
+    }
     std::vector<Eigen::VectorXd> v(set.size()), cv(set.size());
     std::vector<const Problem*> problems;
     ConstVectors vs;
@@ -473,7 +516,7 @@ class VulkanStepStore final : public StepStore {
 
   /// Dispatches `mode` over every dof work-group with the set's bodies active, waits, and returns
   /// each body's sums: its work-groups' partial sums added in order, in double.
-  std::vector<std::array<double, kSums>> run(Mode mode, const BodySet& set, Tables t) {
+  std::vector<std::array<double, kSums>> run(Mode mode, const BodySet& set, Tables t, bool sums = true) {
     for (std::size_t i : set) t.u[kUCount * i + kUActive] = 1u;
     VkCommandBuffer cb = ctx_->begin();
     vk::updateBuffer(cb, buffers_[kBindBodyU], 0, t.u.data(), t.u.size() * sizeof(std::uint32_t));
@@ -491,6 +534,7 @@ class VulkanStepStore final : public StepStore {
     vkCmdPushConstants(cb, ctx_->pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(push), &push);
     vkCmdDispatch(cb, static_cast<std::uint32_t>(dofTotal_ / kWg), 1, 1);
     vk::fullBarrier(cb);
+    if (!sums) return {};  // left open: the next call that waits submits it
     for (std::size_t i : set) {
       const BodySegment& s = bodies_[i].seg;
       const std::size_t first = s.dofBegin() / kWg, count = s.dofs() == 0 ? 0 : (s.dofs() + kWg - 1) / kWg;
@@ -512,6 +556,12 @@ class VulkanStepStore final : public StepStore {
     return out;
   }
 
+  /// The slot's device while it holds the store's (null: another).
+  vkdevice::VulkanDevice* mine(DeviceSlot& slot) const {
+    return &slot.device() == static_cast<Device*>(device_) ? device_ : nullptr;
+  }
+
+  vkdevice::VulkanDevice* device_;  ///< the device whose context holds the store
   std::shared_ptr<vk::Context> ctx_;
   bool isDouble_;
   std::size_t rs_;
@@ -526,10 +576,10 @@ class VulkanStepStore final : public StepStore {
 
 }  // namespace
 
-std::unique_ptr<StepStore> createVulkanStepStore(std::shared_ptr<vk::Context> ctx, bool isDouble,
-                                                 const std::vector<BodySegment>& segments, std::size_t nodeTotal,
-                                                 const DeviceSlot& slot) {
-  return std::make_unique<VulkanStepStore>(std::move(ctx), isDouble, segments, nodeTotal, slot);
+std::unique_ptr<StepStore> createVulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx,
+                                                 bool isDouble, const std::vector<BodySegment>& segments,
+                                                 std::size_t nodeTotal, const DeviceSlot& slot) {
+  return std::make_unique<VulkanStepStore>(device, std::move(ctx), isDouble, segments, nodeTotal, slot);
 }
 
 }  // namespace corofem::detail

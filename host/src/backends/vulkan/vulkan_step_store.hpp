@@ -3,10 +3,12 @@
 // step.comp): the first step of the Vulkan issue's device-resident step. The host reads a body's
 // sums, and a vector only when it asks for one (state(), scratch()).
 //
-// Where it stands: the passes, the state transfers, swaps and copies are the device's. The device
-// calls (positions, forces, damping, the solve) still take their vectors through the host, so the
-// dynamics driver keeps the host's store (createHostStepStore) until they read the store's buffers
-// on the device and a failover can restart a step from a host copy of the committed state.
+// Where it stands: the passes, the state transfers, swaps and copies, the positions, the forces and
+// the damping are the device's. The solve still takes its right-hand side and answer through the
+// host, and a device error inside a step is not survived yet (the device calls do not go through
+// the slot's failover), so the dynamics driver keeps the host's store (createHostStepStore) until
+// the solve reads the store's buffers and a failover can restart a step from a host copy of the
+// committed state.
 #pragma once
 
 #include "device/body_layout.hpp"
@@ -20,12 +22,17 @@ namespace corofem::detail {
 namespace vk {
 class Context;
 }
+namespace vkdevice {
+class VulkanDevice;
+}
 
-/// A store on `ctx` for the slot's bodies laid out as `segments` (the device's: the same nodes, in
-/// its order; `nodeTotal` padded nodes in all), in double where `isDouble`, else float. Throws
-/// Error(DeviceError) for a failed Vulkan call.
-std::unique_ptr<StepStore> createVulkanStepStore(std::shared_ptr<vk::Context> ctx, bool isDouble,
-                                                 const std::vector<BodySegment>& segments, std::size_t nodeTotal,
-                                                 const DeviceSlot& slot);
+/// A store on `device`'s context for the slot's bodies laid out as `segments` (the device's: the
+/// same nodes, in its order; `nodeTotal` padded nodes in all), in double where `isDouble`, else
+/// float. Its device calls read and write its buffers on the device while the slot holds `device`,
+/// and go through host vectors after the slot moved to another device. Throws Error(DeviceError)
+/// for a failed Vulkan call.
+std::unique_ptr<StepStore> createVulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx,
+                                                 bool isDouble, const std::vector<BodySegment>& segments,
+                                                 std::size_t nodeTotal, const DeviceSlot& slot);
 
 }  // namespace corofem::detail
