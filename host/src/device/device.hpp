@@ -179,7 +179,9 @@ class Device {
   virtual std::vector<BodySet> pcgTiles(const BodySet& bodies) const { return {bodies}; }
   /// Starts the solve of A x = b for each body of the set (its coefficients), x its starting
   /// vector (constrained and non-finite entries taken as 0): r = b - A x, u = M^-1 r, w = A u and
-  /// the first scalars, the convergence test included. Returns how each body entered.
+  /// the first scalars, the convergence test included. Returns how each body entered. A null b[i]
+  /// and x[i] (a device whose step store staged b and a zero x in the solve's own vectors, PcgSolve::
+  /// resident) leave the body's b and x on the device, its b checked there.
   virtual std::vector<PcgStart> pcgBegin(const BodySet& bodies, const std::vector<SystemCoeffs>& coeffs,
                                          const ConstVectors& b, const ConstVectors& x, double tolerance,
                                          int maxIterations) = 0;
@@ -202,7 +204,8 @@ class Device {
   /// the set); pcgEnd gives its r . r. Called at most once per solve, after every iteration.
   virtual void pcgResidual(const std::vector<char>& bodies) = 0;
   /// Ends the solve: x of every running body read back (non-finite entries as the device holds
-  /// them), and for the bodies given to pcgResidual their true r . r and b . b in `residual`.
+  /// them; none for a null x[i], whose x stays the device's), and for the bodies given to
+  /// pcgResidual their true r . r and b . b in `residual`.
   /// `iterations`: what each body did (the device may plan its next solves with it). Pending reads
   /// are dropped.
   virtual void pcgEnd(const std::vector<int>& iterations, const Vectors& x, std::vector<PcgScalars>& residual) = 0;

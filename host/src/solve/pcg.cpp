@@ -69,8 +69,10 @@ void solveTile(Device& device, const BodySet& bodies, const std::vector<PcgSolve
   Vectors x(n);
   for (std::size_t i = 0; i < n; ++i) {
     PcgSolve& s = *tile[i];
-    if (!s.b || !s.x) fail(ErrorCode::Internal, "solvePcg: ", bodyName(device, bodies[i]), " has no vector b or x");
-    if (s.x->size() != s.b->size()) s.x->setZero(s.b->size());
+    if (s.resident ? (s.b || s.x) : (!s.b || !s.x))
+      fail(ErrorCode::Internal, "solvePcg: ", bodyName(device, bodies[i]),
+           s.resident ? " solves on the device's vectors but was given host vectors" : " has no vector b or x");
+    if (!s.resident && s.x->size() != s.b->size()) s.x->setZero(s.b->size());
     s.stats = LinearSolveStats{};
     s.failure.clear();
     coeffs[i] = s.coeffs;
@@ -94,7 +96,7 @@ void solveTile(Device& device, const BodySet& bodies, const std::vector<PcgSolve
                     "before the linear solve";
         break;
       case PcgStart::ZeroRhs:
-        s.x->setZero();
+        if (s.x) s.x->setZero();
         s.stats.converged = true;
         break;
       case PcgStart::Running:
@@ -178,7 +180,7 @@ void solveTile(Device& device, const BodySet& bodies, const std::vector<PcgSolve
                   std::to_string(s.stats.iterations) + " iterations on '" + device.deviceName() +
                   "' (the system matrix or the right-hand side holds NaN/Inf, or the device's precision "
                   "overflowed); check the material, time step and loads";
-    } else if (!allFiniteEntries(*s.x)) {
+    } else if (s.x && !allFiniteEntries(*s.x)) {  // a resident x: its owner counts them (StepStore::update)
       s.failure = bodyName(device, bodies[i]) + ": PCG produced a non-finite solution on '" + device.deviceName() + "'";
     }
   }

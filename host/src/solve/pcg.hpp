@@ -21,6 +21,9 @@ struct PcgSolve {
   SystemCoeffs coeffs;
   const Eigen::VectorXd* b = nullptr;  ///< right-hand side (constrained rows ignored)
   Eigen::VectorXd* x = nullptr;        ///< starting vector in, solution out (constrained dofs 0)
+  /// b and x are the device's own, with no host vectors (both null): a step store staged b and a
+  /// zero x in the device's solve vectors and takes x from them after (Device::pcgBegin).
+  bool resident = false;
   LinearSolveStats stats;              ///< filled: iterations, the true relative residual, converged
   /// Empty, or why the solve failed (non-finite right-hand side, residual or solution): the text of
   /// an Error(SolveFailed) naming the body. x is then unspecified.

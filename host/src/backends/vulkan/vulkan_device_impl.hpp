@@ -181,6 +181,11 @@ class VulkanDevice final : public Device {
   bool positionsNeedHost() const { return amg_ != nullptr; }
   /// f_int of `set` at the device's positions into `to`.
   void internalForcesInto(const BodySet& set, const vk::Buffer& to, const std::vector<std::size_t>& at);
+  /// The right-hand sides of the next solve of `set` from `from`, and its starting x = 0: the solve
+  /// then takes null vectors (PcgSolve::resident).
+  void stageSolve(const BodySet& set, const vk::Buffer& from, const std::vector<std::size_t>& at);
+  /// The last solve's x of `set` into `to`.
+  void takeSolution(const BodySet& set, const vk::Buffer& to, const std::vector<std::size_t>& at);
   /// y = A p for `set` with p and y in `vectors` (p at from[i], y at to[i]).
   void applyIn(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const vk::Buffer& vectors,
                const std::vector<std::size_t>& from, const std::vector<std::size_t>& to);
@@ -412,6 +417,7 @@ class VulkanDevice final : public Device {
   BodySet solve_;
   std::vector<SystemCoeffs> solveCoeffs_;  ///< per body of the device (the solve's; others unused)
   std::vector<PcgStart> started_;
+  std::vector<char> resident_;  ///< per body of the solve: b and x are the device's (stageSolve)
   int cap_ = 0, enqueued_ = 0;
   std::deque<Read> reads_;
   PcgTicket nextTicket_ = 0;

@@ -12,7 +12,8 @@ std::vector<PcgStart> VulkanDevice::pcgBegin(const BodySet& set, const std::vect
   checkSet(set, b.size(), "right-hand sides");
   checkSet(set, x.size(), "starting vectors");
   checkSet(set, coeffs.size(), "coefficients");
-  for (std::size_t i = 0; i < set.size(); ++i) checkSize(segment(set[i]), *b[i], "a right-hand side");
+  for (std::size_t i = 0; i < set.size(); ++i)
+    if (b[i] || x[i]) checkSize(segment(set[i]), *b[i], "a right-hand side");
   solve_ = set;
   cap_ = std::max(0, maxIterations);
   enqueued_ = 0;
@@ -20,6 +21,7 @@ std::vector<PcgStart> VulkanDevice::pcgBegin(const BodySet& set, const std::vect
   residualFor_.clear();
   endReads_ = 0;
   started_.assign(set.size(), PcgStart::Running);
+  resident_.assign(set.size(), 0);
   waitStaging();
   const std::size_t xOffset = 3 * layout_.nodeTotal;  // reals: b first, then x
   std::vector<SystemCoeffs> all(bodyCount());
@@ -31,6 +33,18 @@ std::vector<PcgStart> VulkanDevice::pcgBegin(const BodySet& set, const std::vect
   std::vector<std::pair<double, double>> amgCoefficients;  // (mass, stiffness) of each running body's A
   for (std::size_t i = 0; i < set.size(); ++i) {
     const BodySegment& sg = segment(set[i]);
+    const auto join = [&]() {
+      active[set[i]] = any = true;
+      all[set[i]] = coeffs[i];
+      running.push_back(set[i]);
+      amgCoefficients.emplace_back(coeffs[i].mass + coeffs[i].damping * sg.rayleighMass,
+                                   coeffs[i].stiffness + coeffs[i].damping * sg.rayleighStiffness);
+    };
+    if (!b[i]) {  // staged by stageSolve: b checked by the set-up's stop test, x = 0
+      resident_[i] = 1;
+      join();
+      continue;
+    }
     const Eigen::VectorXd& bi = *b[i];
     const Eigen::VectorXd& xi = *x[i];
     const std::vector<std::uint8_t>& fixed = constrainedHost_[set[i]];
@@ -66,18 +80,16 @@ std::vector<PcgStart> VulkanDevice::pcgBegin(const BodySet& set, const std::vect
              [&](std::size_t d) { return start(sg.hostDof(d)); });
     toB.push_back({sg.dofBegin() * rs_, sg.dofBegin() * rs_, sg.dofs() * rs_});
     toX.push_back({(xOffset + sg.dofBegin()) * rs_, sg.dofBegin() * rs_, sg.dofs() * rs_});
-    active[set[i]] = any = true;
-    all[set[i]] = coeffs[i];
-    running.push_back(set[i]);
-    amgCoefficients.emplace_back(coeffs[i].mass + coeffs[i].damping * sg.rayleighMass,
-                                 coeffs[i].stiffness + coeffs[i].damping * sg.rayleighStiffness);
+    join();
   }
   solveCoeffs_ = all;
   if (!any) return started_;
   if (amg_) amg_->prepare(running, amgCoefficients);  // the hierarchies (host work, uploads) before recording
   VkCommandBuffer cb = ctx_->begin();
-  vkCmdCopyBuffer(cb, up_.handle(), buffer(kVecB).handle(), static_cast<std::uint32_t>(toB.size()), toB.data());
-  vkCmdCopyBuffer(cb, up_.handle(), buffer(kVecX).handle(), static_cast<std::uint32_t>(toX.size()), toX.data());
+  if (!toB.empty()) {
+    vkCmdCopyBuffer(cb, up_.handle(), buffer(kVecB).handle(), static_cast<std::uint32_t>(toB.size()), toB.data());
+    vkCmdCopyBuffer(cb, up_.handle(), buffer(kVecX).handle(), static_cast<std::uint32_t>(toX.size()), toX.data());
+  }
   if (amg_) amg_->recordWarps(cb, running);
   std::vector<double> sc(kScalarCount * bodyCount(), 0.0);
   for (std::size_t body = 0; body < bodyCount(); ++body) sc[kScalarCount * body + kScalarTol2] = tolerance * tolerance;
@@ -214,9 +226,30 @@ void VulkanDevice::pcgResidual(const std::vector<char>& bodies) {
   endReads_ = ctx_->submit();
 }
 
+void VulkanDevice::stageSolve(const BodySet& set, const vk::Buffer& from, const std::vector<std::size_t>& at) {
+  checkSet(set, at.size(), "right-hand sides");
+  VkCommandBuffer cb = ctx_->begin();
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    const BodySegment& sg = segment(set[i]);
+    copy(cb, from, (at[i] + sg.dofBegin()) * rs_, buffer(kVecB), sg.dofBegin() * rs_, sg.dofs() * rs_);
+    vkCmdFillBuffer(cb, buffer(kVecX).handle(), sg.dofBegin() * rs_, sg.dofs() * rs_, 0u);
+  }
+  vk::fullBarrier(cb);  // left open: pcgBegin records after it
+}
+
+void VulkanDevice::takeSolution(const BodySet& set, const vk::Buffer& to, const std::vector<std::size_t>& at) {
+  checkSet(set, at.size(), "solutions");
+  VkCommandBuffer cb = ctx_->begin();
+  for (std::size_t i = 0; i < set.size(); ++i) {
+    const BodySegment& sg = segment(set[i]);
+    copy(cb, buffer(kVecX), sg.dofBegin() * rs_, to, (at[i] + sg.dofBegin()) * rs_, sg.dofs() * rs_);
+  }
+  vk::fullBarrier(cb);  // left open: the store's next pass reads x after it
+}
+
 void VulkanDevice::recordEndReads(VkCommandBuffer cb) {
   for (std::size_t i = 0; i < solve_.size(); ++i)
-    if (started_[i] == PcgStart::Running) {
+    if (started_[i] == PcgStart::Running && !resident_[i]) {
       const BodySegment& sg = segment(solve_[i]);
       copy(cb, buffer(kVecX), sg.dofBegin() * rs_, down_, sg.dofBegin() * rs_, sg.dofs() * rs_);
     }
@@ -242,7 +275,7 @@ void VulkanDevice::pcgEnd(const std::vector<int>&, const Vectors& x, std::vector
     scalarsOf(values, all);
     for (std::size_t i = 0; i < solve_.size(); ++i) {
       if (started_[i] != PcgStart::Running) continue;
-      getReals(down_.mapped(), isDouble_, segment(solve_[i]), kChunk, *x[i]);
+      if (x[i]) getReals(down_.mapped(), isDouble_, segment(solve_[i]), kChunk, *x[i]);
       if (i < residualFor_.size() && residualFor_[i]) residual[i] = all[i];
     }
   }

@@ -247,6 +247,20 @@ class VulkanStepStore final : public StepStore {
   }
 
   void solve(DeviceSlot& device, const BodySet& set, std::vector<PcgSolve>& solves) override {
+    if (solves.size() != set.size())
+      fail(ErrorCode::Internal, "step store: ", solves.size(), " solves for ", set.size(), " bodies");
+    if (vkdevice::VulkanDevice* d = mine(device); d && device.solver().linearSolver == LinearSolverKind::Pcg) {
+      for (std::size_t i : set) checked(i);
+      d->stageSolve(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Rhs)));
+      for (PcgSolve& s : solves) {
+        s.b = nullptr;
+        s.x = nullptr;
+        s.resident = true;
+      }
+      solvePcg(*d, set, solves, device.solver());
+      d->takeSolution(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Dv)));
+      return;
+    }
     std::vector<Eigen::VectorXd> rhs(set.size()), dv(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       rhs[k] = scratch(set[k], Scratch::Rhs);
