@@ -1,16 +1,17 @@
 #version 450
 /* The dynamics driver's per-dof passes on a device's step store (host/src/backends/vulkan/
  * vulkan_step_store.cpp; their meaning and the host's own version: host/src/solve/step_store.hpp
- * and host_step_store.cpp), one invocation per dof, pc.mode choosing the pass:
+ * and host_step_store.cpp), pc.mode choosing the pass:
  *   kModeBegin      vb, xb, the constrained dofs' targets, f_ext(t1), Newton's starting v, Cv = 0
  *   kModePositions  x = xb + kx v, a = ka (v - vb)
- *   kModeResidual   r = M a + C v + f_int + S (x - t) - f_ext, rhs = -r / ka
+ *   kModeResidual   r = M a + C v + f_int + S (x - t) - f_ext, rhs = -r / ka, with |f_ext|^2
  *   kModeUpdate     v += dv
  *   kModeEnd        the reactions, the springs' pull joining f_ext, the work sums
  *   kModeDamping    Cv = alpha M v of the state kUFrom names (mass damping alone; alpha 0: none)
- * Each work-group of 64 dofs belongs to one body (the device's segments are whole node work-groups,
- * 192 dofs); it writes its sums (the host adds a body's work-groups in order, in double) to
- * partials[8 g + k], a tree over its invocations: the same bits for a body alone or in a set.
+ * One invocation per node (its three dofs in order), work-groups of 64 nodes, each of one body (the
+ * device's segments are whole node work-groups); a pass with sums writes its work-group's (the host
+ * adds a body's work-groups in order, in double) to partials[8 g + k], a tree over its invocations:
+ * the same bits for a body alone or in a set.
  *
  * Every vector is a whole device's dofs (pc.o0 = D reals, the device's numbering); positions (x,
  * the rest positions, held and spring targets) are stored relative to the body's origin, which the
@@ -28,7 +29,7 @@
 
 layout(local_size_x = 64) in;
 
-layout(std430, binding = 0) readonly buffer WgBody { uint wgBody[]; };   /* per work-group: its body, or ~0 */
+layout(std430, binding = 0) readonly buffer WgBody { uint wgBody[]; };   /* per node work-group: its body, or ~0 */
 layout(std430, binding = 1) readonly buffer BodyU { uint bodyU[]; };     /* kU* per body */
 layout(std430, binding = 2) readonly buffer BodyR { real bodyR[]; };     /* pc.o3 per body: kR*, scales */
 layout(std430, binding = 3) buffer Vecs { real vecs[]; };                /* 28 vectors of D */
@@ -82,110 +83,126 @@ void write_sums(uint count) {
     for (uint k = 0u; k < count; ++k) partials[8u * gl_WorkGroupID.x + k] = sums[k][0];
 }
 
+void begin_dof(uint d) {
+  const bool newmark = body_flag(kFlagNewmark);
+  const real kx = body_real(kRKx);
+  const real x = vecs[state_at(kCommitted, kX, d)], v = vecs[state_at(kCommitted, kV, d)];
+  const real a = vecs[state_at(kCommitted, kA, d)];
+  const real vb = newmark ? v + body_real(kRCv) * a : v;
+  const real xb = newmark ? x + body_real(kRH) * v + body_real(kRCa) * a - kx * vb : x;
+  vecs[scratch_at(kVb, d)] = vb;
+  vecs[scratch_at(kXb, d)] = xb;
+  const real free_d = input_of(kInFree, d);
+  /* The targets: constrained dofs at rest, prescribed ones moved (the last group naming the dof),
+   * then the application's held ones (NaN: not held), in proportion from the state kUFrom names. */
+  real target = vecs[scratch_at(kTarget, d)];
+  if (free_d == real(0)) target = input_of(kInRest, d);
+  const uint g = presc[d];
+  if (g != 0xFFFFFFFFu) target = input_of(kInRest, d) + body_real(kRCount + pc.o1 + g) * input_of(kInPresc, d);
+  if (body_flag(kFlagHeld)) {
+    const real held = input_of(kInHeld, d);
+    if (!isnan(held)) {
+      const real fraction = body_real(kRFraction);
+      const real x0 = vecs[state_at(bodyU[kUCount * body + kUFrom], kX, d)];
+      target = fraction == real(1) ? held : x0 + fraction * (held - x0);
+    }
+  }
+  vecs[scratch_at(kTarget, d)] = target;
+  real f = real(0);
+  for (uint l = 0u; l < pc.o1; ++l) f += body_real(kRCount + l) * loads[l * pc.o0 + d];
+  if (body_flag(kFlagApplied)) f += input_of(kInApplied, d);
+  vecs[state_at(kResult, kFext, d)] = f;
+  vecs[state_at(kResult, kV, d)] = free_d == real(0) ? (target - xb) / kx : v;
+  vecs[scratch_at(kCv, d)] = real(0);
+}
+
+void positions_dof(uint d) {
+  const real v = vecs[state_at(kResult, kV, d)];
+  vecs[state_at(kResult, kX, d)] = vecs[scratch_at(kXb, d)] + body_real(kRKx) * v;
+  vecs[state_at(kResult, kA, d)] = body_real(kRKa) * (v - vecs[scratch_at(kVb, d)]);
+}
+
+/* Adds dof d's terms to the invocation's sums (s[k]: k < 7). */
+void residual_dof(uint d, inout real s[8]) {
+  const real x = vecs[state_at(kResult, kX, d)], v = vecs[state_at(kResult, kV, d)];
+  const real a = vecs[state_at(kResult, kA, d)];
+  const real ma = input_of(kInMass, d) * a;
+  const real k = input_of(kInSpring, d);
+  const real spring = body_flag(kFlagSprings) && k != real(0) ? k * (x - input_of(kInSpringTarget, d)) : real(0);
+  const real cv = vecs[scratch_at(kCv, d)], fint = vecs[scratch_at(kFint, d)];
+  const real fext = vecs[state_at(kResult, kFext, d)];
+  const real r = ma + cv + fint + spring - fext;
+  vecs[scratch_at(kR, d)] = r;
+  vecs[scratch_at(kRhs, d)] = -r / body_real(kRKa);
+  const real f = input_of(kInFree, d);
+  const real maf = ma * f, cvf = cv * f, fintf = fint * f, sf = spring * f, rf = r * f, ff = fext * f;
+  s[0] += maf * maf;
+  s[1] += cvf * cvf;
+  s[2] += fintf * fintf;
+  s[3] += sf * sf;
+  s[4] += rf * rf;
+  s[5] += not_finite(x) || not_finite(v) || not_finite(a) ? real(1) : real(0);
+  s[6] += ff * ff;
+}
+
+void update_dof(uint d, inout real s[8]) {
+  const real dv = vecs[scratch_at(kDv, d)];
+  s[0] += not_finite(dv) ? real(1) : real(0);
+  vecs[state_at(kResult, kV, d)] += dv;
+}
+
+void end_dof(uint d, inout real s[8]) {
+  const real free_d = input_of(kInFree, d);
+  const real rd = vecs[scratch_at(kR, d)] * (real(1) - free_d);
+  vecs[state_at(kResult, kReaction, d)] = rd;
+  const real x = vecs[state_at(kResult, kX, d)];
+  const real k = input_of(kInSpring, d);
+  real f = vecs[state_at(kResult, kFext, d)];
+  if (body_flag(kFlagSprings) && k != real(0) && free_d != real(0)) {
+    f += k * (input_of(kInSpringTarget, d) - x);
+    vecs[state_at(kResult, kFext, d)] = f;
+  }
+  const real dx = x - vecs[state_at(kCommitted, kX, d)];
+  const real fPrev = vecs[state_at(kCommitted, kFext, d)], rPrev = vecs[state_at(kCommitted, kReaction, d)];
+  const real v = vecs[state_at(kResult, kV, d)];
+  s[0] += (rPrev + rd) * dx;
+  s[1] += (fPrev + f) * dx;
+  s[2] += rPrev * dx;
+  s[3] += rd * dx;
+  s[4] += fPrev * dx;
+  s[5] += f * dx;
+  s[6] += input_of(kInMass, d) * (v * v);
+}
+
 void main() {
   body = wgBody[gl_WorkGroupID.x];
   if (body == 0xFFFFFFFFu || bodyU[kUCount * body + kUActive] == 0u) return;  /* the whole work-group */
   const uint lid = gl_LocalInvocationID.x;
-  const uint d = 64u * gl_WorkGroupID.x + lid;
-  const bool real_dof = d - bodyU[kUCount * body + kUDofBegin] < bodyU[kUCount * body + kUDofs];
-  for (uint k = 0u; k < 8u; ++k) sums[k][lid] = real(0);
-  const real ka = body_real(kRKa), kx = body_real(kRKx);
-
+  const uint n = 64u * gl_WorkGroupID.x + lid;  /* a node: its dofs 3 n .. 3 n + 2 */
+  const bool real_node = 3u * n - bodyU[kUCount * body + kUDofBegin] < bodyU[kUCount * body + kUDofs];
+  real s[8];
+  for (uint k = 0u; k < 8u; ++k) s[k] = real(0);
   if (pc.mode == kModeBegin) {
-    if (real_dof) {
-      const bool newmark = body_flag(kFlagNewmark);
-      const real x = vecs[state_at(kCommitted, kX, d)], v = vecs[state_at(kCommitted, kV, d)];
-      const real a = vecs[state_at(kCommitted, kA, d)];
-      const real vb = newmark ? v + body_real(kRCv) * a : v;
-      const real xb = newmark ? x + body_real(kRH) * v + body_real(kRCa) * a - kx * vb : x;
-      vecs[scratch_at(kVb, d)] = vb;
-      vecs[scratch_at(kXb, d)] = xb;
-      const real free_d = input_of(kInFree, d);
-      /* The targets: constrained dofs at rest or prescribed (the last group on the dof), then the
-       * application's held ones (NaN: not held), in proportion from the state kUFrom names. */
-      real target = vecs[scratch_at(kTarget, d)];
-      if (free_d == real(0)) target = input_of(kInRest, d);
-      const uint g = presc[d];
-      if (g != 0xFFFFFFFFu) target = input_of(kInRest, d) + body_real(kRCount + pc.o1 + g) * input_of(kInPresc, d);
-      if (body_flag(kFlagHeld)) {
-        const real held = input_of(kInHeld, d);
-        if (!isnan(held)) {
-          const real fraction = body_real(kRFraction);
-          const real x0 = vecs[state_at(bodyU[kUCount * body + kUFrom], kX, d)];
-          target = fraction == real(1) ? held : x0 + fraction * (held - x0);
-        }
-      }
-      vecs[scratch_at(kTarget, d)] = target;
-      real f = real(0);
-      for (uint l = 0u; l < pc.o1; ++l) f += body_real(kRCount + l) * loads[l * pc.o0 + d];
-      if (body_flag(kFlagApplied)) f += input_of(kInApplied, d);
-      vecs[state_at(kResult, kFext, d)] = f;
-      const real ff = f * free_d;
-      sums[0][lid] = ff * ff;
-      vecs[state_at(kResult, kV, d)] = free_d == real(0) ? (target - xb) / kx : v;
-      vecs[scratch_at(kCv, d)] = real(0);
-    }
-    write_sums(1u);
+    if (real_node)
+      for (uint c = 0u; c < 3u; ++c) begin_dof(3u * n + c);
   } else if (pc.mode == kModePositions) {
-    if (real_dof) {
-      const real v = vecs[state_at(kResult, kV, d)];
-      vecs[state_at(kResult, kX, d)] = vecs[scratch_at(kXb, d)] + kx * v;
-      vecs[state_at(kResult, kA, d)] = ka * (v - vecs[scratch_at(kVb, d)]);
-    }
-  } else if (pc.mode == kModeResidual) {
-    if (real_dof) {
-      const real x = vecs[state_at(kResult, kX, d)], v = vecs[state_at(kResult, kV, d)];
-      const real a = vecs[state_at(kResult, kA, d)];
-      const real ma = input_of(kInMass, d) * a;
-      const real k = input_of(kInSpring, d);
-      const real spring = body_flag(kFlagSprings) && k != real(0) ? k * (x - input_of(kInSpringTarget, d)) : real(0);
-      const real cv = vecs[scratch_at(kCv, d)], fint = vecs[scratch_at(kFint, d)];
-      const real r = ma + cv + fint + spring - vecs[state_at(kResult, kFext, d)];
-      vecs[scratch_at(kR, d)] = r;
-      vecs[scratch_at(kRhs, d)] = -r / ka;
-      const real f = input_of(kInFree, d);
-      const real maf = ma * f, cvf = cv * f, fintf = fint * f, sf = spring * f, rf = r * f;
-      sums[0][lid] = maf * maf;
-      sums[1][lid] = cvf * cvf;
-      sums[2][lid] = fintf * fintf;
-      sums[3][lid] = sf * sf;
-      sums[4][lid] = rf * rf;
-      sums[5][lid] = not_finite(x) || not_finite(v) || not_finite(a) ? real(1) : real(0);
-    }
-    write_sums(6u);
-  } else if (pc.mode == kModeUpdate) {
-    if (real_dof) {
-      const real dv = vecs[scratch_at(kDv, d)];
-      sums[0][lid] = not_finite(dv) ? real(1) : real(0);
-      vecs[state_at(kResult, kV, d)] += dv;
-    }
-    write_sums(1u);
-  } else if (pc.mode == kModeEnd) {
-    if (real_dof) {
-      const real free_d = input_of(kInFree, d);
-      const real rd = vecs[scratch_at(kR, d)] * (real(1) - free_d);
-      vecs[state_at(kResult, kReaction, d)] = rd;
-      const real x = vecs[state_at(kResult, kX, d)];
-      const real k = input_of(kInSpring, d);
-      real f = vecs[state_at(kResult, kFext, d)];
-      if (body_flag(kFlagSprings) && k != real(0) && free_d != real(0)) {
-        f += k * (input_of(kInSpringTarget, d) - x);
-        vecs[state_at(kResult, kFext, d)] = f;
-      }
-      const real dx = x - vecs[state_at(kCommitted, kX, d)];
-      const real fPrev = vecs[state_at(kCommitted, kFext, d)], rPrev = vecs[state_at(kCommitted, kReaction, d)];
-      const real v = vecs[state_at(kResult, kV, d)];
-      sums[0][lid] = (rPrev + rd) * dx;
-      sums[1][lid] = (fPrev + f) * dx;
-      sums[2][lid] = rPrev * dx;
-      sums[3][lid] = rd * dx;
-      sums[4][lid] = fPrev * dx;
-      sums[5][lid] = f * dx;
-      sums[6][lid] = input_of(kInMass, d) * (v * v);
-    }
-    write_sums(7u);
+    if (real_node)
+      for (uint c = 0u; c < 3u; ++c) positions_dof(3u * n + c);
   } else if (pc.mode == kModeDamping) {
-    if (real_dof)
-      vecs[scratch_at(kCv, d)] = body_real(kRAlpha) * (input_of(kInMass, d) * vecs[state_at(bodyU[kUCount * body + kUFrom], kV, d)]);
+    if (real_node)
+      for (uint c = 0u; c < 3u; ++c) {
+        const uint d = 3u * n + c;
+        vecs[scratch_at(kCv, d)] = body_real(kRAlpha) * (input_of(kInMass, d) * vecs[state_at(bodyU[kUCount * body + kUFrom], kV, d)]);
+      }
+  } else {
+    /* The passes with sums: each invocation's three dofs in order, then the work-group's tree. */
+    if (real_node)
+      for (uint c = 0u; c < 3u; ++c) {
+        if (pc.mode == kModeResidual) residual_dof(3u * n + c, s);
+        else if (pc.mode == kModeUpdate) update_dof(3u * n + c, s);
+        else end_dof(3u * n + c, s);
+      }
+    for (uint k = 0u; k < 7u; ++k) sums[k][lid] = s[k];
+    write_sums(7u);
   }
 }

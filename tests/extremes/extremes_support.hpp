@@ -37,6 +37,9 @@ struct BackendCase {
   Precision precision = Precision::Double;
   std::string device;  ///< the device's selector (OpenCL: its index in cl::listDevices(); Vulkan: the candidate's)
   std::string absent;  ///< non-empty: why this case cannot run here (the test skips with it)
+  /// Vulkan: the dynamics' vectors in the device's memory (VulkanTuning::deviceStore = 1; a GPU's
+  /// default, which lavapipe, a CPU device, takes only when asked).
+  bool deviceStore = false;
 
   bool isFloat() const { return isDevice() && precision == Precision::Float; }
   /// A device backend (OpenCL, Vulkan): its rotation methods are its own (the reference's is SVD polar).
@@ -44,7 +47,14 @@ struct BackendCase {
   std::string describe() const {
     return kind == BackendKind::Reference
                ? "reference (double)"
-               : std::string(toString(kind)) + " device " + device + (isFloat() ? " (float)" : " (double)");
+               : std::string(toString(kind)) + " device " + device + (isFloat() ? " (float)" : " (double)") +
+                     (deviceStore ? ", device store" : "");
+  }
+  /// The options a Simulation of this case is made with.
+  SimulationOptions options() const {
+    SimulationOptions o;
+    if (deviceStore) o.vulkan.deviceStore = 1;
+    return o;
   }
 };
 
@@ -90,6 +100,20 @@ inline std::vector<BackendCase> backendCases() {
     out.push_back({"vulkan_no_device", BackendKind::Vulkan, Precision::Double, "",
                    "no Vulkan device here (a build without the Vulkan backend, or no driver: install "
                    "mesa-vulkan-drivers for the lavapipe CPU device)"});
+  return out;
+}
+
+/// backendCases(), and each Vulkan case again with the device store (BackendCase::deviceStore).
+inline std::vector<BackendCase> backendCasesWithDeviceStores() {
+  std::vector<BackendCase> out = backendCases();
+  const std::size_t n = out.size();
+  for (std::size_t i = 0; i < n; ++i)
+    if (out[i].kind == BackendKind::Vulkan && out[i].absent.empty()) {
+      BackendCase c = out[i];
+      c.name += "_store";
+      c.deviceStore = true;
+      out.push_back(c);
+    }
   return out;
 }
 

@@ -107,6 +107,14 @@ struct VulkanTuning {
   int fusedPcg = -1;
   /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
   int localityOrder = -1;
+  /// Where a dynamic step's vectors live (positions, velocities, accelerations, loads, reactions,
+  /// the residual and Newton's correction): in the device's memory, its per-dof passes on the
+  /// device, so that a step moves no vector through the host (the host reads a few sums per pass);
+  /// or on the host, in double, each device call converting its vectors on the way. -1 = on a GPU
+  /// only (on lavapipe, a CPU device, the host's loops run on the same cores without a dispatch
+  /// each: docs/performance.md); 0 = never; 1 = always. A lost device loses what it held: the
+  /// bodies then fail over only from a step whose vectors could still be read back.
+  int deviceStore = -1;
 };
 
 }  // namespace corofem

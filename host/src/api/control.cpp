@@ -126,7 +126,10 @@ void Simulation::Impl::applyHolds(Group& g) {
     g.slot->setMaterial(stiffened);
     for (std::size_t index : stiffened) g.driver->materialChanged(index);
   }
-  if (!sprung.empty()) g.slot->setSprings(sprung);
+  if (!sprung.empty()) {
+    g.slot->setSprings(sprung);
+    for (std::size_t index : sprung) g.driver->loadsChanged(index);
+  }
   for (std::size_t i : g.bodies) {
     Body& b = bodies[i];
     Body::Hold& h = b.hold;
@@ -504,6 +507,7 @@ Status Simulation::setGravity(const double gravity[3]) {
       loads.erase(std::remove_if(loads.begin(), loads.end(), [](const detail::ExternalForce& f) { return f.gravity; }),
                   loads.end());
       loads.push_back(detail::ExternalForce{detail::gravityForce(*b.problem, gravity), 0.0, /*gravity=*/true});
+      s.driverOf(b).loadsChanged(b.index);
       s.touched(b);
     }
   });

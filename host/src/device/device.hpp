@@ -247,9 +247,10 @@ class Device {
 
   /// A store of the dynamics driver's vectors on this device for the slot's bodies (the slot holds
   /// this device), or null where the device keeps none (the driver keeps the host's store,
-  /// createHostStepStore). The store lives in the device's memory but not in the device object: it
-  /// outlives a device the slot makes again for the same context only where the backend says so.
-  virtual std::unique_ptr<StepStore> createStepStore(const DeviceSlot& slot);
+  /// createHostStepStore). The store outlives the device object: once the slot holds another
+  /// device (a failover, a removed body), its calls go through the slot with host vectors, until
+  /// the driver moves the state to a store of the new device.
+  virtual std::unique_ptr<StepStore> createStepStore(DeviceSlot& slot);
 };
 
 /// The set {0, ..., n - 1}.

@@ -79,6 +79,7 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
     ++index_;
     try {
       std::unique_ptr<Device> next = makeDevice(problems_, solver_, order_[index_], options_);
+      refreshPositions();
       givePositions(*next, lastX_);
       device_ = std::move(next);
       ++generation_;
@@ -100,6 +101,36 @@ void DeviceSlot::advance(const std::string& call, const std::string& error) {
   }
   exhausted_ = true;  // the last device stays for the reports; no call reaches it again
   failExhausted();
+}
+
+void DeviceSlot::setPositionSource(const void* owner, PositionSource source) {
+  source_ = std::move(source);
+  sourceOwner_ = owner;
+  elsewhere_.clear();
+}
+
+void DeviceSlot::dropPositionSource(const void* owner) {
+  if (owner != sourceOwner_) return;
+  refreshPositions();  // what the store set last stays the slot's
+  source_ = nullptr;
+  sourceOwner_ = nullptr;
+}
+
+void DeviceSlot::positionsSetElsewhere(const BodySet& bodies) {
+  elsewhere_.resize(problems_.size(), 0);
+  for (std::size_t b : bodies) elsewhere_.at(b) = 1;
+}
+
+void DeviceSlot::refreshPositions() {
+  for (std::size_t b = 0; b < elsewhere_.size(); ++b)
+    if (elsewhere_[b] && source_) source_(b, lastX_.at(b));
+  elsewhere_.clear();
+}
+
+void DeviceSlot::failover(const std::string& call, const Error& error) {
+  if (error.code() != ErrorCode::DeviceError) throw error;
+  if (exhausted_) failExhausted();
+  advance(call, error.what());
 }
 
 void DeviceSlot::failExhausted() const {
@@ -152,7 +183,10 @@ void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
 
 void DeviceSlot::setPositions(const BodySet& bodies, const ConstVectors& x) {
   // The positions are kept for a failover (advance gives the new device them): a repeat is harmless.
-  for (std::size_t i = 0; i < bodies.size(); ++i) lastX_.at(bodies[i]) = *x[i];
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    lastX_.at(bodies[i]) = *x[i];
+    if (bodies[i] < elsewhere_.size()) elsewhere_[bodies[i]] = 0;
+  }
   guarded(SlotStats::SetPositions, bodies, [&](Device& d) { d.setPositions(bodies, x); });
 }
 
@@ -178,6 +212,7 @@ void DeviceSlot::setSprings(const BodySet& bodies) {
 void DeviceSlot::removeBody(std::size_t body) {
   if (body >= problems_.size() || problems_.size() < 2)
     fail(ErrorCode::Internal, "removing body ", body, " of a device slot of ", problems_.size());
+  refreshPositions();  // before the indices move
   if (!exhausted_ && device_->removeBody(body)) {  // in place: the other bodies keep what they hold
     problems_.erase(problems_.begin() + static_cast<std::ptrdiff_t>(body));
     lastX_.erase(lastX_.begin() + static_cast<std::ptrdiff_t>(body));

@@ -11,9 +11,11 @@
 
 #include "device/registry.hpp"
 #include "solve/pcg.hpp"
+#include "util/error.hpp"
 #include "util/log.hpp"
 
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -94,6 +96,20 @@ class DeviceSlot {
   Device& device() const { return *device_; }
   const Candidate& current() const { return order_[index_]; }
   const std::vector<Candidate>& order() const { return order_; }
+  /// A step store that sets positions on the device itself (not through setPositions) names them
+  /// here: `source(body, x)` gives the body's positions as last set, for a device the slot makes
+  /// (a failover, a removed body), and positionsSetElsewhere marks the bodies whose last positions
+  /// are the source's. An empty source: none (the store went).
+  using PositionSource = std::function<void(std::size_t body, Eigen::VectorXd& x)>;
+  void setPositionSource(const void* owner, PositionSource source);
+  /// Drops the source if `owner` set it (a store that goes leaves its successor's).
+  void dropPositionSource(const void* owner);
+  void positionsSetElsewhere(const BodySet& bodies);
+  /// Moves the bodies to the next candidate after a DeviceError in a call the slot did not make (a
+  /// step store's own call on the device): as a failing call of the slot would, or throws the
+  /// slot's DeviceError when no candidate is left.
+  void failover(const std::string& call, const Error& error);
+
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }
   const std::vector<FallbackEvent>& events() const { return events_; }
@@ -130,6 +146,11 @@ class DeviceSlot {
   std::unique_ptr<Device> device_;  ///< never null once constructed
   bool exhausted_ = false;          ///< every candidate failed: each call is a DeviceError
   std::vector<Eigen::VectorXd> lastX_;  ///< per body: the last positions given (empty: none yet)
+  std::vector<char> elsewhere_;         ///< per body: its last positions are the source's
+  PositionSource source_;
+  const void* sourceOwner_ = nullptr;
+  /// lastX_ of the bodies positionsSetElsewhere marked, from the source.
+  void refreshPositions();
   std::string when_ = "create";
   std::vector<FallbackEvent> events_;
   std::string failures_;  ///< every device error so far (for the final message)

@@ -33,6 +33,7 @@ class StaticsDriver final : public Driver {
   }
   void constraintsChanged(std::size_t) override { needsDynamics(); }
   void materialChanged(std::size_t) override { needsDynamics(); }
+  void loadsChanged(std::size_t) override {}  // each solve reads the loads
   void setControls(std::size_t, const BodyControls&) override { needsDynamics(); }
   void removeBody(std::size_t body) override {
     solvers_.erase(solvers_.begin() + static_cast<std::ptrdiff_t>(body));

@@ -67,6 +67,9 @@ class Driver {
   /// The body's Problem::constrained changed (the slot's device was told): the driver's free dofs
   /// follow it from the next step.
   virtual void constraintsChanged(std::size_t body) = 0;
+  /// The body's loads or springs changed (Problem::forces, springStiffness; the slot's device was
+  /// told of springs): the driver reads them again from the next step.
+  virtual void loadsChanged(std::size_t body) = 0;
   /// The body's Problem material changed (the slot's device was told): its force scale and, at
   /// the next step, its acceleration and energy budget are measured again.
   virtual void materialChanged(std::size_t body) = 0;

@@ -39,7 +39,9 @@ std::string num(double v) {
 }  // namespace
 
 DynamicsDriver::DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const Log& log)
-    : slot_(slot), desc_(desc), log_(log), store_(createHostStepStore(slot)) {
+    : slot_(slot), desc_(desc), log_(log), store_(slot.device().createStepStore(slot)),
+      deviceStore_(store_ != nullptr), storeGeneration_(slot.generation()) {
+  if (!store_) store_ = createHostStepStore(slot);
   bodies_.resize(slot.bodyCount());
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
     Body& b = bodies_[i];
@@ -121,10 +123,15 @@ void DynamicsDriver::setState(std::size_t body, const Eigen::VectorXd& x, const 
 
 void DynamicsDriver::constraintsChanged(std::size_t body) {
   bodies_.at(body);
-  store_->constraintsChanged(body);
+  store_->problemChanged(body);
   // Held dofs: their velocities follow from their targets.
   const Eigen::VectorXd v = (store_->state(body, StateSlot::Committed, StateVec::V).array() * store_->freeMask(body)).matrix();
   store_->setState(body, StateSlot::Committed, StateVec::V, v);
+}
+
+void DynamicsDriver::loadsChanged(std::size_t body) {
+  bodies_.at(body);
+  store_->problemChanged(body);
 }
 
 void DynamicsDriver::materialChanged(std::size_t body) {
@@ -225,10 +232,34 @@ void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure
   }
 }
 
+void DynamicsDriver::followDevice() {
+  if (slot_.generation() == storeGeneration_) return;
+  storeGeneration_ = slot_.generation();
+  slot_.dropPositionSource(store_.get());  // the positions the old store set stay the slot's
+  std::unique_ptr<StepStore> next = slot_.device().createStepStore(slot_);
+  const bool onDevice = next != nullptr;
+  if (!onDevice) {
+    if (!deviceStore_) return;  // the host's store serves every device
+    next = createHostStepStore(slot_);
+  }
+  // The states the old store holds (its device object may be gone; its memory is not), and the
+  // controls; the scratch is the next step's.
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    const Eigen::Index n = bodies_[i].problem->restPositions.size();
+    for (StateSlot s : {StateSlot::Committed, StateSlot::Start, StateSlot::Previous})
+      for (StateVec v : {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction})
+        if (const Eigen::VectorXd& value = store_->state(i, s, v); value.size() == n) next->setState(i, s, v, value);
+    next->setControls(i, store_->controls(i));
+  }
+  store_ = std::move(next);
+  deviceStore_ = onDevice;
+}
+
 std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall& call) {
   std::vector<BodyOutcome> out(set.size());
   std::vector<std::string> startFailure(bodies_.size());
   try {
+    followDevice();
     start(set, startFailure);
   } catch (...) {
     // The initial state could not be evaluated (every device failed): nothing moved.
@@ -390,9 +421,7 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       all.push_back(a.body);
       args[j] = BeginArgs{m, a.t1, a.fraction, b.startHeld ? StateSlot::Start : StateSlot::Committed};
     }
-    std::vector<double> fextNorm;
-    store_->begin(all, args, fextNorm);
-    for (std::size_t j = 0; j < adv.size(); ++j) adv[j].fextNorm = fextNorm[j];
+    store_->begin(all, args);
   }
 
   const int maxIterations = std::max(1, desc_.newtonIterations);
@@ -454,7 +483,7 @@ void DynamicsDriver::advance(std::vector<Advance>& adv) {
       const Body& b = bodies_[a.body];
       const ResidualSums& s = sums[k];
       const double scale = std::max({std::sqrt(s.ma), std::sqrt(s.cv), std::sqrt(s.fint), std::sqrt(s.spring),
-                                     a.fextNorm, b.forceFloor});
+                                     std::sqrt(s.fext), b.forceFloor});
       a.residualNorm = std::sqrt(s.r);
       const double relative = a.residualNorm / scale;
       if (!std::isfinite(relative) || s.nonFinite != 0.0) {

@@ -92,6 +92,7 @@ class DynamicsDriver final : public Driver {
   void rollback(std::size_t body) override;
   void setState(std::size_t body, const Eigen::VectorXd& x, const Eigen::VectorXd& v) override;
   void constraintsChanged(std::size_t body) override;
+  void loadsChanged(std::size_t body) override;
   void materialChanged(std::size_t body) override;
   void setControls(std::size_t body, const BodyControls& controls) override;
   void removeBody(std::size_t body) override;
@@ -144,7 +145,6 @@ class DynamicsDriver final : public Driver {
     double fraction = 1.0;
     std::string where;  ///< "time step 3/10", "time step 3/10, substep 2/4"
     SchemeMaps maps;
-    double fextNorm = 0.0;
     double initialRelative = 0.0, initialNorm = 0.0, residualNorm = 0.0;
     bool allLinearConverged = true, evaluated = false, running = true;
     BodyStepStats stats;
@@ -162,6 +162,9 @@ class DynamicsDriver final : public Driver {
   /// a_0 from M a_0 = f_ext(0) - C v_0 - f_int(x_0) on the free dofs, and the energy at t = 0, for
   /// the bodies of `set` not started yet; a body whose a_0 is not finite fails.
   void start(const BodySet& set, std::vector<std::string>& failure);
+  /// After the slot made another device (a failover, a removed body): the bodies' states move to
+  /// the new device's store, or to the host's from a device's.
+  void followDevice();
   /// Per body of a step's set: its stats (every attempt's iterations, the successful attempt's
   /// residuals and substeps), the substep counts tried, the last failure, and the bodies still to
   /// succeed (indices into the set).
@@ -190,6 +193,8 @@ class DynamicsDriver final : public Driver {
   const Log& log_;
   std::vector<Body> bodies_;
   std::unique_ptr<StepStore> store_;  ///< the bodies' vectors
+  bool deviceStore_ = false;          ///< store_ is a device's (Device::createStepStore), not the host's
+  std::size_t storeGeneration_ = 0;   ///< the slot's generation store_ was made for
 };
 
 }  // namespace corofem::detail

@@ -75,7 +75,7 @@ class HostStepStore final : public StepStore {
   void copy(std::size_t body, StateSlot from, StateSlot to) override {
     at(body).states[index(to)] = at(body).states[index(from)];
   }
-  void constraintsChanged(std::size_t body) override { at(body).freeMask = bodyScale(*at(body).problem).freeMask; }
+  void problemChanged(std::size_t body) override { at(body).freeMask = bodyScale(*at(body).problem).freeMask; }
   void setControls(std::size_t body, const BodyControls& controls) override { at(body).controls = controls; }
   const BodyControls& controls(std::size_t body) const override { return bodies_.at(body).controls; }
   void removeBody(std::size_t body) override {
@@ -116,9 +116,8 @@ class HostStepStore final : public StepStore {
     device.solve(set, solves);
   }
 
-  void begin(const BodySet& set, const std::vector<BeginArgs>& args, std::vector<double>& fextNorm) override {
+  void begin(const BodySet& set, const std::vector<BeginArgs>& args) override {
     check(set, args.size());
-    fextNorm.assign(set.size(), 0.0);
     forEach(set.size(), [&](std::size_t k) {
       Body& b = at(set[k]);
       const BeginArgs& arg = args[k];
@@ -147,9 +146,9 @@ class HostStepStore final : public StepStore {
                       &cvOut = b.scratch[index(Scratch::Cv)];
       Eigen::VectorXd &fext = next[index(StateVec::Fext)], &vOut = next[index(StateVec::V)];
       const Eigen::ArrayXd& free = b.freeMask;
-      // One pass: vb, xb, f_ext (the loads, then the application's forces) and its free norm, and
-      // Newton's starting v. The same arithmetic, term by term, as the vector expressions it fuses.
-      const std::array<double, 1> fextSq = overDofs<1>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 1>& sum) {
+      // One pass: vb, xb, f_ext (the loads, then the application's forces), and Newton's starting
+      // v. The same arithmetic, term by term, as the vector expressions it fuses.
+      overDofs<0>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 0>&) {
         for (Eigen::Index d = lo; d < hi; ++d) {
           const double vbd = m.newmark ? v[d] + m.cv * a[d] : v[d];
           const double xbd = m.newmark ? x[d] + m.h * v[d] + m.ca * a[d] - m.kx * vbd : x[d];
@@ -158,13 +157,10 @@ class HostStepStore final : public StepStore {
           double f = p.externalForceAt(scales, d);
           if (withApplied) f += applied[d];
           fext[d] = f;
-          const double ff = f * free[d];
-          sum[0] += ff * ff;
           vOut[d] = free[d] == 0.0 ? (target[d] - xbd) / m.kx : v[d];
           cvOut[d] = 0.0;
         }
       });
-      fextNorm[k] = std::sqrt(fextSq[0]);
     });
   }
 
@@ -205,25 +201,27 @@ class HostStepStore final : public StepStore {
       const Eigen::VectorXd& springTarget = b.controls.springTargets;
       const bool springs = ks.size() == n && springTarget.size() == n;
       const Eigen::ArrayXd& free = b.freeMask;
-      // Sums: |M a|^2, |C v|^2, |f_int|^2, |S (x - t)|^2, |r|^2 (free dofs), non-finite x, v or a.
-      // The sums run in dof order.
-      const std::array<double, 6> sums = overDofs<6>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 6>& sum) {
+      // Sums: |M a|^2, |C v|^2, |f_int|^2, |S (x - t)|^2, |r|^2 (free dofs), non-finite x, v or a,
+      // |f_ext|^2 (free dofs). The sums run in dof order.
+      const std::array<double, 7> sums = overDofs<7>(n, [&](Eigen::Index lo, Eigen::Index hi, std::array<double, 7>& sum) {
         for (Eigen::Index d = lo; d < hi; ++d) {
           const double ma = mass[d] * a[d];
           const double spring = springs && ks[d] != 0.0 ? ks[d] * (x[d] - springTarget[d]) : 0.0;
           const double rd = ma + cv[d] + fint[d] + spring - fext[d];
           r[d] = rd;
           rhs[d] = -rd / ka;
-          const double f = free[d], maf = ma * f, cvf = cv[d] * f, fintf = fint[d] * f, sf = spring * f, rf = rd * f;
+          const double f = free[d], maf = ma * f, cvf = cv[d] * f, fintf = fint[d] * f, sf = spring * f, rf = rd * f,
+                       ff = fext[d] * f;
           sum[0] += maf * maf;
           sum[1] += cvf * cvf;
           sum[2] += fintf * fintf;
           sum[3] += sf * sf;
           sum[4] += rf * rf;
           if (!std::isfinite(x[d]) || !std::isfinite(v[d]) || !std::isfinite(a[d])) sum[5] += 1.0;
+          sum[6] += ff * ff;
         }
       });
-      out[k] = ResidualSums{sums[0], sums[1], sums[2], sums[3], sums[4], sums[5]};
+      out[k] = ResidualSums{sums[0], sums[1], sums[2], sums[3], sums[4], sums[5], sums[6]};
     });
   }
 

@@ -32,7 +32,7 @@ void Device::setSprings(const BodySet& bodies, const std::vector<const Problem*>
   fail(ErrorCode::DeviceError, "the ", name(), " backend cannot attach springs to a body at run time");
 }
 
-std::unique_ptr<StepStore> Device::createStepStore(const DeviceSlot&) { return nullptr; }
+std::unique_ptr<StepStore> Device::createStepStore(DeviceSlot&) { return nullptr; }
 
 double slendernessOf(const Problem& p) {
   const Eigen::Index n = p.restPositions.size() / 3;

@@ -57,10 +57,11 @@ struct BeginArgs {
 };
 
 /// The sums of StepStore::residual over a body's free dofs: |M a|^2, |C v|^2, |f_int|^2,
-/// |S (x - t)|^2, |r|^2, and the non-finite entries of x, v and a (all dofs).
+/// |S (x - t)|^2, |r|^2, the non-finite entries of x, v and a (all dofs), and |f_ext|^2.
 struct ResidualSums {
   double ma = 0.0, cv = 0.0, fint = 0.0, spring = 0.0, r = 0.0;
   double nonFinite = 0.0;
+  double fext = 0.0;
 };
 
 /// The sums of StepStore::end over dx = x_{n+1} - x_n (Result.X - Committed.X), R the reactions and
@@ -86,8 +87,9 @@ class StepStore {
   /// Exchanges two states of the body (all five vectors), or copies one onto another.
   virtual void swap(std::size_t body, StateSlot a, StateSlot b) = 0;
   virtual void copy(std::size_t body, StateSlot from, StateSlot to) = 0;
-  /// The body's free dofs (1, 0 where Problem::constrained holds) from its problem, read again.
-  virtual void constraintsChanged(std::size_t body) = 0;
+  /// The body's problem changed (its constrained dofs, loads or springs): the store reads it again
+  /// (the host's reads the loads and springs at each pass, and its free dofs here).
+  virtual void problemChanged(std::size_t body) = 0;
   /// What the application holds the body by (DynamicsDriver::setControls); empty vectors: none.
   virtual void setControls(std::size_t body, const BodyControls& controls) = 0;
   virtual const BodyControls& controls(std::size_t body) const = 0;
@@ -116,9 +118,9 @@ class StepStore {
   /// From each body's committed state: Vb, Xb, the targets of the constrained dofs at t1 into
   /// Target (the scene's fixed and prescribed targets, the application's held ones where given),
   /// f_ext(t1) into Result.Fext (the loads and the application's forces), Newton's starting v into
-  /// Result.V (v_n; a constrained dof the v that lands it on its target), Cv = 0. Returns the free
-  /// norm of f_ext, per body.
-  virtual void begin(const BodySet& set, const std::vector<BeginArgs>& args, std::vector<double>& fextNorm) = 0;
+  /// Result.V (v_n; a constrained dof the v that lands it on its target), Cv = 0. It returns
+  /// nothing, so that a device's store need not wait for it.
+  virtual void begin(const BodySet& set, const std::vector<BeginArgs>& args) = 0;
   /// Result.X = Xb + kx Result.V and Result.A = ka (Result.V - Vb).
   virtual void positions(const BodySet& set, const std::vector<SchemeMaps>& maps) = 0;
   /// r = M a + C v + f_int + S (x - t) - f_ext at the result state into R, Rhs = -r / ka, and the

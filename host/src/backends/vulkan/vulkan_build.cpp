@@ -33,6 +33,7 @@ VulkanDevice::VulkanDevice(const std::vector<const Problem*>& problems, const So
               solver_.preconditioner != PreconditionerKind::Amg;
   groupIterationsPerDispatch_ = static_cast<int>(std::max<std::size_t>(1, kGroupChunkBudget / chunks));
   fusedPcg_ = tuning.fusedPcg < 0 ? ctx_->physical().gpu : tuning.fusedPcg > 0;
+  deviceStore_ = tuning.deviceStore < 0 ? ctx_->physical().gpu : tuning.deviceStore > 0;
   build();
   if (solver_.preconditioner == PreconditionerKind::Amg) {
     VulkanAmgHost host;
@@ -175,6 +176,7 @@ void VulkanDevice::build() {
   down_ = vk::Buffer(*ctx_, energyOffset_ + E / kWg * rs_, true);
   energyHost_.assign(B, 0.0);
   energyFresh_.assign(B, 0);
+  energyPending_.assign(B, 0);
 
   uploadVector(owned_[kSegInfo], segInfo_);
   uploadVector(owned_[kElemSeg], elemSeg);

@@ -27,7 +27,7 @@ void VulkanDevice::setPositions(const BodySet& set, const ConstVectors& x) {
   VkCommandBuffer cb = ctx_->begin();
   for (std::size_t i = 0; i < set.size(); ++i) {
     BodySegment& sg = layout_.segments[set[i]];
-    energyFresh_[set[i]] = 0;
+    energyFresh_[set[i]] = energyPending_[set[i]] = 0;
     const Eigen::VectorXd& xi = *x[i];
     centroidOf(xi, sg.nodes, sg.centroid);  // keeps float's x - c small (the forces read differences only)
     putReals(up_.mapped(), isDouble_, sg.dofBegin(), sg.dofs(), kChunk,
@@ -82,7 +82,7 @@ void VulkanDevice::setPositionsFrom(const BodySet& set, const vk::Buffer& from, 
   VkCommandBuffer cb = ctx_->begin();
   for (std::size_t i = 0; i < set.size(); ++i) {
     BodySegment& sg = layout_.segments[set[i]];
-    energyFresh_[set[i]] = 0;
+    energyFresh_[set[i]] = energyPending_[set[i]] = 0;
     std::copy(origins[i].begin(), origins[i].end(), sg.centroid);
     copy(cb, from, (at[i] + sg.dofBegin()) * rs_, buffer(kPos), sg.dofBegin() * rs_, sg.dofs() * rs_);
   }
@@ -98,10 +98,9 @@ void VulkanDevice::internalForcesInto(const BodySet& set, const vk::Buffer& to, 
   for (std::size_t i = 0; i < set.size(); ++i) {
     const BodySegment& sg = segment(set[i]);
     copy(cb, yout_, sg.dofBegin() * rs_, to, (at[i] + sg.dofBegin()) * rs_, sg.dofs() * rs_);
+    energyPending_[set[i]] = 1;
   }
-  vk::hostReadBarrier(cb);  // the energies' sums, read now; the forces stay on the device
-  ctx_->wait(ctx_->submit());
-  takeEnergies(set);
+  vk::hostReadBarrier(cb);  // left open: the energies' sums are taken by elasticEnergy, if it comes
 }
 
 void VulkanDevice::applyIn(const BodySet& set, const std::vector<SystemCoeffs>& coeffs, const vk::Buffer& vectors,
@@ -152,7 +151,15 @@ void VulkanDevice::apply(const BodySet& set, const std::vector<SystemCoeffs>& co
 void VulkanDevice::elasticEnergy(const BodySet& set, std::vector<double>& energy) {
   checkSet(set, set.size(), "energies");
   energy.assign(set.size(), 0.0);
-  if (!std::all_of(set.begin(), set.end(), [&](std::size_t b) { return energyFresh_[b] != 0; })) {
+  if (std::all_of(set.begin(), set.end(), [&](std::size_t b) { return energyFresh_[b] != 0 || energyPending_[b] != 0; })) {
+    BodySet pending;
+    for (std::size_t b : set)
+      if (!energyFresh_[b]) pending.push_back(b);
+    if (!pending.empty()) {
+      ctx_->wait(ctx_->flush());  // the sums internalForcesInto left on their way to down_
+      takeEnergies(pending);
+    }
+  } else {
     VkCommandBuffer cb = ctx_->begin();
     recordActive(cb, activeOf(set));
     recordCoefficients(cb, std::vector<SystemCoeffs>(bodyCount()));
@@ -189,6 +196,7 @@ void VulkanDevice::takeEnergies(const BodySet& set) {
     });
     energyHost_[b] = sum;
     energyFresh_[b] = 1;
+    energyPending_[b] = 0;
   }
 }
 
@@ -213,7 +221,7 @@ void VulkanDevice::setMaterial(const BodySet& set, const std::vector<const Probl
   for (std::size_t i = 0; i < set.size(); ++i) {
     BodySegment& sg = layout_.segments[set[i]];
     lame_[set[i]] = problems[i]->lame;
-    energyFresh_[set[i]] = 0;  // the energy is the Lame parameters' too
+    energyFresh_[set[i]] = energyPending_[set[i]] = 0;  // the energy is the Lame parameters' too
     sg.rayleighMass = problems[i]->rayleighMass;
     sg.rayleighStiffness = problems[i]->rayleighStiffness;
     if (amg_) amg_->invalidate(set[i]);
@@ -255,7 +263,8 @@ std::vector<DeviceBuffer> VulkanDevice::buffers() const {
   return out;
 }
 
-std::unique_ptr<StepStore> VulkanDevice::createStepStore(const DeviceSlot& slot) {
+std::unique_ptr<StepStore> VulkanDevice::createStepStore(DeviceSlot& slot) {
+  if (!deviceStore_) return nullptr;
   return createVulkanStepStore(*this, ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
 }
 

@@ -166,8 +166,9 @@ class VulkanDevice final : public Device {
 
   std::vector<DeviceBuffer> buffers() const override;
 
-  /// The store on this device's context, in its numbering and precision (vulkan_step_store.hpp).
-  std::unique_ptr<StepStore> createStepStore(const DeviceSlot& slot) override;
+  /// The store on this device's context, in its numbering and precision (vulkan_step_store.hpp),
+  /// where VulkanTuning::deviceStore asks for one; else null (the host's).
+  std::unique_ptr<StepStore> createStepStore(DeviceSlot& slot) override;
 
   // ---------------------------------------------------------------------------- a store's calls
   // The element operations on vectors a step store keeps in a buffer of this device's context, in
@@ -395,6 +396,8 @@ class VulkanDevice final : public Device {
   std::size_t energyOffset_ = 0;   ///< bytes: where the element work-groups' energy sums are read to in down_
   std::vector<double> energyHost_;  ///< per body: its strain energy as last read
   std::vector<char> energyFresh_;   ///< per body: energyHost_ is at the positions and material set
+  /// per body: its energy's sums are on their way to down_ in recorded work (internalForcesInto)
+  std::vector<char> energyPending_;
   VkPipeline rotations_ = VK_NULL_HANDLE, element_ = VK_NULL_HANDLE, gather_ = VK_NULL_HANDLE, pcg_ = VK_NULL_HANDLE,
              reduce_ = VK_NULL_HANDLE, pcgGroup_ = VK_NULL_HANDLE, elementFused_ = VK_NULL_HANDLE,
              pcgFused_ = VK_NULL_HANDLE, surface_ = VK_NULL_HANDLE;
@@ -408,6 +411,7 @@ class VulkanDevice final : public Device {
   bool groupPcg_ = false;  ///< PCG iterations in one dispatch, a work-group per body (pcg_group.comp)
   int groupIterationsPerDispatch_ = 1;                   ///< pcg_group's iterations in one dispatch
   bool fusedPcg_ = false;  ///< off pcg_group, two dispatches an iteration (VulkanTuning::fusedPcg)
+  bool deviceStore_ = false;  ///< createStepStore makes one (VulkanTuning::deviceStore)
   long long groupDispatches_ = 0, phaseDispatches_ = 0;  ///< PCG iteration dispatches of each path
   /// The last submission reading up_ (0: none pending; kOpenCommands: the open command buffer, or
   /// a submission since: Context::flush gives it).

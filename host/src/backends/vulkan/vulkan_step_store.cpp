@@ -21,7 +21,7 @@ namespace {
 
 // step.comp's numbers (its comment says what each holds).
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
-constexpr std::size_t kWg = 64;  ///< dofs per work-group: a segment's 64 padded nodes are three
+constexpr std::size_t kWg = 64;  ///< nodes per work-group of step.comp (a segment's are whole ones)
 constexpr std::size_t kChunk = 4096;
 constexpr std::size_t kStates = static_cast<std::size_t>(StateSlot::kCount);
 constexpr std::size_t kStateVecs = static_cast<std::size_t>(StateVec::kCount);
@@ -48,20 +48,23 @@ bool isPosition(Scratch v) { return v == Scratch::Xb || v == Scratch::Target; }
 class VulkanStepStore final : public StepStore {
  public:
   VulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx, bool isDouble,
-                  const std::vector<BodySegment>& segments, std::size_t nodeTotal, const DeviceSlot& slot)
-      : device_(&device), ctx_(std::move(ctx)), isDouble_(isDouble), rs_(isDouble ? sizeof(double) : sizeof(float)),
-        dofTotal_(3 * nodeTotal) {
+                  const std::vector<BodySegment>& segments, std::size_t nodeTotal, DeviceSlot& slot)
+      : device_(&device), generation_(slot.generation()), ctx_(std::move(ctx)), isDouble_(isDouble),
+        rs_(isDouble ? sizeof(double) : sizeof(float)), dofTotal_(3 * nodeTotal) {
     if (segments.size() != slot.bodyCount())
       fail(ErrorCode::Internal, "vulkan step store: ", segments.size(), " segments for ", slot.bodyCount(), " bodies");
     for (std::size_t i = 0; i < segments.size(); ++i) {
       Body b;
       b.problem = &slot.problem(i);
       b.seg = segments[i];
-      if (b.seg.dofs() != static_cast<std::size_t>(b.problem->restPositions.size()) || b.seg.dofBegin() % kWg != 0)
+      if (b.seg.dofs() != static_cast<std::size_t>(b.problem->restPositions.size()) || b.seg.nodeBegin % kWg != 0)
         fail(ErrorCode::Internal, "vulkan step store: body '", b.problem->name, "' has ", b.seg.dofs(),
              " dofs on the device at ", b.seg.dofBegin(), " for ", b.problem->restPositions.size());
+      // In float, positions relative to the rest centroid keep float's resolution where the body
+      // is (the device's own positions are relative to a centroid too); in double the origin is 0,
+      // so that a state set and read back is the same numbers.
       const Eigen::Index n = b.problem->restPositions.size();
-      for (int k = 0; k < 3; ++k) {
+      for (int k = 0; k < 3 && !isDouble_; ++k) {
         double sum = 0.0;
         for (Eigen::Index d = k; d < n; d += 3) sum += b.problem->restPositions[d];
         b.origin[static_cast<std::size_t>(k)] = n >= 3 ? sum / static_cast<double>(n / 3) : 0.0;
@@ -72,7 +75,7 @@ class VulkanStepStore final : public StepStore {
     }
     const vk::Spirv code = vk::shaderCode(vk::Shader::Step, isDouble_);
     pipeline_ = ctx_->pipeline(code.words, code.bytes, "step.comp");
-    const std::size_t groups = dofTotal_ / kWg;
+    const std::size_t groups = dofTotal_ / (3 * kWg);
     buffers_[kBindWgBody] = vk::Buffer(*ctx_, groups * sizeof(std::uint32_t), false);
     buffers_[kBindBodyU] = vk::Buffer(*ctx_, bodies_.size() * kUCount * sizeof(std::uint32_t), false);
     buffers_[kBindVecs] = vk::Buffer(*ctx_, kVectors * dofTotal_ * rs_, false);
@@ -87,6 +90,13 @@ class VulkanStepStore final : public StepStore {
     std::vector<std::uint32_t> none(dofTotal_, kNone);
     uploadWords(buffers_[kBindPresc], 0, none.data(), none.size());
     grow(loads_, groups_);
+    // The slot may outlive the store or go first (a Simulation drops a group's slot before its
+    // driver): the source holds the store's token, and does nothing once the store went.
+    slot.setPositionSource(this, [this, alive = std::weak_ptr<char>(alive_)](std::size_t body, Eigen::VectorXd& x) {
+      if (alive.expired()) return;
+      Body& b = at(body);
+      readVector(b, (kStateVecs * b.positions + index(StateVec::X)) * dofTotal_, true, x);
+    });
   }
 
   ~VulkanStepStore() override {
@@ -152,7 +162,7 @@ class VulkanStepStore final : public StepStore {
     ctx_->wait(ctx_->submit());
   }
 
-  void constraintsChanged(std::size_t body) override { uploadProblem(checked(body)); }
+  void problemChanged(std::size_t body) override { uploadProblem(checked(body)); }
 
   void setControls(std::size_t body, const BodyControls& controls) override {
     Body& b = at(body);
@@ -175,43 +185,47 @@ class VulkanStepStore final : public StepStore {
   // vectors.
 
   void setPositions(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
-    ConstVectors xs;
-    if (vkdevice::VulkanDevice* d = mine(device)) {
+    onDevice(device, "setPositions", [&](vkdevice::VulkanDevice& d) {
       std::vector<std::size_t> at;
       std::vector<std::array<double, 3>> origins;
+      ConstVectors xs;
       for (std::size_t i : set) {
         at.push_back(stateOffset(bodies_[checked(i)], slot, StateVec::X));
         origins.push_back(bodies_[i].origin);
-        if (d->positionsNeedHost()) xs.push_back(&state(i, slot, StateVec::X));
+        if (d.positionsNeedHost()) xs.push_back(&state(i, slot, StateVec::X));
       }
-      d->setPositionsFrom(set, buffers_[kBindVecs], at, origins, d->positionsNeedHost() ? &xs : nullptr);
-      return;
-    }
-    for (std::size_t i : set) xs.push_back(&state(i, slot, StateVec::X));
-    device.setPositions(set, xs);
+      d.setPositionsFrom(set, buffers_[kBindVecs], at, origins, d.positionsNeedHost() ? &xs : nullptr);
+      for (std::size_t i : set) bodies_[i].positions = bodies_[i].slot[index(slot)];
+      device.positionsSetElsewhere(set);
+    }, [&]() {
+      ConstVectors xs;
+      for (std::size_t i : set) xs.push_back(&state(i, slot, StateVec::X));
+      device.setPositions(set, xs);
+    });
   }
 
   void internalForces(DeviceSlot& device, const BodySet& set) override {
-    if (vkdevice::VulkanDevice* d = mine(device)) {
-      for (std::size_t i : set) checked(i);
-      d->internalForcesInto(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Fint)));
-      return;
-    }
-    std::vector<Eigen::VectorXd> f(set.size());
-    Vectors fs;
-    for (Eigen::VectorXd& v : f) fs.push_back(&v);
-    device.internalForces(set, fs);
-    for (std::size_t k = 0; k < set.size(); ++k) setScratch(at(set[k]), Scratch::Fint, f[k]);
+    for (std::size_t i : set) checked(i);
+    onDevice(device, "internalForces", [&](vkdevice::VulkanDevice& d) {
+      d.internalForcesInto(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Fint)));
+    }, [&]() {
+      std::vector<Eigen::VectorXd> f(set.size());
+      Vectors fs;
+      for (Eigen::VectorXd& v : f) fs.push_back(&v);
+      device.internalForces(set, fs);
+      for (std::size_t k = 0; k < set.size(); ++k) setScratch(at(set[k]), Scratch::Fint, f[k]);
+    });
   }
 
   void damping(DeviceSlot& device, const BodySet& set, StateSlot slot) override {
-    if (vkdevice::VulkanDevice* d = mine(device)) {
+    for (std::size_t i : set) checked(i);
+    onDevice(device, "damping", [&](vkdevice::VulkanDevice& d) {
       // Mass damping alone (or none) as alpha M v in the store's pass, stiffness damping by the
       // device's product with C = alpha M + beta K.
       BodySet byMass, byProduct;
       Tables t = tables();
       for (std::size_t i : set) {
-        const Problem& p = *at(i).problem;
+        const Problem& p = *bodies_[i].problem;
         if (p.rayleighStiffness == 0.0) {
           byMass.push_back(i);
           t.r[realsPerBody() * i + kRAlpha] = p.rayleighMass;
@@ -227,40 +241,42 @@ class VulkanStepStore final : public StepStore {
           from.push_back(stateOffset(bodies_[i], slot, StateVec::V));
           to.push_back(scratchOffset(Scratch::Cv));
         }
-        d->applyIn(byProduct, std::vector<SystemCoeffs>(byProduct.size(), SystemCoeffs{0.0, 1.0, 0.0}),
-                   buffers_[kBindVecs], from, to);
+        d.applyIn(byProduct, std::vector<SystemCoeffs>(byProduct.size(), SystemCoeffs{0.0, 1.0, 0.0}),
+                  buffers_[kBindVecs], from, to);
       }
-      return;
-    }
-    std::vector<Eigen::VectorXd> v(set.size()), cv(set.size());
-    std::vector<const Problem*> problems;
-    ConstVectors vs;
-    Vectors cvs;
-    for (std::size_t k = 0; k < set.size(); ++k) {
-      v[k] = state(set[k], slot, StateVec::V);
-      problems.push_back(at(set[k]).problem);
-      vs.push_back(&v[k]);
-      cvs.push_back(&cv[k]);
-    }
-    dampingForces(device, set, problems, vs, cvs);
-    for (std::size_t k = 0; k < set.size(); ++k) setScratch(at(set[k]), Scratch::Cv, cv[k]);
+    }, [&]() {
+      std::vector<Eigen::VectorXd> v(set.size()), cv(set.size());
+      std::vector<const Problem*> problems;
+      ConstVectors vs;
+      Vectors cvs;
+      for (std::size_t k = 0; k < set.size(); ++k) {
+        v[k] = state(set[k], slot, StateVec::V);
+        problems.push_back(bodies_[set[k]].problem);
+        vs.push_back(&v[k]);
+        cvs.push_back(&cv[k]);
+      }
+      dampingForces(device, set, problems, vs, cvs);
+      for (std::size_t k = 0; k < set.size(); ++k) setScratch(bodies_[set[k]], Scratch::Cv, cv[k]);
+    });
   }
 
   void solve(DeviceSlot& device, const BodySet& set, std::vector<PcgSolve>& solves) override {
     if (solves.size() != set.size())
       fail(ErrorCode::Internal, "step store: ", solves.size(), " solves for ", set.size(), " bodies");
-    if (vkdevice::VulkanDevice* d = mine(device); d && device.solver().linearSolver == LinearSolverKind::Pcg) {
-      for (std::size_t i : set) checked(i);
-      d->stageSolve(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Rhs)));
-      for (PcgSolve& s : solves) {
-        s.b = nullptr;
-        s.x = nullptr;
-        s.resident = true;
-      }
-      solvePcg(*d, set, solves, device.solver());
-      d->takeSolution(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Dv)));
+    for (std::size_t i : set) checked(i);
+    if (device.solver().linearSolver == LinearSolverKind::Pcg &&
+        onDevice(device, "solve", [&](vkdevice::VulkanDevice& d) {
+          d.stageSolve(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Rhs)));
+          for (PcgSolve& s : solves) {
+            s.b = nullptr;
+            s.x = nullptr;
+            s.resident = true;
+          }
+          solvePcg(d, set, solves, device.solver());
+          d.takeSolution(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Dv)));
+        }))
       return;
-    }
+    for (PcgSolve& s : solves) s.resident = false;
     std::vector<Eigen::VectorXd> rhs(set.size()), dv(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       rhs[k] = scratch(set[k], Scratch::Rhs);
@@ -278,7 +294,7 @@ class VulkanStepStore final : public StepStore {
 
   // ---------------------------------------------------------------------------- passes
 
-  void begin(const BodySet& set, const std::vector<BeginArgs>& args, std::vector<double>& fextNorm) override {
+  void begin(const BodySet& set, const std::vector<BeginArgs>& args) override {
     check(set, args.size());
     Tables t = tables();
     for (std::size_t k = 0; k < set.size(); ++k) {
@@ -294,16 +310,14 @@ class VulkanStepStore final : public StepStore {
       std::copy(scales.begin(), scales.end(), r + kRCount);
       std::copy(presc.begin(), presc.end(), r + kRCount + loads_);
     }
-    const std::vector<std::array<double, kSums>> sums = run(kModeBegin, set, t);
-    fextNorm.resize(set.size());
-    for (std::size_t k = 0; k < set.size(); ++k) fextNorm[k] = std::sqrt(sums[k][0]);
+    run(kModeBegin, set, t, /*sums=*/false);
   }
 
   void positions(const BodySet& set, const std::vector<SchemeMaps>& maps) override {
     check(set, maps.size());
     Tables t = tables();
     for (std::size_t k = 0; k < set.size(); ++k) setMaps(t, set[k], maps[k]);
-    run(kModePositions, set, t);
+    run(kModePositions, set, t, /*sums=*/false);
   }
 
   void residual(const BodySet& set, const std::vector<SchemeMaps>& maps, std::vector<ResidualSums>& out) override {
@@ -314,7 +328,7 @@ class VulkanStepStore final : public StepStore {
     out.resize(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       const auto& s = sums[k];
-      out[k] = ResidualSums{s[0], s[1], s[2], s[3], s[4], s[5]};
+      out[k] = ResidualSums{s[0], s[1], s[2], s[3], s[4], s[5], s[6]};
     }
   }
 
@@ -340,6 +354,7 @@ class VulkanStepStore final : public StepStore {
     Eigen::ArrayXd freeMask;
     BodyControls controls;
     std::array<std::uint32_t, kStates> slot = {0, 1, 2, 3};  ///< the physical state of each StateSlot
+    std::uint32_t positions = 0;  ///< the physical state whose X the device's positions were set from
     std::array<Eigen::VectorXd, kVectors> read;               ///< state() and scratch() answers
   };
 
@@ -423,12 +438,12 @@ class VulkanStepStore final : public StepStore {
     copyUp(to, first * sizeof(std::uint32_t), 0, count * sizeof(std::uint32_t));
   }
 
-  /// Each dof work-group's body (an index into bodies_), or none.
+  /// Each node work-group's body (an index into bodies_), or none.
   void uploadWorkGroups() {
-    std::vector<std::uint32_t> wg(dofTotal_ / kWg, kNone);
+    std::vector<std::uint32_t> wg(dofTotal_ / (3 * kWg), kNone);
     for (std::size_t i = 0; i < bodies_.size(); ++i) {
       const BodySegment& s = bodies_[i].seg;
-      for (std::size_t g = s.dofBegin() / kWg; g < 3 * (s.nodeBegin + s.nodeSpan) / kWg; ++g)
+      for (std::size_t g = s.nodeBegin / kWg; g < (s.nodeBegin + s.nodeSpan) / kWg; ++g)
         wg[g] = static_cast<std::uint32_t>(i);
     }
     uploadWords(buffers_[kBindWgBody], 0, wg.data(), wg.size());
@@ -546,12 +561,12 @@ class VulkanStepStore final : public StepStore {
     vkCmdBindPipeline(cb, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
     vkCmdBindDescriptorSets(cb, VK_PIPELINE_BIND_POINT_COMPUTE, ctx_->pipelineLayout(), 0, 1, &set_, 0, nullptr);
     vkCmdPushConstants(cb, ctx_->pipelineLayout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(push), &push);
-    vkCmdDispatch(cb, static_cast<std::uint32_t>(dofTotal_ / kWg), 1, 1);
+    vkCmdDispatch(cb, static_cast<std::uint32_t>(dofTotal_ / (3 * kWg)), 1, 1);
     vk::fullBarrier(cb);
     if (!sums) return {};  // left open: the next call that waits submits it
     for (std::size_t i : set) {
       const BodySegment& s = bodies_[i].seg;
-      const std::size_t first = s.dofBegin() / kWg, count = s.dofs() == 0 ? 0 : (s.dofs() + kWg - 1) / kWg;
+      const std::size_t first = s.nodeBegin / kWg, count = (s.nodes + kWg - 1) / kWg;
       const VkBufferCopy region{first * kSums * rs_, first * kSums * rs_, count * kSums * rs_};
       if (count) vkCmdCopyBuffer(cb, buffers_[kBindPartials].handle(), down_.handle(), 1, &region);
     }
@@ -560,7 +575,7 @@ class VulkanStepStore final : public StepStore {
     std::vector<std::array<double, kSums>> out(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       const BodySegment& s = bodies_[set[k]].seg;
-      const std::size_t first = s.dofBegin() / kWg, count = (s.dofs() + kWg - 1) / kWg;
+      const std::size_t first = s.nodeBegin / kWg, count = (s.nodes + kWg - 1) / kWg;
       out[k].fill(0.0);
       withReals(down_.mapped(), isDouble_, 0, [&](const auto* p) {
         for (std::size_t g = first; g < first + count; ++g)
@@ -570,12 +585,31 @@ class VulkanStepStore final : public StepStore {
     return out;
   }
 
-  /// The slot's device while it holds the store's (null: another).
-  vkdevice::VulkanDevice* mine(DeviceSlot& slot) const {
-    return &slot.device() == static_cast<Device*>(device_) ? device_ : nullptr;
+  /// onDevice(device) where the slot still holds the store's device (the generation it was made
+  /// in); a DeviceError there moves the slot to its next candidate. Then, or where the slot held
+  /// another device already, onHost() (through the slot). Returns whether onDevice ran to its end.
+  template <class OnDevice, class OnHost>
+  bool onDevice(DeviceSlot& slot, const char* call, OnDevice&& onDevice, OnHost&& onHost) {
+    if (slot.generation() == generation_ && &slot.device() == static_cast<Device*>(device_)) {
+      try {
+        onDevice(*device_);
+        return true;
+      } catch (const Error& e) {
+        if (e.code() != ErrorCode::DeviceError) throw;
+        slot.failover(call, e);  // the new device takes the positions from the store (the source)
+      }
+    }
+    onHost();
+    return false;
+  }
+  template <class OnDevice>
+  bool onDevice(DeviceSlot& slot, const char* call, OnDevice&& fn) {
+    return onDevice(slot, call, std::forward<OnDevice>(fn), []() {});
   }
 
   vkdevice::VulkanDevice* device_;  ///< the device whose context holds the store
+  std::size_t generation_;          ///< the slot's generation when it held device_
+  std::shared_ptr<char> alive_ = std::make_shared<char>(0);  ///< the slot's position source's token
   std::shared_ptr<vk::Context> ctx_;
   bool isDouble_;
   std::size_t rs_;
@@ -592,7 +626,7 @@ class VulkanStepStore final : public StepStore {
 
 std::unique_ptr<StepStore> createVulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx,
                                                  bool isDouble, const std::vector<BodySegment>& segments,
-                                                 std::size_t nodeTotal, const DeviceSlot& slot) {
+                                                 std::size_t nodeTotal, DeviceSlot& slot) {
   return std::make_unique<VulkanStepStore>(device, std::move(ctx), isDouble, segments, nodeTotal, slot);
 }
 

@@ -29,10 +29,13 @@ class VulkanDevice;
 /// A store on `device`'s context for the slot's bodies laid out as `segments` (the device's: the
 /// same nodes, in its order; `nodeTotal` padded nodes in all), in double where `isDouble`, else
 /// float. Its device calls read and write its buffers on the device while the slot holds `device`,
-/// and go through host vectors after the slot moved to another device. Throws Error(DeviceError)
-/// for a failed Vulkan call.
+/// and go through the slot with host vectors after it moved to another device; a DeviceError in one
+/// of them moves the slot to its next candidate (DeviceSlot::failover, the positions from the
+/// store) and repeats the call there. Its owner drops the slot's position source (DeviceSlot::
+/// dropPositionSource) before it replaces the store. Throws Error(DeviceError) for a failed Vulkan
+/// call.
 std::unique_ptr<StepStore> createVulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx,
                                                  bool isDouble, const std::vector<BodySegment>& segments,
-                                                 std::size_t nodeTotal, const DeviceSlot& slot);
+                                                 std::size_t nodeTotal, DeviceSlot& slot);
 
 }  // namespace corofem::detail
