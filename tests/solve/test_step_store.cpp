@@ -453,6 +453,54 @@ TEST_P(StepStoreContract, ABodyGetsTheSameBitsAloneAsInASet) {
   EXPECT_TRUE(test::sameBits(store_->scratch(1, Scratch::R), r1));
 }
 
+/// A device error in a Vulkan store's world: the slot moves to its next candidate (here the
+/// reference), which takes the positions the store last set on the Vulkan device (not any the slot
+/// was given), and the store's calls go on through the slot with host vectors.
+TEST(VulkanStepStoreFailover, TheNextDeviceTakesThePositionsTheStoreSetAndTheCallsGoOn) {
+  const auto vulkan = detail::findBackend("vulkan");
+  const auto reference = detail::findBackend("reference");
+  ASSERT_NE(reference, nullptr);
+  if (!vulkan || vulkan->candidates().empty()) GTEST_SKIP() << "no Vulkan device";
+  const detail::Problem problem = featureBody(6, 3, 3, 0.1, 11);
+  SolverDesc solver;
+  solver.linearSolver = LinearSolverKind::Pcg;
+  solver.precision = Precision::Double;
+  detail::DeviceOptions options;
+  options.vulkan.deviceStore = 1;
+  std::unique_ptr<detail::DeviceSlot> slot;
+  try {
+    slot = std::make_unique<detail::DeviceSlot>(std::vector<const detail::Problem*>{&problem}, solver,
+                                                std::vector<detail::Candidate>{vulkan->resolve(""), reference->resolve("")},
+                                                /*fallbackAtCreate=*/false, options);
+  } catch (const detail::Error& e) {
+    GTEST_SKIP() << "no Vulkan device for double: " << e.what();
+  }
+  ASSERT_EQ(slot->current().backend, "vulkan");
+  std::unique_ptr<detail::StepStore> store = slot->device().createStepStore(*slot);
+  ASSERT_NE(store, nullptr);
+  const auto n = static_cast<std::size_t>(problem.restPositions.size());
+  slot->setPositions({0}, {&problem.restPositions});  // what the slot was given: rest
+  const Eigen::VectorXd x = problem.restPositions + 0.01 * randomVector(n, 5);
+  store->setState(0, StateSlot::Committed, StateVec::X, x);
+  store->setPositions(*slot, {0}, StateSlot::Committed);  // on the device, from the store's buffer
+  std::vector<double> before, after;
+  slot->elasticEnergy({0}, before);
+  ASSERT_GT(before[0], 0.0);
+
+  slot->failover("a test", detail::Error(ErrorCode::DeviceError, "a device lost on purpose"));
+  EXPECT_EQ(slot->current().backend, "reference");
+  EXPECT_EQ(slot->failovers(), 1u);
+  slot->elasticEnergy({0}, after);
+  EXPECT_NEAR(after[0], before[0], 1e-9 * before[0]) << "the reference was not given the store's positions";
+
+  // The store's calls now go through the slot: its forces are the reference's at x.
+  store->internalForces(*slot, {0});
+  Eigen::VectorXd f;
+  slot->internalForces({0}, {&f});
+  EXPECT_TRUE(test::sameBits(store->scratch(0, Scratch::Fint), f));
+  EXPECT_GT(f.norm(), 0.0);
+}
+
 INSTANTIATE_TEST_SUITE_P(Stores, StepStoreContract, ::testing::ValuesIn(kStores),
                          [](const ::testing::TestParamInfo<StoreKind>& info) { return std::string(info.param.name); });
 

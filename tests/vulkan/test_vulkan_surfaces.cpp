@@ -140,6 +140,20 @@ TEST_P(VulkanSurfaces, TheDeviceSurfaceIsTheHostsDeformationOfTheRunsOwnNodes) {
   EXPECT_EQ(n1, n2);
 }
 
+/// The same with the dynamics' vectors in the device's memory (VulkanTuning::deviceStore, a GPU's
+/// default): the device's positions come from the store's buffers, relative to the store's origin,
+/// and the surface is still the host's deformation of the positions the run reads back.
+TEST_P(VulkanSurfaces, WithTheStateOnTheDeviceTheSurfaceIsTheHostsDeformationToo) {
+  SimulationOptions o;
+  o.vulkan.deviceStore = 1;
+  auto sim = Simulation::create(vulkanSurfaceScene(GetParam()), o);
+  skipUnless(sim);
+  if (IsSkipped()) return;
+  ASSERT_TRUE(sim) << sim.message();
+  for (int k = 1; k <= 10; ++k) ASSERT_TRUE(sim->step()) << "step " << k;
+  expectTheHostsSurface(sim.value(), 0, isDouble());
+}
+
 TEST_P(VulkanSurfaces, ABatchsSurfacesShareTheirBuffersAndEachIsItsBodys) {
   auto sim = Simulation::create(vulkanSurfaceScene(GetParam(), 3));
   skipUnless(sim);
