@@ -36,6 +36,8 @@
 //   --fused_pcg=N         VulkanTuning::fusedPcg for every backend it makes (1: two dispatches an
 //                         iteration off the one-dispatch path, 0: four; the default, -1, two on a
 //                         GPU and four on a CPU device)
+//   --device_store=N      VulkanTuning::deviceStore for every backend it makes (1: the dynamics'
+//                         vectors on the device, 0: on the host; the default, -1, on a GPU only)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
 #include "bench_scenes.hpp"
@@ -396,13 +398,17 @@ int registerAll() {
 
 }  // namespace
 
-/// Takes --group_pcg_nodes and --fused_pcg out of argv; exits with a message on a malformed value.
+/// Takes --group_pcg_nodes, --fused_pcg and --device_store out of argv; exits with a message on a
+/// malformed value.
 void parseVulkanBenchOptions(int& argc, char** argv) {
   int out = 1;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
-    const std::string group = "--group_pcg_nodes=", fused = "--fused_pcg=";
-    const std::string* flag = arg.rfind(group, 0) == 0 ? &group : arg.rfind(fused, 0) == 0 ? &fused : nullptr;
+    const std::string group = "--group_pcg_nodes=", fused = "--fused_pcg=", store = "--device_store=";
+    const std::string* flag = arg.rfind(group, 0) == 0   ? &group
+                              : arg.rfind(fused, 0) == 0 ? &fused
+                              : arg.rfind(store, 0) == 0 ? &store
+                                                         : nullptr;
     if (!flag) {
       argv[out++] = argv[i];
       continue;
@@ -411,11 +417,12 @@ void parseVulkanBenchOptions(int& argc, char** argv) {
     const long long v = std::strtoll(arg.c_str() + flag->size(), &end, 10);
     if (arg.size() == flag->size() || !end || *end) {
       std::fprintf(stderr, "%s: not an integer (VulkanTuning::%s)\n", arg.c_str(),
-                   flag == &group ? "groupPcgNodes" : "fusedPcg");
+                   flag == &group ? "groupPcgNodes" : flag == &fused ? "fusedPcg" : "deviceStore");
       std::exit(2);
     }
     if (flag == &group) benchTuning().groupPcgNodes = v;
-    else benchTuning().fusedPcg = static_cast<int>(v);
+    else if (flag == &fused) benchTuning().fusedPcg = static_cast<int>(v);
+    else benchTuning().deviceStore = static_cast<int>(v);
   }
   argc = out;
 }

@@ -19,7 +19,8 @@
 # the 10k box's 2,100 nodes on the per-phase path), in turns. profile also profiles the multigrid's
 # iteration (pcg_iteration_amg, 10k). vulkanstep: bench_vulkan's steps from the binaries in VULKANSTEP, in
 # turns (see the stage). fusedab: bench_vulkan's iterations and steps with VulkanTuning::fusedPcg 0 and 1
-# in turns (FUSEDAB_FILTER, FUSEDAB_ROUNDS). Call it as `bash bench/device/run_on_gpu.sh 2>&1` with nothing after it:
+# in turns (FUSEDAB_FILTER, FUSEDAB_ROUNDS). storeab: bench_vulkan's steps with VulkanTuning::deviceStore 0
+# (the host's vectors) and 1 (the device's) in turns (STOREAB_FILTER, STOREAB_ROUNDS). Call it as `bash bench/device/run_on_gpu.sh 2>&1` with nothing after it:
 # the device tool gives back nothing of a pipeline it kills at the call's limit (a `| grep` lost a whole call).
 set -uo pipefail
 root=$(pwd)
@@ -201,6 +202,15 @@ if has fusedab; then  # VulkanTuning::fusedPcg in turns: an iteration in four di
         awk -v r="$round" -v f="$v" '{print "round " r, "fused_pcg=" f, $1, $2, $3, $4, $5, $9, $10}'
     done
   done | tee /tmp/logs/fusedab.txt
+fi
+if has storeab; then  # VulkanTuning::deviceStore in turns: the dynamics' vectors on the host (0) or the device (1)
+  for round in $(seq "${STOREAB_ROUNDS:-2}"); do
+    for v in 0 1; do
+      timeout 200 "$B/bench_vulkan" --device_store="$v" --benchmark_filter="${STOREAB_FILTER:-^step/0/}" \
+        --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | \
+        awk -v r="$round" -v f="$v" '{print "round " r, "device_store=" f, $1, $2, $3, $4, $5, $7, $9, $10}'
+    done
+  done | tee /tmp/logs/storeab.txt
 fi
 if has precond; then  # the preconditioners per converged step on the GPU (issue 29's beam, both APIs)
   (cd "$root" && timeout 240 "$B/bench_precond" \
