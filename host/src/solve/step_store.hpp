@@ -2,9 +2,10 @@
 // (solve/dynamics.cpp). The driver keeps every decision (Newton's stop, the blow-up and runaway
 // guards, substeps, the commit) and reads only scalars from the passes; the store keeps the
 // vectors and runs the passes and the device calls on them. HostStepStore keeps them on the host,
-// in double, and serves every device. A device that keeps them itself (the Vulkan issue's
-// recorded step) implements the same passes on its own buffers, so that a step's vectors need not
-// cross to the host: the driver is written once over either.
+// in double, and serves every device. A device that keeps them itself (Device::createStepStore:
+// the Vulkan device's, backends/vulkan/vulkan_step_store.hpp) implements the same passes on its own
+// buffers, so that a step's vectors need not cross to the host: the driver is written once over
+// either.
 //
 // Per body the store holds four states (StateSlot), each the five vectors of a dynamics state
 // (StateVec, 3N reals in the problem's numbering): the committed one, the step's start (kept for

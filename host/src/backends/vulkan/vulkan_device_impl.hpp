@@ -16,8 +16,9 @@
 // the bodies' render surfaces there (vulkan_surfaces.cpp) into VkBuffers a renderer draws from.
 //
 // The "amg" preconditioner's V-cycle is vulkan_amg.cpp's, recorded between pcg.comp's pass and the
-// product. Not here yet (the Vulkan issue's later step): the whole step as one recorded command
-// buffer replayed every frame.
+// product. The dynamics' vectors may live on the device too (createStepStore, vulkan_step_store.cpp:
+// the store's calls below read and write its buffers). Not here yet (the Vulkan issue's last step):
+// the whole step as one recorded command buffer replayed every frame.
 #pragma once
 
 #include "backends/vulkan/shaders.hpp"
