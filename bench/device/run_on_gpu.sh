@@ -194,23 +194,21 @@ if has vulkanstep; then  # bench_vulkan's whole steps from several binaries (an 
     done
   done | tee /tmp/logs/vulkanstep.txt
 fi
-if has fusedab; then  # VulkanTuning::fusedPcg in turns: an iteration in four dispatches (0) against two (1)
-  for round in $(seq "${FUSEDAB_ROUNDS:-2}"); do
+# bench_vulkan's medians with a VulkanTuning flag at 0 and at 1, in turns: ab <flag> <filter> <rounds>
+ab() {
+  for round in $(seq "$3"); do
     for v in 0 1; do
-      timeout 200 "$B/bench_vulkan" --fused_pcg="$v" --benchmark_filter="${FUSEDAB_FILTER:-^(pcg_iterations|step)/0/}" \
+      timeout 200 "$B/bench_vulkan" "--$1=$v" --benchmark_filter="$2" \
         --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | \
-        awk -v r="$round" -v f="$v" '{print "round " r, "fused_pcg=" f, $1, $2, $3, $4, $5, $9, $10}'
+        awk -v r="$round" -v f="$1=$v" '{print "round " r, f, $1, $2, $3, $4, $5, $7, $9, $10}'
     done
-  done | tee /tmp/logs/fusedab.txt
+  done
+}
+if has fusedab; then  # VulkanTuning::fusedPcg in turns: an iteration in four dispatches (0) against two (1)
+  ab fused_pcg "${FUSEDAB_FILTER:-^(pcg_iterations|step)/0/}" "${FUSEDAB_ROUNDS:-2}" | tee /tmp/logs/fusedab.txt
 fi
 if has storeab; then  # VulkanTuning::deviceStore in turns: the dynamics' vectors on the host (0) or the device (1)
-  for round in $(seq "${STOREAB_ROUNDS:-2}"); do
-    for v in 0 1; do
-      timeout 200 "$B/bench_vulkan" --device_store="$v" --benchmark_filter="${STOREAB_FILTER:-^step/0/}" \
-        --benchmark_repetitions=3 --benchmark_report_aggregates_only=true 2>/dev/null | grep median | \
-        awk -v r="$round" -v f="$v" '{print "round " r, "device_store=" f, $1, $2, $3, $4, $5, $7, $9, $10}'
-    done
-  done | tee /tmp/logs/storeab.txt
+  ab device_store "${STOREAB_FILTER:-^step/0/}" "${STOREAB_ROUNDS:-2}" | tee /tmp/logs/storeab.txt
 fi
 if has precond; then  # the preconditioners per converged step on the GPU (issue 29's beam, both APIs)
   (cd "$root" && timeout 240 "$B/bench_precond" \
