@@ -37,7 +37,7 @@
 //                         iteration off the one-dispatch path, 0: four; the default, -1, two on a
 //                         GPU and four on a CPU device)
 //   --device_store=N      VulkanTuning::deviceStore for every backend it makes (1: the dynamics'
-//                         vectors on the device, 0: on the host; the default, -1, on a GPU only)
+//                         vectors on the device, 0 (the default): on the host, -1: on a GPU only)
 //
 // lavapipe needs LP_NUM_THREADS=0 (its rasteriser threads are not used by compute) to behave.
 #include "bench_scenes.hpp"

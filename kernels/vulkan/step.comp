@@ -192,7 +192,9 @@ void main() {
     if (real_node)
       for (uint c = 0u; c < 3u; ++c) {
         const uint d = 3u * n + c;
-        vecs[scratch_at(kCv, d)] = body_real(kRAlpha) * (input_of(kInMass, d) * vecs[state_at(bodyU[kUCount * body + kUFrom], kV, d)]);
+        const real alpha = body_real(kRAlpha);  /* 0: no damping, Cv = 0 whatever v holds (the host's) */
+        vecs[scratch_at(kCv, d)] =
+            alpha == real(0) ? real(0) : alpha * (input_of(kInMass, d) * vecs[state_at(bodyU[kUCount * body + kUFrom], kV, d)]);
       }
   } else {
     /* The passes with sums: each invocation's three dofs in order, then the work-group's tree. */

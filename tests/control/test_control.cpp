@@ -50,6 +50,11 @@ SimulationOptions& caseOptions() {
 Simulation create(const Scene& scene) {
   Result<Simulation> sim = Simulation::create(scene, caseOptions());
   if (!sim) throw std::runtime_error(sim.message());
+  if (caseOptions().vulkan.deviceStore == 1 && scene.analysis.kind == AnalysisDesc::Kind::Dynamic) {
+    // The case runs what it says: its dynamics' vectors on the device.
+    const nlohmann::json report = nlohmann::json::parse(sim->schedulerReport());
+    EXPECT_GE(report.value("device_counters", nlohmann::json::object()).value("step_stores_made", 0LL), 1);
+  }
   return std::move(sim.value());
 }
 

@@ -37,8 +37,8 @@ struct BackendCase {
   Precision precision = Precision::Double;
   std::string device;  ///< the device's selector (OpenCL: its index in cl::listDevices(); Vulkan: the candidate's)
   std::string absent;  ///< non-empty: why this case cannot run here (the test skips with it)
-  /// Vulkan: the dynamics' vectors in the device's memory (VulkanTuning::deviceStore = 1; a GPU's
-  /// default, which lavapipe, a CPU device, takes only when asked).
+  /// Vulkan: the dynamics' vectors in the device's memory (VulkanTuning::deviceStore = 1; the
+  /// default keeps them on the host).
   bool deviceStore = false;
 
   bool isFloat() const { return isDevice() && precision == Precision::Float; }

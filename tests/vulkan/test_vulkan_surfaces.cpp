@@ -140,9 +140,9 @@ TEST_P(VulkanSurfaces, TheDeviceSurfaceIsTheHostsDeformationOfTheRunsOwnNodes) {
   EXPECT_EQ(n1, n2);
 }
 
-/// The same with the dynamics' vectors in the device's memory (VulkanTuning::deviceStore, a GPU's
-/// default): the device's positions come from the store's buffers, relative to the store's origin,
-/// and the surface is still the host's deformation of the positions the run reads back.
+/// The same with the dynamics' vectors in the device's memory (VulkanTuning::deviceStore = 1): the
+/// device's positions come from the store's buffers, relative to the store's origin, and the
+/// surface is still the host's deformation of the positions the run reads back.
 TEST_P(VulkanSurfaces, WithTheStateOnTheDeviceTheSurfaceIsTheHostsDeformationToo) {
   SimulationOptions o;
   o.vulkan.deviceStore = 1;
@@ -152,6 +152,8 @@ TEST_P(VulkanSurfaces, WithTheStateOnTheDeviceTheSurfaceIsTheHostsDeformationToo
   ASSERT_TRUE(sim) << sim.message();
   for (int k = 1; k <= 10; ++k) ASSERT_TRUE(sim->step()) << "step " << k;
   expectTheHostsSurface(sim.value(), 0, isDouble());
+  const nlohmann::json report = nlohmann::json::parse(sim->schedulerReport());
+  EXPECT_EQ(report.value("device_counters", nlohmann::json::object()).value("step_stores_made", 0LL), 1);
 }
 
 TEST_P(VulkanSurfaces, ABatchsSurfacesShareTheirBuffersAndEachIsItsBodys) {

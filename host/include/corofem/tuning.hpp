@@ -108,13 +108,15 @@ struct VulkanTuning {
   /// The device's numbering of a body's elements and nodes, as OpenCLTuning::localityOrder.
   int localityOrder = -1;
   /// Where a dynamic step's vectors live (positions, velocities, accelerations, loads, reactions,
-  /// the residual and Newton's correction): in the device's memory, its per-dof passes on the
-  /// device, so that a step moves no vector through the host (the host reads a few sums per pass);
-  /// or on the host, in double, each device call converting its vectors on the way. -1 = on a GPU
-  /// only (on lavapipe, a CPU device, the host's loops run on the same cores without a dispatch
-  /// each: docs/performance.md); 0 = never; 1 = always. A lost device loses what it held: the
-  /// bodies then fail over only from a step whose vectors could still be read back.
-  int deviceStore = -1;
+  /// the residual and Newton's correction): in the device's memory, in its precision, its per-dof
+  /// passes on the device, so that a step moves no vector through the host but for the multigrid's
+  /// warp (the host reads a few sums per pass); or on the host, in double, each device call
+  /// converting its vectors on the way. 0 = on the host (the default until it is measured on a
+  /// GPU); -1 = on a GPU only; 1 = always. On lavapipe, a CPU device, the device's store halves the
+  /// host's CPU a step at 100k elements but takes 5-30 % longer (docs/performance.md). In float the
+  /// state is float's: positions read back to about 1e-7 of the body's size. A device lost with the
+  /// state loses it: the bodies fail over to the next device at rest, at their rest positions.
+  int deviceStore = 0;
 };
 
 }  // namespace corofem

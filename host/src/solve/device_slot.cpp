@@ -74,12 +74,21 @@ DeviceSlot::DeviceSlot(std::unique_ptr<Device> device, const SolverDesc& solver,
 
 void DeviceSlot::advance(const std::string& call, const std::string& error) {
   failures_ += "\n  " + order_[index_].label() + " (" + call + "): " + error;
+  // The positions a store set on the failing device, read once (a lost device may not give them:
+  // those bodies then start the next device with none, and their driver restarts them).
+  try {
+    refreshPositions();
+  } catch (const std::exception& e) {
+    failures_ += "\n  " + order_[index_].label() + " (its bodies' positions): " + e.what();
+    for (std::size_t b = 0; b < elsewhere_.size(); ++b)
+      if (elsewhere_[b]) lastX_.at(b).resize(0);
+    elsewhere_.clear();
+  }
   while (index_ + 1 < order_.size()) {
     const std::size_t from = index_;
     ++index_;
     try {
       std::unique_ptr<Device> next = makeDevice(problems_, solver_, order_[index_], options_);
-      refreshPositions();
       givePositions(*next, lastX_);
       device_ = std::move(next);
       ++generation_;

@@ -97,9 +97,10 @@ class DeviceSlot {
   const Candidate& current() const { return order_[index_]; }
   const std::vector<Candidate>& order() const { return order_; }
   /// A step store that sets positions on the device itself (not through setPositions) names them
-  /// here: `source(body, x)` gives the body's positions as last set, for a device the slot makes
-  /// (a failover, a removed body), and positionsSetElsewhere marks the bodies whose last positions
-  /// are the source's. An empty source: none (the store went).
+  /// here: `source(body, x)` gives the positions of the store's state the body's were last set
+  /// from (the same numbers until the store writes that state again, which the dynamics driver does
+  /// only before it sets positions again), for a device the slot makes (a failover, a removed
+  /// body); positionsSetElsewhere marks the bodies whose last positions are the source's.
   using PositionSource = std::function<void(std::size_t body, Eigen::VectorXd& x)>;
   void setPositionSource(const void* owner, PositionSource source);
   /// Drops the source if `owner` set it (a store that goes leaves its successor's).
@@ -113,6 +114,8 @@ class DeviceSlot {
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }
   const std::vector<FallbackEvent>& events() const { return events_; }
+  /// Every candidate failed: each call throws the slot's DeviceError.
+  bool exhausted() const { return exhausted_; }
   /// Devices made since the first, by failovers and removed bodies (a surface made for the device
   /// of before must be made again).
   std::size_t generation() const { return generation_; }

@@ -39,8 +39,8 @@ std::string num(double v) {
 }  // namespace
 
 DynamicsDriver::DynamicsDriver(DeviceSlot& slot, const DynamicDesc& desc, const Log& log)
-    : slot_(slot), desc_(desc), log_(log), store_(slot.device().createStepStore(slot)),
-      deviceStore_(store_ != nullptr), storeGeneration_(slot.generation()) {
+    : slot_(slot), desc_(desc), log_(log), store_(storeFor(slot, log)), deviceStore_(store_ != nullptr),
+      storeGeneration_(slot.generation()) {
   if (!store_) store_ = createHostStepStore(slot);
   bodies_.resize(slot.bodyCount());
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
@@ -232,27 +232,54 @@ void DynamicsDriver::start(const BodySet& set, std::vector<std::string>& failure
   }
 }
 
+std::unique_ptr<StepStore> DynamicsDriver::storeFor(DeviceSlot& slot, const Log& log) {
+  try {
+    return slot.device().createStepStore(slot);
+  } catch (const Error& e) {
+    if (e.code() != ErrorCode::DeviceError) throw;
+    log(LogLevel::Warning, "the dynamics' vectors stay on the host: the device's store could not be made (", e.what(),
+        ")");
+    return nullptr;
+  }
+}
+
 void DynamicsDriver::followDevice() {
   if (slot_.generation() == storeGeneration_) return;
-  storeGeneration_ = slot_.generation();
   slot_.dropPositionSource(store_.get());  // the positions the old store set stay the slot's
-  std::unique_ptr<StepStore> next = slot_.device().createStepStore(slot_);
+  std::unique_ptr<StepStore> next = storeFor(slot_, log_);
   const bool onDevice = next != nullptr;
-  if (!onDevice) {
-    if (!deviceStore_) return;  // the host's store serves every device
-    next = createHostStepStore(slot_);
+  if (!onDevice && !deviceStore_) {
+    storeGeneration_ = slot_.generation();  // the host's store serves every device
+    return;
   }
-  // The states the old store holds (its device object may be gone; its memory is not), and the
-  // controls; the scratch is the next step's.
+  if (!next) next = createHostStepStore(slot_);
+  // The states the old store holds (its device object may be gone; its memory may not be), and the
+  // controls; the scratch is the next step's. A store whose device was lost with them gives none:
+  // its bodies start again at rest, at their rest positions.
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
-    const Eigen::Index n = bodies_[i].problem->restPositions.size();
-    for (StateSlot s : {StateSlot::Committed, StateSlot::Start, StateSlot::Previous})
-      for (StateVec v : {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction})
-        if (const Eigen::VectorXd& value = store_->state(i, s, v); value.size() == n) next->setState(i, s, v, value);
+    Body& b = bodies_[i];
+    const Problem& p = *b.problem;
+    const Eigen::Index n = p.restPositions.size();
+    try {
+      for (StateSlot s : {StateSlot::Committed, StateSlot::Start, StateSlot::Previous})
+        for (StateVec v : {StateVec::X, StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction})
+          if (const Eigen::VectorXd& value = store_->state(i, s, v); value.size() == n) next->setState(i, s, v, value);
+    } catch (const Error& e) {
+      if (e.code() != ErrorCode::DeviceError) throw;
+      log_(LogLevel::Warning, "body '", p.name, "': its state was lost with its device (", e.what(),
+           "); it starts again at rest");
+      next->setState(i, StateSlot::Committed, StateVec::X, p.restPositions);
+      for (StateVec z : {StateVec::V, StateVec::A, StateVec::Fext, StateVec::Reaction})
+        next->setZero(i, StateSlot::Committed, z);
+      next->copy(i, StateSlot::Committed, StateSlot::Previous);
+      b.started = false;  // its acceleration and energy budget are measured again
+      b.deviceAtCommitted = false;
+    }
     next->setControls(i, store_->controls(i));
   }
   store_ = std::move(next);
   deviceStore_ = onDevice;
+  storeGeneration_ = slot_.generation();
 }
 
 std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall& call) {

@@ -165,6 +165,8 @@ class DynamicsDriver final : public Driver {
   /// After the slot made another device (a failover, a removed body): the bodies' states move to
   /// the new device's store, or to the host's from a device's.
   void followDevice();
+  /// The slot's device's store, or null for the host's (also where the device's cannot be made).
+  static std::unique_ptr<StepStore> storeFor(DeviceSlot& slot, const Log& log);
   /// Per body of a step's set: its stats (every attempt's iterations, the successful attempt's
   /// residuals and substeps), the substep counts tried, the last failure, and the bodies still to
   /// succeed (indices into the set).

@@ -247,7 +247,8 @@ std::vector<DeviceCounter> VulkanDevice::counters() const {
           {"pcg_phase_dispatches", phaseDispatches_},
           {"submissions", static_cast<long long>(ctx_->lastSubmission())},
           {"blocking_waits", static_cast<long long>(ctx_->blockingWaits())},
-          {"amg_hierarchies_made", amg_ ? amg_->builds() : 0}};
+          {"amg_hierarchies_made", amg_ ? amg_->builds() : 0},
+          {"step_stores_made", stepStores_}};
 }
 
 std::vector<DeviceBuffer> VulkanDevice::buffers() const {
@@ -265,6 +266,11 @@ std::vector<DeviceBuffer> VulkanDevice::buffers() const {
 
 std::unique_ptr<StepStore> VulkanDevice::createStepStore(DeviceSlot& slot) {
   if (!deviceStore_) return nullptr;
+  // Its largest buffer (28 vectors of every dof) within what a binding may span, and what step.comp
+  // indexes in 32 bits; else the host keeps the vectors.
+  const std::size_t dofs = 3 * layout_.nodeTotal, largest = 28 * dofs * rs_;
+  if (largest > ctx_->physical().limits.maxStorageBufferRange || 28 * dofs > 0xFFFFFFFFu) return nullptr;
+  ++stepStores_;
   return createVulkanStepStore(*this, ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
 }
 

@@ -413,6 +413,7 @@ class VulkanDevice final : public Device {
   int groupIterationsPerDispatch_ = 1;                   ///< pcg_group's iterations in one dispatch
   bool fusedPcg_ = false;  ///< off pcg_group, two dispatches an iteration (VulkanTuning::fusedPcg)
   bool deviceStore_ = false;  ///< createStepStore makes one (VulkanTuning::deviceStore)
+  long long stepStores_ = 0;  ///< stores made (the report's device_counters: where the vectors live)
   long long groupDispatches_ = 0, phaseDispatches_ = 0;  ///< PCG iteration dispatches of each path
   /// The last submission reading up_ (0: none pending; kOpenCommands: the open command buffer, or
   /// a submission since: Context::flush gives it).

@@ -49,7 +49,7 @@ class VulkanStepStore final : public StepStore {
  public:
   VulkanStepStore(vkdevice::VulkanDevice& device, std::shared_ptr<vk::Context> ctx, bool isDouble,
                   const std::vector<BodySegment>& segments, std::size_t nodeTotal, DeviceSlot& slot)
-      : device_(&device), generation_(slot.generation()), ctx_(std::move(ctx)), isDouble_(isDouble),
+      : device_(&device), slot_(&slot), generation_(slot.generation()), ctx_(std::move(ctx)), isDouble_(isDouble),
         rs_(isDouble ? sizeof(double) : sizeof(float)), dofTotal_(3 * nodeTotal) {
     if (segments.size() != slot.bodyCount())
       fail(ErrorCode::Internal, "vulkan step store: ", segments.size(), " segments for ", slot.bodyCount(), " bodies");
@@ -135,7 +135,7 @@ class VulkanStepStore final : public StepStore {
     VkCommandBuffer cb = ctx_->begin();
     vkCmdFillBuffer(cb, buffers_[kBindVecs].handle(), (stateOffset(b, slot, vec) + b.seg.dofBegin()) * rs_,
                     b.seg.dofs() * rs_, 0u);
-    ctx_->wait(ctx_->submit());
+    submitAndWait("a state cleared");
   }
 
   const Eigen::VectorXd& scratch(std::size_t body, Scratch vec) override {
@@ -159,7 +159,7 @@ class VulkanStepStore final : public StepStore {
                                 (stateOffset(b, to, StateVec(v)) + b.seg.dofBegin()) * rs_, b.seg.dofs() * rs_};
       vkCmdCopyBuffer(cb, buffers_[kBindVecs].handle(), buffers_[kBindVecs].handle(), 1, &region);
     }
-    ctx_->wait(ctx_->submit());
+    submitAndWait("a state copied");
   }
 
   void problemChanged(std::size_t body) override { uploadProblem(checked(body)); }
@@ -390,7 +390,7 @@ class VulkanStepStore final : public StepStore {
     const VkBufferCopy region{(offset + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_};
     vkCmdCopyBuffer(cb, buffers_[kBindVecs].handle(), down_.handle(), 1, &region);
     vk::hostReadBarrier(cb);
-    ctx_->wait(ctx_->submit());
+    submitAndWait("a read of the state");
     getReals(down_.mapped(), isDouble_, b.seg, kChunk, out);
     if (position)
       for (Eigen::Index d = 0; d < out.size(); ++d) out[d] += b.origin[static_cast<std::size_t>(d % 3)];
@@ -405,7 +405,7 @@ class VulkanStepStore final : public StepStore {
     VkCommandBuffer cb = ctx_->begin();
     const VkBufferCopy region{b.seg.dofBegin() * rs_, (offset + b.seg.dofBegin()) * rs_, b.seg.dofs() * rs_};
     vkCmdCopyBuffer(cb, up_.handle(), buffers_[kBindVecs].handle(), 1, &region);
-    ctx_->wait(ctx_->submit());
+    submitAndWait("a write of the state");
   }
 
   void setScratch(const Body& b, Scratch vec, const Eigen::VectorXd& value) {
@@ -429,7 +429,7 @@ class VulkanStepStore final : public StepStore {
     VkCommandBuffer cb = ctx_->begin();
     const VkBufferCopy region{fromByte, toByte, bytes};
     vkCmdCopyBuffer(cb, up_.handle(), to.handle(), 1, &region);
-    ctx_->wait(ctx_->submit());
+    submitAndWait("an upload of the inputs");
   }
 
   void uploadWords(const vk::Buffer& to, std::size_t first, const std::uint32_t* words, std::size_t count) {
@@ -571,7 +571,7 @@ class VulkanStepStore final : public StepStore {
       if (count) vkCmdCopyBuffer(cb, buffers_[kBindPartials].handle(), down_.handle(), 1, &region);
     }
     vk::hostReadBarrier(cb);
-    ctx_->wait(ctx_->submit());
+    submitAndWait("the step's passes");
     std::vector<std::array<double, kSums>> out(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       const BodySegment& s = bodies_[set[k]].seg;
@@ -588,9 +588,28 @@ class VulkanStepStore final : public StepStore {
   /// onDevice(device) where the slot still holds the store's device (the generation it was made
   /// in); a DeviceError there moves the slot to its next candidate. Then, or where the slot held
   /// another device already, onHost() (through the slot). Returns whether onDevice ran to its end.
+  /// Whether the slot still holds the store's device (the generation it was made in), and has not
+  /// given up on every device.
+  bool holdsMine(const DeviceSlot& slot) const {
+    return !slot.exhausted() && slot.generation() == generation_ && &slot.device() == static_cast<Device*>(device_);
+  }
+
+  /// Submits the open commands and waits. A DeviceError there (the device failed under the store's
+  /// own commands) moves the slot to its next candidate, as an error in a call of the slot's would,
+  /// and is thrown on: the step fails, and the driver moves the states at the next
+  /// (DynamicsDriver::followDevice).
+  void submitAndWait(const char* what) {
+    try {
+      ctx_->wait(ctx_->submit());
+    } catch (const Error& e) {
+      if (e.code() == ErrorCode::DeviceError && holdsMine(*slot_)) slot_->failover(what, e);
+      throw;
+    }
+  }
+
   template <class OnDevice, class OnHost>
   bool onDevice(DeviceSlot& slot, const char* call, OnDevice&& onDevice, OnHost&& onHost) {
-    if (slot.generation() == generation_ && &slot.device() == static_cast<Device*>(device_)) {
+    if (holdsMine(slot)) {
       try {
         onDevice(*device_);
         return true;
@@ -608,6 +627,7 @@ class VulkanStepStore final : public StepStore {
   }
 
   vkdevice::VulkanDevice* device_;  ///< the device whose context holds the store
+  DeviceSlot* slot_;                ///< the slot it was made for (never used in the destructor)
   std::size_t generation_;          ///< the slot's generation when it held device_
   std::shared_ptr<char> alive_ = std::make_shared<char>(0);  ///< the slot's position source's token
   std::shared_ptr<vk::Context> ctx_;

@@ -3,12 +3,10 @@
 // step.comp): the first step of the Vulkan issue's device-resident step. The host reads a body's
 // sums, and a vector only when it asks for one (state(), scratch()).
 //
-// Where it stands: the passes, the state transfers, swaps and copies, the positions, the forces and
-// the damping are the device's. The solve still takes its right-hand side and answer through the
-// host, and a device error inside a step is not survived yet (the device calls do not go through
-// the slot's failover), so the dynamics driver keeps the host's store (createHostStepStore) until
-// the solve reads the store's buffers and a failover can restart a step from a host copy of the
-// committed state.
+// The device calls (positions, forces, damping, the solve) read and write the store's buffers on
+// the device. The dynamics driver takes this store where VulkanTuning::deviceStore asks for it. A
+// device lost with the state loses it (no host copy is kept): the driver restarts those bodies at
+// rest on the next device (DynamicsDriver::followDevice).
 #pragma once
 
 #include "device/body_layout.hpp"
