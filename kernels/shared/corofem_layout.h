@@ -190,6 +190,51 @@ COROFEM_CONSTANT(unsigned, kPackPartialBase, 6);   /* the slot's first partial t
 COROFEM_CONSTANT(unsigned, kPackLane0, 7);         /* lane l's segment + 1 at kPackLane0 + l (0: no body) */
 COROFEM_CONSTANT(unsigned, kPackInfoCount, 15);
 
+/* ---------------------------------------------------------------- the Vulkan step store
+ * kernels/vulkan/step.comp and host/src/backends/vulkan/vulkan_step_store.cpp. The passes (pc.mode): */
+COROFEM_CONSTANT(unsigned, kStepBegin, 0);
+COROFEM_CONSTANT(unsigned, kStepPositions, 1);
+COROFEM_CONSTANT(unsigned, kStepResidual, 2);
+COROFEM_CONSTANT(unsigned, kStepUpdate, 3);
+COROFEM_CONSTANT(unsigned, kStepEnd, 4);
+COROFEM_CONSTANT(unsigned, kStepDamping, 5);
+/* Per body (uint) at bodyU[kStepUCount * b + k]: running, first dof, dofs, the physical state of
+ * each of the four StateSlots (kStepUSlot + slot), the StateSlot the held targets start from (and
+ * the damping's v is read from), kStepFlag* flags. */
+COROFEM_CONSTANT(unsigned, kStepUActive, 0);
+COROFEM_CONSTANT(unsigned, kStepUDofBegin, 1);
+COROFEM_CONSTANT(unsigned, kStepUDofs, 2);
+COROFEM_CONSTANT(unsigned, kStepUSlot, 3);
+COROFEM_CONSTANT(unsigned, kStepUFrom, 7);
+COROFEM_CONSTANT(unsigned, kStepUFlags, 8);
+COROFEM_CONSTANT(unsigned, kStepUCount, 12);
+COROFEM_CONSTANT(unsigned, kStepFlagNewmark, 1);
+COROFEM_CONSTANT(unsigned, kStepFlagSprings, 2);
+COROFEM_CONSTANT(unsigned, kStepFlagApplied, 4);
+COROFEM_CONSTANT(unsigned, kStepFlagHeld, 8);
+/* Per body (real) at bodyR[reals per body * b + k]: the scheme's maps h, ka, kx, cv, ca, the held
+ * targets' fraction, the mass damping's alpha; then the load scales and the prescribed groups'. */
+COROFEM_CONSTANT(unsigned, kStepRH, 0);
+COROFEM_CONSTANT(unsigned, kStepRKa, 1);
+COROFEM_CONSTANT(unsigned, kStepRKx, 2);
+COROFEM_CONSTANT(unsigned, kStepRCv, 3);
+COROFEM_CONSTANT(unsigned, kStepRCa, 4);
+COROFEM_CONSTANT(unsigned, kStepRFraction, 5);
+COROFEM_CONSTANT(unsigned, kStepRAlpha, 6);
+COROFEM_CONSTANT(unsigned, kStepRCount, 7);
+/* The per-dof inputs, each a vector of every dof: rest positions, lumped mass, 1 on free dofs,
+ * spring stiffness, held targets (NaN: not held), applied forces, spring targets, prescribed values. */
+COROFEM_CONSTANT(unsigned, kStepInRest, 0);
+COROFEM_CONSTANT(unsigned, kStepInMass, 1);
+COROFEM_CONSTANT(unsigned, kStepInFree, 2);
+COROFEM_CONSTANT(unsigned, kStepInSpring, 3);
+COROFEM_CONSTANT(unsigned, kStepInHeld, 4);
+COROFEM_CONSTANT(unsigned, kStepInApplied, 5);
+COROFEM_CONSTANT(unsigned, kStepInSpringTarget, 6);
+COROFEM_CONSTANT(unsigned, kStepInPresc, 7);
+COROFEM_CONSTANT(unsigned, kStepInputs, 8);
+COROFEM_CONSTANT(unsigned, kStepSums, 8);  /* partial sums per node work-group */
+
 #ifdef __OPENCL_C_VERSION__
 /* Segment lookups. Work-group indices are taken as global id / WG (not get_group_id) so that the
  * host may launch only the span of work-groups of the active segments with a global offset. */

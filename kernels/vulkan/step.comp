@@ -2,12 +2,12 @@
 /* The dynamics driver's per-dof passes on a device's step store (host/src/backends/vulkan/
  * vulkan_step_store.cpp; their meaning and the host's own version: host/src/solve/step_store.hpp
  * and host_step_store.cpp), pc.mode choosing the pass:
- *   kModeBegin      vb, xb, the constrained dofs' targets, f_ext(t1), Newton's starting v, Cv = 0
- *   kModePositions  x = xb + kx v, a = ka (v - vb)
- *   kModeResidual   r = M a + C v + f_int + S (x - t) - f_ext, rhs = -r / ka, with |f_ext|^2
- *   kModeUpdate     v += dv
- *   kModeEnd        the reactions, the springs' pull joining f_ext, the work sums
- *   kModeDamping    Cv = alpha M v of the state kUFrom names (mass damping alone; alpha 0: none)
+ *   kStepBegin      vb, xb, the constrained dofs' targets, f_ext(t1), Newton's starting v, Cv = 0
+ *   kStepPositions  x = xb + kx v, a = ka (v - vb)
+ *   kStepResidual   r = M a + C v + f_int + S (x - t) - f_ext, rhs = -r / ka, with |f_ext|^2
+ *   kStepUpdate     v += dv
+ *   kStepEnd        the reactions, the springs' pull joining f_ext, the work sums
+ *   kStepDamping    Cv = alpha M v of the state kStepUFrom names (mass damping alone; alpha 0: none)
  * One invocation per node (its three dofs in order), work-groups of 64 nodes, each of one body (the
  * device's segments are whole node work-groups); a pass with sums writes its work-group's (the host
  * adds a body's work-groups in order, in double) to partials[8 g + k], a tree over its invocations:
@@ -39,36 +39,25 @@ layout(std430, binding = 6) readonly buffer Presc { uint presc[]; };     /* per 
 layout(std430, binding = 7) writeonly buffer Partials { real partials[]; };  /* 8 per work-group */
 
 layout(push_constant) uniform Push {
-  uint S, mode, flags, precond, rotation, rows;  /* common.glsl's; mode: kMode* below */
+  uint S, mode, flags, precond, rotation, rows;  /* common.glsl's; mode: the pass, corofem_layout.h's kStep* */
   uint o0, o1, o2, o3, o4, o5;                   /* D, load patterns, prescribed groups, reals per body */
 } pc;
 
-const uint kModeBegin = 0u, kModePositions = 1u, kModeResidual = 2u, kModeUpdate = 3u, kModeEnd = 4u,
-           kModeDamping = 5u;
-/* Per body (uint): running, first dof, dofs, the physical state of each StateSlot, the state the
- * held targets start from, kU* flags. */
-const uint kUActive = 0u, kUDofBegin = 1u, kUDofs = 2u, kUSlot = 3u, kUFrom = 7u, kUFlags = 8u, kUCount = 12u;
-const uint kFlagNewmark = 1u, kFlagSprings = 2u, kFlagApplied = 4u, kFlagHeld = 8u;
-/* Per body (real): the scheme's maps, the held targets' fraction, the mass damping's alpha, then the
- * load scales (pc.o1) and the prescribed groups' scales (pc.o2). */
-const uint kRH = 0u, kRKa = 1u, kRKx = 2u, kRCv = 3u, kRCa = 4u, kRFraction = 5u, kRAlpha = 6u, kRCount = 7u;
-/* The state vectors and the scratch (solve/step_store.hpp's StateVec and Scratch). */
+/* The passes, the per-body tables and the inputs: corofem_layout.h's kStep*. The state vectors
+ * and the scratch (solve/step_store.hpp's StateVec and Scratch): */
 const uint kX = 0u, kV = 1u, kA = 2u, kFext = 3u, kReaction = 4u;
 const uint kVb = 0u, kXb = 1u, kTarget = 2u, kFint = 3u, kCv = 4u, kR = 5u, kDv = 6u, kRhs = 7u;
 const uint kCommitted = 0u, kResult = 3u;
-/* The inputs per dof. */
-const uint kInRest = 0u, kInMass = 1u, kInFree = 2u, kInSpring = 3u, kInHeld = 4u, kInApplied = 5u,
-           kInSpringTarget = 6u, kInPresc = 7u;
 
-shared real sums[8][64];
+shared real sums[kStepSums][64];
 
 uint body;
 
-uint state_at(uint slot, uint v, uint d) { return (5u * bodyU[kUCount * body + kUSlot + slot] + v) * pc.o0 + d; }
+uint state_at(uint slot, uint v, uint d) { return (5u * bodyU[kStepUCount * body + kStepUSlot + slot] + v) * pc.o0 + d; }
 uint scratch_at(uint k, uint d) { return (20u + k) * pc.o0 + d; }
 real input_of(uint k, uint d) { return inp[k * pc.o0 + d]; }
 real body_real(uint k) { return bodyR[pc.o3 * body + k]; }
-bool body_flag(uint f) { return (bodyU[kUCount * body + kUFlags] & f) != 0u; }
+bool body_flag(uint f) { return (bodyU[kStepUCount * body + kStepUFlags] & f) != 0u; }
 bool not_finite(real v) { return isnan(v) || isinf(v); }
 
 /* The work-group's sums k < count into partials (a tree; every invocation reaches it). */
@@ -84,33 +73,33 @@ void write_sums(uint count) {
 }
 
 void begin_dof(uint d) {
-  const bool newmark = body_flag(kFlagNewmark);
-  const real kx = body_real(kRKx);
+  const bool newmark = body_flag(kStepFlagNewmark);
+  const real kx = body_real(kStepRKx);
   const real x = vecs[state_at(kCommitted, kX, d)], v = vecs[state_at(kCommitted, kV, d)];
   const real a = vecs[state_at(kCommitted, kA, d)];
-  const real vb = newmark ? v + body_real(kRCv) * a : v;
-  const real xb = newmark ? x + body_real(kRH) * v + body_real(kRCa) * a - kx * vb : x;
+  const real vb = newmark ? v + body_real(kStepRCv) * a : v;
+  const real xb = newmark ? x + body_real(kStepRH) * v + body_real(kStepRCa) * a - kx * vb : x;
   vecs[scratch_at(kVb, d)] = vb;
   vecs[scratch_at(kXb, d)] = xb;
-  const real free_d = input_of(kInFree, d);
+  const real free_d = input_of(kStepInFree, d);
   /* The targets: constrained dofs at rest, prescribed ones moved (the last group naming the dof),
-   * then the application's held ones (NaN: not held), in proportion from the state kUFrom names. */
+   * then the application's held ones (NaN: not held), in proportion from the state kStepUFrom names. */
   real target = vecs[scratch_at(kTarget, d)];
-  if (free_d == real(0)) target = input_of(kInRest, d);
+  if (free_d == real(0)) target = input_of(kStepInRest, d);
   const uint g = presc[d];
-  if (g != 0xFFFFFFFFu) target = input_of(kInRest, d) + body_real(kRCount + pc.o1 + g) * input_of(kInPresc, d);
-  if (body_flag(kFlagHeld)) {
-    const real held = input_of(kInHeld, d);
+  if (g != 0xFFFFFFFFu) target = input_of(kStepInRest, d) + body_real(kStepRCount + pc.o1 + g) * input_of(kStepInPresc, d);
+  if (body_flag(kStepFlagHeld)) {
+    const real held = input_of(kStepInHeld, d);
     if (!isnan(held)) {
-      const real fraction = body_real(kRFraction);
-      const real x0 = vecs[state_at(bodyU[kUCount * body + kUFrom], kX, d)];
+      const real fraction = body_real(kStepRFraction);
+      const real x0 = vecs[state_at(bodyU[kStepUCount * body + kStepUFrom], kX, d)];
       target = fraction == real(1) ? held : x0 + fraction * (held - x0);
     }
   }
   vecs[scratch_at(kTarget, d)] = target;
   real f = real(0);
-  for (uint l = 0u; l < pc.o1; ++l) f += body_real(kRCount + l) * loads[l * pc.o0 + d];
-  if (body_flag(kFlagApplied)) f += input_of(kInApplied, d);
+  for (uint l = 0u; l < pc.o1; ++l) f += body_real(kStepRCount + l) * loads[l * pc.o0 + d];
+  if (body_flag(kStepFlagApplied)) f += input_of(kStepInApplied, d);
   vecs[state_at(kResult, kFext, d)] = f;
   vecs[state_at(kResult, kV, d)] = free_d == real(0) ? (target - xb) / kx : v;
   vecs[scratch_at(kCv, d)] = real(0);
@@ -118,23 +107,23 @@ void begin_dof(uint d) {
 
 void positions_dof(uint d) {
   const real v = vecs[state_at(kResult, kV, d)];
-  vecs[state_at(kResult, kX, d)] = vecs[scratch_at(kXb, d)] + body_real(kRKx) * v;
-  vecs[state_at(kResult, kA, d)] = body_real(kRKa) * (v - vecs[scratch_at(kVb, d)]);
+  vecs[state_at(kResult, kX, d)] = vecs[scratch_at(kXb, d)] + body_real(kStepRKx) * v;
+  vecs[state_at(kResult, kA, d)] = body_real(kStepRKa) * (v - vecs[scratch_at(kVb, d)]);
 }
 
 /* Adds dof d's terms to the invocation's sums (s[k]: k < 7). */
 void residual_dof(uint d, inout real s[8]) {
   const real x = vecs[state_at(kResult, kX, d)], v = vecs[state_at(kResult, kV, d)];
   const real a = vecs[state_at(kResult, kA, d)];
-  const real ma = input_of(kInMass, d) * a;
-  const real k = input_of(kInSpring, d);
-  const real spring = body_flag(kFlagSprings) && k != real(0) ? k * (x - input_of(kInSpringTarget, d)) : real(0);
+  const real ma = input_of(kStepInMass, d) * a;
+  const real k = input_of(kStepInSpring, d);
+  const real spring = body_flag(kStepFlagSprings) && k != real(0) ? k * (x - input_of(kStepInSpringTarget, d)) : real(0);
   const real cv = vecs[scratch_at(kCv, d)], fint = vecs[scratch_at(kFint, d)];
   const real fext = vecs[state_at(kResult, kFext, d)];
   const real r = ma + cv + fint + spring - fext;
   vecs[scratch_at(kR, d)] = r;
-  vecs[scratch_at(kRhs, d)] = -r / body_real(kRKa);
-  const real f = input_of(kInFree, d);
+  vecs[scratch_at(kRhs, d)] = -r / body_real(kStepRKa);
+  const real f = input_of(kStepInFree, d);
   const real maf = ma * f, cvf = cv * f, fintf = fint * f, sf = spring * f, rf = r * f, ff = fext * f;
   s[0] += maf * maf;
   s[1] += cvf * cvf;
@@ -152,14 +141,14 @@ void update_dof(uint d, inout real s[8]) {
 }
 
 void end_dof(uint d, inout real s[8]) {
-  const real free_d = input_of(kInFree, d);
+  const real free_d = input_of(kStepInFree, d);
   const real rd = vecs[scratch_at(kR, d)] * (real(1) - free_d);
   vecs[state_at(kResult, kReaction, d)] = rd;
   const real x = vecs[state_at(kResult, kX, d)];
-  const real k = input_of(kInSpring, d);
+  const real k = input_of(kStepInSpring, d);
   real f = vecs[state_at(kResult, kFext, d)];
-  if (body_flag(kFlagSprings) && k != real(0) && free_d != real(0)) {
-    f += k * (input_of(kInSpringTarget, d) - x);
+  if (body_flag(kStepFlagSprings) && k != real(0) && free_d != real(0)) {
+    f += k * (input_of(kStepInSpringTarget, d) - x);
     vecs[state_at(kResult, kFext, d)] = f;
   }
   const real dx = x - vecs[state_at(kCommitted, kX, d)];
@@ -171,37 +160,37 @@ void end_dof(uint d, inout real s[8]) {
   s[3] += rd * dx;
   s[4] += fPrev * dx;
   s[5] += f * dx;
-  s[6] += input_of(kInMass, d) * (v * v);
+  s[6] += input_of(kStepInMass, d) * (v * v);
 }
 
 void main() {
   body = wgBody[gl_WorkGroupID.x];
-  if (body == 0xFFFFFFFFu || bodyU[kUCount * body + kUActive] == 0u) return;  /* the whole work-group */
+  if (body == 0xFFFFFFFFu || bodyU[kStepUCount * body + kStepUActive] == 0u) return;  /* the whole work-group */
   const uint lid = gl_LocalInvocationID.x;
   const uint n = 64u * gl_WorkGroupID.x + lid;  /* a node: its dofs 3 n .. 3 n + 2 */
-  const bool real_node = 3u * n - bodyU[kUCount * body + kUDofBegin] < bodyU[kUCount * body + kUDofs];
+  const bool real_node = 3u * n - bodyU[kStepUCount * body + kStepUDofBegin] < bodyU[kStepUCount * body + kStepUDofs];
   real s[8];
   for (uint k = 0u; k < 8u; ++k) s[k] = real(0);
-  if (pc.mode == kModeBegin) {
+  if (pc.mode == kStepBegin) {
     if (real_node)
       for (uint c = 0u; c < 3u; ++c) begin_dof(3u * n + c);
-  } else if (pc.mode == kModePositions) {
+  } else if (pc.mode == kStepPositions) {
     if (real_node)
       for (uint c = 0u; c < 3u; ++c) positions_dof(3u * n + c);
-  } else if (pc.mode == kModeDamping) {
+  } else if (pc.mode == kStepDamping) {
     if (real_node)
       for (uint c = 0u; c < 3u; ++c) {
         const uint d = 3u * n + c;
-        const real alpha = body_real(kRAlpha);  /* 0: no damping, Cv = 0 whatever v holds (the host's) */
+        const real alpha = body_real(kStepRAlpha);  /* 0: no damping, Cv = 0 whatever v holds (the host's) */
         vecs[scratch_at(kCv, d)] =
-            alpha == real(0) ? real(0) : alpha * (input_of(kInMass, d) * vecs[state_at(bodyU[kUCount * body + kUFrom], kV, d)]);
+            alpha == real(0) ? real(0) : alpha * (input_of(kStepInMass, d) * vecs[state_at(bodyU[kStepUCount * body + kStepUFrom], kV, d)]);
       }
   } else {
     /* The passes with sums: each invocation's three dofs in order, then the work-group's tree. */
     if (real_node)
       for (uint c = 0u; c < 3u; ++c) {
-        if (pc.mode == kModeResidual) residual_dof(3u * n + c, s);
-        else if (pc.mode == kModeUpdate) update_dof(3u * n + c, s);
+        if (pc.mode == kStepResidual) residual_dof(3u * n + c, s);
+        else if (pc.mode == kStepUpdate) update_dof(3u * n + c, s);
         else end_dof(3u * n + c, s);
       }
     for (uint k = 0u; k < 7u; ++k) sums[k][lid] = s[k];

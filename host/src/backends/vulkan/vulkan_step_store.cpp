@@ -19,7 +19,7 @@ namespace corofem::detail {
 
 namespace {
 
-// step.comp's numbers (its comment says what each holds).
+// step.comp's numbers beside corofem_layout.h's kStep* (its comment says what each holds).
 constexpr std::uint32_t kNone = 0xFFFFFFFFu;
 constexpr std::size_t kWg = 64;  ///< nodes per work-group of step.comp (a segment's are whole ones)
 constexpr std::size_t kChunk = 4096;
@@ -27,12 +27,6 @@ constexpr std::size_t kStates = static_cast<std::size_t>(StateSlot::kCount);
 constexpr std::size_t kStateVecs = static_cast<std::size_t>(StateVec::kCount);
 constexpr std::size_t kScratchVecs = static_cast<std::size_t>(Scratch::kCount);
 constexpr std::size_t kVectors = kStates * kStateVecs + kScratchVecs;
-constexpr std::size_t kSums = 8;  ///< partial sums per work-group
-enum Mode : std::uint32_t { kModeBegin, kModePositions, kModeResidual, kModeUpdate, kModeEnd, kModeDamping };
-enum Input : std::size_t { kInRest, kInMass, kInFree, kInSpring, kInHeld, kInApplied, kInSpringTarget, kInPresc, kInputs };
-constexpr std::size_t kUActive = 0, kUDofBegin = 1, kUDofs = 2, kUSlot = 3, kUFrom = 7, kUFlags = 8, kUCount = 12;
-constexpr std::uint32_t kFlagNewmark = 1, kFlagSprings = 2, kFlagApplied = 4, kFlagHeld = 8;
-constexpr std::size_t kRH = 0, kRKa = 1, kRKx = 2, kRCv = 3, kRCa = 4, kRFraction = 5, kRAlpha = 6, kRCount = 7;
 enum Binding : std::size_t { kBindWgBody, kBindBodyU, kBindBodyR, kBindVecs, kBindInputs, kBindLoads, kBindPresc,
                              kBindPartials, kBindings };
 
@@ -77,14 +71,14 @@ class VulkanStepStore final : public StepStore {
     pipeline_ = ctx_->pipeline(code.words, code.bytes, "step.comp");
     const std::size_t groups = dofTotal_ / (3 * kWg);
     buffers_[kBindWgBody] = vk::Buffer(*ctx_, groups * sizeof(std::uint32_t), false);
-    buffers_[kBindBodyU] = vk::Buffer(*ctx_, bodies_.size() * kUCount * sizeof(std::uint32_t), false);
+    buffers_[kBindBodyU] = vk::Buffer(*ctx_, bodies_.size() * kStepUCount * sizeof(std::uint32_t), false);
     buffers_[kBindVecs] = vk::Buffer(*ctx_, kVectors * dofTotal_ * rs_, false);
-    buffers_[kBindInputs] = vk::Buffer(*ctx_, kInputs * dofTotal_ * rs_, false);
+    buffers_[kBindInputs] = vk::Buffer(*ctx_, kStepInputs * dofTotal_ * rs_, false);
     buffers_[kBindPresc] = vk::Buffer(*ctx_, dofTotal_ * sizeof(std::uint32_t), false);
-    buffers_[kBindPartials] = vk::Buffer(*ctx_, groups * kSums * rs_, false);
+    buffers_[kBindPartials] = vk::Buffer(*ctx_, groups * kStepSums * rs_, false);
     placeholder_ = vk::Buffer(*ctx_, 0, false);
     up_ = vk::Buffer(*ctx_, std::max(dofTotal_ * rs_, dofTotal_ * sizeof(std::uint32_t)), true);
-    down_ = vk::Buffer(*ctx_, std::max(dofTotal_ * rs_, groups * kSums * rs_), true);
+    down_ = vk::Buffer(*ctx_, std::max(dofTotal_ * rs_, groups * kStepSums * rs_), true);
     for (const Binding b : {kBindWgBody, kBindBodyU, kBindVecs, kBindInputs, kBindPartials}) vk::zeroBuffer(*ctx_, buffers_[b]);
     uploadWorkGroups();
     std::vector<std::uint32_t> none(dofTotal_, kNone);
@@ -228,13 +222,13 @@ class VulkanStepStore final : public StepStore {
         const Problem& p = *bodies_[i].problem;
         if (p.rayleighStiffness == 0.0) {
           byMass.push_back(i);
-          t.r[realsPerBody() * i + kRAlpha] = p.rayleighMass;
-          t.u[kUCount * i + kUFrom] = static_cast<std::uint32_t>(index(slot));
+          t.r[realsPerBody() * i + kStepRAlpha] = p.rayleighMass;
+          t.u[kStepUCount * i + kStepUFrom] = static_cast<std::uint32_t>(index(slot));
         } else {
           byProduct.push_back(i);
         }
       }
-      if (!byMass.empty()) run(kModeDamping, byMass, t, /*sums=*/false);
+      if (!byMass.empty()) run(kStepDamping, byMass, t, /*sums=*/false);
       if (!byProduct.empty()) {
         std::vector<std::size_t> from, to;
         for (std::size_t i : byProduct) {
@@ -301,30 +295,30 @@ class VulkanStepStore final : public StepStore {
       const Body& b = bodies_[set[k]];
       const BeginArgs& a = args[k];
       setMaps(t, set[k], a.maps);
-      std::uint32_t* u = &t.u[kUCount * set[k]];
-      u[kUFrom] = static_cast<std::uint32_t>(index(a.from));
+      std::uint32_t* u = &t.u[kStepUCount * set[k]];
+      u[kStepUFrom] = static_cast<std::uint32_t>(index(a.from));
       double* r = &t.r[realsPerBody() * set[k]];
-      r[kRFraction] = a.fraction;
+      r[kStepRFraction] = a.fraction;
       const std::vector<double> scales = b.problem->loadScales(a.t1, /*dynamic=*/true);
       const std::vector<double> presc = b.problem->prescribedScales(a.t1, /*dynamic=*/true);
-      std::copy(scales.begin(), scales.end(), r + kRCount);
-      std::copy(presc.begin(), presc.end(), r + kRCount + loads_);
+      std::copy(scales.begin(), scales.end(), r + kStepRCount);
+      std::copy(presc.begin(), presc.end(), r + kStepRCount + loads_);
     }
-    run(kModeBegin, set, t, /*sums=*/false);
+    run(kStepBegin, set, t, /*sums=*/false);
   }
 
   void positions(const BodySet& set, const std::vector<SchemeMaps>& maps) override {
     check(set, maps.size());
     Tables t = tables();
     for (std::size_t k = 0; k < set.size(); ++k) setMaps(t, set[k], maps[k]);
-    run(kModePositions, set, t, /*sums=*/false);
+    run(kStepPositions, set, t, /*sums=*/false);
   }
 
   void residual(const BodySet& set, const std::vector<SchemeMaps>& maps, std::vector<ResidualSums>& out) override {
     check(set, maps.size());
     Tables t = tables();
     for (std::size_t k = 0; k < set.size(); ++k) setMaps(t, set[k], maps[k]);
-    const std::vector<std::array<double, kSums>> sums = run(kModeResidual, set, t);
+    const std::vector<std::array<double, kStepSums>> sums = run(kStepResidual, set, t);
     out.resize(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       const auto& s = sums[k];
@@ -334,14 +328,14 @@ class VulkanStepStore final : public StepStore {
 
   void update(const BodySet& set, std::vector<double>& nonFinite) override {
     check(set, set.size());
-    const std::vector<std::array<double, kSums>> sums = run(kModeUpdate, set, tables());
+    const std::vector<std::array<double, kStepSums>> sums = run(kStepUpdate, set, tables());
     nonFinite.resize(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) nonFinite[k] = sums[k][0];
   }
 
   void end(const BodySet& set, std::vector<EndSums>& out) override {
     check(set, set.size());
-    const std::vector<std::array<double, kSums>> sums = run(kModeEnd, set, tables());
+    const std::vector<std::array<double, kStepSums>> sums = run(kStepEnd, set, tables());
     out.resize(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) std::copy_n(sums[k].begin(), out[k].size(), out[k].begin());
   }
@@ -364,7 +358,7 @@ class VulkanStepStore final : public StepStore {
     std::vector<double> r;
   };
 
-  std::size_t realsPerBody() const { return kRCount + loads_ + groups_; }
+  std::size_t realsPerBody() const { return kStepRCount + loads_ + groups_; }
 
   Body& at(std::size_t body) { return bodies_[checked(body)]; }
   std::size_t checked(std::size_t body) const {
@@ -419,7 +413,7 @@ class VulkanStepStore final : public StepStore {
 
   /// Input `k` of the body (kIn*) = value(problem dof).
   template <class Value>
-  void writeInput(const Body& b, Input k, Value&& value) {
+  void writeInput(const Body& b, unsigned k, Value&& value) {
     putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk,
              [&](std::size_t d) { return value(static_cast<Eigen::Index>(b.seg.hostDof(d))); });
     copyUp(buffers_[kBindInputs], (k * dofTotal_ + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_);
@@ -457,10 +451,10 @@ class VulkanStepStore final : public StepStore {
     b.freeMask = bodyScale(p).freeMask;
     const Eigen::Index n = p.restPositions.size();
     const auto originOf = [&](Eigen::Index d) { return b.origin[static_cast<std::size_t>(d % 3)]; };
-    writeInput(b, kInRest, [&](Eigen::Index d) { return p.restPositions[d] - originOf(d); });
-    writeInput(b, kInMass, [&](Eigen::Index d) { return p.lumpedMass.size() == n ? p.lumpedMass[d] : 0.0; });
-    writeInput(b, kInFree, [&](Eigen::Index d) { return b.freeMask[d]; });
-    writeInput(b, kInSpring, [&](Eigen::Index d) { return p.springStiffness.size() == n ? p.springStiffness[d] : 0.0; });
+    writeInput(b, kStepInRest, [&](Eigen::Index d) { return p.restPositions[d] - originOf(d); });
+    writeInput(b, kStepInMass, [&](Eigen::Index d) { return p.lumpedMass.size() == n ? p.lumpedMass[d] : 0.0; });
+    writeInput(b, kStepInFree, [&](Eigen::Index d) { return b.freeMask[d]; });
+    writeInput(b, kStepInSpring, [&](Eigen::Index d) { return p.springStiffness.size() == n ? p.springStiffness[d] : 0.0; });
     // A prescribed dof takes the last group that names it (Problem::applyPrescribed).
     std::vector<std::uint32_t> group(static_cast<std::size_t>(n), kNone);
     Eigen::VectorXd value = Eigen::VectorXd::Zero(n);
@@ -469,7 +463,7 @@ class VulkanStepStore final : public StepStore {
         group[p.prescribed[g].dofs[k]] = static_cast<std::uint32_t>(g);
         value[p.prescribed[g].dofs[k]] = p.prescribed[g].values[k];
       }
-    writeInput(b, kInPresc, [&](Eigen::Index d) { return value[d]; });
+    writeInput(b, kStepInPresc, [&](Eigen::Index d) { return value[d]; });
     std::vector<std::uint32_t> deviceGroup(b.seg.dofs());
     for (std::size_t d = 0; d < b.seg.dofs(); ++d) deviceGroup[d] = group[b.seg.hostDof(d)];
     uploadWords(buffers_[kBindPresc], b.seg.dofBegin(), deviceGroup.data(), deviceGroup.size());
@@ -507,46 +501,46 @@ class VulkanStepStore final : public StepStore {
     const Eigen::Index n = b.problem->restPositions.size();
     const BodyControls& c = b.controls;
     const auto originOf = [&](Eigen::Index d) { return b.origin[static_cast<std::size_t>(d % 3)]; };
-    if (c.targets.size() == n) writeInput(b, kInHeld, [&](Eigen::Index d) { return c.targets[d] - originOf(d); });
-    if (c.forces.size() == n) writeInput(b, kInApplied, [&](Eigen::Index d) { return c.forces[d]; });
+    if (c.targets.size() == n) writeInput(b, kStepInHeld, [&](Eigen::Index d) { return c.targets[d] - originOf(d); });
+    if (c.forces.size() == n) writeInput(b, kStepInApplied, [&](Eigen::Index d) { return c.forces[d]; });
     if (c.springTargets.size() == n)
-      writeInput(b, kInSpringTarget, [&](Eigen::Index d) { return c.springTargets[d] - originOf(d); });
+      writeInput(b, kStepInSpringTarget, [&](Eigen::Index d) { return c.springTargets[d] - originOf(d); });
   }
 
   /// The tables with every body inactive, its dofs and states set.
   Tables tables() const {
     Tables t;
-    t.u.assign(kUCount * bodies_.size(), 0u);
+    t.u.assign(kStepUCount * bodies_.size(), 0u);
     t.r.assign(realsPerBody() * bodies_.size(), 0.0);
     for (std::size_t i = 0; i < bodies_.size(); ++i) {
       const Body& b = bodies_[i];
       const Problem& p = *b.problem;
       const Eigen::Index n = p.restPositions.size();
-      std::uint32_t* u = &t.u[kUCount * i];
-      u[kUDofBegin] = static_cast<std::uint32_t>(b.seg.dofBegin());
-      u[kUDofs] = static_cast<std::uint32_t>(b.seg.dofs());
-      std::copy(b.slot.begin(), b.slot.end(), u + kUSlot);
+      std::uint32_t* u = &t.u[kStepUCount * i];
+      u[kStepUDofBegin] = static_cast<std::uint32_t>(b.seg.dofBegin());
+      u[kStepUDofs] = static_cast<std::uint32_t>(b.seg.dofs());
+      std::copy(b.slot.begin(), b.slot.end(), u + kStepUSlot);
       const bool springs = p.springStiffness.size() == n && b.controls.springTargets.size() == n;
-      u[kUFlags] = (springs ? kFlagSprings : 0u) | (b.controls.forces.size() == n ? kFlagApplied : 0u) |
-                   (b.controls.targets.size() == n ? kFlagHeld : 0u);
+      u[kStepUFlags] = (springs ? kStepFlagSprings : 0u) | (b.controls.forces.size() == n ? kStepFlagApplied : 0u) |
+                   (b.controls.targets.size() == n ? kStepFlagHeld : 0u);
     }
     return t;
   }
 
   void setMaps(Tables& t, std::size_t body, const SchemeMaps& m) const {
-    if (m.newmark) t.u[kUCount * body + kUFlags] |= kFlagNewmark;
+    if (m.newmark) t.u[kStepUCount * body + kStepUFlags] |= kStepFlagNewmark;
     double* r = &t.r[realsPerBody() * body];
-    r[kRH] = m.h;
-    r[kRKa] = m.ka;
-    r[kRKx] = m.kx;
-    r[kRCv] = m.cv;
-    r[kRCa] = m.ca;
+    r[kStepRH] = m.h;
+    r[kStepRKa] = m.ka;
+    r[kStepRKx] = m.kx;
+    r[kStepRCv] = m.cv;
+    r[kStepRCa] = m.ca;
   }
 
   /// Dispatches `mode` over every dof work-group with the set's bodies active, waits, and returns
   /// each body's sums: its work-groups' partial sums added in order, in double.
-  std::vector<std::array<double, kSums>> run(Mode mode, const BodySet& set, Tables t, bool sums = true) {
-    for (std::size_t i : set) t.u[kUCount * i + kUActive] = 1u;
+  std::vector<std::array<double, kStepSums>> run(unsigned mode, const BodySet& set, Tables t, bool sums = true) {
+    for (std::size_t i : set) t.u[kStepUCount * i + kStepUActive] = 1u;
     VkCommandBuffer cb = ctx_->begin();
     vk::updateBuffer(cb, buffers_[kBindBodyU], 0, t.u.data(), t.u.size() * sizeof(std::uint32_t));
     const std::vector<unsigned char> reals = realBytes(t.r, isDouble_);
@@ -567,19 +561,19 @@ class VulkanStepStore final : public StepStore {
     for (std::size_t i : set) {
       const BodySegment& s = bodies_[i].seg;
       const std::size_t first = s.nodeBegin / kWg, count = (s.nodes + kWg - 1) / kWg;
-      const VkBufferCopy region{first * kSums * rs_, first * kSums * rs_, count * kSums * rs_};
+      const VkBufferCopy region{first * kStepSums * rs_, first * kStepSums * rs_, count * kStepSums * rs_};
       if (count) vkCmdCopyBuffer(cb, buffers_[kBindPartials].handle(), down_.handle(), 1, &region);
     }
     vk::hostReadBarrier(cb);
     submitAndWait("the step's passes");
-    std::vector<std::array<double, kSums>> out(set.size());
+    std::vector<std::array<double, kStepSums>> out(set.size());
     for (std::size_t k = 0; k < set.size(); ++k) {
       const BodySegment& s = bodies_[set[k]].seg;
       const std::size_t first = s.nodeBegin / kWg, count = (s.nodes + kWg - 1) / kWg;
       out[k].fill(0.0);
       withReals(down_.mapped(), isDouble_, 0, [&](const auto* p) {
         for (std::size_t g = first; g < first + count; ++g)
-          for (std::size_t j = 0; j < kSums; ++j) out[k][j] += static_cast<double>(p[kSums * g + j]);
+          for (std::size_t j = 0; j < kStepSums; ++j) out[k][j] += static_cast<double>(p[kStepSums * g + j]);
       });
     }
     return out;
