@@ -30,10 +30,10 @@
 layout(local_size_x = 64) in;
 
 layout(std430, binding = 0) readonly buffer WgBody { uint wgBody[]; };   /* per node work-group: its body, or ~0 */
-layout(std430, binding = 1) readonly buffer BodyU { uint bodyU[]; };     /* kU* per body */
-layout(std430, binding = 2) readonly buffer BodyR { real bodyR[]; };     /* pc.o3 per body: kR*, scales */
+layout(std430, binding = 1) readonly buffer BodyU { uint bodyU[]; };     /* kStepU* per body */
+layout(std430, binding = 2) readonly buffer BodyR { real bodyR[]; };     /* pc.o3 per body: kStepR*, scales */
 layout(std430, binding = 3) buffer Vecs { real vecs[]; };                /* 28 vectors of D */
-layout(std430, binding = 4) readonly buffer Inputs { real inp[]; };      /* kIn* vectors of D */
+layout(std430, binding = 4) readonly buffer Inputs { real inp[]; };      /* kStepIn* vectors of D */
 layout(std430, binding = 5) readonly buffer Loads { real loads[]; };     /* pc.o1 load patterns of D */
 layout(std430, binding = 6) readonly buffer Presc { uint presc[]; };     /* per dof: its prescribed group, or ~0 */
 layout(std430, binding = 7) writeonly buffer Partials { real partials[]; };  /* 8 per work-group */

@@ -170,7 +170,7 @@ class StepStoreContract : public ::testing::TestWithParam<StoreKind> {
       if (!entry || entry->candidates().empty()) GTEST_SKIP() << "no Vulkan device";
       std::unique_ptr<detail::Device> device;
       detail::DeviceOptions options;
-      options.vulkan.deviceStore = 1;  // on lavapipe too (a CPU device keeps the host's by default)
+      options.vulkan.deviceStore = 1;  // the default keeps the host's
       try {
         device = entry->create(ps, solver, entry->resolve(""), options);
       } catch (const detail::Error& e) {
@@ -499,6 +499,35 @@ TEST(VulkanStepStoreFailover, TheNextDeviceTakesThePositionsTheStoreSetAndTheCal
   slot->internalForces({0}, {&f});
   EXPECT_TRUE(test::sameBits(store->scratch(0, Scratch::Fint), f));
   EXPECT_GT(f.norm(), 0.0);
+}
+
+/// A store's positions that cannot be read during a failover (its device lost): the read's own
+/// failover request is refused, the failover goes on to the next candidate once, and the body
+/// reaches it with no positions (its driver restarts it) instead of exhausting the candidates.
+TEST(DeviceSlotPositionSource, AReadThatFailsDuringAFailoverMovesTheSlotOnce) {
+  const auto reference = detail::findBackend("reference");
+  ASSERT_NE(reference, nullptr);
+  const detail::Problem problem = featureBody(2, 2, 2, 0.1, 3);
+  SolverDesc solver;
+  detail::DeviceSlot slot({&problem}, solver, {reference->resolve(""), reference->resolve(""), reference->resolve("")},
+                          /*fallbackAtCreate=*/false);
+  int reads = 0;
+  const int owner = 0;
+  slot.setPositionSource(&owner, [&](std::size_t, Eigen::VectorXd&) {
+    ++reads;
+    const detail::Error lost(ErrorCode::DeviceError, "a device lost on purpose");
+    slot.failover("a read of the positions", lost);  // what a store's wait does on such an error
+    throw lost;
+  });
+  slot.positionsSetElsewhere({0});
+  ASSERT_NO_THROW(slot.failover("a test", detail::Error(ErrorCode::DeviceError, "the first error")));
+  EXPECT_EQ(reads, 1);
+  EXPECT_EQ(slot.failovers(), 1u);
+  EXPECT_FALSE(slot.exhausted());
+  std::vector<double> energy;
+  slot.elasticEnergy({0}, energy);  // the new device works, at its own rest positions
+  EXPECT_EQ(energy[0], 0.0);
+  slot.dropPositionSource(&owner);
 }
 
 INSTANTIATE_TEST_SUITE_P(Stores, StepStoreContract, ::testing::ValuesIn(kStores),

@@ -131,13 +131,20 @@ void DeviceSlot::positionsSetElsewhere(const BodySet& bodies) {
 }
 
 void DeviceSlot::refreshPositions() {
-  for (std::size_t b = 0; b < elsewhere_.size(); ++b)
-    if (elsewhere_[b] && source_) source_(b, lastX_.at(b));
+  refreshing_ = true;
+  try {
+    for (std::size_t b = 0; b < elsewhere_.size(); ++b)
+      if (elsewhere_[b] && source_) source_(b, lastX_.at(b));
+  } catch (...) {
+    refreshing_ = false;
+    throw;
+  }
+  refreshing_ = false;
   elsewhere_.clear();
 }
 
 void DeviceSlot::failover(const std::string& call, const Error& error) {
-  if (error.code() != ErrorCode::DeviceError) throw error;
+  if (error.code() != ErrorCode::DeviceError || refreshing_) throw error;  // a read of the source fails alone
   if (exhausted_) failExhausted();
   advance(call, error.what());
 }

@@ -108,7 +108,8 @@ class DeviceSlot {
   void positionsSetElsewhere(const BodySet& bodies);
   /// Moves the bodies to the next candidate after a DeviceError in a call the slot did not make (a
   /// step store's own call on the device): as a failing call of the slot would, or throws the
-  /// slot's DeviceError when no candidate is left.
+  /// slot's DeviceError when no candidate is left. While the slot reads a store's positions for a
+  /// failover already, it throws `error` back to that read instead.
   void failover(const std::string& call, const Error& error);
 
   /// Labels the events that follow ("step 3").
@@ -152,6 +153,7 @@ class DeviceSlot {
   std::vector<char> elsewhere_;         ///< per body: its last positions are the source's
   PositionSource source_;
   const void* sourceOwner_ = nullptr;
+  bool refreshing_ = false;  ///< refreshPositions is reading the source
   /// lastX_ of the bodies positionsSetElsewhere marked, from the source.
   void refreshPositions();
   std::string when_ = "create";

@@ -280,6 +280,7 @@ void DynamicsDriver::followDevice() {
   store_ = std::move(next);
   deviceStore_ = onDevice;
   storeGeneration_ = slot_.generation();
+  for (Body& b : bodies_) b.deviceAtCommitted = false;  // the new device may hold no positions of a body
 }
 
 std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall& call) {
@@ -314,8 +315,13 @@ std::vector<BodyOutcome> DynamicsDriver::step(const BodySet& set, const StepCall
     // (out of memory, the application's task runner): the bodies still stepping keep their state
     // at the step's start; substeps would not help.
     for (std::size_t i : pending) {
-      restoreStart(set[i]);
       out[i].error = std::current_exception();
+      try {
+        restoreStart(set[i]);
+      } catch (const Error& e) {
+        // A store lost with its device: the next step moves the bodies off it (followDevice).
+        if (e.code() != ErrorCode::DeviceError) throw;
+      }
     }
   }
   return out;

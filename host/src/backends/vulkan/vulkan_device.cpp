@@ -266,12 +266,16 @@ std::vector<DeviceBuffer> VulkanDevice::buffers() const {
 
 std::unique_ptr<StepStore> VulkanDevice::createStepStore(DeviceSlot& slot) {
   if (!deviceStore_) return nullptr;
-  // Its largest buffer (28 vectors of every dof) within what a binding may span, and what step.comp
-  // indexes in 32 bits; else the host keeps the vectors.
-  const std::size_t dofs = 3 * layout_.nodeTotal, largest = 28 * dofs * rs_;
-  if (largest > ctx_->physical().limits.maxStorageBufferRange || 28 * dofs > 0xFFFFFFFFu) return nullptr;
+  // Its largest buffer (28 vectors of every dof, or the load patterns) within what a binding may
+  // span, and what step.comp indexes in 32 bits; else the host keeps the vectors.
+  std::size_t vectors = 28;
+  for (const BodySegment& sg : layout_.segments) vectors = std::max(vectors, sg.problem->forces.size() + 1);
+  const std::size_t dofs = 3 * layout_.nodeTotal;
+  if (vectors * dofs * rs_ > ctx_->physical().limits.maxStorageBufferRange || vectors * dofs > 0xFFFFFFFFu)
+    return nullptr;
+  std::unique_ptr<StepStore> store = createVulkanStepStore(*this, ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
   ++stepStores_;
-  return createVulkanStepStore(*this, ctx_, isDouble_, layout_.segments, layout_.nodeTotal, slot);
+  return store;
 }
 
 }  // namespace vkdevice

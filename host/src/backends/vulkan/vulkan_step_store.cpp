@@ -411,7 +411,7 @@ class VulkanStepStore final : public StepStore {
     });
   }
 
-  /// Input `k` of the body (kIn*) = value(problem dof).
+  /// Input `k` of the body (kStepIn*) = value(problem dof).
   template <class Value>
   void writeInput(const Body& b, unsigned k, Value&& value) {
     putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk,
@@ -579,9 +579,6 @@ class VulkanStepStore final : public StepStore {
     return out;
   }
 
-  /// onDevice(device) where the slot still holds the store's device (the generation it was made
-  /// in); a DeviceError there moves the slot to its next candidate. Then, or where the slot held
-  /// another device already, onHost() (through the slot). Returns whether onDevice ran to its end.
   /// Whether the slot still holds the store's device (the generation it was made in), and has not
   /// given up on every device.
   bool holdsMine(const DeviceSlot& slot) const {
@@ -601,6 +598,9 @@ class VulkanStepStore final : public StepStore {
     }
   }
 
+  /// onDevice(device) where the slot still holds the store's device; a DeviceError there moves the
+  /// slot to its next candidate (unless a wait inside it did already). Then, or where the slot held
+  /// another device already, onHost() (through the slot). Returns whether onDevice ran to its end.
   template <class OnDevice, class OnHost>
   bool onDevice(DeviceSlot& slot, const char* call, OnDevice&& onDevice, OnHost&& onHost) {
     if (holdsMine(slot)) {
@@ -609,7 +609,7 @@ class VulkanStepStore final : public StepStore {
         return true;
       } catch (const Error& e) {
         if (e.code() != ErrorCode::DeviceError) throw;
-        slot.failover(call, e);  // the new device takes the positions from the store (the source)
+        if (holdsMine(slot)) slot.failover(call, e);  // the new device takes the store's positions (the source)
       }
     }
     onHost();
