@@ -57,12 +57,7 @@ class VulkanStepStore final : public StepStore {
       // In float, positions relative to the rest centroid keep float's resolution where the body
       // is (the device's own positions are relative to a centroid too); in double the origin is 0,
       // so that a state set and read back is the same numbers.
-      const Eigen::Index n = b.problem->restPositions.size();
-      for (int k = 0; k < 3 && !isDouble_; ++k) {
-        double sum = 0.0;
-        for (Eigen::Index d = k; d < n; d += 3) sum += b.problem->restPositions[d];
-        b.origin[static_cast<std::size_t>(k)] = n >= 3 ? sum / static_cast<double>(n / 3) : 0.0;
-      }
+      if (!isDouble_) vkdevice::centroidOf(b.problem->restPositions, b.seg.nodes, b.origin.data());
       loads_ = std::max(loads_, b.problem->forces.size());
       groups_ = std::max(groups_, b.problem->prescribed.size());
       bodies_.push_back(std::move(b));
@@ -112,12 +107,7 @@ class VulkanStepStore final : public StepStore {
 
   void setState(std::size_t body, StateSlot slot, StateVec vec, const Eigen::VectorXd& value) override {
     Body& b = at(body);
-    if (static_cast<std::size_t>(value.size()) != b.seg.dofs())
-      fail(ErrorCode::Internal, "step store: a state vector of ", value.size(), " entries for body '", b.problem->name,
-           "' of ", b.seg.dofs(), " dofs");
-    writeVector(b, stateOffset(b, slot, vec), [&](Eigen::Index d) {
-      return value[d] - (isPosition(vec) ? b.origin[static_cast<std::size_t>(d % 3)] : 0.0);
-    });
+    writeChecked(b, stateOffset(b, slot, vec), isPosition(vec), value, "a state vector");
   }
 
   void setZero(std::size_t body, StateSlot slot, StateVec vec) override {
@@ -390,40 +380,45 @@ class VulkanStepStore final : public StepStore {
       for (Eigen::Index d = 0; d < out.size(); ++d) out[d] += b.origin[static_cast<std::size_t>(d % 3)];
   }
 
-  /// The body's entries of the vector at `offset` = value(problem dof), in the device's precision
-  /// and numbering.
+  /// The body's entries of `to` from real `offset` on = value(problem dof), in the device's
+  /// precision and numbering, through the staging buffer.
   template <class Value>
-  void writeVector(const Body& b, std::size_t offset, Value&& value) {
+  void writeBody(const Body& b, const vk::Buffer& to, std::size_t offset, Value&& value) {
     putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk,
              [&](std::size_t d) { return value(static_cast<Eigen::Index>(b.seg.hostDof(d))); });
-    VkCommandBuffer cb = ctx_->begin();
-    const VkBufferCopy region{b.seg.dofBegin() * rs_, (offset + b.seg.dofBegin()) * rs_, b.seg.dofs() * rs_};
-    vkCmdCopyBuffer(cb, up_.handle(), buffers_[kBindVecs].handle(), 1, &region);
-    submitAndWait("a write of the state");
+    copyUp(to, (offset + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_);
+  }
+  template <class Value>
+  void writeVector(const Body& b, std::size_t offset, Value&& value) {
+    writeBody(b, buffers_[kBindVecs], offset, std::forward<Value>(value));
+  }
+
+  /// A state's or scratch vector of the body (3N entries, `what` in the message otherwise), less
+  /// the origin where it holds positions.
+  void writeChecked(const Body& b, std::size_t offset, bool position, const Eigen::VectorXd& value, const char* what) {
+    if (static_cast<std::size_t>(value.size()) != b.seg.dofs())
+      fail(ErrorCode::Internal, "step store: ", what, " of ", value.size(), " entries for body '", b.problem->name,
+           "' of ", b.seg.dofs(), " dofs");
+    writeVector(b, offset, [&](Eigen::Index d) {
+      return value[d] - (position ? b.origin[static_cast<std::size_t>(d % 3)] : 0.0);
+    });
   }
 
   void setScratch(const Body& b, Scratch vec, const Eigen::VectorXd& value) {
-    if (static_cast<std::size_t>(value.size()) != b.seg.dofs())
-      fail(ErrorCode::Internal, "step store: a scratch vector of ", value.size(), " entries for body '",
-           b.problem->name, "' of ", b.seg.dofs(), " dofs");
-    writeVector(b, scratchOffset(vec), [&](Eigen::Index d) {
-      return value[d] - (isPosition(vec) ? b.origin[static_cast<std::size_t>(d % 3)] : 0.0);
-    });
+    writeChecked(b, scratchOffset(vec), isPosition(vec), value, "a scratch vector");
   }
 
   /// Input `k` of the body (kStepIn*) = value(problem dof).
   template <class Value>
   void writeInput(const Body& b, unsigned k, Value&& value) {
-    putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk,
-             [&](std::size_t d) { return value(static_cast<Eigen::Index>(b.seg.hostDof(d))); });
-    copyUp(buffers_[kBindInputs], (k * dofTotal_ + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_);
+    writeBody(b, buffers_[kBindInputs], k * dofTotal_, std::forward<Value>(value));
   }
 
   void copyUp(const vk::Buffer& to, std::size_t toByte, std::size_t fromByte, std::size_t bytes) {
     VkCommandBuffer cb = ctx_->begin();
     const VkBufferCopy region{fromByte, toByte, bytes};
     vkCmdCopyBuffer(cb, up_.handle(), to.handle(), 1, &region);
-    submitAndWait("an upload of the inputs");
+    submitAndWait("an upload to the store");
   }
 
   void uploadWords(const vk::Buffer& to, std::size_t first, const std::uint32_t* words, std::size_t count) {
@@ -471,12 +466,9 @@ class VulkanStepStore final : public StepStore {
       grow(std::max(loads_, p.forces.size()), std::max(groups_, p.prescribed.size()));  // uploads every body again
       return;
     }
-    for (std::size_t l = 0; l < loads_; ++l) {
-      putReals(up_.mapped(), isDouble_, b.seg.dofBegin(), b.seg.dofs(), kChunk, [&](std::size_t d) {
-        return l < p.forces.size() ? p.forces[l].f[static_cast<Eigen::Index>(b.seg.hostDof(d))] : 0.0;
-      });
-      copyUp(buffers_[kBindLoads], (l * dofTotal_ + b.seg.dofBegin()) * rs_, b.seg.dofBegin() * rs_, b.seg.dofs() * rs_);
-    }
+    for (std::size_t l = 0; l < loads_; ++l)
+      writeBody(b, buffers_[kBindLoads], l * dofTotal_,
+                [&](Eigen::Index d) { return l < p.forces.size() ? p.forces[l].f[d] : 0.0; });
     uploadControls(b);
   }
 
