@@ -1,8 +1,9 @@
-// The warped Cholesky's solves (precond/supernodal_ldlt.hpp) and order
-// (precond/nested_dissection.hpp): the supernodal solves against Eigen's on random symmetric
-// positive definite matrices of awkward sizes and on a beam's rest operator in its nested
-// dissection order, the same bits whatever runs the tasks and in whatever order, and the order's
-// split of the beam into independent subtrees with a fill near minimum degree's.
+// The warped Cholesky's factor and solves (precond/supernodal_ldlt.hpp) and order
+// (precond/nested_dissection.hpp): the supernodal factor and solves against Eigen's simplicial
+// factor on random symmetric positive definite matrices of awkward sizes and on a beam's rest
+// operator in its nested dissection order (the same pattern, the same solutions), matrices that are
+// not positive definite refused, the same bits whatever runs the tasks and in whatever order, and
+// the order's split of the beam into independent subtrees with a fill near minimum degree's.
 #include "precond/nested_dissection.hpp"
 #include "precond/rest_system.hpp"
 #include "precond/supernodal_ldlt.hpp"
@@ -54,9 +55,10 @@ Eigen::SparseMatrix<double> randomSpd(int n, int perRow, unsigned seed) {
   return A;
 }
 
-SupernodalLdlt supernodal(const Ldlt& f) {
+/// The supernodal factor of A in the order Eigen's factor f of A chose.
+SupernodalLdlt supernodal(const Eigen::SparseMatrix<double>& A, const Ldlt& f) {
   SupernodalLdlt s;
-  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
+  EXPECT_TRUE(s.factor(A, f.permutationP().indices()));
   return s;
 }
 
@@ -71,8 +73,10 @@ TEST(SupernodalLdlt, SolvesAsEigensFactorDoesOnRandomMatricesOfAwkwardSizes) {
       const Eigen::SparseMatrix<double> A = randomSpd(n, perRow, static_cast<unsigned>(n * 31 + perRow));
       const Ldlt f(A);
       ASSERT_EQ(f.info(), Eigen::Success);
-      const SupernodalLdlt s = supernodal(f);
+      const SupernodalLdlt s = supernodal(A, f);
       EXPECT_EQ(s.rows(), n);
+      EXPECT_EQ(s.factorEntries(), static_cast<std::size_t>(f.matrixL().nestedExpression().nonZeros()))
+          << "the symbolic pattern is Eigen's; " << n << " rows, " << perRow << " a row";
       if (n >= 64 && perRow >= 4)  // the factor's trailing columns fill in: runs of more than one
         EXPECT_LT(s.supernodeCount(), static_cast<std::size_t>(n)) << n << " rows, " << perRow << " a row";
       for (const unsigned seed : {3u, 4u}) {
@@ -91,7 +95,8 @@ TEST(SupernodalLdlt, AFactorWithoutAPermutationSolvesToo) {
   const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> f(A);
   ASSERT_EQ(f.info(), Eigen::Success);
   SupernodalLdlt s;
-  s.build(f.matrixL().nestedExpression(), f.vectorD(), Eigen::VectorXi());
+  ASSERT_TRUE(s.factor(A, Eigen::VectorXi()));
+  EXPECT_EQ(s.factorEntries(), static_cast<std::size_t>(f.matrixL().nestedExpression().nonZeros()));
   const Eigen::VectorXd b = randomVector(301, 2);
   Eigen::VectorXd x;
   s.solve(b, x);
@@ -118,7 +123,7 @@ struct OrderedFactor {
     Eigen::SparseMatrix<double> ordered(n, n);
     ordered = Eigen::SparseMatrix<double>(b.A0).twistedBy(P);
     ldlt.compute(ordered);
-    solves.build(ldlt.matrixL().nestedExpression(), ldlt.vectorD(), P.indices());
+    EXPECT_TRUE(solves.factor(Eigen::SparseMatrix<double>(b.A0), P.indices()));
   }
 };
 
@@ -139,6 +144,7 @@ TEST(NestedDissection, SplitsABeamIntoIndependentSubtreesWithAFillNearMinimumDeg
   const double fill = static_cast<double>(f.ldlt.matrixL().nestedExpression().nonZeros());
   const double amdFill = static_cast<double>(amd.matrixL().nestedExpression().nonZeros());
   EXPECT_LT(fill, 1.5 * amdFill) << "nested dissection's fill against minimum degree's";
+  EXPECT_EQ(f.solves.factorEntries(), static_cast<std::size_t>(fill)) << "the symbolic pattern is Eigen's";
   // The beam's cross-sections are the separators: the top of the tree, which one thread solves,
   // is a few of them (41 x 4 x 4 nodes, 48 dofs a cross-section; 40 x 4 x 4 free).
   EXPECT_GT(f.solves.topColumns(), 0u);
@@ -155,37 +161,6 @@ TEST(NestedDissection, SplitsABeamIntoIndependentSubtreesWithAFillNearMinimumDeg
   Eigen::VectorXd nan = b.p.restPositions;
   nan[b.free[5]] = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(nestedDissection(b.A0, b.free, nan), Error) << "a rest position not finite";
-}
-
-/// L (strictly lower, n x n) from its columns' rows, each entry a distinct value.
-Eigen::SparseMatrix<double> lowerOf(int n, const std::vector<std::vector<int>>& columns) {
-  std::vector<Eigen::Triplet<double>> entries;
-  for (int j = 0; j < n; ++j)
-    for (const int i : columns[static_cast<std::size_t>(j)]) entries.emplace_back(i, j, 0.1 * (i + 1) - 0.03 * j);
-  Eigen::SparseMatrix<double> L(n, n);
-  L.setFromTriplets(entries.begin(), entries.end());
-  L.makeCompressed();
-  return L;
-}
-
-TEST(SupernodalLdlt, ARunWhoseColumnsLackSomeOfItsRowsStoresZerosThereAndSolves) {
-  // Column 1's rows {3} are among the run's {2, 3} without being all of them (not a Cholesky
-  // factor's pattern, where they would be): the run [0, 4) stores a zero at (2, 1).
-  const Eigen::SparseMatrix<double> L = lowerOf(4, {{1, 2, 3}, {3}, {3}, {}});
-  const Eigen::VectorXd d = (Eigen::VectorXd(4) << 2.0, -1.5, 3.0, 0.5).finished();
-  const Eigen::VectorXi perm = (Eigen::VectorXi(4) << 2, 0, 3, 1).finished();
-  SupernodalLdlt s;
-  s.build(L, d, perm);
-  EXPECT_EQ(s.supernodeCount(), 1u);
-  EXPECT_EQ(s.storedValues(), 16u) << "a 4 x 4 triangle, no rows below";
-  // A = P^T L D L^T P, dense.
-  const Eigen::MatrixXd Ld = Eigen::MatrixXd(L) + Eigen::MatrixXd::Identity(4, 4);
-  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P(perm);
-  const Eigen::MatrixXd A = P.transpose() * (Ld * d.asDiagonal() * Ld.transpose()) * P;
-  const Eigen::VectorXd b = randomVector(4, 1);
-  Eigen::VectorXd x = b;
-  s.solve(x, x);  // in place
-  EXPECT_LT((A * x - b).norm(), 1e-12 * b.norm());
 }
 
 TEST(SupernodalLdlt, ANeverBuiltOneSolvesTheEmptySystem) {
@@ -215,9 +190,19 @@ TEST(SupernodalLdlt, GivesTheSameBitsWhateverRunsItsTasksAndInWhateverOrder) {
   EXPECT_EQ(calls.load(), 2) << "the two sweeps' tasks on the application's runner";
   ASSERT_EQ(pooled.size(), serial.size());
   EXPECT_EQ(std::memcmp(pooled.data(), serial.data(), sizeof(double) * static_cast<std::size_t>(pooled.size())), 0);
+  // The factorisation's tasks too: made on the runner, last task first, it solves to the same bits.
+  SupernodalLdlt backwardsMade;
+  {
+    const TaskScope scope(runner);
+    ASSERT_TRUE(backwardsMade.factor(Eigen::SparseMatrix<double>(b.A0), f.P.indices()));
+  }
+  EXPECT_EQ(calls.load(), 3) << "the factorisation's tasks on the application's runner";
+  backwardsMade.solve(r, serial);
+  EXPECT_EQ(std::memcmp(pooled.data(), serial.data(), sizeof(double) * static_cast<std::size_t>(pooled.size())), 0)
+      << "a factor made with its tasks run backwards";
 }
 
-TEST(SupernodalLdlt, InconsistentFactorsAreInternalErrors) {
+TEST(SupernodalLdlt, InconsistentInputsAreInternalErrorsAndARefusedFactorKeepsTheOneBefore) {
   const Eigen::SparseMatrix<double> A = randomSpd(20, 3, 1);
   const Ldlt f(A);
   SupernodalLdlt s;
@@ -230,23 +215,16 @@ TEST(SupernodalLdlt, InconsistentFactorsAreInternalErrors) {
       EXPECT_NE(std::string(e.what()).find("SupernodalLdlt"), std::string::npos) << e.what();
     }
   };
-  expectInternal([&] { s.build(f.matrixL().nestedExpression(), Eigen::VectorXd::Ones(19), Eigen::VectorXi()); },
-                 "too few pivots");
+  expectInternal([&] { s.factor(Eigen::SparseMatrix<double>(20, 19), Eigen::VectorXi()); }, "a matrix not square");
+  expectInternal([&] { s.factor(A, Eigen::VectorXi::LinSpaced(19, 0, 18)); }, "a permutation too short");
   Eigen::VectorXi twice = f.permutationP().indices();
   twice[1] = twice[0];
-  expectInternal([&] { s.build(f.matrixL().nestedExpression(), f.vectorD(), twice); }, "a permutation with a repeat");
-  Eigen::SparseMatrix<double> upper = Eigen::SparseMatrix<double>(f.matrixL().nestedExpression()).transpose();
-  upper.makeCompressed();
-  ASSERT_GT(upper.nonZeros(), 0);
-  expectInternal([&] { s.build(upper, f.vectorD(), Eigen::VectorXi()); }, "entries above the diagonal");
-  Eigen::SparseMatrix<double> uncompressed = f.matrixL().nestedExpression();
-  uncompressed.uncompress();
-  expectInternal([&] { s.build(uncompressed, f.vectorD(), Eigen::VectorXi()); }, "an uncompressed factor");
-  Eigen::SparseMatrix<double> unsorted = lowerOf(4, {{2, 3}, {3}, {}, {}});
-  std::swap(unsorted.innerIndexPtr()[0], unsorted.innerIndexPtr()[1]);  // column 0's rows 3, 2
-  expectInternal([&] { s.build(unsorted, Eigen::VectorXd::Ones(4), Eigen::VectorXi()); }, "rows out of order");
+  expectInternal([&] { s.factor(A, twice); }, "a permutation with a repeat");
+  Eigen::VectorXi outside = f.permutationP().indices();
+  outside[3] = 20;
+  expectInternal([&] { s.factor(A, outside); }, "a permutation out of range");
 
-  s.build(f.matrixL().nestedExpression(), f.vectorD(), f.permutationP().indices());
+  ASSERT_TRUE(s.factor(A, f.permutationP().indices()));
   Eigen::VectorXd x;
   expectInternal([&] { s.solve(Eigen::VectorXd::Ones(21), x); }, "a right-hand side of another size");
   const Eigen::VectorXd b = randomVector(20, 3);
@@ -255,14 +233,31 @@ TEST(SupernodalLdlt, InconsistentFactorsAreInternalErrors) {
     s.solve(b, x);
     EXPECT_LT((x - f.solve(b)).norm(), 1e-12 * x.norm()) << what;
   };
-  expectInternal([&] { s.build(f.matrixL().nestedExpression(), Eigen::VectorXd::Ones(19), Eigen::VectorXi()); },
-                 "too few pivots, after a build");
-  keepsTheOneBefore("a factor refused for its sizes");
-  // Column 0's rows {1, 3}: its parent is column 1, whose rows below are {2}, so row 3 is no
-  // ancestor's.
-  expectInternal([&] { s.build(lowerOf(4, {{1, 3}, {2}, {}, {}}), Eigen::VectorXd::Ones(4), Eigen::VectorXi()); },
-                 "a pattern not a Cholesky factor's");
-  keepsTheOneBefore("a factor refused for its pattern");
+  expectInternal([&] { s.factor(A, twice); }, "a permutation with a repeat, after a factor");
+  keepsTheOneBefore("a factor refused for its permutation");
+
+  // Not positive definite: a negative pivot (the last, after every update), a zero one, one
+  // that is not finite, and an indefinite matrix of positive diagonal.
+  const auto refused = [&](Eigen::SparseMatrix<double> M, const char* what) {
+    EXPECT_FALSE(s.factor(M, Eigen::VectorXi())) << what;
+    keepsTheOneBefore(what);
+  };
+  Eigen::SparseMatrix<double> negative = randomSpd(30, 4, 2);
+  negative.coeffRef(29, 29) = -negative.coeff(29, 29);
+  refused(negative, "a negative pivot");
+  Eigen::SparseMatrix<double> zero(3, 3);
+  zero.coeffRef(0, 0) = 1.0;
+  zero.coeffRef(2, 2) = 1.0;
+  refused(zero, "a zero pivot");
+  Eigen::SparseMatrix<double> nan = randomSpd(30, 4, 3);
+  nan.coeffRef(7, 7) = std::numeric_limits<double>::quiet_NaN();
+  refused(nan, "a pivot not a number");
+  Eigen::SparseMatrix<double> indefinite(2, 2);
+  indefinite.coeffRef(0, 0) = 1.0;
+  indefinite.coeffRef(1, 1) = 1.0;
+  indefinite.coeffRef(0, 1) = 2.0;
+  indefinite.coeffRef(1, 0) = 2.0;
+  refused(indefinite, "an indefinite matrix");
 }
 
 }  // namespace

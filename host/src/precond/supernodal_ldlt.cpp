@@ -4,7 +4,11 @@
 #include "util/error.hpp"
 #include "util/parallel.hpp"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
+#include <cmath>
+#include <exception>
 #include <array>
 #include <numeric>
 #include <queue>
@@ -78,32 +82,97 @@ constexpr auto kRowsUp = upTable(std::make_index_sequence<kFixedWidths>());
 
 }  // namespace
 
-void SupernodalLdlt::build(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm) {
-  SupernodalLdlt made;  // a throw leaves this factor as it was
-  made.make(L, d, perm);
-  *this = std::move(made);
-}
-
-void SupernodalLdlt::make(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm) {
-  const int n = static_cast<int>(L.cols());
-  if (L.rows() != n || d.size() != n || (perm.size() != 0 && perm.size() != n) || !L.isCompressed())
-    fail(ErrorCode::Internal, "SupernodalLdlt: a factor of ", L.rows(), " x ", L.cols(), " with ", d.size(),
-         " pivots and a permutation of ", perm.size());
-  const int* Lp = L.outerIndexPtr();
-  const int* Li = L.innerIndexPtr();
-  const double* Lx = L.valuePtr();
-  for (int j = 0; j < n; ++j)
-    for (int k = Lp[j]; k < Lp[j + 1]; ++k)
-      if (Li[k] <= j || Li[k] >= n || (k > Lp[j] && Li[k] <= Li[k - 1]))
-        fail(ErrorCode::Internal, "SupernodalLdlt: column ", j, " of the factor has row ", Li[k],
-             " (rows must be below the diagonal and ascending)");
+bool SupernodalLdlt::factor(const Eigen::SparseMatrix<double>& A, const Eigen::VectorXi& perm) {
+  const auto n = static_cast<int>(A.cols());
+  if (A.rows() != n || (perm.size() != 0 && perm.size() != n))
+    fail(ErrorCode::Internal, "SupernodalLdlt: a matrix of ", A.rows(), " x ", A.cols(), " and a permutation of ",
+         perm.size());
+  std::vector<int> to(static_cast<std::size_t>(n));  // row i of A is row to[i] of C = P A P^T
   std::vector<char> seen(static_cast<std::size_t>(n), 0);
-  for (Eigen::Index i = 0; i < perm.size(); ++i) {
-    if (perm[i] < 0 || perm[i] >= n || seen[static_cast<std::size_t>(perm[i])])
+  for (int i = 0; i < n; ++i) {
+    const int p = perm.size() == 0 ? i : perm[i];
+    if (p < 0 || p >= n || seen[static_cast<std::size_t>(p)])
       fail(ErrorCode::Internal, "SupernodalLdlt: the permutation is not one of 0..", n - 1);
-    seen[static_cast<std::size_t>(perm[i])] = 1;
+    seen[static_cast<std::size_t>(p)] = 1;
+    to[static_cast<std::size_t>(i)] = p;
   }
 
+  // C's entries on and below its diagonal, by columns, each column's rows ascending.
+  std::vector<std::size_t> Cp(static_cast<std::size_t>(n) + 1, 0);
+  for (int j = 0; j < n; ++j)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it) {
+      const int r = to[static_cast<std::size_t>(it.row())], c = to[static_cast<std::size_t>(j)];
+      if (r >= c) ++Cp[static_cast<std::size_t>(c) + 1];
+    }
+  for (int j = 0; j < n; ++j) Cp[static_cast<std::size_t>(j) + 1] += Cp[static_cast<std::size_t>(j)];
+  std::vector<int> Ci(Cp.back());
+  std::vector<double> Cx(Cp.back());
+  {
+    std::vector<std::size_t> next(Cp.begin(), Cp.end() - 1);
+    for (int j = 0; j < n; ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it) {
+        const int r = to[static_cast<std::size_t>(it.row())], c = to[static_cast<std::size_t>(j)];
+        if (r < c) continue;
+        const std::size_t at = next[static_cast<std::size_t>(c)]++;
+        Ci[at] = r;
+        Cx[at] = it.value();
+      }
+    std::vector<std::pair<int, double>> column;
+    for (int j = 0; j < n; ++j) {
+      const std::size_t b = Cp[static_cast<std::size_t>(j)], e = Cp[static_cast<std::size_t>(j) + 1];
+      column.clear();
+      for (std::size_t k = b; k < e; ++k) column.emplace_back(Ci[k], Cx[k]);
+      std::sort(column.begin(), column.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+      for (std::size_t k = b; k < e; ++k) {
+        Ci[k] = column[k - b].first;
+        Cx[k] = column[k - b].second;
+      }
+    }
+  }
+
+  // The symbolic factorisation: column j's rows below the diagonal are C's and its children's in
+  // the elimination tree (less j itself); its parent is the first of them. A child comes before its
+  // parent, so a column's pattern is complete, and stored, before its parent reads it.
+  std::vector<std::size_t> Lp(static_cast<std::size_t>(n) + 1, 0);
+  std::vector<int> Li;
+  Li.reserve(2 * Cp.back());
+  {
+    std::vector<std::vector<int>> children(static_cast<std::size_t>(n));
+    std::vector<int> mark(static_cast<std::size_t>(n), -1);
+    for (int j = 0; j < n; ++j) {
+      const std::size_t begin = Li.size();
+      mark[static_cast<std::size_t>(j)] = j;
+      const auto add = [&](int r) {
+        if (mark[static_cast<std::size_t>(r)] == j) return;
+        mark[static_cast<std::size_t>(r)] = j;
+        Li.push_back(r);
+      };
+      for (std::size_t k = Cp[static_cast<std::size_t>(j)]; k < Cp[static_cast<std::size_t>(j) + 1]; ++k) add(Ci[k]);
+      for (const int c : children[static_cast<std::size_t>(j)])
+        for (std::size_t k = Lp[static_cast<std::size_t>(c)]; k < Lp[static_cast<std::size_t>(c) + 1]; ++k) add(Li[k]);
+      std::sort(Li.begin() + static_cast<std::ptrdiff_t>(begin), Li.end());
+      Lp[static_cast<std::size_t>(j) + 1] = Li.size();
+      if (Li.size() > begin) children[static_cast<std::size_t>(Li[begin])].push_back(j);
+    }
+  }
+
+  SupernodalLdlt made;  // a refused factor leaves this one as it was
+  const std::vector<int> of = made.structure(n, Lp, Li);
+  made.entries_ = Li.size();
+  std::vector<int>().swap(Li);
+  made.partition(of);
+  if (!made.numeric(Cp, Ci, Cx, of)) return false;
+  made.perm_ = perm.size() == 0 ? std::vector<int>() : std::vector<int>(perm.data(), perm.data() + perm.size());
+  made.work_.acc.assign((kTasks + 1) * made.widest_, 0.0);
+  made.work_.updates.assign(kTasks * made.topColumns_.size(), 0.0);
+  made.work_.y.resize(n);
+  *this = std::move(made);
+  return true;
+}
+
+std::vector<int> SupernodalLdlt::structure(int n, const std::vector<std::size_t>& Lp, const std::vector<int>& Li) {
+  first_.clear();
+  rows_.clear();
   rowStart_.assign(1, 0);
   // The runs: U holds the rows below the run [c0, j) not yet in it (ascending).
   std::vector<int> U;
@@ -115,26 +184,29 @@ void SupernodalLdlt::make(const Eigen::SparseMatrix<double>& L, const Eigen::Vec
     c0 = end;
   };
   for (int j = 0; j < n; ++j) {
-    if (j > c0 && !U.empty() && U.front() == j && std::includes(U.begin() + 1, U.end(), Li + Lp[j], Li + Lp[j + 1])) {
+    const int* b = Li.data() + Lp[static_cast<std::size_t>(j)];
+    const int* e = Li.data() + Lp[static_cast<std::size_t>(j) + 1];
+    if (j > c0 && !U.empty() && U.front() == j && std::equal(U.begin() + 1, U.end(), b, e)) {
       U.erase(U.begin());
       continue;
     }
     if (j > 0) close(j);
-    U.assign(Li + Lp[j], Li + Lp[j + 1]);
+    U.assign(b, e);
   }
   if (n > 0) close(n);
   first_.push_back(n);
   const std::size_t S = first_.size() - 1;
 
-  // A Cholesky factor's pattern: the rows below a supernode that are not its parent's columns (the
-  // parent holds its first row below) are among its parent's rows below, so every row below a
-  // supernode is an ancestor's (by induction from the roots), which the split into tasks needs.
   std::vector<int> of(static_cast<std::size_t>(n));
   widest_ = 0;
   for (std::size_t s = 0; s < S; ++s) {
     widest_ = std::max(widest_, static_cast<std::size_t>(first_[s + 1] - first_[s]));
     for (int c = first_[s]; c < first_[s + 1]; ++c) of[static_cast<std::size_t>(c)] = static_cast<int>(s);
   }
+  // A Cholesky factor's pattern: the rows below a supernode that are not its parent's columns (the
+  // parent holds its first row below) are among its parent's rows below, so every row below a
+  // supernode is an ancestor's (by induction from the roots), which the numeric pass's updates and
+  // the split into tasks need. An internal check of the symbolic pass above.
   for (std::size_t s = 0; s < S; ++s) {
     if (rowStart_[s + 1] == rowStart_[s]) continue;
     const auto parent = static_cast<std::size_t>(of[static_cast<std::size_t>(rows_[rowStart_[s]])]);
@@ -143,44 +215,162 @@ void SupernodalLdlt::make(const Eigen::SparseMatrix<double>& L, const Eigen::Vec
     while (rest != end && *rest < first_[parent + 1]) ++rest;
     if (!std::includes(rows_.data() + rowStart_[parent], rows_.data() + rowStart_[parent + 1], rest, end))
       fail(ErrorCode::Internal, "SupernodalLdlt: the factor's column ", first_[s],
-           " has a row below that is not an ancestor's in its elimination tree (not a Cholesky factor's pattern)");
+           " has a row below that is not an ancestor's in its elimination tree");
   }
 
-  // The panels: the run's w x w triangle (row-major, unit diagonal and upper half stored as 0), then
-  // its h rows below, w values each.
+  // The panels: the run's w x w triangle (row-major), then its h rows below, w values each.
   panelStart_.assign(S + 1, 0);
   for (std::size_t s = 0; s < S; ++s) {
     const auto w = static_cast<std::size_t>(first_[s + 1] - first_[s]);
     panelStart_[s + 1] = panelStart_[s] + w * w + (rowStart_[s + 1] - rowStart_[s]) * w;
   }
   values_.assign(panelStart_[S], 0.0);
+  dinv_.setZero(n);  // its size is rows(): the factor's
+  return of;
+}
+
+bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vector<int>& Ci,
+                             const std::vector<double>& Cx, const std::vector<int>& of) {
+  using Block = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  using Map = Eigen::Map<Block>;
+  const auto n = static_cast<std::size_t>(of.size());
+  const std::size_t S = supernodeCount();
+  // where[r]: row r's place among the rows below the supernode being filled or updated (-1: none).
+  std::vector<int> where(n, -1);
+  // C's entries into the panels: the triangle's lower half with its diagonal, and the rows below.
   for (std::size_t s = 0; s < S; ++s) {
-    const int a = first_[s], b = first_[s + 1];
-    const auto w = static_cast<std::size_t>(b - a);
+    const Panel p = panel(static_cast<int>(s));
+    for (std::size_t r = 0; r < p.h; ++r) where[static_cast<std::size_t>(p.below[r])] = static_cast<int>(r);
     double* T = values_.data() + panelStart_[s];
-    double* R = T + w * w;
-    const int* below = rows_.data() + rowStart_[s];
-    const auto h = rowStart_[s + 1] - rowStart_[s];
-    for (int c = a; c < b; ++c) {
-      const auto k = static_cast<std::size_t>(c - a);
-      std::size_t at = 0;
-      for (int e = Lp[c]; e < Lp[c + 1]; ++e) {
-        const int r = Li[e];
-        if (r < b) {
-          T[static_cast<std::size_t>(r - a) * w + k] = Lx[e];
-          continue;
-        }
-        while (at < h && below[at] < r) ++at;  // found: build() merged only columns within the rows
-        R[at * w + k] = Lx[e];
+    double* R = T + p.w * p.w;
+    for (int c = p.first; c < p.first + static_cast<int>(p.w); ++c) {
+      const auto k = static_cast<std::size_t>(c - p.first);
+      for (std::size_t e = Cp[static_cast<std::size_t>(c)]; e < Cp[static_cast<std::size_t>(c) + 1]; ++e) {
+        const int r = Ci[e];
+        if (r < p.first + static_cast<int>(p.w)) T[static_cast<std::size_t>(r - p.first) * p.w + k] = Cx[e];
+        else R[static_cast<std::size_t>(where[static_cast<std::size_t>(r)]) * p.w + k] = Cx[e];
       }
     }
+    for (std::size_t r = 0; r < p.h; ++r) where[static_cast<std::size_t>(p.below[r])] = -1;
   }
-  dinv_ = d.cwiseInverse();
-  perm_.assign(perm.data(), perm.data() + perm.size());
-  partition(of);
-  work_.acc.assign((kTasks + 1) * widest_, 0.0);
-  work_.updates.assign(kTasks * topColumns_.size(), 0.0);
-  work_.y.resize(n);
+
+  // Supernode s's triangle factored, T = L_c L_c^T (its lower half, updated by the descendants),
+  // then its rows below solved, W = R L_c^-T; false at a pivot that is not positive and finite.
+  const auto pivots = [&](std::size_t s) {
+    const Panel p = panel(static_cast<int>(s));
+    Map T(values_.data() + panelStart_[s], static_cast<Eigen::Index>(p.w), static_cast<Eigen::Index>(p.w));
+    Map R(values_.data() + panelStart_[s] + p.w * p.w, static_cast<Eigen::Index>(p.h), static_cast<Eigen::Index>(p.w));
+    {
+      Eigen::LLT<Eigen::Ref<Block>, Eigen::Lower> llt(T);
+      if (llt.info() != Eigen::Success) return false;
+    }
+    for (Eigen::Index k = 0; k < T.rows(); ++k)
+      if (!(std::isfinite(T(k, k)) && T(k, k) > 0.0)) return false;
+    if (p.h > 0) T.triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(R);
+    return true;
+  };
+  // W W^T's blocks subtracted from the ancestors' panels, for the rows below from q0 to qEnd grouped
+  // by the ancestor whose columns they are (U, place: the caller's scratch). False where a row below
+  // is not among its ancestor's (not a Cholesky factor's pattern: an internal error).
+  const auto updates = [&](std::size_t s, std::size_t q0, std::size_t qEnd, Block& U, std::vector<int>& place) {
+    const Panel p = panel(static_cast<int>(s));
+    const std::size_t w = p.w, h = p.h;
+    const Map R(values_.data() + panelStart_[s] + w * w, static_cast<Eigen::Index>(h), static_cast<Eigen::Index>(w));
+    while (q0 < qEnd) {
+      const auto t = static_cast<std::size_t>(of[static_cast<std::size_t>(p.below[q0])]);
+      const Panel a = panel(static_cast<int>(t));
+      const int end = a.first + static_cast<int>(a.w);
+      std::size_t q1 = q0;
+      while (q1 < h && p.below[q1] < end) ++q1;
+      // Rows q0.. of W go to a's triangle (those among its columns, -1 - their row there) or to its
+      // rows below (an ancestor's rows below hold every row below its descendants past its columns).
+      place.resize(h - q0);
+      std::size_t at = 0;
+      for (std::size_t r = q0; r < h; ++r) {
+        const int row = p.below[r];
+        if (row < end) {
+          place[r - q0] = -1 - (row - a.first);
+          continue;
+        }
+        while (at < a.h && a.below[at] < row) ++at;
+        if (at == a.h || a.below[at] != row) return false;
+        place[r - q0] = static_cast<int>(at);
+      }
+      const auto rows = static_cast<Eigen::Index>(h - q0), cols = static_cast<Eigen::Index>(q1 - q0);
+      U.resize(rows, cols);
+      U.noalias() = R.middleRows(static_cast<Eigen::Index>(q0), rows) *
+                    R.middleRows(static_cast<Eigen::Index>(q0), cols).transpose();
+      double* aT = values_.data() + panelStart_[t];
+      double* aR = aT + a.w * a.w;
+      for (Eigen::Index r = 0; r < rows; ++r) {
+        const int to = place[static_cast<std::size_t>(r)];
+        double* row = to < 0 ? aT + static_cast<std::size_t>(-1 - to) * a.w : aR + static_cast<std::size_t>(to) * a.w;
+        for (Eigen::Index c = 0; c < std::min(cols, r + 1); ++c)
+          row[p.below[q0 + static_cast<std::size_t>(c)] - a.first] -= U(r, c);
+      }
+      q0 = q1;
+    }
+    return true;
+  };
+  // L = L_c diag(L_c)^-1 and D = diag(L_c)^2: the triangle's strict lower half and the rows below
+  // scaled by their column's pivot; the triangle's diagonal and upper half stored as 0.
+  const auto finish = [&](std::size_t s) {
+    const Panel p = panel(static_cast<int>(s));
+    Map T(values_.data() + panelStart_[s], static_cast<Eigen::Index>(p.w), static_cast<Eigen::Index>(p.w));
+    Map R(values_.data() + panelStart_[s] + p.w * p.w, static_cast<Eigen::Index>(p.h), static_cast<Eigen::Index>(p.w));
+    for (Eigen::Index k = 0; k < T.rows(); ++k) {
+      const double pivot = T(k, k);
+      dinv_[p.first + k] = 1.0 / (pivot * pivot);
+      for (Eigen::Index i = k + 1; i < T.rows(); ++i) T(i, k) /= pivot;
+      R.col(k) /= pivot;
+      for (Eigen::Index i = 0; i <= k; ++i) T(i, k) = 0.0;
+    }
+  };
+  const auto notBelow = [&](std::size_t s) {
+    fail(ErrorCode::Internal, "SupernodalLdlt: a row below column ", first_[s], " is not below its ancestor");
+  };
+
+  // The tasks' subtrees side by side, each supernode's updates of its own subtree (its first
+  // direct_[s] rows below); then, in supernode order, the updates of the top from the tasks'
+  // supernodes and the top's own supernodes. Each panel entry takes its updates in supernode order,
+  // as one thread going through the supernodes in order would: the bits do not depend on the
+  // threads.
+  std::vector<int> failed(kTasks, 0);  // 1: a pivot, 2: a row below
+  std::vector<std::exception_ptr> thrown(kTasks);
+  forTasks([&](std::size_t t) {
+    try {
+      Block U;
+      std::vector<int> place;
+      for (const int s : tasks_[t]) {
+        const auto k = static_cast<std::size_t>(s);
+        if (!pivots(k)) {
+          failed[t] = 1;
+          return;
+        }
+        if (!updates(k, 0, direct_[k], U, place)) {
+          failed[t] = 2;
+          return;
+        }
+      }
+    } catch (...) {
+      thrown[t] = std::current_exception();
+    }
+  });
+  for (std::size_t t = 0; t < kTasks; ++t)
+    if (thrown[t]) std::rethrow_exception(thrown[t]);
+  for (std::size_t t = 0; t < kTasks; ++t)
+    if (failed[t] == 2) notBelow(static_cast<std::size_t>(tasks_[t].front()));
+  if (std::find(failed.begin(), failed.end(), 1) != failed.end()) return false;
+  Block U;
+  std::vector<int> place;
+  for (std::size_t s = 0; s < S; ++s) {
+    const Panel p = panel(static_cast<int>(s));
+    const bool top = topIndex_[static_cast<std::size_t>(p.first)] >= 0;
+    if (top && !pivots(s)) return false;
+    if (!updates(s, top ? 0 : direct_[s], p.h, U, place)) notBelow(s);
+    finish(s);
+  }
+  return true;
 }
 
 void SupernodalLdlt::partition(const std::vector<int>& of) {

@@ -1,5 +1,5 @@
-// The triangular solves of a sparse LDL^T factor, by supernodes (the warped Cholesky's
-// z = A_0^-1 t, precond/warped_cholesky.hpp).
+// The sparse LDL^T factor of the warped Cholesky's rest operator and its triangular solves
+// (z = A_0^-1 t, precond/warped_cholesky.hpp), by supernodes.
 //
 // A factor of a finite-element operator has runs of consecutive columns whose rows below the run
 // are the same: the three dofs of a node, and the wide separators near the root of the elimination
@@ -9,19 +9,23 @@
 // which a CPU vectorises; a column-by-column solve chains each entry's update through memory
 // instead (docs/performance.md, "The warped factor's solves by supernodes").
 //
-// Runs are grown greedily: column j joins the run ending at j - 1 where it is the first row below
-// the run and its own rows below are among the run's. In a Cholesky factor's pattern they are then
-// the same rows (the run's columns are a chain of the elimination tree); for another strictly lower
-// L the run stores zeros where column j has no entry.
+// The factorisation works on the same panels (factor()): the symbolic pass finds the elimination
+// tree and each column's rows (a column's rows are its own entries' and its children's, less
+// itself), the runs are grown greedily (column j joins the run ending at j - 1 where it is the
+// run's first row below and its rows below are the run's others), and the numeric pass goes through
+// the supernodes in order (children first): a panel's triangle is factored densely (T = L_c L_c^T),
+// its rows below solved against it (W = R L_c^-T), and W W^T, the run's contribution to the rows
+// below, subtracted from its ancestors' panels block by block (right-looking). The wide separators
+// near the root, where most of the arithmetic is, become dense matrix products.
 //
 // The solves run on the host's threads (util/parallel.hpp). In a Cholesky factor's pattern a
-// supernode's rows below are its ancestors in the elimination tree (build() checks it), so disjoint
-// subtrees solve apart: build() splits the tree from its roots, the largest subtree first, until
-// none that can be split holds more than 1/kTasks of the panels' values, and deals the subtrees to
-// kTasks tasks; the supernodes split off (the top of the tree) are solved on one thread, after the
-// tasks going down (L) and before them coming up (L^T). A task's updates of the top's rows are kept
-// in its own buffer and subtracted in task order. The tasks and every sum's order follow from the
-// factor alone, so the bits do not depend on the number of threads or on who runs the tasks.
+// supernode's rows below are its ancestors in the elimination tree, so disjoint subtrees solve
+// apart: factor() splits the tree from its roots, the largest subtree first, until none that can be
+// split holds more than 1/kTasks of the panels' values, and deals the subtrees to kTasks tasks; the
+// supernodes split off (the top of the tree) are solved on one thread, after the tasks going down
+// (L) and before them coming up (L^T). A task's updates of the top's rows are kept in its own
+// buffer and subtracted in task order. The tasks and every sum's order follow from the matrix and
+// the order alone, so the bits do not depend on the number of threads or on who runs the tasks.
 #pragma once
 
 #include <Eigen/Core>
@@ -37,16 +41,14 @@ class SupernodalLdlt {
   /// The tasks the subtrees are dealt to (each runs on one thread at a time).
   static constexpr std::size_t kTasks = 4;
 
-  /// From a factor A = P^T L D L^T P: `L` strictly lower triangular, compressed, column-major with
-  /// each column's rows ascending and the pattern of a Cholesky factor (each row below a column is
-  /// its ancestor in the elimination tree: Eigen's SimplicialLDLT::matrixL(), its unit diagonal
-  /// implied), `d` D's diagonal (all non-zero) and `perm` P's indices ((P b)[perm[i]] = b[i];
-  /// empty: P = I). Throws Error(Internal) for inconsistent sizes, a column with rows out of order
-  /// or a supernode with a row below that is not an ancestor's; the factor then is the one it was
-  /// before.
-  void build(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm);
+  /// Factors A = P^T L D L^T P, L unit lower triangular, D diagonal: `A` symmetric n x n with
+  /// both triangles stored (entry (i, j) is read where perm[i] >= perm[j]), `perm` P's indices
+  /// ((P b)[perm[i]] = b[i]; empty: P = I). Returns false, the factor left as it was, where a pivot
+  /// is not positive and finite (A is not positive definite, to rounding). Throws Error(Internal)
+  /// for a matrix that is not square or a permutation that is not one of 0..n-1.
+  bool factor(const Eigen::SparseMatrix<double>& A, const Eigen::VectorXi& perm);
 
-  /// x = A^-1 b (x is resized; it may be b). Before a build(), A is the 0 x 0 matrix. Not to be
+  /// x = A^-1 b (x is resized; it may be b). Before a factor(), A is the 0 x 0 matrix. Not to be
   /// called on one object from two threads at once: it keeps its work vectors between calls.
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
 
@@ -57,11 +59,18 @@ class SupernodalLdlt {
   /// Values stored in the panels: the factor's entries, any zeros of the runs, and the triangles'
   /// diagonals and upper halves (kept as zeros for a square layout).
   std::size_t storedValues() const { return values_.size(); }
+  /// Entries of L below its diagonal.
+  std::size_t factorEntries() const { return entries_; }
 
  private:
-  /// build() on a new object.
-  void make(const Eigen::SparseMatrix<double>& L, const Eigen::VectorXd& d, const Eigen::VectorXi& perm);
-  /// The tasks and the top from the elimination tree (make()); `of`: each column's supernode.
+  /// The runs, their rows below and the panels (zero) from L's pattern: column j's rows below the
+  /// diagonal Li[Lp[j] .. Lp[j + 1]), ascending. Returns each column's supernode.
+  std::vector<int> structure(int n, const std::vector<std::size_t>& Lp, const std::vector<int>& Li);
+  /// The panels from the entries of C = P A P^T on and below the diagonal (`Cp`, `Ci`, `Cx` by
+  /// columns), factored; false at a pivot that is not positive and finite.
+  bool numeric(const std::vector<std::size_t>& Cp, const std::vector<int>& Ci, const std::vector<double>& Cx,
+               const std::vector<int>& of);
+  /// The tasks and the top from the elimination tree (factor()); `of`: each column's supernode.
   void partition(const std::vector<int>& of);
   /// fn(t) for every task t: on the host's threads, or on the caller where the factor is small.
   template <class Fn>
@@ -89,6 +98,7 @@ class SupernodalLdlt {
   std::vector<std::size_t> panelStart_;    ///< its panel: values_[panelStart_[s] ..], w x w then h x w
   std::vector<double> values_;
   std::size_t widest_ = 0;                 ///< the widest supernode's columns
+  std::size_t entries_ = 0;                ///< L's entries below the diagonal
   /// Per supernode in a task: its rows below in that task's subtree, the first `direct_[s]` of them
   /// (the rest are in the top); all of them for a supernode of the top.
   std::vector<std::size_t> direct_;

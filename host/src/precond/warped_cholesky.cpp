@@ -6,8 +6,6 @@
 #include "util/parallel.hpp"
 
 #include <Eigen/Eigenvalues>
-#include <Eigen/OrderingMethods>
-#include <Eigen/SparseCholesky>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 
@@ -88,21 +86,12 @@ void WarpedCholesky::build(const AmgMatrix& A0, const std::vector<Eigen::Index>&
         !(weakestRigidMotion(A0, freeDofs, rest, diagonal) > kRigidThreshold))
       failSingular(body);
     // P A0 P^T in nested dissection order (precond/nested_dissection.hpp), factored as it stands.
-    const std::vector<int> position = nestedDissection(A0, freeDofs, rest);
-    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> P(n);
-    for (Eigen::Index i = 0; i < n; ++i) P.indices()[i] = position[static_cast<std::size_t>(i)];
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>> ldlt;
-    {
-      Eigen::SparseMatrix<double> ordered(n, n);  // freed before the panels are made
-      ordered = Eigen::SparseMatrix<double>(A0).twistedBy(P);
-      ldlt.compute(ordered);
-    }
     // LDL^T of a positive definite matrix has a positive D; anything else (a mechanism the rigid
     // motions above do not show) would make PCG break down.
-    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0) || !ldlt.vectorD().allFinite())
-      failSingular(body);
-    factor_.build(ldlt.matrixL().nestedExpression(), ldlt.vectorD(), P.indices());
-    factorEntries_ = ldlt.matrixL().nestedExpression().nonZeros();
+    const std::vector<int> position = nestedDissection(A0, freeDofs, rest);
+    const Eigen::Map<const Eigen::VectorXi> perm(position.data(), n);
+    if (!factor_.factor(Eigen::SparseMatrix<double>(A0), perm)) failSingular(body);
+    factorEntries_ = static_cast<Eigen::Index>(factor_.factorEntries());
   }
   freeDofs_ = freeDofs;
   nodeCount_ = static_cast<std::size_t>(rest.size() / 3);

@@ -9,8 +9,8 @@
 //
 // is its exact inverse. A_0 = m M + s K_0 on the free dofs is the REST operator: it does not change
 // while the body moves, so it is factored once (a sparse LDL^T in nested dissection order,
-// precond/nested_dissection.hpp) and each PCG iteration costs two triangular solves (by
-// supernodes on the host's threads, precond/supernodal_ldlt.hpp) and 2 N 3x3 products. Only the
+// precond/nested_dissection.hpp, by supernodes on the host's threads, precond/supernodal_ldlt.hpp)
+// and each PCG iteration costs two triangular solves (by the same supernodes) and 2 N 3x3 products. Only the
 // differences of the element rotations around a node (bending over a node's elements) and the
 // strain the co-rotational tangent leaves out are left for PCG to correct: on issue 29's curled
 // 12,960-tet beam 6-11 iterations to 1e-6 where Jacobi needs about 600 (bench_warped_cholesky).
@@ -69,7 +69,7 @@ class WarpedCholesky {
 
   bool built_ = false;
   std::vector<Eigen::Index> freeDofs_;
-  /// The factor's solves (made from Eigen's SimplicialLDLT, which is dropped once copied).
+  /// The factor and its solves.
   SupernodalLdlt factor_;
   Eigen::Index factorEntries_ = 0;
   /// Per node with a free dof: the node, and its dofs' free indices (-1: constrained).
