@@ -296,10 +296,15 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
         if (at == a.h || a.below[at] != row) return false;
         place[r - q0] = static_cast<int>(at);
       }
+      // U = W_q0.. W_group^T: its top square (the group's own rows) symmetric, only its lower half
+      // formed (a rank update); the rows below it a general product.
       const auto rows = static_cast<Eigen::Index>(h - q0), cols = static_cast<Eigen::Index>(q1 - q0);
+      const auto group = R.middleRows(static_cast<Eigen::Index>(q0), cols);
       U.resize(rows, cols);
-      U.noalias() = R.middleRows(static_cast<Eigen::Index>(q0), rows) *
-                    R.middleRows(static_cast<Eigen::Index>(q0), cols).transpose();
+      U.topRows(cols).setZero();
+      U.topRows(cols).selfadjointView<Eigen::Lower>().rankUpdate(group);
+      if (rows > cols)
+        U.bottomRows(rows - cols).noalias() = R.middleRows(static_cast<Eigen::Index>(q1), rows - cols) * group.transpose();
       double* aT = values_.data() + panelStart_[t];
       double* aR = aT + a.w * a.w;
       for (Eigen::Index r = 0; r < rows; ++r) {
