@@ -22,6 +22,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <tuple>
 
 using namespace corofem;
 using namespace corofem::detail;
@@ -163,6 +164,42 @@ TEST(NestedDissection, SplitsABeamIntoIndependentSubtreesWithAFillNearMinimumDeg
   EXPECT_THROW(nestedDissection(b.A0, b.free, nan), Error) << "a rest position not finite";
 }
 
+TEST(SupernodalLdlt, FactorsADenseMatrixABlockDiagonalOneAndTheEmptyOne) {
+  // Dense: one run of every column, no rows below, no subtree to split.
+  Eigen::MatrixXd dense = Eigen::MatrixXd::Random(40, 40);
+  dense = dense * dense.transpose() + 40.0 * Eigen::MatrixXd::Identity(40, 40);
+  // A forest: seven independent blocks, its rows shuffled.
+  std::vector<Eigen::Triplet<double>> entries;
+  int forestRows = 0;
+  for (int b = 0; b < 7; ++b) {  // 9, 14, 19, ... rows
+    const Eigen::SparseMatrix<double> block = randomSpd(9 + 5 * b, 4, static_cast<unsigned>(40 + b));
+    for (int j = 0; j < block.outerSize(); ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(block, j); it; ++it)
+        entries.emplace_back(forestRows + static_cast<int>(it.row()), forestRows + j, it.value());
+    forestRows += static_cast<int>(block.rows());
+  }
+  Eigen::SparseMatrix<double> forest(forestRows, forestRows);
+  forest.setFromTriplets(entries.begin(), entries.end());
+  Eigen::VectorXi shuffled = Eigen::VectorXi::LinSpaced(forestRows, 0, forestRows - 1);
+  std::shuffle(shuffled.data(), shuffled.data() + forestRows, std::mt19937(3));
+  for (const auto& [A, perm, what] :
+       {std::tuple{Eigen::SparseMatrix<double>(dense.sparseView()), Eigen::VectorXi(), "dense"},
+        std::tuple{forest, Eigen::VectorXi(), "a forest"}, std::tuple{forest, shuffled, "a forest, shuffled"}}) {
+    SupernodalLdlt s;
+    ASSERT_TRUE(s.factor(A, perm)) << what;
+    const Eigen::VectorXd b = randomVector(static_cast<std::size_t>(A.rows()), 8);
+    Eigen::VectorXd x;
+    s.solve(b, x);
+    EXPECT_LT((A * x - b).norm(), 1e-12 * b.norm()) << what;
+  }
+  SupernodalLdlt empty;
+  ASSERT_TRUE(empty.factor(Eigen::SparseMatrix<double>(0, 0), Eigen::VectorXi()));
+  EXPECT_EQ(empty.rows(), 0);
+  Eigen::VectorXd x = Eigen::VectorXd::Ones(2);
+  empty.solve(Eigen::VectorXd(), x);
+  EXPECT_EQ(x.size(), 0);
+}
+
 TEST(SupernodalLdlt, ANeverBuiltOneSolvesTheEmptySystem) {
   const SupernodalLdlt s;
   Eigen::VectorXd x = Eigen::VectorXd::Ones(3);
@@ -252,6 +289,12 @@ TEST(SupernodalLdlt, InconsistentInputsAreInternalErrorsAndARefusedFactorKeepsTh
   Eigen::SparseMatrix<double> nan = randomSpd(30, 4, 3);
   nan.coeffRef(7, 7) = std::numeric_limits<double>::quiet_NaN();
   refused(nan, "a pivot not a number");
+  Eigen::SparseMatrix<double> offNan = randomSpd(30, 4, 4);
+  offNan.coeffRef(12, 3) = offNan.coeffRef(3, 12) = std::numeric_limits<double>::quiet_NaN();
+  refused(offNan, "an entry below the diagonal not a number");
+  Eigen::SparseMatrix<double> offInf = randomSpd(30, 4, 5);
+  offInf.coeffRef(20, 2) = offInf.coeffRef(2, 20) = std::numeric_limits<double>::infinity();
+  refused(offInf, "an entry below the diagonal infinite");
   Eigen::SparseMatrix<double> indefinite(2, 2);
   indefinite.coeffRef(0, 0) = 1.0;
   indefinite.coeffRef(1, 1) = 1.0;

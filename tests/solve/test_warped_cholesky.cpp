@@ -300,6 +300,29 @@ TEST(WarpedCholesky, ABodyWithEveryDofConstrainedHasNothingToSolve) {
   EXPECT_EQ(z.size(), 0);
 }
 
+TEST(WarpedCholesky, ARestSystemThatIsNotPositiveDefiniteFailsWithTheFix) {
+  // A mechanism the rigid motions do not show: one coupling made larger than its two dofs'
+  // stiffness allows (the 2 x 2 minor indefinite), every rigid motion still costing energy. The
+  // factorisation meets a pivot that is not positive.
+  const Problem p = clampedBeam(4);
+  const std::vector<Eigen::Index> free = freeDofsOf(p);
+  AmgMatrix A0 = restOperator(restStiffness(p), p, free, kBackwardEulerMass, 1.0);
+  const double coupling = 3.0 * std::sqrt(A0.coeff(4, 4) * A0.coeff(7, 7));
+  A0.coeffRef(4, 7) = coupling;
+  A0.coeffRef(7, 4) = coupling;
+  WarpedCholesky w;
+  try {
+    w.build(A0, free, p.restPositions, "indefinite");
+    ADD_FAILURE() << "an indefinite rest system was factored";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::SolveFailed);
+    const std::string message = e.what();
+    EXPECT_NE(message.find("body 'indefinite'"), std::string::npos) << message;
+    EXPECT_NE(message.find("\"warped_cholesky\""), std::string::npos) << message;
+  }
+  EXPECT_FALSE(w.built());
+}
+
 TEST(WarpedCholesky, InconsistentSizesAreInternalErrors) {
   const Problem p = clampedBeam(4);
   const std::vector<Eigen::Index> free = freeDofsOf(p);

@@ -1,4 +1,4 @@
-// The supernodal triangular solves of precond/supernodal_ldlt.hpp.
+// The supernodal factorisation and triangular solves of precond/supernodal_ldlt.hpp.
 #include "precond/supernodal_ldlt.hpp"
 
 #include "util/error.hpp"
@@ -270,9 +270,10 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
     return true;
   };
   // W W^T's blocks subtracted from the ancestors' panels, for the rows below from q0 to qEnd grouped
-  // by the ancestor whose columns they are (U, place: the caller's scratch). False where a row below
+  // by the ancestor whose columns they are (scratch, place: the caller's, kept between calls). False where a row below
   // is not among its ancestor's (not a Cholesky factor's pattern: an internal error).
-  const auto updates = [&](std::size_t s, std::size_t q0, std::size_t qEnd, Block& U, std::vector<int>& place) {
+  const auto updates = [&](std::size_t s, std::size_t q0, std::size_t qEnd, std::vector<double>& scratch,
+                           std::vector<int>& place) {
     const Panel p = panel(static_cast<int>(s));
     const std::size_t w = p.w, h = p.h;
     const Map R(values_.data() + panelStart_[s] + w * w, static_cast<Eigen::Index>(h), static_cast<Eigen::Index>(w));
@@ -300,7 +301,8 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
       // formed (a rank update); the rows below it a general product.
       const auto rows = static_cast<Eigen::Index>(h - q0), cols = static_cast<Eigen::Index>(q1 - q0);
       const auto group = R.middleRows(static_cast<Eigen::Index>(q0), cols);
-      U.resize(rows, cols);
+      if (scratch.size() < static_cast<std::size_t>(rows * cols)) scratch.resize(static_cast<std::size_t>(rows * cols));
+      Map U(scratch.data(), rows, cols);
       U.topRows(cols).setZero();
       U.topRows(cols).selfadjointView<Eigen::Lower>().rankUpdate(group);
       if (rows > cols)
@@ -341,18 +343,20 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
   // as one thread going through the supernodes in order would: the bits do not depend on the
   // threads.
   std::vector<int> failed(kTasks, 0);  // 1: a pivot, 2: a row below
+  std::vector<std::size_t> at(kTasks, 0);  // the supernode that failed
   std::vector<std::exception_ptr> thrown(kTasks);
   forTasks([&](std::size_t t) {
     try {
-      Block U;
+      std::vector<double> scratch;
       std::vector<int> place;
       for (const int s : tasks_[t]) {
         const auto k = static_cast<std::size_t>(s);
+        at[t] = k;
         if (!pivots(k)) {
           failed[t] = 1;
           return;
         }
-        if (!updates(k, 0, direct_[k], U, place)) {
+        if (!updates(k, 0, direct_[k], scratch, place)) {
           failed[t] = 2;
           return;
         }
@@ -364,15 +368,15 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
   for (std::size_t t = 0; t < kTasks; ++t)
     if (thrown[t]) std::rethrow_exception(thrown[t]);
   for (std::size_t t = 0; t < kTasks; ++t)
-    if (failed[t] == 2) notBelow(static_cast<std::size_t>(tasks_[t].front()));
+    if (failed[t] == 2) notBelow(at[t]);
   if (std::find(failed.begin(), failed.end(), 1) != failed.end()) return false;
-  Block U;
+  std::vector<double> scratch;
   std::vector<int> place;
   for (std::size_t s = 0; s < S; ++s) {
     const Panel p = panel(static_cast<int>(s));
     const bool top = topIndex_[static_cast<std::size_t>(p.first)] >= 0;
     if (top && !pivots(s)) return false;
-    if (!updates(s, top ? 0 : direct_[s], p.h, U, place)) notBelow(s);
+    if (!updates(s, top ? 0 : direct_[s], p.h, scratch, place)) notBelow(s);
     finish(s);
   }
   return true;

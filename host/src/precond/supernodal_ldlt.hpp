@@ -18,14 +18,20 @@
 // below, subtracted from its ancestors' panels block by block (right-looking). The wide separators
 // near the root, where most of the arithmetic is, become dense matrix products.
 //
-// The solves run on the host's threads (util/parallel.hpp). In a Cholesky factor's pattern a
-// supernode's rows below are its ancestors in the elimination tree, so disjoint subtrees solve
-// apart: factor() splits the tree from its roots, the largest subtree first, until none that can be
-// split holds more than 1/kTasks of the panels' values, and deals the subtrees to kTasks tasks; the
-// supernodes split off (the top of the tree) are solved on one thread, after the tasks going down
-// (L) and before them coming up (L^T). A task's updates of the top's rows are kept in its own
-// buffer and subtracted in task order. The tasks and every sum's order follow from the matrix and
-// the order alone, so the bits do not depend on the number of threads or on who runs the tasks.
+// The factorisation and the solves run on the host's threads (util/parallel.hpp). In a Cholesky
+// factor's pattern a supernode's rows below are its ancestors in the elimination tree, so disjoint
+// subtrees factor and solve apart: factor() splits the tree from its roots, the largest subtree
+// first, until none that can be split holds more than 1/kTasks of the panels' values, and deals the
+// subtrees to kTasks tasks; the supernodes split off (the top of the tree) are done on one thread.
+// - Factorisation: the tasks side by side, each supernode updating the rest of its own task; then,
+//   on one thread in supernode order, the tasks' updates of the top and the top's own supernodes.
+//   Every panel entry takes its updates in supernode order, as one thread going through the
+//   supernodes in order would.
+// - Solves: the tasks going down (L) before the top, and coming up (L^T) after it; a task's
+//   updates of the top's rows are kept in its own buffer and subtracted in task order.
+// The tasks and the order of every sum follow from the matrix and the order (and, inside the dense
+// kernels, from Eigen's blocking for the CPU), so the bits do not depend on the number of threads
+// or on who runs the tasks.
 #pragma once
 
 #include <Eigen/Core>

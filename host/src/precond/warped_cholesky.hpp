@@ -24,7 +24,8 @@
 // z = W A_0^-1 W^T r is symmetric positive definite whatever the rotations.
 //
 // The factor is deterministic (its order depends on the matrix and the rest positions alone, its
-// sums on the order, and its solves' on the factor, not on the threads) and it costs memory: the
+// sums on the order and on the dense kernels' blocking for the CPU, and its solves' on the factor,
+// not on the threads) and it costs memory: the
 // factor of the 12,960-tet beam holds 1.71 M entries (about 16 MB in its panels), and a direct
 // factor's fill grows faster than the mesh (docs/performance.md).
 #pragma once
