@@ -377,19 +377,44 @@ class ReferenceBody {
     blockStarts_.push_back(static_cast<int>(freeDofs_.size()));
     const int nf = static_cast<int>(freeDofs_.size());
 
-    std::vector<Eigen::Triplet<double, int>> triplets;
-    triplets.reserve(p_.elements.size() * 144 + static_cast<std::size_t>(nf));
-    for (int i = 0; i < nf; ++i) triplets.emplace_back(i, i, 0.0);  // mass diagonal
+    // The pattern from the nodes' neighbours (the nodes they share an element with, themselves
+    // included): column j of a free dof of node a holds the free dofs of a's neighbours, ascending
+    // (dofs are numbered node by node), and a free dof of a node in no element its diagonal alone.
+    // Made straight into A_'s arrays: the element pairs' 144 entries each are never listed.
+    const std::size_t N = n / 3;
+    std::vector<std::vector<int>> neighbours(N);
     for (std::size_t e = 0; e < p_.elements.size(); ++e)
-      for (int a = 0; a < 12; ++a)
-        for (int b = 0; b < 12; ++b) {
-          const int r = freeIndex_[static_cast<std::size_t>(3 * node(e, a / 3) + a % 3)];
-          const int c = freeIndex_[static_cast<std::size_t>(3 * node(e, b / 3) + b % 3)];
-          if (r >= 0 && c >= 0) triplets.emplace_back(r, c, 0.0);
-        }
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b) neighbours[static_cast<std::size_t>(node(e, a))].push_back(static_cast<int>(node(e, b)));
+    std::vector<int> start(static_cast<std::size_t>(nf) + 1, 0);
+    for (auto& list : neighbours) {
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+    }
+    const auto freeOfNode = [&](std::size_t m) {
+      int k = 0;
+      for (std::size_t c = 0; c < 3; ++c) k += freeIndex_[3 * m + c] >= 0 ? 1 : 0;
+      return k;
+    };
+    for (int j = 0; j < nf; ++j) {
+      const auto a = static_cast<std::size_t>(freeDofs_[static_cast<std::size_t>(j)]) / 3;
+      int rows = neighbours[a].empty() ? 1 : 0;
+      for (const int m : neighbours[a]) rows += freeOfNode(static_cast<std::size_t>(m));
+      start[static_cast<std::size_t>(j) + 1] = start[static_cast<std::size_t>(j)] + rows;
+    }
     A_.resize(nf, nf);
-    A_.setFromTriplets(triplets.begin(), triplets.end());
     A_.makeCompressed();
+    A_.resizeNonZeros(start.back());
+    std::copy(start.begin(), start.end(), A_.outerIndexPtr());
+    std::fill(A_.valuePtr(), A_.valuePtr() + start.back(), 0.0);
+    for (int j = 0; j < nf; ++j) {
+      const auto a = static_cast<std::size_t>(freeDofs_[static_cast<std::size_t>(j)]) / 3;
+      int* rows = A_.innerIndexPtr() + start[static_cast<std::size_t>(j)];
+      if (neighbours[a].empty()) *rows = j;
+      for (const int m : neighbours[a])
+        for (std::size_t c = 0; c < 3; ++c)
+          if (const int r = freeIndex_[3 * static_cast<std::size_t>(m) + c]; r >= 0) *rows++ = r;
+    }
 
     const auto slotOf = [&](int r, int c) {
       const int* begin = A_.innerIndexPtr() + A_.outerIndexPtr()[c];
