@@ -501,6 +501,56 @@ TEST(VulkanStepStoreFailover, TheNextDeviceTakesThePositionsTheStoreSetAndTheCal
   EXPECT_GT(f.norm(), 0.0);
 }
 
+/// The device calls a store makes count in the slot's statistics (the batch report's
+/// rounds_by_call) as the slot's own calls do: the same calls with the Vulkan store as with the
+/// host's, which makes them through the slot.
+TEST(VulkanStepStoreCounts, TheStoresDeviceCallsCountAsTheSlotsOwnDo) {
+  const auto vulkan = detail::findBackend("vulkan");
+  const auto reference = detail::findBackend("reference");
+  ASSERT_NE(reference, nullptr);
+  if (!vulkan || vulkan->candidates().empty()) GTEST_SKIP() << "no Vulkan device";
+  const detail::Problem problem = featureBody(6, 3, 3, 0.1, 11);  // damped by mass and stiffness
+  SolverDesc solver;
+  solver.linearSolver = LinearSolverKind::Pcg;
+  solver.precision = Precision::Float;
+  detail::DeviceOptions options;
+  options.vulkan.deviceStore = 1;
+  const auto n = static_cast<std::size_t>(problem.restPositions.size());
+  const auto calls = [&](bool deviceStore) {
+    detail::DeviceSlot slot({&problem}, solver, {vulkan->resolve("")}, /*fallbackAtCreate=*/false, options);
+    std::unique_ptr<detail::StepStore> store =
+        deviceStore ? slot.device().createStepStore(slot) : detail::createHostStepStore(slot);
+    EXPECT_NE(store, nullptr);
+    store->setState(0, StateSlot::Committed, StateVec::X, problem.restPositions + 0.01 * randomVector(n, 5));
+    store->setState(0, StateSlot::Committed, StateVec::V, 0.1 * randomVector(n, 6));
+    for (StateVec z : {StateVec::A, StateVec::Fext, StateVec::Reaction}) store->setZero(0, StateSlot::Committed, z);
+    // One Newton iteration of a step, as the driver makes it.
+    const SchemeMaps maps = eulerMaps(1.0 / 60.0);
+    slot.beginStep();
+    store->begin({0}, {BeginArgs{maps, maps.h, 1.0, StateSlot::Committed}});
+    store->positions({0}, {maps});
+    store->setPositions(slot, {0}, StateSlot::Result);
+    store->internalForces(slot, {0});
+    store->damping(slot, {0}, StateSlot::Result);
+    std::vector<detail::ResidualSums> sums;
+    store->residual({0}, {maps}, sums);
+    std::vector<detail::PcgSolve> solves(1);
+    solves[0].coeffs = detail::SystemCoeffs{1.0, 1.0 / maps.ka, maps.kx / maps.ka};
+    store->solve(slot, {0}, solves);
+    EXPECT_TRUE(solves[0].failure.empty()) << solves[0].failure;
+    EXPECT_GT(solves[0].stats.iterations, 0);
+    slot.endStep();
+    std::vector<long long> out;
+    for (const detail::SlotCallStats& c : slot.stats().byCall) out.push_back(c.calls);
+    return out;
+  };
+  const std::vector<long long> host = calls(false), device = calls(true);
+  EXPECT_EQ(device, host);
+  for (const auto call : {detail::SlotStats::SetPositions, detail::SlotStats::InternalForces, detail::SlotStats::Apply,
+                          detail::SlotStats::Solve})
+    EXPECT_EQ(device[call], 1) << detail::slotCallName(call);
+}
+
 /// A store's positions that cannot be read during a failover (its device lost): the read's own
 /// failover request is refused, the failover goes on to the next candidate once, and the body
 /// reaches it with no positions (its driver restarts it) instead of exhausting the candidates.

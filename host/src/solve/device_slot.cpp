@@ -178,10 +178,11 @@ void DeviceSlot::withFailover(const std::string& call, Fn&& fn) {
 
 template <class Fn>
 void DeviceSlot::guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
-  using Clock = std::chrono::steady_clock;
-  const auto start = Clock::now();
-  withFailover(eventName(call), fn);
-  const auto end = Clock::now();
+  counted(call, bodies, [&]() { withFailover(eventName(call), fn); });
+}
+
+void DeviceSlot::count(SlotStats::Call call, const BodySet& bodies, std::chrono::steady_clock::time_point start,
+                       std::chrono::steady_clock::time_point end) {
   const double seconds = std::chrono::duration<double>(end - start).count();
   stats_.calls += 1;
   stats_.bodies += static_cast<long long>(bodies.size());

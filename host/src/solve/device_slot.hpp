@@ -111,6 +111,12 @@ class DeviceSlot {
   /// slot's DeviceError when no candidate is left. While the slot reads a store's positions for a
   /// failover already, it throws `error` back to that read instead.
   void failover(const std::string& call, const Error& error);
+  /// fn() counted in stats() as a call `call` of the bodies (its time; in a step its place in
+  /// byCall, with the host's wait since the slot's last call), with no failover: a step store's
+  /// own call on the device (the store fails over itself, failover()), so that a step's calls
+  /// count the same whichever store holds its vectors.
+  template <class Fn>
+  void counted(SlotStats::Call call, const BodySet& bodies, Fn&& fn);
 
   /// Labels the events that follow ("step 3").
   void setWhen(const std::string& when) { when_ = when; }
@@ -135,6 +141,9 @@ class DeviceSlot {
   void withFailover(const std::string& call, Fn&& fn);
   template <class Fn>
   void guarded(SlotStats::Call call, const BodySet& bodies, Fn&& fn);
+  /// A call from start to end in stats_.
+  void count(SlotStats::Call call, const BodySet& bodies, std::chrono::steady_clock::time_point start,
+             std::chrono::steady_clock::time_point end);
   /// Moves to the next candidate that can be created and given the last positions; throws
   /// Error(DeviceError) listing every failure when none is left.
   void advance(const std::string& call, const std::string& error);
@@ -167,5 +176,13 @@ class DeviceSlot {
   std::chrono::steady_clock::time_point lastEnd_;
   std::vector<Eigen::VectorXd> solveStart_;  ///< the solves' starting vectors, restored before a repeat
 };
+
+template <class Fn>
+void DeviceSlot::counted(SlotStats::Call call, const BodySet& bodies, Fn&& fn) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  fn();
+  count(call, bodies, start, Clock::now());
+}
 
 }  // namespace corofem::detail

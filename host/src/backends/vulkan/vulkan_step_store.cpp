@@ -178,7 +178,9 @@ class VulkanStepStore final : public StepStore {
         origins.push_back(bodies_[i].origin);
         if (d.positionsNeedHost()) xs.push_back(&state(i, slot, StateVec::X));
       }
-      d.setPositionsFrom(set, buffers_[kBindVecs], at, origins, d.positionsNeedHost() ? &xs : nullptr);
+      device.counted(SlotStats::SetPositions, set, [&]() {
+        d.setPositionsFrom(set, buffers_[kBindVecs], at, origins, d.positionsNeedHost() ? &xs : nullptr);
+      });
       for (std::size_t i : set) bodies_[i].positions = bodies_[i].slot[index(slot)];
       device.positionsSetElsewhere(set);
     }, [&]() {
@@ -191,7 +193,9 @@ class VulkanStepStore final : public StepStore {
   void internalForces(DeviceSlot& device, const BodySet& set) override {
     for (std::size_t i : set) checked(i);
     onDevice(device, "internalForces", [&](vkdevice::VulkanDevice& d) {
-      d.internalForcesInto(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Fint)));
+      device.counted(SlotStats::InternalForces, set, [&]() {
+        d.internalForcesInto(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Fint)));
+      });
     }, [&]() {
       std::vector<Eigen::VectorXd> f(set.size());
       Vectors fs;
@@ -225,8 +229,10 @@ class VulkanStepStore final : public StepStore {
           from.push_back(stateOffset(bodies_[i], slot, StateVec::V));
           to.push_back(scratchOffset(Scratch::Cv));
         }
-        d.applyIn(byProduct, std::vector<SystemCoeffs>(byProduct.size(), SystemCoeffs{0.0, 1.0, 0.0}),
-                  buffers_[kBindVecs], from, to);
+        device.counted(SlotStats::Apply, byProduct, [&]() {
+          d.applyIn(byProduct, std::vector<SystemCoeffs>(byProduct.size(), SystemCoeffs{0.0, 1.0, 0.0}),
+                    buffers_[kBindVecs], from, to);
+        });
       }
     }, [&]() {
       std::vector<Eigen::VectorXd> v(set.size()), cv(set.size());
@@ -256,7 +262,7 @@ class VulkanStepStore final : public StepStore {
             s.x = nullptr;
             s.resident = true;
           }
-          solvePcg(d, set, solves, device.solver());
+          device.counted(SlotStats::Solve, set, [&]() { solvePcg(d, set, solves, device.solver()); });
           d.takeSolution(set, buffers_[kBindVecs], std::vector<std::size_t>(set.size(), scratchOffset(Scratch::Dv)));
         }))
       return;
