@@ -130,36 +130,8 @@ bool SupernodalLdlt::factor(const Eigen::SparseMatrix<double>& A, const Eigen::V
     }
   }
 
-  // The symbolic factorisation: column j's rows below the diagonal are C's and its children's in
-  // the elimination tree (less j itself); its parent is the first of them. A child comes before its
-  // parent, so a column's pattern is complete, and stored, before its parent reads it.
-  std::vector<std::size_t> Lp(static_cast<std::size_t>(n) + 1, 0);
-  std::vector<int> Li;
-  Li.reserve(2 * Cp.back());
-  {
-    std::vector<std::vector<int>> children(static_cast<std::size_t>(n));
-    std::vector<int> mark(static_cast<std::size_t>(n), -1);
-    for (int j = 0; j < n; ++j) {
-      const std::size_t begin = Li.size();
-      mark[static_cast<std::size_t>(j)] = j;
-      const auto add = [&](int r) {
-        if (mark[static_cast<std::size_t>(r)] == j) return;
-        mark[static_cast<std::size_t>(r)] = j;
-        Li.push_back(r);
-      };
-      for (std::size_t k = Cp[static_cast<std::size_t>(j)]; k < Cp[static_cast<std::size_t>(j) + 1]; ++k) add(Ci[k]);
-      for (const int c : children[static_cast<std::size_t>(j)])
-        for (std::size_t k = Lp[static_cast<std::size_t>(c)]; k < Lp[static_cast<std::size_t>(c) + 1]; ++k) add(Li[k]);
-      std::sort(Li.begin() + static_cast<std::ptrdiff_t>(begin), Li.end());
-      Lp[static_cast<std::size_t>(j) + 1] = Li.size();
-      if (Li.size() > begin) children[static_cast<std::size_t>(Li[begin])].push_back(j);
-    }
-  }
-
   SupernodalLdlt made;  // a refused factor leaves this one as it was
-  const std::vector<int> of = made.structure(n, Lp, Li);
-  made.entries_ = Li.size();
-  std::vector<int>().swap(Li);
+  const std::vector<int> of = made.symbolic(n, Cp, Ci);
   made.partition(of);
   if (!made.numeric(Cp, Ci, Cx, of)) return false;
   made.perm_ = perm.size() == 0 ? std::vector<int>() : std::vector<int>(perm.data(), perm.data() + perm.size());
@@ -170,39 +142,65 @@ bool SupernodalLdlt::factor(const Eigen::SparseMatrix<double>& A, const Eigen::V
   return true;
 }
 
-std::vector<int> SupernodalLdlt::structure(int n, const std::vector<std::size_t>& Lp, const std::vector<int>& Li) {
+std::vector<int> SupernodalLdlt::symbolic(int n, const std::vector<std::size_t>& Cp, const std::vector<int>& Ci) {
+  // Column j's rows below the diagonal (its pattern) are C's and its children's in the elimination
+  // tree, less j itself; its parent is the first of them. A child comes before its parent, so a
+  // column's pattern is complete before its parent reads it. The patterns are kept by supernode,
+  // not by column: a child of j is either j - 1, the open run's last column, whose pattern is the
+  // run's rows below, or the last column of a closed supernode, whose pattern is that supernode's
+  // rows below (a column inside a run has the next column as its parent).
   first_.clear();
   rows_.clear();
   rowStart_.assign(1, 0);
-  // The runs: U holds the rows below the run [c0, j) not yet in it (ascending).
-  std::vector<int> U;
+  std::vector<int> of(static_cast<std::size_t>(n));
+  std::vector<std::vector<int>> children(static_cast<std::size_t>(n));
+  std::vector<int> mark(static_cast<std::size_t>(n), -1);
+  std::vector<int> U, P;  // the open run [c0, j)'s rows below j - 1 (ascending); column j's pattern
   int c0 = 0;
+  entries_ = 0;
   const auto close = [&](int end) {
+    const auto w = static_cast<std::size_t>(end - c0);
+    entries_ += w * (w - 1) / 2 + w * U.size();
     first_.push_back(c0);
     rows_.insert(rows_.end(), U.begin(), U.end());
     rowStart_.push_back(rows_.size());
     c0 = end;
   };
   for (int j = 0; j < n; ++j) {
-    const int* b = Li.data() + Lp[static_cast<std::size_t>(j)];
-    const int* e = Li.data() + Lp[static_cast<std::size_t>(j) + 1];
-    if (j > c0 && !U.empty() && U.front() == j && std::equal(U.begin() + 1, U.end(), b, e)) {
-      U.erase(U.begin());
-      continue;
+    P.clear();
+    mark[static_cast<std::size_t>(j)] = j;
+    const auto add = [&](int r) {
+      if (mark[static_cast<std::size_t>(r)] == j) return;
+      mark[static_cast<std::size_t>(r)] = j;
+      P.push_back(r);
+    };
+    for (std::size_t k = Cp[static_cast<std::size_t>(j)]; k < Cp[static_cast<std::size_t>(j) + 1]; ++k) add(Ci[k]);
+    for (const int c : children[static_cast<std::size_t>(j)]) {
+      if (c == j - 1) {
+        for (const int r : U) add(r);
+        continue;
+      }
+      const auto sc = static_cast<std::size_t>(of[static_cast<std::size_t>(c)]);
+      const int end = sc + 1 < first_.size() ? first_[sc + 1] : c0;
+      if (sc >= first_.size() || end != c + 1)
+        fail(ErrorCode::Internal, "SupernodalLdlt: column ", c, ", a child of ", j, ", is not the last of a supernode");
+      for (std::size_t k = rowStart_[sc]; k < rowStart_[sc + 1]; ++k) add(rows_[k]);
     }
-    if (j > 0) close(j);
-    U.assign(b, e);
+    std::sort(P.begin(), P.end());
+    if (!P.empty()) children[static_cast<std::size_t>(P.front())].push_back(j);
+    if (j > c0 && !U.empty() && U.front() == j && std::equal(U.begin() + 1, U.end(), P.begin(), P.end())) {
+      U.erase(U.begin());
+    } else {
+      if (j > 0) close(j);
+      U.swap(P);
+    }
+    of[static_cast<std::size_t>(j)] = static_cast<int>(first_.size());  // the open run's index
   }
   if (n > 0) close(n);
   first_.push_back(n);
   const std::size_t S = first_.size() - 1;
-
-  std::vector<int> of(static_cast<std::size_t>(n));
   widest_ = 0;
-  for (std::size_t s = 0; s < S; ++s) {
-    widest_ = std::max(widest_, static_cast<std::size_t>(first_[s + 1] - first_[s]));
-    for (int c = first_[s]; c < first_[s + 1]; ++c) of[static_cast<std::size_t>(c)] = static_cast<int>(s);
-  }
+  for (std::size_t s = 0; s < S; ++s) widest_ = std::max(widest_, static_cast<std::size_t>(first_[s + 1] - first_[s]));
   // A Cholesky factor's pattern: the rows below a supernode that are not its parent's columns (the
   // parent holds its first row below) are among its parent's rows below, so every row below a
   // supernode is an ancestor's (by induction from the roots), which the numeric pass's updates and

@@ -69,9 +69,10 @@ class SupernodalLdlt {
   std::size_t factorEntries() const { return entries_; }
 
  private:
-  /// The runs, their rows below and the panels (zero) from L's pattern: column j's rows below the
-  /// diagonal Li[Lp[j] .. Lp[j + 1]), ascending. Returns each column's supernode.
-  std::vector<int> structure(int n, const std::vector<std::size_t>& Lp, const std::vector<int>& Li);
+  /// The symbolic factorisation of C (its entries on and below the diagonal, by columns: `Cp`,
+  /// `Ci`): the runs, their rows below, L's entries and the panels (zero). Returns each column's
+  /// supernode.
+  std::vector<int> symbolic(int n, const std::vector<std::size_t>& Cp, const std::vector<int>& Ci);
   /// The panels from the entries of C = P A P^T on and below the diagonal (`Cp`, `Ci`, `Cx` by
   /// columns), factored; false at a pivot that is not positive and finite.
   bool numeric(const std::vector<std::size_t>& Cp, const std::vector<int>& Ci, const std::vector<double>& Cx,
