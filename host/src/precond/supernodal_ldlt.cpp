@@ -268,8 +268,9 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
     return true;
   };
   // W W^T's blocks subtracted from the ancestors' panels, for the rows below from q0 to qEnd grouped
-  // by the ancestor whose columns they are (scratch, place: the caller's, kept between calls). False where a row below
-  // is not among its ancestor's (not a Cholesky factor's pattern: an internal error).
+  // by the ancestor whose columns they are (scratch, place: the caller's, kept between calls).
+  // False where a row below is not among its ancestor's (not a Cholesky factor's pattern: an
+  // internal error).
   const auto updates = [&](std::size_t s, std::size_t q0, std::size_t qEnd, std::vector<double>& scratch,
                            std::vector<int>& place) {
     const Panel p = panel(static_cast<int>(s));
@@ -304,7 +305,8 @@ bool SupernodalLdlt::numeric(const std::vector<std::size_t>& Cp, const std::vect
       U.topRows(cols).setZero();
       U.topRows(cols).selfadjointView<Eigen::Lower>().rankUpdate(group);
       if (rows > cols)
-        U.bottomRows(rows - cols).noalias() = R.middleRows(static_cast<Eigen::Index>(q1), rows - cols) * group.transpose();
+        U.bottomRows(rows - cols).noalias() =
+            R.middleRows(static_cast<Eigen::Index>(q1), rows - cols) * group.transpose();
       double* aT = values_.data() + panelStart_[t];
       double* aR = aT + a.w * a.w;
       for (Eigen::Index r = 0; r < rows; ++r) {

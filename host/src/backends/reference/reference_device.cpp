@@ -385,7 +385,8 @@ class ReferenceBody {
     std::vector<std::vector<int>> neighbours(N);
     for (std::size_t e = 0; e < p_.elements.size(); ++e)
       for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b) neighbours[static_cast<std::size_t>(node(e, a))].push_back(static_cast<int>(node(e, b)));
+        for (int b = 0; b < 4; ++b)
+          neighbours[static_cast<std::size_t>(node(e, a))].push_back(static_cast<int>(node(e, b)));
     std::vector<int> start(static_cast<std::size_t>(nf) + 1, 0);
     for (auto& list : neighbours) {
       std::sort(list.begin(), list.end());
