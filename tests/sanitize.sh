@@ -33,10 +33,11 @@ export UBSAN_OPTIONS="${UBSAN_OPTIONS:-halt_on_error=1:print_stacktrace=1}"
 # 96, DynamicsPasses.ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder
 # (a 50,000-tet body made three times and stepped: over 300 s when the clean-clone run of 81a6d7e
 # was stopped, in a costlier form than today's), WarpedAmg.AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere
-# 35 (dense generalised eigenvalues of 576 x 576 operators at -O0); and seven whose time goes to
-# hundreds of Jacobi-PCG iterations or a mesh refinement study, each path of which other tests of
+# 35 (dense generalised eigenvalues of 576 x 576 operators at -O0); and eight whose time goes to
+# hundreds of Jacobi-PCG iterations, a mesh refinement study or a long factor, each path of which other tests of
 # the job run (3f45051's clean-clone run): WarpedCholesky.ACurledBeamTakesFewIterationsWhereJacobiTakesHundredsToTheSameAnswer
-# 18 (WarpedCholesky's other tests), WarpedAmg.IterationsStayFewWhereJacobiNeedsHundredsAndDoNotGrowWithTheMesh
+# 18 (WarpedCholesky's other tests), WarpedCholesky.LongHeldBodiesAndStiffFreeOnesInDynamicsAreNotRefused
+# 11 (the factor of a 3,000-cell cantilever; the factor runs in WarpedCholesky's other tests), WarpedAmg.IterationsStayFewWhereJacobiNeedsHundredsAndDoNotGrowWithTheMesh
 # 16 (WarpedAmg's other tests), Fig8.DampedDynamicsSettlesOnTheStaticSolution 17 (DampingWork.*),
 # LinearCantilever.* 47 for the four (the linear formulation's statics: Fig8, CliRun). The plain
 # build runs them all; --all runs them here.
@@ -48,6 +49,7 @@ if ((!all)); then
   slow+='DynamicsPasses\.ABodyOfManyChunksGetsTheSameBitsOnAnyThreadsInAnyOrder|'
   slow+='WarpedAmg\.AGrabsHierarchyTakesTheBoundsOfTheOneForMoreDofsAndTheyHoldThere|'
   slow+='WarpedCholesky\.ACurledBeamTakesFewIterationsWhereJacobiTakesHundredsToTheSameAnswer|'
+  slow+='WarpedCholesky\.LongHeldBodiesAndStiffFreeOnesInDynamicsAreNotRefused|'
   slow+='WarpedAmg\.IterationsStayFewWhereJacobiNeedsHundredsAndDoNotGrowWithTheMesh|'
   slow+='Fig8\.DampedDynamicsSettlesOnTheStaticSolution|LinearCantilever\..*)$'
 fi

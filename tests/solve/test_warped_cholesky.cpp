@@ -262,6 +262,9 @@ TEST(WarpedCholesky, StaticsOfABodyNothingHoldsFailsWithTheFix) {
     p.constrained[0] = p.constrained[1] = p.constrained[2] = 1;
     refused(p, "one node fixed, " + std::to_string(cells) + " cells");
   }
+}
+
+TEST(WarpedCholesky, LongHeldBodiesAndStiffFreeOnesInDynamicsAreNotRefused) {
   // Held bodies are not refused, however long (the smallest rigid quotient falls as the length
   // cubed: 8.3e-12 here, a threshold of 1e-9 refused this beam), and neither is a free body in
   // dynamics whose mass is tiny against its stiffness (steel-stiff, 1.6e-9).
