@@ -305,14 +305,28 @@ TEST(WarpedCholesky, ABodyWithEveryDofConstrainedHasNothingToSolve) {
 
 TEST(WarpedCholesky, ARestSystemThatIsNotPositiveDefiniteFailsWithTheFix) {
   // A mechanism the rigid motions do not show: one coupling made larger than its two dofs'
-  // stiffness allows (the 2 x 2 minor indefinite), every rigid motion still costing energy. The
-  // factorisation meets a pivot that is not positive.
+  // stiffness allows (the 2 x 2 minor indefinite). The two dofs are the x of two free nodes at the
+  // same y and z, which every rigid motion moves alike (v_i = v_j), so a positive coupling adds
+  // 2 c v_i^2 >= 0 to each rigid motion's energy and the rigid-motion check passes: the
+  // factorisation must meet the pivot that is not positive.
   const Problem p = clampedBeam(4);
   const std::vector<Eigen::Index> free = freeDofsOf(p);
   AmgMatrix A0 = restOperator(restStiffness(p), p, free, kBackwardEulerMass, 1.0);
-  const double coupling = 3.0 * std::sqrt(A0.coeff(4, 4) * A0.coeff(7, 7));
-  A0.coeffRef(4, 7) = coupling;
-  A0.coeffRef(7, 4) = coupling;
+  Eigen::Index i = -1, j = -1;
+  const Eigen::VectorXd& X = p.restPositions;
+  for (std::size_t a = 0; a < free.size() && j < 0; ++a) {
+    if (free[a] % 3 != 0) continue;
+    for (std::size_t b = a + 1; b < free.size() && j < 0; ++b)
+      if (free[b] % 3 == 0 && X[free[b]] != X[free[a]] && X[free[b] + 1] == X[free[a] + 1] &&
+          X[free[b] + 2] == X[free[a] + 2]) {
+        i = static_cast<Eigen::Index>(a);
+        j = static_cast<Eigen::Index>(b);
+      }
+  }
+  ASSERT_GE(j, 0) << "no two free nodes at the same y and z";
+  const double coupling = 3.0 * std::sqrt(A0.coeff(i, i) * A0.coeff(j, j));
+  A0.coeffRef(i, j) = coupling;
+  A0.coeffRef(j, i) = coupling;
   WarpedCholesky w;
   try {
     w.build(A0, free, p.restPositions, "indefinite");
