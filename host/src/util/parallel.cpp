@@ -15,6 +15,9 @@
 #ifdef __linux__
 #include <sched.h>
 #endif
+#if defined(__unix__) || defined(__APPLE__)
+#include <pthread.h>
+#endif
 
 namespace corofem::detail {
 
@@ -103,11 +106,22 @@ class Pool {
   bool stop_ = false;
 };
 
+/// Set in a child made by fork() after the pool existed. The child has none of the pool's workers,
+/// and the pool's mutex may have been held by one of them at the fork (a worker going back to
+/// sleep), so the child never touches the pool: its passes run on the caller, chunk by chunk in
+/// order, which gives the same bits.
+std::atomic<bool> forkedChild{false};
+
 Pool& pool() {
   // Never destroyed: its workers sleep until the process ends. Destroying it at exit would hang a
   // forked child in pthread_cond_destroy (the parent's sleeping workers count as waiters there), and
   // a static destructor elsewhere could still call parallelChunks.
-  static Pool* p = new Pool(hostThreads());
+  static Pool* p = [] {
+#if defined(__unix__) || defined(__APPLE__)
+    pthread_atfork(nullptr, nullptr, [] { forkedChild.store(true, std::memory_order_relaxed); });
+#endif
+    return new Pool(hostThreads());
+  }();
   return *p;
 }
 
@@ -212,7 +226,8 @@ void parallelChunks(std::size_t n, std::size_t chunkSize,
       (*currentRunner)(chunks, [&](std::size_t c) { marked(c, c * chunkSize, std::min(n, (c + 1) * chunkSize)); });
       return;
     }
-    if (hostThreads() > 1 && pool().run(chunks, n, chunkSize, marked)) return;
+    if (hostThreads() > 1 && !forkedChild.load(std::memory_order_relaxed) && pool().run(chunks, n, chunkSize, marked))
+      return;
   }
   for (std::size_t c = 0; c < chunks; ++c) fn(c, c * chunkSize, std::min(n, (c + 1) * chunkSize));
 }
