@@ -571,19 +571,22 @@ TEST_P(OpenCLBatch, WarmAndColdStartsInOneRoundMatchEachBodyAlone) {
   COROFEM_REQUIRE_OPENCL_DEVICE(GetParam());
   const std::vector<detail::Problem> ps = bodies();
   const std::size_t K = ps.size();
-  // The node blocks capped (each answer depends on its start and on A x), and the multigrid to its
-  // tolerance (the bodies stop at different iterations while the coarse levels of all run on).
-  // tileBytes 2: the GPU configuration (work-group sums; amg's coarse products a row per work-item).
-  for (PreconditionerKind pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg})
+  // The node blocks capped (each answer depends on its start and on A x), the multigrid to its
+  // tolerance (the bodies stop at different iterations while the coarse levels of all run on) and
+  // the warped factor to its tolerance (applied on the host to the running bodies between launches).
+  // tileBytes 2: the GPU configuration (work-group sums; amg's coarse products a row per work-item;
+  // the warped factor's r . z in the first of a body's work-group partials).
+  for (PreconditionerKind pc : {PreconditionerKind::BlockDiagonal, PreconditionerKind::Amg, PreconditionerKind::WarpedCholesky})
   for (std::size_t tileBytes : {std::size_t{0}, std::size_t{1}, std::size_t{2}}) {
+    const bool toTolerance = pc != PreconditionerKind::BlockDiagonal;
     SolverDesc s = solver();
     s.preconditioner = pc;
-    s.maxIterations = pc == PreconditionerKind::Amg ? 60 : 10;
-    if (pc != PreconditionerKind::Amg) s.tolerance = 1e-14;
+    s.maxIterations = toTolerance ? 60 : 10;
+    if (!toTolerance) s.tolerance = 1e-14;
     detail::OpenCLTuning o;
     if (tileBytes == 1) o.tileBytes = 1;
     if (tileBytes == 2) {
-      if (pc != PreconditionerKind::Amg) continue;
+      if (!toTolerance) continue;
       o.workGroupSize = 32;
       o.elementsPerItem = 1;
       o.nodesPerItem = 1;
@@ -620,7 +623,7 @@ TEST_P(OpenCLBatch, WarmAndColdStartsInOneRoundMatchEachBodyAlone) {
                                                 << maxRel(sol[i], alone[i]);
         EXPECT_EQ(solves[i].stats.iterations, st.iterations) << ps[i].name << ", frame " << frame;
         EXPECT_EQ(solves[i].stats.relativeResidual, st.relativeResidual) << ps[i].name << ", frame " << frame;
-        if (pc == PreconditionerKind::Amg)  // to its tolerance well inside the cap, in every configuration
+        if (toTolerance)  // to its tolerance well inside the cap, in every configuration
           EXPECT_TRUE(st.converged) << ps[i].name << ", frame " << frame << ", configuration " << tileBytes << ": "
                                     << st.iterations << " iterations, residual " << st.relativeResidual;
       }

@@ -310,9 +310,10 @@ TEST(SceneErrors, ReferenceOnlyFeaturesOnOpenClAreRejected) {
   EXPECT_CONTAINS(overrideError({"backend.kind=opencl", "bodies.0.formulation=neo_hookean"}),
                   "bodies[0].formulation: \"neo_hookean\" runs only on the reference backend");
   EXPECT_EQ(overrideError({"backend=vulkan", "solver.preconditioner=warped_cholesky"}),
-            "solver.preconditioner: \"warped_cholesky\" runs only on the reference backend, and the backend is "
-            "\"vulkan\"; use \"amg\", or the backend \"reference\"");
+            "solver.preconditioner: \"warped_cholesky\" runs on the reference and opencl backends, and the backend is "
+            "\"vulkan\"; use \"amg\", or the backend \"reference\" or \"opencl\"");
   EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=reference", "solver.preconditioner=warped_cholesky"}).isOk());
+  EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=opencl", "solver.preconditioner=warped_cholesky"}).isOk());
   // "amg" runs on both backends.
   EXPECT_TRUE(parseScene(test::kMinimalScene, "", {"backend=opencl", "solver.preconditioner=amg"}).isOk());
   // On "auto" the choice is left to the backend selection (tests/schedule/test_scheduler.cpp).

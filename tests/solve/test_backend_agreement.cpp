@@ -156,15 +156,13 @@ TEST(BackendAgreement, TheLiverAndItsSurfaceOnEveryDeviceBackend) {
   if (compared == 0) GTEST_SKIP() << "no device backend with a double-precision device in this build";
 }
 
-TEST(BackendAgreement, TheMultigridOnEveryDeviceBackend) {
-  // A slender beam (1 x 0.1 x 0.1 m, 30 x 3 x 3 cells, 1,620 tets, E = 1e6 Pa) clamped at x = 0,
-  // 20 backward-Euler steps under gravity with "amg" (the preconditioner "auto" gives large slender
-  // bodies), PCG at 1e-10 in double: each device's V-cycle (its own kernels over the levels
-  // device_amg.cpp lays out) against the reference's. The same iterations within two a step
-  // (rounding in the cycle), the nodes to the solves' rounding; the whole run on the device asked for
-  // (a failover to the reference would compare the reference with itself).
-  COROFEM_SKIP_WITHOUT_DEVICE_BACKENDS();
-  auto beam = [](BackendKind backend) {
+/// A slender beam (1 x 0.1 x 0.1 m, 30 x 3 x 3 cells, 1,620 tets, E = 1e6 Pa) clamped at x = 0, 20
+/// backward-Euler steps under gravity with preconditioner `pc`, PCG at 1e-10 in double, on each
+/// of `backends` against the reference: the same iterations within two a step (rounding in the
+/// preconditioner), the nodes to the solves' rounding; the whole run on the device asked for (a
+/// failover to the reference would compare the reference with itself).
+void preconditionerAgrees(PreconditionerKind pc, const std::vector<BackendKind>& backends) {
+  auto beam = [pc](BackendKind backend) {
     BodyDesc body = cantileverBody(boxMesh({0, 0, 0}, {1.0, 0.1, 0.1}, {30, 3, 3}), 0.0, 1e6, 0.3, 1000.0,
                                    Formulation::Corotational);
     body.loads.push_back(gravity({0, 0, -9.81}));
@@ -175,7 +173,7 @@ TEST(BackendAgreement, TheMultigridOnEveryDeviceBackend) {
     scene.analysis.dynamics.steps = 20;
     scene.solver.tolerance = 1e-10;
     scene.solver.maxIterations = 500;
-    scene.solver.preconditioner = PreconditionerKind::Amg;
+    scene.solver.preconditioner = pc;
     scene.backend.kind = backend;
     return scene;
   };
@@ -197,7 +195,7 @@ TEST(BackendAgreement, TheMultigridOnEveryDeviceBackend) {
   long long refIterations = 0;
   ASSERT_TRUE(run(BackendKind::Reference, refNodes, refIterations));
   int compared = 0;
-  for (BackendKind backend : {BackendKind::OpenCL, BackendKind::Vulkan}) {
+  for (BackendKind backend : backends) {
     SCOPED_TRACE(toString(backend));
     std::vector<double> nodes;
     long long iterations = 0;
@@ -207,13 +205,27 @@ TEST(BackendAgreement, TheMultigridOnEveryDeviceBackend) {
     ASSERT_EQ(nodes.size(), refNodes.size());
     double worst = 0;
     for (std::size_t i = 0; i < nodes.size(); ++i) worst = std::max(worst, std::abs(nodes[i] - refNodes[i]));
-    std::cout << "  amg beam, " << toString(backend) << " - reference: nodes " << worst << " m, PCG iterations "
-              << iterations << " (reference " << refIterations << ")\n";
+    std::cout << "  " << toString(pc) << " beam, " << toString(backend) << " - reference: nodes " << worst
+              << " m, PCG iterations " << iterations << " (reference " << refIterations << ")\n";
     EXPECT_LT(worst, 1e-8);
     EXPECT_LE(std::abs(iterations - refIterations), 2 * 20) << "more than two iterations a step apart";
     ++compared;
   }
   if (compared == 0) GTEST_SKIP() << "no device backend with a double-precision device in this build";
+}
+
+TEST(BackendAgreement, TheMultigridOnEveryDeviceBackend) {
+  // Each device's V-cycle (its own kernels over the levels device_amg.cpp lays out) against the
+  // reference's ("auto" gives large slender bodies the multigrid).
+  COROFEM_SKIP_WITHOUT_DEVICE_BACKENDS();
+  preconditionerAgrees(PreconditionerKind::Amg, {BackendKind::OpenCL, BackendKind::Vulkan});
+}
+
+TEST(BackendAgreement, TheWarpedFactorOnOpenCl) {
+  // The factor applied on the host between the OpenCL device's launches (device_warped.hpp), warped
+  // by the rotations the device computed, against the reference's.
+  COROFEM_SKIP_WITHOUT_DEVICE_BACKENDS();
+  preconditionerAgrees(PreconditionerKind::WarpedCholesky, {BackendKind::OpenCL});
 }
 
 }  // namespace

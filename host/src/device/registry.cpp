@@ -88,9 +88,6 @@ std::string hostOnlyFeature(const Problem& p, const SolverDesc& s) {
   if (s.linearSolver == LinearSolverKind::Cholesky)
     return "the Cholesky solver runs only on the reference backend; set \"backend\": \"reference\" or the solver "
            "\"pcg\"";
-  if (s.preconditioner == PreconditionerKind::WarpedCholesky)
-    return "the preconditioner \"warped_cholesky\" runs only on the reference backend; set \"backend\": "
-           "\"reference\" or the preconditioner \"amg\"";
   return "";
 }
 

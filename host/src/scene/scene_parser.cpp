@@ -631,9 +631,9 @@ void checkConsistency(const Reader& r, const Scene& scene) {
     if (scene.solver.linearSolver == LinearSolverKind::Cholesky)
       r.fail("solver.linear_solver", "\"cholesky\" runs only on the reference backend, and the backend is \"", backend,
              "\"; use \"pcg\", or the backend \"reference\"");
-    if (scene.solver.preconditioner == PreconditionerKind::WarpedCholesky)
-      r.fail("solver.preconditioner", "\"warped_cholesky\" runs only on the reference backend, and the backend is \"",
-             backend, "\"; use \"amg\", or the backend \"reference\"");
+    if (scene.solver.preconditioner == PreconditionerKind::WarpedCholesky && scene.backend.kind == BackendKind::Vulkan)
+      r.fail("solver.preconditioner", "\"warped_cholesky\" runs on the reference and opencl backends, and the backend "
+             "is \"vulkan\"; use \"amg\", or the backend \"reference\" or \"opencl\"");
     for (std::size_t i = 0; i < scene.bodies.size(); ++i) {
       const Formulation f = scene.bodies[i].formulation;
       if (f == Formulation::StVenantKirchhoff || f == Formulation::NeoHookean)

@@ -77,7 +77,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
   const PreconditionerKind preconditioner = preconditionerOf(scene.solver, problem);
   const bool precond = pcg && preconditioner != PreconditionerKind::None;
   const bool amg = pcg && preconditioner == PreconditionerKind::Amg;
-  const bool warped = pcg && preconditioner == PreconditionerKind::WarpedCholesky;  // reference backend only
+  const bool warped = pcg && preconditioner == PreconditionerKind::WarpedCholesky;  // reference and OpenCL
   // amg smooths with the node blocks' inverses: the block preconditioner's data on a device.
   const bool block = preconditioner == PreconditionerKind::BlockDiagonal || amg;
   // The multigrid's levels (precond/amg.hpp) per free dof of the body, as the Vega beam of
@@ -158,11 +158,10 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     buffer("element_geometry", dv, 10 * E * r);
     if (corot) {
       // R itself only for the Quaternion method (every pass writes it: a pass cannot be run again
-      // to read it back, it advances the warm start); the other kernels read a_i.
-      if (problem.rotation == RotationMethod::Quaternion) {
-        buffer("rotations", dv, 9 * E * r);
-        buffer("quaternions", dv, 4 * E * r);
-      }
+      // to read it back, it advances the warm start) and for "warped_cholesky" (its warp reads R
+      // before every solve); the other kernels read a_i.
+      if (problem.rotation == RotationMethod::Quaternion || warped) buffer("rotations", dv, 9 * E * r);
+      if (problem.rotation == RotationMethod::Quaternion) buffer("quaternions", dv, 4 * E * r);
       buffer("rotated_gradients", dv, 9 * E * r);
     }
     buffer("element_output", dv, 12 * E * r);
@@ -170,7 +169,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     buffer("positions", dv, D * r);
     buffer("free_mask", dv, D * r);
     if (dynamic) buffer("lumped_mass", dv, D * r);
-    if (precond) {
+    if (precond && !warped) {  // warped_cholesky: the factor on the host
       buffer("node_blocks", dv, 6 * N * r);
       buffer("preconditioner_inverse", dv, (block ? 9 : 3) * N * r);
     }
@@ -179,6 +178,16 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
       buffer("amg_levels (estimate: prolongations, coarse operators)", dv, amgEntriesPerDof * D * (r + 4));
       buffer("amg_vectors (level 0 scratch)", dv, 3 * D * r);
     }
+  }
+  // The factor's fill is known only once it is made: kWarpedFill times A's entries on the 12,960-tet
+  // beam (1.41 M below the diagonal), and it grows faster than the mesh. K_0 is kept beside it, and
+  // after a grab or a new time step the factor before it (the spare) too. A device backend keeps
+  // them on the host too (device/device_warped.hpp).
+  const double warpedEntries = warped ? 9 * (N + 2 * static_cast<double>(edgeCount(problem.mesh))) : 0.0;
+  if (warped) {
+    buffer("warped_cholesky_factor (estimate: 4.2x the system's entries, more on larger meshes; twice after a grab)",
+           "host", kWarpedFill * warpedEntries * 12);
+    buffer("rest_stiffness (K_0, kept)", "host", warpedEntries * 12);
   }
   if (device) {
     if (entry && entry->passes) {
@@ -190,11 +199,15 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
                         (dynamic ? (damping ? "M, C, K_t" : "M, K_t") : "K_t"));
       kernels.push_back("single-reduction PCG");
     }
+    if (warped)
+      kernels.push_back("warped_cholesky on the host's threads per PCG iteration: r read, the warp and the factor's two "
+                        "triangular solves, z written");
     if (batched)
       for (auto& k : kernels)
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";
     product = E * (16 + 34 * r) + 16 * E + 4 * (N + 1) + 12 * E * r + D * r * (3 + (dynamic ? 1 : 0));
-    pcgIter = product + 11 * D * r + (precond ? (block ? 9 : 3) * N * r : 0);
+    pcgIter = product + 11 * D * r + (precond && !warped ? (block ? 9 : 3) * N * r : 0);
+    if (warped) pcgIter += 2 * D * r;  // r read, z written
     if (amg) pcgIter += 4 * product + 12 * D * r + (amgEntriesPerDof + 3 * 17) * D * (r + 4);
     newtonFixed = (corot ? E * (16 + 22 * r) : 0) + 2 * product + 5 * D * r;
   } else {
@@ -206,13 +219,6 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     if (dynamic) buffer("lumped_mass", h, D * 8);
     buffer(pcg ? "cg_vectors" : "cholesky_factor (at least the matrix)", h, pcg ? 5 * D * 8 : nnz * 12);
     if (amg) buffer("amg_levels (estimate: prolongations, coarse operators)", h, amgEntriesPerDof * D * 12);
-    // The factor's fill is known only once it is made: kWarpedFill times A's entries on the
-    // 12,960-tet beam (1.41 M below the diagonal), and it grows faster than the mesh. K_0 is kept
-    // beside it, and after a grab or a new time step the factor before it (the spare) too.
-    if (warped)
-      buffer("warped_cholesky_factor (estimate: 4.2x the system's entries, more on larger meshes; twice after a grab)", h,
-             kWarpedFill * nnz * 12);
-    if (warped) buffer("rest_stiffness (K_0, kept)", h, nnz * 12);
     if (corot) kernels.push_back("polar decomposition per element (Newton's iteration, the SVD where F is inverted or flat)");
     kernels.push_back("element forces");
     kernels.push_back("sparse assembly of " + std::string(dynamic ? "M + C + K_t" : "K_t"));

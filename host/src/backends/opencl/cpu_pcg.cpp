@@ -30,8 +30,9 @@ std::size_t roundUp(std::size_t n, std::size_t m) { return (n + m - 1) / m * m; 
 }  // namespace
 
 CpuPcg::CpuPcg(SegmentEngine& engine) : e_(engine) {
-  // The "amg" cycle runs between the launched iterations' kernels (engine_amg.hpp): no one-launch PCG.
-  const bool launched = e_.precond_ == PreconditionerKind::Amg;
+  // The "amg" cycle runs between the launched iterations' kernels (engine_amg.hpp), the
+  // "warped_cholesky" factor on the host between them (device_warped.hpp): no one-launch PCG.
+  const bool launched = e_.precond_ == PreconditionerKind::Amg || e_.precond_ == PreconditionerKind::WarpedCholesky;
   group_ = !launched && e_.tuning_.groupPcg != 0;
   team_ = !launched && e_.tuning_.teamPcg != 0;
   teamChosen_ = team_ && e_.tuning_.teamPcg == kTeamPcgByMeasurement;

@@ -4,6 +4,7 @@
 
 #include "backends/opencl/segment_engine.hpp"
 #include "backends/opencl/engine_amg.hpp"
+#include "device/device_warped.hpp"
 
 #include "util/error.hpp"
 
@@ -34,6 +35,7 @@ V slice(const V& v, std::size_t at, std::size_t n) {
 void SegmentEngine::setPositions(const BodySet& bodies, const ConstVectors& x) {
   checkSizes(bodies, x, "the positions");
   if (amg_) amg_->positionsSet(bodies, x);
+  if (warped_) warped_->positionsSet(bodies);
   std::size_t at = 0;
   for (const BodySet& tile : tiles(bodies, tileBytes_)) {
     setPositionsTile(tile, slice(x, at, tile.size()));
@@ -77,7 +79,7 @@ void SegmentEngine::elasticEnergy(const BodySet& bodies, std::vector<double>& en
 // ---------------------------------------------------------------------------- the launch sequences
 
 void SegmentEngine::refreshBlocks(bool cornersWritten) {
-  if (precond_ == PreconditionerKind::None) return;
+  if (!formsBlocks()) return;
   const cl_uint S = static_cast<cl_uint>(stride_);
   if (!cornersWritten)
     launch(kCornerGradients_, Span::Elements, S, elemSeg_, segInfoBuf_, geom_, rotatedGradients(), elemOut_);
@@ -124,7 +126,7 @@ void SegmentEngine::launchRotations(const std::vector<char>& rotate, bool writeC
 void SegmentEngine::enqueueRotations() {
   std::vector<char> corotational(segs_.size());
   for (std::size_t s = 0; s < segs_.size(); ++s) corotational[s] = segs_[s].corotational;
-  launchRotations(corotational, precond_ != PreconditionerKind::None, rAlways_);
+  launchRotations(corotational, formsBlocks(), rAlways_);
 }
 
 void SegmentEngine::setPositionsTile(const BodySet& bodies, const ConstVectors& xs) {
@@ -160,7 +162,7 @@ void SegmentEngine::setPositionsTile(const BodySet& bodies, const ConstVectors& 
   // The blocks rotate with R (linear bodies: constant, never stale); formed by the solve that needs
   // them (refreshStaleBlocks), not here: the corner gradients would be overwritten by the forces.
   launchRotations(rotate, false, rAlways_);
-  if (precond_ != PreconditionerKind::None)
+  if (formsBlocks())
     for (std::size_t s = 0; s < segs_.size(); ++s)
       if (rotate[s]) blocksStale_[s] = 1;
 }

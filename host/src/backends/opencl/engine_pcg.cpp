@@ -7,6 +7,7 @@
 #include "backends/opencl/cpu_pcg.hpp"
 #include "backends/opencl/engine_amg.hpp"
 #include "backends/opencl/segment_engine.hpp"
+#include "device/device_warped.hpp"
 
 #include "util/error.hpp"
 
@@ -38,6 +39,7 @@ void SegmentEngine::pcgSetup(bool zeroStart, bool haveAx, const std::vector<char
   launch(kPcgInit_, Span::NodeChunks, nodeSeg_, segInfoBuf_, segCoefBuf_, blocks_, mass_, cl_uint(zeroStart ? 1 : 0),
          b_, q_, free_, minv_, r_, z_, p_, s_, partials_);
   if (amg_) amg_->cycle(true);  // u = M^-1 r by the V-cycle, over pcg_init's node-block one
+  if (warped_) hostPrecondition();  // u = M^-1 r by the factor, over pcg_init's u = r
   if (productFor) {  // the packs' bodies take w = A u and the first scalars in pcg_iterate_pack
     if (!anyFor) return;
     setActive(*productFor);
@@ -58,6 +60,7 @@ void SegmentEngine::pcgIteration(bool last) {
   // u = M^-1 r by the V-cycle, over pcg_update's node-block one. The cap's last iteration needs r . r
   // alone (the stop test), not u: no cycle.
   if (amg_ && !last) amg_->cycle(false);
+  if (warped_ && !last) hostPrecondition();
   if (last)
     launch(kReduceFinish_, Span::Segments, segInfoBuf_, partials_, partialsW_, scalars_, cl_uint(kReduceLast),
            SumReal{round_.tolerance * round_.tolerance});
@@ -73,6 +76,7 @@ void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) 
   std::fill(axReady_.begin(), axReady_.end(), 0);
   round_.tolerance = solver_.tolerance;
   if (amg_) amg_->prepare(allBodies(segs_.size()));
+  if (warped_) prepareWarped(allBodies(segs_.size()));
   pcgSetup(false, false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
   segInfoStale_ = true;  // the device may have stopped a segment: the next setActive uploads the table
@@ -215,6 +219,7 @@ std::vector<PcgStart> SegmentEngine::pcgBegin(const BodySet& bodies, const std::
   // own with packFresh: theirs stay stale for a later solve outside a pack).
   refreshStaleBlocks(round_.packFresh ? unpackedOnly : active);
   if (amg_) amg_->prepare(running);
+  if (warped_) prepareWarped(running);
   setActive(active);
   if (round_.packWhole) {
     // The packed bodies' segments stay inactive from here (pcgSetup made the unpacked ones the
@@ -369,6 +374,57 @@ void SegmentEngine::pcgEnd(const std::vector<int>& iterations, const Vectors& xs
 }
 
 long long SegmentEngine::amgBuilds() const { return amg_ ? amg_->builds() : 0; }
+long long SegmentEngine::warpedBuilds() const { return warped_ ? warped_->builds() : 0; }
+
+void SegmentEngine::prepareWarped(const BodySet& running) {
+  std::vector<std::pair<double, double>> coefficients;
+  for (std::size_t s : running)
+    coefficients.emplace_back(operatorMass_[s], segCoef_[kSegCoefCount * s + kCoefStiff]);
+  warped_->prepare(running, coefficients, [this](std::size_t s) { return readRotations(s); });
+}
+
+void SegmentEngine::hostPrecondition() {
+  if (activeLo_ >= activeHi_) return;
+  // The active segments' r and partials (in queue order after the kernel that formed them).
+  const std::size_t dofLo = segs_[activeLo_].dofBegin();
+  const std::size_t dofHi = segs_[activeHi_ - 1].dofBegin() + 3 * segs_[activeHi_ - 1].nodeSpan;
+  const std::size_t partLo = kPartialComponents * partialBegin(activeLo_);
+  const std::size_t partHi = kPartialComponents * (partialBegin(activeHi_ - 1) + partialCount(activeHi_ - 1));
+  std::vector<unsigned char>& r = warpedR_;
+  std::vector<unsigned char>& parts = warpedPartials_;
+  r.resize(dofHi * realSize_);
+  parts.resize(partHi * sumSize_);
+  std::vector<unsigned char> z(dofHi * realSize_);  // moved into its write
+  cl_event readR = nullptr;
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), r_.get(), CL_FALSE, dofLo * realSize_, (dofHi - dofLo) * realSize_,
+                              r.data() + dofLo * realSize_, 0, nullptr, &readR),
+          "clEnqueueReadBuffer", dev_);
+  const cl_int read = clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_TRUE, partLo * sumSize_,
+                                          (partHi - partLo) * sumSize_, parts.data() + partLo * sumSize_, 0, nullptr,
+                                          nullptr);
+  clReleaseEvent(readR);  // done: the blocking read behind it on the in-order queue is
+  checkCl(read, "clEnqueueReadBuffer", dev_);
+  writesDone();
+  // z over the whole range (padding and stopped segments' dofs written as they were: 0 and r, which
+  // no active segment reads) and each active segment's r . z in its first partial.
+  std::memcpy(z.data() + dofLo * realSize_, r.data() + dofLo * realSize_, (dofHi - dofLo) * realSize_);
+  for (std::size_t s = activeLo_; s < activeHi_; ++s) {
+    if (!active_[s]) continue;
+    const double rz = warped_->apply(s, r.data(), z.data(), double_);
+    const std::size_t first = kPartialComponents * partialBegin(s);
+    for (std::size_t g = 0; g < partialCount(s); ++g) {
+      const double v = g == 0 ? rz : 0.0;
+      if (sumSize_ == sizeof(double))
+        reinterpret_cast<double*>(parts.data())[first + kPartialComponents * g] = v;
+      else
+        reinterpret_cast<float*>(parts.data())[first + kPartialComponents * g] = static_cast<float>(v);
+    }
+  }
+  enqueueWrite(z_, dofLo * realSize_,
+               std::vector<unsigned char>(z.begin() + static_cast<std::ptrdiff_t>(dofLo * realSize_), z.end()));
+  enqueueWrite(partials_, partLo * sumSize_,
+               std::vector<unsigned char>(parts.begin() + static_cast<std::ptrdiff_t>(partLo * sumSize_), parts.end()));
+}
 
 }  // namespace corofem::detail
 

@@ -3,6 +3,7 @@
 
 #include "backends/opencl/segment_engine.hpp"
 #include "backends/opencl/engine_amg.hpp"
+#include "device/device_warped.hpp"
 
 #include "util/error.hpp"
 
@@ -244,6 +245,7 @@ void SegmentEngine::setConstraints(const BodySet& bodies, const std::vector<cons
     axReady_[bodies[i]] = 0;
     warmLast_[bodies[i]] = 0;
     if (amg_) amg_->constraintsChanged(bodies[i]);
+    if (warped_) warped_->constraintsChanged(bodies[i]);
   }
 }
 
@@ -263,6 +265,7 @@ void SegmentEngine::setMaterial(const BodySet& bodies, const std::vector<const P
     axReady_[s] = 0;
     blocksStale_[s] = 1;
     if (amg_) amg_->invalidate(s);
+    if (warped_) warped_->invalidate(s);
   }
   // The element kernels read lambda and mu from the coefficients buffer: upload them now (the solve
   // coefficients that multiply them are formed again by the next setCoefficients).

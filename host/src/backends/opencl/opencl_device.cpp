@@ -77,7 +77,8 @@ class OpenCLDevice final : public Device {
             {"pcg_team_launches", static_cast<long long>(c.teamLaunches)},
             {"pcg_pack_launches", static_cast<long long>(c.packLaunches)},
             {"pcg_pack_lanes", static_cast<long long>(c.packLanes)},
-            {"amg_hierarchies_made", engine_.amgBuilds()}};
+            {"amg_hierarchies_made", engine_.amgBuilds()},
+            {"warped_cholesky_factors_made", engine_.warpedBuilds()}};
   }
   bool devicePositions(std::size_t body, DevicePositions& out) const override {
     if (body >= engine_.segmentCount()) return false;

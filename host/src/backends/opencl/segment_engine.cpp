@@ -11,6 +11,7 @@
 
 #include "backends/opencl/segment_engine.hpp"
 #include "backends/opencl/engine_amg.hpp"
+#include "device/device_warped.hpp"
 
 #include "backends/opencl/cpu_pcg.hpp"
 #include "util/error.hpp"
@@ -105,6 +106,7 @@ SegmentEngine::SegmentEngine(const std::vector<const Problem*>& problems, const 
 
   cpu_ = std::make_unique<CpuPcg>(*this);
   if (precond_ == PreconditionerKind::Amg) amg_ = std::make_unique<EngineAmg>(*this);
+  if (precond_ == PreconditionerKind::WarpedCholesky) warped_ = std::make_unique<DeviceWarped>(segs_);
   try {
     build(solver_);
     allocate();
@@ -261,7 +263,9 @@ void SegmentEngine::allocate() {
   for (const BodySegment& sg : segs_) anyCorotational = anyCorotational || sg.corotational;
   // The Quaternion method's state only where something rotates (linear bodies never do).
   const bool quaternion = solver_.rotation == RotationMethod::Quaternion && anyCorotational;
-  rAlways_ = quaternion;
+  // "warped_cholesky" reads R before every solve (its warp): written by the pass that computes it
+  // rather than by a second pass for readRotations.
+  rAlways_ = quaternion || (precond_ == PreconditionerKind::WarpedCholesky && anyCorotational);
   {
     std::vector<double> geom(kGeomComponents * S, 0.0), quat(quaternion ? kQuatComponents * S : 0, 0.0);
     for (const BodySegment& sg : segs_)
@@ -276,7 +280,8 @@ void SegmentEngine::allocate() {
     createReal(geom_, geom.size());
     upload(geom_, geom.data(), 0, geom.size());
     // R itself only where every pass writes it (rAlways_: the Quaternion method cannot run a pass
-    // again for readRotations); otherwise the first readRotations makes it (ensureRotations).
+    // again for readRotations, "warped_cholesky" reads it at every solve); otherwise the first
+    // readRotations makes it (ensureRotations).
     if (rAlways_) ensureRotations();
     // At rest (and always for the linear formulation) R = I, so a_i = grad N_i. Without a
     // co-rotational body nothing ever changes them: the kernels read the gradients of geom_, whose
@@ -346,7 +351,7 @@ void SegmentEngine::allocate() {
   }
   createReal(free_, dofTotal);
   upload(free_, freeMask.data(), 0, dofTotal);
-  if (precond_ != PreconditionerKind::None) {
+  if (formsBlocks()) {
     // The block preconditioner reads 6 reals per node, the diagonal one 3 (precond.cl).
     const bool nodeBlocks = precond_ == PreconditionerKind::BlockDiagonal || precond_ == PreconditionerKind::Amg;
     createReal(blocks_, (nodeBlocks ? kNodeBlockComponents : 3) * nodeTotal_);

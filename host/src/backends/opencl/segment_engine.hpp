@@ -56,6 +56,7 @@ struct KernelProfile {
 };
 
 class CpuPcg;
+class DeviceWarped;
 class EngineAmg;
 struct CpuPcgCounts;
 
@@ -120,6 +121,8 @@ class SegmentEngine {
   CpuPcgCounts pcgCounts() const;
   /// The "amg" hierarchies made so far (0 without the multigrid).
   long long amgBuilds() const;
+  /// The "warped_cholesky" factors made so far (0 without it).
+  long long warpedBuilds() const;
 
   // Device-only work on every segment (benchmarks), no transfers.
   void enqueueRotations();
@@ -234,6 +237,11 @@ class SegmentEngine {
   std::vector<BodySet> tiles(const BodySet& bodies, std::size_t tileBytes) const;
 
   // -- element operations (engine_element.cpp)
+  /// The preconditioner is formed on the device from node blocks (pcg_init's M^-1): every one but
+  /// none and "warped_cholesky" (the host's factor).
+  bool formsBlocks() const {
+    return precond_ != PreconditionerKind::None && precond_ != PreconditionerKind::WarpedCholesky;
+  }
   void refreshBlocks(bool cornersWritten);
   /// The preconditioner's node blocks of the running segments whose rotations changed since their
   /// blocks were formed (blocksStale_), before a solve: the last evaluation of a step (a dynamic
@@ -277,6 +285,13 @@ class SegmentEngine {
   void pcgSetup(bool zeroStart, bool haveAx, const std::vector<char>* productFor = nullptr, bool onlyFor = false);
   /// One launched PCG iteration; `last`: the iteration cap's last, whose next product is not needed.
   void pcgIteration(bool last = false);
+  /// "warped_cholesky" before a solve of `running`: their factors and warps (device_warped.hpp),
+  /// the warp from the rotations the device computed.
+  void prepareWarped(const BodySet& running);
+  /// "warped_cholesky": z_ = M^-1 r_ of the active segments on the host after pcg_init or
+  /// pcg_update (which left z_ = r_), and r . z in place of their partials' first sums (the others
+  /// kept: r . r, and b . b of pcg_init). One blocking read of r_ and the partials, two writes.
+  void hostPrecondition();
   /// Waits for the pending scalar reads (on an error, or a solve that ends before taking them).
   void dropReads(bool wait);
   /// The host's view of the launched span: the segments still running as it knows.
@@ -319,6 +334,8 @@ class SegmentEngine {
   bool hasMass_ = false;                 ///< some body has a nonzero lumped mass
   std::unique_ptr<CpuPcg> cpu_;          ///< the CPU devices' one-launch iterations (cpu_pcg.hpp)
   std::unique_ptr<EngineAmg> amg_;       ///< the "amg" preconditioner's levels (engine_amg.hpp), or null
+  std::unique_ptr<DeviceWarped> warped_; ///< the "warped_cholesky" factors (device_warped.hpp), or null
+  std::vector<unsigned char> warpedR_, warpedPartials_;  ///< hostPrecondition's reads
   std::vector<int> lastIterations_;      ///< per segment: iterations of its last solve
 
   std::vector<cl_uint> segInfo_;         ///< host copy of the device table (kSegInfoCount per segment)

@@ -13,6 +13,9 @@ namespace corofem::detail {
 
 std::string vulkanRefusal(const Problem& p, const SolverDesc& s) {
   if (std::string why = hostOnlyFeature(p, s); !why.empty()) return why;
+  if (s.preconditioner == PreconditionerKind::WarpedCholesky)
+    return "the preconditioner \"warped_cholesky\" runs on the reference and opencl backends, not on vulkan; set "
+           "\"backend\": \"reference\" or \"opencl\", or the preconditioner \"amg\"";
   if (s.precision == Precision::Mixed)
     return "the vulkan backend runs in float or double, not mixed precision; set solver.precision to \"float\" or "
            "\"double\"";
