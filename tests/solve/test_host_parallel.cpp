@@ -119,13 +119,15 @@ TEST(HostParallel, AForkedChildUsesItAndExitsNormally) {
   ASSERT_EQ(chunkedSum(v, 1000), 100000.0);  // the pool exists
   // Its workers are running, not starting: a thread starting under AddressSanitizer allocates, and
   // the allocator's lock held at the fork would hang the child's leak check at exit (GCC 12's
-  // libasan takes no lock around fork), which is not what this test is about. Each of two chunks
-  // waits, up to 10 s, for the other to be taken, so a worker has taken one.
-  if (detail::hostThreads() > 1) {
+  // libasan takes no lock around fork), which is not what this test is about. One chunk per thread,
+  // each waiting (up to 10 s: a thread the system refused never comes) until all are taken: a
+  // thread holds one waiting chunk at a time, so every worker has taken one.
+  const int threads = static_cast<int>(detail::hostThreads());
+  if (threads > 1) {
     std::atomic<int> entered{0};
-    parallelChunks(2, 1, [&](std::size_t, std::size_t, std::size_t) {
+    parallelChunks(static_cast<std::size_t>(threads), 1, [&](std::size_t, std::size_t, std::size_t) {
       ++entered;
-      for (int i = 0; i < 10000 && entered.load() < 2; ++i) usleep(1000);
+      for (int i = 0; i < 10000 && entered.load() < threads; ++i) usleep(1000);
     });
   }
   const pid_t child = fork();

@@ -41,15 +41,16 @@ class DeviceWarped {
 
   /// Before a solve of `running` (segments), coefficients[i] = (mass, stiffness) of the operator
   /// m M + s K of running[i]: makes or takes back their factors, and warps each co-rotational body
-  /// whose positions changed since its last warp by its element rotations, rotationsOf(segment):
-  /// 9 reals per element of the problem's numbering, row-major. Throws as WarpedCholesky::build
-  /// (Error(SolveFailed) naming the body for a singular rest operator).
+  /// whose positions changed since its last warp by its element rotations: rotationsOf(due), called
+  /// once where some are due, gives per segment of `due` 9 reals per element of the problem's
+  /// numbering, row-major. Throws as WarpedCholesky::build (Error(SolveFailed) naming the body for
+  /// a singular rest operator).
   void prepare(const BodySet& running, const std::vector<std::pair<double, double>>& coefficients,
-               const std::function<std::vector<double>(std::size_t)>& rotationsOf);
+               const std::function<std::vector<std::vector<double>>(const BodySet& due)>& rotationsOf);
 
-  /// z = W A_0^-1 W^T r on segment s's free dofs, 0 on its constrained ones: r and z are the
-  /// device's reals (float, or double with `isDouble`) from the segment's first dof, its 3 N dofs
-  /// in the device's numbering. Returns r . z over the free dofs of the reals as stored, summed in
+  /// z = W A_0^-1 W^T r on segment s's free dofs, 0 on its constrained ones: r and z point at the
+  /// segment's first dof in the device's reals (float, or double with `isDouble`), its 3 N dofs in
+  /// the device's numbering. Returns r . z over the free dofs of the reals as stored, summed in
   /// the problem's dof order (the same bits on any threads). Only after prepare of the segment.
   double apply(std::size_t s, const unsigned char* r, unsigned char* z, bool isDouble);
 

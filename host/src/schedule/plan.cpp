@@ -207,7 +207,8 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
         k = k.get<std::string>() + " [shared: one launch for the " + std::to_string(batchMates.size()) + " bodies]";
     product = E * (16 + 34 * r) + 16 * E + 4 * (N + 1) + 12 * E * r + D * r * (3 + (dynamic ? 1 : 0));
     pcgIter = product + 11 * D * r + (precond && !warped ? (block ? 9 : 3) * N * r : 0);
-    if (warped) pcgIter += 2 * D * r;  // r read, z written
+    // r read and z written; on the host the factor read twice and its vectors (as the reference's)
+    if (warped) pcgIter += 2 * D * r + 2 * kWarpedFill * warpedEntries * 12 + 6 * D * 8;
     if (amg) pcgIter += 4 * product + 12 * D * r + (amgEntriesPerDof + 3 * 17) * D * (r + 4);
     newtonFixed = (corot ? E * (16 + 22 * r) : 0) + 2 * product + 5 * D * r;
   } else {
@@ -228,7 +229,7 @@ std::string planJson(const BodyDesc& desc, const Problem& problem, const Scene& 
     product = nnz * 12 + 4 * (D + 1) + 3 * D * 8;
     pcgIter = product + 10 * D * 8;
     if (amg) pcgIter += 4 * product + 12 * D * 8 + (amgEntriesPerDof + 3 * 17) * D * 12;
-    if (warped) pcgIter += 2 * kWarpedFill * nnz * 12 + 6 * D * 8;  // the factor read twice
+    if (warped) pcgIter += 2 * kWarpedFill * warpedEntries * 12 + 6 * D * 8;  // the factor read twice
     newtonFixed = nnz * 8 + 144 * 8 * E + product;
   }
   // Driver state on the host (BodySolver): committed and rollback copies.

@@ -349,22 +349,30 @@ void SegmentEngine::elasticEnergyTile(const BodySet& all, std::vector<double>& e
   }
 }
 
-std::vector<double> SegmentEngine::readRotations(std::size_t s) {
-  const BodySegment& sg = segs_[s];
+std::vector<std::vector<double>> SegmentEngine::readRotations(const BodySet& segments) {
   ensureRotations();  // R = I for a body never rotated
-  if (rStale_[s]) {
-    // The last rotation pass wrote no R: run it again for this body with R (from the same positions,
-    // so the same a_i, bit for bit; not the corners: the blocks were formed from the first pass).
-    std::vector<char> only(segs_.size(), 0);
-    only[s] = 1;
-    launchRotations(only, false, true);
+  // The segments whose last rotation pass wrote no R: that pass again with R (from the same
+  // positions, so the same a_i, bit for bit; not the corners: the blocks were formed from the first).
+  std::vector<char> rerun(segs_.size(), 0);
+  bool any = false;
+  std::size_t lo = stride_, hi = 0;  // the elements the segments span
+  for (std::size_t s : segments) {
+    if (rStale_.at(s)) rerun[s] = any = true;
+    lo = std::min(lo, segs_[s].elemBegin);
+    hi = std::max(hi, segs_[s].elemBegin + segs_[s].elems);
   }
+  if (any) launchRotations(rerun, false, true);
   std::vector<double> soa(kRotComponents * stride_);
-  download(rot_, soa.data(), 0, soa.size());
-  std::vector<double> out(9 * sg.elems);
-  for (std::size_t e = 0; e < sg.elems; ++e) {
-    const std::size_t to = sg.hostElem.empty() ? e : sg.hostElem[e];  // in the problem's element order
-    for (std::size_t k = 0; k < 9; ++k) out[9 * to + k] = soa[k * stride_ + sg.elemBegin + e];
+  if (lo < hi)
+    for (std::size_t k = 0; k < kRotComponents; ++k) download(rot_, soa.data(), k * stride_ + lo, hi - lo);
+  std::vector<std::vector<double>> out;
+  for (std::size_t s : segments) {
+    const BodySegment& sg = segs_[s];
+    std::vector<double>& r = out.emplace_back(9 * sg.elems);
+    for (std::size_t e = 0; e < sg.elems; ++e) {
+      const std::size_t to = sg.hostElem.empty() ? e : sg.hostElem[e];  // in the problem's element order
+      for (std::size_t k = 0; k < 9; ++k) r[9 * to + k] = soa[k * stride_ + sg.elemBegin + e];
+    }
   }
   return out;
 }

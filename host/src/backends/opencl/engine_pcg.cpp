@@ -71,12 +71,13 @@ void SegmentEngine::pcgIteration(bool last) {
 void SegmentEngine::enqueuePcgIterations(const SystemCoeffs& c, int iterations) {
   for (std::size_t s = 0; s < segs_.size(); ++s) setCoefficients(s, c);
   refreshStaleBlocks(std::vector<char>(segs_.size(), 1));  // as pcgBegin does: the blocks of these rotations
+  if (warped_) prepareWarped(allBodies(segs_.size()));  // before the segments are made active: it may launch
   setAllActive();
   std::fill(xKnown_.begin(), xKnown_.end(), 0);  // the iterations change x
   std::fill(axReady_.begin(), axReady_.end(), 0);
+  std::fill(hostStopped_.begin(), hostStopped_.end(), 0);
   round_.tolerance = solver_.tolerance;
   if (amg_) amg_->prepare(allBodies(segs_.size()));
-  if (warped_) prepareWarped(allBodies(segs_.size()));
   pcgSetup(false, false);
   for (int i = 0; i < iterations; ++i) pcgIteration(i + 1 == iterations);
   segInfoStale_ = true;  // the device may have stopped a segment: the next setActive uploads the table
@@ -96,6 +97,7 @@ std::vector<PcgStart> SegmentEngine::pcgBegin(const BodySet& bodies, const std::
   checkSizes(bodies, coeffs.size(), "the coefficients");
   dropReads(true);  // a solve that ended in an error leaves its reads
   round_ = Round{};
+  std::fill(hostStopped_.begin(), hostStopped_.end(), 0);
   round_.bodies = bodies;
   round_.running.assign(bodies.size(), 0);
   round_.cap = std::max(0, maxIterations);
@@ -239,11 +241,14 @@ void SegmentEngine::narrowSpan(const std::vector<char>& running) {
   // The host's view only: the device's table stays as the device left it.
   activeLo_ = segs_.size();
   activeHi_ = 0;
-  for (std::size_t i = 0; i < round_.bodies.size(); ++i)
-    if (round_.running[i] && running[i]) {
+  for (std::size_t i = 0; i < round_.bodies.size(); ++i) {
+    const bool on = round_.running[i] && running[i];
+    hostStopped_[round_.bodies[i]] = on ? 0 : 1;
+    if (on) {
       activeLo_ = std::min(activeLo_, round_.bodies[i]);
       activeHi_ = std::max(activeHi_, round_.bodies[i] + 1);
     }
+  }
 }
 
 void SegmentEngine::pcgIterate(int n, const std::vector<char>& running) {
@@ -380,38 +385,47 @@ void SegmentEngine::prepareWarped(const BodySet& running) {
   std::vector<std::pair<double, double>> coefficients;
   for (std::size_t s : running)
     coefficients.emplace_back(operatorMass_[s], segCoef_[kSegCoefCount * s + kCoefStiff]);
-  warped_->prepare(running, coefficients, [this](std::size_t s) { return readRotations(s); });
+  warped_->prepare(running, coefficients, [this](const BodySet& due) { return readRotations(due); });
 }
 
 void SegmentEngine::hostPrecondition() {
   if (activeLo_ >= activeHi_) return;
-  // The active segments' r and partials (in queue order after the kernel that formed them).
+  // The span's r, partials and segment table, in queue order after the kernel that formed r (the
+  // table: which segments the device has stopped since the host last read their scalars).
   const std::size_t dofLo = segs_[activeLo_].dofBegin();
   const std::size_t dofHi = segs_[activeHi_ - 1].dofBegin() + 3 * segs_[activeHi_ - 1].nodeSpan;
   const std::size_t partLo = kPartialComponents * partialBegin(activeLo_);
   const std::size_t partHi = kPartialComponents * (partialBegin(activeHi_ - 1) + partialCount(activeHi_ - 1));
   std::vector<unsigned char>& r = warpedR_;
-  std::vector<unsigned char>& parts = warpedPartials_;
-  r.resize(dofHi * realSize_);
-  parts.resize(partHi * sumSize_);
-  std::vector<unsigned char> z(dofHi * realSize_);  // moved into its write
-  cl_event readR = nullptr;
-  checkCl(clEnqueueReadBuffer(ctx_->queue(), r_.get(), CL_FALSE, dofLo * realSize_, (dofHi - dofLo) * realSize_,
-                              r.data() + dofLo * realSize_, 0, nullptr, &readR),
+  std::vector<cl_uint>& table = warpedTable_;
+  r.resize((dofHi - dofLo) * realSize_);
+  table.resize(kSegInfoCount * (activeHi_ - activeLo_));
+  std::vector<unsigned char> parts((partHi - partLo) * sumSize_);  // each moved into its write
+  std::vector<unsigned char> z(r.size());
+  cl_event reads[2] = {nullptr, nullptr};
+  checkCl(clEnqueueReadBuffer(ctx_->queue(), r_.get(), CL_FALSE, dofLo * realSize_, r.size(), r.data(), 0, nullptr,
+                              &reads[0]),
           "clEnqueueReadBuffer", dev_);
-  const cl_int read = clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_TRUE, partLo * sumSize_,
-                                          (partHi - partLo) * sumSize_, parts.data() + partLo * sumSize_, 0, nullptr,
-                                          nullptr);
-  clReleaseEvent(readR);  // done: the blocking read behind it on the in-order queue is
+  cl_int read = clEnqueueReadBuffer(ctx_->queue(), segInfoBuf_.get(), CL_FALSE,
+                                    kSegInfoCount * activeLo_ * sizeof(cl_uint), table.size() * sizeof(cl_uint),
+                                    table.data(), 0, nullptr, &reads[1]);
+  if (read == CL_SUCCESS)
+    read = clEnqueueReadBuffer(ctx_->queue(), partials_.get(), CL_TRUE, partLo * sumSize_, parts.size(), parts.data(),
+                               0, nullptr, nullptr);
+  if (read != CL_SUCCESS) clWaitForEvents(reads[1] ? 2 : 1, reads);  // nothing may write r or table after this
+  for (cl_event e : reads)
+    if (e) clReleaseEvent(e);  // done: the blocking read behind them on the in-order queue is
   checkCl(read, "clEnqueueReadBuffer", dev_);
   writesDone();
-  // z over the whole range (padding and stopped segments' dofs written as they were: 0 and r, which
-  // no active segment reads) and each active segment's r . z in its first partial.
-  std::memcpy(z.data() + dofLo * realSize_, r.data() + dofLo * realSize_, (dofHi - dofLo) * realSize_);
+  // z over the span: each running segment's from the factor, and r . z in its first partial (the
+  // others' sums kept: r . r, and b . b of pcg_init); elsewhere (padding, and segments stopped or
+  // out of the solve, which read no z) r as pcg_init and pcg_update left it.
+  std::memcpy(z.data(), r.data(), r.size());
   for (std::size_t s = activeLo_; s < activeHi_; ++s) {
-    if (!active_[s]) continue;
-    const double rz = warped_->apply(s, r.data(), z.data(), double_);
-    const std::size_t first = kPartialComponents * partialBegin(s);
+    if (!active_[s] || hostStopped_[s] || table[kSegInfoCount * (s - activeLo_) + kSegActive] == 0) continue;
+    const std::size_t at = (segs_[s].dofBegin() - dofLo) * realSize_;
+    const double rz = warped_->apply(s, r.data() + at, z.data() + at, double_);
+    const std::size_t first = kPartialComponents * partialBegin(s) - partLo;
     for (std::size_t g = 0; g < partialCount(s); ++g) {
       const double v = g == 0 ? rz : 0.0;
       if (sumSize_ == sizeof(double))
@@ -420,10 +434,8 @@ void SegmentEngine::hostPrecondition() {
         reinterpret_cast<float*>(parts.data())[first + kPartialComponents * g] = static_cast<float>(v);
     }
   }
-  enqueueWrite(z_, dofLo * realSize_,
-               std::vector<unsigned char>(z.begin() + static_cast<std::ptrdiff_t>(dofLo * realSize_), z.end()));
-  enqueueWrite(partials_, partLo * sumSize_,
-               std::vector<unsigned char>(parts.begin() + static_cast<std::ptrdiff_t>(partLo * sumSize_), parts.end()));
+  enqueueWrite(z_, dofLo * realSize_, std::move(z));
+  enqueueWrite(partials_, partLo * sumSize_, std::move(parts));
 }
 
 }  // namespace corofem::detail

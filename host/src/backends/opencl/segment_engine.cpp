@@ -367,6 +367,7 @@ void SegmentEngine::allocate() {
   partialsW_.create(c, kPartialComponents * partialTotal_ * sumSize_, dev_);
   scalars_.create(c, kScalarCount * K * sumSize_, dev_);
   lastIterations_.assign(K, 0);
+  hostStopped_.assign(K, 0);
   cpu_->allocate();
 }
 

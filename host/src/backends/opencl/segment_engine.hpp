@@ -109,8 +109,11 @@ class SegmentEngine {
   /// Every buffer allocated, named for what it holds, at its clCreateBuffer size.
   std::vector<DeviceBuffer> buffers() const;
 
-  /// Segment `s`'s rotations, 9 per element (row-major R), as last computed.
-  std::vector<double> readRotations(std::size_t s);
+  /// Segment `s`'s rotations, 9 per element (row-major R, the problem's element order), as last
+  /// computed.
+  std::vector<double> readRotations(std::size_t s) { return std::move(readRotations(BodySet{s}).front()); }
+  /// The same for each of `segments`, in one read of the elements they span.
+  std::vector<std::vector<double>> readRotations(const BodySet& segments);
   /// Segment 0's relative positions start at offset 0 of this buffer (3 reals per node).
   cl_mem positionBuffer() const { return pos_.get(); }
   bool positionsAreDouble() const { return double_; }
@@ -288,9 +291,10 @@ class SegmentEngine {
   /// "warped_cholesky" before a solve of `running`: their factors and warps (device_warped.hpp),
   /// the warp from the rotations the device computed.
   void prepareWarped(const BodySet& running);
-  /// "warped_cholesky": z_ = M^-1 r_ of the active segments on the host after pcg_init or
+  /// "warped_cholesky": z_ = M^-1 r_ of the running segments on the host after pcg_init or
   /// pcg_update (which left z_ = r_), and r . z in place of their partials' first sums (the others
-  /// kept: r . r, and b . b of pcg_init). One blocking read of r_ and the partials, two writes.
+  /// kept: r . r, and b . b of pcg_init); none for a segment the host or the device has stopped.
+  /// One blocking read of r_, the partials and the segment table; two writes.
   void hostPrecondition();
   /// Waits for the pending scalar reads (on an error, or a solve that ends before taking them).
   void dropReads(bool wait);
@@ -335,7 +339,10 @@ class SegmentEngine {
   std::unique_ptr<CpuPcg> cpu_;          ///< the CPU devices' one-launch iterations (cpu_pcg.hpp)
   std::unique_ptr<EngineAmg> amg_;       ///< the "amg" preconditioner's levels (engine_amg.hpp), or null
   std::unique_ptr<DeviceWarped> warped_; ///< the "warped_cholesky" factors (device_warped.hpp), or null
-  std::vector<unsigned char> warpedR_, warpedPartials_;  ///< hostPrecondition's reads
+  std::vector<unsigned char> warpedR_;   ///< hostPrecondition's read of r
+  std::vector<cl_uint> warpedTable_;     ///< and of the segment table
+  /// Per segment: a body of the solve the host has seen stop (narrowSpan); hostPrecondition skips it.
+  std::vector<char> hostStopped_;
   std::vector<int> lastIterations_;      ///< per segment: iterations of its last solve
 
   std::vector<cl_uint> segInfo_;         ///< host copy of the device table (kSegInfoCount per segment)
