@@ -417,14 +417,17 @@ class ConformanceBase : public testing::TestWithParam<ConformanceCase> {
 
   /// Sets random positions (seed + body) on every body of both devices; returns them.
   std::vector<Eigen::VectorXd> setRandomPositions(unsigned seed) {
+    return setRandomPositionsOn({&device(), &reference()}, seed);
+  }
+  /// The same on each of `devices`.
+  std::vector<Eigen::VectorXd> setRandomPositionsOn(const std::vector<detail::Device*>& devices, unsigned seed) const {
     std::vector<Eigen::VectorXd> x(count());
     detail::ConstVectors in;
     for (std::size_t i = 0; i < count(); ++i) {
       x[i] = randomPositions(problem(i), seed + static_cast<unsigned>(i));
       in.push_back(&x[i]);
     }
-    device().setPositions(detail::allBodies(count()), in);
-    reference().setPositions(detail::allBodies(count()), in);
+    for (detail::Device* d : devices) d->setPositions(detail::allBodies(count()), in);
     return x;
   }
 
