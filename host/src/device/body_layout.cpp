@@ -95,6 +95,23 @@ BodyLayout::BodyLayout(const std::vector<const Problem*>& problems, int order, s
   }
 }
 
+std::vector<Eigen::Index> segmentFreeDofs(const BodySegment& sg, std::vector<std::size_t>* deviceDofs) {
+  std::vector<std::uint8_t> constrained(sg.dofs());
+  std::vector<std::size_t> deviceDof(sg.dofs());
+  for (std::size_t d = 0; d < sg.dofs(); ++d) {
+    constrained[sg.hostDof(d)] = sg.constrained[d];
+    deviceDof[sg.hostDof(d)] = d;
+  }
+  std::vector<Eigen::Index> free;
+  if (deviceDofs) deviceDofs->clear();
+  for (std::size_t d = 0; d < constrained.size(); ++d)
+    if (!constrained[d]) {
+      free.push_back(static_cast<Eigen::Index>(d));
+      if (deviceDofs) deviceDofs->push_back(deviceDof[d]);
+    }
+  return free;
+}
+
 void getReals(const unsigned char* base, bool isDouble, const BodySegment& sg, std::size_t chunk, Eigen::VectorXd& out) {
   out.resize(static_cast<Eigen::Index>(sg.dofs()));
   parallelChunks(sg.dofs(), chunk, [&](std::size_t, std::size_t lo, std::size_t hi) {

@@ -95,6 +95,10 @@ inline std::vector<unsigned char> realBytes(const std::vector<double>& values, b
   return bytes;
 }
 
+/// Segment sg's free dofs in the problem's numbering, ascending (the segment keeps its mask in the
+/// device's); with `deviceDofs`, each one's device dof (from the segment's first) at the same index.
+std::vector<Eigen::Index> segmentFreeDofs(const BodySegment& sg, std::vector<std::size_t>* deviceDofs = nullptr);
+
 /// out = segment sg's reals of `base` in double, in the problem's dof order (resized only if its
 /// size differs), in chunks of `chunk` on the host's threads.
 void getReals(const unsigned char* base, bool isDouble, const BodySegment& sg, std::size_t chunk, Eigen::VectorXd& out);

@@ -110,12 +110,8 @@ bool DeviceAmg::prepare(const BodySet& running, const std::vector<std::pair<doub
   for (std::size_t i = 0; i < running.size(); ++i) {
     const std::size_t s = running[i];
     const BodySegment& sg = segs_[s];
-    if (!freeKnown_[s]) {  // the free dofs in the problem's numbering (the segment keeps its mask in the device's)
-      std::vector<std::uint8_t> constrained(sg.dofs());
-      for (std::size_t d = 0; d < sg.dofs(); ++d) constrained[sg.hostDof(d)] = sg.constrained[d];
-      freeDofs_[s].clear();
-      for (std::size_t d = 0; d < constrained.size(); ++d)
-        if (!constrained[d]) freeDofs_[s].push_back(static_cast<Eigen::Index>(d));
+    if (!freeKnown_[s]) {
+      freeDofs_[s] = segmentFreeDofs(sg);
       freeKnown_[s] = 1;
     }
     if (bodies_[s].ensure(*sg.problem, freeDofs_[s], coefficients[i].first, coefficients[i].second) !=

@@ -39,20 +39,8 @@ void DeviceWarped::prepare(const BodySet& running, const std::vector<std::pair<d
   for (std::size_t i = 0; i < running.size(); ++i) {
     const std::size_t s = running[i];
     const BodySegment& sg = segs_.at(s);
-    if (!freeKnown_[s]) {  // the free dofs in the problem's numbering (the segment keeps its mask in the device's)
-      std::vector<std::uint8_t> constrained(sg.dofs());
-      std::vector<std::size_t> deviceDof(sg.dofs());
-      for (std::size_t d = 0; d < sg.dofs(); ++d) {
-        constrained[sg.hostDof(d)] = sg.constrained[d];
-        deviceDof[sg.hostDof(d)] = d;
-      }
-      freeDofs_[s].clear();
-      freeDevice_[s].clear();
-      for (std::size_t d = 0; d < constrained.size(); ++d)
-        if (!constrained[d]) {
-          freeDofs_[s].push_back(static_cast<Eigen::Index>(d));
-          freeDevice_[s].push_back(deviceDof[d]);
-        }
+    if (!freeKnown_[s]) {
+      freeDofs_[s] = segmentFreeDofs(sg, &freeDevice_[s]);
       freeKnown_[s] = 1;
     }
     BodyCholesky& body = bodies_[s];

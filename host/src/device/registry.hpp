@@ -120,7 +120,8 @@ std::shared_ptr<const BackendEntry> backendOf(const Candidate& c);
 Candidate referenceCandidate();
 
 /// Why a device backend that runs what the reference backend has except its host-only features
-/// (the hyperelastic formulations, the Cholesky solver) refuses this body: a sentence naming the fix, or "" where it uses none of them.
+/// (the hyperelastic formulations, the Cholesky solver) refuses this body: a sentence naming the
+/// fix, or "" where it uses none of them.
 std::string hostOnlyFeature(const Problem& problem, const SolverDesc& solver);
 
 /// The device a selector names among a backend's devices (names[i], gpu[i]: device i's name and
